@@ -1,0 +1,109 @@
+"""Cleaning as ALGORITHM.md requires, with pymeshlab's filters and a map back to the input.
+
+Exact duplicate vertices are merged into their first occurrence; for meshes, zero-area
+faces and then unreferenced vertices are dropped. pymeshlab's cleaning filters compact
+and renumber the mesh without telling where each vertex came from, so every vertex
+carries its input index in a custom attribute through the filters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pymeshlab
+
+from .errors import InputError
+from .io import Geometry
+
+_SOURCE_INDEX = "meshlab_sharp_input_index"
+
+
+@dataclass(frozen=True)
+class CleanGeometry:
+    """Cleaned geometry and its maps to and from the input's vertex order.
+
+    Attributes
+    ----------
+    vertices : (m, 3) float64
+        Cleaned vertices, in the input's relative order.
+    faces : (f, 3) int64 or None
+        Cleaned triangles indexing ``vertices``; None for a point cloud.
+    to_input : (m,) int64
+        Input index of each cleaned vertex (its first occurrence).
+    from_input : (n,) int64
+        Cleaned index of each input vertex; -1 for a vertex that was dropped.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray | None
+    to_input: np.ndarray
+    from_input: np.ndarray
+
+    @property
+    def is_mesh(self) -> bool:
+        """True when faces remain."""
+        return self.faces is not None
+
+    def to_input_order(self, values: np.ndarray, fill: float | bool) -> np.ndarray:
+        """Scatter per-cleaned-vertex ``values`` (m, ...) to input order (n, ...).
+
+        Input vertices merged into a duplicate take its value; dropped ones get ``fill``.
+        """
+        out = np.full((len(self.from_input), *values.shape[1:]), fill, dtype=values.dtype)
+        kept = self.from_input >= 0
+        out[kept] = values[self.from_input[kept]]
+        return out
+
+
+def clean(geometry: Geometry) -> CleanGeometry:
+    """Merge exact duplicates, drop zero-area faces and unreferenced vertices.
+
+    Parameters
+    ----------
+    geometry : Geometry
+        Validated input (finite coordinates, valid face indices).
+
+    Returns
+    -------
+    CleanGeometry
+
+    Raises
+    ------
+    InputError
+        A mesh all of whose faces have zero area.
+    """
+    v = geometry.vertices
+    ms = pymeshlab.MeshSet()
+    if geometry.is_mesh:
+        mesh = pymeshlab.Mesh(vertex_matrix=v, face_matrix=geometry.faces.astype(np.int32))
+    else:
+        mesh = pymeshlab.Mesh(vertex_matrix=v)
+    mesh.add_vertex_custom_scalar_attribute(np.arange(len(v), dtype=np.float64), _SOURCE_INDEX)
+    ms.add_mesh(mesh)
+    ms.meshing_remove_duplicate_vertices()
+    if geometry.is_mesh:
+        ms.meshing_remove_null_faces()
+        ms.meshing_remove_unreferenced_vertices()
+    out = ms.current_mesh()
+    to_input = out.vertex_custom_scalar_attribute_array(_SOURCE_INDEX).astype(np.int64)
+    if geometry.is_mesh and out.face_number() == 0:
+        raise InputError(
+            f"{geometry.source}: every face has zero area; nothing is left of the mesh "
+            "(use --as-points to treat its vertices as a point cloud)"
+        )
+    faces = out.face_matrix().astype(np.int64) if geometry.is_mesh else None
+
+    # Input vertex -> its first occurrence (pymeshlab keeps the first of equal vertices).
+    _, first, group = np.unique(v, axis=0, return_index=True, return_inverse=True)
+    survivor = first[group.reshape(-1)]
+    cleaned_of_input = np.full(len(v), -1, dtype=np.int64)
+    cleaned_of_input[to_input] = np.arange(len(to_input))
+    from_input = cleaned_of_input[survivor]
+    if not np.all(np.diff(to_input) > 0) or np.any(
+        from_input[to_input] != np.arange(len(to_input))
+    ):
+        raise RuntimeError("internal error: pymeshlab reordered vertices while cleaning")
+    return CleanGeometry(
+        vertices=v[to_input], faces=faces, to_input=to_input, from_input=from_input
+    )

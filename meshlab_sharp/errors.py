@@ -1,0 +1,15 @@
+"""Exceptions raised by meshlab-sharp.
+
+Every problem with the user's input or options is an :class:`InputError`: the CLI
+prints its message on one line and exits with a non-zero status, never a traceback.
+"""
+
+from __future__ import annotations
+
+
+class MeshlabSharpError(Exception):
+    """Base class of every error meshlab-sharp raises on purpose."""
+
+
+class InputError(MeshlabSharpError, ValueError):
+    """The input geometry, file or options cannot be processed as given."""

@@ -1,0 +1,58 @@
+"""pymeshlab integration: detect on a MeshSet's current mesh and write the result into it."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import pymeshlab
+
+from .io import add_vertex_attribute, select_vertices
+from .normals import Weighting
+from .pipeline import DetectionResult, detect
+
+
+def detect_meshset(
+    ms: pymeshlab.MeshSet,
+    *,
+    scales: Sequence[int] | None = None,
+    weighting: Weighting = "gaussian",
+    as_points: bool = False,
+    colorize: bool = False,
+    progress: bool = False,
+) -> DetectionResult:
+    """Detect sharp features on ``ms.current_mesh()`` and store them in it.
+
+    Afterwards the current mesh has vertex quality = feature strength (fraction of
+    scales), vertex selection = features, and the custom per-vertex attributes
+    ``sharp_strength`` and ``sharp_feature`` (``_2``, ``_3``... on later runs), so a
+    script can go on with MeshLab filters, e.g.
+    ``ms.compute_selection_by_scalar_per_vertex(minq=0.75, maxq=1)`` or
+    ``ms.save_current_mesh('out.ply', save_vertex_quality=True, save_vertex_flag=True)``.
+
+    Parameters
+    ----------
+    ms : pymeshlab.MeshSet
+        Its current mesh is read and annotated; vertices and faces are not changed.
+    scales, weighting, as_points, progress
+        As for :func:`meshlab_sharp.detect`.
+    colorize : bool, default False
+        Also colour the vertices: features red, the rest by strength (MeshLab's
+        quality colour ramp is not used, so the red is unambiguous).
+
+    Returns
+    -------
+    DetectionResult
+    """
+    result = detect(ms, scales=scales, weighting=weighting, as_points=as_points, progress=progress)
+    mesh = ms.current_mesh()
+    name = add_vertex_attribute(mesh, "sharp_strength", result.strength)
+    ms.compute_scalar_by_function_per_vertex(q=name)
+    select_vertices(ms, result.mask)
+    if colorize:
+        ms.compute_color_by_function_per_vertex(
+            r=f"({name} >= 1) ? 230 : 200 - 100 * {name}",
+            g=f"({name} >= 1) ? 13 : 200 - 100 * {name}",
+            b=f"({name} >= 1) ? 13 : 200",
+            a="255",
+        )
+    return result

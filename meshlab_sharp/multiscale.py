@@ -1,0 +1,120 @@
+"""The multiscale decision: candidates at every scale are sharp features."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods
+from .normals import Weighting
+from .projected_distance import projected_distances
+from .threshold import FLAT_TOLERANCE, normalise, otsu_threshold
+
+#: Default scales of a point cloud: k nearest neighbours.
+DEFAULT_KNN_SCALES: tuple[int, ...] = (12, 16, 20, 24, 28, 32, 36, 40)
+#: Default scales of a mesh: k-rings.
+DEFAULT_RING_SCALES: tuple[int, ...] = (1, 2, 3, 4)
+
+
+@dataclass
+class ScaleResults:
+    """What every scale produced, per cleaned point.
+
+    Attributes
+    ----------
+    scales : tuple of int
+    thresholds : (s,) float64
+        Otsu's threshold T at each scale.
+    candidate_counts : (s,) int64
+        Number of candidates at each scale.
+    votes : (m,) int64
+        Number of scales at which each point was a candidate.
+    distances : (s, m) float64 or None
+        Normalised projected distances, when kept.
+    normals : (s, m, 3) float64 or None
+        Normals used at each scale, when kept.
+    """
+
+    scales: tuple[int, ...]
+    thresholds: np.ndarray
+    candidate_counts: np.ndarray
+    votes: np.ndarray
+    distances: np.ndarray | None = None
+    normals: np.ndarray | None = None
+
+
+def run_scales(
+    points: np.ndarray,
+    neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods,
+    scales: Sequence[int],
+    *,
+    normals: np.ndarray | None = None,
+    weighting: Weighting = "gaussian",
+    keep_details: bool = False,
+    on_scale: Callable[[int], None] | None = None,
+) -> ScaleResults:
+    """Projected distance, normalisation and Otsu's threshold at each scale.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+        Cleaned points.
+    neighbourhoods : KnnNeighbourhoods or RingNeighbourhoods
+    scales : sequence of int
+        Increasing scales.
+    normals : (m, 3) float64, optional
+        Fixed normals of a mesh (zero rows fall back to PCA); None for a cloud.
+    weighting : {"gaussian", "none"}
+    keep_details : bool, default False
+        Keep the per-scale normalised distances and normals.
+    on_scale : callable, optional
+        Called with each scale when it is done (progress reporting).
+    """
+    m, s = len(points), len(scales)
+    flat_span = FLAT_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
+    thresholds = np.empty(s)
+    counts = np.empty(s, dtype=np.int64)
+    votes = np.zeros(m, dtype=np.int64)
+    distances = np.empty((s, m)) if keep_details else None
+    used_normals = np.empty((s, m, 3)) if keep_details else None
+    for i, scale in enumerate(scales):
+        pdis, used = projected_distances(
+            points, neighbourhoods.at(scale), normals, weighting=weighting
+        )
+        v = normalise(pdis, flat_span=flat_span)
+        thresholds[i] = otsu_threshold(v)
+        candidate = v >= thresholds[i]
+        counts[i] = int(candidate.sum())
+        votes += candidate
+        if distances is not None and used_normals is not None:
+            distances[i] = v
+            used_normals[i] = used
+        if on_scale is not None:
+            on_scale(scale)
+    return ScaleResults(
+        scales=tuple(scales),
+        thresholds=thresholds,
+        candidate_counts=counts,
+        votes=votes,
+        distances=distances,
+        normals=used_normals,
+    )
+
+
+def decide(votes: np.ndarray, n_scales: int) -> tuple[np.ndarray, np.ndarray]:
+    """Features are candidates at every scale; strength is the fraction of scales.
+
+    Parameters
+    ----------
+    votes : (m,) int
+        Scales at which each point was a candidate.
+    n_scales : int
+
+    Returns
+    -------
+    mask : (m,) bool
+    strength : (m,) float64
+    """
+    return votes == n_scales, votes / float(n_scales)

@@ -1,0 +1,263 @@
+"""The whole detection, one way: load -> clean -> neighbourhoods -> normals ->
+projected distance -> threshold -> decide, with every result in the input's order.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pymeshlab
+
+from .cleaning import clean
+from .errors import InputError
+from .io import Geometry, as_geometry, load
+from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
+from .neighbourhoods import build_neighbourhoods
+from .normals import WEIGHTINGS, Weighting, face_average_normals
+from .progress import Progress
+
+Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | pymeshlab.Mesh
+
+
+@dataclass
+class DetectionResult:
+    """Sharp features of one input, every per-vertex array in the input's order.
+
+    Attributes
+    ----------
+    mask : (n,) bool
+        True for the sharp feature points (candidates at every scale).
+    strength : (n,) float64
+        Fraction of scales at which the point was a candidate, in [0, 1].
+    kind : {"points", "mesh"}
+        How the input was processed: kNN neighbourhoods or k-rings.
+    scales : tuple of int
+        The scales used (k of kNN, or rings).
+    thresholds : (s,) float64
+        Otsu's threshold at each scale.
+    candidate_counts : (s,) int64
+        Candidates at each scale (cleaned points; merged duplicates count once).
+    kept : (n,) bool
+        Input vertices that took part (False for unreferenced mesh vertices, which are
+        dropped by cleaning and are never features).
+    weighting : str
+        The PCA weighting.
+    n_clean : int
+        Number of distinct points processed.
+    timings : dict of str to float
+        Seconds per stage.
+    distances : (s, n) float64 or None
+        Normalised projected distances per scale (``return_details=True``); NaN for
+        dropped vertices.
+    normals : (s, n, 3) float64 or None
+        Unit normals used at each scale (``return_details=True``); NaN for dropped
+        vertices. Their sign is arbitrary.
+    """
+
+    mask: np.ndarray
+    strength: np.ndarray
+    kind: str
+    scales: tuple[int, ...]
+    thresholds: np.ndarray
+    candidate_counts: np.ndarray
+    kept: np.ndarray
+    weighting: str
+    n_clean: int
+    timings: dict[str, float] = field(default_factory=dict)
+    distances: np.ndarray | None = None
+    normals: np.ndarray | None = None
+
+    @property
+    def indices(self) -> np.ndarray:
+        """0-based input indices of the features, shape (f,)."""
+        return np.flatnonzero(self.mask)
+
+    @property
+    def n_features(self) -> int:
+        """Number of feature points."""
+        return int(self.mask.sum())
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-ready summary: counts, per-scale thresholds, options and timings."""
+        return {
+            "kind": self.kind,
+            "n_input": len(self.mask),
+            "n_clean": self.n_clean,
+            "n_dropped": int((~self.kept).sum()),
+            "n_features": self.n_features,
+            "options": {"scales": list(self.scales), "weighting": self.weighting},
+            "scales": [
+                {"scale": int(s), "threshold": float(t), "candidates": int(c)}
+                for s, t, c in zip(self.scales, self.thresholds, self.candidate_counts, strict=True)
+            ],
+            "timings_s": {k: round(v, 6) for k, v in self.timings.items()},
+        }
+
+
+def detect(
+    source: Source,
+    faces: np.ndarray | None = None,
+    *,
+    scales: Sequence[int] | None = None,
+    weighting: Weighting = "gaussian",
+    as_points: bool = False,
+    return_details: bool = False,
+    progress: bool | Progress = False,
+    workers: int = -1,
+) -> DetectionResult:
+    """Find the sharp features of a point cloud or triangle mesh.
+
+    Parameters
+    ----------
+    source : path, (n, 3) array, Geometry, pymeshlab.MeshSet or pymeshlab.Mesh
+        The input. A path is read with pymeshlab; a MeshSet contributes its current mesh.
+    faces : (m, 3) int array, optional
+        Triangles, when ``source`` is an array. None: a point cloud.
+    scales : sequence of int, optional
+        kNN sizes for clouds (default 12, 16, ..., 40) or rings for meshes (default
+        1, 2, 3, 4).
+    weighting : {"gaussian", "none"}, default "gaussian"
+        Weights of the PCA normals (clouds, and mesh vertices without a face normal).
+    as_points : bool, default False
+        Ignore faces: process a mesh's vertices as a point cloud.
+    return_details : bool, default False
+        Also return per-scale normalised projected distances and normals.
+    progress : bool or Progress, default False
+        Draw a progress bar on stderr (True), or report to the given Progress.
+    workers : int, default -1
+        Threads for the kNN query (-1: all cores).
+
+    Returns
+    -------
+    DetectionResult
+
+    Raises
+    ------
+    InputError
+        Unreadable input, non-finite coordinates, too few distinct points for the
+        largest scale, invalid options. All points on one plane is not an error: the
+        result has no features.
+    """
+    if weighting not in WEIGHTINGS:
+        raise InputError(f"unknown weighting {weighting!r}; choose from {', '.join(WEIGHTINGS)}")
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    geometry = _as_input(source, faces, as_points)
+    timings["load"] = time.perf_counter() - t0
+
+    is_mesh = geometry.is_mesh and not as_points
+    kind = "mesh" if is_mesh else "points"
+    scales_t = _check_scales(scales, DEFAULT_RING_SCALES if is_mesh else DEFAULT_KNN_SCALES, kind)
+    bar = (
+        progress
+        if isinstance(progress, Progress)
+        else Progress(len(scales_t) + 3, enabled=progress)
+    )
+
+    t = time.perf_counter()
+    cleaned = clean(geometry if is_mesh else Geometry(geometry.vertices, None, geometry.source))
+    timings["clean"] = time.perf_counter() - t
+    bar.step("cleaned")
+    points = cleaned.vertices
+    if not is_mesh:
+        _check_cloud_size(len(geometry.vertices), len(points), max(scales_t), geometry.source)
+
+    t = time.perf_counter()
+    neighbourhoods = build_neighbourhoods(points, cleaned.faces, scales_t, workers=workers)
+    normals = face_average_normals(points, cleaned.faces) if is_mesh else None
+    timings["neighbourhoods"] = time.perf_counter() - t
+    bar.step("neighbourhoods")
+
+    t = time.perf_counter()
+    per_scale = run_scales(
+        points,
+        neighbourhoods,
+        scales_t,
+        normals=normals,
+        weighting=weighting,
+        keep_details=return_details,
+        on_scale=lambda s: bar.step(f"scale {s}"),
+    )
+    timings["normals_projected_distance_threshold"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    mask, strength = decide(per_scale.votes, len(scales_t))
+    result = DetectionResult(
+        mask=cleaned.to_input_order(mask, False),
+        strength=cleaned.to_input_order(strength, 0.0),
+        kind=kind,
+        scales=scales_t,
+        thresholds=per_scale.thresholds,
+        candidate_counts=per_scale.candidate_counts,
+        kept=cleaned.from_input >= 0,
+        weighting=weighting,
+        n_clean=len(points),
+        timings=timings,
+    )
+    if per_scale.distances is not None and per_scale.normals is not None:
+        result.distances = np.stack(
+            [cleaned.to_input_order(d, np.nan) for d in per_scale.distances]
+        )
+        result.normals = np.stack([cleaned.to_input_order(n, np.nan) for n in per_scale.normals])
+    timings["decide"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    bar.step("done")
+    if not isinstance(progress, Progress):
+        bar.close()
+    return result
+
+
+def _as_input(source: Source, faces: np.ndarray | None, as_points: bool) -> Geometry:
+    """Turn whatever the caller gave into a validated Geometry."""
+    if isinstance(source, Geometry):
+        return source
+    if isinstance(source, pymeshlab.MeshSet):
+        if source.mesh_number() == 0:
+            raise InputError("the MeshSet holds no mesh")
+        source = source.current_mesh()
+    if isinstance(source, pymeshlab.Mesh):
+        mesh_faces = source.face_matrix() if source.face_number() > 0 else None
+        return as_geometry(source.vertex_matrix(), mesh_faces, source="MeshSet mesh")
+    if isinstance(source, str | os.PathLike):
+        if faces is not None:
+            raise InputError("faces are taken from the file; do not pass faces with a path")
+        return load(source, as_points=as_points)
+    return as_geometry(source, faces, source="array")
+
+
+def _check_scales(
+    scales: Sequence[int] | None, default: tuple[int, ...], kind: str
+) -> tuple[int, ...]:
+    """Sorted, distinct, positive integer scales; the default when None."""
+    if scales is None:
+        return default
+    try:
+        values = sorted({int(s) for s in scales})
+    except (TypeError, ValueError):
+        raise InputError(f"scales must be integers, got {scales!r}") from None
+    if any(float(s) != int(s) for s in scales):
+        raise InputError(f"scales must be integers, got {list(scales)!r}")
+    if not values:
+        raise InputError("at least one scale is needed")
+    low = 1 if kind == "mesh" else 2
+    if values[0] < low:
+        what = "rings" if kind == "mesh" else "kNN sizes"
+        raise InputError(f"{what} must be >= {low}, got {values[0]}")
+    return tuple(values)
+
+
+def _check_cloud_size(n_input: int, n_clean: int, k_max: int, source: str) -> None:
+    """A cloud needs at least ``k_max`` distinct points."""
+    if n_clean == 1 and n_input > 1:
+        raise InputError(f"{source}: all {n_input} points are identical")
+    if n_clean < k_max:
+        dup = f" ({n_input} before merging duplicates)" if n_input != n_clean else ""
+        raise InputError(
+            f"{source}: {n_clean} distinct points{dup}, fewer than the largest scale "
+            f"k = {k_max}; use smaller --scales"
+        )
