@@ -14,7 +14,7 @@ import numpy as np
 import pymeshlab
 
 from .errors import InputError
-from .io import Geometry
+from .io import Geometry, mesh_arrays
 
 _SOURCE_INDEX = "meshlab_sharp_input_index"
 
@@ -85,14 +85,16 @@ def clean(geometry: Geometry) -> CleanGeometry:
     if geometry.is_mesh:
         ms.meshing_remove_null_faces()
         ms.meshing_remove_unreferenced_vertices()
-    out = ms.current_mesh()
-    to_input = out.vertex_custom_scalar_attribute_array(_SOURCE_INDEX).astype(np.int64)
-    if geometry.is_mesh and out.face_number() == 0:
+    to_input = (
+        ms.current_mesh().vertex_custom_scalar_attribute_array(_SOURCE_INDEX).astype(np.int64)
+    )
+    _, faces = mesh_arrays(ms)
+    del ms
+    if geometry.is_mesh and faces is None:
         raise InputError(
             f"{geometry.source}: every face has zero area; nothing is left of the mesh "
             "(use --as-points to treat its vertices as a point cloud)"
         )
-    faces = out.face_matrix().astype(np.int64) if geometry.is_mesh else None
 
     # Input vertex -> its first occurrence (pymeshlab keeps the first of equal vertices).
     _, first, group = np.unique(v, axis=0, return_index=True, return_inverse=True)

@@ -27,11 +27,17 @@ import pymeshlab
 from .errors import InputError
 
 #: Extensions read as plain-text point lists (one point per line).
-POINT_LIST_EXTENSIONS = frozenset({".xyz", ".pts", ".asc", ".txt", ".csv", ".pwn", ".pwv"})
+POINT_LIST_EXTENSIONS = frozenset({".xyz", ".pts", ".asc", ".txt"})
 #: Text formats scanned for NaN/inf tokens before loading.
 _TEXT_EXTENSIONS = POINT_LIST_EXTENSIONS | {".obj", ".off"}
 _NONFINITE = re.compile(rb"(?i)(?<![a-z])(nan|inf)")
 _PLY_ELEMENT = re.compile(rb"^element\s+(\w+)\s+(\d+)\s*$")
+_NUMBER = rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_SEP = rb"(?:[ \t]*[,;][ \t]*|[ \t]+)"
+#: A line of a point list: three numbers first (more columns may follow).
+_POINT_LINE = re.compile(
+    rb"^[ \t]*" + _NUMBER + _SEP + _NUMBER + _SEP + _NUMBER + rb"(?![\d.eE])", re.M
+)
 
 
 @dataclass(frozen=True)
@@ -143,46 +149,124 @@ def load(path: str | os.PathLike[str], *, as_points: bool = False) -> Geometry:
     expected_vertices = _check_before_load(p, ext)
 
     ms = pymeshlab.MeshSet()
+    options = _load_options(p, ext)
     with _quiet_stdout():
         try:
-            ms.load_new_mesh(str(p))
+            ms.load_new_mesh(str(p), **options)
         except Exception as exc:  # pymeshlab's exceptions share no base class but Exception
             reason = str(exc).strip().splitlines()
             detail = reason[-1].strip() if reason else type(exc).__name__
             raise InputError(
                 f"{name}: cannot read the file (truncated, corrupt or unsupported format): {detail}"
             ) from None
-    mesh = ms.current_mesh()
-    vertices = mesh.vertex_matrix()
-    faces = mesh.face_matrix() if mesh.face_number() > 0 and not as_points else None
+    vertices, faces = mesh_arrays(ms)
+    del ms  # free pymeshlab's copy before anything can raise
+    if ext == ".obj":
+        expected_faces = _obj_triangle_count(p.read_bytes())
+        n_faces = 0 if faces is None else len(faces)
+        if n_faces < expected_faces:
+            raise InputError(
+                f"{name}: {expected_faces - n_faces} of {expected_faces} triangles could not be "
+                "read: their face indices point to missing vertices"
+            )
+    if as_points:
+        faces = None
     if len(vertices) == 0:
         raise InputError(f"{name}: the file holds no points")
     if expected_vertices is not None and len(vertices) != expected_vertices:
+        why = "non-finite coordinates (NaN or inf)" if ext == ".ply" else "unreadable lines"
         raise InputError(
-            f"{name}: the file declares {expected_vertices} vertices but "
-            f"{len(vertices)} could be read; the missing ones have non-finite coordinates "
-            "(NaN or inf)"
+            f"{name}: the file holds {expected_vertices} vertices but pymeshlab read "
+            f"{len(vertices)}; the others have {why}"
         )
     return as_geometry(vertices, faces, source=name)
 
 
+def mesh_arrays(ms: pymeshlab.MeshSet) -> tuple[np.ndarray, np.ndarray | None]:
+    """Vertices (n, 3) and faces (m, 3) or None of the current mesh of ``ms``.
+
+    No ``pymeshlab.Mesh`` reference outlives this call: one kept in a frame that a
+    traceback holds can be freed after its MeshSet by the garbage collector, which
+    crashes the interpreter.
+    """
+    mesh = ms.current_mesh()
+    vertices = mesh.vertex_matrix()
+    faces = mesh.face_matrix().astype(np.int64) if mesh.face_number() > 0 else None
+    return vertices, faces
+
+
 def _check_before_load(p: Path, ext: str) -> int | None:
-    """Reject what pymeshlab would load silently wrong; return the declared vertex count.
+    """Reject what pymeshlab would load silently wrong; return the expected vertex count.
 
     PLY: the header's vertex count (checked against what pymeshlab reads, since it drops
-    non-finite vertices). Text formats: NaN/inf tokens. Point lists: binary content.
+    non-finite vertices). Text formats: NaN/inf tokens. Point lists: binary content, and
+    the number of lines that start with three numbers.
     """
     if ext == ".ply":
         return _ply_vertex_count(p)
-    if ext in _TEXT_EXTENSIONS:
-        data = p.read_bytes()
-        if ext in POINT_LIST_EXTENSIONS and not _looks_like_text(data):
-            raise InputError(f"{p}: not a text point list (binary or garbage content)")
-        match = _NONFINITE.search(data)
-        if match is not None:
-            line = data.count(b"\n", 0, match.start()) + 1
-            raise InputError(f"{p}: non-finite coordinate (NaN or inf) on line {line}")
+    if ext not in _TEXT_EXTENSIONS:
+        return None
+    data = p.read_bytes()
+    if ext in POINT_LIST_EXTENSIONS and not _looks_like_text(data):
+        raise InputError(f"{p}: not a text point list (binary or garbage content)")
+    match = _NONFINITE.search(data)
+    if match is not None:
+        line = data.count(b"\n", 0, match.start()) + 1
+        raise InputError(f"{p}: non-finite coordinate (NaN or inf) on line {line}")
+    if ext == ".off":
+        _check_off_faces(p, data)
+    if ext in POINT_LIST_EXTENSIONS:
+        count = len(_POINT_LINE.findall(data))
+        if count == 0:
+            raise InputError(f"{p}: not a text point list (no line starts with x y z numbers)")
+        return count
     return None
+
+
+def _check_off_faces(p: Path, data: bytes) -> None:
+    """Reject an ASCII OFF whose faces index missing vertices.
+
+    pymeshlab loads such a file anyway, with dangling indices that later crash the
+    interpreter, so the face block is checked before pymeshlab sees the file.
+    """
+    lines = (ln.split(b"#", 1)[0].split() for ln in data.splitlines())
+    tokens = [t for t in lines if t]
+    if not tokens or not tokens[0][0].endswith(b"OFF"):
+        raise InputError(f"{p}: not an OFF file (no OFF keyword)")
+    if tokens[0][0] != tokens[0][-1] or len(tokens) < 2:
+        return  # binary or unusual variant: left to pymeshlab
+    head = tokens[0][1:] if len(tokens[0]) > 1 else tokens[1]
+    body = tokens[1:] if len(tokens[0]) > 1 else tokens[2:]
+    try:
+        nv, nf = int(head[0]), int(head[1])
+        faces = body[nv : nv + nf]
+        bad = [f for f in faces if any(not 0 <= int(i) < nv for i in f[1 : 1 + int(f[0])])]
+    except (ValueError, IndexError):
+        raise InputError(f"{p}: malformed OFF file") from None
+    if len(faces) < nf:
+        raise InputError(f"{p}: truncated OFF file ({len(faces)} of {nf} faces)")
+    if bad:
+        raise InputError(f"{p}: {len(bad)} faces have face indices outside 0..{nv - 1}")
+
+
+def _obj_triangle_count(data: bytes) -> int:
+    """Triangles an OBJ's ``f`` lines make once fanned (a face of m corners makes m - 2)."""
+    return sum(max(len(ln.split()) - 3, 0) for ln in data.splitlines() if ln.startswith(b"f "))
+
+
+def _load_options(p: Path, ext: str) -> dict[str, str]:
+    """Extra pymeshlab load parameters: the column separator of a ``.txt`` point list."""
+    if ext != ".txt":
+        return {}
+    with p.open("rb") as fh:
+        head = fh.read(4096)
+    first = _POINT_LINE.search(head)
+    line = first.group(0) if first else b""
+    if b";" in line:
+        return {"separator": "SEMICOLON"}
+    if b"," in line:
+        return {"separator": "COMMA"}
+    return {"separator": "SPACE"}
 
 
 def _looks_like_text(data: bytes) -> bool:
@@ -198,21 +282,19 @@ def _looks_like_text(data: bytes) -> bool:
 
 
 def _ply_vertex_count(p: Path) -> int | None:
-    """The vertex count declared in a PLY header, or None when there is no valid header."""
+    """The vertex count declared in a PLY header (None when it declares none)."""
+    count = None
     with p.open("rb") as fh:
         if fh.readline().strip() != b"ply":
             raise InputError(f"{p}: not a PLY file (no 'ply' magic line)")
-        for _ in range(1000):
-            line = fh.readline()
-            if not line:
-                raise InputError(f"{p}: truncated PLY header (no end_header)")
+        for line in fh:
             line = line.strip()
             if line == b"end_header":
-                return None
+                return count
             m = _PLY_ELEMENT.match(line)
             if m and m.group(1) == b"vertex":
-                return int(m.group(2))
-    return None
+                count = int(m.group(2))
+    raise InputError(f"{p}: truncated PLY header (no end_header)")
 
 
 @contextlib.contextmanager

@@ -15,7 +15,7 @@ import pymeshlab
 
 from .cleaning import clean
 from .errors import InputError
-from .io import Geometry, as_geometry, load
+from .io import Geometry, as_geometry, load, mesh_arrays
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
 from .neighbourhoods import build_neighbourhoods
 from .normals import WEIGHTINGS, Weighting, face_average_normals
@@ -219,10 +219,10 @@ def _as_input(source: Source, faces: np.ndarray | None, as_points: bool) -> Geom
     if isinstance(source, pymeshlab.MeshSet):
         if source.mesh_number() == 0:
             raise InputError("the MeshSet holds no mesh")
-        source = source.current_mesh()
+        return as_geometry(*mesh_arrays(source), source="MeshSet current mesh")
     if isinstance(source, pymeshlab.Mesh):
         mesh_faces = source.face_matrix() if source.face_number() > 0 else None
-        return as_geometry(source.vertex_matrix(), mesh_faces, source="MeshSet mesh")
+        return as_geometry(source.vertex_matrix(), mesh_faces, source="pymeshlab Mesh")
     if isinstance(source, str | os.PathLike):
         if faces is not None:
             raise InputError("faces are taken from the file; do not pass faces with a path")

@@ -1,0 +1,7 @@
+"""``python -m meshlab_sharp`` runs the command line."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

@@ -1,0 +1,93 @@
+"""Test inputs with known answers, built with numpy and pymeshlab (no files needed)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pymeshlab
+
+
+def cube_grid_points(m: int = 21) -> np.ndarray:
+    """Regular m x m grid on each face of the cube [-1, 1]^3, shared edges once. (n, 3)."""
+    g = np.linspace(-1.0, 1.0, m)
+    faces = []
+    for axis in range(3):
+        others = [i for i in range(3) if i != axis]
+        a, b = np.meshgrid(g, g, indexing="ij")
+        for side in (-1.0, 1.0):
+            p = np.empty((m * m, 3))
+            p[:, axis] = side
+            p[:, others[0]] = a.ravel()
+            p[:, others[1]] = b.ravel()
+            faces.append(p)
+    return np.unique(np.concatenate(faces), axis=0)
+
+
+def cube_grid_mesh(subdivisions: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Cube [-1, 1]^3 triangulated regularly (midpoint subdivision). (n, 3), (m, 3)."""
+    ms = pymeshlab.MeshSet()
+    ms.create_cube(size=2.0)
+    ms.meshing_surface_subdivision_midpoint(iterations=subdivisions)
+    ms.meshing_remove_duplicate_vertices()
+    mesh = ms.current_mesh()
+    return mesh.vertex_matrix(), mesh.face_matrix().astype(np.int64)
+
+
+def on_cube_edges(points: np.ndarray, half: float = 1.0, tol: float = 1e-9) -> np.ndarray:
+    """True for points on the 12 edges of the cube [-half, half]^3. (n,) bool."""
+    return np.sum(np.abs(np.abs(points) - half) < tol, axis=1) >= 2
+
+
+def flat_square(m: int = 30) -> np.ndarray:
+    """Regular m x m grid on the unit square in the plane z = 0. (m*m, 3)."""
+    g = np.linspace(0.0, 1.0, m)
+    a, b = np.meshgrid(g, g)
+    return np.column_stack([a.ravel(), b.ravel(), np.zeros(m * m)])
+
+
+def random_box_points(n: int = 3000, seed: int = 0, size=(2.0, 1.4, 1.0)) -> np.ndarray:
+    """Uniform random samples on the surface of an axis-aligned box (no exact ties). (n, 3)."""
+    rng = np.random.default_rng(seed)
+    sx, sy, sz = size
+    areas = np.array([sy * sz, sy * sz, sx * sz, sx * sz, sx * sy, sx * sy])
+    face = rng.choice(6, size=n, p=areas / areas.sum())
+    u, v = rng.random(n), rng.random(n)
+    p = np.empty((n, 3))
+    axis = face // 2
+    side = face % 2
+    dims = np.array(size)
+    for i in range(n):
+        a = axis[i]
+        o = [j for j in range(3) if j != a]
+        p[i, a] = side[i] * dims[a]
+        p[i, o[0]] = u[i] * dims[o[0]]
+        p[i, o[1]] = v[i] * dims[o[1]]
+    return p - dims / 2
+
+
+def box_cylinder_points(n: int = 4000, seed: int = 1) -> np.ndarray:
+    """Random samples on a box with a cylinder standing on its top: planes, a cylinder,
+    convex and concave circular edges. (n, 3)."""
+    rng = np.random.default_rng(seed)
+    ms = pymeshlab.MeshSet()
+    ms.create_cube(size=2.0)
+    ms.create_cone(r0=0.5, r1=0.5, h=1.5, subdiv=96)
+    ms.compute_matrix_from_translation(traslmethod="XYZ translation", axisx=0, axisy=1.5, axisz=0)
+    ms.generate_boolean_union(first_mesh=0, second_mesh=1)
+    mesh = ms.current_mesh()
+    v, f = mesh.vertex_matrix(), mesh.face_matrix()
+    tri = v[f]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    pick = rng.choice(len(f), size=n, p=area / area.sum())
+    r1, r2 = rng.random(n), rng.random(n)
+    s = np.sqrt(r1)
+    w = np.column_stack([1 - s, s * (1 - r2), s * r2])
+    return np.einsum("ij,ijk->ik", w, tri[pick])
+
+
+def random_rotation(seed: int = 0) -> np.ndarray:
+    """A random proper rotation matrix. (3, 3)."""
+    q, r = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q

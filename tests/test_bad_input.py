@@ -1,0 +1,190 @@
+"""Bad input gets a clear one-line error (or a documented result), never a traceback."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import shapes
+from files import write_ply, write_xyz
+
+import meshlab_sharp
+from meshlab_sharp.cli import main
+from meshlab_sharp.io import atomic_write
+
+CUBE = shapes.cube_grid_points(9)
+
+
+def _nan_cube(value: float) -> np.ndarray:
+    p = CUBE.copy()
+    p[17, 1] = value
+    return p
+
+
+def _make(tmp: Path, case: str) -> Path:
+    """Create the bad input ``case`` under ``tmp`` and return its path."""
+    if case == "missing":
+        return tmp / "nope.ply"
+    if case == "empty-ply":
+        return _touch(tmp / "empty.ply", b"")
+    if case == "empty-xyz":
+        return _touch(tmp / "empty.xyz", b"")
+    if case == "whitespace-xyz":
+        return _touch(tmp / "blank.xyz", b"\n\n  \n")
+    if case in ("truncated-binary-ply", "truncated-ascii-ply"):
+        full = write_ply(tmp / "full.ply", CUBE, binary=case.startswith("truncated-binary"))
+        data = full.read_bytes()
+        return _touch(tmp / "truncated.ply", data[: len(data) // 2])
+    if case == "truncated-header-ply":
+        return _touch(tmp / "hdr.ply", b"ply\nformat ascii 1.0\nelement vertex 3\n")
+    if case.startswith("garbage-"):
+        ext = case.split("-")[1]
+        return _touch(tmp / f"garbage.{ext}", np.random.default_rng(0).bytes(4096))
+    if case == "nan-ascii-ply":
+        return write_ply(tmp / "nan.ply", _nan_cube(np.nan))
+    if case == "inf-binary-ply":
+        return write_ply(tmp / "inf.ply", _nan_cube(np.inf), binary=True)
+    if case == "nan-binary-ply":
+        return write_ply(tmp / "nanb.ply", _nan_cube(np.nan), binary=True)
+    if case == "nan-xyz":
+        return write_xyz(tmp / "nan.xyz", _nan_cube(np.nan))
+    if case == "inf-obj":
+        lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in _nan_cube(-np.inf)]
+        return _touch(tmp / "inf.obj", ("\n".join(lines) + "\n").encode())
+    if case == "too-few-points":
+        return write_xyz(tmp / "few.xyz", CUBE[:30])
+    if case == "all-identical":
+        return write_xyz(tmp / "same.xyz", np.tile([[1.0, 2.0, 3.0]], (100, 1)))
+    if case == "off-bad-face-index":
+        return _touch(tmp / "bad.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n")
+    if case == "obj-bad-face-index":
+        return _touch(tmp / "bad.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n")
+    if case == "all-faces-degenerate":
+        v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], float)
+        return write_ply(tmp / "degenerate.ply", v, [[0, 1, 2], [1, 2, 3]])
+    raise AssertionError(case)
+
+
+def _touch(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
+
+
+ERRORS = {
+    "missing": "no such file",
+    "empty-ply": "empty",
+    "empty-xyz": "empty",
+    "whitespace-xyz": "not a text point list",
+    "truncated-binary-ply": "cannot read",
+    "truncated-ascii-ply": "cannot read",
+    "truncated-header-ply": "truncated PLY header",
+    "garbage-ply": "not a PLY file",
+    "garbage-xyz": "not a text point list",
+    "garbage-stl": "cannot read",
+    "garbage-obj": "cannot read",
+    "nan-ascii-ply": "non-finite",
+    "nan-binary-ply": "non-finite",
+    "inf-binary-ply": "non-finite",
+    "nan-xyz": "non-finite",
+    "inf-obj": "non-finite",
+    "too-few-points": "fewer than the largest scale",
+    "all-identical": "identical",
+    "off-bad-face-index": "face indices",
+    "obj-bad-face-index": "missing vertices",
+    "all-faces-degenerate": "zero area",
+}
+
+
+@pytest.mark.parametrize("case", sorted(ERRORS))
+def test_api_raises_input_error(tmp_path, case):
+    path = _make(tmp_path, case)
+    with pytest.raises(meshlab_sharp.InputError, match=ERRORS[case]):
+        meshlab_sharp.detect(path)
+
+
+@pytest.mark.parametrize("case", sorted(ERRORS))
+def test_cli_prints_one_line_and_fails(tmp_path, case, capsys):
+    path = _make(tmp_path, case)
+    before = _digest(path)
+    code = main(["detect", str(path), "-q"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.startswith("meshlab-sharp: error: ")
+    assert ERRORS[case] in err
+    assert err.count("\n") == 1
+    assert _digest(path) == before
+    assert not list(tmp_path.glob("*_sharp.ply"))
+    assert not list(tmp_path.glob(".*part*"))
+
+
+def test_real_script_gives_no_traceback(tmp_path):
+    path = _make(tmp_path, "nan-binary-ply")
+    proc = subprocess.run(
+        [sys.executable, "-m", "meshlab_sharp", "detect", str(path)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 1
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.strip().startswith("meshlab-sharp: error:")
+
+
+def test_plane_is_the_documented_no_features_result(tmp_path, capsys):
+    path = write_ply(tmp_path / "plane.ply", shapes.flat_square(25) @ shapes.random_rotation(2).T)
+    assert main(["detect", str(path), "--indices", str(tmp_path / "i.txt")]) == 0
+    assert "0 sharp features" in capsys.readouterr().out
+    assert (tmp_path / "i.txt").read_text() == ""
+
+
+def test_mesh_without_faces_is_a_point_cloud(tmp_path):
+    path = write_ply(tmp_path / "cloud.ply", CUBE, faces=None)
+    result = meshlab_sharp.detect(path)
+    assert result.kind == "points"
+    np.testing.assert_array_equal(result.mask, shapes.on_cube_edges(CUBE))
+
+
+def test_array_inputs_are_validated():
+    with pytest.raises(meshlab_sharp.InputError, match="shape"):
+        meshlab_sharp.detect(np.zeros((10, 2)))
+    with pytest.raises(meshlab_sharp.InputError, match="no points"):
+        meshlab_sharp.detect(np.zeros((0, 3)))
+    with pytest.raises(meshlab_sharp.InputError, match="non-finite"):
+        meshlab_sharp.detect(_nan_cube(np.nan))
+    with pytest.raises(meshlab_sharp.InputError, match="face indices"):
+        meshlab_sharp.detect(CUBE, np.array([[0, 1, len(CUBE)]]))
+    with pytest.raises(meshlab_sharp.InputError, match="weighting"):
+        meshlab_sharp.detect(CUBE, weighting="cubic")
+    with pytest.raises(meshlab_sharp.InputError, match=">= 2"):
+        meshlab_sharp.detect(CUBE, scales=[0, 12])
+    with pytest.raises(meshlab_sharp.InputError, match="integers"):
+        meshlab_sharp.detect(CUBE, scales=["a"])
+
+
+def test_bad_scales_on_the_command_line(tmp_path, capsys):
+    path = write_xyz(tmp_path / "cube.xyz", CUBE)
+    with pytest.raises(SystemExit) as exc:
+        main(["detect", str(path), "--scales", "twelve"])
+    assert exc.value.code == 2
+    assert "invalid scales" in capsys.readouterr().err
+
+
+def test_atomic_write_leaves_nothing_when_interrupted(tmp_path):
+    dest = tmp_path / "out.ply"
+
+    def half_then_interrupt(tmp: str) -> None:
+        Path(tmp).write_bytes(b"ply\nformat")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write(dest, half_then_interrupt)
+    assert os.listdir(tmp_path) == []
+
+
+def _digest(path: Path) -> str | None:
+    return hashlib.sha256(path.read_bytes()).hexdigest() if path.exists() else None

@@ -1,0 +1,64 @@
+"""Cleaning merges duplicates and drops unreferenced vertices; results stay in input order."""
+
+from __future__ import annotations
+
+import numpy as np
+import shapes
+
+import meshlab_sharp
+from meshlab_sharp.cleaning import clean
+from meshlab_sharp.io import as_geometry
+
+
+def test_duplicates_take_the_result_of_their_first_occurrence():
+    points = shapes.cube_grid_points(15)
+    rng = np.random.default_rng(0)
+    dup_of = rng.choice(len(points), 200, replace=False)
+    with_dups = np.concatenate([points, points[dup_of]])
+    order = rng.permutation(len(with_dups))
+    noisy_input = with_dups[order]
+
+    result = meshlab_sharp.detect(noisy_input)
+    assert len(result.mask) == len(noisy_input)
+    np.testing.assert_array_equal(result.mask, shapes.on_cube_edges(noisy_input))
+    assert result.n_clean == len(points)
+    assert result.kept.all()
+
+
+def test_unreferenced_vertices_are_dropped_and_never_features():
+    vertices, faces = shapes.cube_grid_mesh(3)
+    # Two isolated vertices, and one that duplicates the corner (1, 1, 1), put first so
+    # that it is the first occurrence the corner's faces are merged into.
+    extra = np.array([[5.0, 5.0, 5.0], [1.0, 1.0, 1.0], [-7.0, 0.0, 0.0]])
+    all_vertices = np.concatenate([extra, vertices])
+    all_faces = faces + len(extra)
+    result = meshlab_sharp.detect(all_vertices, all_faces)
+    assert len(result.mask) == len(all_vertices)
+    np.testing.assert_array_equal(result.kept[:3], [False, True, False])
+    assert result.kept[3:].all()
+    np.testing.assert_array_equal(result.mask[:3], [False, True, False])
+    np.testing.assert_array_equal(result.strength[[0, 2]], 0.0)
+    np.testing.assert_array_equal(result.mask[3:], shapes.on_cube_edges(vertices))
+    assert result.n_clean == len(vertices)
+
+
+def test_clean_maps_both_ways():
+    v = np.array(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [5, 5, 5], [0, 0, 1], [0, 0, 0]], float
+    )
+    f = np.array([[0, 1, 2], [3, 2, 5], [0, 1, 3], [6, 2, 5]])
+    c = clean(as_geometry(v, f))
+    np.testing.assert_array_equal(c.to_input, [0, 1, 2, 5])
+    np.testing.assert_array_equal(c.from_input, [0, 1, 2, 1, -1, 3, 0])
+    np.testing.assert_array_equal(c.vertices, v[[0, 1, 2, 5]])
+    # The face (0, 1, 3) has zero area once 3 is merged into 1.
+    assert len(c.faces) == 3
+    assert set(map(tuple, np.sort(c.faces, axis=1))) == {(0, 1, 2), (1, 2, 3), (0, 2, 3)}
+
+
+def test_collinear_faces_are_dropped():
+    v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], float)
+    f = np.array([[0, 1, 2], [0, 1, 3]])
+    c = clean(as_geometry(v, f))
+    assert len(c.faces) == 1
+    np.testing.assert_array_equal(c.from_input, [0, 1, -1, 2])
