@@ -50,9 +50,9 @@ def detect_meshset(
     select_vertices(ms, result.mask)
     if colorize:
         ms.compute_color_by_function_per_vertex(
-            r=f"({name} >= 1) ? 230 : 200 - 100 * {name}",
-            g=f"({name} >= 1) ? 13 : 200 - 100 * {name}",
-            b=f"({name} >= 1) ? 13 : 200",
+            x=f"({name} >= 1) ? 230 : 200 - 100 * {name}",
+            y=f"({name} >= 1) ? 13 : 200 - 100 * {name}",
+            z=f"({name} >= 1) ? 13 : 200",
             a="255",
         )
     return result
