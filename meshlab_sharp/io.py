@@ -254,8 +254,11 @@ def _obj_triangle_count(data: bytes) -> int:
     return sum(max(len(ln.split()) - 3, 0) for ln in data.splitlines() if ln.startswith(b"f "))
 
 
-def _load_options(p: Path, ext: str) -> dict[str, str]:
-    """Extra pymeshlab load parameters: the column separator of a ``.txt`` point list."""
+def _load_options(p: Path, ext: str) -> dict[str, str | bool]:
+    """Extra pymeshlab load parameters: an ``.asc`` list stays a point cloud (pymeshlab
+    would triangulate it as a range grid), a ``.txt`` list gets its column separator."""
+    if ext == ".asc":
+        return {"triangulate": False}
     if ext != ".txt":
         return {}
     with p.open("rb") as fh:
@@ -263,22 +266,22 @@ def _load_options(p: Path, ext: str) -> dict[str, str]:
     first = _POINT_LINE.search(head)
     line = first.group(0) if first else b""
     if b";" in line:
-        return {"separator": "SEMICOLON"}
+        return {"separator": ";"}
     if b"," in line:
-        return {"separator": "COMMA"}
+        return {"separator": ","}
     return {"separator": "SPACE"}
 
 
 def _looks_like_text(data: bytes) -> bool:
-    """True when ``data`` is printable ASCII text with numbers on its lines."""
+    """True when ``data`` is printable ASCII text with digits in it."""
     if b"\x00" in data:
         return False
     try:
-        text = data.decode("ascii")
+        text = data[:65536].decode("ascii")
     except UnicodeDecodeError:
         return False
-    printable = sum(c.isprintable() or c in "\r\n\t" for c in text[:65536])
-    return printable == len(text[:65536]) and re.search(r"\d", text) is not None
+    printable = sum(c.isprintable() or c in "\r\n\t" for c in text)
+    return printable == len(text) and re.search(r"\d", text) is not None
 
 
 def _ply_vertex_count(p: Path) -> int | None:

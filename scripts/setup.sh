@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Set up meshlab-sharp on Debian 12: system libraries, a virtual environment in .venv
+# with the package installed (editable), and with --all also what the tests and the
+# MeshLab plugin need (test extras, MeshLab 2020.09, its build dependencies, Xvfb).
+#
+#   bash scripts/setup.sh          # the Python package
+#   bash scripts/setup.sh --all    # + test tools and the MeshLab plugin's Debian packages
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+all=0
+[[ "${1:-}" == "--all" ]] && all=1
+
+sudo=""
+if [[ "$(id -u)" != 0 ]]; then sudo="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+
+# pymeshlab needs libgl1 (import) and libopengl0 (its PLY/OBJ/OFF/STL plugins).
+packages=(libgl1 libopengl0 libgomp1 python3 python3-venv python3-pip)
+if [[ $all == 1 ]]; then
+  packages+=($(bash scripts/plugin_packages.sh))
+fi
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if (( ${#missing[@]} )); then
+  echo "setup: installing Debian packages: ${missing[*]}"
+  $sudo apt-get update -qq
+  $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+python=${PYTHON:-python3}
+if [[ ! -x .venv/bin/python ]]; then
+  "$python" -m venv .venv
+fi
+extras=""
+[[ $all == 1 ]] && extras="[test]"
+.venv/bin/python -m pip install -q --upgrade pip
+.venv/bin/python -m pip install -q -e ".${extras}"
+echo "setup: ready (.venv/bin/meshlab-sharp)"
