@@ -63,7 +63,7 @@ Mesh = tuple[np.ndarray, np.ndarray]
 """(vertices (n, 3) float64, faces (m, 3) int64), closed and outward oriented."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SamplePart:
     """A generated part: points or a mesh, and its exact sharp edges.
 
