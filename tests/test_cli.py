@@ -14,7 +14,7 @@ from files import write_ply
 
 import meshlab_sharp
 from meshlab_sharp.cli import main, parse_scales
-from meshlab_sharp.io import mesh_arrays
+from meshlab_sharp.io import _umask, mesh_arrays
 
 
 def _read_back(path):
@@ -42,6 +42,8 @@ def test_detect_writes_ply_indices_and_report(tmp_path, capsys):
     )
     assert code == 0
     assert src.read_bytes() == before
+    mode = (tmp_path / "cube_sharp.ply").stat().st_mode & 0o777
+    assert mode == 0o666 & ~_umask()
     out = capsys.readouterr().out
     assert "sharp features" in out
     expected = shapes.on_cube_edges(vertices, tol=1e-6)
