@@ -1,0 +1,66 @@
+"""The progress bar: drawn on a terminal, silent otherwise."""
+
+from __future__ import annotations
+
+import io
+import os
+import pty
+import subprocess
+import sys
+
+import shapes
+from files import write_ply
+
+from meshlab_sharp.progress import Progress
+
+
+def test_bar_draws_steps_and_ends_the_line():
+    stream = io.StringIO()
+    bar = Progress(4, enabled=True, stream=stream)
+    bar.step("scale 12")
+    bar.step("scale 16", n=3)
+    bar.close()
+    text = stream.getvalue()
+    assert "scale 12" in text and "1/4" in text
+    assert "4/4" in text and "#" * 30 in text
+    assert text.endswith("\n")
+
+
+def test_disabled_bar_writes_nothing():
+    stream = io.StringIO()
+    bar = Progress(3, enabled=False, stream=stream)
+    bar.step("x")
+    bar.close()
+    assert stream.getvalue() == ""
+
+
+def _run_with_terminal_stderr(args):
+    master, slave = pty.openpty()
+    proc = subprocess.run(
+        [sys.executable, "-m", "meshlab_sharp", *args],
+        stdout=subprocess.PIPE,
+        stderr=slave,
+        check=False,
+    )
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            data = os.read(master, 65536)
+        except OSError:
+            break
+        if not data:
+            break
+        chunks.append(data)
+    os.close(master)
+    return proc.returncode, b"".join(chunks).decode()
+
+
+def test_cli_draws_the_bar_on_a_terminal_unless_quiet(tmp_path):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
+    code, err = _run_with_terminal_stderr(["detect", str(src)])
+    assert code == 0
+    assert "scale 40" in err and "[" in err and "#" in err
+    code, err = _run_with_terminal_stderr(["detect", str(src), "--force", "--quiet"])
+    assert code == 0
+    assert err == ""
