@@ -14,6 +14,7 @@ from .io import Geometry, load, save_features_ply
 from .meshset import detect_meshset
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
 from .pipeline import DetectionResult, detect
+from .preprocessing import Preprocessing, PreprocessingReport, preprocess
 
 __version__ = "0.1.0"
 
@@ -24,9 +25,12 @@ __all__ = [
     "Geometry",
     "InputError",
     "MeshlabSharpError",
+    "Preprocessing",
+    "PreprocessingReport",
     "__version__",
     "detect",
     "detect_meshset",
     "load",
+    "preprocess",
     "save_features_ply",
 ]

@@ -56,6 +56,35 @@ class CleanGeometry:
         return out
 
 
+def tag_input_indices(mesh: pymeshlab.Mesh, indices: np.ndarray | None = None) -> None:
+    """Tag each vertex of ``mesh`` with an input index that pymeshlab's filters carry.
+
+    pymeshlab's filters compact and renumber vertices without saying where each came
+    from, but they move custom per-vertex attributes along with the vertices. The index
+    is stored plus one, so that a vertex a filter adds (attribute 0) can be told apart.
+
+    Parameters
+    ----------
+    mesh : pymeshlab.Mesh
+        Not yet added to a MeshSet (``add_mesh`` stores a copy).
+    indices : (n,) int, optional
+        Input index of each vertex (-1: not an input vertex). Default: 0..n-1.
+    """
+    n = mesh.vertex_number()
+    values = np.arange(n) if indices is None else np.asarray(indices, dtype=np.int64)
+    mesh.add_vertex_custom_scalar_attribute(values.astype(np.float64) + 1.0, _SOURCE_INDEX)
+
+
+def tagged_input_indices(ms: pymeshlab.MeshSet, n_input: int) -> np.ndarray:
+    """Input index of each vertex of the current mesh of ``ms``, tagged by
+    :func:`tag_input_indices`; -1 for a vertex a filter added (its tag is not an index
+    in ``0..n_input-1``). Shape (m,) int64."""
+    raw = ms.current_mesh().vertex_custom_scalar_attribute_array(_SOURCE_INDEX)
+    index = np.rint(raw).astype(np.int64) - 1
+    index[(raw != np.rint(raw)) | (index < 0) | (index >= n_input)] = -1
+    return index
+
+
 def clean(geometry: Geometry) -> CleanGeometry:
     """Merge exact duplicates, drop zero-area faces and unreferenced vertices.
 
@@ -79,15 +108,13 @@ def clean(geometry: Geometry) -> CleanGeometry:
         mesh = pymeshlab.Mesh(vertex_matrix=v, face_matrix=geometry.faces.astype(np.int32))
     else:
         mesh = pymeshlab.Mesh(vertex_matrix=v)
-    mesh.add_vertex_custom_scalar_attribute(np.arange(len(v), dtype=np.float64), _SOURCE_INDEX)
+    tag_input_indices(mesh)
     ms.add_mesh(mesh)
     ms.meshing_remove_duplicate_vertices()
     if geometry.is_mesh:
         ms.meshing_remove_null_faces()
         ms.meshing_remove_unreferenced_vertices()
-    to_input = (
-        ms.current_mesh().vertex_custom_scalar_attribute_array(_SOURCE_INDEX).astype(np.int64)
-    )
+    to_input = tagged_input_indices(ms, len(v))
     _, faces = mesh_arrays(ms)
     del ms
     if geometry.is_mesh and faces is None:

@@ -20,6 +20,7 @@ from .io import Geometry, load, save_features_ply, save_indices, save_json
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
 from .normals import WEIGHTINGS
 from .pipeline import DetectionResult, detect
+from .preprocessing import Preprocessing
 from .progress import Progress
 
 
@@ -85,6 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
     det.add_argument("--ascii", action="store_true", help="write an ASCII PLY (default binary)")
     det.add_argument("--force", action="store_true", help="overwrite existing outputs")
     det.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
+    _add_preprocessing_arguments(det)
     det.set_defaults(func=run_detect)
 
     try:  # TEMPORARY until plugin.py lands
@@ -123,10 +125,12 @@ def run_detect(args: argparse.Namespace) -> int:
         source = Path(args.input)
         stem, folder = source.stem, source.parent
     output = Path(args.output) if args.output else folder / f"{stem}_sharp.ply"
-    outputs = [p for p in (output, args.indices, args.report) if p is not None]
+    extra = (args.save_processed, args.plot)
+    outputs = [p for p in (output, args.indices, args.report, *extra) if p is not None]
     _check_outputs(source, [Path(p) for p in outputs], force=args.force)
     if output.suffix.lower() != ".ply":
         raise MeshlabSharpError(f"{output}: the output must be a .ply file")
+    steps = _preprocessing_from_args(args)
 
     show = not args.quiet
     progress = Progress(
@@ -141,6 +145,8 @@ def run_detect(args: argparse.Namespace) -> int:
         weighting=args.weighting,
         as_points=args.as_points,
         progress=progress,
+        preprocessing=steps,
+        return_details=args.plot is not None,
     )
     result.timings["load"] = load_time
     t = time.perf_counter()
@@ -154,16 +160,33 @@ def run_detect(args: argparse.Namespace) -> int:
     )
     if args.indices:
         save_indices(args.indices, result.mask)
+    if args.save_processed and result.preprocessing is not None:
+        done = result.preprocessing
+        assert done.result is not None
+        save_features_ply(
+            args.save_processed,
+            done.geometry.vertices,
+            done.geometry.faces,
+            done.result.strength,
+            done.result.mask,
+            binary=not args.ascii,
+        )
     result.timings["save"] = time.perf_counter() - t
     result.timings["total"] = time.perf_counter() - start
     progress.step("saved")
     progress.close()
+    if args.plot:
+        from .plot import save_report
+
+        save_report(args.plot, result, geometry)
     if args.report:
         report = result.summary()
         report["input"] = geometry.source
         report["outputs"] = {"ply": str(output), "indices": args.indices}
         save_json(args.report, report)
     if show:
+        if result.preprocessing is not None:
+            _print_preprocessing(result)
         _print_summary(geometry.source, output, result)
     return 0
 
@@ -199,3 +222,118 @@ def _print_summary(source: str, output: Path, result: DetectionResult) -> None:
         f"{result.n_features} sharp features ({100.0 * result.n_features / n:.1f}%) "
         f"-> {output} [{result.timings.get('total', 0.0):.2f} s]"
     )
+
+
+def _add_preprocessing_arguments(det: argparse.ArgumentParser) -> None:
+    """Preprocessing flags (pymeshlab filters, applied in a fixed order) and the picture."""
+    from .preprocessing import DENOISE_METHODS
+
+    pre = det.add_argument_group(
+        "preprocessing",
+        "pymeshlab filters run before detection, always in this order: remove outliers, "
+        "denoise, fill holes, simplify. Results stay in the input's order: removed points "
+        "are not features; vertices added by hole filling are only in --save-processed.",
+    )
+    pre.add_argument(
+        "--remove-outliers",
+        action="store_true",
+        help="point clouds: remove points of high local outlier probability",
+    )
+    pre.add_argument(
+        "--outlier-probability",
+        type=float,
+        default=0.8,
+        metavar="P",
+        help="outlier probability threshold in (0, 1) (default 0.8)",
+    )
+    pre.add_argument(
+        "--outlier-neighbours",
+        type=int,
+        default=32,
+        metavar="K",
+        help="neighbours of the outlier probability (default 32)",
+    )
+    pre.add_argument(
+        "--denoise",
+        nargs="?",
+        const="auto",
+        choices=DENOISE_METHODS,
+        metavar="METHOD",
+        help="smooth before detection: meshes taubin (default) or two_steps; point clouds "
+        "rimls (default) or apss MLS projection",
+    )
+    pre.add_argument(
+        "--smoothing-steps",
+        type=int,
+        metavar="N",
+        help="mesh smoothing iterations (default 10 Taubin, 3 two-step)",
+    )
+    pre.add_argument("--fill-holes", action="store_true", help="meshes: close holes")
+    pre.add_argument(
+        "--max-hole-size",
+        type=int,
+        metavar="EDGES",
+        help="largest hole closed, in boundary edges (default: bounding-box diagonal / "
+        "mean edge length)",
+    )
+    pre.add_argument(
+        "--simplify",
+        type=float,
+        metavar="FRACTION",
+        help="keep about this fraction of the vertices, in (0, 1]",
+    )
+    pre.add_argument(
+        "--save-processed",
+        metavar="FILE.ply",
+        help="write the processed geometry (quality = strength, features selected)",
+    )
+    det.add_argument(
+        "--plot",
+        metavar="FILE.png",
+        help="write the report picture: histograms with thresholds, views with the "
+        "features (needs matplotlib: pip install 'meshlab-sharp[plot]')",
+    )
+
+
+def _preprocessing_from_args(args: argparse.Namespace) -> Preprocessing | None:
+    """The Preprocessing the flags ask for (None when none); checks the extra outputs."""
+    steps = Preprocessing(
+        remove_outliers=args.remove_outliers,
+        outlier_probability=args.outlier_probability,
+        outlier_neighbours=args.outlier_neighbours,
+        denoise=args.denoise is not None,
+        denoise_method=args.denoise or "auto",
+        smoothing_steps=args.smoothing_steps,
+        fill_holes=args.fill_holes,
+        max_hole_size=args.max_hole_size,
+        simplify=args.simplify,
+    )
+    if args.save_processed is not None:
+        if not steps.active:
+            raise MeshlabSharpError(
+                "--save-processed needs a preprocessing step (--remove-outliers, --denoise, "
+                "--fill-holes or --simplify)"
+            )
+        if Path(args.save_processed).suffix.lower() != ".ply":
+            raise MeshlabSharpError(f"{args.save_processed}: --save-processed must be a .ply file")
+    if args.plot is not None:
+        if Path(args.plot).suffix.lower() != ".png":
+            raise MeshlabSharpError(f"{args.plot}: --plot must be a .png file")
+        from .plot import require_matplotlib
+
+        require_matplotlib()
+    return steps if steps.active else None
+
+
+def _print_preprocessing(result: DetectionResult) -> None:
+    """One line per preprocessing step, on stdout."""
+    assert result.preprocessing is not None
+    for step in result.preprocessing.steps:
+        name = step["step"].replace("_", " ")
+        if "skipped" in step:
+            print(f"  {name}: skipped ({step['skipped']})")
+        else:
+            print(
+                f"  {name}: {step['vertices_before']} -> {step['vertices_after']} vertices "
+                f"[{step['seconds']:.2f} s]"
+            )

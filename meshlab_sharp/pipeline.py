@@ -19,6 +19,13 @@ from .io import Geometry, as_geometry, load, mesh_arrays
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
 from .neighbourhoods import build_neighbourhoods
 from .normals import WEIGHTINGS, Weighting, face_average_normals
+from .preprocessing import (
+    Preprocessing,
+    PreprocessingReport,
+    as_preprocessing,
+    map_to_input,
+    preprocess,
+)
 from .progress import Progress
 
 Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | pymeshlab.Mesh
@@ -57,6 +64,9 @@ class DetectionResult:
     normals : (s, n, 3) float64 or None
         Unit normals used at each scale (``return_details=True``); NaN for dropped
         vertices. Their sign is arbitrary.
+    preprocessing : PreprocessingReport or None
+        With ``detect(..., preprocessing=...)``: the steps run, the processed geometry,
+        its map to the input and the detection in its order.
     """
 
     mask: np.ndarray
@@ -71,6 +81,7 @@ class DetectionResult:
     timings: dict[str, float] = field(default_factory=dict)
     distances: np.ndarray | None = None
     normals: np.ndarray | None = None
+    preprocessing: PreprocessingReport | None = None
 
     @property
     def indices(self) -> np.ndarray:
@@ -96,6 +107,11 @@ class DetectionResult:
                 for s, t, c in zip(self.scales, self.thresholds, self.candidate_counts, strict=True)
             ],
             "timings_s": {k: round(v, 6) for k, v in self.timings.items()},
+            **(
+                {}
+                if self.preprocessing is None
+                else {"preprocessing": self.preprocessing.summary()}
+            ),
         }
 
 
@@ -109,6 +125,7 @@ def detect(
     return_details: bool = False,
     progress: bool | Progress = False,
     workers: int = -1,
+    preprocessing: Preprocessing | dict[str, Any] | None = None,
 ) -> DetectionResult:
     """Find the sharp features of a point cloud or triangle mesh.
 
@@ -131,6 +148,11 @@ def detect(
         Draw a progress bar on stderr (True), or report to the given Progress.
     workers : int, default -1
         Threads for the kNN query (-1: all cores).
+    preprocessing : Preprocessing or dict, optional
+        pymeshlab filters run first (outlier removal, denoising, hole filling,
+        simplification; see :mod:`meshlab_sharp.preprocessing`). Detection runs on the
+        processed geometry; results are mapped back to the input's vertices (removed
+        ones: not features, ``kept`` False; vertices added by hole filling: left out).
 
     Returns
     -------
@@ -149,6 +171,25 @@ def detect(
     t0 = time.perf_counter()
     geometry = _as_input(source, faces, as_points)
     timings["load"] = time.perf_counter() - t0
+    steps = as_preprocessing(preprocessing)
+    if steps is not None and steps.active:
+        t = time.perf_counter()
+        log: list[dict[str, Any]] = []
+        given = Geometry(geometry.vertices, None, geometry.source) if as_points else geometry
+        processed, to_input = preprocess(given, steps, log=log)
+        report = PreprocessingReport(log, processed, to_input, seconds=time.perf_counter() - t)
+        inner = detect(
+            processed,
+            scales=scales,
+            weighting=weighting,
+            return_details=return_details,
+            progress=progress,
+            workers=workers,
+        )
+        result = map_to_input(inner, to_input, len(geometry.vertices), report)
+        result.timings = {**inner.timings, "load": timings["load"], "preprocess": report.seconds}
+        result.timings["total"] = time.perf_counter() - t0
+        return result
 
     is_mesh = geometry.is_mesh and not as_points
     kind = "mesh" if is_mesh else "points"
