@@ -1,0 +1,165 @@
+// MeshLab glue around sharp_core: reads the current layer, runs the detector in double,
+// writes vertex quality (strength), vertex selection (features) and optional colour.
+#include "filter_sharp_features.h"
+
+#include "sharp_core.h"
+
+#include <vcg/complex/algorithms/update/selection.h>
+
+namespace {
+const char *NAME = "Select Sharp Features (Projected Distance)";
+}
+
+FilterSharpFeaturesPlugin::FilterSharpFeaturesPlugin()
+{
+	typeList << FP_SHARP_FEATURES;
+	for (FilterIDType tt : types())
+		actionList << new QAction(filterName(tt), this);
+}
+
+QString FilterSharpFeaturesPlugin::pluginName() const
+{
+	return "FilterSharpFeatures";
+}
+
+QString FilterSharpFeaturesPlugin::filterName(FilterIDType) const
+{
+	return NAME;
+}
+
+QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType) const
+{
+	return "Selects the sharp features (creases, corners) of a mesh or point cloud automatically, "
+	       "with the projected-distance method of Tran et al. (2014): per vertex, the distance "
+	       "between the vertex and the centroid of its neighbourhood along the normal; Otsu's "
+	       "threshold on its histogram; at several scales (k-rings on a mesh, k nearest "
+	       "neighbours on a point cloud). A vertex is a feature if it is a candidate at every "
+	       "scale. Vertex quality is set to the feature strength (fraction of scales), the "
+	       "selection to the features. The same algorithm as the meshlab-sharp Python package.";
+}
+
+MeshFilterInterface::FilterClass FilterSharpFeaturesPlugin::getClass(QAction *)
+{
+	return FilterClass(MeshFilterInterface::Selection | MeshFilterInterface::Quality);
+}
+
+MeshFilterInterface::FILTER_ARITY FilterSharpFeaturesPlugin::filterArity(QAction *) const
+{
+	return SINGLE_MESH;
+}
+
+int FilterSharpFeaturesPlugin::getPreConditions(QAction *) const
+{
+	return MeshModel::MM_NONE;
+}
+
+int FilterSharpFeaturesPlugin::postCondition(QAction *) const
+{
+	return MeshModel::MM_VERTQUALITY | MeshModel::MM_VERTFLAGSELECT | MeshModel::MM_VERTCOLOR;
+}
+
+void FilterSharpFeaturesPlugin::initParameterSet(QAction *, MeshModel &, RichParameterList &par)
+{
+	par.addParam(RichString("knnScales", "12 16 20 24 28 32 36 40", "Point-cloud scales (k)",
+	                        "Neighbourhood sizes k (k nearest neighbours, the point included) used "
+	                        "on point clouds: a list like '12 16 20' or a range 'start:stop:step'."));
+	par.addParam(RichString("ringScales", "1 2 3 4", "Mesh scales (rings)",
+	                        "k-ring sizes used on meshes: a list like '1 2 3 4' or a range '1:4'."));
+	par.addParam(RichEnum("weighting", 0, QStringList() << "Gaussian" << "None", "Normal weighting",
+	                      "Weights of the PCA normals: Gaussian exp(-d^2/h^2), h the farthest "
+	                      "neighbour, or none (plain PCA)."));
+	par.addParam(RichBool("asPoints", false, "Treat a mesh as points",
+	                      "Ignore the faces and use k nearest neighbours."));
+	par.addParam(RichBool("colorize", true, "Colour the features",
+	                      "Features red, the other vertices grey."));
+}
+
+bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const RichParameterList &par,
+                                            vcg::CallBackPos *cb)
+{
+	MeshModel *mm = md.mm();
+	if (mm == nullptr) {
+		errorMessage = "Sharp features: there is no current layer.";
+		return false;
+	}
+	CMeshO &m = mm->cm;
+	sharp::Options options;
+	try {
+		options.knnScales = sharp::parseScales(par.getString("knnScales").toStdString(), 2);
+		options.ringScales = sharp::parseScales(par.getString("ringScales").toStdString(), 1);
+	} catch (const sharp::InputError &e) {
+		errorMessage = QString("Sharp features: ") + e.what();
+		return false;
+	}
+	options.gaussian = par.getEnum("weighting") == 0;
+	options.asPoints = par.getBool("asPoints");
+
+	// Live vertices in layer order; faces re-indexed to that order.
+	std::vector<CMeshO::VertexPointer> live;
+	std::vector<int> index(m.vert.size(), -1);
+	for (size_t i = 0; i < m.vert.size(); ++i)
+		if (!m.vert[i].IsD()) {
+			index[i] = int(live.size());
+			live.push_back(&m.vert[i]);
+		}
+	std::vector<sharp::Point> pts(live.size());
+	for (size_t i = 0; i < live.size(); ++i)
+		pts[i] = {double(live[i]->P()[0]), double(live[i]->P()[1]), double(live[i]->P()[2])};
+	std::vector<std::array<int, 3>> faces;
+	for (auto &f : m.face) {
+		if (f.IsD()) continue;
+		std::array<int, 3> t{};
+		bool ok = true;
+		for (int a = 0; a < 3; ++a) {
+			const CMeshO::VertexPointer vp = f.V(a);
+			const long vi = (vp == nullptr) ? -1 : long(vp - &m.vert[0]);
+			if (vi < 0 || vi >= long(m.vert.size()) || index[vi] < 0) ok = false;
+			else t[a] = index[vi];
+		}
+		if (!ok) {
+			errorMessage = "Sharp features: a face references a missing vertex.";
+			return false;
+		}
+		faces.push_back(t);
+	}
+
+	sharp::Result r;
+	try {
+		r = sharp::detect(pts, faces, options, cb);
+	} catch (const sharp::InputError &e) {
+		errorMessage = QString("Sharp features: ") + e.what();
+		Log("Sharp features: error: %s", e.what());
+		return false;
+	} catch (const std::exception &e) {
+		errorMessage = QString("Sharp features: internal error: ") + e.what();
+		return false;
+	}
+
+	mm->updateDataMask(MeshModel::MM_VERTQUALITY);
+	const bool colorize = par.getBool("colorize");
+	if (colorize)
+		mm->updateDataMask(MeshModel::MM_VERTCOLOR);
+	vcg::tri::UpdateSelection<CMeshO>::VertexClear(m);
+	for (size_t i = 0; i < live.size(); ++i) {
+		live[i]->Q() = CMeshO::VertexType::QualityType(r.strength[i]);
+		if (r.feature[i])
+			live[i]->SetS();
+		if (colorize)
+			live[i]->C() = r.feature[i] ? vcg::Color4b(230, 13, 13, 255) : vcg::Color4b(200, 200, 200, 255);
+	}
+
+	QString scales;
+	for (size_t s = 0; s < r.scales.size(); ++s)
+		scales += QString(" %1=%2:T=%3,candidates=%4")
+		              .arg(r.mesh ? "ring" : "k")
+		              .arg(r.scales[s])
+		              .arg(r.thresholds[s], 0, 'f', 8)
+		              .arg(r.candidates[s]);
+	Log("Sharp features: %s, %ld of %d vertices are features;%s", r.mesh ? "mesh (k-rings)" : "points (kNN)",
+	    r.nFeatures, int(live.size()), qUtf8Printable(scales));
+	if (r.allFlat)
+		Log("Sharp features: no features: all points lie on one plane.");
+	return true;
+}
+
+MESHLAB_PLUGIN_NAME_EXPORTER(FilterSharpFeaturesPlugin)
