@@ -20,6 +20,7 @@ from .io import Geometry, load, save_features_ply, save_indices, save_json
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
 from .normals import WEIGHTINGS
 from .pipeline import DetectionResult, detect
+from .plugin import add_plugin_command
 from .preprocessing import Preprocessing
 from .progress import Progress
 
@@ -89,12 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_preprocessing_arguments(det)
     det.set_defaults(func=run_detect)
 
-    try:  # TEMPORARY until plugin.py lands
-        from .plugin import add_plugin_command
-
-        add_plugin_command(sub)
-    except ImportError:
-        pass
+    add_plugin_command(sub)
     return parser
 
 

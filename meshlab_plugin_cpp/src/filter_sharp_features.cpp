@@ -77,19 +77,22 @@ void FilterSharpFeaturesPlugin::initParameterSet(QAction *, MeshModel &, RichPar
 bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const RichParameterList &par,
                                             vcg::CallBackPos *cb)
 {
-	MeshModel *mm = md.mm();
-	if (mm == nullptr) {
-		errorMessage = "Sharp features: there is no current layer.";
+	// Errors go to MeshLab's log (meshlabserver prints it) and to errorMessage (the GUI).
+	auto fail = [this](const QString &why) {
+		errorMessage = "Sharp features: " + why;
+		Log("Sharp features: error: %s", qUtf8Printable(why));
 		return false;
-	}
+	};
+	MeshModel *mm = md.mm();
+	if (mm == nullptr)
+		return fail("there is no current layer");
 	CMeshO &m = mm->cm;
 	sharp::Options options;
 	try {
 		options.knnScales = sharp::parseScales(par.getString("knnScales").toStdString(), 2);
 		options.ringScales = sharp::parseScales(par.getString("ringScales").toStdString(), 1);
 	} catch (const sharp::InputError &e) {
-		errorMessage = QString("Sharp features: ") + e.what();
-		return false;
+		return fail(e.what());
 	}
 	options.gaussian = par.getEnum("weighting") == 0;
 	options.asPoints = par.getBool("asPoints");
@@ -116,10 +119,8 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const R
 			if (vi < 0 || vi >= long(m.vert.size()) || index[vi] < 0) ok = false;
 			else t[a] = index[vi];
 		}
-		if (!ok) {
-			errorMessage = "Sharp features: a face references a missing vertex.";
-			return false;
-		}
+		if (!ok)
+			return fail("a face references a missing vertex");
 		faces.push_back(t);
 	}
 
@@ -127,12 +128,9 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const R
 	try {
 		r = sharp::detect(pts, faces, options, cb);
 	} catch (const sharp::InputError &e) {
-		errorMessage = QString("Sharp features: ") + e.what();
-		Log("Sharp features: error: %s", e.what());
-		return false;
+		return fail(e.what());
 	} catch (const std::exception &e) {
-		errorMessage = QString("Sharp features: internal error: ") + e.what();
-		return false;
+		return fail(QString("internal error: ") + e.what());
 	}
 
 	mm->updateDataMask(MeshModel::MM_VERTQUALITY);

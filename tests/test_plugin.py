@@ -1,0 +1,246 @@
+"""The C++ MeshLab 2020.09 plugin: built from scratch, run by Debian's meshlabserver under
+Xvfb, read back, and compared with the Python package on the same files."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pymeshlab
+import pytest
+import shapes
+from files import write_ply
+
+import meshlab_sharp
+from meshlab_sharp import plugin
+from meshlab_sharp.cli import main
+from meshlab_sharp.io import mesh_arrays
+from meshlab_sharp.sample import sample_part
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "meshlab_plugin_cpp" / "examples"
+_SCALE = re.compile(r"(k|ring)=(\d+):T=([0-9.]+),candidates=(\d+)")
+
+pytestmark = pytest.mark.skipif(
+    shutil.which("dpkg-query") is None, reason="the plugin targets Debian's MeshLab 2020.09"
+)
+
+
+@pytest.fixture(scope="session")
+def meshlab_root(tmp_path_factory):
+    """Build the plugin from scratch and install it into a private MeshLab root."""
+    missing = plugin.missing_packages()
+    if missing:
+        pytest.fail(f"missing Debian packages {missing}: run bash scripts/setup.sh --all")
+    base = tmp_path_factory.mktemp("meshlab")
+    root, build = base / "root", base / "build"
+    code = main(["plugin", "install", "--root", str(root), "--build-dir", str(build), "--no-apt"])
+    assert code == 0
+    assert (build / plugin.PLUGIN_FILE).is_file()
+    return root
+
+
+def run_meshlabserver(root: Path, src: Path, out: Path, **params) -> tuple[int, str]:
+    """Apply the filter with ``params`` overriding the example script's defaults."""
+    script = (EXAMPLE / "sharp_features_default.mlx").read_text()
+    for name, value in params.items():
+        script = re.sub(rf'value="[^"]*" name="{name}"', f'value="{value}" name="{name}"', script)
+    mlx = out.with_suffix(".mlx")
+    mlx.write_text(script)
+    command = [
+        "xvfb-run",
+        "-a",
+        "-s",
+        "-screen 0 1280x1024x24",
+        str(root / "bin" / "meshlabserver"),
+        "-i",
+        str(src),
+        "-o",
+        str(out),
+        "-m",
+        "vq",
+        "vf",
+        "vc",
+        "-s",
+        str(mlx),
+    ]
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=300, check=False)
+    return proc.returncode, proc.stdout + proc.stderr
+
+
+def parse_log(log: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per-scale thresholds and candidate counts from the filter's log line."""
+    line = next(ln for ln in log.splitlines() if "vertices are features" in ln)
+    found = _SCALE.findall(line)
+    return np.array([float(t) for _, _, t, _ in found]), np.array([int(c) for *_, c in found])
+
+
+def read_back(path: Path):
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(path))
+    m = ms.current_mesh()
+    quality, selection = m.vertex_scalar_array(), m.vertex_selection_array()
+    vertices, faces = mesh_arrays(ms)
+    return vertices, faces, quality, selection
+
+
+def test_meshlabserver_lists_the_filter(meshlab_root, tmp_path):
+    dump = tmp_path / "filters.txt"
+    subprocess.run(
+        ["xvfb-run", "-a", str(meshlab_root / "bin" / "meshlabserver"), "-d", str(dump)],
+        capture_output=True,
+        timeout=120,
+        check=False,
+    )
+    assert plugin.FILTER_NAME in dump.read_text(errors="replace")
+
+
+def test_cube_mesh_gives_the_12_edges(meshlab_root, tmp_path):
+    vertices, faces = shapes.cube_grid_mesh(4)
+    src = write_ply(tmp_path / "cube.ply", vertices, faces, binary=True)
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply")
+    assert code == 0, log
+    v, f, quality, selection = read_back(tmp_path / "out.ply")
+    expected = shapes.on_cube_edges(v, tol=1e-6)
+    assert expected.sum() == 188
+    np.testing.assert_array_equal(selection, expected)
+    np.testing.assert_array_equal(quality[expected], 1.0)
+    np.testing.assert_array_equal(f, faces)
+    thresholds, _ = parse_log(log)
+    np.testing.assert_array_equal(thresholds, meshlab_sharp.detect(src).thresholds)
+
+
+def test_cube_points_give_the_12_edges(meshlab_root, tmp_path):
+    points = shapes.cube_grid_points(15)
+    src = write_ply(tmp_path / "cube.ply", points)
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply")
+    assert code == 0, log
+    _, _, quality, selection = read_back(tmp_path / "out.ply")
+    expected = shapes.on_cube_edges(points)
+    np.testing.assert_array_equal(selection, expected)
+    np.testing.assert_array_equal(quality[expected], 1.0)
+    assert "points (kNN)" in log
+
+
+def test_flat_square_has_no_features(meshlab_root, tmp_path):
+    src = write_ply(tmp_path / "flat.ply", shapes.flat_square(20) @ shapes.random_rotation(4).T)
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply")
+    assert code == 0, log
+    assert "no features: all points lie on one plane" in log
+    _, _, quality, selection = read_back(tmp_path / "out.ply")
+    assert not selection.any()
+    assert not quality.any()
+
+
+def _agreement_cases():
+    part_points = sample_part("points", n_points=20000)
+    part_mesh = sample_part("mesh")
+    cube_v, cube_f = shapes.cube_grid_mesh(3)
+    return {
+        "sample-points": (part_points.vertices, None, {}),
+        "sample-mesh": (part_mesh.vertices, part_mesh.faces, {}),
+        "sample-mesh-as-points": (part_mesh.vertices, part_mesh.faces, {"asPoints": "true"}),
+        "box-cylinder-unweighted": (
+            shapes.box_cylinder_points(6000, seed=3),
+            None,
+            {"weighting": "1"},
+        ),
+        "box-points-other-scales": (
+            shapes.random_box_points(5000, seed=8),
+            None,
+            {"knnScales": "8:32:6"},
+        ),
+        "cube-mesh-rings-1-6": (cube_v, cube_f, {"ringScales": "1 2 3 4 5 6"}),
+    }
+
+
+AGREEMENT = _agreement_cases()
+
+
+@pytest.mark.parametrize("case", sorted(AGREEMENT))
+def test_agrees_with_the_python_package(meshlab_root, tmp_path, case):
+    vertices, faces, params = AGREEMENT[case]
+    src = write_ply(tmp_path / "in.ply", vertices.astype(np.float32), faces, binary=True)
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply", **params)
+    assert code == 0, log
+    _, _, quality, selection = read_back(tmp_path / "out.ply")
+
+    options = {
+        "as_points": params.get("asPoints") == "true",
+        "weighting": "none" if params.get("weighting") == "1" else "gaussian",
+    }
+    if "knnScales" in params:
+        options["scales"] = range(8, 33, 6)
+    if "ringScales" in params:
+        options["scales"] = [1, 2, 3, 4, 5, 6]
+    expected = meshlab_sharp.detect(src, **options, return_details=True)
+    thresholds, counts = parse_log(log)
+    np.testing.assert_array_equal(thresholds, expected.thresholds)
+
+    agree = np.mean(selection == expected.mask)
+    assert agree >= 0.999, f"{agree:.5f} of the points agree"
+    near = (np.abs(expected.distances - expected.thresholds[:, None]) < 1e-9).any(axis=0)
+    assert np.array_equal(selection[~near], expected.mask[~near])
+    np.testing.assert_allclose(quality, expected.strength, atol=1e-6)
+    np.testing.assert_array_equal(counts, expected.candidate_counts)
+    assert expected.n_features > 0
+
+
+def _bad(tmp_path: Path, case: str) -> Path:
+    if case == "empty-layer":
+        return write_ply(tmp_path / "empty.ply", np.zeros((0, 3)))
+    if case == "too-few-points":
+        return write_ply(tmp_path / "few.ply", shapes.cube_grid_points(9)[:25])
+    if case == "nan-coordinates":
+        p = shapes.cube_grid_points(9).copy()
+        p[5, 1] = np.nan
+        return write_ply(tmp_path / "nan.ply", p, binary=True)
+    if case == "all-identical":
+        return write_ply(tmp_path / "same.ply", np.tile([[1.0, 2.0, 3.0]], (60, 1)))
+    if case == "degenerate-faces":
+        v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], float)
+        return write_ply(tmp_path / "deg.ply", v, [[0, 1, 2], [1, 2, 3]])
+    if case == "bad-scales":
+        return write_ply(tmp_path / "cube.ply", shapes.cube_grid_points(9))
+    raise AssertionError(case)
+
+
+BAD = {
+    "empty-layer": ("no vertices", {}),
+    "too-few-points": ("fewer than the largest scale", {}),
+    "nan-coordinates": ("non-finite", {}),
+    "all-identical": ("identical", {}),
+    "degenerate-faces": ("zero area", {}),
+    "bad-scales": ("invalid scales", {"knnScales": "twelve"}),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_input_fails_cleanly(meshlab_root, tmp_path, case):
+    message, params = BAD[case]
+    src = _bad(tmp_path, case)
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply", **params)
+    assert code not in (0, 134, 139) and code > 0, log  # an error, not a signal
+    assert message in log
+    assert "core dumped" not in log.lower()
+
+
+def test_non_manifold_mesh_and_isolated_vertices(meshlab_root, tmp_path):
+    vertices, faces = shapes.cube_grid_mesh(3)
+    n = len(vertices)
+    # A fin: two extra triangles on one cube edge make it non-manifold; two isolated vertices.
+    corner = int(np.flatnonzero(np.all(vertices == [1, 1, 1], axis=1))[0])
+    other = int(np.flatnonzero(np.all(vertices == [1, 1, -1], axis=1))[0])
+    extra = np.array([[2.0, 2.0, 0.0], [5.0, 5.0, 5.0], [-5.0, 0.0, 0.0]])
+    all_v = np.concatenate([vertices, extra])
+    all_f = np.concatenate([faces, [[corner, other, n]]])
+    src = write_ply(tmp_path / "nm.ply", all_v, all_f)
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply")
+    assert code == 0, log
+    _, _, quality, selection = read_back(tmp_path / "out.ply")
+    assert not selection[n + 1 :].any()
+    np.testing.assert_array_equal(quality[n + 1 :], 0.0)
+    expected = meshlab_sharp.detect(src)
+    np.testing.assert_array_equal(selection, expected.mask)
