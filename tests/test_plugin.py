@@ -16,7 +16,6 @@ from files import write_ply
 
 import meshlab_sharp
 from meshlab_sharp import plugin
-from meshlab_sharp.cli import main
 from meshlab_sharp.io import mesh_arrays
 from meshlab_sharp.sample import sample_part
 
@@ -26,20 +25,6 @@ _SCALE = re.compile(r"(k|ring)=(\d+):T=([0-9.]+),candidates=(\d+)")
 pytestmark = pytest.mark.skipif(
     shutil.which("dpkg-query") is None, reason="the plugin targets Debian's MeshLab 2020.09"
 )
-
-
-@pytest.fixture(scope="session")
-def meshlab_root(tmp_path_factory):
-    """Build the plugin from scratch and install it into a private MeshLab root."""
-    missing = plugin.missing_packages()
-    if missing:
-        pytest.fail(f"missing Debian packages {missing}: run bash scripts/setup.sh --all")
-    base = tmp_path_factory.mktemp("meshlab")
-    root, build = base / "root", base / "build"
-    code = main(["plugin", "install", "--root", str(root), "--build-dir", str(build), "--no-apt"])
-    assert code == 0
-    assert (build / plugin.PLUGIN_FILE).is_file()
-    return root
 
 
 def run_meshlabserver(root: Path, src: Path, out: Path, **params) -> tuple[int, str]:
