@@ -29,8 +29,18 @@ def render(out: Path, n_points: int = 50_000) -> None:
     fig = plt.figure(figsize=(14, 6.5), dpi=110)
     for k, (elev, azim) in enumerate([(32, -58), (38, 125)]):
         ax = fig.add_subplot(1, 2, k + 1, projection="3d")
-        ax.scatter(p[:, 0], p[:, 1], p[:, 2], c=shade, cmap="Blues_r", vmin=0, vmax=1.4,
-                   s=0.4, linewidths=0, depthshade=False)
+        ax.scatter(
+            p[:, 0],
+            p[:, 1],
+            p[:, 2],
+            c=shade,
+            cmap="Blues_r",
+            vmin=0,
+            vmax=1.4,
+            s=0.4,
+            linewidths=0,
+            depthshade=False,
+        )
         ax.add_collection3d(Line3DCollection(part.edges, colors="red", linewidths=1.2))
         ax.set_box_aspect(np.ptp(p, axis=0))
         ax.view_init(elev=elev, azim=azim)

@@ -3,8 +3,8 @@
 # with the package installed (editable), and with --all also what the tests and the
 # MeshLab plugin need (test extras, MeshLab 2020.09, its build dependencies, Xvfb).
 #
-#   bash scripts/setup.sh          # the Python package
-#   bash scripts/setup.sh --all    # + test tools and the MeshLab plugin's Debian packages
+#   bash scripts/setup.sh          # the Python package (with matplotlib for --plot)
+#   bash scripts/setup.sh --all    # + test tools, MeshLab 2020.09 and the plugin's build needs
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -18,7 +18,7 @@ export DEBIAN_FRONTEND=noninteractive
 # pymeshlab needs libgl1 (import) and libopengl0 (its PLY/OBJ/OFF/STL plugins).
 packages=(libgl1 libopengl0 libgomp1 python3 python3-venv python3-pip)
 if [[ $all == 1 ]]; then
-  packages+=($(bash scripts/plugin_packages.sh))
+  packages+=(xdotool imagemagick)  # the GUI test drives MeshLab and takes screenshots
 fi
 missing=()
 for p in "${packages[@]}"; do
@@ -34,8 +34,12 @@ python=${PYTHON:-python3}
 if [[ ! -x .venv/bin/python ]]; then
   "$python" -m venv .venv
 fi
-extras=""
-[[ $all == 1 ]] && extras="[test]"
+extras="[plot]"
+[[ $all == 1 ]] && extras="[plot,test]"
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".${extras}"
+if [[ $all == 1 ]]; then
+  # MeshLab 2020.09, the plugin's build dependencies and its headers (Debian source package).
+  .venv/bin/meshlab-sharp plugin deps
+fi
 echo "setup: ready (.venv/bin/meshlab-sharp)"

@@ -82,8 +82,12 @@ def test_distance_to_segments_brute_force():
     pts = rng.uniform(-6, 6, (500, 3))
     a = seg[None, :, 0]
     ab = seg[None, :, 1] - a
-    t = np.clip(np.einsum("nkj,nkj->nk", pts[:, None] - a, np.broadcast_to(ab, (500, 30, 3)))
-                / np.einsum("kj,kj->k", ab[0], ab[0]), 0, 1)
+    t = np.clip(
+        np.einsum("nkj,nkj->nk", pts[:, None] - a, np.broadcast_to(ab, (500, 30, 3)))
+        / np.einsum("kj,kj->k", ab[0], ab[0]),
+        0,
+        1,
+    )
     brute = np.linalg.norm(pts[:, None] - a - t[..., None] * ab, axis=2).min(axis=1)
     got = distance_to_segments(pts, seg, step=0.05)
     assert np.all(got >= brute - 1e-12)
