@@ -16,6 +16,7 @@ from files import write_ply
 
 import meshlab_sharp
 from meshlab_sharp import plugin
+from meshlab_sharp.cli import main
 from meshlab_sharp.io import mesh_arrays
 from meshlab_sharp.sample import sample_part
 
@@ -229,3 +230,22 @@ def test_non_manifold_mesh_and_isolated_vertices(meshlab_root, tmp_path):
     np.testing.assert_array_equal(quality[n + 1 :], 0.0)
     expected = meshlab_sharp.detect(src)
     np.testing.assert_array_equal(selection, expected.mask)
+
+
+def test_debian_meshlab_reads_the_python_output(meshlab_root, tmp_path):
+    """meshlab-sharp's PLY, loaded and re-saved by Debian's meshlabserver 2020.09, keeps
+    the selection (flags bit 0x20) and the quality: MeshLab understands the output."""
+    part = sample_part("points", n_points=8000)
+    src = write_ply(tmp_path / "part.ply", part.vertices)
+    assert main(["detect", str(src), "-q"]) == 0
+    ours = tmp_path / "part_sharp.ply"
+    back = tmp_path / "back.ply"
+    command = ["xvfb-run", "-a", str(meshlab_root / "bin" / "meshlabserver")]
+    command += ["-i", str(ours), "-o", str(back), "-m", "vq", "vf"]
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    expected = meshlab_sharp.detect(src)
+    _, _, quality, selection = read_back(back)
+    assert expected.n_features > 100
+    np.testing.assert_array_equal(selection, expected.mask)
+    np.testing.assert_allclose(quality, expected.strength, atol=1e-6)
