@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import pymeshlab
 
+from . import _kernels
 from .errors import InputError
 from .io import Geometry, mesh_arrays
 
@@ -85,13 +86,17 @@ def tagged_input_indices(ms: pymeshlab.MeshSet, n_input: int) -> np.ndarray:
     return index
 
 
-def clean(geometry: Geometry) -> CleanGeometry:
+def clean(geometry: Geometry, *, backend: str | None = None) -> CleanGeometry:
     """Merge exact duplicates, drop zero-area faces and unreferenced vertices.
 
     Parameters
     ----------
     geometry : Geometry
         Validated input (finite coordinates, valid face indices).
+    backend : {"compiled", "numpy"}, optional
+        "numpy": pymeshlab's filters (the reference); "compiled": a hash of the
+        coordinates in C and vcg's zero-area test, same survivors, same faces.
+        Default: :func:`meshlab_sharp._kernels.default_backend`.
 
     Returns
     -------
@@ -102,6 +107,8 @@ def clean(geometry: Geometry) -> CleanGeometry:
     InputError
         A mesh all of whose faces have zero area.
     """
+    if _kernels.resolve(backend) == "compiled":
+        return _clean_compiled(geometry)
     v = geometry.vertices
     ms = pymeshlab.MeshSet()
     if geometry.is_mesh:
@@ -136,3 +143,39 @@ def clean(geometry: Geometry) -> CleanGeometry:
     return CleanGeometry(
         vertices=v[to_input], faces=faces, to_input=to_input, from_input=from_input
     )
+
+
+def _clean_compiled(geometry: Geometry) -> CleanGeometry:
+    """:func:`clean` without pymeshlab: what its filters do, as vcg does it.
+
+    ``meshing_remove_duplicate_vertices`` keeps the first of equal vertices (``==`` on
+    each coordinate) and the order of the others; ``meshing_remove_null_faces`` drops
+    faces with ``DoubleArea <= 0`` (a face using a merged vertex twice is one);
+    ``meshing_remove_unreferenced_vertices`` then compacts, keeping the order.
+    """
+    v = np.ascontiguousarray(geometry.vertices, dtype=np.float64)
+    to_input, from_input = _kernels.merge_duplicates(v)
+    if not geometry.is_mesh:
+        vertices = v if len(to_input) == len(v) else v[to_input]
+        return CleanGeometry(
+            vertices=vertices, faces=None, to_input=to_input, from_input=from_input
+        )
+    merged = v if len(to_input) == len(v) else v[to_input]
+    faces = from_input[np.asarray(geometry.faces, dtype=np.int64)]
+    faces = faces[_kernels.face_double_areas(merged, faces) > 0]
+    if len(faces) == 0:
+        raise InputError(
+            f"{geometry.source}: every face has zero area; nothing is left of the mesh "
+            "(use --as-points to treat its vertices as a point cloud)"
+        )
+    used = np.zeros(len(merged), dtype=bool)
+    used[faces.reshape(-1)] = True
+    if used.all():
+        renumber = None
+    else:
+        renumber = np.cumsum(used) - 1
+        faces = renumber[faces]
+        merged = merged[used]
+        to_input = to_input[used]
+        from_input = np.where(used[from_input], renumber[from_input], -1)
+    return CleanGeometry(vertices=merged, faces=faces, to_input=to_input, from_input=from_input)

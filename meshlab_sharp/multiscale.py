@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _kernels
 from .neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods
 from .normals import Weighting
 from .projected_distance import projected_distances
@@ -71,8 +72,16 @@ def run_scales(
         Keep the per-scale normalised distances and normals.
     on_scale : callable, optional
         Called with each scale when it is done (progress reporting).
+
+    The backend is the neighbourhoods': with "compiled", the projected distances of
+    every scale come from one pass of the C kernels over the points (neighbourhoods
+    searched and used at once), then each scale is normalised and thresholded as with
+    "numpy".
     """
     m, s = len(points), len(scales)
+    fused = _compiled_projected_distances(
+        points, neighbourhoods, scales, normals, weighting, keep_details
+    )
     flat_span = FLAT_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
     thresholds = np.empty(s)
     counts = np.empty(s, dtype=np.int64)
@@ -80,9 +89,12 @@ def run_scales(
     distances = np.empty((s, m)) if keep_details else None
     used_normals = np.empty((s, m, 3)) if keep_details else None
     for i, scale in enumerate(scales):
-        pdis, used = projected_distances(
-            points, neighbourhoods.at(scale), normals, weighting=weighting
-        )
+        if fused is not None:
+            pdis, used = fused[0][i], None if fused[1] is None else fused[1][i]
+        else:
+            pdis, used = projected_distances(
+                points, neighbourhoods.at(scale), normals, weighting=weighting
+            )
         v = normalise(pdis, flat_span=flat_span)
         thresholds[i] = otsu_threshold(v)
         candidate = v >= thresholds[i]
@@ -101,6 +113,61 @@ def run_scales(
         distances=distances,
         normals=used_normals,
     )
+
+
+def projected_distances_all(
+    points: np.ndarray,
+    neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods,
+    scales: Sequence[int],
+    *,
+    normals: np.ndarray | None = None,
+    weighting: Weighting = "gaussian",
+) -> np.ndarray:
+    """Raw projected distances (s, m) of every scale, with the neighbourhoods' backend
+    (what :func:`run_scales` thresholds; for benchmarks and tests)."""
+    fused = _compiled_projected_distances(points, neighbourhoods, scales, normals, weighting, False)
+    if fused is not None:
+        return fused[0]
+    return np.stack(
+        [
+            projected_distances(points, neighbourhoods.at(k), normals, weighting=weighting)[0]
+            for k in scales
+        ]
+    )
+
+
+def _compiled_projected_distances(
+    points: np.ndarray,
+    neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods,
+    scales: Sequence[int],
+    normals: np.ndarray | None,
+    weighting: Weighting,
+    keep_normals: bool,
+) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """Projected distances (s, m) and normals (s, m, 3) or None, of every scale at
+    once with the compiled kernels; None when the neighbourhoods are the numpy ones."""
+    if not scales:
+        return None
+    if list(scales) != sorted(set(scales)):
+        return None
+    if isinstance(neighbourhoods, KnnNeighbourhoods) and neighbourhoods.grid is not None:
+        if max(scales) > neighbourhoods.k_max or min(scales) < 1:
+            return None
+        return _kernels.cloud_projected_distances(
+            neighbourhoods.grid,
+            scales,
+            weighting,
+            keep_normals=keep_normals,
+            workers=neighbourhoods.workers,
+        )
+    if isinstance(neighbourhoods, RingNeighbourhoods) and neighbourhoods.adjacency is not None:
+        if min(scales) < 1:
+            return None
+        indptr, indices = neighbourhoods.adjacency
+        return _kernels.ring_projected_distances(
+            points, indptr, indices, scales, normals, weighting, keep_normals=keep_normals
+        )
+    return None
 
 
 def decide(votes: np.ndarray, n_scales: int) -> tuple[np.ndarray, np.ndarray]:

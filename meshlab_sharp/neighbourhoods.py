@@ -4,6 +4,13 @@ A neighbourhood is stored flat, as in CSR sparse matrices: the neighbours of poi
 ``i`` are ``indices[indptr[i]:indptr[i + 1]]``, the point itself included. For clouds
 one kNN query at the largest scale serves every scale (the smaller ones are prefixes);
 for meshes each ring is grown from the previous one.
+
+Two backends give the same neighbourhoods (``tests/test_equivalence.py``): "numpy",
+the reference (cKDTree, sparse matrix powers), and "compiled" (the default when built,
+:mod:`meshlab_sharp._kernels`), which sorts the points along a Morton curve into grid
+cells and searches them in C. With the compiled backend the neighbourhoods are not
+stored: :func:`meshlab_sharp.multiscale.run_scales` searches them and uses them at once,
+point by point, and ``at()`` computes a scale's table only when asked for.
 """
 
 from __future__ import annotations
@@ -15,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from . import _kernels
 from .errors import InputError
 
 #: Rows per block of kNN queries (bounds the temporary memory).
@@ -133,20 +141,48 @@ class KnnNeighbourhoods:
         The largest scale; one query of this size serves every scale.
     workers : int, default -1
         Threads for the kd-tree query.
+    backend : {"compiled", "numpy"}, optional
+        Default: :func:`meshlab_sharp._kernels.default_backend`.
     """
 
-    def __init__(self, points: np.ndarray, k_max: int, *, workers: int = -1) -> None:
-        self.indices = knn(points, k_max, workers=workers)
+    def __init__(
+        self, points: np.ndarray, k_max: int, *, workers: int = -1, backend: str | None = None
+    ) -> None:
+        n = len(points)
+        if not 1 <= k_max <= n:
+            raise InputError(
+                f"k = {k_max} nearest neighbours needs at least {k_max} points, got {n}"
+            )
         self.k_max = k_max
+        self.workers = workers
+        self.backend = _kernels.resolve(backend)
+        self._indices: np.ndarray | None = None
+        #: The Morton-sorted grid of the compiled backend (None with numpy).
+        self.grid: _kernels.Grid | None = None
+        if self.backend == "compiled":
+            self.grid = _kernels.build_grid(points, k_max)
+        else:
+            self._indices = knn(points, k_max, workers=workers)
+
+    @property
+    def indices(self) -> np.ndarray:
+        """(n, k_max) neighbour indices, rows sorted by (squared distance, index)."""
+        if self._indices is None:
+            assert self.grid is not None
+            idx = _kernels.cloud_knn(self.grid, self.k_max, self.workers)
+            dtype = np.int32 if len(idx) < 2**31 else np.int64
+            self._indices = idx.astype(dtype)
+        return self._indices
 
     def at(self, k: int) -> Neighbourhood:
         """The k-nearest neighbourhoods, ``k <= k_max``."""
         if not 1 <= k <= self.k_max:
             raise ValueError(f"scale {k} outside 1..{self.k_max}")
-        n = len(self.indices)
+        indices = self.indices
+        n = len(indices)
         return Neighbourhood(
             indptr=np.arange(n + 1, dtype=np.int64) * k,
-            indices=np.ascontiguousarray(self.indices[:, :k]).reshape(-1),
+            indices=np.ascontiguousarray(indices[:, :k]).reshape(-1),
         )
 
 
@@ -162,21 +198,48 @@ class RingNeighbourhoods:
         Triangles.
     n : int
         Number of vertices.
+    backend : {"compiled", "numpy"}, optional
+        Default: :func:`meshlab_sharp._kernels.default_backend`. The compiled backend
+        keeps the 1-ring adjacency (``adjacency``) for a breadth-first search in C and
+        builds the sparse matrices only if ``at()`` is called.
     """
 
-    def __init__(self, faces: np.ndarray, n: int) -> None:
+    def __init__(self, faces: np.ndarray, n: int, *, backend: str | None = None) -> None:
+        self.faces = faces
+        self.n = n
+        self.backend = _kernels.resolve(backend)
+        #: (indptr, indices) 1-ring adjacency with repeats (compiled backend), else None.
+        self.adjacency: tuple[np.ndarray, np.ndarray] | None = None
+        self._one_ring: sp.csr_matrix | None = None
+        if self.backend == "compiled" and n < 2**31:
+            self.adjacency = _kernels.adjacency(faces, n)
+        else:
+            self._one_ring = self._build_one_ring()
+        self._ring = 0
+        self._current = None
+
+    def _build_one_ring(self) -> sp.csr_matrix:
+        faces, n = self.faces, self.n
         i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2], np.arange(n)])
         j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0], np.arange(n)])
         a = sp.coo_matrix((np.ones(len(i), dtype=bool), (i, j)), shape=(n, n)).tocsr()
-        self.one_ring = (a + a.T).tocsr()
-        self.one_ring.sort_indices()
-        self._ring = 0
-        self._current = sp.identity(n, dtype=bool, format="csr")
+        one_ring = (a + a.T).tocsr()
+        one_ring.sort_indices()
+        return one_ring
+
+    @property
+    def one_ring(self) -> sp.csr_matrix:
+        """The 1-ring (and self) as a boolean sparse matrix."""
+        if self._one_ring is None:
+            self._one_ring = self._build_one_ring()
+        return self._one_ring
 
     def at(self, ring: int) -> Neighbourhood:
         """Every vertex within ``ring`` edges, the vertex itself included."""
         if ring < self._ring:
             raise ValueError("rings must be requested in increasing order")
+        if self._current is None:
+            self._current = sp.identity(self.n, dtype=bool, format="csr")
         while self._ring < ring:
             self._current = (self._current @ self.one_ring).tocsr()
             self._ring += 1
@@ -185,9 +248,18 @@ class RingNeighbourhoods:
 
 
 def build_neighbourhoods(
-    points: np.ndarray, faces: np.ndarray | None, scales: Sequence[int], *, workers: int = -1
+    points: np.ndarray,
+    faces: np.ndarray | None,
+    scales: Sequence[int],
+    *,
+    workers: int = -1,
+    backend: str | None = None,
 ) -> KnnNeighbourhoods | RingNeighbourhoods:
-    """kNN neighbourhoods for a cloud (``faces is None``), k-rings for a mesh."""
+    """kNN neighbourhoods for a cloud (``faces is None``), k-rings for a mesh.
+
+    ``backend``: "compiled" or "numpy" (see the module's docstring); default
+    :func:`meshlab_sharp._kernels.default_backend`.
+    """
     if faces is None:
-        return KnnNeighbourhoods(points, max(scales), workers=workers)
-    return RingNeighbourhoods(faces, len(points))
+        return KnnNeighbourhoods(points, max(scales), workers=workers, backend=backend)
+    return RingNeighbourhoods(faces, len(points), backend=backend)
