@@ -12,6 +12,27 @@
 #include <stdlib.h>
 #include <string.h>
 
+#if defined(__x86_64__) && defined(__GLIBC__) && defined(MS_LIBMVEC)
+#include <emmintrin.h>
+/* glibc's libmvec: exp of two doubles at once (SSE2, any x86-64), within 1 ulp of
+ * exp(); about 2.5x faster than two calls of exp() here. */
+__m128d _ZGVbN2v_exp(__m128d);
+#define HAVE_VEXP 1
+#endif
+
+/* mu[j] = exp(-d2[j] / h2), j < m */
+static void gaussian_weights(const double *d2, int64_t m, double h2, double *mu) {
+    int64_t j = 0;
+#ifdef HAVE_VEXP
+    __m128d hh = _mm_set1_pd(h2), zero = _mm_setzero_pd();
+    for (; j + 2 <= m; j += 2) {
+        __m128d a = _mm_div_pd(_mm_sub_pd(zero, _mm_loadu_pd(d2 + j)), hh);
+        _mm_storeu_pd(mu + j, _ZGVbN2v_exp(a));
+    }
+#endif
+    for (; j < m; j++) mu[j] = exp(-d2[j] / h2);
+}
+
 #define MORTON_BITS 21
 #define MORTON_MAX ((1u << MORTON_BITS) - 1u)
 #define EMPTY_KEY UINT64_MAX
@@ -180,18 +201,19 @@ void ms_eigvecs(const double *cov, int64_t c, double *out) {
  * fixed: a fixed unit normal or NULL (PCA). h2 is max d2 (given). */
 static inline double neighbourhood_pdis(const double *q, const double *d2, int64_t m,
                                         const double *mean, double h2, int gaussian,
-                                        const double *fixed, double *normal) {
+                                        const double *fixed, double *normal, double *mu) {
     double nrm[3];
     if (fixed != NULL) {
         nrm[0] = fixed[0]; nrm[1] = fixed[1]; nrm[2] = fixed[2];
     } else {
         double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
         int w = gaussian && h2 > 0.0;
+        if (w) gaussian_weights(d2, m, h2, mu);
         for (int64_t j = 0; j < m; j++) {
             double rx = q[3 * j] - mean[0], ry = q[3 * j + 1] - mean[1],
                    rz = q[3 * j + 2] - mean[2];
-            double mu = w ? exp(-d2[j] / h2) : 1.0;
-            double mx = mu * rx, my = mu * ry, mz = mu * rz;
+            double wj = w ? mu[j] : 1.0;
+            double mx = wj * rx, my = wj * ry, mz = wj * rz;
             c00 += mx * rx; c01 += mx * ry; c02 += mx * rz;
             c11 += my * ry; c12 += my * rz; c22 += mz * rz;
         }
@@ -381,10 +403,73 @@ static int knn_one(const grid_t *g, int64_t i, int64_t k, cbuf_t *buf) {
     }
 }
 
+typedef struct {
+    double *x, *y, *z, *d2;
+    int64_t *idx, *pos;
+    int64_t n, cap;
+} block_t;
+
+static int block_reserve(block_t *b, int64_t need) {
+    if (need <= b->cap) return 0;
+    int64_t cap = b->cap ? b->cap : 512;
+    while (cap < need) cap *= 2;
+    double **dp[4] = {&b->x, &b->y, &b->z, &b->d2};
+    for (int t = 0; t < 4; t++) {
+        double *r = (double *)realloc(*dp[t], (size_t)cap * sizeof(double));
+        if (!r) return -1;
+        *dp[t] = r;
+    }
+    int64_t *r1 = (int64_t *)realloc(b->idx, (size_t)cap * sizeof(int64_t));
+    if (!r1) return -1;
+    b->idx = r1;
+    int64_t *r2 = (int64_t *)realloc(b->pos, (size_t)cap * sizeof(int64_t));
+    if (!r2) return -1;
+    b->pos = r2;
+    b->cap = cap;
+    return 0;
+}
+
+/* The points of the 3x3x3 cells around cell c (level g->level), as arrays. */
+static int gather_block(const grid_t *g, const int64_t *c, block_t *b) {
+    int64_t cmax = (int64_t)(MORTON_MAX >> g->level);
+    b->n = 0;
+    for (int64_t dz = -1; dz <= 1; dz++) {
+        int64_t z = c[2] + dz;
+        if (z < 0 || z > cmax) continue;
+        for (int64_t dy = -1; dy <= 1; dy++) {
+            int64_t y = c[1] + dy;
+            if (y < 0 || y > cmax) continue;
+            for (int64_t dx = -1; dx <= 1; dx++) {
+                int64_t x = c[0] + dx;
+                if (x < 0 || x > cmax) continue;
+                int64_t s, e;
+                cell_range(g, g->level, morton3((uint32_t)x, (uint32_t)y, (uint32_t)z), &s, &e);
+                if (e <= s) continue;
+                if (block_reserve(b, b->n + (e - s))) return -1;
+                for (int64_t j = s; j < e; j++) {
+                    int64_t t = b->n++;
+                    b->x[t] = g->p[3 * j];
+                    b->y[t] = g->p[3 * j + 1];
+                    b->z[t] = g->p[3 * j + 2];
+                    b->idx[t] = g->orig[j];
+                    b->pos[t] = j;
+                }
+            }
+        }
+    }
+    return 0;
+}
+
 /* kNN of sorted positions [begin, end) at k = max(ks), then for each scale ks[s] the
  * projected distance into out_pdis[s * n + orig[i]] (and the normal into
  * out_normals[(s * n + orig[i]) * 3], when not NULL). With out_idx (n, kmax) not NULL,
- * store the neighbour indices instead (no pdis). Returns 0, -1 out of memory. */
+ * store the neighbour indices instead (no pdis). Returns 0, -1 out of memory.
+ *
+ * Points are taken cell by cell: the 27 cells around a cell are gathered once for all
+ * its points. A point's k nearest are among them when at least k lie closer than the
+ * block's faces; the k-th distance of the previous point plus the distance between the
+ * two bounds this point's k-th distance (triangle inequality), which prunes the
+ * candidates before the selection. Otherwise the search widens (knn_one). */
 int ms_cloud_pdis(const double *p, const int64_t *orig, const uint64_t *codes, int64_t n,
                   double ox, double oy, double oz, double fine, int level,
                   const uint64_t *hkeys, const int64_t *hstart, const int64_t *hend,
@@ -393,18 +478,87 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, const uint64_t *codes, i
     grid_t g = {p, orig, codes, n, {ox, oy, oz}, fine, level, hkeys, hstart, hend, hmask};
     int64_t kmax = ks[nscales - 1];
     cbuf_t buf = {NULL, 0, 0};
+    block_t blk = {NULL, NULL, NULL, NULL, NULL, NULL, 0, 0};
     double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
+    double *mu = (double *)malloc((size_t)kmax * sizeof(double));
     int rc = 0;
-    if (!q || !d2) { rc = -1; goto done; }
+    uint64_t cell = EMPTY_KEY;
+    int64_t c[3] = {0, 0, 0};
+    int64_t cmax = (int64_t)(MORTON_MAX >> level);
+    double cs = fine * (double)(1ULL << level);
+    double prev_r = -1.0, prev_p[3] = {0, 0, 0};
+    if (!q || !d2 || !mu) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
-        if (knn_one(&g, i, kmax, &buf)) { rc = -1; goto done; }
+        const double *pi = p + 3 * i;
+        uint64_t key = codes[i] >> (3 * level);
+        if (key != cell) {
+            cell = key;
+            c[0] = compact3(key); c[1] = compact3(key >> 1); c[2] = compact3(key >> 2);
+            if (gather_block(&g, c, &blk)) { rc = -1; goto done; }
+        }
+        double bound = INFINITY;
+        for (int a = 0; a < 3; a++) {
+            if (c[a] - 1 > 0) {
+                double dd = pi[a] - (g.o[a] + (double)(c[a] - 1) * cs);
+                if (dd < bound) bound = dd;
+            }
+            if (c[a] + 2 <= cmax) {
+                double dd = (g.o[a] + (double)(c[a] + 2) * cs) - pi[a];
+                if (dd < bound) bound = dd;
+            }
+        }
+        bound -= fine;
+        int found = 0;
+        if (bound > 0.0 && blk.n >= kmax) {
+            double b2 = bound == INFINITY ? INFINITY : bound * bound;
+            double px = pi[0], py = pi[1], pz = pi[2];
+            int64_t nb = blk.n;
+            double *bd = blk.d2;
+            for (int64_t j = 0; j < nb; j++) {
+                double dx = blk.x[j] - px, dy = blk.y[j] - py, dz = blk.z[j] - pz;
+                bd[j] = dx * dx + dy * dy + dz * dz;
+            }
+            double limit = b2;
+            if (prev_r >= 0.0) {
+                double ex = px - prev_p[0], ey = py - prev_p[1], ez = pz - prev_p[2];
+                double t = prev_r + sqrt(ex * ex + ey * ey + ez * ez);
+                double tau = t * t * (1.0 + 1e-9) + 1e-300;
+                if (tau < limit) limit = tau;
+            }
+            /* strictly inside the block (< b2), or within the triangle bound */
+            if (cbuf_reserve(&buf, nb)) { rc = -1; goto done; }
+            int64_t m = 0;
+            for (int64_t j = 0; j < nb; j++) {
+                if (bd[j] < limit || (limit < b2 && bd[j] == limit)) {
+                    buf.c[m].d2 = bd[j]; buf.c[m].idx = blk.idx[j]; buf.c[m].pos = blk.pos[j];
+                    m++;
+                }
+            }
+            if (m < kmax && limit < b2) {
+                /* rounding paranoia: retry with the block bound */
+                m = 0;
+                for (int64_t j = 0; j < nb; j++) {
+                    if (bd[j] < b2) {
+                        buf.c[m].d2 = bd[j]; buf.c[m].idx = blk.idx[j]; buf.c[m].pos = blk.pos[j];
+                        m++;
+                    }
+                }
+            }
+            if (m >= kmax) {
+                buf.n = m;
+                select_sorted(buf.c, m, kmax);
+                found = 1;
+            }
+        }
+        if (!found && knn_one(&g, i, kmax, &buf)) { rc = -1; goto done; }
+        prev_r = sqrt(buf.c[kmax - 1].d2);
+        prev_p[0] = pi[0]; prev_p[1] = pi[1]; prev_p[2] = pi[2];
         int64_t oi = orig[i];
         if (out_idx != NULL) {
             for (int64_t j = 0; j < kmax; j++) out_idx[oi * kmax + j] = buf.c[j].idx;
             continue;
         }
-        const double *pi = p + 3 * i;
         for (int64_t j = 0; j < kmax; j++) {
             const double *pj = p + 3 * buf.c[j].pos;
             q[3 * j] = pj[0] - pi[0];
@@ -422,13 +576,15 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, const uint64_t *codes, i
             }
             double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
             double *nrm = out_normals ? out_normals + 3 * (s * n + oi) : NULL;
-            out_pdis[s * n + oi] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm);
+            out_pdis[s * n + oi] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
         }
     }
 done:
     free(buf.c);
+    free(blk.x); free(blk.y); free(blk.z); free(blk.d2); free(blk.idx); free(blk.pos);
     free(q);
     free(d2);
+    free(mu);
     return rc;
 }
 
@@ -465,9 +621,10 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
     int32_t *queue = (int32_t *)malloc((size_t)cap * sizeof(int32_t));
     double *q = (double *)malloc((size_t)cap * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)cap * sizeof(double));
+    double *mu = (double *)malloc((size_t)cap * sizeof(double));
     int rc = 0;
     int64_t rmax = rings[nscales - 1];
-    if (!queue || !q || !d2) { rc = -1; goto done; }
+    if (!queue || !q || !d2 || !mu) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         const double *fn = fixed ? fixed + 3 * i : NULL;
@@ -497,6 +654,9 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                         double *nd = (double *)realloc(d2, (size_t)nc * sizeof(double));
                         if (!nd) { rc = -1; goto done; }
                         d2 = nd;
+                        double *nm = (double *)realloc(mu, (size_t)nc * sizeof(double));
+                        if (!nm) { rc = -1; goto done; }
+                        mu = nm;
                         cap = nc;
                     }
                     queue[tail++] = w;
@@ -515,7 +675,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                 }
                 double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
                 double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
-                out_pdis[s * n + i] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm);
+                out_pdis[s * n + i] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm, mu);
                 s++;
             }
         }
@@ -524,6 +684,7 @@ done:
     free(queue);
     free(q);
     free(d2);
+    free(mu);
     return rc;
 }
 
