@@ -84,6 +84,14 @@ def build_parser() -> argparse.ArgumentParser:
         default="gaussian",
         help="weights of the PCA normals (default: gaussian)",
     )
+    det.add_argument(
+        "--mode",
+        choices=("paper", "robust"),
+        default="paper",
+        help="paper: the paper's method as ALGORITHM.md reads it (default); robust: "
+        "ignores outliers, density-independent, no features on smooth objects, thin "
+        "lines (docs/robust-mode.md)",
+    )
     det.add_argument("--ascii", action="store_true", help="write an ASCII PLY (default binary)")
     det.add_argument("--force", action="store_true", help="overwrite existing outputs")
     det.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
@@ -139,6 +147,7 @@ def run_detect(args: argparse.Namespace) -> int:
         geometry,
         scales=args.scales,
         weighting=args.weighting,
+        mode=args.mode,
         as_points=args.as_points,
         progress=progress,
         preprocessing=steps,

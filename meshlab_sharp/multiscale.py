@@ -55,6 +55,7 @@ def run_scales(
     weighting: Weighting = "gaussian",
     keep_details: bool = False,
     on_scale: Callable[[int], None] | None = None,
+    rule: Callable[[int, int, np.ndarray], tuple[np.ndarray, float]] | None = None,
 ) -> ScaleResults:
     """Projected distance, normalisation and Otsu's threshold at each scale.
 
@@ -72,6 +73,10 @@ def run_scales(
         Keep the per-scale normalised distances and normals.
     on_scale : callable, optional
         Called with each scale when it is done (progress reporting).
+    rule : callable, optional
+        ``rule(i, scale, pdis) -> (values, threshold)`` replaces min-max normalisation
+        and Otsu's threshold (robust mode, :class:`meshlab_sharp.robust.RelativeRule`).
+        None: the paper's rule.
 
     The backend is the neighbourhoods': with "compiled", the projected distances of
     every scale come from one pass of the C kernels over the points (neighbourhoods
@@ -95,8 +100,11 @@ def run_scales(
             pdis, used = projected_distances(
                 points, neighbourhoods.at(scale), normals, weighting=weighting
             )
-        v = normalise(pdis, flat_span=flat_span)
-        thresholds[i] = otsu_threshold(v)
+        if rule is None:
+            v = normalise(pdis, flat_span=flat_span)
+            thresholds[i] = otsu_threshold(v)
+        else:
+            v, thresholds[i] = rule(i, scale, pdis)
         candidate = v >= thresholds[i]
         counts[i] = int(candidate.sum())
         votes += candidate

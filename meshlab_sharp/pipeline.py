@@ -27,8 +27,13 @@ from .preprocessing import (
     preprocess,
 )
 from .progress import Progress
+from .robust import RobustSetup
 
 Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | pymeshlab.Mesh
+
+#: Detection modes: the paper's method as ALGORITHM.md reads it, or robust mode
+#: (:mod:`meshlab_sharp.robust`, docs/robust-mode.md).
+MODES = ("paper", "robust")
 
 
 @dataclass
@@ -67,6 +72,8 @@ class DetectionResult:
     preprocessing : PreprocessingReport or None
         With ``detect(..., preprocessing=...)``: the steps run, the processed geometry,
         its map to the input and the detection in its order.
+    mode : str
+        "paper" or "robust".
     """
 
     mask: np.ndarray
@@ -82,6 +89,7 @@ class DetectionResult:
     distances: np.ndarray | None = None
     normals: np.ndarray | None = None
     preprocessing: PreprocessingReport | None = None
+    mode: str = "paper"
 
     @property
     def indices(self) -> np.ndarray:
@@ -101,7 +109,11 @@ class DetectionResult:
             "n_clean": self.n_clean,
             "n_dropped": int((~self.kept).sum()),
             "n_features": self.n_features,
-            "options": {"scales": list(self.scales), "weighting": self.weighting},
+            "options": {
+                "scales": list(self.scales),
+                "weighting": self.weighting,
+                **({} if self.mode == "paper" else {"mode": self.mode}),
+            },
             "scales": [
                 {"scale": int(s), "threshold": float(t), "candidates": int(c)}
                 for s, t, c in zip(self.scales, self.thresholds, self.candidate_counts, strict=True)
@@ -126,6 +138,7 @@ def detect(
     progress: bool | Progress = False,
     workers: int = -1,
     preprocessing: Preprocessing | dict[str, Any] | None = None,
+    mode: str = "paper",
 ) -> DetectionResult:
     """Find the sharp features of a point cloud or triangle mesh.
 
@@ -153,6 +166,11 @@ def detect(
         simplification; see :mod:`meshlab_sharp.preprocessing`). Detection runs on the
         processed geometry; results are mapped back to the input's vertices (removed
         ones: not features, ``kept`` False; vertices added by hole filling: left out).
+    mode : {"paper", "robust"}, default "paper"
+        "paper": ALGORITHM.md's reading of the paper. "robust": isolated points left
+        out, projected distances relative to the local spacing, a threshold floor (no
+        features on smooth objects) and thinning across the lines
+        (:mod:`meshlab_sharp.robust`); ``distances`` are then the relative distances.
 
     Returns
     -------
@@ -167,6 +185,8 @@ def detect(
     """
     if weighting not in WEIGHTINGS:
         raise InputError(f"unknown weighting {weighting!r}; choose from {', '.join(WEIGHTINGS)}")
+    if not isinstance(mode, str) or mode not in MODES:
+        raise InputError(f"unknown mode {mode!r}; choose from {', '.join(MODES)}")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     geometry = _as_input(source, faces, as_points)
@@ -185,6 +205,7 @@ def detect(
             return_details=return_details,
             progress=progress,
             workers=workers,
+            mode=mode,
         )
         result = map_to_input(inner, to_input, len(geometry.vertices), report)
         result.timings = {**inner.timings, "load": timings["load"], "preprocess": report.seconds}
@@ -211,23 +232,35 @@ def detect(
     t = time.perf_counter()
     neighbourhoods = build_neighbourhoods(points, cleaned.faces, scales_t, workers=workers)
     normals = face_average_normals(points, cleaned.faces) if is_mesh else None
+    robust = None
+    work, work_neighbourhoods = points, neighbourhoods
+    if mode == "robust":
+        robust = RobustSetup(points, cleaned.faces, neighbourhoods, scales_t, workers=workers)
+        work, work_neighbourhoods = robust.points, robust.neighbourhoods
     timings["neighbourhoods"] = time.perf_counter() - t
     bar.step("neighbourhoods")
 
     t = time.perf_counter()
     per_scale = run_scales(
-        points,
-        neighbourhoods,
+        work,
+        work_neighbourhoods,
         scales_t,
         normals=normals,
         weighting=weighting,
         keep_details=return_details,
         on_scale=lambda s: bar.step(f"scale {s}"),
+        rule=None if robust is None else robust.rule,
     )
     timings["normals_projected_distance_threshold"] = time.perf_counter() - t
 
     t = time.perf_counter()
     mask, strength = decide(per_scale.votes, len(scales_t))
+    if robust is not None:
+        mask = robust.expand(robust.thin(mask), False)
+        strength = robust.expand(strength, 0.0)
+        if per_scale.distances is not None and per_scale.normals is not None:
+            per_scale.distances = np.stack([robust.expand(d, np.nan) for d in per_scale.distances])
+            per_scale.normals = np.stack([robust.expand(n, np.nan) for n in per_scale.normals])
     result = DetectionResult(
         mask=cleaned.to_input_order(mask, False),
         strength=cleaned.to_input_order(strength, 0.0),
@@ -239,6 +272,7 @@ def detect(
         weighting=weighting,
         n_clean=len(points),
         timings=timings,
+        mode=mode,
     )
     if per_scale.distances is not None and per_scale.normals is not None:
         result.distances = np.stack(

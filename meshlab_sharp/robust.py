@@ -1,0 +1,366 @@
+"""Robust mode: the projected-distance method where the paper's reading fails.
+
+``detect(..., mode="robust")`` changes four things of the paper's method (measured
+choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plugin):
+
+1. **Isolated points are left out** (point clouds): point ``i`` is isolated when it is
+   not among the ``k_max`` nearest neighbours of its own nearest neighbour. Detection
+   runs on the other points; isolated points are never features.
+2. **Relative projected distance** instead of min-max normalisation: per scale,
+   ``r_i = pdis_i / l_i`` with ``l_i`` the mean distance from ``p_i`` to the members of
+   its neighbourhood (itself included). ``0 <= r_i <= 1`` always (``pdis_i`` is the
+   normal component of the centroid offset, whose length is at most ``l_i``), so the
+   histogram range is fixed: a few far points cannot stretch it, and the value does not
+   depend on the local point density.
+3. **Threshold with a floor**: ``T = max(otsu(r), R_MIN)`` with ``R_MIN`` the value of
+   ``r`` on a straight edge that turns by ``CREASE_ANGLE`` (20) degrees,
+   ``(2 / pi) * sin(10 deg)``. On a smooth object Otsu still splits the histogram, but
+   below the floor: "no sharp features" becomes a possible answer.
+4. **Thinning**: among the points that are candidates at every scale, a point is
+   dropped when a candidate neighbour lying across the feature line (more than 60
+   degrees from the line's direction) has a larger mean relative distance (non-maximum
+   suppression across the line), so lines stay one point wide.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .neighbourhoods import (
+    KnnNeighbourhoods,
+    Neighbourhood,
+    RingNeighbourhoods,
+    build_neighbourhoods,
+)
+from .threshold import otsu_threshold
+
+__all__ = [
+    "CREASE_ANGLE",
+    "R_MIN",
+    "THIN_CONE_COS",
+    "THIN_KNN",
+    "THIN_RING",
+    "RelativeRule",
+    "RobustSetup",
+    "isolated_points",
+    "local_scale",
+    "relative_distances",
+    "robust_threshold",
+    "thin",
+]
+
+#: Degrees: the smallest turn of the surface that counts as a sharp edge (the ground
+#: truth's crease angle, ``groundtruth.CREASE_ANGLE``).
+CREASE_ANGLE = 20.0
+#: Relative projected distance at a point on a straight edge turning by CREASE_ANGLE,
+#: with a disc-shaped neighbourhood: ``(2 / pi) * sin(CREASE_ANGLE / 2)`` = 0.1106.
+R_MIN = (2.0 / math.pi) * math.sin(math.radians(CREASE_ANGLE / 2.0))
+#: Thinning compares a point with candidate neighbours whose offset makes more than
+#: 60 degrees with the line direction: ``|d . e| < THIN_CONE_COS * |d|``.
+THIN_CONE_COS = 0.5
+#: Neighbourhood of the comparison in thinning: the 16 nearest points (clouds) ...
+THIN_KNN = 16
+#: ... or the 2-ring (meshes; about 19 vertices on a regular mesh).
+THIN_RING = 2
+
+
+def isolated_points(indices: np.ndarray) -> np.ndarray:
+    """Points that are not among the k nearest neighbours of their nearest neighbour.
+
+    Parameters
+    ----------
+    indices : (n, k) int
+        k-nearest-neighbour indices of distinct points, each row sorted by distance
+        with the point itself first (column 0) and its nearest neighbour in column 1.
+        ``k >= 2``.
+
+    Returns
+    -------
+    (n,) bool
+        True for isolated points (outliers): ``i`` does not occur in
+        ``indices[indices[i, 1]]``.
+    """
+    idx = np.asarray(indices)
+    n = len(idx)
+    if n == 0 or idx.shape[1] < 2:
+        return np.zeros(n, bool)
+    nearest = idx[:, 1]
+    return ~(idx[nearest] == np.arange(n)[:, None]).any(axis=1)
+
+
+def _segment_sums(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
+    """Sums of ``values`` (len(indices),) or (len(indices), d) over CSR segments."""
+    n = len(indptr) - 1
+    out = np.zeros((n,) + values.shape[1:], dtype=values.dtype)
+    nonempty = indptr[1:] > indptr[:-1]
+    if nonempty.any():
+        out[nonempty] = np.add.reduceat(values, indptr[:-1][nonempty], axis=0)
+    return out
+
+
+def _expand(starts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """Concatenation of ``arange(starts[c], starts[c] + sizes[c])`` over c."""
+    total = int(sizes.sum())
+    first = np.repeat(starts - (np.cumsum(sizes) - sizes), sizes)
+    return first + np.arange(total, dtype=np.int64)
+
+
+def local_scale(points: np.ndarray, neighbourhood: Neighbourhood) -> np.ndarray:
+    """Mean distance from each point to the members of its neighbourhood.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+    neighbourhood : Neighbourhood
+        CSR lists (``indptr`` (m + 1,), ``indices``); each point's own index included.
+
+    Returns
+    -------
+    (m,) float64
+        ``l_i = (1 / |N(i)|) * sum_{j in N(i)} |p_j - p_i|`` (0 for an empty list).
+    """
+    indptr = np.asarray(neighbourhood.indptr, np.int64)
+    indices = np.asarray(neighbourhood.indices, np.int64)
+    size = np.diff(indptr)
+    owner = np.repeat(np.arange(len(points)), size)
+    d = np.sqrt(((points[indices] - points[owner]) ** 2).sum(axis=1))
+    total = _segment_sums(d, indptr)
+    return np.where(size > 0, total / np.maximum(size, 1), 0.0)
+
+
+def relative_distances(pdis: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Projected distances relative to the local scale, clipped to [0, 1].
+
+    Parameters
+    ----------
+    pdis : (m,) float64
+        Projected distances ``|mean . n|``.
+    scale : (m,) float64
+        :func:`local_scale` at the same neighbourhoods.
+
+    Returns
+    -------
+    (m,) float64
+        ``min(pdis / scale, 1)``; 0 where ``scale == 0``.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(scale > 0, pdis / np.where(scale > 0, scale, 1.0), 0.0)
+    return np.minimum(r, 1.0)
+
+
+def robust_threshold(r: np.ndarray) -> float:
+    """Otsu's threshold of relative distances on [0, 1], never below ``R_MIN``.
+
+    Parameters
+    ----------
+    r : (m,) float64
+        Relative projected distances in [0, 1] (isolated points left out).
+
+    Returns
+    -------
+    float
+        ``max(otsu_threshold(r), R_MIN)``; candidates are ``r >= T``.
+    """
+    return max(otsu_threshold(r), R_MIN)
+
+
+@dataclass
+class RelativeRule:
+    """Per-scale rule of robust mode for :func:`meshlab_sharp.multiscale.run_scales`.
+
+    Called as ``rule(i, scale, pdis)`` for the i-th scale: returns the relative
+    distances (m,) and the threshold; it also accumulates ``score``, the mean of the
+    relative distances over the scales (the ranking used by :func:`thin`).
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+    lists : callable
+        ``lists(scale) -> Neighbourhood``, the neighbourhoods of that scale (called in
+        increasing order of scale).
+    n_scales : int
+    """
+
+    points: np.ndarray
+    lists: object
+    n_scales: int
+
+    def __post_init__(self) -> None:
+        self.score = np.zeros(len(self.points))
+
+    def __call__(self, i: int, scale: int, pdis: np.ndarray) -> tuple[np.ndarray, float]:
+        ell = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
+        r = relative_distances(np.asarray(pdis, np.float64), ell)
+        self.score += r / self.n_scales
+        return r, robust_threshold(r)
+
+
+def thin(
+    points: np.ndarray,
+    mask: np.ndarray,
+    score: np.ndarray,
+    direction: Neighbourhood,
+    compare: Neighbourhood,
+    *,
+    cone_cos: float = THIN_CONE_COS,
+) -> np.ndarray:
+    """Non-maximum suppression of feature points across the feature line.
+
+    For a feature point ``i``: ``e_i`` is the unit eigenvector of the largest eigenvalue
+    of ``C = sum_j (q_j - qbar)(q_j - qbar)^T`` over the feature points ``j`` of
+    ``direction[i]`` (``i`` included), ``q_j = p_j - p_i`` and ``qbar`` their mean
+    (the direction of the line of features through ``i``). ``i`` is dropped when some
+    feature point ``j != i`` of ``compare[i]`` with ``d = p_j - p_i`` satisfies
+    ``|d . e_i| < cone_cos * |d|`` (it lies across the line) and
+    ``score[j] > score[i]``. Every decision uses the mask before thinning.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+    mask : (m,) bool
+        Feature points before thinning.
+    score : (m,) float64
+        Ranking (mean relative projected distance over the scales).
+    direction : Neighbourhood
+        CSR lists for the line direction (the largest scale).
+    compare : Neighbourhood
+        CSR lists for the comparison (``THIN_KNN`` nearest or the ``THIN_RING``-ring).
+    cone_cos : float, default THIN_CONE_COS (0.5)
+
+    Returns
+    -------
+    (m,) bool
+        The thinned mask (a subset of ``mask``).
+    """
+    mask = np.asarray(mask, bool)
+    cand = np.flatnonzero(mask)
+    if len(cand) == 0:
+        return mask.copy()
+    # line direction from the candidate members of direction[i]
+    dptr = np.asarray(direction.indptr, np.int64)
+    dind = np.asarray(direction.indices, np.int64)
+    starts, ends = dptr[cand], dptr[cand + 1]
+    sizes = ends - starts
+    owner = np.repeat(np.arange(len(cand)), sizes)
+    flat = _expand(starts, sizes)
+    members = dind[flat] if len(flat) else np.zeros(0, np.int64)
+    use = mask[members]
+    owner, members = owner[use], members[use]
+    q = points[members] - points[cand[owner]]
+    counts = np.bincount(owner, minlength=len(cand)).astype(np.float64)
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=len(cand)))])
+    qsum = _segment_sums(q, ptr)
+    outer = _segment_sums(q[:, :, None] * q[:, None, :], ptr)
+    safe = np.maximum(counts, 1.0)[:, None]
+    qbar = qsum / safe
+    cov = outer - safe[:, :, None] * qbar[:, :, None] * qbar[:, None, :]
+    _, vecs = np.linalg.eigh(cov)
+    e = vecs[:, :, 2]
+    # comparison with candidate neighbours across the line
+    cptr = np.asarray(compare.indptr, np.int64)
+    cind = np.asarray(compare.indices, np.int64)
+    starts, ends = cptr[cand], cptr[cand + 1]
+    sizes = ends - starts
+    owner = np.repeat(np.arange(len(cand)), sizes)
+    flat = _expand(starts, sizes)
+    nb = cind[flat] if len(flat) else np.zeros(0, np.int64)
+    ci = cand[owner]
+    use = mask[nb] & (nb != ci)
+    owner, nb, ci = owner[use], nb[use], ci[use]
+    d = points[nb] - points[ci]
+    along = np.abs((d * e[owner]).sum(axis=1))
+    across = along < cone_cos * np.sqrt((d * d).sum(axis=1))
+    beaten = across & (score[nb] > score[ci])
+    suppressed = np.bincount(owner[beaten], minlength=len(cand)) > 0
+    out = mask.copy()
+    out[cand[suppressed]] = False
+    return out
+
+
+class RobustSetup:
+    """What robust mode adds around :func:`meshlab_sharp.multiscale.run_scales`.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+        Cleaned points.
+    faces : (f, 3) int or None
+        Cleaned triangles of a mesh; None for a cloud.
+    neighbourhoods : KnnNeighbourhoods or RingNeighbourhoods
+        Those of ``points`` (built by the pipeline).
+    scales : tuple of int
+        Increasing scales.
+    workers : int, default -1
+        Threads for a kNN query when isolated points are left out.
+
+    Attributes
+    ----------
+    keep : (p,) int64
+        Indices (into ``points``) of the points processed: all for a mesh, the
+        non-isolated ones for a cloud.
+    points, neighbourhoods
+        The points processed and their neighbourhoods (rebuilt without the isolated
+        points when there are any).
+    rule : RelativeRule
+        The per-scale rule to pass to ``run_scales``.
+    """
+
+    def __init__(
+        self,
+        points: np.ndarray,
+        faces: np.ndarray | None,
+        neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods,
+        scales: tuple[int, ...],
+        *,
+        workers: int = -1,
+    ) -> None:
+        self.n = len(points)
+        self.faces = faces
+        self.scales = tuple(scales)
+        self.keep = np.arange(self.n, dtype=np.int64)
+        self.points = points
+        self.neighbourhoods = neighbourhoods
+        if faces is None:
+            assert isinstance(neighbourhoods, KnnNeighbourhoods)
+            isolated = isolated_points(neighbourhoods.indices)
+            if isolated.any():
+                self.keep = np.flatnonzero(~isolated)
+                self.points = np.ascontiguousarray(points[self.keep])
+                self.neighbourhoods = build_neighbourhoods(
+                    self.points, None, self.scales, workers=workers
+                )
+        self._rings: RingNeighbourhoods | None = None
+        self.rule = RelativeRule(self.points, self._lists, len(self.scales))
+
+    def _lists(self, scale: int) -> Neighbourhood:
+        if self.faces is None:
+            return self.neighbourhoods.at(scale)
+        if self._rings is None:
+            self._rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
+        return self._rings.at(scale)
+
+    def thin(self, mask: np.ndarray) -> np.ndarray:
+        """:func:`thin` of the processed points' features; (p,) bool -> (p,) bool."""
+        if not mask.any():
+            return mask
+        top = max(self.scales)
+        if self.faces is None:
+            compare = self.neighbourhoods.at(min(THIN_KNN, top))
+            direction = self.neighbourhoods.at(top)
+        else:
+            rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
+            compare = rings.at(min(THIN_RING, top))
+            direction = rings.at(top)
+        return thin(self.points, mask, self.rule.score, direction, compare, cone_cos=THIN_CONE_COS)
+
+    def expand(self, values: np.ndarray, fill: object) -> np.ndarray:
+        """Per-processed-point values (p, ...) to all cleaned points (m, ...), ``fill``
+        for the isolated ones."""
+        if len(self.keep) == self.n:
+            return values
+        out = np.full((self.n,) + values.shape[1:], fill, dtype=values.dtype)
+        out[self.keep] = values
+        return out
