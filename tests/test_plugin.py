@@ -139,7 +139,19 @@ def _agreement_cases():
             {"knnScales": "8:32:6"},
         ),
         "cube-mesh-rings-1-6": (cube_v, cube_f, {"ringScales": "1 2 3 4 5 6"}),
+        "robust-sample-points": (part_points.vertices, None, {"mode": "1"}),
+        "robust-sample-mesh": (part_mesh.vertices, part_mesh.faces, {"mode": "1"}),
+        "robust-outliers": (_with_outliers(part_points.vertices), None, {"mode": "1"}),
     }
+
+
+def _with_outliers(points: np.ndarray) -> np.ndarray:
+    """1% far outliers appended, uniform in the enlarged bounding box."""
+    rng = np.random.default_rng(21)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    pad = 0.2 * np.linalg.norm(hi - lo)
+    extra = rng.uniform(lo - pad, hi + pad, size=(len(points) // 100, 3))
+    return np.concatenate([points, extra])
 
 
 AGREEMENT = _agreement_cases()
@@ -156,6 +168,7 @@ def test_agrees_with_the_python_package(meshlab_root, tmp_path, case):
     options = {
         "as_points": params.get("asPoints") == "true",
         "weighting": "none" if params.get("weighting") == "1" else "gaussian",
+        "mode": "robust" if params.get("mode") == "1" else "paper",
     }
     if "knnScales" in params:
         options["scales"] = range(8, 33, 6)
@@ -170,6 +183,7 @@ def test_agrees_with_the_python_package(meshlab_root, tmp_path, case):
     near = (np.abs(expected.distances - expected.thresholds[:, None]) < 1e-9).any(axis=0)
     assert np.array_equal(selection[~near], expected.mask[~near])
     np.testing.assert_allclose(quality, expected.strength, atol=1e-6)
+    assert f"{options['mode']} mode" in log
     np.testing.assert_array_equal(counts, expected.candidate_counts)
     assert expected.n_features > 0
 

@@ -70,6 +70,12 @@ void FilterSharpFeaturesPlugin::initParameterSet(QAction *, MeshModel &, RichPar
 	                      "neighbour, or none (plain PCA)."));
 	par.addParam(RichBool("asPoints", false, "Treat a mesh as points",
 	                      "Ignore the faces and use k nearest neighbours."));
+	par.addParam(RichEnum("mode", 0, QStringList() << "Paper" << "Robust", "Mode",
+	                      "Paper: the method as the paper describes it (ALGORITHM.md). Robust: "
+	                      "isolated points left out, projected distance relative to the local "
+	                      "spacing, a threshold floor of a 20-degree edge, lines thinned to one "
+	                      "point (docs/robust-mode.md): survives outliers, says 'no features' "
+	                      "on smooth objects, copes with uneven density."));
 	par.addParam(RichBool("colorize", true, "Colour the features",
 	                      "Features red, the other vertices grey."));
 }
@@ -96,6 +102,7 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const R
 	}
 	options.gaussian = par.getEnum("weighting") == 0;
 	options.asPoints = par.getBool("asPoints");
+	options.robust = par.getEnum("mode") == 1;
 
 	// Live vertices in layer order; faces re-indexed to that order.
 	std::vector<CMeshO::VertexPointer> live;
@@ -153,8 +160,9 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const R
 		              .arg(r.scales[s])
 		              .arg(r.thresholds[s], 0, 'f', 8)
 		              .arg(r.candidates[s]);
-	Log("Sharp features: %s, %ld of %d vertices are features;%s", r.mesh ? "mesh (k-rings)" : "points (kNN)",
-	    r.nFeatures, int(live.size()), qUtf8Printable(scales));
+	Log("Sharp features: %s, %s mode, %ld of %d vertices are features;%s",
+	    r.mesh ? "mesh (k-rings)" : "points (kNN)", options.robust ? "robust" : "paper", r.nFeatures,
+	    int(live.size()), qUtf8Printable(scales));
 	if (r.allFlat)
 		Log("Sharp features: no features: all points lie on one plane.");
 	return true;

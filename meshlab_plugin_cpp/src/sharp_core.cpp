@@ -17,6 +17,11 @@ namespace {
 const int BINS = 256;
 const double FLAT_TOLERANCE = 1e-6;  // threshold.py
 const double ZERO_NORMAL = 1e-12;    // normals.py
+// robust.py: r on a straight edge turning by 20 degrees, (2 / pi) sin(10 deg).
+const double R_MIN = 0.11061587104123714;
+const double THIN_CONE_COS = 0.5;
+const int THIN_KNN = 16;
+const int THIN_RING = 2;
 
 inline double sq(const Point &a, const Point &c) {
 	const double dx = a.x - c.x, dy = a.y - c.y, dz = a.z - c.z;
@@ -96,19 +101,23 @@ Eigen::Vector3d pcaNormal(const std::vector<Point> &q, const Point &m, bool gaus
 }
 
 // pdis = |mean . n| for the neighbourhood nb of point i (projected_distance.py).
+// Also sets meanDistance = (1/m) sum |p_j - p_i| (robust.py's local scale l_i).
 double projectedDistance(const std::vector<Point> &pts, long i, const std::vector<long> &nb,
                          const Eigen::Vector3d *fixedNormal, bool gaussian,
-                         std::vector<Point> &scratch) {
+                         std::vector<Point> &scratch, double &meanDistance) {
 	scratch.resize(nb.size());
 	Point m{0.0, 0.0, 0.0};
+	double dsum = 0.0;
 	for (size_t j = 0; j < nb.size(); ++j) {
 		const Point &p = pts[nb[j]];
 		scratch[j] = {p.x - pts[i].x, p.y - pts[i].y, p.z - pts[i].z};
 		m.x += scratch[j].x;
 		m.y += scratch[j].y;
 		m.z += scratch[j].z;
+		dsum += std::sqrt(sq(p, pts[i]));
 	}
 	const double s = double(nb.size());
+	meanDistance = dsum / s;
 	m.x /= s;
 	m.y /= s;
 	m.z /= s;
@@ -255,6 +264,46 @@ std::vector<int> parseScales(const std::string &text, int minimum) {
 	return out;
 }
 
+namespace {
+
+// robust.py's thinning: a feature i is dropped when a feature j of K(i), lying more
+// than 60 degrees from the line direction e_i (largest eigenvector over the features of
+// D(i)), has a larger score. Decisions use the features before thinning.
+std::vector<char> thin(const std::vector<Point> &pts, const std::vector<char> &feature,
+                       const std::vector<double> &score, const std::vector<std::vector<long>> &D,
+                       const std::vector<std::vector<long>> &K) {
+	std::vector<char> out = feature;
+	for (size_t i = 0; i < pts.size(); ++i) {
+		if (!feature[i]) continue;
+		Eigen::Vector3d qsum = Eigen::Vector3d::Zero();
+		Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
+		double count = 0.0;
+		for (long j : D[i]) {
+			if (!feature[j]) continue;
+			const Eigen::Vector3d q(pts[j].x - pts[i].x, pts[j].y - pts[i].y, pts[j].z - pts[i].z);
+			qsum += q;
+			outer += q * q.transpose();
+			count += 1.0;
+		}
+		const Eigen::Vector3d qbar = qsum / std::max(count, 1.0);
+		const Eigen::Matrix3d cov = outer - std::max(count, 1.0) * qbar * qbar.transpose();
+		Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(cov);
+		const Eigen::Vector3d e = solver.eigenvectors().col(2);
+		for (long j : K[i]) {
+			if (j == long(i) || !feature[j]) continue;
+			const double dx = pts[j].x - pts[i].x, dy = pts[j].y - pts[i].y, dz = pts[j].z - pts[i].z;
+			const double along = std::fabs(dx * e[0] + dy * e[1] + dz * e[2]);
+			if (along < THIN_CONE_COS * std::sqrt(dx * dx + dy * dy + dz * dz) && score[j] > score[i]) {
+				out[i] = 0;
+				break;
+			}
+		}
+	}
+	return out;
+}
+
+}  // namespace
+
 Result detect(const std::vector<Point> &vertices, const std::vector<std::array<int, 3>> &faces,
               const Options &options, bool (*progress)(const int, const char *)) {
 	const long nIn = long(vertices.size());
@@ -270,35 +319,75 @@ Result detect(const std::vector<Point> &vertices, const std::vector<std::array<i
 		for (int a = 0; a < 3; ++a)
 			if (f[a] < 0 || f[a] >= nIn) throw InputError("a face index is out of range");
 	const Clean c = clean(vertices, r.mesh ? faces : std::vector<std::array<int, 3>>{}, r.mesh);
-	const long n = long(c.pts.size());
 	if (r.mesh && c.faces.empty()) throw InputError("every face has zero area: nothing is left of the mesh");
 	r.scales = r.mesh ? options.ringScales : options.knnScales;
 	const int sMax = r.scales.back();
 	if (!r.mesh) {
+		const long n = long(c.pts.size());
 		if (n == 1 && nIn > 1) throw InputError("all " + std::to_string(nIn) + " points are identical");
 		if (n < sMax)
 			throw InputError(std::to_string(n) + " distinct points, fewer than the largest scale k = " +
 			                 std::to_string(sMax));
 	}
-	r.nClean = n;
+	r.nClean = long(c.pts.size());
 	const size_t S = r.scales.size();
+
+	// The points processed: every cleaned point, less the isolated ones in robust mode.
+	std::vector<Point> pts = c.pts;
+	std::vector<long> toClean(pts.size());
+	std::iota(toClean.begin(), toClean.end(), 0L);
+	std::vector<std::vector<long>> hoods;  // kNN at the largest scale (clouds)
+	if (!r.mesh) {
+		hoods = knn(pts, sMax, progress);
+		if (options.robust) {
+			std::vector<Point> kept;
+			std::vector<long> keptIdx;
+			for (size_t i = 0; i < pts.size(); ++i) {
+				const auto &nj = hoods[hoods[i][1]];
+				if (std::find(nj.begin(), nj.end(), long(i)) != nj.end()) {
+					kept.push_back(pts[i]);
+					keptIdx.push_back(long(i));
+				}
+			}
+			if (kept.size() < pts.size()) {
+				if (long(kept.size()) < sMax)
+					throw InputError("too few points are left once isolated points are removed");
+				pts.swap(kept);
+				toClean.swap(keptIdx);
+				hoods = knn(pts, sMax, progress);
+			}
+		}
+	}
+	const long n = long(pts.size());
 	std::vector<std::vector<double>> pdis(S, std::vector<double>(n, 0.0));
+	std::vector<std::vector<double>> ell(S, std::vector<double>(n, 0.0));
+	std::vector<std::vector<long>> D, K;  // thinning: direction and comparison lists
 	std::vector<Point> scratch;
 	std::vector<long> nb;
 
 	if (!r.mesh) {
-		const auto hoods = knn(c.pts, sMax, progress);
 		for (long i = 0; i < n; ++i) {
 			if (progress && i % 20000 == 0) progress(40 + int(50 * i / n), "Sharp features: projected distances");
 			for (size_t s = 0; s < S; ++s) {
 				nb.assign(hoods[i].begin(), hoods[i].begin() + r.scales[s]);
-				pdis[s][i] = projectedDistance(c.pts, i, nb, nullptr, options.gaussian, scratch);
+				pdis[s][i] = projectedDistance(pts, i, nb, nullptr, options.gaussian, scratch, ell[s][i]);
 			}
+		}
+		if (options.robust) {
+			D = hoods;
+			K.resize(n);
+			const int kc = std::min(THIN_KNN, sMax);
+			for (long i = 0; i < n; ++i) K[i].assign(hoods[i].begin(), hoods[i].begin() + kc);
 		}
 	} else {
 		std::vector<char> valid;
-		const auto normals = faceAverageNormals(c.pts, c.faces, valid);
+		const auto normals = faceAverageNormals(pts, c.faces, valid);
 		const auto adj = oneRing(n, c.faces);
+		const int compareRing = std::min(THIN_RING, sMax);
+		if (options.robust) {
+			D.resize(n);
+			K.resize(n);
+		}
 		std::vector<long> stamp(n, -1), frontier, next;
 		for (long i = 0; i < n; ++i) {
 			if (progress && i % 20000 == 0) progress(int(90 * i / n), "Sharp features: rings");
@@ -306,6 +395,7 @@ Result detect(const std::vector<Point> &vertices, const std::vector<std::array<i
 			frontier.assign(1, i);
 			stamp[i] = i;
 			int ring = 0;
+			if (options.robust && compareRing == 0) K[i] = nb;
 			for (size_t s = 0; s < S; ++s) {
 				while (ring < r.scales[s]) {  // grow one ring
 					next.clear();
@@ -318,16 +408,18 @@ Result detect(const std::vector<Point> &vertices, const std::vector<std::array<i
 							}
 					frontier.swap(next);
 					++ring;
+					if (options.robust && ring == compareRing) K[i] = nb;
 				}
-				pdis[s][i] = projectedDistance(c.pts, i, nb, valid[i] ? &normals[i] : nullptr,
-				                               options.gaussian, scratch);
+				pdis[s][i] = projectedDistance(pts, i, nb, valid[i] ? &normals[i] : nullptr,
+				                               options.gaussian, scratch, ell[s][i]);
 			}
+			if (options.robust) D[i] = nb;
 		}
 	}
 
-	// Normalise, threshold, vote (threshold.py, multiscale.py).
-	double lo[3] = {c.pts[0].x, c.pts[0].y, c.pts[0].z}, hi[3] = {lo[0], lo[1], lo[2]};
-	for (const Point &p : c.pts) {
+	// Normalise, threshold, vote (threshold.py, multiscale.py; robust.py in robust mode).
+	double lo[3] = {pts[0].x, pts[0].y, pts[0].z}, hi[3] = {lo[0], lo[1], lo[2]};
+	for (const Point &p : pts) {
 		lo[0] = std::min(lo[0], p.x), hi[0] = std::max(hi[0], p.x);
 		lo[1] = std::min(lo[1], p.y), hi[1] = std::max(hi[1], p.y);
 		lo[2] = std::min(lo[2], p.z), hi[2] = std::max(hi[2], p.z);
@@ -335,17 +427,29 @@ Result detect(const std::vector<Point> &vertices, const std::vector<std::array<i
 	const double dx = hi[0] - lo[0], dy = hi[1] - lo[1], dz = hi[2] - lo[2];
 	const double flatSpan = FLAT_TOLERANCE * std::sqrt(dx * dx + dy * dy + dz * dz);
 	std::vector<int> votes(n, 0);
-	std::vector<double> v(n);
-	r.allFlat = true;
+	std::vector<double> v(n), score(n, 0.0);
+	r.allFlat = !options.robust;  // the flat-scale rule belongs to paper mode
 	for (size_t s = 0; s < S; ++s) {
-		const auto mm = std::minmax_element(pdis[s].begin(), pdis[s].end());
-		const double pmin = *mm.first, pmax = *mm.second;
 		double T = 1.0;
+		bool active = true;
+		if (options.robust) {
+			for (long i = 0; i < n; ++i) {
+				v[i] = ell[s][i] > 0.0 ? std::min(pdis[s][i] / ell[s][i], 1.0) : 0.0;
+				score[i] += v[i] / double(S);
+			}
+			T = std::max(otsu(v), R_MIN);
+		} else {
+			const auto mm = std::minmax_element(pdis[s].begin(), pdis[s].end());
+			const double pmin = *mm.first, pmax = *mm.second;
+			active = pmax - pmin > flatSpan;
+			if (active) {
+				r.allFlat = false;
+				for (long i = 0; i < n; ++i) v[i] = (pdis[s][i] - pmin) / (pmax - pmin);
+				T = otsu(v);
+			}
+		}
 		long count = 0;
-		if (pmax - pmin > flatSpan) {
-			r.allFlat = false;
-			for (long i = 0; i < n; ++i) v[i] = (pdis[s][i] - pmin) / (pmax - pmin);
-			T = otsu(v);
+		if (active) {
 			for (long i = 0; i < n; ++i)
 				if (v[i] >= T) {
 					votes[i]++;
@@ -355,15 +459,23 @@ Result detect(const std::vector<Point> &vertices, const std::vector<std::array<i
 		r.thresholds.push_back(T);
 		r.candidates.push_back(count);
 	}
+	std::vector<char> feature(n);
+	for (long i = 0; i < n; ++i) feature[i] = votes[i] == int(S);
+	if (options.robust) feature = thin(pts, feature, score, D, K);
+
+	// Back to the input's order.
+	std::vector<long> processed(c.pts.size(), -1);
+	for (long i = 0; i < n; ++i) processed[toClean[i]] = i;
 	r.strength.assign(nIn, 0.0);
 	r.feature.assign(nIn, 0);
 	r.kept.assign(nIn, 0);
 	for (long i = 0; i < nIn; ++i) {
 		const long ci = c.fromInput[i];
-		if (ci < 0) continue;
+		if (ci < 0 || processed[ci] < 0) continue;
+		const long pi = processed[ci];
 		r.kept[i] = 1;
-		r.strength[i] = double(votes[ci]) / double(S);
-		r.feature[i] = votes[ci] == int(S);
+		r.strength[i] = double(votes[pi]) / double(S);
+		r.feature[i] = feature[pi];
 		r.nFeatures += r.feature[i];
 	}
 	if (progress) progress(100, "Sharp features: done");

@@ -18,6 +18,7 @@ struct Options {
 	std::vector<int> ringScales{1, 2, 3, 4};                       // meshes
 	bool gaussian = true;   // Gaussian-weighted PCA normals; false: plain PCA
 	bool asPoints = false;  // ignore the faces
+	bool robust = false;    // robust mode (docs/robust-mode.md); false: the paper's method
 };
 
 struct Result {
