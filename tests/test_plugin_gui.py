@@ -22,8 +22,9 @@ pytestmark = pytest.mark.skipif(
 FILTERS_MENU = (120, 10)
 SELECTION_SUBMENU = (160, 87)
 SHARP_FEATURES_ITEM = (678, 611)
-APPLY_BUTTON = (265, 458)
-CLOSE_BUTTON = (93, 458)
+# The filter dialog's Close and Apply buttons: its bottom row, at a quarter and three
+# quarters of its width (its height grows with the parameter list).
+BUTTON_ROW_FROM_BOTTOM = 23
 VIEWPORT = (slice(70, 600), slice(0, 430))  # rows, columns of the 3D view
 
 
@@ -41,6 +42,19 @@ def _windows(env: dict[str, str], name: str) -> list[str]:
         ["xdotool", "search", "--name", name], capture_output=True, text=True, env=env, check=False
     )
     return proc.stdout.split()
+
+
+def _geometry(env: dict[str, str], window: str) -> tuple[int, int, int, int]:
+    """x, y, width, height of an X window."""
+    out = subprocess.run(
+        ["xdotool", "getwindowgeometry", "--shell", window],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    ).stdout
+    values = dict(line.split("=", 1) for line in out.split())
+    return tuple(int(values[k]) for k in ("X", "Y", "WIDTH", "HEIGHT"))  # type: ignore[return-value]
 
 
 def _red_pixels(png: Path) -> int:
@@ -104,9 +118,11 @@ def test_gui_applies_the_filter_and_shows_red_features(meshlab_root, display, tm
         assert _wait_for(lambda: bool(_windows(display, "Select Sharp Features")), 20), (
             "the filter dialog did not open"
         )
-        click(APPLY_BUTTON)
+        x, y, width, height = _geometry(display, _windows(display, "Select Sharp Features")[-1])
+        row = y + height - BUTTON_ROW_FROM_BOTTOM
+        click((x + width * 3 // 4, row))  # Apply
         time.sleep(2)
-        click(CLOSE_BUTTON)  # the dialog covers part of the 3D view
+        click((x + width // 4, row))  # Close: the dialog covers part of the 3D view
         time.sleep(2)
         after = _red_pixels(shot("after.png"))
         assert gui.poll() is None, "MeshLab died"
