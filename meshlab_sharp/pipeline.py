@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pymeshlab
 
+from . import _kernels
 from .cleaning import clean
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
@@ -139,6 +140,7 @@ def detect(
     workers: int = -1,
     preprocessing: Preprocessing | dict[str, Any] | None = None,
     mode: str = "paper",
+    backend: str | None = None,
 ) -> DetectionResult:
     """Find the sharp features of a point cloud or triangle mesh.
 
@@ -171,6 +173,9 @@ def detect(
         out, projected distances relative to the local spacing, a threshold floor (no
         features on smooth objects) and thinning across the lines
         (:mod:`meshlab_sharp.robust`); ``distances`` are then the relative distances.
+    backend : {"compiled", "numpy"}, optional
+        The compiled kernels (default when built) or the numpy reference path; both
+        give the same answers. Default: ``MESHLAB_SHARP_BACKEND`` or "compiled".
 
     Returns
     -------
@@ -183,6 +188,39 @@ def detect(
         largest scale, invalid options. All points on one plane is not an error: the
         result has no features.
     """
+    try:
+        _kernels.resolve(backend)
+    except (ValueError, RuntimeError) as exc:
+        raise InputError(str(exc)) from None
+    with _kernels.use_backend(_kernels.resolve(backend)):
+        return _detect(
+            source,
+            faces,
+            scales=scales,
+            weighting=weighting,
+            as_points=as_points,
+            return_details=return_details,
+            progress=progress,
+            workers=workers,
+            preprocessing=preprocessing,
+            mode=mode,
+        )
+
+
+def _detect(
+    source: Source,
+    faces: np.ndarray | None,
+    *,
+    scales: Sequence[int] | None,
+    weighting: Weighting,
+    as_points: bool,
+    return_details: bool,
+    progress: bool | Progress,
+    workers: int,
+    preprocessing: Preprocessing | dict[str, Any] | None,
+    mode: str,
+) -> DetectionResult:
+    """:func:`detect` under the chosen backend."""
     if weighting not in WEIGHTINGS:
         raise InputError(f"unknown weighting {weighting!r}; choose from {', '.join(WEIGHTINGS)}")
     if not isinstance(mode, str) or mode not in MODES:

@@ -78,3 +78,14 @@ def test_custom_scales_and_weighting_are_used():
     assert result.scales == (10, 20)
     assert result.weighting == "none"
     assert len(result.thresholds) == 2
+
+
+def test_both_backends_give_the_cube_edges():
+    points = shapes.cube_grid_points(15)
+    fast = meshlab_sharp.detect(points, backend="compiled")
+    reference = meshlab_sharp.detect(points, backend="numpy")
+    np.testing.assert_array_equal(fast.mask, shapes.on_cube_edges(points))
+    np.testing.assert_array_equal(reference.mask, fast.mask)
+    np.testing.assert_array_equal(reference.thresholds, fast.thresholds)
+    with pytest.raises(meshlab_sharp.InputError, match="unknown backend"):
+        meshlab_sharp.detect(points, backend="gpu")
