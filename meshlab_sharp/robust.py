@@ -108,6 +108,17 @@ def _expand(starts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
     return first + np.arange(total, dtype=np.int64)
 
 
+def _rows(lists: Neighbourhood, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The entries of the CSR ``lists`` in ``rows``, flat: (position in ``rows``, index)."""
+    indptr = np.asarray(lists.indptr, np.int64)
+    indices = np.asarray(lists.indices, np.int64)
+    starts = indptr[rows]
+    sizes = indptr[rows + 1] - starts
+    owner = np.repeat(np.arange(len(rows)), sizes)
+    flat = _expand(starts, sizes)
+    return owner, indices[flat] if len(flat) else np.zeros(0, np.int64)
+
+
 def local_scale(points: np.ndarray, neighbourhood: Neighbourhood) -> np.ndarray:
     """Mean distance from each point to the members of its neighbourhood.
 
@@ -240,13 +251,7 @@ def thin(
     if len(cand) == 0:
         return mask.copy()
     # line direction from the candidate members of direction[i]
-    dptr = np.asarray(direction.indptr, np.int64)
-    dind = np.asarray(direction.indices, np.int64)
-    starts, ends = dptr[cand], dptr[cand + 1]
-    sizes = ends - starts
-    owner = np.repeat(np.arange(len(cand)), sizes)
-    flat = _expand(starts, sizes)
-    members = dind[flat] if len(flat) else np.zeros(0, np.int64)
+    owner, members = _rows(direction, cand)
     use = mask[members]
     owner, members = owner[use], members[use]
     q = points[members] - points[cand[owner]]
@@ -260,13 +265,7 @@ def thin(
     _, vecs = np.linalg.eigh(cov)
     e = vecs[:, :, 2]
     # comparison with candidate neighbours across the line
-    cptr = np.asarray(compare.indptr, np.int64)
-    cind = np.asarray(compare.indices, np.int64)
-    starts, ends = cptr[cand], cptr[cand + 1]
-    sizes = ends - starts
-    owner = np.repeat(np.arange(len(cand)), sizes)
-    flat = _expand(starts, sizes)
-    nb = cind[flat] if len(flat) else np.zeros(0, np.int64)
+    owner, nb = _rows(compare, cand)
     ci = cand[owner]
     use = mask[nb] & (nb != ci)
     owner, nb, ci = owner[use], nb[use], ci[use]
