@@ -48,7 +48,7 @@ from scipy.spatial import cKDTree
 
 from .cleaning import tag_input_indices, tagged_input_indices
 from .errors import InputError
-from .io import Geometry, _quiet_stdout, as_geometry
+from .io import Geometry, as_geometry, quiet_stdout
 
 __all__ = [
     "DENOISE_METHODS",
@@ -536,7 +536,7 @@ _STEPS = {
 def _apply(ms: pymeshlab.MeshSet, name: str, **params: Any) -> None:
     """Run one pymeshlab filter; its failures become InputError."""
     try:
-        with _quiet_stdout():
+        with quiet_stdout():
             getattr(ms, name)(**params)
     except Exception as exc:  # pymeshlab's exception classes share no base but Exception
         lines = str(exc).strip().splitlines()

@@ -14,7 +14,8 @@ from files import write_ply
 
 import meshlab_sharp
 from meshlab_sharp.cli import main, parse_scales
-from meshlab_sharp.io import _umask, mesh_arrays
+from meshlab_sharp.io import mesh_arrays
+from meshlab_sharp.io.writers import _umask
 
 
 def _read_back(path):

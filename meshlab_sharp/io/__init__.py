@@ -1,0 +1,32 @@
+"""Input and output: the Geometry type, guarded readers, atomic writers."""
+
+from .geometry import Geometry, as_geometry, mesh_arrays
+from .quiet import quiet_stdout
+from .readers import POINT_LIST_EXTENSIONS, load
+from .writers import (
+    add_vertex_attribute,
+    atomic_write,
+    feature_colors,
+    feature_meshset,
+    save_features_ply,
+    save_indices,
+    save_json,
+    select_vertices,
+)
+
+__all__ = [
+    "POINT_LIST_EXTENSIONS",
+    "Geometry",
+    "add_vertex_attribute",
+    "as_geometry",
+    "atomic_write",
+    "feature_colors",
+    "feature_meshset",
+    "load",
+    "mesh_arrays",
+    "quiet_stdout",
+    "save_features_ply",
+    "save_indices",
+    "save_json",
+    "select_vertices",
+]
