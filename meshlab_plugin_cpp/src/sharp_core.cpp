@@ -28,6 +28,24 @@ inline double sq(const Point &a, const Point &c) {
 	return dx * dx + dy * dy + dz * dz;
 }
 
+// Multiply every coordinate by one power of two, 2^-e with 2^(e-1) <= max |coordinate| < 2^e,
+// so that the largest is in [0.5, 1). Exact in binary floating point: every distance ratio,
+// normal, threshold and selection is what it was, but squared distances can no longer
+// overflow or underflow, whatever the unit (1e-100 or 1e100), here nor in vcg's kd-tree,
+// which compares squared offsets in float.
+void scaleToUnit(std::vector<Point> &pts) {
+	double big = 0.0;
+	for (const Point &p : pts) big = std::max({big, std::fabs(p.x), std::fabs(p.y), std::fabs(p.z)});
+	if (big == 0.0) return;
+	int e = 0;
+	std::frexp(big, &e);
+	for (Point &p : pts) {
+		p.x = std::ldexp(p.x, -e);
+		p.y = std::ldexp(p.y, -e);
+		p.z = std::ldexp(p.z, -e);
+	}
+}
+
 struct Clean {
 	std::vector<Point> pts;                   // cleaned vertices, input order
 	std::vector<std::array<int, 3>> faces;    // cleaned triangles
@@ -334,6 +352,7 @@ Result detect(const std::vector<Point> &vertices, const std::vector<std::array<i
 
 	// The points processed: every cleaned point, less the isolated ones in robust mode.
 	std::vector<Point> pts = c.pts;
+	scaleToUnit(pts);
 	std::vector<long> toClean(pts.size());
 	std::iota(toClean.begin(), toClean.end(), 0L);
 	std::vector<std::vector<long>> hoods;  // kNN at the largest scale (clouds)

@@ -1,0 +1,46 @@
+"""Hostile geometry through the MeshLab plugin under Debian's meshlabserver, and through
+the Python package: neither may crash, and both give the same answer or both refuse."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from files import write_ply
+from hostile import hostile_geometries
+from test_plugin import read_back, run_meshlabserver
+
+import meshlab_sharp
+from meshlab_sharp.errors import InputError
+
+CASES = hostile_geometries()
+MODES = {"0": "paper", "1": "robust"}
+#: meshlabserver's exit status when a filter reports failure (it exits with -1).
+FILTER_FAILED = 255
+#: What a process killed by a signal leaves in its log.
+CRASH_WORDS = ("core dumped", "segmentation fault", "aborted", "terminate called")
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_hostile_geometry_does_not_crash_meshlab(meshlab_root, tmp_path, case, mode):
+    vertices, faces = CASES[case]
+    src = write_ply(tmp_path / "in.ply", vertices, faces, binary=True)
+    out = tmp_path / "out.ply"
+    code, log = run_meshlabserver(meshlab_root, src, out, mode=mode)
+    assert code in (0, FILTER_FAILED), f"meshlabserver died with status {code}:\n{log}"
+    assert not any(word in log.lower() for word in CRASH_WORDS), log
+
+    try:
+        expected = meshlab_sharp.detect(src, mode=MODES[mode])
+    except InputError:
+        expected = None
+    if expected is None:
+        # Python refuses the input: the filter must refuse it too, with a message.
+        assert code == FILTER_FAILED, log
+        assert "Sharp features: error:" in log, log
+        return
+    assert code == 0, log
+    v, _, quality, selection = read_back(out)
+    assert len(v) == len(vertices)
+    np.testing.assert_array_equal(selection, expected.mask)
+    np.testing.assert_allclose(quality, expected.strength, atol=1e-6)
