@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,8 @@ from meshlab_sharp.sample import sample_part
 EXAMPLE = Path(__file__).resolve().parent.parent / "meshlab_plugin_cpp" / "examples"
 _SCALE = re.compile(r"(k|ring)=(\d+):T=([0-9.]+),candidates=(\d+)")
 
+#: In CI a skip here is a failure (conftest.py): set-up installs MeshLab there.
+REQUIRED_IN_CI = True
 pytestmark = pytest.mark.skipif(
     shutil.which("dpkg-query") is None, reason="the plugin targets Debian's MeshLab 2020.09"
 )
@@ -263,3 +266,22 @@ def test_debian_meshlab_reads_the_python_output(meshlab_root, tmp_path):
     assert expected.n_features > 100
     np.testing.assert_array_equal(selection, expected.mask)
     np.testing.assert_allclose(quality, expected.strength, atol=1e-6)
+
+
+def test_a_skip_fails_in_ci():
+    """Without dpkg-query on the path the plugin tests skip; in CI that is a failure."""
+    root = Path(__file__).resolve().parent.parent
+    env = {"PATH": "/nonexistent", "PYTHONPATH": str(root), "CI": "true"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-o", "addopts="]
+        + [f"{__file__}::test_meshlabserver_lists_the_filter"],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=root,
+        timeout=300,
+        check=False,
+    )
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "skipped in CI, where it must run: Skipped: the plugin targets Debian" in proc.stdout
+    assert "skipped" not in proc.stdout.splitlines()[-1]
