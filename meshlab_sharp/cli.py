@@ -337,10 +337,10 @@ def _pause_for_tests() -> None:
 
 
 def _sample_geometry(kind: str) -> Geometry:
-    """The built-in sample part as a Geometry."""
+    """The built-in sample part as a Geometry (built once, then read from the cache)."""
     from .sample import sample_part
 
-    part = sample_part(kind)
+    part = sample_part(kind, cache=True)
     return Geometry(vertices=part.vertices, faces=part.faces, source=f"sample part ({kind})")
 
 

@@ -18,6 +18,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from .cache import cache_dir
 from .errors import MeshlabSharpError
 
 #: Debian packages the plugin needs to build and run (headless runs use Xvfb).
@@ -113,12 +114,6 @@ def _run_install(args: argparse.Namespace) -> int:
         print(f"plugin: installed {dest}; Debian's meshlab and meshlabserver now list")
         print(f"plugin: Filters > Selection > {FILTER_NAME}")
     return 0
-
-
-def cache_dir() -> Path:
-    """Where the MeshLab sources and the default builds live."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "meshlab-sharp"
 
 
 def default_build_dir(sources: Path) -> Path:
