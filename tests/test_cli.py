@@ -19,6 +19,7 @@ import shapes
 from files import write_ply
 
 import meshlab_sharp
+from meshlab_sharp import sample
 from meshlab_sharp.cli import PAUSE_ENV, main, parse_scales
 from meshlab_sharp.errors import OutputError
 from meshlab_sharp.io import OutputSet, mesh_arrays
@@ -341,3 +342,36 @@ def test_an_unknown_backend_in_the_environment_is_an_error(tmp_path, monkeypatch
     monkeypatch.setenv("MESHLAB_SHARP_BACKEND", "cuda")
     with pytest.raises(meshlab_sharp.InputError, match="MESHLAB_SHARP_BACKEND='cuda'"):
         meshlab_sharp.detect(shapes.cube_grid_points(9))
+
+
+def test_the_sample_checks_its_outputs_before_it_is_built(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+
+    def no_build(*args, **kwargs):
+        raise AssertionError("the sample was built before the outputs were checked")
+
+    monkeypatch.setattr(sample, "make_part", no_build)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "sample_part_sharp.ply").write_text("old\n")
+    assert main(["detect", "--sample", "mesh"]) == 1
+    assert capsys.readouterr().err == (
+        "meshlab-sharp: error: out/sample_part_sharp.ply exists; use --force to overwrite it\n"
+    )
+
+
+def test_the_sample_writes_into_out(tmp_path, monkeypatch):
+    """Default sample outputs go to out/ (created; git ignores it), not the checkout."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    make_part = sample.make_part
+    monkeypatch.setattr(
+        sample, "make_part", lambda *a, **k: make_part(*a, **{**k, "n_points": 3_000})
+    )
+    assert main(["detect", "--sample", "-q"]) == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["sample_part_sharp.ply"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "out"]
+    ignored = subprocess.run(
+        ["git", "check-ignore", "-q", "out/sample_part_sharp.ply"], cwd=ROOT, check=False
+    )
+    assert ignored.returncode == 0
