@@ -228,15 +228,21 @@ def run_detect(args: argparse.Namespace) -> int:
     """``meshlab-sharp detect``: every output is checked before any computation, and
     written all or nothing (:class:`meshlab_sharp.io.OutputSet`)."""
     outputs = OutputSet()
+    progress = Progress(
+        len(args.scales or DEFAULT_KNN_SCALES) + 4,
+        enabled=not args.quiet and sys.stderr.isatty(),
+    )
     try:
         with outputs:
-            return _detect_into(args, outputs)
+            return _detect_into(args, outputs, progress)
     except Interrupted as exc:
         exc.written = list(outputs.written)
         raise
+    finally:
+        progress.close()  # an error message starts on a line of its own
 
 
-def _detect_into(args: argparse.Namespace, outputs: OutputSet) -> int:
+def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progress) -> int:
     """:func:`run_detect`, staging every file in ``outputs`` and committing them."""
     if args.input is not None and args.sample is not None:
         raise MeshlabSharpError("give either INPUT or --sample, not both")
@@ -260,10 +266,6 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet) -> int:
     _check_outputs(source, [output, *(Path(p) for p in extra if p is not None)], force=args.force)
     steps = _preprocessing_from_args(args)
 
-    show = not args.quiet
-    progress = Progress(
-        len(args.scales or DEFAULT_KNN_SCALES) + 4, enabled=show and sys.stderr.isatty()
-    )
     start = time.perf_counter()
     geometry = _sample_geometry(sample) if source is None else load(source)
     load_time = time.perf_counter() - start
@@ -318,7 +320,7 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet) -> int:
     outputs.commit()
     progress.step("saved")
     progress.close()
-    if show:
+    if not args.quiet:
         if result.preprocessing is not None:
             _print_preprocessing(result)
         _print_summary(geometry.source, output, result)
