@@ -190,10 +190,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGINT, SIGTERM and SIGHUP end the command with one line saying what was written,
     and status 128 + the signal's number.
     """
-    parser = build_parser()
-    args = parser.parse_args(argv)
     with _signals_interrupt():
         try:
+            args = build_parser().parse_args(argv)
             return int(args.func(args) or 0)
         except MeshlabSharpError as exc:
             print(f"meshlab-sharp: error: {exc}", file=sys.stderr)
