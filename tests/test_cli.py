@@ -20,7 +20,7 @@ from files import write_ply
 
 import meshlab_sharp
 from meshlab_sharp import sample
-from meshlab_sharp.cli import PAUSE_ENV, main, parse_scales
+from meshlab_sharp.cli import PAUSE_ENV, Interrupted, _interrupted_message, main, parse_scales
 from meshlab_sharp.errors import OutputError
 from meshlab_sharp.io import OutputSet, mesh_arrays
 from meshlab_sharp.io.writers import _umask
@@ -375,3 +375,12 @@ def test_the_sample_writes_into_out(tmp_path, monkeypatch):
         ["git", "check-ignore", "-q", "out/sample_part_sharp.ply"], cwd=ROOT, check=False
     )
     assert ignored.returncode == 0
+
+
+def test_the_interruption_message_says_what_was_written():
+    exc = Interrupted(signal.SIGHUP)
+    assert _interrupted_message(exc) == "interrupted by SIGHUP"  # a command with no outputs
+    exc.written = []
+    assert _interrupted_message(exc) == "interrupted by SIGHUP; no output was written"
+    exc.written = [Path("a.ply"), Path("a.txt")]  # the signal came after the renames
+    assert _interrupted_message(exc) == "interrupted by SIGHUP after writing a.ply, a.txt"
