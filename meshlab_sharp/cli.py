@@ -358,7 +358,7 @@ def _check_outputs(source: Path | None, outputs: list[Path], *, force: bool) -> 
         if not folder.is_dir():
             raise MeshlabSharpError(f"cannot write {p}: the folder {folder} does not exist")
         if not os.access(folder, os.W_OK | os.X_OK):
-            raise MeshlabSharpError(f"cannot write {p}: no permission to write in {folder}")
+            raise MeshlabSharpError(f"cannot write {p}: the folder {folder} is not writable")
         if p.is_dir():
             raise MeshlabSharpError(f"cannot write {p}: it is a folder")
         if p.exists() and not force:

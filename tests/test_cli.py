@@ -279,31 +279,45 @@ def test_an_output_that_is_a_folder_or_exists_is_refused_first(tmp_path, capsys)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.ply", "c.txt", "r.json"]
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root may write in any folder")
-def test_an_unwritable_output_folder_is_refused_first(tmp_path, capsys):
-    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
-    locked = tmp_path / "locked"
-    locked.mkdir(mode=0o500)
-    assert main(["detect", str(src), "--indices", str(locked / "c.txt")]) == 1
-    assert "no permission to write in" in capsys.readouterr().err
-    assert not (tmp_path / "c_sharp.ply").exists()
-
-
-@pytest.fixture
-def tiny_disk(tmp_path):
-    """A 64 KiB tmpfs (needs root to mount)."""
-    folder = tmp_path / "disk"
+def _mount_tmpfs(folder: Path, options: str) -> None:
+    """Mount a 64 KiB tmpfs on ``folder`` (root only; skips the test otherwise)."""
     folder.mkdir()
     proc = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(folder)],
+        ["mount", "-t", "tmpfs", "-o", f"size=64k,{options}", "tmpfs", str(folder)],
         capture_output=True,
         text=True,
         check=False,
     )
     if proc.returncode != 0:
         pytest.skip(f"cannot mount a small tmpfs: {proc.stderr.strip()}")
+
+
+@pytest.fixture
+def tiny_disk(tmp_path):
+    """A 64 KiB file system."""
+    folder = tmp_path / "disk"
+    _mount_tmpfs(folder, "rw")
     yield folder
     subprocess.run(["umount", str(folder)], check=True)
+
+
+@pytest.fixture
+def read_only_folder(tmp_path):
+    """A folder nobody may write in, root included (a read-only file system)."""
+    folder = tmp_path / "locked"
+    _mount_tmpfs(folder, "ro")
+    yield folder
+    subprocess.run(["umount", str(folder)], check=True)
+
+
+def test_an_unwritable_output_folder_is_refused_first(tmp_path, capsys, read_only_folder):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
+    assert main(["detect", str(src), "--indices", str(read_only_folder / "c.txt")]) == 1
+    assert capsys.readouterr().err == (
+        f"meshlab-sharp: error: cannot write {read_only_folder / 'c.txt'}: the folder "
+        f"{read_only_folder} is not writable\n"
+    )
+    assert not (tmp_path / "c_sharp.ply").exists()
 
 
 def test_a_full_disk_is_one_line_naming_the_output(tmp_path, tiny_disk):
