@@ -90,12 +90,18 @@ def available() -> bool:
 
 def default_backend() -> str:
     """The backend used when none is named: ``MESHLAB_SHARP_BACKEND`` or a
-    :func:`use_backend` block if set, else "compiled" when available, else "numpy"."""
+    :func:`use_backend` block if set, else "compiled" when available, else "numpy".
+
+    Raises ValueError when ``MESHLAB_SHARP_BACKEND`` names no backend."""
     if _override:
         return _override[-1]
     env = os.environ.get("MESHLAB_SHARP_BACKEND", "").strip().lower()
-    if env in BACKENDS:
-        return env if env == "numpy" or available() else "numpy"
+    if env and env not in BACKENDS:
+        raise ValueError(
+            f"MESHLAB_SHARP_BACKEND={env!r} is not a backend; choose from {', '.join(BACKENDS)}"
+        )
+    if env == "numpy":
+        return env
     return "compiled" if available() else "numpy"
 
 

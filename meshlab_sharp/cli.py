@@ -9,41 +9,72 @@ runs on the built-in sample part.
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import sys
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
+from types import FrameType
+from typing import NoReturn
 
-from . import __version__
+from . import __version__, _kernels
 from .errors import MeshlabSharpError
-from .io import Geometry, load, save_features_ply, save_indices, save_json
+from .io import Geometry, OutputSet, load, save_features_ply, save_indices, save_json
+from .io.writers import HELD_SIGNALS
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
 from .normals import WEIGHTINGS
-from .pipeline import DetectionResult, detect
+from .pipeline import MAX_SCALES, DetectionResult, detect
 from .plugin import add_plugin_command
 from .preprocessing import Preprocessing
 from .progress import Progress
 
 
 def parse_scales(text: str) -> list[int]:
-    """Parse ``"12,16,20"`` or an inclusive range ``"12:40:4"`` (``"1:4"`` steps by 1)."""
+    """Parse a list ``"12,16,20"`` or ``"12 16 20"`` (the plugin's format), or an
+    inclusive range ``"12:40:4"`` (``"1:4"`` steps by 1).
+
+    A list is comma-separated (spaces around the commas allowed) or space-separated,
+    never both; a range is checked before it is built: at most :data:`MAX_SCALES`
+    values.
+    """
+    hint = "use a list like 12,16,20 or 12 16 20, or a range like 12:40:4"
+    values: Sequence[int]
     try:
         if ":" in text:
             parts = [int(p) for p in text.split(":")]
             if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] <= 0):
                 raise ValueError
-            step = parts[2] if len(parts) == 3 else 1
-            return list(range(parts[0], parts[1] + 1, step))
-        return [int(p) for p in text.replace(" ", "").split(",") if p]
+            values = range(parts[0], parts[1] + 1, parts[2] if len(parts) == 3 else 1)
+        else:
+            items = [p.strip() for p in text.split(",")] if "," in text else text.split()
+            if not items or any(len(p.split()) != 1 for p in items):
+                raise ValueError
+            values = [int(p) for p in items]
     except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid scales {text!r}: {hint}") from None
+    if len(values) == 0:
+        raise argparse.ArgumentTypeError(f"invalid scales {text!r}: the range is empty")
+    if len(values) > MAX_SCALES:
         raise argparse.ArgumentTypeError(
-            f"invalid scales {text!r}: use a list like 12,16,20 or a range like 12:40:4"
-        ) from None
+            f"invalid scales {text!r}: {len(values)} scales, more than {MAX_SCALES}"
+        )
+    return list(values)
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line, ``meshlab-sharp: error: ...``,
+    with exit status 1 like every other error."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(1, f"meshlab-sharp: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="meshlab-sharp",
         description="Find sharp features (creases, corners) of point clouds and meshes "
         "automatically, with the projected-distance method of Tran et al.",
@@ -67,7 +98,12 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("points", "mesh"),
         help="run on the built-in sample part (the default when no INPUT is given)",
     )
-    det.add_argument("-o", "--output", help="output PLY (default: INPUT_sharp.ply)")
+    det.add_argument(
+        "-o",
+        "--output",
+        help=f"output PLY (default: INPUT_sharp.ply; {SAMPLE_FOLDER}/sample_part_sharp.ply "
+        "for the sample part)",
+    )
     det.add_argument("--indices", metavar="FILE", help="write 0-based feature indices, one a line")
     det.add_argument("--report", metavar="FILE", help="write counts, thresholds, timings as JSON")
     det.add_argument("--as-points", action="store_true", help="treat a mesh as a point cloud")
@@ -76,7 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=parse_scales,
         help="kNN sizes for clouds (default "
         f"{','.join(map(str, DEFAULT_KNN_SCALES))}) or rings for meshes (default "
-        f"{','.join(map(str, DEFAULT_RING_SCALES))}); a list or a range start:stop:step",
+        f"{','.join(map(str, DEFAULT_RING_SCALES))}); a list, comma- or space-separated "
+        "('8,12,16' or '8 12 16'), or a range start:stop:step",
     )
     det.add_argument(
         "--weighting",
@@ -102,46 +139,134 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``meshlab-sharp`` script; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+class Interrupted(BaseException):
+    """A catchable termination signal (SIGINT, SIGTERM, SIGHUP) stopped the command.
+
+    Attributes
+    ----------
+    signum : int
+        The signal.
+    written : list of Path or None
+        ``detect``: the outputs renamed into place before the signal (none unless it
+        came after the renames). None for commands that write no output set.
+    """
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+        self.written: list[Path] | None = None
+
+
+@contextmanager
+def _signals_interrupt() -> Iterator[None]:
+    """Turn SIGINT, SIGTERM and SIGHUP into :class:`Interrupted` while the block runs.
+
+    Only the first signal interrupts; later ones are ignored, so that the clean-up
+    (removing temporary files) runs to its end. Outside the main thread, where Python
+    cannot set handlers, nothing changes.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived: list[int] = []
+
+    def interrupt(signum: int, frame: FrameType | None) -> None:
+        if not arrived:
+            arrived.append(signum)
+            raise Interrupted(signum)
+
+    previous = {s: signal.signal(s, interrupt) for s in HELD_SIGNALS}
     try:
-        return int(args.func(args) or 0)
-    except MeshlabSharpError as exc:
-        print(f"meshlab-sharp: error: {exc}", file=sys.stderr)
-        return 1
-    except OSError as exc:
-        print(f"meshlab-sharp: error: {exc.strerror or exc}: {exc.filename or ''}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("meshlab-sharp: interrupted; no partial output was left", file=sys.stderr)
-        return 130
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``meshlab-sharp`` script; returns the exit status.
+
+    Every failure is one line on stderr, ``meshlab-sharp: error: ...``, and status 1;
+    SIGINT, SIGTERM and SIGHUP end the command with one line saying what was written,
+    and status 128 + the signal's number.
+    """
+    with _signals_interrupt():
+        try:
+            args = build_parser().parse_args(argv)
+            return int(args.func(args) or 0)
+        except MeshlabSharpError as exc:
+            print(f"meshlab-sharp: error: {exc}", file=sys.stderr)
+            return 1
+        except OSError as exc:
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"meshlab-sharp: error: {where}{exc.strerror or exc}", file=sys.stderr)
+            return 1
+        except Interrupted as exc:
+            print(f"meshlab-sharp: {_interrupted_message(exc)}", file=sys.stderr)
+            return 128 + exc.signum
+
+
+def _interrupted_message(exc: Interrupted) -> str:
+    """What an interruption left: nothing, or every output (after the renames)."""
+    said = f"interrupted by {signal.Signals(exc.signum).name}"
+    if exc.written is None:
+        return said
+    if not exc.written:
+        return f"{said}; no output was written"
+    return f"{said} after writing {', '.join(map(str, exc.written))}"
+
+
+#: Folder of the sample part's default outputs (created when absent); git ignores it.
+SAMPLE_FOLDER = "out"
+#: Test hook: when set to a path, ``detect`` creates that file once every output is
+#: staged and waits (at most a minute) until it is removed before renaming them.
+PAUSE_ENV = "MESHLAB_SHARP_TEST_PAUSE"
 
 
 def run_detect(args: argparse.Namespace) -> int:
-    """``meshlab-sharp detect``."""
+    """``meshlab-sharp detect``: every output is checked before any computation, and
+    written all or nothing (:class:`meshlab_sharp.io.OutputSet`)."""
+    outputs = OutputSet()
+    progress = Progress(
+        len(args.scales or DEFAULT_KNN_SCALES) + 4,
+        enabled=not args.quiet and sys.stderr.isatty(),
+    )
+    try:
+        with outputs:
+            return _detect_into(args, outputs, progress)
+    except Interrupted as exc:
+        exc.written = list(outputs.written)
+        raise
+    finally:
+        progress.close()  # an error message starts on a line of its own
+
+
+def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progress) -> int:
+    """:func:`run_detect`, staging every file in ``outputs`` and committing them."""
     if args.input is not None and args.sample is not None:
         raise MeshlabSharpError("give either INPUT or --sample, not both")
-    if args.input is None:
-        source, stem, folder = _sample_geometry(args.sample or "points"), "sample_part", Path(".")
+    try:
+        _kernels.resolve(None)  # a bad MESHLAB_SHARP_BACKEND fails before any work
+    except (ValueError, RuntimeError) as exc:
+        raise MeshlabSharpError(str(exc)) from None
+    sample = (args.sample or "points") if args.input is None else None
+    source: Path | None = None
+    if sample is not None:
+        stem, folder = "sample_part", Path(SAMPLE_FOLDER)
+        if args.output is None:
+            folder.mkdir(exist_ok=True)
     else:
         source = Path(args.input)
         stem, folder = source.stem, source.parent
     output = Path(args.output) if args.output else folder / f"{stem}_sharp.ply"
-    extra = (args.save_processed, args.plot)
-    outputs = [p for p in (output, args.indices, args.report, *extra) if p is not None]
-    _check_outputs(source, [Path(p) for p in outputs], force=args.force)
     if output.suffix.lower() != ".ply":
         raise MeshlabSharpError(f"{output}: the output must be a .ply file")
+    extra = (args.indices, args.report, args.save_processed, args.plot)
+    _check_outputs(source, [output, *(Path(p) for p in extra if p is not None)], force=args.force)
     steps = _preprocessing_from_args(args)
 
-    show = not args.quiet
-    progress = Progress(
-        len(args.scales or DEFAULT_KNN_SCALES) + 4, enabled=show and sys.stderr.isatty()
-    )
     start = time.perf_counter()
-    geometry = source if isinstance(source, Geometry) else load(source)
+    geometry = _sample_geometry(sample) if source is None else load(source)
     load_time = time.perf_counter() - start
     result = detect(
         geometry,
@@ -155,16 +280,18 @@ def run_detect(args: argparse.Namespace) -> int:
     )
     result.timings["load"] = load_time
     t = time.perf_counter()
+    binary = not args.ascii
     save_features_ply(
         output,
         geometry.vertices,
         geometry.faces,
         result.strength,
         result.mask,
-        binary=not args.ascii,
+        binary=binary,
+        into=outputs,
     )
     if args.indices:
-        save_indices(args.indices, result.mask)
+        save_indices(args.indices, result.mask, into=outputs)
     if args.save_processed and result.preprocessing is not None:
         done = result.preprocessing
         assert done.result is not None
@@ -174,44 +301,66 @@ def run_detect(args: argparse.Namespace) -> int:
             done.geometry.faces,
             done.result.strength,
             done.result.mask,
-            binary=not args.ascii,
+            binary=binary,
+            into=outputs,
         )
-    result.timings["save"] = time.perf_counter() - t
-    result.timings["total"] = time.perf_counter() - start
-    progress.step("saved")
-    progress.close()
     if args.plot:
         from .plot import save_report
 
-        save_report(args.plot, result, geometry)
+        save_report(args.plot, result, geometry, into=outputs)
+    result.timings["save"] = time.perf_counter() - t
+    result.timings["total"] = time.perf_counter() - start
     if args.report:
         report = result.summary()
         report["input"] = geometry.source
         report["outputs"] = {"ply": str(output), "indices": args.indices}
-        save_json(args.report, report)
-    if show:
+        save_json(args.report, report, into=outputs)
+    _pause_for_tests()
+    outputs.commit()
+    progress.step("saved")
+    progress.close()
+    if not args.quiet:
         if result.preprocessing is not None:
             _print_preprocessing(result)
         _print_summary(geometry.source, output, result)
     return 0
 
 
+def _pause_for_tests() -> None:
+    """The :data:`PAUSE_ENV` test hook: hold between staging and renaming."""
+    flag = os.environ.get(PAUSE_ENV)
+    if not flag:
+        return
+    Path(flag).touch()
+    end = time.monotonic() + 60.0
+    while Path(flag).exists() and time.monotonic() < end:
+        time.sleep(0.02)
+
+
 def _sample_geometry(kind: str) -> Geometry:
-    """The built-in sample part as a Geometry."""
+    """The built-in sample part as a Geometry (built once, then read from the cache)."""
     from .sample import sample_part
 
-    part = sample_part(kind)
+    part = sample_part(kind, cache=True)
     return Geometry(vertices=part.vertices, faces=part.faces, source=f"sample part ({kind})")
 
 
-def _check_outputs(source: Geometry | Path, outputs: list[Path], *, force: bool) -> None:
-    """Refuse to overwrite the input, or an existing output without ``--force``."""
+def _check_outputs(source: Path | None, outputs: list[Path], *, force: bool) -> None:
+    """Before any work: every output's folder exists and is writable, no output is a
+    folder, the input, another output, or (without ``--force``) an existing file."""
     resolved = [p.resolve() for p in outputs]
     if len(set(resolved)) != len(resolved):
         raise MeshlabSharpError("two outputs have the same path")
-    if isinstance(source, Path) and source.exists() and source.resolve() in resolved:
+    if source is not None and source.exists() and source.resolve() in resolved:
         raise MeshlabSharpError(f"{source}: an output would overwrite the input")
     for p in outputs:
+        folder = p.parent
+        if not folder.is_dir():
+            raise MeshlabSharpError(f"cannot write {p}: the folder {folder} does not exist")
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise MeshlabSharpError(f"cannot write {p}: the folder {folder} is not writable")
+        if p.is_dir():
+            raise MeshlabSharpError(f"cannot write {p}: it is a folder")
         if p.exists() and not force:
             raise MeshlabSharpError(f"{p} exists; use --force to overwrite it")
 

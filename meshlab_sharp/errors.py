@@ -13,3 +13,8 @@ class MeshlabSharpError(Exception):
 
 class InputError(MeshlabSharpError, ValueError):
     """The input geometry, file or options cannot be processed as given."""
+
+
+class OutputError(MeshlabSharpError, OSError):
+    """An output file cannot be written; the message names the destination, not the
+    hidden temporary file."""

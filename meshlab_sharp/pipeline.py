@@ -35,6 +35,8 @@ Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | py
 #: Detection modes: the paper's method as ALGORITHM.md reads it, or robust mode
 #: (:mod:`meshlab_sharp.robust`, docs/robust-mode.md).
 MODES = ("paper", "robust")
+#: The most scales one detection takes (the defaults have 8 and 4).
+MAX_SCALES = 64
 
 
 @dataclass
@@ -57,7 +59,8 @@ class DetectionResult:
         Candidates at each scale (cleaned points; merged duplicates count once).
     kept : (n,) bool
         Input vertices that took part (False for unreferenced mesh vertices, which are
-        dropped by cleaning and are never features).
+        dropped by cleaning, and in robust mode for isolated points, which are left
+        out; neither is ever a feature). The MeshLab plugin reports the same.
     weighting : str
         The PCA weighting.
     n_clean : int
@@ -132,7 +135,7 @@ def detect(
     source: Source,
     faces: np.ndarray | None = None,
     *,
-    scales: Sequence[int] | None = None,
+    scales: Sequence[int] | int | None = None,
     weighting: Weighting = "gaussian",
     as_points: bool = False,
     return_details: bool = False,
@@ -150,9 +153,9 @@ def detect(
         The input. A path is read with pymeshlab; a MeshSet contributes its current mesh.
     faces : (m, 3) int array, optional
         Triangles, when ``source`` is an array. None: a point cloud.
-    scales : sequence of int, optional
+    scales : int or sequence of int, optional
         kNN sizes for clouds (default 12, 16, ..., 40) or rings for meshes (default
-        1, 2, 3, 4).
+        1, 2, 3, 4); at most :data:`MAX_SCALES`. A single int is one scale.
     weighting : {"gaussian", "none"}, default "gaussian"
         Weights of the PCA normals (clouds, and mesh vertices without a face normal).
     as_points : bool, default False
@@ -211,7 +214,7 @@ def _detect(
     source: Source,
     faces: np.ndarray | None,
     *,
-    scales: Sequence[int] | None,
+    scales: Sequence[int] | int | None,
     weighting: Weighting,
     as_points: bool,
     return_details: bool,
@@ -299,6 +302,10 @@ def _detect(
         if per_scale.distances is not None and per_scale.normals is not None:
             per_scale.distances = np.stack([robust.expand(d, np.nan) for d in per_scale.distances])
             per_scale.normals = np.stack([robust.expand(n, np.nan) for n in per_scale.normals])
+    # points that took part: all cleaned points, less robust mode's isolated ones
+    taking_part = np.ones(len(points), bool)
+    if robust is not None:
+        taking_part = robust.expand(np.ones(len(robust.keep), bool), False)
     result = DetectionResult(
         mask=cleaned.to_input_order(mask, False),
         strength=cleaned.to_input_order(strength, 0.0),
@@ -306,7 +313,7 @@ def _detect(
         scales=scales_t,
         thresholds=per_scale.thresholds,
         candidate_counts=per_scale.candidate_counts,
-        kept=cleaned.from_input >= 0,
+        kept=cleaned.to_input_order(taking_part, False),
         weighting=weighting,
         n_clean=len(points),
         timings=timings,
@@ -344,17 +351,24 @@ def _as_input(source: Source, faces: np.ndarray | None, as_points: bool) -> Geom
 
 
 def _check_scales(
-    scales: Sequence[int] | None, default: tuple[int, ...], kind: str
+    scales: Sequence[int] | int | None, default: tuple[int, ...], kind: str
 ) -> tuple[int, ...]:
-    """Sorted, distinct, positive integer scales; the default when None."""
+    """Sorted, distinct, positive integer scales (a single int is one scale), at most
+    :data:`MAX_SCALES` of them; the default when None."""
     if scales is None:
         return default
+    given: Any = [int(scales)] if isinstance(scales, int | np.integer) else scales
+    if isinstance(scales, bool | str | bytes) or not hasattr(given, "__len__"):
+        raise InputError(f"scales must be a sequence of integers, e.g. [12, 16], got {scales!r}")
+    if len(given) > MAX_SCALES:
+        raise InputError(f"{len(given)} scales given; at most {MAX_SCALES} are allowed")
     try:
-        values = sorted({int(s) for s in scales})
-    except (TypeError, ValueError):
-        raise InputError(f"scales must be integers, got {scales!r}") from None
-    if any(float(s) != int(s) for s in scales):
-        raise InputError(f"scales must be integers, got {list(scales)!r}")
+        values = sorted({int(s) for s in given})
+        exact = all(float(s) == int(s) for s in given)
+    except (TypeError, ValueError, OverflowError):
+        exact = False
+    if not exact:
+        raise InputError(f"scales must be integers, got {list(given)!r}")
     if not values:
         raise InputError("at least one scale is needed")
     low = 1 if kind == "mesh" else 2

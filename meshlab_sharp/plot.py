@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import InputError, MeshlabSharpError
-from .io import Geometry, atomic_write
+from .io import Geometry, OutputSet, atomic_write
 
 __all__ = ["DEFAULT_SIZE", "VIEWS", "report_figure", "require_matplotlib", "save_report"]
 
@@ -54,6 +54,7 @@ def save_report(
     *,
     title: str | None = None,
     size: tuple[int, int] = DEFAULT_SIZE,
+    into: OutputSet | None = None,
 ) -> Path:
     """Write the report picture of a detection as a PNG (atomically).
 
@@ -71,6 +72,8 @@ def save_report(
         First line of the title (default: the geometry's source).
     size : (int, int)
         Width and height in pixels.
+    into : OutputSet, optional
+        Only stage the picture in this set (see :func:`meshlab_sharp.io.atomic_write`).
 
     Returns
     -------
@@ -84,7 +87,7 @@ def save_report(
     def write(tmp: str) -> None:
         fig.savefig(tmp, format="png", dpi=_DPI)
 
-    return atomic_write(dest, write)
+    return atomic_write(dest, write, into=into)
 
 
 def report_figure(

@@ -11,12 +11,14 @@ access to the system once the Debian packages are there.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+from .cache import cache_dir
 from .errors import MeshlabSharpError
 
 #: Debian packages the plugin needs to build and run (headless runs use Xvfb).
@@ -80,7 +82,11 @@ def _add_build_options(parser: argparse.ArgumentParser) -> None:
         metavar="DIR",
         help=f"unpacked MeshLab source package (default: the cache folder's {SOURCE_FOLDER})",
     )
-    parser.add_argument("--build-dir", metavar="DIR", help="CMake build folder")
+    parser.add_argument(
+        "--build-dir",
+        metavar="DIR",
+        help="CMake build folder (default: one per plugin source tree in the cache folder)",
+    )
     parser.add_argument(
         "--no-apt", action="store_true", help="do not run apt-get; fail if a package is missing"
     )
@@ -96,8 +102,9 @@ def _run_deps(args: argparse.Namespace) -> int:
 def _run_install(args: argparse.Namespace) -> int:
     ensure_packages(use_apt=not args.no_apt)
     source = ensure_source(Path(args.source_dir) if args.source_dir else None, not args.no_apt)
-    build_dir = Path(args.build_dir) if args.build_dir else cache_dir() / "build"
-    library = build(source, build_dir)
+    sources = plugin_sources()
+    build_dir = Path(args.build_dir) if args.build_dir else default_build_dir(sources)
+    library = build(source, build_dir, sources)
     if args.root:
         root = make_private_root(Path(args.root), library)
         print(f"plugin: installed into the private MeshLab root {root}")
@@ -109,21 +116,25 @@ def _run_install(args: argparse.Namespace) -> int:
     return 0
 
 
-def cache_dir() -> Path:
-    """Where the MeshLab sources and the default build live."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "meshlab-sharp"
+def default_build_dir(sources: Path) -> Path:
+    """The CMake build folder of one plugin source tree: ``build-<hash of its path>`` in
+    the cache, so that two checkouts (or installs) never share a CMake cache."""
+    key = hashlib.sha256(str(sources.resolve()).encode()).hexdigest()[:16]
+    return cache_dir() / f"build-{key}"
 
 
 def plugin_sources() -> Path:
-    """The ``meshlab_plugin_cpp`` folder of this checkout."""
-    folder = Path(__file__).resolve().parent.parent / "meshlab_plugin_cpp"
-    if not (folder / "CMakeLists.txt").is_file():
-        raise MeshlabSharpError(
-            f"the plugin sources are not next to this package ({folder}); "
-            "install meshlab-sharp from a git checkout (pip install -e .)"
-        )
-    return folder
+    """The plugin's sources: ``plugin_src`` inside the installed package (a wheel), or
+    ``meshlab_plugin_cpp`` beside the package (a git checkout, editable install)."""
+    package = Path(__file__).resolve().parent
+    candidates = (package / "plugin_src", package.parent / "meshlab_plugin_cpp")
+    for folder in candidates:
+        if (folder / "CMakeLists.txt").is_file():
+            return folder
+    raise MeshlabSharpError(
+        f"the plugin sources are missing (looked in {' and '.join(map(str, candidates))}); "
+        "reinstall meshlab-sharp"
+    )
 
 
 def missing_packages() -> list[str]:
@@ -206,14 +217,17 @@ def _ensure_deb_src() -> None:
     _apt(["update", "-qq"])
 
 
-def build(source: Path, build_dir: Path) -> Path:
-    """Configure and build the plugin with CMake; return the built library."""
+def build(source: Path, build_dir: Path, sources: Path) -> Path:
+    """Configure and build the plugin with CMake; return the built library.
+
+    ``source``: the unpacked MeshLab source package (headers); ``sources``: the plugin's
+    sources (:func:`plugin_sources`)."""
     build_dir.mkdir(parents=True, exist_ok=True)
     _check_call(
         [
             "cmake",
             "-S",
-            str(plugin_sources()),
+            str(sources),
             "-B",
             str(build_dir),
             f"-DMESHLAB_SOURCE_DIR={source}",

@@ -426,7 +426,13 @@ def _denoise(state: _State, config: Preprocessing, record: dict[str, Any]) -> st
             "stepsmoothnum": int(config.smoothing_steps or 3),
             "normalthr": float(config.normal_threshold),
         }
-        record.update(filters=["apply_coord_two_steps_smoothing"], parameters=params)
+        # the filter needs a compact mesh ("Lack of Compactness" otherwise): drop the
+        # unreferenced vertices first (cleaning would drop them anyway)
+        record.update(
+            filters=["meshing_remove_unreferenced_vertices", "apply_coord_two_steps_smoothing"],
+            parameters=params,
+        )
+        _apply(ms, "meshing_remove_unreferenced_vertices")
         _apply(ms, "apply_coord_two_steps_smoothing", **params)
         state.update(ms)
         return ""

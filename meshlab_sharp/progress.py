@@ -35,6 +35,7 @@ class Progress:
         self.width = width
         self.done = 0
         self._start = time.perf_counter()
+        self._drawn = False
 
     def step(self, label: str, n: int = 1) -> None:
         """Advance by ``n`` steps and show ``label`` as the current stage."""
@@ -46,10 +47,12 @@ class Progress:
         bar = "#" * filled + "." * (self.width - filled)
         self.stream.write(f"\r{label[:28]:<28} [{bar}] {self.done}/{self.total} {elapsed:6.1f}s")
         self.stream.flush()
+        self._drawn = True
 
     def close(self) -> None:
-        """End the line of the bar, if one was drawn."""
-        if self.enabled:
+        """End the line of the bar, if one was drawn, and draw no more (a second call
+        does nothing, so a command can close the bar before printing an error)."""
+        if self._drawn:
             self.stream.write("\n")
             self.stream.flush()
-            self.enabled = False
+        self.enabled = self._drawn = False

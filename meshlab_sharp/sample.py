@@ -14,14 +14,25 @@ part of ``meshlab_sharp.groundtruth``; see there for how it is built and sampled
 
 from __future__ import annotations
 
+import hashlib
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__, groundtruth
+from .cache import cache_dir
 from .groundtruth import SamplePart, make_part
+from .io import atomic_write
 
 __all__ = ["SAMPLE_NAME", "SamplePart", "sample_part"]
 
 SAMPLE_NAME = "fandisk"
 
 
-def sample_part(kind: str = "points", *, n_points: int | None = None, seed: int = 0) -> SamplePart:
+def sample_part(
+    kind: str = "points", *, n_points: int | None = None, seed: int = 0, cache: bool = False
+) -> SamplePart:
     """Generate the sample part (no file, no download; a few seconds).
 
     Parameters
@@ -35,6 +46,10 @@ def sample_part(kind: str = "points", *, n_points: int | None = None, seed: int 
         See ``kind``.
     seed : int
         Seed of the point sampling; the same seed gives the same arrays.
+    cache : bool, default False
+        Keep the part in the user's cache folder (``sample/`` in
+        :func:`meshlab_sharp.cache.cache_dir`), keyed by the arguments, the version and
+        the generator's source, and load it from there next time (the CLI does).
 
     Returns
     -------
@@ -43,4 +58,52 @@ def sample_part(kind: str = "points", *, n_points: int | None = None, seed: int 
         None, ``edges`` (e, 2, 3) float64 exact sharp-edge segments, ``spacing``,
         ``normals`` (n, 3), ``name`` = "fandisk".
     """
-    return make_part(SAMPLE_NAME, kind, n_points=n_points, seed=seed)
+    if not cache:
+        return make_part(SAMPLE_NAME, kind, n_points=n_points, seed=seed)
+    path = _cache_file(kind, n_points, seed)
+    try:
+        return _read_cached(path, kind, seed)
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        pass  # absent or unreadable: build it again
+    part = make_part(SAMPLE_NAME, kind, n_points=n_points, seed=seed)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(path, lambda tmp: _write_cached(tmp, part))
+    except OSError:
+        pass  # a cache that cannot be written only costs time
+    return part
+
+
+_FIELDS = ("vertices", "edges", "normals", "outliers")
+
+
+def _cache_file(kind: str, n_points: int | None, seed: int) -> Path:
+    """The cache file of one part: its arguments, the version and a digest of the
+    generator's source in the name."""
+    source = b"".join(Path(m).read_bytes() for m in (__file__, groundtruth.__file__))
+    digest = hashlib.sha256(source).hexdigest()[:12]
+    size = "default" if n_points is None else str(int(n_points))
+    name = f"{SAMPLE_NAME}-{kind}-{size}-seed{seed}-{__version__}-{digest}.npz"
+    return cache_dir() / "sample" / name
+
+
+def _write_cached(tmp: str, part: SamplePart) -> None:
+    verts, faces = part.extra["reference"]
+    arrays = {f: getattr(part, f) for f in _FIELDS}
+    if part.faces is not None:
+        arrays["faces"] = part.faces
+    with open(tmp, "wb") as fh:  # an open file: np.savez would add ".npz" to a name
+        np.savez(fh, spacing=part.spacing, ref_vertices=verts, ref_faces=faces, **arrays)
+
+
+def _read_cached(path: Path, kind: str, seed: int) -> SamplePart:
+    with np.load(path, allow_pickle=False) as data:
+        return SamplePart(
+            name=SAMPLE_NAME,
+            faces=data["faces"] if "faces" in data.files else None,
+            spacing=float(data["spacing"]),
+            kind=kind,
+            seed=seed,
+            extra={"reference": (data["ref_vertices"], data["ref_faces"])},
+            **{f: data[f] for f in _FIELDS},
+        )

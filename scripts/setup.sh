@@ -42,4 +42,4 @@ if [[ $all == 1 ]]; then
   # MeshLab 2020.09, the plugin's build dependencies and its headers (Debian source package).
   .venv/bin/meshlab-sharp plugin deps
 fi
-echo "setup: ready (.venv/bin/meshlab-sharp)"
+echo "setup: ready: run .venv/bin/meshlab-sharp, or source .venv/bin/activate first for plain meshlab-sharp"

@@ -170,8 +170,10 @@ def test_bad_scales_on_the_command_line(tmp_path, capsys):
     path = write_xyz(tmp_path / "cube.xyz", CUBE)
     with pytest.raises(SystemExit) as exc:
         main(["detect", str(path), "--scales", "twelve"])
-    assert exc.value.code == 2
-    assert "invalid scales" in capsys.readouterr().err
+    assert exc.value.code == 1  # usage errors too: one line, status 1
+    err = capsys.readouterr().err
+    assert err.startswith("meshlab-sharp: error: argument --scales: invalid scales")
+    assert err.count("\n") == 1
 
 
 def test_atomic_write_leaves_nothing_when_interrupted(tmp_path):

@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import argparse
+import errno
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pymeshlab
@@ -13,9 +19,13 @@ import shapes
 from files import write_ply
 
 import meshlab_sharp
-from meshlab_sharp.cli import main, parse_scales
-from meshlab_sharp.io import mesh_arrays
+from meshlab_sharp import sample
+from meshlab_sharp.cli import PAUSE_ENV, Interrupted, _interrupted_message, main, parse_scales
+from meshlab_sharp.errors import OutputError
+from meshlab_sharp.io import OutputSet, mesh_arrays
 from meshlab_sharp.io.writers import _umask
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def _read_back(path):
@@ -110,6 +120,22 @@ def test_parse_scales():
     assert parse_scales("12:40:4") == [12, 16, 20, 24, 28, 32, 36, 40]
     assert parse_scales("1:4") == [1, 2, 3, 4]
     assert parse_scales("12, 20,28") == [12, 20, 28]
+    assert parse_scales("8 12 16") == [8, 12, 16]  # the plugin's format
+    assert parse_scales(" 8\t12  16 ") == [8, 12, 16]
+    assert parse_scales("12") == [12]
+
+
+@pytest.mark.parametrize("text", ["8 12,16", "8,,12", "8,", "", " ", "8 1 2,3", "4:2", "1:2:0"])
+def test_parse_scales_rejects_ambiguous_or_empty(text):
+    with pytest.raises(argparse.ArgumentTypeError, match="invalid scales"):
+        parse_scales(text)
+
+
+def test_a_huge_scale_range_fails_at_once():
+    start = time.perf_counter()
+    with pytest.raises(argparse.ArgumentTypeError, match="99999999 scales, more than 64"):
+        parse_scales("2:100000000")
+    assert time.perf_counter() - start < 0.1  # the range is not built
 
 
 def test_installed_script_runs(tmp_path):
@@ -150,3 +176,225 @@ def test_detect_meshset_writes_quality_and_selection():
 def test_detect_meshset_on_an_empty_meshset():
     with pytest.raises(meshlab_sharp.InputError, match="no mesh"):
         meshlab_sharp.detect_meshset(pymeshlab.MeshSet())
+
+
+def _run(args, env=None, **kwargs):
+    """``python -m meshlab_sharp ARGS`` with this checkout first on the path."""
+    environ = dict(os.environ, PYTHONPATH=str(ROOT), **(env or {}))
+    return subprocess.Popen(
+        [sys.executable, "-m", "meshlab_sharp", *map(str, args)],
+        env=environ,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kwargs,
+    )
+
+
+def _hidden(folder):
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+
+
+def _with_old_outputs(tmp_path):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
+    old = {tmp_path / n: f"old {n}\n".encode() for n in ("c_sharp.ply", "c.txt", "c.json")}
+    for path, content in old.items():
+        path.write_bytes(content)
+    args = ["detect", src, "--indices", tmp_path / "c.txt", "--report", tmp_path / "c.json"]
+    return args + ["--force", "-q"], old
+
+
+def _wait_for(path: Path, proc: subprocess.Popen, timeout: float = 60.0) -> None:
+    end = time.monotonic() + timeout
+    while not path.exists():
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < end, "the command never reached the renames"
+        time.sleep(0.02)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_before_the_renames_leaves_the_old_outputs(tmp_path, sig):
+    args, old = _with_old_outputs(tmp_path)
+    flag = tmp_path / "flag" / "paused"
+    flag.parent.mkdir()
+    proc = _run(args, env={PAUSE_ENV: str(flag)})
+    _wait_for(flag, proc)
+    assert len(_hidden(tmp_path)) == 3  # the three outputs, staged
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + sig
+    assert err == f"meshlab-sharp: interrupted by {sig.name}; no output was written\n"
+    assert out == ""
+    assert _hidden(tmp_path) == []
+    for path, content in old.items():
+        assert path.read_bytes() == content
+
+
+def test_a_failing_rename_says_which_outputs_were_written(tmp_path):
+    args, _ = _with_old_outputs(tmp_path)
+    (tmp_path / "c.txt").unlink()
+    flag = tmp_path / "flag" / "paused"
+    flag.parent.mkdir()
+    proc = _run(args, env={PAUSE_ENV: str(flag)})
+    _wait_for(flag, proc)
+    (tmp_path / "c.txt").mkdir()  # appears after the checks: the second rename fails
+    flag.unlink()
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    assert out == ""
+    ply = tmp_path / "c_sharp.ply"
+    assert err == (
+        f"meshlab-sharp: error: cannot write {tmp_path / 'c.txt'}: Is a directory "
+        f"(written: {ply}; the others were not)\n"
+    )
+    assert _hidden(tmp_path) == []
+    assert ply.read_bytes().startswith(b"ply\n")
+    assert (tmp_path / "c.json").read_bytes() == b"old c.json\n"
+
+
+@pytest.mark.parametrize("option", ["--indices", "--report", "--plot", "-o", "--save-processed"])
+def test_outputs_are_checked_before_anything_is_read(tmp_path, capsys, option):
+    missing = tmp_path / "missing"
+    name = {"--plot": "x.png", "-o": "x.ply", "--save-processed": "x.ply"}.get(option, "x.txt")
+    extra = ["--fill-holes"] if option == "--save-processed" else []
+    # the input does not exist either: the output's folder is what fails
+    code = main(["detect", str(tmp_path / "absent.ply"), option, str(missing / name), *extra])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert err == (
+        f"meshlab-sharp: error: cannot write {missing / name}: the folder {missing} "
+        "does not exist\n"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_output_that_is_a_folder_or_exists_is_refused_first(tmp_path, capsys):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
+    (tmp_path / "r.json").mkdir()
+    assert main(["detect", str(src), "--report", str(tmp_path / "r.json")]) == 1
+    assert capsys.readouterr().err.endswith("r.json: it is a folder\n")
+    (tmp_path / "c.txt").write_text("old\n")
+    assert main(["detect", str(src), "--indices", str(tmp_path / "c.txt")]) == 1
+    assert "c.txt exists; use --force" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.ply", "c.txt", "r.json"]
+
+
+def _mount_tmpfs(folder: Path, options: str) -> None:
+    """Mount a 64 KiB tmpfs on ``folder`` (root only; skips the test otherwise)."""
+    folder.mkdir()
+    proc = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size=64k,{options}", "tmpfs", str(folder)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if proc.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs: {proc.stderr.strip()}")
+
+
+@pytest.fixture
+def tiny_disk(tmp_path):
+    """A 64 KiB file system."""
+    folder = tmp_path / "disk"
+    _mount_tmpfs(folder, "rw")
+    yield folder
+    subprocess.run(["umount", str(folder)], check=True)
+
+
+@pytest.fixture
+def read_only_folder(tmp_path):
+    """A folder nobody may write in, root included (a read-only file system)."""
+    folder = tmp_path / "locked"
+    _mount_tmpfs(folder, "ro")
+    yield folder
+    subprocess.run(["umount", str(folder)], check=True)
+
+
+def test_an_unwritable_output_folder_is_refused_first(tmp_path, capsys, read_only_folder):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
+    assert main(["detect", str(src), "--indices", str(read_only_folder / "c.txt")]) == 1
+    assert capsys.readouterr().err == (
+        f"meshlab-sharp: error: cannot write {read_only_folder / 'c.txt'}: the folder "
+        f"{read_only_folder} is not writable\n"
+    )
+    assert not (tmp_path / "c_sharp.ply").exists()
+
+
+def test_a_full_disk_is_one_line_naming_the_output(tmp_path, tiny_disk):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(30))  # 5,402 points: 250 KB
+    out = tiny_disk / "c_sharp.ply"
+    proc = _run(["detect", src, "-o", out, "-q"])
+    out_, err = proc.communicate(timeout=120)
+    assert proc.returncode == 1
+    assert out_ == ""
+    assert err == f"meshlab-sharp: error: cannot write {out}: No space left on device\n"
+    assert list(tiny_disk.iterdir()) == []
+
+
+def test_a_write_error_names_the_destination_not_the_temporary_file(tmp_path):
+    def no_space(tmp: str) -> None:
+        Path(tmp).write_bytes(b"ply\n")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), tmp)
+
+    dest = tmp_path / "out.txt"
+    with OutputSet() as outputs, pytest.raises(OutputError) as exc:
+        outputs.stage(dest, no_space)
+    assert str(exc.value) == f"cannot write {dest}: No space left on device"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_unknown_backend_in_the_environment_is_an_error(tmp_path, monkeypatch):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
+    proc = _run(["detect", src], env={"MESHLAB_SHARP_BACKEND": "cuda"})
+    out, err = proc.communicate(timeout=60)
+    assert (proc.returncode, out) == (1, "")
+    assert err == (
+        "meshlab-sharp: error: MESHLAB_SHARP_BACKEND='cuda' is not a backend; "
+        "choose from compiled, numpy\n"
+    )
+    assert not (tmp_path / "c_sharp.ply").exists()
+    monkeypatch.setenv("MESHLAB_SHARP_BACKEND", "cuda")
+    with pytest.raises(meshlab_sharp.InputError, match="MESHLAB_SHARP_BACKEND='cuda'"):
+        meshlab_sharp.detect(shapes.cube_grid_points(9))
+
+
+def test_the_sample_checks_its_outputs_before_it_is_built(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+
+    def no_build(*args, **kwargs):
+        raise AssertionError("the sample was built before the outputs were checked")
+
+    monkeypatch.setattr(sample, "make_part", no_build)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "sample_part_sharp.ply").write_text("old\n")
+    assert main(["detect", "--sample", "mesh"]) == 1
+    assert capsys.readouterr().err == (
+        "meshlab-sharp: error: out/sample_part_sharp.ply exists; use --force to overwrite it\n"
+    )
+
+
+def test_the_sample_writes_into_out(tmp_path, monkeypatch):
+    """Default sample outputs go to out/ (created; git ignores it), not the checkout."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    make_part = sample.make_part
+    monkeypatch.setattr(
+        sample, "make_part", lambda *a, **k: make_part(*a, **{**k, "n_points": 3_000})
+    )
+    assert main(["detect", "--sample", "-q"]) == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["sample_part_sharp.ply"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "out"]
+    ignored = subprocess.run(
+        ["git", "check-ignore", "-q", "out/sample_part_sharp.ply"], cwd=ROOT, check=False
+    )
+    assert ignored.returncode == 0
+
+
+def test_the_interruption_message_says_what_was_written():
+    exc = Interrupted(signal.SIGHUP)
+    assert _interrupted_message(exc) == "interrupted by SIGHUP"  # a command with no outputs
+    exc.written = []
+    assert _interrupted_message(exc) == "interrupted by SIGHUP; no output was written"
+    exc.written = [Path("a.ply"), Path("a.txt")]  # the signal came after the renames
+    assert _interrupted_message(exc) == "interrupted by SIGHUP after writing a.ply, a.txt"

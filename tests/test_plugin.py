@@ -3,9 +3,12 @@ Xvfb, read back, and compared with the Python package on the same files."""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
+import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +26,8 @@ from meshlab_sharp.sample import sample_part
 EXAMPLE = Path(__file__).resolve().parent.parent / "meshlab_plugin_cpp" / "examples"
 _SCALE = re.compile(r"(k|ring)=(\d+):T=([0-9.]+),candidates=(\d+)")
 
+#: In CI a skip here is a failure (conftest.py): set-up installs MeshLab there.
+REQUIRED_IN_CI = True
 pytestmark = pytest.mark.skipif(
     shutil.which("dpkg-query") is None, reason="the plugin targets Debian's MeshLab 2020.09"
 )
@@ -263,3 +268,76 @@ def test_debian_meshlab_reads_the_python_output(meshlab_root, tmp_path):
     assert expected.n_features > 100
     np.testing.assert_array_equal(selection, expected.mask)
     np.testing.assert_allclose(quality, expected.strength, atol=1e-6)
+
+
+def test_a_skip_fails_in_ci():
+    """Without dpkg-query on the path the plugin tests skip; in CI that is a failure."""
+    root = Path(__file__).resolve().parent.parent
+    env = {"PATH": "/nonexistent", "PYTHONPATH": str(root), "CI": "true"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-o", "addopts="]
+        + [f"{__file__}::test_meshlabserver_lists_the_filter"],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=root,
+        timeout=300,
+        check=False,
+    )
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "skipped in CI, where it must run: Skipped: the plugin targets Debian" in proc.stdout
+    assert "skipped" not in proc.stdout.splitlines()[-1]
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(folder)): p.read_bytes()
+        for p in folder.rglob("*")
+        if p.is_file() and "build" not in p.relative_to(folder).parts
+    }
+
+
+def test_a_wheel_ships_the_sources_and_its_own_build_folder(tmp_path, monkeypatch):
+    """A plain ``pip install`` (a wheel) carries the plugin's sources, and ``plugin
+    install`` builds them in a build folder of their own, beside another checkout's."""
+    checkout = Path(__file__).resolve().parent.parent
+    wheels = tmp_path / "wheels"
+    proc = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", str(checkout), "--no-deps", "-q", "-w", wheels],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    (wheel,) = wheels.glob("*.whl")
+    site = tmp_path / "site"
+    zipfile.ZipFile(wheel).extractall(site)
+    shipped = site / "meshlab_sharp" / "plugin_src"
+    assert _files(shipped) == _files(checkout / "meshlab_plugin_cpp")
+
+    # a configured CMake cache of another source tree (this checkout) in the same cache
+    headers = plugin.ensure_source(None, use_apt=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    other = plugin.default_build_dir(checkout / "meshlab_plugin_cpp")
+    configure = ["cmake", "-S", checkout / "meshlab_plugin_cpp", "-B", other]
+    subprocess.run([*configure, f"-DMESHLAB_SOURCE_DIR={headers}"], capture_output=True, check=True)
+    own = plugin.default_build_dir(shipped)
+    assert own != other and own.parent == other.parent == plugin.cache_dir()
+
+    root = tmp_path / "root"
+    proc = subprocess.run(
+        [sys.executable, "-m", "meshlab_sharp", "plugin", "install", "--root", root]
+        + ["--no-apt", "--source-dir", headers],
+        env=dict(os.environ, PYTHONPATH=str(site)),
+        cwd=tmp_path,  # not the checkout: python -m puts the folder first on the path
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (own / plugin.PLUGIN_FILE).is_file()
+    assert (
+        root / "lib" / "x86_64-linux-gnu" / "meshlab" / "plugins" / plugin.PLUGIN_FILE
+    ).is_file()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import time
 from pathlib import Path
@@ -14,6 +15,8 @@ from files import write_ply
 
 from meshlab_sharp.sample import sample_part
 
+#: In CI a skip here is a failure (conftest.py): set-up installs MeshLab there.
+REQUIRED_IN_CI = True
 pytestmark = pytest.mark.skipif(
     shutil.which("dpkg-query") is None, reason="the plugin targets Debian's MeshLab 2020.09"
 )
@@ -129,9 +132,14 @@ def test_gui_applies_the_filter_and_shows_red_features(meshlab_root, display, tm
         assert before == 0
         assert after > 1000, f"only {after} red pixels after applying the filter"
     finally:
-        gui.terminate()
-        try:
-            gui.wait(10)
-        except subprocess.TimeoutExpired:
-            gui.kill()
-    assert gui.returncode is not None and gui.returncode >= -15  # ended by us, no crash
+        ours = signal.SIGTERM
+        if gui.poll() is None:
+            gui.terminate()
+            try:
+                gui.wait(10)
+            except subprocess.TimeoutExpired:
+                ours = signal.SIGKILL
+                gui.kill()
+                gui.wait(10)
+    # MeshLab ended by itself (0) or by the signal we sent; any other signal is a crash
+    assert gui.returncode in (0, -ours), f"MeshLab ended with {gui.returncode}"

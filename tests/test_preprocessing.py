@@ -275,3 +275,19 @@ def test_cli_bad_flags_are_one_line_errors(tmp_path, capsys, flags, message):
     err = capsys.readouterr().err
     assert err.startswith("meshlab-sharp: error:") and message in err
     assert "Traceback" not in err and not (tmp_path / "c_sharp.ply").exists()
+
+
+def test_two_step_denoise_on_a_mesh_with_an_unreferenced_vertex():
+    """The filter needs a compact mesh: the stray vertex is dropped first, and the
+    result is the same as without it, mapped back around it."""
+    vertices, faces = cube_grid_mesh(3)
+    stray = np.vstack([vertices[:10], [[5.0, 5.0, 5.0]], vertices[10:]])
+    shifted = faces + (faces >= 10)
+    steps = Preprocessing(denoise=True, denoise_method="two_steps")
+    plain, plain_map = preprocess(Geometry(vertices, faces, "cube"), steps)
+    processed, to_input = preprocess(Geometry(stray, shifted, "cube + stray"), steps)
+    np.testing.assert_array_equal(processed.vertices, plain.vertices)
+    np.testing.assert_array_equal(processed.faces, plain.faces)
+    np.testing.assert_array_equal(to_input, plain_map + (plain_map >= 10))
+    result = meshlab_sharp.detect(stray, shifted, preprocessing=steps)
+    assert not result.kept[10] and not result.mask[10]

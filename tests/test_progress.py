@@ -64,3 +64,24 @@ def test_cli_draws_the_bar_on_a_terminal_unless_quiet(tmp_path):
     code, err = _run_with_terminal_stderr(["detect", str(src), "--force", "--quiet"])
     assert code == 0
     assert err == ""
+
+
+def test_an_error_after_the_bar_starts_on_its_own_line(tmp_path):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
+    code, err = _run_with_terminal_stderr(["detect", str(src), "--scales", "12,1000"])
+    assert code == 1
+    lines = err.splitlines()
+    assert lines[-1].startswith("meshlab-sharp: error: ")  # not after the bar's last line
+    assert "fewer than the largest scale" in lines[-1]
+
+
+def test_close_without_drawing_writes_nothing_and_twice_once():
+    stream = io.StringIO()
+    bar = Progress(3, enabled=True, stream=stream)
+    bar.close()
+    assert stream.getvalue() == ""
+    bar = Progress(3, enabled=True, stream=stream)
+    bar.step("x")
+    bar.close()
+    bar.close()
+    assert stream.getvalue().count("\n") == 1

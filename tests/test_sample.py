@@ -9,6 +9,7 @@ import pymeshlab
 import pytest
 from scipy.spatial import cKDTree
 
+from meshlab_sharp import sample
 from meshlab_sharp.evaluation import distance_to_segments
 from meshlab_sharp.groundtruth import crease_segments
 from meshlab_sharp.sample import sample_part
@@ -138,3 +139,36 @@ def test_mesh_deterministic():
 def test_bad_kind():
     with pytest.raises(ValueError):
         sample_part("voxels")
+
+
+def _same(a, b) -> bool:
+    arrays = ("vertices", "edges", "normals", "outliers")
+    return (
+        all(np.array_equal(getattr(a, f), getattr(b, f)) for f in arrays)
+        and (a.faces is None) == (b.faces is None)
+        and (a.faces is None or np.array_equal(a.faces, b.faces))
+        and (a.name, a.kind, a.seed, a.spacing) == (b.name, b.kind, b.seed, b.spacing)
+        and all(
+            np.array_equal(x, y)
+            for x, y in zip(a.extra["reference"], b.extra["reference"], strict=True)
+        )
+    )
+
+
+@pytest.mark.parametrize(("kind", "n"), [("points", 2_000), ("mesh", 1_000)])
+def test_the_cache_keeps_the_part(tmp_path, monkeypatch, kind, n):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    built = sample_part(kind, n_points=n, seed=5, cache=True)
+    assert _same(built, sample_part(kind, n_points=n, seed=5))
+    (cached,) = (tmp_path / "meshlab-sharp" / "sample").iterdir()
+    assert cached.name.startswith(f"fandisk-{kind}-{n}-seed5-")
+
+    def no_build(*args, **kwargs):
+        raise AssertionError("the part was built again")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(sample, "make_part", no_build)
+        assert _same(sample_part(kind, n_points=n, seed=5, cache=True), built)
+    cached.write_bytes(b"not an npz")  # a damaged cache is built again
+    assert _same(sample_part(kind, n_points=n, seed=5, cache=True), built)
+    assert np.load(cached)["vertices"].shape == built.vertices.shape

@@ -4,6 +4,7 @@ from .geometry import Geometry, as_geometry, mesh_arrays
 from .quiet import quiet_stdout
 from .readers import POINT_LIST_EXTENSIONS, load
 from .writers import (
+    OutputSet,
     add_vertex_attribute,
     atomic_write,
     feature_colors,
@@ -17,6 +18,7 @@ from .writers import (
 __all__ = [
     "POINT_LIST_EXTENSIONS",
     "Geometry",
+    "OutputSet",
     "add_vertex_attribute",
     "as_geometry",
     "atomic_write",

@@ -1,27 +1,154 @@
-"""Writing results atomically: a temporary sibling, then a rename.
+"""Writing results atomically: temporary siblings, then renames.
 
-Every file written here goes to a temporary file in the destination's folder first and
-is renamed into place, so an interrupted run never leaves half a file behind.
+Every file written here goes to a hidden temporary sibling (``.NAME.XXXX.part.EXT``) in
+the destination's folder first and is renamed into place only when its content is
+complete. An :class:`OutputSet` does this for several files at once: all of them are
+written to temporary siblings, and only then renamed, one after the other, with the
+catchable signals blocked; anything that stops the set before the renames removes every
+temporary file, so an output set is all or nothing.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
+import signal
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from types import TracebackType
 from typing import Any
 
 import numpy as np
 import pymeshlab
 
-from ..errors import InputError
+from ..errors import OutputError
 from .quiet import quiet_stdout
 
+#: Signals held back while an output set creates a temporary file or renames its files.
+HELD_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
 
-def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> Path:
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """Delay :data:`HELD_SIGNALS` until the block ends (they are delivered then)."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+class OutputSet:
+    """Files written to hidden temporary siblings, renamed into place together.
+
+    ``stage`` writes one file's content to a temporary sibling of its destination;
+    ``commit`` renames every staged file into place; ``discard`` (also run on leaving a
+    ``with`` block) removes the temporary files that were not renamed.
+
+    Attributes
+    ----------
+    written : list of Path
+        Destinations renamed into place so far, in order.
+    """
+
+    def __init__(self) -> None:
+        self._staged: list[tuple[Path, Path]] = []
+        self.written: list[Path] = []
+
+    def __enter__(self) -> OutputSet:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.discard()
+
+    def stage(self, path: str | os.PathLike[str], write: Callable[[str], None]) -> Path:
+        """Write one file's content to a temporary sibling of ``path``.
+
+        Parameters
+        ----------
+        path : path-like
+            Destination. Its folder must exist.
+        write : callable
+            ``write(tmp_path)`` creates the content at ``tmp_path`` (same extension as
+            ``path``, so format-sniffing writers such as pymeshlab's work).
+
+        Returns
+        -------
+        Path
+            The destination.
+
+        Raises
+        ------
+        OutputError
+            The folder is missing, or writing failed (disk full, no permission...): the
+            message names ``path``.
+        """
+        dest = Path(path)
+        folder = dest.parent if str(dest.parent) else Path(".")
+        if not folder.is_dir():
+            raise OutputError(f"cannot write {dest}: the folder {folder} does not exist")
+        try:
+            with signals_held():  # the temporary file is always recorded for discard
+                fd, tmp = tempfile.mkstemp(
+                    prefix=f".{dest.stem}.", suffix=f".part{dest.suffix}", dir=folder
+                )
+                self._staged.append((Path(tmp), dest))
+            os.close(fd)
+            write(tmp)
+            os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
+        except OSError as exc:
+            raise OutputError(f"cannot write {dest}: {exc.strerror or exc}") from None
+        return dest
+
+    def commit(self) -> list[Path]:
+        """Rename every staged file into place, with the catchable signals held.
+
+        Returns
+        -------
+        list of Path
+            The destinations, in the order staged.
+
+        Raises
+        ------
+        OutputError
+            A rename failed; the message says which files were written before it.
+        """
+        with signals_held():
+            while self._staged:
+                tmp, dest = self._staged[0]
+                try:
+                    os.replace(tmp, dest)
+                except OSError as exc:
+                    done = ", ".join(map(str, self.written))
+                    note = f" (written: {done}; the others were not)" if done else ""
+                    raise OutputError(f"cannot write {dest}: {exc.strerror or exc}{note}") from None
+                self._staged.pop(0)
+                self.written.append(dest)
+        return list(self.written)
+
+    def discard(self) -> None:
+        """Remove the temporary files not renamed into place."""
+        with signals_held():
+            for tmp, _ in self._staged:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(tmp)
+            self._staged.clear()
+
+
+def atomic_write(
+    path: str | os.PathLike[str],
+    write: Callable[[str], None],
+    *,
+    into: OutputSet | None = None,
+) -> Path:
     """Write a file through a temporary sibling and rename it into place.
 
     Parameters
@@ -31,26 +158,24 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[str], None]) -> 
     write : callable
         ``write(tmp_path)`` creates the content at ``tmp_path`` (same extension as
         ``path``, so format-sniffing writers such as pymeshlab's work).
+    into : OutputSet, optional
+        Only stage the file in this set; its ``commit`` renames it into place.
 
     Returns
     -------
     Path
         The destination.
+
+    Raises
+    ------
+    OutputError
+        See :meth:`OutputSet.stage`.
     """
-    dest = Path(path)
-    folder = dest.parent if str(dest.parent) else Path(".")
-    if not folder.is_dir():
-        raise InputError(f"{dest}: the folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.stem}.", suffix=f".part{dest.suffix}", dir=folder)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
-        os.replace(tmp, dest)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+    if into is not None:
+        return into.stage(path, write)
+    with OutputSet() as single:
+        dest = single.stage(path, write)
+        single.commit()
     return dest
 
 
@@ -70,6 +195,7 @@ def save_features_ply(
     *,
     normals: np.ndarray | None = None,
     binary: bool = True,
+    into: OutputSet | None = None,
 ) -> Path:
     """Write a PLY that MeshLab shows: quality = strength, selection = features.
 
@@ -89,22 +215,51 @@ def save_features_ply(
         Written as vertex normals when given.
     binary : bool, default True
         Binary or ASCII PLY.
+    into : OutputSet, optional
+        Only stage the file in this set (see :func:`atomic_write`).
+
+    Raises
+    ------
+    OutputError
+        The file cannot be written (the message names ``path`` and the reason).
     """
     ms = feature_meshset(vertices, faces, strength, mask, normals=normals)
 
     def write(tmp: str) -> None:
-        with quiet_stdout():
-            ms.save_current_mesh(
-                tmp,
-                binary=binary,
-                save_vertex_quality=True,
-                save_vertex_flag=True,
-                save_vertex_color=True,
-                save_vertex_normal=normals is not None,
-                save_face_color=False,
-            )
+        try:
+            with quiet_stdout():
+                ms.save_current_mesh(
+                    tmp,
+                    binary=binary,
+                    save_vertex_quality=True,
+                    save_vertex_flag=True,
+                    save_vertex_color=True,
+                    save_vertex_normal=normals is not None,
+                    save_face_color=False,
+                )
+        except pymeshlab.PyMeshLabException as exc:
+            raise _write_failure(tmp, exc) from None
 
-    return atomic_write(path, write)
+    return atomic_write(path, write, into=into)
+
+
+#: Bytes appended to a file pymeshlab failed to write, to learn why (disk full...).
+_PROBE_BYTES = 1 << 20
+
+
+def _write_failure(tmp: str, exc: Exception) -> OSError:
+    """The OSError behind a failed pymeshlab save, which reports only "Output Stream
+    Error": append and sync :data:`_PROBE_BYTES` to the file, which fails with the
+    system's reason (no space, quota, I/O error) when the file system is the cause."""
+    try:
+        with open(tmp, "ab") as fh:
+            fh.write(bytes(_PROBE_BYTES))
+            fh.flush()
+            os.fsync(fh.fileno())
+    except OSError as probe:
+        return probe
+    reason = str(exc).splitlines()[-1].strip() or "unknown error"
+    return OSError(errno.EIO, f"pymeshlab could not write the file ({reason})")
 
 
 def feature_colors(mask: np.ndarray) -> np.ndarray:
@@ -168,23 +323,28 @@ def add_vertex_attribute(mesh: pymeshlab.Mesh, name: str, values: np.ndarray) ->
     return candidate
 
 
-def save_indices(path: str | os.PathLike[str], mask: np.ndarray) -> Path:
-    """Write the 0-based indices of the features, one per line."""
+def save_indices(
+    path: str | os.PathLike[str], mask: np.ndarray, *, into: OutputSet | None = None
+) -> Path:
+    """Write the 0-based indices of the features, one per line (``mask``: (n,) bool;
+    ``into``: see :func:`atomic_write`)."""
     idx = np.flatnonzero(mask)
 
     def write(tmp: str) -> None:
         with open(tmp, "w", encoding="ascii") as fh:
             fh.writelines(f"{i}\n" for i in idx)
 
-    return atomic_write(path, write)
+    return atomic_write(path, write, into=into)
 
 
-def save_json(path: str | os.PathLike[str], data: dict[str, Any]) -> Path:
-    """Write ``data`` as indented JSON."""
+def save_json(
+    path: str | os.PathLike[str], data: dict[str, Any], *, into: OutputSet | None = None
+) -> Path:
+    """Write ``data`` as indented JSON (``into``: see :func:`atomic_write`)."""
 
     def write(tmp: str) -> None:
         with open(tmp, "w", encoding="utf-8") as fh:
             json.dump(data, fh, indent=2)
             fh.write("\n")
 
-    return atomic_write(path, write)
+    return atomic_write(path, write, into=into)
