@@ -36,9 +36,11 @@ import numpy as np
 import pymeshlab
 from scipy.spatial import ConvexHull, cKDTree
 
+from .evaluation import POISSON_NN, density_spacing
+from .scan import scan, scanner_positions
+
 __all__ = [
     "ACUTE_PARTS",
-    "CLOUD_SPACING",
     "COARSE_SEGMENTS",
     "CONDITIONS",
     "CORRUPTIONS",
@@ -578,19 +580,16 @@ THIN_PARTS: dict[str, Callable[[float], Mesh]] = {
 }
 """Thin-walled part name -> builder of its reference surface for a wall thickness."""
 
-CLOUD_SPACING = 0.78
-"""Mean nearest-neighbour distance of ``n`` Poisson-disk points on area ``A``, in units
-of ``sqrt(A / n)`` (measured: 0.775 to 0.783 on the parts, 3,000 to 20,000 points)."""
-
 
 def expected_spacing(area: float, n: int, kind: str) -> float:
     """Spacing that ``n`` points (or mesh vertices) on a surface of ``area`` will have.
 
-    Clouds: ``CLOUD_SPACING * sqrt(area / n)``; meshes: the remesher's target edge length
-    ``sqrt(2 area / (sqrt(3) n))`` (the edge of an equilateral mesh with n vertices).
+    Clouds: ``evaluation.POISSON_NN * sqrt(area / n)`` (0.78); meshes: the remesher's
+    target edge length ``sqrt(2 area / (sqrt(3) n))`` (the edge of an equilateral mesh
+    with n vertices).
     """
     if kind == "points":
-        return CLOUD_SPACING * math.sqrt(area / n)
+        return POISSON_NN * math.sqrt(area / n)
     return math.sqrt(2.0 * area / (math.sqrt(3.0) * n))
 
 
@@ -1086,8 +1085,8 @@ def openscad_part(name: str) -> SamplePart:
 
 
 SCAN_NOISE = 0.1
-"""Range noise of the simulated scan at the part's centre distance, in pixel spacings
-(it grows with the square of the range)."""
+"""Range noise of the simulated scan at the scanners' mean distance, in pixel footprints
+there (it grows with the square of the range; see ``scan.scan``)."""
 
 
 def _subdivide(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
@@ -1110,15 +1109,16 @@ def visible_edges(
     normals: np.ndarray,
     spacing: np.ndarray,
     *,
-    radius: float = 1.5,
+    radius: float = 2.0,
 ) -> np.ndarray:
     """The parts of a mesh's sharp edges that a scan saw from both sides.
 
-    The edges are cut into pieces of a quarter of the smallest spacing; a piece is
-    seen when, within ``radius`` times the local spacing (that of the nearest scan
-    point), there are scan points on each of its two faces (a point is on face a when
-    its normal is within 30 degrees of a's and nearer to a's than to b's). An edge seen
-    from one side only, or not at all, cannot be found as a crease.
+    The edges are cut into pieces of half the median spacing; a piece is
+    seen when each of its two faces has a scan point within ``radius`` times that
+    point's own spacing of it (a point is on face a when its normal is within 30 degrees
+    of a's and nearer to a's than to b's; the two faces may be sampled at different
+    densities). An edge seen from one side only, or not at all, cannot be found as a
+    crease.
 
     Parameters
     ----------
@@ -1143,20 +1143,18 @@ def visible_edges(
     ends, fa, fb, fn = _crease_edges(v, np.asarray(faces, np.int64), CREASE_ANGLE)
     if len(ends) == 0 or len(surface) == 0:
         return np.zeros((0, 2, 3))
-    pieces, sid = _subdivide(v[ends], float(np.min(spacing)) / 4)
+    spacing = np.asarray(spacing, np.float64)
+    pieces, sid = _subdivide(v[ends], float(np.median(spacing)) / 2)
     mid = pieces.mean(axis=1)
-    tree = cKDTree(surface)
-    _, nearest = tree.query(mid)
-    r = radius * spacing[nearest]
-    d, idx = tree.query(mid, k=min(32, len(surface)), distance_upper_bound=float(r.max()))
-    near = d <= r[:, None]
-    idx = np.where(near, idx, 0)
-    na, nb = fn[fa[sid]], fn[fb[sid]]
-    ca = np.einsum("pkj,pj->pk", normals[idx], na)
-    cb = np.einsum("pkj,pj->pk", normals[idx], nb)
+    reach = radius * float(np.percentile(spacing, 99))
+    pairs = cKDTree(mid).sparse_distance_matrix(cKDTree(surface), reach, output_type="ndarray")
+    pid, idx = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    near = pairs["v"] <= radius * spacing[idx]
+    ca = np.einsum("kj,kj->k", normals[idx], fn[fa[sid[pid]]])
+    cb = np.einsum("kj,kj->k", normals[idx], fn[fb[sid[pid]]])
     c30 = math.cos(math.radians(30.0))
-    side_a = (near & (ca > c30) & (ca > cb)).any(axis=1)
-    side_b = (near & (cb > c30) & (cb > ca)).any(axis=1)
+    side_a = np.bincount(pid[near & (ca > c30) & (ca > cb)], minlength=len(mid)) > 0
+    side_b = np.bincount(pid[near & (cb > c30) & (cb > ca)], minlength=len(mid)) > 0
     return pieces[side_a & side_b]
 
 
@@ -1166,19 +1164,18 @@ def scan_part(
     """Part ``name`` scanned from four positions (``scan.scanner_positions``) and merged.
 
     About ``n_points`` points (see :func:`meshlab_sharp.scan.scan`): occlusion, density
-    falling with range, range noise growing with range squared (``noise`` pixel spacings
-    at the centre distance). ``extra["local_spacing"]`` (n,) is each point's spacing
-    (``evaluation.local_spacing``), used for scoring; ``extra["visible_edges"]`` the
+    falling with range, range noise growing with range squared (``noise`` pixel
+    footprints at the scanners' mean distance). ``extra["local_spacing"]`` (n,) is each
+    point's spacing from the local density (``evaluation.density_spacing``: where views
+    overlap, nearest-neighbour distances are no measure of the gaps), used for scoring;
+    ``extra["visible_edges"]`` the
     pieces of the sharp edges seen from both sides (``visible_edges``): coverage is
     measured on those only, precision against all the edges.
     """
-    from .evaluation import local_spacing
-    from .scan import scan, scanner_positions
-
     verts, faces, edges = reference_surface(name)
     res = scan(verts, faces, scanner_positions(verts), n_points=n_points, noise=noise, seed=seed)
     pts = _f32(res.points)
-    local = local_spacing(pts)
+    local = density_spacing(pts)
     return SamplePart(
         name=name,
         vertices=pts,

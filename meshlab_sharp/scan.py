@@ -2,7 +2,8 @@
 
 Each scanner is a pinhole depth camera (a structured-light or time-of-flight sensor)
 looking at the centre of the part's bounding box, with a square grid of pixels that
-just covers the part's bounding sphere. Every pixel casts one ray; the ray's first hit
+just covers the part's bounding sphere, the same angular step in every view (one
+scanner moved around the part). Every pixel casts one ray; the ray's first hit
 on the mesh (exact ray-triangle intersection, so occlusion is exact) is a point. This
 gives what a scanner gives:
 
@@ -12,10 +13,10 @@ gives what a scanner gives:
 - **grazing angles dropped**: hits more than ``max_incidence`` degrees from head-on
   are lost, as a real sensor loses them;
 - **noise growing with range**: each point moves along its ray by N(0, sigma^2) with
-  ``sigma = noise * footprint(D) * (range / D)^2``, where D is the scanner's distance
-  to the part's centre and ``footprint(D)`` the pixel spacing at that distance: the
-  depth error of triangulation and time-of-flight sensors grows with the square of
-  the range.
+  ``sigma = noise * footprint(D) * (range / D)^2``, where D is the scanners' mean
+  distance to the part's centre and ``footprint(D)`` the pixel spacing at that
+  distance: the depth error of triangulation and time-of-flight sensors grows with
+  the square of the range.
 
 The views are merged into one cloud (overlaps are denser: no resampling).
 """
@@ -171,11 +172,15 @@ def scan(
     scanners: np.ndarray,
     *,
     n_points: int,
-    noise: float = 0.2,
+    noise: float = 0.1,
     max_incidence: float = 75.0,
     seed: int = 0,
 ) -> ScanResult:
     """Scan a closed triangle mesh from several positions and merge the views.
+
+    One scanner, moved to each position: the same angular step in every view (found so
+    that the merged cloud has about ``n_points`` points), so farther views give fewer,
+    sparser points.
 
     Parameters
     ----------
@@ -185,11 +190,11 @@ def scan(
     scanners : (k, 3) float
         Scanner positions, outside the part's bounding sphere.
     n_points : int
-        About how many points the merged cloud has (each view gets ``n_points / k``
-        rays that hit, within a few %).
+        About how many points the merged cloud has (within a few %).
     noise : float
-        Standard deviation of the range noise at the part's centre distance, in units
-        of the pixel spacing there; it grows with the square of the range.
+        Standard deviation of the range noise at the scanners' mean distance D to the
+        part's centre, in pixel footprints there (``angle step * D``); it grows with
+        the square of the range: ``sigma(r) = noise * step * r^2 / D``.
     max_incidence : float
         Degrees: hits farther than this from head-on are dropped.
     seed : int
@@ -201,44 +206,49 @@ def scan(
     """
     v = np.asarray(verts, np.float64)
     f = np.asarray(faces, np.int64)
+    origins = np.asarray(scanners, np.float64).reshape(-1, 3)
     centre = 0.5 * (v.min(0) + v.max(0))
     radius = float(np.linalg.norm(v - centre, axis=1).max())
+    dists = np.linalg.norm(origins - centre, axis=1)
+    if np.any(dists <= radius):
+        raise ValueError("every scanner must lie outside the part's bounding sphere")
     fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
     fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
-    rng = np.random.default_rng(seed)
-    per_view = n_points / len(scanners)
     cos_max = math.cos(math.radians(max_incidence))
-    out: dict[str, list[np.ndarray]] = {k: [] for k in ScanResult.__dataclass_fields__}
-    for view, origin in enumerate(np.asarray(scanners, np.float64)):
-        dist = float(np.linalg.norm(centre - origin))
-        frame = _camera(centre, origin)
-        half = 1.02 * math.tan(math.asin(min(radius / dist, 0.999)))
+    frames = [_camera(centre, o) for o in origins]
+    # image half-widths (tangent of the half field of view) covering the bounding sphere
+    halves = 1.02 * np.tan(np.arcsin(radius / dists))
 
-        def shoot(n: int, frame=frame, origin=origin, half=half):
-            pix, t, tri = first_hits(v, f, origin, frame, half, n)
-            step = 2.0 * half / n
-            d = np.c_[-half + (pix // n + 0.5) * step, -half + (pix % n + 0.5) * step]
-            ray = np.c_[d, np.ones(len(d))] @ frame  # world direction, unit depth
+    def shoot(step: float) -> list[tuple[np.ndarray, ...]]:
+        views = []
+        for origin, frame, half in zip(origins, frames, halves, strict=True):
+            n = max(4, math.ceil(2.0 * half / step))
+            h = 0.5 * n * step
+            pix, t, tri = first_hits(v, f, origin, frame, h, n)
+            uv = np.c_[-h + (pix // n + 0.5) * step, -h + (pix % n + 0.5) * step]
+            ray = np.c_[uv, np.ones(len(uv))] @ frame  # world direction, unit depth
             cosi = np.abs(np.einsum("ij,ij->i", ray, fn[tri])) / np.linalg.norm(ray, axis=1)
             keep = cosi >= cos_max
-            return t[keep], tri[keep], ray[keep], step
+            views.append((t[keep], tri[keep], ray[keep]))
+        return views
 
-        n_pix = 64
-        t, tri, ray, step = shoot(n_pix)
-        n_pix = max(8, round(n_pix * math.sqrt(per_view / max(len(t), 1))))
-        t, tri, ray, step = shoot(n_pix)
-        rng_len = t * np.linalg.norm(ray, axis=1)
-        unit = ray / np.linalg.norm(ray, axis=1, keepdims=True)
+    step = 2.0 * halves.min() / 64
+    hits = sum(len(t) for t, _, _ in shoot(step))
+    step *= math.sqrt(hits / n_points)
+    rng = np.random.default_rng(seed)
+    d_mean = float(dists.mean())
+    out: dict[str, list[np.ndarray]] = {k: [] for k in ScanResult.__dataclass_fields__}
+    for view, (origin, (t, tri, ray)) in enumerate(zip(origins, shoot(step), strict=True)):
+        ray2 = np.einsum("ij,ij->i", ray, ray)
+        rng_len = t * np.sqrt(ray2)
+        unit = ray / np.sqrt(ray2)[:, None]
         surface = origin + t[:, None] * ray
-        # pixel angle ~ step / (1 + u^2 + v^2); the footprint at range r is r * angle
-        angle = step / np.einsum("ij,ij->i", ray, ray)
-        sigma = noise * (step * dist) * (rng_len / dist) ** 2
-        out["points"].append(
-            surface + unit * rng.normal(0.0, 1.0, len(t))[:, None] * sigma[:, None]
-        )
+        sigma = noise * step * rng_len**2 / d_mean
+        out["points"].append(surface + unit * (rng.normal(0.0, 1.0, len(t)) * sigma)[:, None])
         out["surface"].append(surface)
         out["normals"].append(fn[tri])
         out["face"].append(tri)
         out["view"].append(np.full(len(t), view, np.int64))
-        out["footprint"].append(rng_len * angle)
+        # a pixel subtends about step / (1 + u^2 + v^2) radians
+        out["footprint"].append(rng_len * step / ray2)
     return ScanResult(**{k: np.concatenate(a) for k, a in out.items()})
