@@ -1023,9 +1023,17 @@ def _tessellation(name: str, verts: np.ndarray, faces: np.ndarray, edges: np.nda
 
 
 OPENSCAD_DIR = Path(__file__).resolve().parent / "data" / "openscad"
-"""OpenSCAD models (``.scad``) and the STL files OpenSCAD 2021.01 exported from them."""
+"""OpenSCAD models (``.scad``) and the STL files OpenSCAD 2021.01 exported from them
+(``openscad -o name.stl name.scad``; stored as binary STL, re-encoded by pymeshlab: the
+same float32 coordinates)."""
 
-OPENSCAD_PARTS = ("scad_bracket", "scad_pocket_plate", "scad_flanged_pipe", "scad_knob")
+OPENSCAD_PARTS = (
+    "scad_bracket",
+    "scad_pocket_plate",
+    "scad_flanged_pipe",
+    "scad_knob",
+    "scad_handle",
+)
 """Parts exported by OpenSCAD (file ``OPENSCAD_DIR / name[5:] + ".stl"``)."""
 
 
@@ -1355,8 +1363,8 @@ def _conditions() -> dict[str, Condition]:
         Condition(
             "cad",
             "cad",
-            SHARP_PARTS,
-            SHARP_PARTS,
+            SHARP_PARTS + SMOOTH_PARTS,
+            SHARP_PARTS + SMOOTH_PARTS,
             "CSG kernel's triangulation, 128 segments/turn (per-vertex scores)",
         ),
         Condition(
