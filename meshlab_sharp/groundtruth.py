@@ -1341,7 +1341,7 @@ class Condition:
     description: str
 
 
-_SCAN_PARTS = ("fandisk", "drilled_plate", "concave_steps", "chamfered_box", "rounded_box")
+_SCAN_PARTS = ("fandisk", "box", "drilled_plate", "concave_steps", "chamfered_box", "rounded_box")
 _THIN = tuple(THIN_PARTS)
 
 
