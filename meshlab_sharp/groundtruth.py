@@ -19,6 +19,12 @@ Every part is built the same way:
 
 Coordinates are rounded to float32 (MeshLab stores float) and returned as float64.
 
+The evaluation's **conditions** (``CONDITIONS``, ``suite``, ``make_condition``) add
+corruptions (noise, outliers, a density gradient), CAD tessellations (``cad_part``: the
+reference surface itself, also with ``COARSE_SEGMENTS``; ``openscad_part``: STL files
+exported by OpenSCAD), thin-walled parts built for the sampling (``make_thin_part``),
+acute wedges, and a simulated scan (``scan_part``, :mod:`meshlab_sharp.scan`).
+
 >>> from meshlab_sharp.groundtruth import make_part, add_noise
 >>> part = make_part("drilled_plate", n_points=20_000, seed=1)   # doctest: +SKIP
 >>> noisy = add_noise(part, 0.25, seed=2)                          # doctest: +SKIP
@@ -116,6 +122,12 @@ class SamplePart:
         ``"points"`` or ``"mesh"``.
     seed : int
         Seed the points were drawn with (meshes do not depend on it).
+    extra : dict
+        ``"reference"``: (vertices, faces) of the reference surface; optional
+        ``"local_spacing"`` (n,) per-point spacing to score with (density gradient,
+        scan), ``"visible_edges"`` (p, 2, 3) the edges a scan saw (coverage is measured
+        on them), ``"view"`` (n,) the scanner of each scan point, ``"scoring"``
+        ("vertices" for CAD tessellations), ``"wall"`` (thin parts' wall thickness).
     """
 
     name: str
