@@ -1,0 +1,263 @@
+"""Text files as numpy token tables: where each token starts and ends, and on which line.
+
+The readers of the text formats (point lists, OBJ, OFF, ASCII PLY and STL) work on these
+tables with numpy instead of Python loops over lines, and convert only the tokens they
+need. Every conversion error names the line and the token.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+
+def _byte_table(chars: bytes) -> np.ndarray:
+    table = np.zeros(256, dtype=bool)
+    table[list(chars)] = True
+    return table
+
+
+_SPACE = _byte_table(b" \t\n\r\x0b\x0c")
+
+
+@dataclass(frozen=True)
+class Tokens:
+    """The whitespace-separated tokens of a text, as offsets into its bytes.
+
+    Attributes
+    ----------
+    buf : (b,) uint8
+        The text.
+    start, end : (t,) int64
+        Offsets of each token's first byte and one past its last.
+    line : (t,) int64
+        1-based line number of each token.
+    """
+
+    buf: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    line: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+    def text(self, i: int) -> str:
+        """Token ``i`` as printable text (shortened when long), for messages."""
+        raw = self.buf[self.start[i] : min(self.end[i], self.start[i] + 24)].tobytes()
+        more = "..." if self.end[i] - self.start[i] > 24 else ""
+        return raw.decode("ascii", "backslashreplace") + more
+
+    def take(self, keep: np.ndarray) -> Tokens:
+        """The tokens selected by a boolean mask or an index array."""
+        return Tokens(self.buf, self.start[keep], self.end[keep], self.line[keep])
+
+    def line_starts(self) -> np.ndarray:
+        """(t,) bool: True for the first token of each line."""
+        first = np.ones(len(self), dtype=bool)
+        first[1:] = self.line[1:] != self.line[:-1]
+        return first
+
+    def equals(self, word: bytes) -> np.ndarray:
+        """(t,) bool: True where the token is exactly ``word``."""
+        same = (self.end - self.start) == len(word)
+        for k, byte in enumerate(word):
+            idx = np.minimum(self.start + k, len(self.buf) - 1)
+            same &= self.buf[idx] == byte
+        return same
+
+
+def tokenize(
+    data: bytes, *, separators: bytes = b"", comments: tuple[bytes, ...] = (b"#",)
+) -> Tokens:
+    """Split ``data`` at whitespace (and ``separators``); drop comments.
+
+    Parameters
+    ----------
+    data : bytes
+        The text.
+    separators : bytes
+        Extra single-byte separators, e.g. ``b",;"`` for point lists.
+    comments : tuple of bytes
+        Marks that begin a comment: a token that starts with one is dropped with the
+        rest of its line.
+
+    Returns
+    -------
+    Tokens
+    """
+    buf = np.frombuffer(data, dtype=np.uint8)
+    space = _SPACE if not separators else _SPACE | _byte_table(separators)
+    is_space = space[buf]
+    edges = np.diff(is_space.view(np.int8), prepend=np.int8(1), append=np.int8(1))
+    del is_space
+    start = np.flatnonzero(edges == -1)
+    end = np.flatnonzero(edges == 1)
+    del edges
+    line = np.searchsorted(np.flatnonzero(buf == ord("\n")), start) + 1
+    tokens = Tokens(buf, start, end, line)
+    for mark in comments:
+        tokens = _drop_comments(tokens, mark)
+    return tokens
+
+
+def _drop_comments(tokens: Tokens, mark: bytes) -> Tokens:
+    """Drop each token that starts with ``mark`` and the tokens after it on its line."""
+    if len(tokens) == 0:
+        return tokens
+    opens = tokens.buf[tokens.start] == mark[0]
+    for k, byte in enumerate(mark[1:], start=1):
+        idx = np.minimum(tokens.start + k, len(tokens.buf) - 1)
+        opens &= (tokens.end - tokens.start > k) & (tokens.buf[idx] == byte)
+    begin = np.flatnonzero(opens)
+    if len(begin) == 0:
+        return tokens
+    stop = np.searchsorted(tokens.line, tokens.line[begin], side="right")
+    depth = np.zeros(len(tokens) + 1, dtype=np.int64)
+    np.add.at(depth, begin, 1)
+    np.add.at(depth, stop, -1)
+    return tokens.take(np.cumsum(depth[:-1]) == 0)
+
+
+def numbers(tokens: Tokens, index: np.ndarray, dtype: type, name: str) -> np.ndarray:
+    """Convert the tokens at ``index`` to ``dtype`` (np.float64 or np.int64).
+
+    Only plain decimal numbers are accepted: no hex, no ``_`` digit separators, and no
+    ``nan``/``inf``: a non-finite value, including an overflow (``1e400``), is an error.
+
+    Parameters
+    ----------
+    tokens : Tokens
+    index : int array, any shape
+        Positions of the tokens to convert.
+    dtype : np.float64 or np.int64
+    name : str
+        The file, for messages.
+
+    Returns
+    -------
+    ndarray of ``dtype``, the shape of ``index``
+
+    Raises
+    ------
+    InputError
+        Naming the line and token of the first token that is not a number.
+    """
+    flat = np.asarray(index, dtype=np.int64).ravel()
+    if len(flat) == 0:
+        return np.empty(np.shape(index), dtype=dtype)
+    inverse = None
+    if not (np.diff(flat) > 0).all():
+        flat, inverse = np.unique(flat, return_inverse=True)
+    length = tokens.end[flat] - tokens.start[flat]
+    odd = length == 0
+    if dtype is np.int64:  # numpy would join a lone sign to the next number
+        first = tokens.buf[np.minimum(tokens.start[flat], len(tokens.buf) - 1)]
+        odd |= (length == 1) & ((first == ord("+")) | (first == ord("-")))
+    if odd.any():
+        raise _not_a_number(tokens, int(flat[np.argmax(odd)]), name, dtype)
+    marks = np.zeros(len(tokens.buf) + 1, dtype=np.int8)
+    marks[tokens.start[flat]] = 1
+    marks[tokens.end[flat]] = -1
+    selected = np.cumsum(marks[:-1], dtype=np.int8).view(bool)
+    text = np.where(selected, tokens.buf, np.uint8(ord(" "))).tobytes()
+    del marks, selected
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DeprecationWarning)  # numpy < 2: partial read
+            values = np.fromstring(text, dtype=dtype, sep=" ")
+    except (ValueError, DeprecationWarning):
+        values = np.empty(0, dtype=dtype)
+    if len(values) != len(flat):
+        raise _not_a_number(tokens, _first_unconvertible(tokens, flat, dtype), name, dtype)
+    if dtype is np.float64:
+        finite = np.isfinite(values)
+        if not finite.all():
+            raise _overflow(tokens, int(flat[np.argmin(finite)]), name)
+    return (values if inverse is None else values[inverse]).reshape(np.shape(index))
+
+
+def check_numeric(tokens: Tokens, index: np.ndarray, name: str) -> None:
+    """Raise :class:`InputError` unless the tokens at ``index`` are finite numbers."""
+    numbers(tokens, index, np.float64, name)
+
+
+def _first_unconvertible(tokens: Tokens, index: np.ndarray, dtype: type) -> int:
+    """The first token of ``index`` that Python cannot parse as ``dtype`` (the first
+    token if all parse: numpy's parser is the stricter)."""
+    parse = float if dtype is np.float64 else int
+    for i in index:
+        try:
+            parse(tokens.buf[tokens.start[i] : tokens.end[i]].tobytes())
+        except ValueError:
+            return int(i)
+    return int(index[0])
+
+
+def _not_a_number(tokens: Tokens, i: int, name: str, dtype: type) -> InputError:
+    word = tokens.text(i)
+    where = f"{name}: line {tokens.line[i]}"
+    if word.lower().lstrip("+-").startswith(("nan", "inf")):
+        return InputError(f"{where}: non-finite coordinate (NaN or inf): {word}")
+    kind = "a number" if dtype is np.float64 else "an integer"
+    return InputError(f"{where}: {word!r} is not {kind}")
+
+
+def _overflow(tokens: Tokens, i: int, name: str) -> InputError:
+    word = tokens.text(i)
+    if word.lower().lstrip("+-").startswith(("nan", "inf")):
+        return _not_a_number(tokens, i, name, np.float64)
+    return InputError(
+        f"{name}: line {tokens.line[i]}: non-finite coordinate {word} (overflows float64)"
+    )
+
+
+#: How much of a file is looked at before it is read whole.
+HEAD_BYTES = 1 << 16
+_CONTROL = _byte_table(bytes(range(32)) + b"\x7f") & ~_SPACE
+
+
+def read_text(path: Path, name: str, what: str) -> bytes:
+    """The bytes of a text file, refused early (from its first 64 KiB) when it is binary.
+
+    Raises
+    ------
+    InputError
+        NUL or other control bytes near the start of the file.
+    """
+    with path.open("rb") as fh:
+        head = fh.read(HEAD_BYTES)
+        check_text(head, name, what)
+        data = head + fh.read()
+    return data
+
+
+def check_text(data: bytes, name: str, what: str) -> None:
+    """Raise :class:`InputError` if ``data`` holds control bytes (binary content)."""
+    control = _CONTROL[np.frombuffer(data, dtype=np.uint8)]
+    if control.any():
+        at = int(np.argmax(control))
+        raise InputError(
+            f"{name}: not a text {what} (binary or garbage content: byte "
+            f"0x{data[at]:02x} at offset {at})"
+        )
+
+
+def line_table(tokens: Tokens) -> tuple[np.ndarray, np.ndarray]:
+    """Where each non-empty line's tokens start, and how many it has.
+
+    Returns
+    -------
+    first : (l,) int64
+        Index (into ``tokens``) of the first token of each non-empty line.
+    count : (l,) int64
+        Number of tokens on that line.
+    """
+    first = np.flatnonzero(tokens.line_starts())
+    count = np.diff(first, append=len(tokens))
+    return first, count
