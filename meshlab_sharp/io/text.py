@@ -15,6 +15,8 @@ import numpy as np
 
 from ..errors import InputError
 
+_BLOCK = 1 << 18  # tokens converted at a time (bounds the temporary index arrays)
+
 
 def _byte_table(chars: bytes) -> np.ndarray:
     table = np.zeros(256, dtype=bool)
@@ -161,25 +163,39 @@ def numbers(tokens: Tokens, index: np.ndarray, dtype: type, name: str) -> np.nda
         odd |= (length == 1) & ((first == ord("+")) | (first == ord("-")))
     if odd.any():
         raise _not_a_number(tokens, int(flat[np.argmax(odd)]), name, dtype)
-    marks = np.zeros(len(tokens.buf) + 1, dtype=np.int8)
-    marks[tokens.start[flat]] = 1
-    marks[tokens.end[flat]] = -1
-    selected = np.cumsum(marks[:-1], dtype=np.int8).view(bool)
-    text = np.where(selected, tokens.buf, np.uint8(ord(" "))).tobytes()
-    del marks, selected
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error", DeprecationWarning)  # numpy < 2: partial read
-            values = np.fromstring(text, dtype=dtype, sep=" ")
-    except (ValueError, DeprecationWarning):
-        values = np.empty(0, dtype=dtype)
-    if len(values) != len(flat):
-        raise _not_a_number(tokens, _first_unconvertible(tokens, flat, dtype), name, dtype)
+    values = np.empty(len(flat), dtype=dtype)
+    for lo in range(0, len(flat), _BLOCK):
+        block = flat[lo : lo + _BLOCK]
+        parsed = _parse(_compact(tokens, block), dtype)
+        if len(parsed) != len(block):
+            raise _not_a_number(tokens, _first_unconvertible(tokens, block, dtype), name, dtype)
+        values[lo : lo + _BLOCK] = parsed
     if dtype is np.float64:
         finite = np.isfinite(values)
         if not finite.all():
             raise _overflow(tokens, int(flat[np.argmin(finite)]), name)
     return (values if inverse is None else values[inverse]).reshape(np.shape(index))
+
+
+def _compact(tokens: Tokens, index: np.ndarray) -> bytes:
+    """The tokens ``index``, each followed by one space."""
+    start = tokens.start[index]
+    width = tokens.end[index] - start + 1
+    at = np.cumsum(width) - width
+    source = np.repeat(start - at, width) + np.arange(int(width.sum()))
+    text = tokens.buf[np.minimum(source, len(tokens.buf) - 1)]
+    text[at + width - 1] = ord(" ")
+    return text.tobytes()
+
+
+def _parse(text: bytes, dtype: type) -> np.ndarray:
+    """Numbers separated by spaces; fewer than there are words when one does not parse."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DeprecationWarning)  # numpy < 2: partial read
+            return np.fromstring(text, dtype=dtype, sep=" ")
+    except (ValueError, DeprecationWarning):
+        return np.empty(0, dtype=dtype)
 
 
 def check_numeric(tokens: Tokens, index: np.ndarray, name: str) -> None:
