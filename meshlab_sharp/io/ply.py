@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from .polygons import fan_triangles
-from .text import Tokens, check_text, line_table, numbers, tokenize
+from .text import Tokens, check_text, line_table, numbers, read_text, tokenize
 
 _TYPES = {
     "char": "i1",
@@ -340,9 +340,7 @@ def _truncated(name: str, element: _Element) -> InputError:
 
 def _read_ascii(path: Path, header: _Header, name: str) -> dict:
     """The columns the reader needs, from ASCII data: one line per item."""
-    with path.open("rb") as fh:
-        fh.seek(header.size)
-        data = fh.read()
+    data = read_text(path, name, "ASCII PLY", offset=header.size)
     junk = ~_NUMERIC[np.frombuffer(data, dtype=np.uint8)]
     if junk.any():
         at = int(np.argmax(junk))

@@ -16,6 +16,9 @@ import numpy as np
 from ..errors import InputError
 
 _BLOCK = 1 << 18  # tokens converted at a time (bounds the temporary index arrays)
+#: Longest token read as a number: 17 significant digits with sign, point, exponent and
+#: leading zeros fit easily; the bound keeps a giant token from costing gigabytes.
+MAX_NUMBER_LENGTH = 64
 
 
 def _byte_table(chars: bytes) -> np.ndarray:
@@ -157,7 +160,7 @@ def numbers(tokens: Tokens, index: np.ndarray, dtype: type, name: str) -> np.nda
     if not (np.diff(flat) > 0).all():
         flat, inverse = np.unique(flat, return_inverse=True)
     length = tokens.end[flat] - tokens.start[flat]
-    odd = length == 0
+    odd = (length == 0) | (length > MAX_NUMBER_LENGTH)
     if dtype is np.int64:  # numpy would join a lone sign to the next number
         first = tokens.buf[np.minimum(tokens.start[flat], len(tokens.buf) - 1)]
         odd |= (length == 1) & ((first == ord("+")) | (first == ord("-")))
@@ -235,32 +238,41 @@ def _overflow(tokens: Tokens, i: int, name: str) -> InputError:
 
 #: How much of a file is looked at before it is read whole.
 HEAD_BYTES = 1 << 16
+_CHUNK_BYTES = 1 << 26
 _CONTROL = _byte_table(bytes(range(32)) + b"\x7f") & ~_SPACE
 
 
-def read_text(path: Path, name: str, what: str) -> bytes:
-    """The bytes of a text file, refused early (from its first 64 KiB) when it is binary.
+def read_text(path: Path, name: str, what: str, offset: int = 0) -> bytes:
+    """The bytes of a text file from ``offset``, read in chunks, each checked before the
+    next is read: binary content is refused from its first 64 KiB, or as soon as it
+    appears, never after reading the whole file.
 
     Raises
     ------
     InputError
-        NUL or other control bytes near the start of the file.
+        NUL or other control bytes.
     """
+    chunks = []
+    size = HEAD_BYTES
     with path.open("rb") as fh:
-        head = fh.read(HEAD_BYTES)
-        check_text(head, name, what)
-        data = head + fh.read()
-    return data
+        fh.seek(offset)
+        while chunk := fh.read(size):
+            check_text(chunk, name, what, offset)
+            chunks.append(chunk)
+            offset += len(chunk)
+            size = _CHUNK_BYTES
+    return b"".join(chunks)
 
 
-def check_text(data: bytes, name: str, what: str) -> None:
-    """Raise :class:`InputError` if ``data`` holds control bytes (binary content)."""
+def check_text(data: bytes, name: str, what: str, offset: int = 0) -> None:
+    """Raise :class:`InputError` if ``data`` (at ``offset`` in its file) holds control
+    bytes (binary content)."""
     control = _CONTROL[np.frombuffer(data, dtype=np.uint8)]
     if control.any():
         at = int(np.argmax(control))
         raise InputError(
             f"{name}: not a text {what} (binary or garbage content: byte "
-            f"0x{data[at]:02x} at offset {at})"
+            f"0x{data[at]:02x} at offset {offset + at})"
         )
 
 
