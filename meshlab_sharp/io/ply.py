@@ -69,6 +69,15 @@ class _Element:
         """Bytes of one binary item when every list is empty."""
         return sum((p.count_dtype or p.dtype).itemsize for p in self.properties)
 
+    def max_bytes(self) -> int:
+        """Bytes of one binary item when every list is as long as its length type allows."""
+        return sum(
+            p.dtype.itemsize
+            if p.count_dtype is None
+            else p.count_dtype.itemsize + int(np.iinfo(p.count_dtype).max) * p.dtype.itemsize
+            for p in self.properties
+        )
+
 
 class _Faces(NamedTuple):
     corners: np.ndarray  # (s,) int64, the lists one after another
@@ -194,7 +203,8 @@ def _dtype(word: str, name: str, number: int) -> np.dtype:
 
 
 def _check_size(path: Path, header: _Header, name: str) -> None:
-    """Refuse counts the file is too small for, before reading any data."""
+    """Refuse counts the file is too small (or, binary, too large) for, before reading
+    any data."""
     data = path.stat().st_size - header.size
     if header.order == "":
         need = sum(e.count for e in header.elements if e.properties)  # a line per item
@@ -206,6 +216,12 @@ def _check_size(path: Path, header: _Header, name: str) -> None:
         raise InputError(
             f"{name}: truncated PLY file: the header's counts need at least {need} "
             f"{per}s of data, the file has {data} bytes"
+        )
+    most = sum(e.count * e.max_bytes() for e in header.elements)
+    if header.order != "" and data > most:
+        raise InputError(
+            f"{name}: {data - most} bytes of data after the last element (the header's "
+            f"counts allow at most {most} bytes)"
         )
 
 
