@@ -179,6 +179,16 @@ def _ply_cases(v: np.ndarray, f: np.ndarray) -> Iterator[Case]:
         huge = good.replace(b"vertex %d" % n, b"vertex 99999999999999")
         yield Case(f"ply-{short}-count-huge", ".ply", huge, "error")
         yield Case(f"ply-{short}-trailing", ".ply", good + b"\n0 0 0\n", "error")
+    good = ply(v, f, "binary_little_endian")
+    end = good.index(b"end_header\n") + 11 + 12 * n  # the first face's list length
+    for name, count_type, length in [("int", b"<i", 2**31 - 1), ("char", b"<b", -5)]:
+        head = good[:end].replace(b"list uchar int", b"list " + name.encode() + b" int")
+        body = struct.pack(count_type.decode(), length) + good[end + 1 :]
+        yield Case(f"ply-list-length-{name}-{length}", ".ply", head + body, "error")
+    ascii_head = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty %s x\nproperty float y\n"
+    ascii_head += b"property float z\nend_header\n"
+    yield Case("ply-float-overflow", ".ply", ascii_head % b"float" + b"0 1e39 0\n", "error")
+    yield Case("ply-uchar-300", ".ply", ascii_head % b"uchar" + b"300 1 0\n", "error")
     no_end = b"ply\nformat ascii 1.0\nelement vertex 3\n" + b"0 0 0\n" * 3
     yield Case("ply-no-end-header", ".ply", no_end, "error")
     bad_type = ply(v, f).replace(b"property float x", b"property float128 x")

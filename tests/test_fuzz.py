@@ -11,6 +11,7 @@ never another exception.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import subprocess
@@ -73,6 +74,30 @@ def test_malformed_files_through_the_cli(tmp_path, group):
     with ThreadPoolExecutor(max_workers=2) as pool:
         failures = [r for r in pool.map(lambda c: _run(c, tmp_path), group_cases) if r]
     assert not failures, "\n".join(failures)
+
+
+@pytest.mark.filterwarnings("error")
+def test_mutated_files_load_or_raise_input_error(tmp_path):
+    """Many more random mutations, read in-process (the readers are numpy only): a
+    Geometry or an InputError, never another exception, never a warning."""
+    rng = np.random.default_rng(5)
+    inserts = [*malformed.BAD_TOKENS, *malformed.ODD_NUMBERS, b"\n", b"\r", b"\t", b"#", b"/"]
+    for key, (suffix, data) in malformed.VALID.items():
+        for k in range(40):
+            b = bytearray(data)
+            at = int(rng.integers(len(b)))
+            if k % 4 == 0:
+                b[at] = int(rng.integers(256))
+            elif k % 4 == 1:
+                del b[at:]
+            elif k % 4 == 2:
+                b[at:at] = inserts[int(rng.integers(len(inserts)))]
+            else:
+                del b[at : at + int(rng.integers(1, 40))]
+            path = tmp_path / f"{key}-{k}{suffix}"
+            path.write_bytes(bytes(b))
+            with contextlib.suppress(meshlab_sharp.InputError):
+                meshlab_sharp.load(path)
 
 
 def test_generator_covers_every_format():

@@ -280,7 +280,7 @@ def _walk_lists(
         at = offset + sum(q.dtype.itemsize for q in props[:i])
         fits = at + p.count_dtype.itemsize <= len(buf)
         n = int(np.frombuffer(buf, p.count_dtype, 1, at)[0]) if fits else -1
-        if n >= 0:
+        if n >= 0 and at + p.count_dtype.itemsize + n * p.dtype.itemsize <= len(buf):
             fields = [(f"p{j}", q.dtype) for j, q in enumerate(props)]
             fields[i : i + 1] = [("n", p.count_dtype), ("items", p.dtype, (n,))]
             dtype = np.dtype(fields)
@@ -428,7 +428,7 @@ def _ascii_element(
             return {}
         xyz = numbers(tokens, np.stack([scalars[a] for a in "xyz"], axis=1), np.float64, name)
         types = {p.name: p.dtype for p in element.properties}
-        return {a: xyz[:, k].astype(types[a]) for k, a in enumerate("xyz")}
+        return {a: _as_type(xyz[:, k], types[a], first, tokens, name) for k, a in enumerate("xyz")}
     _index_property(element, name)
     if lists is None:
         raise InputError(f"{name}: the face element has no integer vertex_indices list")
@@ -437,6 +437,22 @@ def _ascii_element(
     at = np.repeat(starts, sizes) + np.arange(total) - np.repeat(np.cumsum(sizes) - sizes, sizes)
     corners = numbers(tokens, at, np.int64, name)
     return _Faces(corners, sizes, tokens.line[first])
+
+
+def _as_type(
+    values: np.ndarray, dtype: np.dtype, first: np.ndarray, tokens: Tokens, name: str
+) -> np.ndarray:
+    """(n,) float64 ``values`` read from the lines at ``first``, as the declared ``dtype``
+    (a float overflow becomes inf, refused later; an integer must fit its type)."""
+    if dtype.kind == "f":
+        with np.errstate(over="ignore"):
+            return values.astype(dtype)
+    info = np.iinfo(dtype)
+    bad = (values != np.floor(values)) | (values < info.min) | (values > info.max)
+    if bad.any():
+        line = tokens.line[first[np.argmax(bad)]]
+        raise InputError(f"{name}: line {line}: a coordinate is not a {dtype.name} value")
+    return values.astype(dtype)
 
 
 def _line_length(

@@ -79,7 +79,8 @@ def _ascii_corners(path: Path, name: str) -> np.ndarray:
         line = tokens.line[facets[k]] if len(facets) else tokens.line[v_first[0]]
         raise InputError(f"{name}: line {line}: a facet needs exactly 3 vertices")
     xyz = numbers(tokens, v_first[:, None] + np.arange(1, 4), np.float64, name)
-    single = xyz.astype(np.float32)
+    with np.errstate(over="ignore"):
+        single = xyz.astype(np.float32)
     finite = np.isfinite(single).all(axis=1)
     if not finite.all():
         line = tokens.line[v_first[np.argmin(finite)]]
