@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import re
 import struct
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -300,11 +300,3 @@ def hostile_geometries() -> Iterator[tuple[str, np.ndarray, np.ndarray | None]]:
     v, f = shapes.cube_grid_mesh(2)
     yield "duplicate-faces", v, np.r_[f, f, f[:, ::-1]]
     yield "unreferenced-vertices", np.r_[v, rng.random((20, 3))], f
-
-
-#: Writers for :func:`hostile_geometries`, by suffix, for tests that need files.
-WRITERS: dict[str, Callable[[np.ndarray, np.ndarray | None], bytes]] = {
-    ".ply": lambda v, f: ply(v, f, "binary_little_endian"),
-    ".obj": obj,
-    ".off": off,
-}

@@ -104,7 +104,9 @@ def tokenize(
     start = np.flatnonzero(edges == -1)
     end = np.flatnonzero(edges == 1)
     del edges
-    line = np.searchsorted(np.flatnonzero(buf == ord("\n")), start) + 1
+    newlines = np.flatnonzero(buf == ord("\n"))
+    per_line = np.diff(np.searchsorted(start, newlines), prepend=0, append=len(start))
+    line = np.repeat(np.arange(1, len(newlines) + 2), per_line)
     tokens = Tokens(buf, start, end, line)
     for mark in comments:
         tokens = _drop_comments(tokens, mark)
