@@ -181,3 +181,9 @@ def test_a_huge_file_is_refused_from_its_head(tmp_path):
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         assert peak < 8 << 20, (name, peak)
+
+
+def test_point_list_with_old_mac_line_ends(tmp_path):
+    points = shapes.cube_grid_points(5)
+    (tmp_path / "cr.xyz").write_bytes("".join(f"{x} {y} {z}\r" for x, y, z in points).encode())
+    np.testing.assert_array_equal(meshlab_sharp.load(tmp_path / "cr.xyz").vertices, points)

@@ -80,7 +80,8 @@ class Tokens:
 def tokenize(
     data: bytes, *, separators: bytes = b"", comments: tuple[bytes, ...] = (b"#",)
 ) -> Tokens:
-    """Split ``data`` at whitespace (and ``separators``); drop comments.
+    """Split ``data`` at whitespace (and ``separators``); drop comments. Lines end at
+    LF (or CR in a file without LF).
 
     Parameters
     ----------
@@ -104,7 +105,8 @@ def tokenize(
     start = np.flatnonzero(edges == -1)
     end = np.flatnonzero(edges == 1)
     del edges
-    newlines = np.flatnonzero(buf == ord("\n"))
+    breaks = b"\n" if b"\n" in data or b"\r" not in data else b"\r"  # old Mac: CR only
+    newlines = np.flatnonzero(buf == breaks[0])
     per_line = np.diff(np.searchsorted(start, newlines), prepend=0, append=len(start))
     line = np.repeat(np.arange(1, len(newlines) + 2), per_line)
     tokens = Tokens(buf, start, end, line)
