@@ -238,6 +238,8 @@ def _read_binary(path: Path, header: _Header, name: str) -> dict:
                 raise _truncated(name, element)
             items = np.frombuffer(buf, dtype=dtype, count=element.count, offset=offset)
             offset += need
+            if element.name == "face" and element.count:
+                _index_property(element, name)  # raises: a face element needs its list
             if element.name == "vertex":
                 columns["vertex"] = {
                     p.name: items[f"p{i}"] for i, p in enumerate(element.properties)
