@@ -159,7 +159,7 @@ ERRORS = {
     "stl-nan-triangle": "triangle 1 has a non-finite coordinate",
     "stl-size-mismatch": "a binary STL with 1 triangles has 134 bytes, this file has 127",
     "xyz-hex": "line 3: '0x1F' is not a number",
-    "xyz-two-columns": "line 2: two numbers; a point needs x y z",
+    "xyz-two-columns": "line 2: two values; a point needs x y z",
     "unsupported-format": "unsupported format '.gltf'",
     "missing": "no such file",
     "empty-ply": "empty",
@@ -273,3 +273,11 @@ def test_atomic_write_leaves_nothing_when_interrupted(tmp_path):
 
 def _digest(path: Path) -> str | None:
     return hashlib.sha256(path.read_bytes()).hexdigest() if path.exists() else None
+
+
+def test_a_file_name_with_a_newline_keeps_the_message_on_one_line(tmp_path, capsys):
+    path = _touch(tmp_path / "two\nlines.xyz", b"1 2 0x1F\n")
+    assert main(["detect", str(path), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "'0x1F' is not a number" in err

@@ -36,7 +36,7 @@ def read_point_list(path: Path, name: str) -> tuple[np.ndarray, None]:
     short = count == 2
     if short.any():
         line = tokens.line[first[np.argmax(short)]]
-        raise InputError(f"{name}: line {line}: two numbers; a point needs x y z")
+        raise InputError(f"{name}: line {line}: two values; a point needs x y z")
     points = first[count >= 3]
     if len(points) == 0:
         raise InputError(f"{name}: the file holds no points (no line has x y z)")

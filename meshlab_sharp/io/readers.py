@@ -65,7 +65,7 @@ def load(path: str | os.PathLike[str], *, as_points: bool = False) -> Geometry:
         than 3 vertices; no points.
     """
     p = Path(path)
-    name = str(p)
+    name = str(p) if str(p).isprintable() else ascii(str(p))  # messages stay one line
     if not p.exists():
         raise InputError(f"{name}: no such file")
     if not p.is_file():
