@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .text import Tokens, check_numeric, line_table, numbers, read_text, tokenize
+from .text import Tokens, line_table, numbers, read_text, tokenize
 
 
 def read_point_list(path: Path, name: str) -> tuple[np.ndarray, None]:
@@ -37,13 +37,13 @@ def read_point_list(path: Path, name: str) -> tuple[np.ndarray, None]:
     if short.any():
         line = tokens.line[first[np.argmax(short)]]
         raise InputError(f"{name}: line {line}: two values; a point needs x y z")
-    points = first[count >= 3]
-    if len(points) == 0:
+    point = count >= 3
+    if not point.any():
         raise InputError(f"{name}: the file holds no points (no line has x y z)")
-    extra = np.flatnonzero(np.repeat(count >= 4, count))
-    check_numeric(tokens, extra, name)
     _check_counts(tokens, first, count, name)
-    return numbers(tokens, points[:, None] + np.arange(3), np.float64, name), None
+    values = numbers(tokens, np.flatnonzero(np.repeat(point, count)), np.float64, name)
+    x_at = np.cumsum(count[point]) - count[point]  # each point's x among the values
+    return values[x_at[:, None] + np.arange(3)], None
 
 
 def _check_counts(tokens: Tokens, first: np.ndarray, count: np.ndarray, name: str) -> None:

@@ -205,11 +205,6 @@ def _parse(text: bytes, dtype: type) -> np.ndarray:
         return np.empty(0, dtype=dtype)
 
 
-def check_numeric(tokens: Tokens, index: np.ndarray, name: str) -> None:
-    """Raise :class:`InputError` unless the tokens at ``index`` are finite numbers."""
-    numbers(tokens, index, np.float64, name)
-
-
 def _first_unconvertible(tokens: Tokens, index: np.ndarray, dtype: type) -> int:
     """The first token of ``index`` that Python cannot parse as ``dtype`` (the first
     token if all parse: numpy's parser is the stricter)."""
