@@ -19,6 +19,8 @@ _BLOCK = 1 << 18  # tokens converted at a time (bounds the temporary index array
 #: Longest token read as a number: 17 significant digits with sign, point, exponent and
 #: leading zeros fit easily; the bound keeps a giant token from costing gigabytes.
 MAX_NUMBER_LENGTH = 64
+_SHORT_DIGITS = 15  # decimals with at most this many digits are parsed in numpy
+_POWERS_OF_TEN = 10.0 ** np.arange(_SHORT_DIGITS + 1)
 
 
 def _byte_table(chars: bytes) -> np.ndarray:
@@ -173,15 +175,69 @@ def numbers(tokens: Tokens, index: np.ndarray, dtype: type, name: str) -> np.nda
     values = np.empty(len(flat), dtype=dtype)
     for lo in range(0, len(flat), _BLOCK):
         block = flat[lo : lo + _BLOCK]
-        parsed = _parse(_compact(tokens, block), dtype)
-        if len(parsed) != len(block):
-            raise _not_a_number(tokens, _first_unconvertible(tokens, block, dtype), name, dtype)
+        parsed = np.empty(len(block), dtype=dtype)
+        rest = np.ones(len(block), dtype=bool)
+        if dtype is np.float64:
+            parsed, rest = _short_decimals(tokens, block)
+        if rest.any():
+            slow = _parse(_compact(tokens, block[rest]), dtype)
+            if len(slow) != rest.sum():
+                bad = _first_unconvertible(tokens, block[rest], dtype)
+                raise _not_a_number(tokens, bad, name, dtype)
+            parsed[rest] = slow
         values[lo : lo + _BLOCK] = parsed
     if dtype is np.float64:
         finite = np.isfinite(values)
         if not finite.all():
             raise _overflow(tokens, int(flat[np.argmin(finite)]), name)
     return (values if inverse is None else values[inverse]).reshape(np.shape(index))
+
+
+def _short_decimals(tokens: Tokens, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Parse the tokens written ``[+-]digits[.digits]`` with at most 15 digits, in numpy.
+
+    Such a token is m / 10^f with integers m < 2^53 and f <= 15, both exact in float64,
+    so one division gives the correctly rounded value, as ``float()`` does (Clinger's
+    fast path). The others (exponents, more digits, anything malformed) are left to the
+    general parser.
+
+    Returns
+    -------
+    values : (k,) float64
+        The values of the short decimals (anything elsewhere).
+    rest : (k,) bool
+        The tokens left to the general parser.
+    """
+    values = np.empty(len(index))
+    rest = np.ones(len(index), dtype=bool)
+    short = np.flatnonzero(tokens.end[index] - tokens.start[index] <= _SHORT_DIGITS + 2)
+    if len(short) == 0:
+        return values, rest
+    start = tokens.start[index[short]]
+    length = tokens.end[index[short]] - start
+    rows = np.arange(int(length.max()))[:, None]  # one row per character position
+    inside = rows < length
+    chars = tokens.buf[np.minimum(start + rows, len(tokens.buf) - 1)]
+    signed = (chars[0] == ord("-")) | (chars[0] == ord("+"))
+    body = inside
+    body[0] &= ~signed
+    value = chars.astype(np.int64) - ord("0")
+    digit = body & (value >= 0) & (value <= 9)
+    dot = body & (chars == ord("."))
+    n_digits = digit.sum(axis=0)
+    simple = ((digit | dot) == body).all(axis=0) & (dot.sum(axis=0) <= 1)
+    simple &= (n_digits >= 1) & (n_digits <= _SHORT_DIGITS)
+    value[~digit] = 0
+    scale = np.where(digit, 10, 1)
+    mantissa = np.zeros(len(short), dtype=np.int64)
+    for j in range(len(rows)):  # overflows only where not simple, and those are discarded
+        mantissa *= scale[j]
+        mantissa += value[j]
+    fraction = (digit & (np.cumsum(dot, axis=0) > 0)).sum(axis=0)
+    parsed = mantissa / _POWERS_OF_TEN[np.minimum(fraction, _SHORT_DIGITS)]
+    values[short] = np.where(chars[0] == ord("-"), -parsed, parsed)
+    rest[short] = ~simple
+    return values, rest
 
 
 def _compact(tokens: Tokens, index: np.ndarray) -> bytes:
