@@ -233,7 +233,8 @@ def _short_decimals(tokens: Tokens, index: np.ndarray) -> tuple[np.ndarray, np.n
     for j in range(len(rows)):  # overflows only where not simple, and those are discarded
         mantissa *= scale[j]
         mantissa += value[j]
-    fraction = (digit & (np.cumsum(dot, axis=0) > 0)).sum(axis=0)
+    has_dot = dot.any(axis=0)  # a simple token's digits after its dot end the token:
+    fraction = np.where(has_dot, length - 1 - np.argmax(dot, axis=0), 0)
     parsed = mantissa / _POWERS_OF_TEN[np.minimum(fraction, _SHORT_DIGITS)]
     values[short] = np.where(chars[0] == ord("-"), -parsed, parsed)
     rest[short] = ~simple
