@@ -150,7 +150,8 @@ def detect(
     Parameters
     ----------
     source : path, (n, 3) array, Geometry, pymeshlab.MeshSet or pymeshlab.Mesh
-        The input. A path is read with pymeshlab; a MeshSet contributes its current mesh.
+        The input. A path is read with :func:`meshlab_sharp.load`; a MeshSet contributes
+        its current mesh.
     faces : (m, 3) int array, optional
         Triangles, when ``source`` is an array. None: a point cloud.
     scales : int or sequence of int, optional

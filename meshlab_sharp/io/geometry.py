@@ -15,24 +15,74 @@ from ..errors import InputError
 class Geometry:
     """Vertices and, for a mesh, triangles, as read from a file or given by the caller.
 
+    Construction validates and normalises the arrays, so every Geometry is sound
+    whichever way it was made (see :func:`as_geometry`).
+
     Attributes
     ----------
     vertices : (n, 3) float64
-        Vertex positions in the input's order.
+        Vertex positions in the input's order, all finite, n >= 1.
     faces : (m, 3) int64 or None
-        Triangle vertex indices, or None for a point cloud.
+        Triangle vertex indices in [0, n), or None for a point cloud (m >= 1).
     source : str
         Where the geometry came from (a path, ``"array"``, ``"MeshSet"``...).
+
+    Raises
+    ------
+    InputError
+        Wrong shapes, no vertices, non-finite coordinates, or out-of-range face indices.
     """
 
     vertices: np.ndarray
     faces: np.ndarray | None
     source: str
 
+    def __post_init__(self) -> None:
+        source = self.source
+        try:
+            raw = np.asarray(self.vertices)
+            if raw.dtype.kind not in "biufO":
+                raise TypeError(f"dtype {raw.dtype}")
+            v = raw.astype(np.float64)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise InputError(f"{source}: vertices are not real numbers: {exc}") from None
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise InputError(f"{source}: vertices must have shape (n, 3), got {v.shape}")
+        if len(v) == 0:
+            raise InputError(f"{source}: no points")
+        bad = ~np.isfinite(v).all(axis=1)
+        if bad.any():
+            first = int(np.flatnonzero(bad)[0])
+            raise InputError(
+                f"{source}: {int(bad.sum())} vertices have non-finite coordinates (NaN or inf), "
+                f"the first at index {first}"
+            )
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "faces", _valid_faces(self.faces, len(v), source))
+
     @property
     def is_mesh(self) -> bool:
         """True when the geometry has at least one face."""
         return self.faces is not None and len(self.faces) > 0
+
+
+def _valid_faces(faces: Any, n_vertices: int, source: str) -> np.ndarray | None:
+    """``faces`` as an (m, 3) int64 array of indices below ``n_vertices``; None if empty."""
+    if faces is None:
+        return None
+    f_arr = np.asarray(faces)
+    if f_arr.size == 0:
+        return None
+    if f_arr.ndim != 2 or f_arr.shape[1] != 3:
+        raise InputError(f"{source}: faces must have shape (m, 3), got {f_arr.shape}")
+    if not np.issubdtype(f_arr.dtype, np.integer):
+        raise InputError(f"{source}: face indices must be integers, got {f_arr.dtype}")
+    lo, hi = int(f_arr.min()), int(f_arr.max())
+    if lo < 0 or hi >= n_vertices:
+        raise InputError(
+            f"{source}: face indices must lie in [0, {n_vertices - 1}], found {lo}..{hi}"
+        )
+    return f_arr.astype(np.int64)
 
 
 def as_geometry(vertices: Any, faces: Any = None, source: str = "array") -> Geometry:
@@ -52,36 +102,7 @@ def as_geometry(vertices: Any, faces: Any = None, source: str = "array") -> Geom
     InputError
         Wrong shapes, no vertices, non-finite coordinates, or out-of-range face indices.
     """
-    try:
-        v = np.asarray(vertices, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{source}: vertices are not numeric: {exc}") from None
-    if v.ndim != 2 or v.shape[1] != 3:
-        raise InputError(f"{source}: vertices must have shape (n, 3), got {v.shape}")
-    if len(v) == 0:
-        raise InputError(f"{source}: no points")
-    bad = ~np.isfinite(v).all(axis=1)
-    if bad.any():
-        first = int(np.flatnonzero(bad)[0])
-        raise InputError(
-            f"{source}: {int(bad.sum())} vertices have non-finite coordinates (NaN or inf), "
-            f"the first at index {first}"
-        )
-    f = None
-    if faces is not None:
-        f_arr = np.asarray(faces)
-        if f_arr.size:
-            if f_arr.ndim != 2 or f_arr.shape[1] != 3:
-                raise InputError(f"{source}: faces must have shape (m, 3), got {f_arr.shape}")
-            if not np.issubdtype(f_arr.dtype, np.integer):
-                raise InputError(f"{source}: face indices must be integers, got {f_arr.dtype}")
-            f = f_arr.astype(np.int64)
-            if f.min() < 0 or f.max() >= len(v):
-                raise InputError(
-                    f"{source}: face indices must lie in [0, {len(v) - 1}], "
-                    f"found {int(f.min())}..{int(f.max())}"
-                )
-    return Geometry(vertices=v, faces=f, source=source)
+    return Geometry(vertices=vertices, faces=faces, source=source)
 
 
 def mesh_arrays(ms: pymeshlab.MeshSet) -> tuple[np.ndarray, np.ndarray | None]:
