@@ -300,3 +300,12 @@ def hostile_geometries() -> Iterator[tuple[str, np.ndarray, np.ndarray | None]]:
     v, f = shapes.cube_grid_mesh(2)
     yield "duplicate-faces", v, np.r_[f, f, f[:, ::-1]]
     yield "unreferenced-vertices", np.r_[v, rng.random((20, 3))], f
+    cube = shapes.cube_grid_points(9)
+    yield "one-point", np.array([[1.0, 2.0, 3.0]]), None
+    yield "fewer-points-than-k", cube[:30], None
+    yield "far-outlier", np.r_[cube, [[1e12, -1e12, 1e12]]], None
+    yield "float32-tiny-unit", cube * 1e-30, None
+    yield "float32-huge-unit", cube * 1e30, None
+    yield "flat-mesh", np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]), np.array(
+        [[0, 1, 2], [1, 3, 2]]
+    )

@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from files import write_ply
-from hostile import hostile_geometries
+from malformed import hostile_geometries
 from test_plugin import read_back, run_meshlabserver
 
 import meshlab_sharp
 from meshlab_sharp.errors import InputError
 
-CASES = hostile_geometries()
+CASES = {name: (v, f) for name, v, f in hostile_geometries()}
 MODES = {"0": "paper", "1": "robust"}
 #: meshlabserver's exit status when a filter reports failure (it exits with -1).
 FILTER_FAILED = 255
