@@ -306,6 +306,8 @@ def hostile_geometries() -> Iterator[tuple[str, np.ndarray, np.ndarray | None]]:
     yield "far-outlier", np.r_[cube, [[1e12, -1e12, 1e12]]], None
     yield "float32-tiny-unit", cube * 1e-30, None
     yield "float32-huge-unit", cube * 1e30, None
-    yield "flat-mesh", np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]), np.array(
-        [[0, 1, 2], [1, 3, 2]]
+    yield (
+        "flat-mesh",
+        np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]),
+        np.array([[0, 1, 2], [1, 3, 2]]),
     )
