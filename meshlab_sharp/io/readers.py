@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .child import CHILD_EXTENSIONS, read_with_pymeshlab
 from .geometry import Geometry
 from .obj import read_obj
 from .off import read_off
@@ -34,6 +35,7 @@ _READERS: dict[str, _Reader] = {
     ".off": read_off,
     ".stl": read_stl,
     **dict.fromkeys(POINT_LIST_EXTENSIONS, read_point_list),
+    **dict.fromkeys(CHILD_EXTENSIONS, read_with_pymeshlab),
 }
 
 
@@ -41,8 +43,10 @@ def load(path: str | os.PathLike[str], *, as_points: bool = False) -> Geometry:
     """Read a mesh or point cloud.
 
     Formats: PLY (ASCII, binary little and big endian), OBJ, OFF (ASCII), STL (ASCII and
-    binary), and point lists ``.xyz``, ``.pts``, ``.asc``, ``.txt``. A file without
-    faces is a point cloud. Polygons are split into triangle fans.
+    binary), and point lists ``.xyz``, ``.pts``, ``.asc``, ``.txt``, parsed and
+    checked here; the other formats MeshLab reads (:data:`~meshlab_sharp.io.child.
+    CHILD_EXTENSIONS`: COLLADA, glTF, VRML, X3D...) through pymeshlab in a child process.
+    A file without faces is a point cloud. Polygons are split into triangle fans.
 
     Parameters
     ----------
