@@ -1,6 +1,6 @@
 """Robust mode: the projected-distance method where the paper's reading fails.
 
-``detect(..., mode="robust")`` changes four things of the paper's method (measured
+``detect(..., mode="robust")`` changes these things of the paper's method (measured
 choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plugin):
 
 1. **Isolated points are left out** (point clouds): point ``i`` is isolated when it is
@@ -16,10 +16,18 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    ``r`` on a straight edge that turns by ``CREASE_ANGLE`` (20) degrees,
    ``(2 / pi) * sin(10 deg)``. On a smooth object Otsu still splits the histogram, but
    below the floor: "no sharp features" becomes a possible answer.
-4. **Thinning**: among the points that are candidates at every scale, a point is
-   dropped when a candidate neighbour lying across the feature line (more than 60
-   degrees from the line's direction) has a larger mean relative distance (non-maximum
-   suppression across the line), so lines stay one point wide.
+4. **Support**: a point that is a candidate at every scale is kept only when at least
+   ``SUPPORT_MIN`` (2) other such points lie among its ``SUPPORT_KNN`` (16) nearest (its
+   ``THIN_RING``-ring on meshes): a line has neighbours along it, a point lifted by
+   noise does not.
+5. **Thinning**: a point is dropped when a supported neighbour among its ``THIN_KNN``
+   (8) nearest, lying across the feature line (more than 60 degrees from the line's
+   direction), has a larger mean relative distance (non-maximum suppression across
+   the line), so lines stay one point wide; comparing only within about 1.5 spacings
+   keeps two parallel lines (the rims of a thin wall) apart.
+6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
+   an edge whose two faces turn by more than ``CREASE_ANGLE`` (more on a noisy mesh)
+   are features too. On a CAD tessellation they are all of them.
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .creases import CREASE_ANGLE, sharp_vertices
 from .neighbourhoods import (
     KnnNeighbourhoods,
     Neighbourhood,
@@ -40,6 +49,8 @@ from .threshold import otsu_threshold
 __all__ = [
     "CREASE_ANGLE",
     "R_MIN",
+    "SUPPORT_KNN",
+    "SUPPORT_MIN",
     "THIN_CONE_COS",
     "THIN_KNN",
     "THIN_RING",
@@ -49,22 +60,29 @@ __all__ = [
     "local_scale",
     "relative_distances",
     "robust_threshold",
+    "supported",
     "thin",
 ]
 
-#: Degrees: the smallest turn of the surface that counts as a sharp edge (the ground
-#: truth's crease angle, ``groundtruth.CREASE_ANGLE``).
-CREASE_ANGLE = 20.0
 #: Relative projected distance at a point on a straight edge turning by CREASE_ANGLE,
 #: with a disc-shaped neighbourhood: ``(2 / pi) * sin(CREASE_ANGLE / 2)`` = 0.1106.
 R_MIN = (2.0 / math.pi) * math.sin(math.radians(CREASE_ANGLE / 2.0))
 #: Thinning compares a point with candidate neighbours whose offset makes more than
 #: 60 degrees with the line direction: ``|d . e| < THIN_CONE_COS * |d|``.
 THIN_CONE_COS = 0.5
-#: Neighbourhood of the comparison in thinning: the 16 nearest points (clouds) ...
-THIN_KNN = 16
-#: ... or the 2-ring (meshes; about 19 vertices on a regular mesh).
+#: Neighbourhood of the comparison in thinning: the 8 nearest points (clouds; within
+#: about 1.5 spacings, the half-width of the band of candidates, so that two lines 2-3
+#: spacings apart are both kept) ...
+THIN_KNN = 8
+#: ... or the 2-ring (meshes; about 19 vertices on a regular mesh). The 2-ring is also
+#: the support neighbourhood on meshes.
 THIN_RING = 2
+#: Support: a feature needs at least SUPPORT_MIN other features among its SUPPORT_KNN
+#: nearest points (clouds), the neighbourhood that thinning used to compare with: a
+#: line one point wide has two neighbours along it within 16 points, a point lifted
+#: alone by noise has none.
+SUPPORT_KNN = 16
+SUPPORT_MIN = 2
 
 
 def isolated_points(indices: np.ndarray) -> np.ndarray:
@@ -209,6 +227,34 @@ class RelativeRule:
         return r, robust_threshold(r)
 
 
+def supported(mask: np.ndarray, around: Neighbourhood, minimum: int = SUPPORT_MIN) -> np.ndarray:
+    """Features with at least ``minimum`` other features in their neighbourhood.
+
+    Parameters
+    ----------
+    mask : (m,) bool
+        Features before the test.
+    around : Neighbourhood
+        CSR lists (each point's own index included; it is not counted).
+    minimum : int, default SUPPORT_MIN (2)
+
+    Returns
+    -------
+    (m,) bool
+        ``mask[i] and #{j in around[i], j != i, mask[j]} >= minimum``.
+    """
+    mask = np.asarray(mask, bool)
+    cand = np.flatnonzero(mask)
+    if len(cand) == 0:
+        return mask.copy()
+    owner, nb = _rows(around, cand)
+    hit = mask[nb] & (nb != cand[owner])
+    count = np.bincount(owner[hit], minlength=len(cand))
+    out = mask.copy()
+    out[cand[count < minimum]] = False
+    return out
+
+
 def thin(
     points: np.ndarray,
     mask: np.ndarray,
@@ -341,19 +387,42 @@ class RobustSetup:
             self._rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
         return self._rings.at(scale)
 
-    def thin(self, mask: np.ndarray) -> np.ndarray:
-        """:func:`thin` of the processed points' features; (p,) bool -> (p,) bool."""
-        if not mask.any():
-            return mask
-        top = max(self.scales)
-        if self.faces is None:
-            compare = self.neighbourhoods.at(min(THIN_KNN, top))
-            direction = self.neighbourhoods.at(top)
-        else:
-            rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
-            compare = rings.at(min(THIN_RING, top))
-            direction = rings.at(top)
-        return thin(self.points, mask, self.rule.score, direction, compare, cone_cos=THIN_CONE_COS)
+    def finish(self, mask: np.ndarray, strength: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Support, thinning and (meshes) the sharp mesh edges, on all cleaned points.
+
+        Parameters
+        ----------
+        mask : (p,) bool
+            Candidates at every scale, per processed point.
+        strength : (p,) float64
+            Fraction of scales at which each processed point was a candidate.
+
+        Returns
+        -------
+        mask, strength : (m,) bool, (m,) float64
+            Per cleaned point (isolated points: False, 0). On a mesh, vertices of a
+            sharp edge (:func:`meshlab_sharp.creases.sharp_vertices`) are features with
+            strength 1.
+        """
+        if mask.any():
+            top = max(self.scales)
+            if self.faces is None:
+                around = self.neighbourhoods.at(min(SUPPORT_KNN, top))
+                compare = self.neighbourhoods.at(min(THIN_KNN, top))
+                direction = self.neighbourhoods.at(top)
+            else:
+                rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
+                around = compare = rings.at(min(THIN_RING, top))
+                direction = rings.at(top)
+            mask = supported(mask, around)
+            mask = thin(
+                self.points, mask, self.rule.score, direction, compare, cone_cos=THIN_CONE_COS
+            )
+        if self.faces is not None:
+            edges, _ = sharp_vertices(self.points, self.faces)
+            mask = mask | edges
+            strength = np.where(edges, 1.0, strength)
+        return self.expand(mask, False), self.expand(strength, 0.0)
 
     def expand(self, values: np.ndarray, fill: object) -> np.ndarray:
         """Per-processed-point values (p, ...) to all cleaned points (m, ...), ``fill``
