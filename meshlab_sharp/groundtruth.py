@@ -28,26 +28,52 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 import pymeshlab
 from scipy.spatial import ConvexHull, cKDTree
 
+from .evaluation import POISSON_NN, density_spacing
+from .scan import scan, scanner_positions
+
 __all__ = [
+    "ACUTE_PARTS",
+    "COARSE_SEGMENTS",
+    "CONDITIONS",
     "CORRUPTIONS",
     "CREASE_ANGLE",
+    "OPENSCAD_DIR",
+    "OPENSCAD_PARTS",
     "PARTS",
+    "ROUND_PARTS",
+    "SCAN_NOISE",
+    "SHARP_PARTS",
     "SMOOTH_PARTS",
+    "THIN_PARTS",
+    "Condition",
     "SamplePart",
     "add_noise",
     "add_outliers",
+    "cad_part",
     "crease_segments",
     "density_gradient",
+    "expected_spacing",
+    "make_condition",
     "make_part",
+    "make_thin_part",
+    "openscad_part",
+    "openscad_surface",
     "part_names",
     "reference_surface",
+    "scan_part",
+    "suite",
+    "thin_surface",
+    "thin_wall",
+    "visible_edges",
+    "weld",
 ]
 
 CREASE_ANGLE = 20.0
@@ -158,15 +184,19 @@ def _box(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> Mesh
     return _prism(rect, lo[2], hi[2])
 
 
-def _cylinder(center: tuple[float, float], r: float, z0: float, z1: float) -> Mesh:
-    """Vertical cylinder (SEGMENTS-gon prism)."""
-    return _prism(_circle(center, r), z0, z1)
+def _cylinder(
+    center: tuple[float, float], r: float, z0: float, z1: float, n: int = SEGMENTS
+) -> Mesh:
+    """Vertical cylinder (n-gon prism)."""
+    return _prism(_circle(center, r, n), z0, z1)
 
 
-def _frustum(center: tuple[float, float], r0: float, r1: float, z0: float, z1: float) -> Mesh:
-    """Vertical truncated cone, radius r0 at z0 and r1 at z1."""
-    b = _circle(center, r0)
-    t = _circle(center, r1)
+def _frustum(
+    center: tuple[float, float], r0: float, r1: float, z0: float, z1: float, n: int = SEGMENTS
+) -> Mesh:
+    """Vertical truncated cone (n segments), radius r0 at z0 and r1 at z1."""
+    b = _circle(center, r0, n)
+    t = _circle(center, r1, n)
     return _loft(np.c_[b, np.full(len(b), z0)], np.c_[t, np.full(len(t), z1)])
 
 
@@ -214,14 +244,16 @@ def _torus(R: float, r: float, nu: int = SEGMENTS, nv: int = SEGMENTS // 2) -> M
     return verts, faces.astype(np.int64)
 
 
-def _rounded_box(half: tuple[float, float, float], r: float, n_flat: int = 24) -> Mesh:
+def _rounded_box(
+    half: tuple[float, float, float], r: float, n_flat: int = 24, segments: int = SEGMENTS
+) -> Mesh:
     """Box of half-sizes ``half`` with every edge and corner rounded by radius r.
 
     A cube's surface grid is mapped onto the offset surface of the inner box: a grid
     point v goes to ``clip(v) + r * (v - clip(v)) / |v - clip(v)|``; grid lines past the
     inner box sit at ``tan(theta)`` so the 90-degree roundings get uniform angle steps.
     """
-    steps = SEGMENTS // 8  # 45 degrees on each of the two cube faces a rounding spans
+    steps = segments // 8  # 45 degrees on each of the two cube faces a rounding spans
     theta = (np.arange(1, steps + 1) / steps) * (np.pi / 4)
     axes = []
     for h in half:
@@ -298,7 +330,7 @@ def _minus(a: Mesh, *cutters: Mesh) -> Mesh:
 # ----------------------------------------------------------------------------------
 
 
-def _part_fandisk() -> Mesh:
+def _part_fandisk(segments: int = SEGMENTS) -> Mesh:
     """The built-in sample: a 100 x 60 x 40 machined block, fandisk-like.
 
     - lower deck 100 x 60 x 20 and a raised block 50 x 60 x 40 on its left half: the
@@ -315,24 +347,25 @@ def _part_fandisk() -> Mesh:
     """
     deck = _box((0, 0, 0), (100, 60, 20))
     block = _box((0, 0, 0), (50, 60, 40))
-    boss = _cylinder((68, 30), 9, 10, 30)
+    boss = _cylinder((68, 30), 9, 10, 30, segments)
     solid = _union(deck, block, boss)
     s = 1 / math.sqrt(2)
     chamfer = _halfspace_cutter(np.array([0.0, 0.0, 32.0]), np.array([-s, 0.0, s]))
     a = math.radians(25)
     slope = _halfspace_cutter(np.array([85.0, 0.0, 20.0]), np.array([math.sin(a), 0, math.cos(a)]))
-    hole = _cylinder((27, 30), 6, -1, 41)
-    countersink = _frustum((27, 30), 5, 12, 35, 42)
+    hole = _cylinder((27, 30), 6, -1, 41, segments)
+    countersink = _frustum((27, 30), 5, 12, 35, 42, segments)
     return _minus(solid, chamfer, slope, hole, countersink)
 
 
-def _part_box() -> Mesh:
-    """Box 60 x 40 x 30: twelve 90-degree edges."""
+def _part_box(segments: int = SEGMENTS) -> Mesh:
+    """Box 60 x 40 x 30: twelve 90-degree edges (no round surface: ``segments`` unused)."""
     return _box((0, 0, 0), (60, 40, 30))
 
 
-def _part_chamfered_box() -> Mesh:
-    """Box 60 x 40 x 30 whose four top edges carry a 6-wide 45-degree chamfer."""
+def _part_chamfered_box(segments: int = SEGMENTS) -> Mesh:
+    """Box 60 x 40 x 30 whose four top edges carry a 6-wide 45-degree chamfer (no round
+    surface: ``segments`` unused)."""
     a, b, h, c = 30.0, 20.0, 30.0, 6.0
     pts = []
     for sx in (-1, 1):
@@ -341,27 +374,29 @@ def _part_chamfered_box() -> Mesh:
     return _convex_hull(np.array(pts))
 
 
-def _part_cylinder() -> Mesh:
+def _part_cylinder(segments: int = SEGMENTS) -> Mesh:
     """Cylinder r = 20, height 40: two circular 90-degree edges."""
-    return _cylinder((0, 0), 20, 0, 40)
+    return _cylinder((0, 0), 20, 0, 40, segments)
 
 
-def _part_cone() -> Mesh:
+def _part_cone(segments: int = SEGMENTS) -> Mesh:
     """Truncated cone r = 25 at the base to r = 10 at height 35 (23-degree half-angle):
     a 67-degree edge at the base circle, a 113-degree one at the top."""
-    return _frustum((0, 0), 25, 10, 0, 35)
+    return _frustum((0, 0), 25, 10, 0, 35, segments)
 
 
-def _part_drilled_plate() -> Mesh:
+def _part_drilled_plate(segments: int = SEGMENTS) -> Mesh:
     """Plate 80 x 50 x 12 with three through holes (r = 5, 7, 9): rims at 90 degrees."""
     plate = _box((0, 0, 0), (80, 50, 12))
-    holes = [_cylinder(c, r, -1, 13) for c, r in (((16, 25), 5), ((38, 25), 7), ((62, 25), 9))]
+    holes = [
+        _cylinder(c, r, -1, 13, segments) for c, r in (((16, 25), 5), ((38, 25), 7), ((62, 25), 9))
+    ]
     return _minus(plate, *holes)
 
 
-def _part_concave_steps() -> Mesh:
+def _part_concave_steps(segments: int = SEGMENTS) -> Mesh:
     """Three-step staircase 60 x 40 (steps 20 deep, 10 high): two concave 90-degree edges
-    between the treads and the risers, and the convex nosings."""
+    between the treads and the risers, and the convex nosings (``segments`` unused)."""
     return _union(
         _box((0, 0, 0), (60, 40, 10)),
         _box((0, 0, 0), (40, 40, 20)),
@@ -369,9 +404,10 @@ def _part_concave_steps() -> Mesh:
     )
 
 
-def _part_star_prism() -> Mesh:
+def _part_star_prism(segments: int = SEGMENTS) -> Mesh:
     """Five-pointed star prism (R = 30, height 20) with 45-degree tips: the vertical
-    tip edges are acute (the faces turn by 135 degrees), the five inner ones concave."""
+    tip edges are acute (the faces turn by 135 degrees), the five inner ones concave
+    (``segments`` unused)."""
     n, big = 5, 30.0
     t22 = math.tan(math.radians(22.5))
     small = big * t22 / (math.sin(math.pi / n) + t22 * math.cos(math.pi / n))
@@ -380,25 +416,50 @@ def _part_star_prism() -> Mesh:
     return _prism(np.c_[rad * np.cos(ang), rad * np.sin(ang)], 0, 20)
 
 
-def _part_sphere() -> Mesh:
-    """Smooth control: sphere r = 25 (icosphere, 10242 vertices)."""
+def _part_sphere(segments: int = SEGMENTS) -> Mesh:
+    """Smooth control: sphere r = 25 (icosphere, 10242 vertices; ``segments`` unused)."""
     ms = pymeshlab.MeshSet()
     ms.create_sphere(radius=25.0, subdiv=5)
     m = ms.current_mesh()
     return m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64)
 
 
-def _part_torus() -> Mesh:
+def _part_torus(segments: int = SEGMENTS) -> Mesh:
     """Smooth control: torus R = 25, r = 10."""
-    return _torus(25.0, 10.0)
+    return _torus(25.0, 10.0, segments, segments // 2)
 
 
-def _part_rounded_box() -> Mesh:
+def _part_rounded_box(segments: int = SEGMENTS) -> Mesh:
     """Smooth control: box 60 x 40 x 30 with every edge rounded (r = 8)."""
-    return _rounded_box((30.0, 20.0, 15.0), 8.0)
+    return _rounded_box((30.0, 20.0, 15.0), 8.0, segments=segments)
 
 
-PARTS: dict[str, Callable[[], Mesh]] = {
+def _wedge(angle: float) -> Mesh:
+    """Triangular prism (height 30) whose apex edge has an interior dihedral angle of
+    ``angle`` degrees: isosceles cross-section, legs 50 long; the two base edges have
+    ``(180 - angle) / 2`` degrees, the end caps 90."""
+    half = math.radians(angle) / 2
+    tri = np.array([[0.0, 0.0], [50 * math.cos(half), -50 * math.sin(half)]])
+    tri = np.vstack([tri, [50 * math.cos(half), 50 * math.sin(half)]])
+    return _prism(tri, 0.0, 30.0)
+
+
+def _part_wedge30(segments: int = SEGMENTS) -> Mesh:
+    """Acute wedge: a 30-degree apex edge (``segments`` unused)."""
+    return _wedge(30.0)
+
+
+def _part_wedge45(segments: int = SEGMENTS) -> Mesh:
+    """Acute wedge: a 45-degree apex edge (``segments`` unused)."""
+    return _wedge(45.0)
+
+
+def _part_wedge60(segments: int = SEGMENTS) -> Mesh:
+    """Acute wedge: a 60-degree apex edge (``segments`` unused)."""
+    return _wedge(60.0)
+
+
+PARTS: dict[str, Callable[[int], Mesh]] = {
     "fandisk": _part_fandisk,
     "box": _part_box,
     "chamfered_box": _part_chamfered_box,
@@ -407,19 +468,173 @@ PARTS: dict[str, Callable[[], Mesh]] = {
     "drilled_plate": _part_drilled_plate,
     "concave_steps": _part_concave_steps,
     "star_prism": _part_star_prism,
+    "wedge30": _part_wedge30,
+    "wedge45": _part_wedge45,
+    "wedge60": _part_wedge60,
     "sphere": _part_sphere,
     "torus": _part_torus,
     "rounded_box": _part_rounded_box,
 }
-"""Part name -> builder of its reference surface."""
+"""Part name -> builder of its reference surface, given the segments per turn of its
+round surfaces."""
 
 SMOOTH_PARTS = ("sphere", "torus", "rounded_box")
 """Smooth controls: no sharp edges."""
+
+SHARP_PARTS = (
+    "fandisk",
+    "box",
+    "chamfered_box",
+    "cylinder",
+    "cone",
+    "drilled_plate",
+    "concave_steps",
+    "star_prism",
+)
+"""The parts of the standard conditions (clean, noise, outliers, density, mesh, CAD)."""
+
+ACUTE_PARTS = ("wedge30", "wedge45", "wedge60", "star_prism")
+"""Parts with acute edges (30, 45, 60 degrees; the star's tips are 45 degrees)."""
+
+ROUND_PARTS = ("fandisk", "cylinder", "cone", "drilled_plate")
+"""Sharp parts with round surfaces: they have a coarse CAD tessellation."""
+
+COARSE_SEGMENTS = 24
+"""Segments per turn of a coarse CAD tessellation: facets turn by 15 degrees, below
+``CREASE_ANGLE``, so the coarse part's exact edges are still its round rims."""
 
 
 def part_names(*, smooth: bool | None = None) -> list[str]:
     """Names of the parts; ``smooth=True`` only the smooth controls, False only the others."""
     return [n for n in PARTS if smooth is None or (n in SMOOTH_PARTS) == smooth]
+
+
+# ----------------------------------------------------------------------------------
+# Thin-walled parts: built for a wall thickness
+# ----------------------------------------------------------------------------------
+
+
+def _along_x(mesh: Mesh) -> Mesh:
+    """Relabel axes (x, y, z) -> (z, x, y) (a rotation): a solid built along z then lies
+    along x; its (x, y) centre becomes (y, z)."""
+    return mesh[0][:, [2, 0, 1]].copy(), mesh[1]
+
+
+def _thin_sheet_bracket(w: float, segments: int = SEGMENTS) -> Mesh:
+    """Sheet-metal angle bracket: a 60 x 40 base and a 40-high upright of sheet ``w``
+    thick, bent at a sharp 90 degrees (convex outside, concave inside), two r = 5
+    holes in the base and an r = 6 hole in the upright."""
+    base = _box((0, 0, 0), (60, 40, w))
+    upright = _box((0, 0, 0), (w, 40, 40))
+    holes = [_cylinder((36, y), 5, -1, w + 1, segments) for y in (12, 28)]
+    holes.append(_along_x(_cylinder((20, 26), 6, -1, w + 1, segments)))
+    return _minus(_union(base, upright), *holes)
+
+
+def _thin_ribbed_housing(w: float, segments: int = SEGMENTS) -> Mesh:
+    """Open box housing 80 x 50 x 30 with walls and floor ``w`` thick, two cross ribs
+    (20 high) and a lengthwise rib (14 high), all ``w`` thick (``segments`` unused)."""
+    shell = _minus(_box((0, 0, 0), (80, 50, 30)), _box((w, w, w), (80 - w, 50 - w, 31)))
+    ribs = [_box((x - w / 2, w / 2, w / 2), (x + w / 2, 50 - w / 2, 20)) for x in (27.0, 53.0)]
+    ribs.append(_box((w / 2, 25 - w / 2, w / 2), (80 - w / 2, 25 + w / 2, 14)))
+    return _union(shell, *ribs)
+
+
+def _thin_blade_rotor(w: float, segments: int = SEGMENTS) -> Mesh:
+    """Rotor: a hub (r = 12, 20 high, r = 4 bore) with six flat blades ``w`` thick,
+    reaching r = 40, 12 wide, pitched by 30 degrees."""
+    pitch = math.radians(30.0)
+    blades = []
+    for k in range(6):
+        phi = k * math.pi / 3
+        corners = []
+        for r in (8.0, 40.0):
+            for t in (-w / 2, w / 2):
+                for z in (-6.0, 6.0):
+                    tp = t * math.cos(pitch) - z * math.sin(pitch)
+                    zp = t * math.sin(pitch) + z * math.cos(pitch) + 10.0
+                    corners.append(
+                        (
+                            r * math.cos(phi) - tp * math.sin(phi),
+                            r * math.sin(phi) + tp * math.cos(phi),
+                            zp,
+                        )
+                    )
+        blades.append(_convex_hull(np.array(corners)))
+    hub = _cylinder((0, 0), 12, 0, 20, segments)
+    return _minus(_union(hub, *blades), _cylinder((0, 0), 4, -1, 21, segments))
+
+
+def _thin_tube(w: float, segments: int = SEGMENTS) -> Mesh:
+    """Tube: outer radius 15, wall ``w``, 40 long: four circular 90-degree edges."""
+    return _minus(
+        _cylinder((0, 0), 15, 0, 40, segments), _cylinder((0, 0), 15 - w, -1, 41, segments)
+    )
+
+
+THIN_PARTS: dict[str, Callable[[float], Mesh]] = {
+    "sheet_bracket": _thin_sheet_bracket,
+    "ribbed_housing": _thin_ribbed_housing,
+    "blade_rotor": _thin_blade_rotor,
+    "tube": _thin_tube,
+}
+"""Thin-walled part name -> builder of its reference surface for a wall thickness."""
+
+
+def expected_spacing(area: float, n: int, kind: str) -> float:
+    """Spacing that ``n`` points (or mesh vertices) on a surface of ``area`` will have.
+
+    Clouds: ``evaluation.POISSON_NN * sqrt(area / n)`` (0.78); meshes: the remesher's
+    target edge length ``sqrt(2 area / (sqrt(3) n))`` (the edge of an equilateral mesh
+    with n vertices).
+    """
+    if kind == "points":
+        return POISSON_NN * math.sqrt(area / n)
+    return math.sqrt(2.0 * area / (math.sqrt(3.0) * n))
+
+
+@functools.cache
+def _thin_cached(name: str, wall: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    verts, faces = THIN_PARTS[name](wall)
+    out = (verts, faces, crease_segments(verts, faces))
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def thin_wall(name: str, spacings: float, n: int, kind: str = "points") -> float:
+    """Wall thickness that is ``spacings`` times the spacing of ``n`` samples of the part.
+
+    The spacing depends on the part's area A, which depends on the wall w: A is linear
+    in w for these parts (walls, rims and hole walls grow with w) up to the corners where
+    walls meet; A(w) = a + b w is fitted through the parts built with w = 1 and w = 3,
+    and ``w = spacings * expected_spacing(a + b w, n, kind)`` solved exactly.
+    """
+    if name not in THIN_PARTS:
+        raise KeyError(f"unknown thin part {name!r}; known: {', '.join(THIN_PARTS)}")
+    areas = []
+    for w in (1.0, 3.0):
+        verts, faces, _ = _thin_cached(name, w)
+        areas.append(float(_face_normals(verts, faces)[1].sum()))
+    b = (areas[1] - areas[0]) / 2.0
+    a = areas[0] - b
+    # w = spacings * c * sqrt(A / n) with c from expected_spacing: w^2 = k (a + b w)
+    k = (spacings * expected_spacing(1.0, n, kind)) ** 2
+    return round(0.5 * (k * b + math.sqrt(k * k * b * b + 4.0 * k * a)), 6)
+
+
+def thin_surface(name: str, wall: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The thin-walled part ``name`` with wall ``wall``: reference mesh and sharp edges.
+
+    Returns
+    -------
+    vertices : (n, 3) float64
+    faces : (m, 3) int64
+    edges : (e, 2, 3) float64
+    """
+    if name not in THIN_PARTS:
+        raise KeyError(f"unknown thin part {name!r}; known: {', '.join(THIN_PARTS)}")
+    return _thin_cached(name, round(float(wall), 6))
 
 
 # ----------------------------------------------------------------------------------
@@ -433,6 +648,34 @@ def _face_normals(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     cr = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     norm = np.linalg.norm(cr, axis=1)
     return cr / np.where(norm > 0, norm, 1.0)[:, None], 0.5 * norm
+
+
+def _crease_edges(
+    verts: np.ndarray, faces: np.ndarray, min_angle: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Edges whose two faces turn by more than ``min_angle`` degrees.
+
+    Returns (e, 2) vertex indices, (e,) and (e,) the two faces of each, and the (m, 3)
+    face normals. Edges with other than two faces, and faces of zero area, are ignored.
+    """
+    normals, areas = _face_normals(verts, faces)
+    scale = np.ptp(verts, axis=0).max() if len(verts) else 1.0
+    good = areas > 1e-12 * scale * scale
+    f_idx = np.flatnonzero(good)
+    fg = faces[good]
+    e = np.vstack([fg[:, [0, 1]], fg[:, [1, 2]], fg[:, [2, 0]]])
+    owner = np.tile(f_idx, 3)
+    key = np.sort(e, axis=1)
+    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    order = np.argsort(inv, kind="stable")
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    two = counts == 2
+    fa = owner[order[starts[two]]]
+    fb = owner[order[starts[two] + 1]]
+    cosang = np.einsum("ij,ij->i", normals[fa], normals[fb])
+    sharp = cosang < math.cos(math.radians(min_angle))
+    return key[order[starts[two]]][sharp], fa[sharp], fb[sharp], normals
 
 
 def crease_segments(
@@ -454,31 +697,18 @@ def crease_segments(
         are ignored.
     """
     verts = np.asarray(verts, np.float64)
-    faces = np.asarray(faces, np.int64)
-    normals, areas = _face_normals(verts, faces)
-    scale = np.ptp(verts, axis=0).max() if len(verts) else 1.0
-    good = areas > 1e-12 * scale * scale
-    f_idx = np.flatnonzero(good)
-    fg = faces[good]
-    e = np.vstack([fg[:, [0, 1]], fg[:, [1, 2]], fg[:, [2, 0]]])
-    owner = np.tile(f_idx, 3)
-    key = np.sort(e, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    inv = inv.reshape(-1)
-    order = np.argsort(inv, kind="stable")
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    two = counts == 2
-    fa = owner[order[starts[two]]]
-    fb = owner[order[starts[two] + 1]]
-    cosang = np.einsum("ij,ij->i", normals[fa], normals[fb])
-    sharp = cosang < math.cos(math.radians(min_angle))
-    ends = key[order[starts[two]]][sharp]
+    ends = _crease_edges(verts, np.asarray(faces, np.int64), min_angle)[0]
     return verts[ends].reshape(-1, 2, 3)
 
 
-def reference_surface(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def reference_surface(
+    name: str, segments: int = SEGMENTS
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The exact part ``name``: reference mesh and its sharp edges (kept in memory
     after the first call; the arrays are read-only).
+
+    ``segments`` (per turn of the round surfaces) must keep facets below the crease
+    angle (at least 18); ``COARSE_SEGMENTS`` gives the coarse CAD tessellation.
 
     Returns
     -------
@@ -488,12 +718,14 @@ def reference_surface(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     if name not in PARTS:
         raise KeyError(f"unknown part {name!r}; known: {', '.join(PARTS)}")
-    return _reference_cached(name)
+    if segments * CREASE_ANGLE <= 360.0:
+        raise ValueError(f"{segments} segments per turn make facets turn by crease angles")
+    return _reference_cached(name, int(segments))
 
 
 @functools.cache
-def _reference_cached(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    verts, faces = PARTS[name]()
+def _reference_cached(name: str, segments: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    verts, faces = PARTS[name](segments)
     out = (verts, faces, crease_segments(verts, faces))
     for a in out:
         a.setflags(write=False)
@@ -640,6 +872,57 @@ def _mean_nn(points: np.ndarray) -> float:
     return float(d[:, 1].mean())
 
 
+def _mesh_spacing(verts: np.ndarray, faces: np.ndarray) -> float:
+    """Mean edge length of a triangle mesh (each edge counted once)."""
+    e = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    return float(np.linalg.norm(verts[e[:, 0]] - verts[e[:, 1]], axis=1).mean())
+
+
+def _sampled(
+    name: str, reference: tuple[np.ndarray, np.ndarray, np.ndarray], kind: str, n: int, seed: int
+) -> SamplePart:
+    """Points (exactly n) or an isotropic mesh (about n vertices) of a reference surface."""
+    verts, faces, edges = reference
+    if kind == "points":
+        pts, nrm = _sample_surface(verts, faces, n, seed)
+        pts = _f32(pts)
+        out_faces = None
+        spacing = _mean_nn(pts)
+    else:
+        pts, out_faces = _remesh(verts, faces, n)
+        pts = _f32(pts)
+        nrm = _vertex_normals(pts, out_faces)
+        spacing = _mesh_spacing(pts, out_faces)
+    return SamplePart(
+        name=name,
+        vertices=pts,
+        faces=out_faces,
+        edges=edges,
+        spacing=spacing,
+        normals=nrm,
+        outliers=np.zeros(len(pts), bool),
+        kind=kind,
+        seed=seed,
+        extra={"reference": (verts, faces)},
+    )
+
+
+def _check_kind_and_count(kind: str, n_points: int | None) -> int:
+    """The number of points for ``kind`` (default when None), validated."""
+    if kind not in ("points", "mesh"):
+        raise ValueError(f"kind must be 'points' or 'mesh', not {kind!r}")
+    if kind == "points":
+        n = DEFAULT_POINTS if n_points is None else int(n_points)
+        if n < 10:
+            raise ValueError("n_points must be at least 10")
+    else:
+        n = DEFAULT_MESH_VERTICES if n_points is None else int(n_points)
+        if n < 100:
+            raise ValueError("n_points must be at least 100 for a mesh")
+    return n
+
+
 def make_part(
     name: str,
     kind: str = "points",
@@ -667,38 +950,248 @@ def make_part(
     -------
     SamplePart
     """
-    if kind not in ("points", "mesh"):
-        raise ValueError(f"kind must be 'points' or 'mesh', not {kind!r}")
-    verts, faces, edges = reference_surface(name)
-    if kind == "points":
-        n = DEFAULT_POINTS if n_points is None else int(n_points)
-        if n < 10:
-            raise ValueError("n_points must be at least 10")
-        pts, nrm = _sample_surface(verts, faces, n, seed)
-        pts = _f32(pts)
-        out_faces = None
-        spacing = _mean_nn(pts)
-    else:
-        n = DEFAULT_MESH_VERTICES if n_points is None else int(n_points)
-        if n < 100:
-            raise ValueError("n_points must be at least 100 for a mesh")
-        pts, out_faces = _remesh(verts, faces, n)
-        pts = _f32(pts)
-        nrm = _vertex_normals(pts, out_faces)
-        e = np.vstack([out_faces[:, [0, 1]], out_faces[:, [1, 2]], out_faces[:, [2, 0]]])
-        e = np.unique(np.sort(e, axis=1), axis=0)
-        spacing = float(np.linalg.norm(pts[e[:, 0]] - pts[e[:, 1]], axis=1).mean())
+    n = _check_kind_and_count(kind, n_points)
+    return _sampled(name, reference_surface(name), kind, n, seed)
+
+
+def make_thin_part(
+    name: str,
+    spacings: float,
+    kind: str = "points",
+    *,
+    n_points: int | None = None,
+    seed: int = 0,
+) -> SamplePart:
+    """A thin-walled part whose walls are ``spacings`` point spacings thick.
+
+    The part is built for the sampling: its wall is ``thin_wall(name, spacings, n,
+    kind)``, ``spacings`` times the spacing that n samples of it will have (clouds:
+    mean nearest-neighbour distance; meshes: mean edge length, within a few %).
+    ``extra["wall"]`` holds the wall thickness.
+
+    Parameters
+    ----------
+    name : str
+        One of ``THIN_PARTS``.
+    spacings : float
+        Wall thickness in point spacings.
+    kind, n_points, seed
+        As for ``make_part``.
+
+    Returns
+    -------
+    SamplePart
+    """
+    n = _check_kind_and_count(kind, n_points)
+    wall = thin_wall(name, spacings, n, kind)
+    part = _sampled(name, thin_surface(name, wall), kind, n, seed)
+    return replace(part, extra={**part.extra, "wall": wall})
+
+
+def cad_part(name: str, segments: int = SEGMENTS) -> SamplePart:
+    """A part as a CAD exporter writes it: the CSG kernel's own triangulation.
+
+    The reference surface itself (long thin triangles, vertices only where faces meet,
+    plus the centre of each fanned cap), not remeshed; ``segments`` per turn of the
+    round surfaces (``COARSE_SEGMENTS`` for a coarse export; its exact edges are
+    those of the coarse solid). Scored per vertex (``extra["scoring"] = "vertices"``):
+    a vertex is a true feature when it lies on an exact edge.
+
+    Returns
+    -------
+    SamplePart
+        ``kind`` "mesh", ``spacing`` the mean edge length.
+    """
+    verts, faces, edges = reference_surface(name, segments)
+    return _tessellation(name, verts, faces, edges)
+
+
+def _tessellation(name: str, verts: np.ndarray, faces: np.ndarray, edges: np.ndarray) -> SamplePart:
+    """A CAD tessellation as a SamplePart scored per vertex."""
+    pts = _f32(verts)
     return SamplePart(
         name=name,
         vertices=pts,
-        faces=out_faces,
+        faces=np.asarray(faces, np.int64),
         edges=edges,
-        spacing=spacing,
-        normals=nrm,
+        spacing=_mesh_spacing(pts, faces),
+        normals=_vertex_normals(pts, faces),
         outliers=np.zeros(len(pts), bool),
-        kind=kind,
+        kind="mesh",
+        extra={"reference": (verts, faces), "scoring": "vertices"},
+    )
+
+
+OPENSCAD_DIR = Path(__file__).resolve().parent / "data" / "openscad"
+"""OpenSCAD models (``.scad``) and the STL files OpenSCAD 2021.01 exported from them."""
+
+OPENSCAD_PARTS = ("scad_bracket", "scad_pocket_plate", "scad_flanged_pipe", "scad_knob")
+"""Parts exported by OpenSCAD (file ``OPENSCAD_DIR / name[5:] + ".stl"``)."""
+
+
+def weld(verts: np.ndarray, faces: np.ndarray) -> Mesh:
+    """Merge identical vertices (an STL file repeats them per triangle), as MeshLab does
+    on load, and drop the triangles that collapse.
+
+    Parameters
+    ----------
+    verts : (n, 3) float
+    faces : (m, 3) int
+
+    Returns
+    -------
+    vertices : (k, 3) float64, faces : (m', 3) int64
+    """
+    uniq, inv = np.unique(np.asarray(verts, np.float64), axis=0, return_inverse=True)
+    f = inv.reshape(-1)[np.asarray(faces, np.int64)]
+    good = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])
+    return uniq, f[good]
+
+
+@functools.cache
+def _openscad_cached(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(OPENSCAD_DIR / f"{name[len('scad_') :]}.stl"))
+    m = ms.current_mesh()
+    verts, faces = weld(m.vertex_matrix(), m.face_matrix())
+    out = (verts, faces, crease_segments(verts, faces))
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def openscad_surface(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An OpenSCAD export, welded, and its exact sharp edges.
+
+    The edges are the mesh edges whose faces turn by more than ``CREASE_ANGLE``: exact
+    for these models, whose round surfaces have ``$fn >= 24`` (facets turn by at most
+    15 degrees) and whose designed edges all turn by 45 degrees or more (the tests
+    check that no dihedral angle lies between 16 and 40 degrees).
+
+    Returns
+    -------
+    vertices : (n, 3) float64
+    faces : (m, 3) int64
+    edges : (e, 2, 3) float64
+    """
+    if name not in OPENSCAD_PARTS:
+        raise KeyError(f"unknown OpenSCAD part {name!r}; known: {', '.join(OPENSCAD_PARTS)}")
+    return _openscad_cached(name)
+
+
+def openscad_part(name: str) -> SamplePart:
+    """An OpenSCAD export as a CAD tessellation (scored per vertex, see ``cad_part``)."""
+    return _tessellation(name, *openscad_surface(name))
+
+
+SCAN_NOISE = 0.1
+"""Range noise of the simulated scan at the scanners' mean distance, in pixel footprints
+there (it grows with the square of the range; see ``scan.scan``)."""
+
+
+def _subdivide(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cut segments into pieces at most ``step`` long: (p, 2, 3) pieces and the (p,)
+    index of the segment each comes from."""
+    lengths = np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)
+    counts = np.maximum(1, np.ceil(lengths / step).astype(np.int64))
+    sid = np.repeat(np.arange(len(segments)), counts)
+    k = np.arange(len(sid)) - np.repeat(np.cumsum(counts) - counts, counts)
+    a, ab = segments[sid, 0], segments[sid, 1] - segments[sid, 0]
+    t0 = (k / counts[sid])[:, None]
+    t1 = ((k + 1) / counts[sid])[:, None]
+    return np.stack([a + t0 * ab, a + t1 * ab], axis=1), sid
+
+
+def visible_edges(
+    verts: np.ndarray,
+    faces: np.ndarray,
+    surface: np.ndarray,
+    normals: np.ndarray,
+    spacing: np.ndarray,
+    *,
+    radius: float = 2.0,
+) -> np.ndarray:
+    """The parts of a mesh's sharp edges that a scan saw from both sides.
+
+    The edges are cut into pieces of half the median spacing; a piece is
+    seen when each of its two faces has a scan point within ``radius`` times that
+    point's own spacing of it (a point is on face a when its normal is within 30 degrees
+    of a's and nearer to a's than to b's; the two faces may be sampled at different
+    densities). An edge seen from one side only, or not at all, cannot be found as a
+    crease.
+
+    Parameters
+    ----------
+    verts : (n, 3) float
+    faces : (m, 3) int
+        The scanned mesh.
+    surface : (k, 3) float
+        Exact positions of the scan points on the mesh (before noise).
+    normals : (k, 3) float
+        Normal of the triangle each scan point lies on.
+    spacing : (k,) float
+        Local spacing of the scan points.
+    radius : float
+        In spacings.
+
+    Returns
+    -------
+    (p, 2, 3) float64
+        The seen pieces of the sharp edges.
+    """
+    v = np.asarray(verts, np.float64)
+    ends, fa, fb, fn = _crease_edges(v, np.asarray(faces, np.int64), CREASE_ANGLE)
+    if len(ends) == 0 or len(surface) == 0:
+        return np.zeros((0, 2, 3))
+    spacing = np.asarray(spacing, np.float64)
+    pieces, sid = _subdivide(v[ends], float(np.median(spacing)) / 2)
+    mid = pieces.mean(axis=1)
+    reach = radius * float(np.percentile(spacing, 99))
+    pairs = cKDTree(mid).sparse_distance_matrix(cKDTree(surface), reach, output_type="ndarray")
+    pid, idx = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    near = pairs["v"] <= radius * spacing[idx]
+    ca = np.einsum("kj,kj->k", normals[idx], fn[fa[sid[pid]]])
+    cb = np.einsum("kj,kj->k", normals[idx], fn[fb[sid[pid]]])
+    c30 = math.cos(math.radians(30.0))
+    side_a = np.bincount(pid[near & (ca > c30) & (ca > cb)], minlength=len(mid)) > 0
+    side_b = np.bincount(pid[near & (cb > c30) & (cb > ca)], minlength=len(mid)) > 0
+    return pieces[side_a & side_b]
+
+
+def scan_part(
+    name: str, *, n_points: int = DEFAULT_POINTS, seed: int = 0, noise: float = SCAN_NOISE
+) -> SamplePart:
+    """Part ``name`` scanned from four positions (``scan.scanner_positions``) and merged.
+
+    About ``n_points`` points (see :func:`meshlab_sharp.scan.scan`): occlusion, density
+    falling with range, range noise growing with range squared (``noise`` pixel
+    footprints at the scanners' mean distance). ``extra["local_spacing"]`` (n,) is each
+    point's spacing from the local density (``evaluation.density_spacing``: where views
+    overlap, nearest-neighbour distances are no measure of the gaps), used for scoring;
+    ``extra["visible_edges"]`` the
+    pieces of the sharp edges seen from both sides (``visible_edges``): coverage is
+    measured on those only, precision against all the edges.
+    """
+    verts, faces, edges = reference_surface(name)
+    res = scan(verts, faces, scanner_positions(verts), n_points=n_points, noise=noise, seed=seed)
+    pts = _f32(res.points)
+    local = density_spacing(pts)
+    return SamplePart(
+        name=name,
+        vertices=pts,
+        faces=None,
+        edges=edges,
+        spacing=float(local.mean()),
+        normals=res.normals,
+        outliers=np.zeros(len(pts), bool),
+        kind="points",
         seed=seed,
-        extra={"reference": (verts, faces)},
+        extra={
+            "reference": (verts, faces),
+            "local_spacing": local,
+            "visible_edges": visible_edges(verts, faces, res.surface, res.normals, local),
+            "view": res.view,
+        },
     )
 
 
@@ -807,3 +1300,194 @@ CORRUPTIONS: dict[str, Callable[..., SamplePart]] = {
     "outliers": add_outliers,
     "density": density_gradient,
 }
+
+
+# ----------------------------------------------------------------------------------
+# The evaluation's conditions
+# ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One condition of the evaluation: how a part is turned into a detector's input.
+
+    Attributes
+    ----------
+    name : str
+        Key of ``CONDITIONS``.
+    group : str
+        The issue's target it counts towards ("clean", "cad", "thin", "noise",
+        "outliers_density", "acute", "scan", "mesh", "smooth").
+    parts : tuple of str
+        Parts it applies to.
+    quick_parts : tuple of str
+        Parts of the quick suite (may be empty).
+    description : str
+        One line for tables.
+    """
+
+    name: str
+    group: str
+    parts: tuple[str, ...]
+    quick_parts: tuple[str, ...]
+    description: str
+
+
+_SCAN_PARTS = ("fandisk", "drilled_plate", "concave_steps", "chamfered_box", "rounded_box")
+_THIN = tuple(THIN_PARTS)
+
+
+def _conditions() -> dict[str, Condition]:
+    c = [
+        Condition("clean", "clean", SHARP_PARTS, SHARP_PARTS, "Poisson-disk cloud, no noise"),
+        Condition("noise10", "noise", SHARP_PARTS, (), "normal noise, sigma 10 % of spacing"),
+        Condition("noise25", "noise", SHARP_PARTS, SHARP_PARTS, "normal noise, 25 % of spacing"),
+        Condition("noise50", "noise", SHARP_PARTS, SHARP_PARTS, "normal noise, 50 % of spacing"),
+        Condition("outliers1", "outliers_density", SHARP_PARTS, SHARP_PARTS, "1 % far outliers"),
+        Condition(
+            "density4",
+            "outliers_density",
+            SHARP_PARTS,
+            SHARP_PARTS,
+            "half the part 4x denser (scored with each side's spacing)",
+        ),
+        Condition("mesh", "mesh", SHARP_PARTS, SHARP_PARTS, "isotropic remesh, n/2 vertices"),
+        Condition(
+            "cad",
+            "cad",
+            SHARP_PARTS,
+            SHARP_PARTS,
+            "CSG kernel's triangulation, 128 segments/turn (per-vertex scores)",
+        ),
+        Condition(
+            "cad_coarse",
+            "cad",
+            ROUND_PARTS,
+            ROUND_PARTS,
+            f"CSG triangulation, {COARSE_SEGMENTS} segments/turn (per-vertex scores)",
+        ),
+        Condition(
+            "openscad",
+            "cad",
+            OPENSCAD_PARTS,
+            OPENSCAD_PARTS,
+            "STL exported by OpenSCAD, welded (per-vertex scores)",
+        ),
+    ]
+    for t in (1, 2, 3):
+        c.append(Condition(f"thin{t}", "thin", _THIN, _THIN, f"cloud, walls {t} spacings thick"))
+        c.append(
+            Condition(
+                f"thin{t}_mesh",
+                "thin",
+                _THIN,
+                _THIN if t == 1 else (),
+                f"mesh, walls {t} edges thick",
+            )
+        )
+    c += [
+        Condition("acute", "acute", ACUTE_PARTS, ACUTE_PARTS, "cloud, edges of 30 to 60 degrees"),
+        Condition(
+            "acute_mesh", "acute", ACUTE_PARTS, ACUTE_PARTS, "mesh, edges of 30 to 60 degrees"
+        ),
+        Condition(
+            "scan",
+            "scan",
+            _SCAN_PARTS,
+            ("fandisk", "drilled_plate", "rounded_box"),
+            "4 scanner views merged: occlusion, range noise, density falling with range",
+        ),
+        Condition("smooth", "smooth", SMOOTH_PARTS, SMOOTH_PARTS, "smooth control, clean cloud"),
+        Condition("smooth_mesh", "smooth", SMOOTH_PARTS, (), "smooth control, isotropic mesh"),
+    ]
+    return {x.name: x for x in c}
+
+
+CONDITIONS: dict[str, Condition] = _conditions()
+"""Condition name -> Condition, in table order."""
+
+
+def suite(
+    *,
+    quick: bool = False,
+    conditions: Sequence[str] | None = None,
+    parts: Sequence[str] | None = None,
+) -> list[tuple[str, str]]:
+    """The (part, condition) pairs of the evaluation, condition by condition.
+
+    Parameters
+    ----------
+    quick : bool
+        Only each condition's ``quick_parts``.
+    conditions : sequence of str, optional
+        Only these conditions (default all, in ``CONDITIONS`` order).
+    parts : sequence of str, optional
+        Only these parts.
+
+    Returns
+    -------
+    list of (part, condition)
+    """
+    names = list(CONDITIONS) if conditions is None else list(conditions)
+    unknown = [c for c in names if c not in CONDITIONS]
+    if unknown:
+        raise KeyError(f"unknown conditions {unknown}; known: {', '.join(CONDITIONS)}")
+    out = []
+    for c in names:
+        cond = CONDITIONS[c]
+        for p in cond.quick_parts if quick else cond.parts:
+            if parts is None or p in parts:
+                out.append((p, c))
+    return out
+
+
+def make_condition(name: str, condition: str, *, n_points: int, seed: int = 0) -> SamplePart:
+    """Part ``name`` under ``condition`` (see ``CONDITIONS``), ready to detect and score.
+
+    Parameters
+    ----------
+    name : str
+        A part the condition applies to (``CONDITIONS[condition].parts``).
+    condition : str
+    n_points : int
+        Points of a cloud; meshes get ``n_points // 2`` vertices (at least 200), a scan
+        about ``n_points`` points; CAD tessellations do not depend on it.
+    seed : int
+        Seed of the sampling; noise and outliers use ``seed + 1``.
+
+    Returns
+    -------
+    SamplePart
+        ``extra["scoring"]`` is "vertices" for CAD tessellations (score with
+        ``evaluation.score_part``, which reads it).
+    """
+    if condition not in CONDITIONS:
+        raise KeyError(f"unknown condition {condition!r}; known: {', '.join(CONDITIONS)}")
+    if name not in CONDITIONS[condition].parts:
+        raise ValueError(f"condition {condition!r} does not apply to part {name!r}")
+    n_mesh = max(n_points // 2, 200)
+    if condition in ("clean", "acute", "smooth"):
+        return make_part(name, n_points=n_points, seed=seed)
+    if condition in ("mesh", "acute_mesh", "smooth_mesh"):
+        return make_part(name, "mesh", n_points=n_mesh)
+    if condition.startswith("noise"):
+        clean = make_part(name, n_points=n_points, seed=seed)
+        return add_noise(clean, int(condition[5:]) / 100.0, seed=seed + 1)
+    if condition == "outliers1":
+        return add_outliers(make_part(name, n_points=n_points, seed=seed), 0.01, seed=seed + 1)
+    if condition == "density4":
+        return density_gradient(make_part(name, n_points=n_points, seed=seed), 4.0)
+    if condition == "cad":
+        return cad_part(name)
+    if condition == "cad_coarse":
+        return cad_part(name, COARSE_SEGMENTS)
+    if condition == "openscad":
+        return openscad_part(name)
+    if condition.startswith("thin"):
+        t = int(condition[4])
+        if condition.endswith("_mesh"):
+            return make_thin_part(name, t, "mesh", n_points=n_mesh)
+        return make_thin_part(name, t, n_points=n_points, seed=seed)
+    if condition == "scan":
+        return scan_part(name, n_points=n_points, seed=seed)
+    raise AssertionError(condition)  # every CONDITIONS key is handled above

@@ -7,7 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from meshlab_sharp.evaluation import distance_to_segments, evaluate, local_spacing, sample_segments
+from meshlab_sharp import groundtruth as gt
+from meshlab_sharp.evaluation import (
+    density_spacing,
+    distance_to_segments,
+    evaluate,
+    evaluate_vertices,
+    local_spacing,
+    sample_segments,
+    score_part,
+)
 
 S = 0.5  # grid spacing
 L = 40.0  # edge length
@@ -100,3 +109,80 @@ def test_sample_segments_lengths():
     assert piece.sum() == pytest.approx(3.1)
     assert list(sid) == [0, 0, 0, 1]
     assert np.allclose(pts[:3, 0], [0.5, 1.5, 2.5])
+
+
+# ----------------------------------------------------------------------------------
+# Per-vertex scores (CAD tessellations), coverage on part of the edges, dispatch
+# ----------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def cad_box():
+    return gt.cad_part("box")
+
+
+def test_vertex_scores_known_answers(cad_box):
+    v = cad_box.vertices
+    corners = np.all(np.isin(v, [0, 60, 40, 30]), axis=1)  # 8 corners, 2 cap centres
+    perfect = evaluate_vertices(v, corners, cad_box.edges)
+    assert (perfect.precision, perfect.coverage, perfect.f1) == (1.0, 1.0, 1.0)
+    assert math.isnan(perfect.thickness) and perfect.n_true_positive == 8
+    everything = evaluate_vertices(v, np.ones(10, bool), cad_box.edges)
+    assert everything.precision == pytest.approx(0.8) and everything.coverage == 1.0
+    assert everything.fp_rate == pytest.approx(0.2)
+    half = corners & (v[:, 2] == 0)
+    sc = evaluate_vertices(v, half, cad_box.edges)
+    assert sc.precision == 1.0 and sc.coverage == 0.5 and sc.f1 == pytest.approx(2 / 3)
+    none = evaluate_vertices(v, np.zeros(10, bool), cad_box.edges)
+    assert (none.precision, none.coverage, none.f1) == (0.0, 0.0, 0.0)
+    smooth = evaluate_vertices(v, corners, np.zeros((0, 2, 3)))
+    assert math.isnan(smooth.f1) and smooth.fp_rate == pytest.approx(0.8)
+
+
+def test_vertex_on_middle_of_a_segment_is_true():
+    seg = np.array([[[0.0, 0, 0], [10, 0, 0]]])
+    pts = np.array([[5.0, 0, 0], [5.0, 1e-3, 0], [20, 20, 0]])
+    sc = evaluate_vertices(pts, np.array([True, True, False]), seg)
+    assert sc.n_true_positive == 1 and sc.precision == 0.5 and sc.coverage == 1.0
+
+
+def test_coverage_on_cover_only(grid):
+    pts, edge = grid
+    half_edge = np.array([[[0.0, 0, 0], [L / 2, 0, 0]]])
+    mask = np.isclose(pts[:, 1], 0) & (pts[:, 0] <= L / 2)
+    full = evaluate(pts, mask, edge, S)
+    covered = evaluate(pts, mask, edge, S, cover=half_edge)
+    assert covered.coverage == 1.0 and full.coverage < 0.6
+    assert covered.precision == full.precision == 1.0
+    assert covered.edge_length == pytest.approx(L / 2)
+
+
+def test_score_part_dispatch(cad_box):
+    corners = np.all(np.isin(cad_box.vertices, [0, 60, 40, 30]), axis=1)
+    assert score_part(cad_box, corners).f1 == 1.0
+    part = gt.scan_part("box", n_points=3000, seed=1)
+    mask = np.zeros(part.n, bool)
+    sc = score_part(part, mask)
+    visible = part.extra["visible_edges"]
+    assert sc.edge_length == pytest.approx(
+        np.linalg.norm(visible[:, 1] - visible[:, 0], axis=1).sum()
+    )
+    truth = distance_to_segments(part.vertices, part.edges) <= part.extra["local_spacing"]
+    sc = score_part(part, truth)
+    assert sc.precision == 1.0 and sc.coverage > 0.98
+
+
+def test_density_spacing_ignores_close_pairs(grid):
+    pts, _ = grid
+    interior = (np.abs(pts[:, 1]) <= 2 * S) & (pts[:, 0] > 3 * S) & (pts[:, 0] < L - 3 * S)
+    one = density_spacing(pts)[interior]
+    # a Poisson-disk-like spacing of the grid: 0.78 sqrt(pi 5 / 16) S (16th neighbour at
+    # sqrt(5) S), within 1 % of 0.78 S
+    assert np.allclose(one, 0.78 * math.sqrt(5 * math.pi / 16) * S)
+    # two views of the same grid, interleaved: the density doubles, the spacing drops by
+    # about sqrt(2) (here sqrt(5/2): 16th neighbour at sqrt(2) S); nearest-neighbour
+    # spacing collapses to the offset
+    both = np.vstack([pts, pts + [0.01 * S, 0, 0]])
+    two = density_spacing(both)[: len(pts)][interior]
+    assert np.allclose(two, one / math.sqrt(5 / 2), rtol=0.01)
+    assert np.all(local_spacing(both)[: len(pts)][interior] < 0.02 * S)
