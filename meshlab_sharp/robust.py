@@ -57,6 +57,7 @@ __all__ = [
     "RelativeRule",
     "RobustSetup",
     "isolated_points",
+    "line_directions",
     "local_scale",
     "relative_distances",
     "robust_threshold",
@@ -227,29 +228,98 @@ class RelativeRule:
         return r, robust_threshold(r)
 
 
-def supported(mask: np.ndarray, around: Neighbourhood, minimum: int = SUPPORT_MIN) -> np.ndarray:
-    """Features with at least ``minimum`` other features in their neighbourhood.
+def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourhood) -> np.ndarray:
+    """Direction of the line of features through each feature point.
 
     Parameters
     ----------
+    points : (m, 3) float64
+    mask : (m,) bool
+        Feature points.
+    direction : Neighbourhood
+        CSR lists (the largest scale; each point's own index included).
+
+    Returns
+    -------
+    (m, 3) float64
+        For a feature point ``i``: the unit eigenvector of the largest eigenvalue of
+        ``C = sum_j (q_j - qbar)(q_j - qbar)^T`` over the feature points ``j`` of
+        ``direction[i]`` (``i`` included), ``q_j = p_j - p_i``, ``qbar`` their mean
+        (its sign is arbitrary). Zero rows for the other points.
+    """
+    mask = np.asarray(mask, bool)
+    e = np.zeros((len(points), 3))
+    cand = np.flatnonzero(mask)
+    if len(cand) == 0:
+        return e
+    owner, members = _rows(direction, cand)
+    use = mask[members]
+    owner, members = owner[use], members[use]
+    q = points[members] - points[cand[owner]]
+    sizes = np.bincount(owner, minlength=len(cand))
+    ptr = np.concatenate([[0], np.cumsum(sizes)])
+    qsum = _segment_sums(q, ptr)
+    outer = _segment_sums(q[:, :, None] * q[:, None, :], ptr)
+    safe = np.maximum(sizes.astype(np.float64), 1.0)[:, None]
+    qbar = qsum / safe
+    cov = outer - safe[:, :, None] * qbar[:, :, None] * qbar[:, None, :]
+    _, vecs = np.linalg.eigh(cov)
+    e[cand] = vecs[:, :, 2]
+    return e
+
+
+def _feature_pairs(
+    points: np.ndarray, mask: np.ndarray, e: np.ndarray, lists: Neighbourhood, cone_cos: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs (i, j) of features, ``j != i`` in ``lists[i]``: the position of ``i`` among
+    the features, ``i``, ``j`` and whether ``d = p_j - p_i`` lies across the line
+    through ``i`` (``|d . e_i| < cone_cos * |d|``)."""
+    cand = np.flatnonzero(mask)
+    owner, nb = _rows(lists, cand)
+    ci = cand[owner]
+    use = mask[nb] & (nb != ci)
+    owner, nb, ci = owner[use], nb[use], ci[use]
+    d = points[nb] - points[ci]
+    along = np.abs((d * e[ci]).sum(axis=1))
+    across = along < cone_cos * np.sqrt((d * d).sum(axis=1))
+    return owner, ci, nb, across
+
+
+def supported(
+    points: np.ndarray,
+    mask: np.ndarray,
+    e: np.ndarray,
+    around: Neighbourhood,
+    minimum: int = SUPPORT_MIN,
+    *,
+    cone_cos: float = THIN_CONE_COS,
+) -> np.ndarray:
+    """Features with at least ``minimum`` other features along their line.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
     mask : (m,) bool
         Features before the test.
+    e : (m, 3) float64
+        :func:`line_directions` of ``mask``.
     around : Neighbourhood
         CSR lists (each point's own index included; it is not counted).
     minimum : int, default SUPPORT_MIN (2)
+    cone_cos : float, default THIN_CONE_COS (0.5)
 
     Returns
     -------
     (m,) bool
-        ``mask[i] and #{j in around[i], j != i, mask[j]} >= minimum``.
+        ``mask[i]`` and at least ``minimum`` features ``j != i`` of ``around[i]`` with
+        ``d = p_j - p_i`` along the line: ``|d . e_i| >= cone_cos * |d|``.
     """
     mask = np.asarray(mask, bool)
     cand = np.flatnonzero(mask)
     if len(cand) == 0:
         return mask.copy()
-    owner, nb = _rows(around, cand)
-    hit = mask[nb] & (nb != cand[owner])
-    count = np.bincount(owner[hit], minlength=len(cand))
+    owner, _, _, across = _feature_pairs(points, mask, e, around, cone_cos)
+    count = np.bincount(owner[~across], minlength=len(cand))
     out = mask.copy()
     out[cand[count < minimum]] = False
     return out
@@ -259,20 +329,17 @@ def thin(
     points: np.ndarray,
     mask: np.ndarray,
     score: np.ndarray,
-    direction: Neighbourhood,
+    e: np.ndarray,
     compare: Neighbourhood,
     *,
     cone_cos: float = THIN_CONE_COS,
 ) -> np.ndarray:
     """Non-maximum suppression of feature points across the feature line.
 
-    For a feature point ``i``: ``e_i`` is the unit eigenvector of the largest eigenvalue
-    of ``C = sum_j (q_j - qbar)(q_j - qbar)^T`` over the feature points ``j`` of
-    ``direction[i]`` (``i`` included), ``q_j = p_j - p_i`` and ``qbar`` their mean
-    (the direction of the line of features through ``i``). ``i`` is dropped when some
-    feature point ``j != i`` of ``compare[i]`` with ``d = p_j - p_i`` satisfies
-    ``|d . e_i| < cone_cos * |d|`` (it lies across the line) and
-    ``score[j] > score[i]``. Every decision uses the mask before thinning.
+    A feature point ``i`` is dropped when some feature point ``j != i`` of
+    ``compare[i]`` with ``d = p_j - p_i`` lies across the line through ``i``
+    (``|d . e_i| < cone_cos * |d|``) and ``score[j] > score[i]``. Every decision uses
+    the mask before thinning.
 
     Parameters
     ----------
@@ -281,8 +348,8 @@ def thin(
         Feature points before thinning.
     score : (m,) float64
         Ranking (mean relative projected distance over the scales).
-    direction : Neighbourhood
-        CSR lists for the line direction (the largest scale).
+    e : (m, 3) float64
+        Line directions (:func:`line_directions`).
     compare : Neighbourhood
         CSR lists for the comparison (``THIN_KNN`` nearest or the ``THIN_RING``-ring).
     cone_cos : float, default THIN_CONE_COS (0.5)
@@ -296,28 +363,7 @@ def thin(
     cand = np.flatnonzero(mask)
     if len(cand) == 0:
         return mask.copy()
-    # line direction from the candidate members of direction[i]
-    owner, members = _rows(direction, cand)
-    use = mask[members]
-    owner, members = owner[use], members[use]
-    q = points[members] - points[cand[owner]]
-    counts = np.bincount(owner, minlength=len(cand)).astype(np.float64)
-    ptr = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=len(cand)))])
-    qsum = _segment_sums(q, ptr)
-    outer = _segment_sums(q[:, :, None] * q[:, None, :], ptr)
-    safe = np.maximum(counts, 1.0)[:, None]
-    qbar = qsum / safe
-    cov = outer - safe[:, :, None] * qbar[:, :, None] * qbar[:, None, :]
-    _, vecs = np.linalg.eigh(cov)
-    e = vecs[:, :, 2]
-    # comparison with candidate neighbours across the line
-    owner, nb = _rows(compare, cand)
-    ci = cand[owner]
-    use = mask[nb] & (nb != ci)
-    owner, nb, ci = owner[use], nb[use], ci[use]
-    d = points[nb] - points[ci]
-    along = np.abs((d * e[owner]).sum(axis=1))
-    across = along < cone_cos * np.sqrt((d * d).sum(axis=1))
+    owner, ci, nb, across = _feature_pairs(points, mask, e, compare, cone_cos)
     beaten = across & (score[nb] > score[ci])
     suppressed = np.bincount(owner[beaten], minlength=len(cand)) > 0
     out = mask.copy()
@@ -414,10 +460,9 @@ class RobustSetup:
                 rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
                 around = compare = rings.at(min(THIN_RING, top))
                 direction = rings.at(top)
-            mask = supported(mask, around)
-            mask = thin(
-                self.points, mask, self.rule.score, direction, compare, cone_cos=THIN_CONE_COS
-            )
+            e = line_directions(self.points, mask, direction)
+            mask = supported(self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS)
+            mask = thin(self.points, mask, self.rule.score, e, compare, cone_cos=THIN_CONE_COS)
         if self.faces is not None:
             edges, _ = sharp_vertices(self.points, self.faces)
             mask = mask | edges
