@@ -19,6 +19,12 @@ Every part is built the same way:
 
 Coordinates are rounded to float32 (MeshLab stores float) and returned as float64.
 
+The evaluation's **conditions** (``CONDITIONS``, ``suite``, ``make_condition``) add
+corruptions (noise, outliers, a density gradient), CAD tessellations (``cad_part``: the
+reference surface itself, also with ``COARSE_SEGMENTS``; ``openscad_part``: STL files
+exported by OpenSCAD), thin-walled parts built for the sampling (``make_thin_part``),
+acute wedges, and a simulated scan (``scan_part``, :mod:`meshlab_sharp.scan`).
+
 >>> from meshlab_sharp.groundtruth import make_part, add_noise
 >>> part = make_part("drilled_plate", n_points=20_000, seed=1)   # doctest: +SKIP
 >>> noisy = add_noise(part, 0.25, seed=2)                          # doctest: +SKIP
@@ -116,6 +122,12 @@ class SamplePart:
         ``"points"`` or ``"mesh"``.
     seed : int
         Seed the points were drawn with (meshes do not depend on it).
+    extra : dict
+        ``"reference"``: (vertices, faces) of the reference surface; optional
+        ``"local_spacing"`` (n,) per-point spacing to score with (density gradient,
+        scan), ``"visible_edges"`` (p, 2, 3) the edges a scan saw (coverage is measured
+        on them), ``"view"`` (n,) the scanner of each scan point, ``"scoring"``
+        ("vertices" for CAD tessellations), ``"wall"`` (thin parts' wall thickness).
     """
 
     name: str
@@ -1023,9 +1035,17 @@ def _tessellation(name: str, verts: np.ndarray, faces: np.ndarray, edges: np.nda
 
 
 OPENSCAD_DIR = Path(__file__).resolve().parent / "data" / "openscad"
-"""OpenSCAD models (``.scad``) and the STL files OpenSCAD 2021.01 exported from them."""
+"""OpenSCAD models (``.scad``) and the STL files OpenSCAD 2021.01 exported from them
+(``openscad -o name.stl name.scad``; stored as binary STL, re-encoded by pymeshlab: the
+same float32 coordinates)."""
 
-OPENSCAD_PARTS = ("scad_bracket", "scad_pocket_plate", "scad_flanged_pipe", "scad_knob")
+OPENSCAD_PARTS = (
+    "scad_bracket",
+    "scad_pocket_plate",
+    "scad_flanged_pipe",
+    "scad_knob",
+    "scad_handle",
+)
 """Parts exported by OpenSCAD (file ``OPENSCAD_DIR / name[5:] + ".stl"``)."""
 
 
@@ -1333,7 +1353,7 @@ class Condition:
     description: str
 
 
-_SCAN_PARTS = ("fandisk", "drilled_plate", "concave_steps", "chamfered_box", "rounded_box")
+_SCAN_PARTS = ("fandisk", "box", "drilled_plate", "concave_steps", "chamfered_box", "rounded_box")
 _THIN = tuple(THIN_PARTS)
 
 
@@ -1355,8 +1375,8 @@ def _conditions() -> dict[str, Condition]:
         Condition(
             "cad",
             "cad",
-            SHARP_PARTS,
-            SHARP_PARTS,
+            SHARP_PARTS + SMOOTH_PARTS,
+            SHARP_PARTS + SMOOTH_PARTS,
             "CSG kernel's triangulation, 128 segments/turn (per-vertex scores)",
         ),
         Condition(

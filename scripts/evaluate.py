@@ -59,7 +59,7 @@ TARGETS = (
     ("1 % outliers", ("outliers1",), "f1", 0.95),
     ("density gradient", ("density4",), "f1", 0.95),
     ("acute edges", ("acute", "acute_mesh"), "f1", 0.93),
-    ("smooth controls (max flagged)", ("smooth", "smooth_mesh", "scan"), "fp", 0.005),
+    ("smooth controls (max flagged)", ("smooth", "smooth_mesh", "scan", "cad"), "fp", 0.005),
 )
 
 
@@ -341,11 +341,15 @@ mesh whose faces turn by more than 20 degrees, as straight segments.
   (facets turn by 15 degrees, still below the crease angle; the truth is recomputed
   from the coarse solid). *openscad*: four models (`meshlab_sharp/data/openscad/*.scad`:
   a bracket with a gusset and bolt holes, a plate with a pocket, chamfers and
-  counterbores, a flanged pipe, a grooved knob) exported to STL by OpenSCAD 2021.01
-  and welded (identical vertices merged, as MeshLab does on load). Their round
-  surfaces have `$fn` 24 to 48 (facets turn by 15 degrees or less) and every designed
-  edge turns by 45 degrees or more; the tests check that no edge turns by between 16
-  and 40 degrees, so the edges over 20 degrees are exactly the designed ones.
+  counterbores, a flanged pipe, a grooved knob, a turned handle whose fillet, shaft
+  and dome are smooth) exported to STL by OpenSCAD 2021.01 and welded (identical
+  vertices merged, as MeshLab does on load). Their round surfaces have `$fn` 24 to 48
+  (facets turn by 15 degrees or less) and every designed edge turns by 45 degrees or
+  more; the tests check that no edge turns by between 16 and 40 degrees, so the edges
+  over 20 degrees are exactly the designed ones. On the prismatic parts every vertex
+  lies on an edge (a detector that flags every vertex scores 1 there); the handle and
+  the smooth controls' tessellations in *cad* (sphere, torus, rounded box: share of
+  vertices flagged) are the checks against that.
   **Scored per vertex**: a vertex is a true feature when it lies on an exact edge;
   precision = true features detected / detected, coverage = recall. (With vertices far
   apart along the edges and nearly all of them on edges, a spacing-based score means

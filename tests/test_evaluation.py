@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import importlib.util
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -186,3 +189,52 @@ def test_density_spacing_ignores_close_pairs(grid):
     two = density_spacing(both)[: len(pts)][interior]
     assert np.allclose(two, one / math.sqrt(5 / 2), rtol=0.01)
     assert np.all(local_spacing(both)[: len(pts)][interior] < 0.02 * S)
+
+
+def _evaluate_script():
+    path = Path(__file__).resolve().parent.parent / "scripts" / "evaluate.py"
+    spec = importlib.util.spec_from_file_location("evaluate_script", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_evaluate_script_json(tmp_path, capsys):
+    script = _evaluate_script()
+    out = tmp_path / "eval.json"
+    argv = ["--conditions", "cad,scan", "--parts", "box,rounded_box", "--points", "2000"]
+    argv += ["--modes", "paper,robust", "--no-write", "--json", str(out)]
+    argv += ["--cache", str(tmp_path / "cache")]
+    assert script.main(argv) == 0
+    data = json.loads(out.read_text())
+    assert data["meta"]["modes"] == ["paper", "robust"]
+    pairs = [(r["part"], r["condition"]) for r in data["rows"]]
+    assert pairs == [
+        ("box", "cad"),
+        ("rounded_box", "cad"),
+        ("box", "scan"),
+        ("rounded_box", "scan"),
+    ]
+    cad_box = data["rows"][0]
+    assert cad_box["scoring"] == "vertices" and cad_box["n"] == 10
+    assert set(data["summary"]) == {"cad", "scan"}
+    assert {t["target"] for t in data["targets"]} >= {
+        "CAD tessellations",
+        "smooth controls (max flagged)",
+    }
+    printed = capsys.readouterr().out
+    assert "robust worse than paper" in printed and "target CAD tessellations" in printed
+    # the second run reads the generated inputs from the cache: same rows
+    assert script.main(argv) == 0
+    again = json.loads(out.read_text())
+    strip = [
+        {k: v for k, v in r.items() if k not in ("paper", "robust", "generate_seconds")}
+        for r in data["rows"]
+    ]
+    assert strip == [
+        {k: v for k, v in r.items() if k not in ("paper", "robust", "generate_seconds")}
+        for r in again["rows"]
+    ]
+    for mode in ("paper", "robust"):
+        assert [r[mode]["f1"] for r in again["rows"]] == [r[mode]["f1"] for r in data["rows"]]
+    assert all(r["generate_seconds"] == 0 for r in again["rows"])

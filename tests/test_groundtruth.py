@@ -446,4 +446,4 @@ def test_suite_and_errors():
     with pytest.raises(KeyError):
         gt.make_condition("box", "nope", n_points=100)
     with pytest.raises(ValueError, match="does not apply"):
-        gt.make_condition("sphere", "cad", n_points=100)
+        gt.make_condition("sphere", "mesh", n_points=100)
