@@ -138,8 +138,8 @@ def _rows(lists: Neighbourhood, rows: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return owner, indices[flat] if len(flat) else np.zeros(0, np.int64)
 
 
-def local_scale(points: np.ndarray, neighbourhood: Neighbourhood) -> np.ndarray:
-    """Mean distance from each point to the members of its neighbourhood.
+def local_scale(points: np.ndarray, neighbourhood: Neighbourhood) -> tuple[np.ndarray, np.ndarray]:
+    """Mean distance from each point to its neighbourhood, and its centroid's distance.
 
     Parameters
     ----------
@@ -149,16 +149,23 @@ def local_scale(points: np.ndarray, neighbourhood: Neighbourhood) -> np.ndarray:
 
     Returns
     -------
-    (m,) float64
+    scale : (m,) float64
         ``l_i = (1 / |N(i)|) * sum_{j in N(i)} |p_j - p_i|`` (0 for an empty list).
+    offset : (m,) float64
+        ``o_i = |(1 / |N(i)|) * sum_{j in N(i)} (p_j - p_i)|``, the distance from
+        ``p_i`` to the centroid (0 for an empty list); ``o_i <= l_i``.
     """
     indptr = np.asarray(neighbourhood.indptr, np.int64)
     indices = np.asarray(neighbourhood.indices, np.int64)
     size = np.diff(indptr)
     owner = np.repeat(np.arange(len(points)), size)
-    d = np.sqrt(((points[indices] - points[owner]) ** 2).sum(axis=1))
-    total = _segment_sums(d, indptr)
-    return np.where(size > 0, total / np.maximum(size, 1), 0.0)
+    q = points[indices] - points[owner]
+    d = np.sqrt(q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1] + q[:, 2] * q[:, 2])
+    count = np.maximum(size, 1)
+    scale = np.where(size > 0, _segment_sums(d, indptr) / count, 0.0)
+    c = _segment_sums(q, indptr) / count[:, None]
+    offset = np.sqrt(c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2])
+    return scale, offset
 
 
 def relative_distances(pdis: np.ndarray, scale: np.ndarray) -> np.ndarray:
@@ -202,8 +209,11 @@ class RelativeRule:
     """Per-scale rule of robust mode for :func:`meshlab_sharp.multiscale.run_scales`.
 
     Called as ``rule(i, scale, pdis)`` for the i-th scale: returns the relative
-    distances (m,) and the threshold; it also accumulates ``score``, the mean of the
-    relative distances over the scales (the ranking used by :func:`thin`).
+    distances (m,) and the threshold; it also accumulates ``score``, the mean over the
+    scales of ``o / l`` (:func:`local_scale`: the centroid's distance relative to the
+    local scale), the ranking used by :func:`thin`. Not ``r``: at an acute edge the
+    normal turns, the projected distance peaks beside the edge, the centroid's distance
+    at the edge.
 
     Parameters
     ----------
@@ -222,9 +232,9 @@ class RelativeRule:
         self.score = np.zeros(len(self.points))
 
     def __call__(self, i: int, scale: int, pdis: np.ndarray) -> tuple[np.ndarray, float]:
-        ell = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
+        ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
         r = relative_distances(np.asarray(pdis, np.float64), ell)
-        self.score += r / self.n_scales
+        self.score += relative_distances(offset, ell) / self.n_scales
         return r, robust_threshold(r)
 
 
@@ -347,7 +357,7 @@ def thin(
     mask : (m,) bool
         Feature points before thinning.
     score : (m,) float64
-        Ranking (mean relative projected distance over the scales).
+        Ranking (:class:`RelativeRule`'s ``score``).
     e : (m, 3) float64
         Line directions (:func:`line_directions`).
     compare : Neighbourhood
