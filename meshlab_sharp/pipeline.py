@@ -275,6 +275,7 @@ def _detect(
     if mode == "robust":
         robust = RobustSetup(points, cleaned.faces, neighbourhoods, scales_t, workers=workers)
         work, work_neighbourhoods = robust.points, robust.neighbourhoods
+        scales_t = robust.scales
     timings["neighbourhoods"] = time.perf_counter() - t
     bar.step("neighbourhoods")
 

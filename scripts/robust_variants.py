@@ -40,6 +40,9 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "no sharp mesh edges": ((creases, "CREASE_ANGLE", 180.0),),
     "mesh edges: no noise factor": ((creases, "NOISE_FACTOR", 0.0),),
     "no threshold floor": ((robust, "R_MIN", 0.0),),
+    "noise-scaled scales off": ((robust, "NOISE_TOLERATED", math.inf),),
+    "noise tolerated 0.15": ((robust, "NOISE_TOLERATED", 0.15),),
+    "noise tolerated 0.25": ((robust, "NOISE_TOLERATED", 0.25),),
 }
 
 
