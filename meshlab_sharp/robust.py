@@ -6,6 +6,11 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 1. **Isolated points are left out** (point clouds): point ``i`` is isolated when it is
    not among the ``k_max`` nearest neighbours of its own nearest neighbour. Detection
    runs on the other points; isolated points are never features.
+1b. **Scales from the noise** (point clouds): the median over the points of
+   ``|d . n| / |d|`` (``d`` the offset to the nearest neighbour, ``n`` the normal of the
+   point and its 6 nearest) measures the noise; above ``NOISE_TOLERATED`` the scales
+   grow as its square, at most ``NOISE_MAX_FACTOR``-fold (the noise of ``r`` falls as
+   ``1 / sqrt(k)``).
 2. **Relative projected distance** instead of min-max normalisation: per scale,
    ``r_i = pdis_i / l_i`` with ``l_i`` the mean distance from ``p_i`` to the members of
    its neighbourhood (itself included). ``0 <= r_i <= 1`` always (``pdis_i`` is the
@@ -17,14 +22,15 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    ``(2 / pi) * sin(10 deg)``. On a smooth object Otsu still splits the histogram, but
    below the floor: "no sharp features" becomes a possible answer.
 4. **Support**: a point that is a candidate at every scale is kept only when at least
-   ``SUPPORT_MIN`` (2) other such points lie among its ``SUPPORT_KNN`` (16) nearest (its
-   ``THIN_RING``-ring on meshes): a line has neighbours along it, a point lifted by
-   noise does not.
+   ``SUPPORT_MIN`` (2) other such points among its ``SUPPORT_KNN`` (16) nearest (its
+   ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
+   along it, a point lifted by noise has none, or only the line it lies beside.
 5. **Thinning**: a point is dropped when a supported neighbour among its ``THIN_KNN``
    (8) nearest, lying across the feature line (more than 60 degrees from the line's
-   direction), has a larger mean relative distance (non-maximum suppression across
-   the line), so lines stay one point wide; comparing only within about 1.5 spacings
-   keeps two parallel lines (the rims of a thin wall) apart.
+   direction), ranks higher (mean over the scales of the centroid's distance relative
+   to ``l``, which peaks on acute edges where ``r`` does not): non-maximum suppression
+   across the line, so lines stay one point wide; comparing only within about 1.5
+   spacings keeps two parallel lines (the rims of a thin wall) apart.
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
    an edge whose two faces turn by more than ``CREASE_ANGLE`` (more on a noisy mesh)
    are features too. On a CAD tessellation they are all of them.
