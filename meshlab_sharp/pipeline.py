@@ -35,6 +35,8 @@ Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | py
 #: Detection modes: the paper's method as ALGORITHM.md reads it, or robust mode
 #: (:mod:`meshlab_sharp.robust`, docs/robust-mode.md).
 MODES = ("paper", "robust")
+#: The mode ``detect``, the CLI and the MeshLab plugin use unless told otherwise.
+DEFAULT_MODE = "robust"
 #: The most scales one detection takes (the defaults have 8 and 4).
 MAX_SCALES = 64
 
@@ -93,7 +95,7 @@ class DetectionResult:
     distances: np.ndarray | None = None
     normals: np.ndarray | None = None
     preprocessing: PreprocessingReport | None = None
-    mode: str = "paper"
+    mode: str = "robust"
 
     @property
     def indices(self) -> np.ndarray:
@@ -116,7 +118,7 @@ class DetectionResult:
             "options": {
                 "scales": list(self.scales),
                 "weighting": self.weighting,
-                **({} if self.mode == "paper" else {"mode": self.mode}),
+                "mode": self.mode,
             },
             "scales": [
                 {"scale": int(s), "threshold": float(t), "candidates": int(c)}
@@ -142,7 +144,7 @@ def detect(
     progress: bool | Progress = False,
     workers: int = -1,
     preprocessing: Preprocessing | dict[str, Any] | None = None,
-    mode: str = "paper",
+    mode: str = DEFAULT_MODE,
     backend: str | None = None,
 ) -> DetectionResult:
     """Find the sharp features of a point cloud or triangle mesh.
@@ -172,13 +174,14 @@ def detect(
         simplification; see :mod:`meshlab_sharp.preprocessing`). Detection runs on the
         processed geometry; results are mapped back to the input's vertices (removed
         ones: not features, ``kept`` False; vertices added by hole filling: left out).
-    mode : {"paper", "robust"}, default "paper"
-        "paper": ALGORITHM.md's reading of the paper. "robust": isolated points left
+    mode : {"robust", "paper"}, default "robust"
+        "robust" (the default): isolated points left
         out, scales grown with the measured noise, projected distances relative to the
         local spacing, a threshold floor (no features on smooth objects), support along
         and thinning across the lines, and on meshes the mesh's own sharp edges
         (:mod:`meshlab_sharp.robust`, docs/robust-mode.md); ``distances`` are then the
-        relative distances and ``scales`` the scales used.
+        relative distances and ``scales`` the scales used. "paper": ALGORITHM.md's
+        reading of the paper, exactly.
     backend : {"compiled", "numpy"}, optional
         The compiled kernels (default when built) or the numpy reference path; both
         give the same answers. Default: ``MESHLAB_SHARP_BACKEND`` or "compiled".
