@@ -7,10 +7,10 @@ for meshes each ring is grown from the previous one.
 
 Two backends give the same neighbourhoods (``tests/test_equivalence.py``): "numpy",
 the reference (cKDTree, sparse matrix powers), and "compiled" (the default when built,
-:mod:`meshlab_sharp._kernels`), which sorts the points along a Morton curve into grid
-cells and searches them in C. With the compiled backend the neighbourhoods are not
-stored: :func:`meshlab_sharp.multiscale.run_scales` searches them and uses them at once,
-point by point, and ``at()`` computes a scale's table only when asked for.
+:mod:`meshlab_sharp._kernels`), which builds a balanced kd-tree and searches it in C.
+With the compiled backend the neighbourhoods are not stored:
+:func:`meshlab_sharp.multiscale.run_scales` searches them and uses them at once, point by
+point, and ``at()`` computes a scale's table only when asked for.
 """
 
 from __future__ import annotations
@@ -157,10 +157,10 @@ class KnnNeighbourhoods:
         self.workers = workers
         self.backend = _kernels.resolve(backend)
         self._indices: np.ndarray | None = None
-        #: The Morton-sorted grid of the compiled backend (None with numpy).
-        self.grid: _kernels.Grid | None = None
+        #: The kd-tree of the compiled backend (None with numpy).
+        self.tree: _kernels.KdTree | None = None
         if self.backend == "compiled":
-            self.grid = _kernels.build_grid(points, k_max)
+            self.tree = _kernels.build_tree(points)
         else:
             self._indices = knn(points, k_max, workers=workers)
 
@@ -168,8 +168,8 @@ class KnnNeighbourhoods:
     def indices(self) -> np.ndarray:
         """(n, k_max) neighbour indices, rows sorted by (squared distance, index)."""
         if self._indices is None:
-            assert self.grid is not None
-            idx = _kernels.cloud_knn(self.grid, self.k_max, self.workers)
+            assert self.tree is not None
+            idx = _kernels.cloud_knn(self.tree, self.k_max, self.workers)
             dtype = np.int32 if len(idx) < 2**31 else np.int64
             self._indices = idx.astype(dtype)
         return self._indices
