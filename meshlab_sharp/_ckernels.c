@@ -528,11 +528,9 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                 double dx = blk.x[j] - px, dy = blk.y[j] - py, dz = blk.z[j] - pz;
                 bd[j] = dx * dx + dy * dy + dz * dz;
             }
-            for (int64_t j = 0; j < nb; j++) {
-                if (bd[j] <= limit2) {
-                    h.c[m].d2 = bd[j]; h.c[m].idx = blk.idx[j]; h.c[m].pos = blk.pos[j];
-                    m++;
-                }
+            for (int64_t j = 0; j < nb; j++) { /* branch-free: h.c holds limit >= nb */
+                h.c[m].d2 = bd[j]; h.c[m].idx = blk.idx[j]; h.c[m].pos = blk.pos[j];
+                m += bd[j] <= limit2;
             }
             if (m >= kmax) {
                 select_sorted(h.c, m, kmax);
