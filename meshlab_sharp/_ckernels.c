@@ -580,13 +580,17 @@ done:
 /* ------------------------------------------------------------------ meshes */
 
 /* 1-ring adjacency of a triangle mesh, CSR with repeats (each face adds both other
- * corners to each corner): ptr (n + 1), idx (6 m). */
-void ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx) {
+ * corners to each corner): ptr (n + 1), idx (6 m). Returns 0, -1 out of memory, or -2
+ * when a face index lies outside [0, n) (nothing is written out of bounds). */
+int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx) {
+    for (int64_t f = 0; f < 3 * m; f++) {
+        if (faces[f] < 0 || faces[f] >= n) return -2;
+    }
+    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
+    if (fill == NULL) return -1;
     memset(ptr, 0, (size_t)(n + 1) * sizeof(int64_t));
     for (int64_t f = 0; f < 3 * m; f++) ptr[faces[f] + 1] += 2;
     for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
-    int64_t *fill = (int64_t *)malloc((size_t)n * sizeof(int64_t));
-    if (fill == NULL) return;
     memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
     for (int64_t f = 0; f < m; f++) {
         int64_t a = faces[3 * f], b = faces[3 * f + 1], c = faces[3 * f + 2];
@@ -595,6 +599,7 @@ void ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int3
         idx[fill[c]++] = (int32_t)a; idx[fill[c]++] = (int32_t)b;
     }
     free(fill);
+    return 0;
 }
 
 /* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import InputError
+
 #: Backends: "compiled" (the C kernels) and "numpy" (the reference implementation).
 BACKENDS: tuple[str, ...] = ("compiled", "numpy")
 #: Points per task handed to a thread.
@@ -38,7 +40,7 @@ _SIGNATURES = {
         [_c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _int, _int, _i64, _i64]
         + [_c_void_p, _c_void_p, _c_void_p],
     ),
-    "ms_adjacency": (None, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
+    "ms_adjacency": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_ring_pdis": (
         _int,
         [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _int, _int, _i64, _i64]
@@ -236,7 +238,11 @@ def adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     ptr = np.empty(n + 1, dtype=np.int64)
     idx = np.empty(6 * len(faces), dtype=np.int32)
-    lib.ms_adjacency(_ptr(faces), len(faces), n, _ptr(ptr), _ptr(idx))
+    rc = lib.ms_adjacency(_ptr(faces), len(faces), n, _ptr(ptr), _ptr(idx))
+    if rc == -2:
+        raise InputError(f"a face index lies outside the {n} vertices")
+    if rc != 0:
+        raise MemoryError("out of memory building the mesh adjacency")
     return ptr, idx
 
 
