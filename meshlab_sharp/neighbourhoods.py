@@ -15,6 +15,7 @@ point, and ``at()`` computes a scale's table only when asked for.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -60,6 +61,30 @@ def squared_distances(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """
     d = points - centres
     return d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
+
+
+def unit_scaled(points: np.ndarray) -> np.ndarray:
+    """``points * 2**-e``, the largest absolute coordinate brought into [0.5, 1).
+
+    Multiplying by a power of two is exact in IEEE arithmetic (short of underflow), so
+    every ratio of distances, every normal and every decision is the one the unscaled
+    points give where those do not underflow or overflow; on the scaled points no
+    squared distance, area or covariance does, whatever the unit (1e-300 to 1e300).
+    No translation: it would round. Detection runs on these coordinates.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+        Finite coordinates.
+
+    Returns
+    -------
+    (n, 3) float64
+        A new array, or ``points`` itself when ``e`` is 0 (or every point is 0).
+    """
+    largest = max(float(points.max()), -float(points.min())) if points.size else 0.0
+    e = math.frexp(largest)[1]
+    return points if e == 0 else np.ldexp(points, -e)
 
 
 def knn(points: np.ndarray, k: int, *, workers: int = -1) -> np.ndarray:

@@ -18,7 +18,7 @@ from .cleaning import clean
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
-from .neighbourhoods import build_neighbourhoods
+from .neighbourhoods import build_neighbourhoods, unit_scaled
 from .normals import WEIGHTINGS, Weighting, face_average_normals
 from .preprocessing import (
     Preprocessing,
@@ -260,7 +260,10 @@ def _detect(
     )
 
     t = time.perf_counter()
-    cleaned = clean(geometry if is_mesh else Geometry(geometry.vertices, None, geometry.source))
+    # Exact power-of-two scaling to O(1): the answer does not depend on the unit (every
+    # output is unit-free), and no squared distance or area underflows or overflows.
+    unit = unit_scaled(geometry.vertices)
+    cleaned = clean(Geometry(unit, geometry.faces if is_mesh else None, geometry.source))
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     points = cleaned.vertices

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import shapes
 
 import meshlab_sharp
+from meshlab_sharp import _kernels
 
 
 @pytest.fixture(scope="module")
@@ -55,3 +58,45 @@ def test_mesh_vertex_order_does_not_matter():
     plain = meshlab_sharp.detect(vertices, faces)
     np.testing.assert_array_equal(shuffled.mask[inverse], plain.mask)
     np.testing.assert_array_equal(shuffled.thresholds, plain.thresholds)
+
+
+#: Units from 1e-100 to 1e100 and beyond; the powers of two reach the ends of float64.
+UNITS = (1e-100, 1e-85, 1e-30, 1e30, 1e100, 1e153, 1e200, 2.0**-1000, 2.0**-7, 2.0**900)
+
+
+@pytest.fixture(scope="module")
+def unit_shapes():
+    return {
+        "cloud": (shapes.box_cylinder_points(2000, seed=11), None),
+        "mesh": shapes.cube_grid_mesh(3),
+    }
+
+
+@pytest.mark.parametrize("backend", ["compiled", "numpy"])
+@pytest.mark.parametrize("mode", ["paper", "robust"])
+@pytest.mark.parametrize("kind", ["cloud", "mesh"])
+def test_answer_does_not_depend_on_the_unit(unit_shapes, kind, mode, backend):
+    """Coordinates are brought to O(1) by an exact power of two before anything is
+    computed, so no floating-point warning at any unit (squared distances of 1e-85
+    units used to underflow, and 1e153 units to overflow into "no features") and the
+    same mask, strength and thresholds. A power-of-two unit changes no bit of the
+    details either; a decimal one rounds the input, so the normalised distances agree
+    to round-off."""
+    if backend == "compiled" and not _kernels.available():
+        pytest.skip("compiled kernels not built")
+    vertices, faces = unit_shapes[kind]
+    with _kernels.use_backend(backend), warnings.catch_warnings(), np.errstate(all="raise"):
+        warnings.simplefilter("error")
+        ref = meshlab_sharp.detect(vertices, faces, mode=mode, return_details=True)
+        assert ref.n_features > 50
+        for unit in UNITS:
+            got = meshlab_sharp.detect(vertices * unit, faces, mode=mode, return_details=True)
+            msg = f"unit {unit}"
+            np.testing.assert_array_equal(got.mask, ref.mask, err_msg=msg)
+            np.testing.assert_array_equal(got.strength, ref.strength, err_msg=msg)
+            np.testing.assert_array_equal(got.thresholds, ref.thresholds, err_msg=msg)
+            if np.frexp(unit)[0] == 0.5:
+                np.testing.assert_array_equal(got.distances, ref.distances, err_msg=msg)
+                np.testing.assert_array_equal(got.normals, ref.normals, err_msg=msg)
+            else:
+                np.testing.assert_allclose(got.distances, ref.distances, atol=1e-9, err_msg=msg)
