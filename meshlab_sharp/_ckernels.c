@@ -150,15 +150,14 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
  * xyz), which bounds the squared distance of its points from below exactly (see
  * box_dist2), so the search is exact: the k nearest by (squared distance, index). */
 
-typedef struct {
-    double x[3];
-    int64_t idx;
-} rec_t;
-
-static inline void rec_swap(rec_t *a, rec_t *b) {
-    rec_t t = *a;
-    *a = *b;
-    *b = t;
+/* Points x (n, 3) with their indices idx (n), permuted together. */
+static inline void point_swap(double *x, int64_t *idx, int64_t i, int64_t j) {
+    double t0 = x[3 * i], t1 = x[3 * i + 1], t2 = x[3 * i + 2];
+    x[3 * i] = x[3 * j]; x[3 * i + 1] = x[3 * j + 1]; x[3 * i + 2] = x[3 * j + 2];
+    x[3 * j] = t0; x[3 * j + 1] = t1; x[3 * j + 2] = t2;
+    int64_t t = idx[i];
+    idx[i] = idx[j];
+    idx[j] = t;
 }
 
 static inline uint64_t xorshift64(uint64_t *s) {
@@ -170,34 +169,32 @@ static inline uint64_t xorshift64(uint64_t *s) {
     return x;
 }
 
-/* Reorder r[0..n) so that r[m] is the element of rank m along axis a, with smaller or
- * equal ones before it and larger or equal ones after (quickselect, pivot the median
- * of three pseudo-random elements: expected O(n) whatever the input order). */
-static void select_axis(rec_t *r, int64_t n, int64_t m, int a, uint64_t *rng) {
+/* Reorder the points [0, n) so that point m is the one of rank m along axis a, with
+ * smaller or equal ones before it and larger or equal ones after (quickselect, pivot
+ * the median of three pseudo-random points: expected O(n) whatever the input order). */
+static void select_axis(double *x, int64_t *idx, int64_t n, int64_t m, int a, uint64_t *rng) {
     int64_t lo = 0, hi = n - 1;
     while (hi - lo >= 16) {
-        int64_t span = hi - lo + 1;
-        int64_t i0 = lo + (int64_t)(xorshift64(rng) % (uint64_t)span);
-        int64_t i1 = lo + (int64_t)(xorshift64(rng) % (uint64_t)span);
-        int64_t i2 = lo + (int64_t)(xorshift64(rng) % (uint64_t)span);
-        double v0 = r[i0].x[a], v1 = r[i1].x[a], v2 = r[i2].x[a];
+        uint64_t span = (uint64_t)(hi - lo + 1);
+        double v0 = x[3 * (lo + (int64_t)(xorshift64(rng) % span)) + a];
+        double v1 = x[3 * (lo + (int64_t)(xorshift64(rng) % span)) + a];
+        double v2 = x[3 * (lo + (int64_t)(xorshift64(rng) % span)) + a];
         double pivot = v0 < v1 ? (v1 < v2 ? v1 : (v0 < v2 ? v2 : v0))
                                : (v0 < v2 ? v0 : (v1 < v2 ? v2 : v1));
         int64_t i = lo, j = hi;
         while (i <= j) {
-            while (r[i].x[a] < pivot) i++;
-            while (pivot < r[j].x[a]) j--;
-            if (i <= j) { rec_swap(&r[i], &r[j]); i++; j--; }
+            while (x[3 * i + a] < pivot) i++;
+            while (pivot < x[3 * j + a]) j--;
+            if (i <= j) { point_swap(x, idx, i, j); i++; j--; }
         }
         if (m <= j) hi = j;
         else if (m >= i) lo = i;
         else return;
     }
     for (int64_t i = lo + 1; i <= hi; i++) {
-        rec_t t = r[i];
-        int64_t j = i - 1;
-        while (j >= lo && t.x[a] < r[j].x[a]) { r[j + 1] = r[j]; j--; }
-        r[j + 1] = t;
+        for (int64_t j = i; j > lo && x[3 * j + a] < x[3 * (j - 1) + a]; j--) {
+            point_swap(x, idx, j, j - 1);
+        }
     }
 }
 
@@ -205,13 +202,13 @@ static void select_axis(rec_t *r, int64_t n, int64_t m, int a, uint64_t *rng) {
  * recursively down to single points, so that the tree order also orders the points
  * inside a leaf (consecutive points are near each other: see ms_cloud_pdis). The boxes
  * of the nodes down to `depth` go into box (node t at depth d). */
-static void build_node(rec_t *r, int64_t s, int64_t e, int64_t t, int d, int depth,
-                       double *box, uint64_t *rng) {
+static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
+                       int depth, double *box, uint64_t *rng) {
     if (e - s < 2 && d > depth) return;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (int64_t j = s; j < e; j++) {
         for (int a = 0; a < 3; a++) {
-            double v = r[j].x[a];
+            double v = x[3 * j + a];
             if (v < lo[a]) lo[a] = v;
             if (v > hi[a]) hi[a] = v;
         }
@@ -227,30 +224,19 @@ static void build_node(rec_t *r, int64_t s, int64_t e, int64_t t, int d, int dep
         if (hi[c] - lo[c] > hi[a] - lo[a]) a = c;
     }
     int64_t m = s + (e - s) / 2;
-    select_axis(r + s, e - s, m - s, a, rng);
-    build_node(r, s, m, 2 * t + 1, d + 1, depth, box, rng);
-    build_node(r, m, e, 2 * t + 2, d + 1, depth, box, rng);
+    select_axis(x + 3 * s, idx + s, e - s, m - s, a, rng);
+    build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, box, rng);
+    build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, box, rng);
 }
 
 /* Build the tree of p (n, 3): the points in tree order into tp (n, 3), their indices
- * into torig (n), the boxes of the 2^(depth + 1) - 1 nodes into box. Returns 0, or -1
- * out of memory. */
-int ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
-                    double *box) {
-    rec_t *r = (rec_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(rec_t));
-    if (r == NULL) return -1;
-    for (int64_t i = 0; i < n; i++) {
-        r[i].x[0] = p[3 * i]; r[i].x[1] = p[3 * i + 1]; r[i].x[2] = p[3 * i + 2];
-        r[i].idx = i;
-    }
+ * into torig (n), the boxes of the 2^(depth + 1) - 1 nodes into box. */
+void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                     double *box) {
+    memcpy(tp, p, (size_t)n * 3 * sizeof(double));
+    for (int64_t i = 0; i < n; i++) torig[i] = i;
     uint64_t rng = 0x9e3779b97f4a7c15ULL;
-    build_node(r, 0, n, 0, 0, depth, box, &rng);
-    for (int64_t i = 0; i < n; i++) {
-        tp[3 * i] = r[i].x[0]; tp[3 * i + 1] = r[i].x[1]; tp[3 * i + 2] = r[i].x[2];
-        torig[i] = r[i].idx;
-    }
-    free(r);
-    return 0;
+    build_node(tp, torig, 0, n, 0, 0, depth, box, &rng);
 }
 
 typedef struct {

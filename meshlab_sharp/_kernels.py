@@ -33,7 +33,7 @@ KD_LEAF = 16
 
 _c_void_p, _i64, _f64, _int = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
 _SIGNATURES = {
-    "ms_kdtree_build": (_int, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_kdtree_build": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
     "ms_eigvecs": (None, [_c_void_p, _i64, _c_void_p]),
     "ms_cloud_pdis": (
         _int,
@@ -179,8 +179,7 @@ def build_tree(points: np.ndarray) -> KdTree:
     tree_points = np.empty_like(points)
     orig = np.empty(n, dtype=np.int64)
     boxes = np.empty((2 ** (depth + 1) - 1, 6))
-    if lib.ms_kdtree_build(_ptr(points), n, depth, _ptr(tree_points), _ptr(orig), _ptr(boxes)):
-        raise MemoryError("out of memory building the kd-tree")
+    lib.ms_kdtree_build(_ptr(points), n, depth, _ptr(tree_points), _ptr(orig), _ptr(boxes))
     return KdTree(tree_points, orig, boxes, depth)
 
 
