@@ -63,8 +63,8 @@ def squared_distances(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
     return d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
 
 
-def unit_scaled(points: np.ndarray) -> np.ndarray:
-    """``points * 2**-e``, the largest absolute coordinate brought into [0.5, 1).
+def unit_scale(points: np.ndarray) -> tuple[np.ndarray, int]:
+    """``points * 2**-e`` and ``e``: the largest absolute coordinate brought into [0.5, 1).
 
     Multiplying by a power of two is exact in IEEE arithmetic (short of underflow), so
     every ratio of distances, every normal and every decision is the one the unscaled
@@ -79,12 +79,14 @@ def unit_scaled(points: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    (n, 3) float64
+    scaled : (n, 3) float64
         A new array, or ``points`` itself when ``e`` is 0 (or every point is 0).
+    e : int
+        ``np.ldexp(scaled, e)`` gives ``points`` back.
     """
     largest = max(float(points.max()), -float(points.min())) if points.size else 0.0
     e = math.frexp(largest)[1]
-    return points if e == 0 else np.ldexp(points, -e)
+    return (points if e == 0 else np.ldexp(points, -e)), e
 
 
 def knn(points: np.ndarray, k: int, *, workers: int = -1) -> np.ndarray:

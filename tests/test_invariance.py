@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -100,3 +104,50 @@ def test_answer_does_not_depend_on_the_unit(unit_shapes, kind, mode, backend):
                 np.testing.assert_array_equal(got.normals, ref.normals, err_msg=msg)
             else:
                 np.testing.assert_allclose(got.distances, ref.distances, atol=1e-9, err_msg=msg)
+
+
+_PREPROCESSED_AT_UNITS = """
+import sys
+import numpy as np
+import shapes
+import meshlab_sharp
+
+steps = {
+    "cloud": [{"remove_outliers": True}, {"denoise": True}, {"simplify": 0.5}],
+    "mesh": [{"denoise": True}, {"denoise": True, "denoise_method": "two_steps"},
+             {"fill_holes": True}, {"simplify": 0.5}],
+}
+rng = np.random.default_rng(0)
+cloud = shapes.box_cylinder_points(2000, seed=11)
+cloud = np.concatenate([cloud + rng.normal(scale=0.003, size=cloud.shape), [[5.0, 5.0, 5.0]]])
+inputs = {"cloud": (cloud, None), "mesh": shapes.cube_grid_mesh(3)}
+out = {}
+for kind, options in steps.items():
+    vertices, faces = inputs[kind]
+    for i, step in enumerate(options):
+        for e in (0, -332, 332):
+            r = meshlab_sharp.detect(np.ldexp(vertices, e), faces, preprocessing=step)
+            out[f"{kind}{i}_{e}_mask"] = r.mask
+            out[f"{kind}{i}_{e}_vertices"] = np.ldexp(r.preprocessing.geometry.vertices, -e)
+np.savez(sys.argv[1], **out)
+"""
+
+
+def test_preprocessing_does_not_depend_on_the_unit(tmp_path):
+    """pymeshlab's filters run on the scaled coordinates too: at 2**332 (about 1e100)
+    Poisson-disk subsampling used to hang and quadric decimation to empty the mesh. The
+    same features and the same processed geometry (in the input's unit) at 2**-332 and
+    2**332 as at 1, every step; in a subprocess with a time limit against a hang."""
+    tests = Path(__file__).resolve().parent
+    subprocess.run(
+        [sys.executable, "-c", _PREPROCESSED_AT_UNITS, tmp_path / "out.npz"],
+        check=True,
+        timeout=300,
+        cwd=tests.parent,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join([str(tests.parent), str(tests)])},
+    )
+    out = np.load(tmp_path / "out.npz")
+    for name in out.files:
+        case, _, what = name.split("_")
+        np.testing.assert_array_equal(out[name], out[f"{case}_0_{what}"], err_msg=name)
+    assert len(out.files) == 2 * 3 * 7
