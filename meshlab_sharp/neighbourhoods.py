@@ -28,6 +28,9 @@ from .errors import InputError
 
 #: Rows per block of kNN queries (bounds the temporary memory).
 QUERY_BLOCK = 131072
+#: Coordinates up to 2**UNIT_RANGE in absolute value, and at least 2**-UNIT_RANGE for
+#: the largest, are used as they are; others are scaled (:func:`unit_scale`).
+UNIT_RANGE = 100
 
 
 @dataclass(frozen=True)
@@ -64,13 +67,17 @@ def squared_distances(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
 
 
 def unit_scale(points: np.ndarray) -> tuple[np.ndarray, int]:
-    """``points * 2**-e`` and ``e``: the largest absolute coordinate brought into [0.5, 1).
+    """``points * 2**-e`` and ``e``: coordinates of O(1) whatever the unit.
 
     Multiplying by a power of two is exact in IEEE arithmetic (short of underflow), so
     every ratio of distances, every normal and every decision is the one the unscaled
-    points give where those do not underflow or overflow; on the scaled points no
-    squared distance, area or covariance does, whatever the unit (1e-300 to 1e300).
-    No translation: it would round. Detection runs on these coordinates.
+    points give where those do not underflow or overflow; on the scaled points (the
+    largest absolute coordinate in [0.5, 1)) no squared distance, area or covariance
+    does, whatever the unit (1e-300 to 1e300). When the largest absolute coordinate
+    already lies in [2**-100, 2**100) nothing in the detection can underflow or overflow
+    either (squared distances stay above 2**-306, covariances far from LAPACK's
+    rescaling bounds), so scaling would change no bit: the points are returned as they
+    are (``e = 0``), which saves a copy. No translation: it would round.
 
     Parameters
     ----------
@@ -80,13 +87,15 @@ def unit_scale(points: np.ndarray) -> tuple[np.ndarray, int]:
     Returns
     -------
     scaled : (n, 3) float64
-        A new array, or ``points`` itself when ``e`` is 0 (or every point is 0).
+        A new array, or ``points`` itself when ``e`` is 0.
     e : int
         ``np.ldexp(scaled, e)`` gives ``points`` back.
     """
     largest = max(float(points.max()), -float(points.min())) if points.size else 0.0
     e = math.frexp(largest)[1]
-    return (points if e == 0 else np.ldexp(points, -e)), e
+    if largest == 0.0 or -UNIT_RANGE < e <= UNIT_RANGE:
+        return points, 0
+    return np.ldexp(points, -e), e
 
 
 def knn(points: np.ndarray, k: int, *, workers: int = -1) -> np.ndarray:

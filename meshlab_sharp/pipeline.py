@@ -268,8 +268,9 @@ def _detect(
     )
 
     t = time.perf_counter()
-    # Exact power-of-two scaling to O(1): the answer does not depend on the unit (every
-    # output is unit-free), and no squared distance or area underflows or overflows.
+    # Exact power-of-two scaling to O(1) where needed: the answer does not depend on the
+    # unit (every output is unit-free), no squared distance or area underflows or
+    # overflows.
     unit = unit_scale(geometry.vertices)[0]
     cleaned = clean(Geometry(unit, geometry.faces if is_mesh else None, geometry.source))
     timings["clean"] = time.perf_counter() - t

@@ -64,8 +64,10 @@ def test_mesh_vertex_order_does_not_matter():
     np.testing.assert_array_equal(shuffled.thresholds, plain.thresholds)
 
 
-#: Units from 1e-100 to 1e100 and beyond; the powers of two reach the ends of float64.
-UNITS = (1e-100, 1e-85, 1e-30, 1e30, 1e100, 1e153, 1e200, 2.0**-1000, 2.0**-7, 2.0**900)
+#: Units from 1e-100 to 1e100 and beyond; the powers of two reach the ends of float64
+#: and both sides of the range kept unscaled (``neighbourhoods.UNIT_RANGE``).
+UNITS = (1e-100, 1e-85, 1e-30, 1e30, 1e100, 1e153, 1e200)
+UNITS += (2.0**-1000, 2.0**-101, 2.0**-99, 2.0**-7, 2.0**60, 2.0**101, 2.0**900)
 
 
 @pytest.fixture(scope="module")
