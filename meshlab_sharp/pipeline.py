@@ -238,12 +238,10 @@ def _detect(
         unit, exponent = unit_scale(geometry.vertices)
         given = Geometry(unit, None if as_points else geometry.faces, geometry.source)
         processed, to_input = preprocess(given, steps, log=log)
-        report = PreprocessingReport(
-            log,
-            replace(processed, vertices=np.ldexp(processed.vertices, exponent)),
-            to_input,
-            seconds=time.perf_counter() - t,
-        )
+        in_unit = processed
+        if exponent:
+            in_unit = replace(processed, vertices=np.ldexp(processed.vertices, exponent))
+        report = PreprocessingReport(log, in_unit, to_input, seconds=time.perf_counter() - t)
         inner = detect(
             processed,
             scales=scales,
