@@ -197,8 +197,8 @@ np.save(sys.argv[2], KnnNeighbourhoods(np.load(sys.argv[1]), 40, backend="compil
 @pytest.mark.parametrize("name", sorted(SPREADS))
 def test_knn_any_spatial_distribution(name, tmp_path):
     """100k points. A far outlier or distant clusters made the former grid search
-    quadratic (minutes); the kd-tree answers in about a second, so the compiled search
-    runs in a subprocess with a generous time limit. Both backends give the same table,
+    quadratic (minutes); the kd-tree answers in about a second of CPU, so the compiled
+    search runs in a subprocess with a generous time limit. Both backends give the same table,
     which agrees with brute force on sampled rows (the far point among them)."""
     points = np.unique(SPREADS[name](100_000), axis=0)
     np.save(tmp_path / "points.npy", points)
@@ -206,7 +206,7 @@ def test_knn_any_spatial_distribution(name, tmp_path):
     subprocess.run(
         [sys.executable, "-c", _COMPILED_KNN, tmp_path / "points.npy", tmp_path / "knn.npy"],
         check=True,
-        timeout=30,
+        timeout=60,
         cwd=root,
         env={**os.environ, "PYTHONPATH": str(root)},
     )
@@ -217,6 +217,37 @@ def test_knn_any_spatial_distribution(name, tmp_path):
     for i in rows:
         d2 = squared_distances(points, points[i])
         np.testing.assert_array_equal(compiled[i], np.lexsort((np.arange(len(points)), d2))[:40])
+
+
+_COMPILED_DETECT = """
+import sys
+import numpy as np
+from meshlab_sharp import detect
+points = np.load(sys.argv[1])
+masks = {m: detect(points, mode=m, backend="compiled").mask for m in ("paper", "robust")}
+np.savez(sys.argv[2], **masks)
+"""
+
+
+def test_detect_with_a_far_outlier_both_modes(tmp_path):
+    """The issue's case end to end: a scan with one stray point at 1e12, both modes
+    (robust mode searches neighbours again for thinning), with the numpy reference's
+    answer, in a subprocess with a time limit against a hang (the former grid search
+    was quadratic here; test_knn_any_spatial_distribution measures that at 100k)."""
+    points = _far_outlier(20_000)
+    np.save(tmp_path / "points.npy", points)
+    root = Path(__file__).resolve().parent.parent
+    subprocess.run(
+        [sys.executable, "-c", _COMPILED_DETECT, tmp_path / "points.npy", tmp_path / "masks.npz"],
+        check=True,
+        timeout=150,
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )
+    masks = np.load(tmp_path / "masks.npz")
+    for mode in ("paper", "robust"):
+        reference = detect(points, mode=mode, backend="numpy").mask
+        np.testing.assert_array_equal(masks[mode], reference, err_msg=mode)
 
 
 def test_rings_identical():
