@@ -1,4 +1,4 @@
-/* Compiled kernels of meshlab-sharp: grid kNN, k-rings, weighted PCA normals and
+/* Compiled kernels of meshlab-sharp: kd-tree kNN, k-rings, weighted PCA normals and
  * projected distances, face-average normals, duplicate merging.
  *
  * A plain C library loaded with ctypes (meshlab_sharp/_kernels.py): no Python headers
@@ -31,92 +31,6 @@ static void gaussian_weights(const double *d2, int64_t m, double h2, double *mu)
     }
 #endif
     for (; j < m; j++) mu[j] = exp(-d2[j] / h2);
-}
-
-#define MORTON_BITS 21
-#define MORTON_MAX ((1u << MORTON_BITS) - 1u)
-#define EMPTY_KEY UINT64_MAX
-
-/* ------------------------------------------------------------------ Morton codes */
-
-static inline uint64_t spread3(uint64_t x) {
-    x &= 0x1fffff;
-    x = (x | x << 32) & 0x1f00000000ffffULL;
-    x = (x | x << 16) & 0x1f0000ff0000ffULL;
-    x = (x | x << 8) & 0x100f00f00f00f00fULL;
-    x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
-    x = (x | x << 2) & 0x1249249249249249ULL;
-    return x;
-}
-
-static inline uint32_t compact3(uint64_t x) {
-    x &= 0x1249249249249249ULL;
-    x = (x ^ (x >> 2)) & 0x10c30c30c30c30c3ULL;
-    x = (x ^ (x >> 4)) & 0x100f00f00f00f00fULL;
-    x = (x ^ (x >> 8)) & 0x1f0000ff0000ffULL;
-    x = (x ^ (x >> 16)) & 0x1f00000000ffffULL;
-    x = (x ^ (x >> 32)) & 0x1fffffULL;
-    return (uint32_t)x;
-}
-
-static inline uint64_t morton3(uint32_t x, uint32_t y, uint32_t z) {
-    return spread3(x) | (spread3(y) << 1) | (spread3(z) << 2);
-}
-
-static inline uint32_t grid_coord(double v, double o, double inv) {
-    double t = floor((v - o) * inv);
-    if (!(t > 0.0)) return 0;
-    if (t >= (double)MORTON_MAX) return MORTON_MAX;
-    return (uint32_t)t;
-}
-
-/* Fine-grid Morton code of every point: 2^21 cells of size 1/inv per axis from o. */
-void ms_morton_codes(const double *p, int64_t n, double ox, double oy, double oz, double inv,
-                     uint64_t *codes) {
-    for (int64_t i = 0; i < n; i++) {
-        codes[i] = morton3(grid_coord(p[3 * i], ox, inv), grid_coord(p[3 * i + 1], oy, inv),
-                           grid_coord(p[3 * i + 2], oz, inv));
-    }
-}
-
-/* counts[L] = number of distinct cells at level L (cells of 2^L fine cells), L = 0..21,
- * of sorted codes. */
-void ms_level_counts(const uint64_t *codes, int64_t n, int64_t *counts) {
-    for (int l = 0; l <= MORTON_BITS; l++) counts[l] = n > 0;
-    for (int64_t i = 1; i < n; i++) {
-        uint64_t x = codes[i] ^ codes[i - 1];
-        if (!x) continue;
-        int top = 63 - __builtin_clzll(x);  /* highest differing bit */
-        int lmax = top / 3;                 /* distinct at levels 0..lmax */
-        for (int l = 0; l <= lmax; l++) counts[l]++;
-    }
-}
-
-static inline uint64_t hash64(uint64_t k) {
-    k ^= k >> 33;
-    k *= 0xff51afd7ed558ccdULL;
-    k ^= k >> 33;
-    k *= 0xc4ceb9fe1a85ec53ULL;
-    k ^= k >> 33;
-    return k;
-}
-
-/* Cells of level L of sorted codes into an open-addressing table (size hmask + 1, a
- * power of two, keys initialised to EMPTY_KEY by the caller). */
-void ms_build_cells(const uint64_t *codes, int64_t n, int level, uint64_t *hkeys,
-                    int64_t *hstart, int64_t *hend, int64_t hmask) {
-    int64_t i = 0;
-    while (i < n) {
-        uint64_t key = codes[i] >> (3 * level);
-        int64_t j = i + 1;
-        while (j < n && (codes[j] >> (3 * level)) == key) j++;
-        uint64_t h = hash64(key) & (uint64_t)hmask;
-        while (hkeys[h] != EMPTY_KEY) h = (h + 1) & (uint64_t)hmask;
-        hkeys[h] = key;
-        hstart[h] = i;
-        hend[h] = j;
-        i = j;
-    }
 }
 
 /* ------------------------------------------------------------------ 3x3 eigenvector */
@@ -225,12 +139,110 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
     return fabs(mean[0] * nrm[0] + mean[1] * nrm[1] + mean[2] * nrm[2]);
 }
 
-/* ------------------------------------------------------------------ kNN on the grid */
+/* ------------------------------------------------------------------ kd-tree */
+
+/* A balanced kd-tree stored implicitly: node 0 is the root, the children of node t are
+ * 2t + 1 and 2t + 2, a node holding the points [s, e) of the tree order splits them at
+ * s + (e - s) / 2 (the median along the widest side of its bounding box), and every
+ * leaf is at the same depth. Median splits keep the depth at log2(n / KD_LEAF) and the
+ * leaves balanced whatever the spatial distribution: a far outlier, distant clusters,
+ * points on a line or a plane. box holds each node's tight bounding box (lo xyz, hi
+ * xyz), which bounds the squared distance of its points from below exactly (see
+ * box_dist2), so the search is exact: the k nearest by (squared distance, index). */
+
+/* Points x (n, 3) with their indices idx (n), permuted together. */
+static inline void point_swap(double *x, int64_t *idx, int64_t i, int64_t j) {
+    double t0 = x[3 * i], t1 = x[3 * i + 1], t2 = x[3 * i + 2];
+    x[3 * i] = x[3 * j]; x[3 * i + 1] = x[3 * j + 1]; x[3 * i + 2] = x[3 * j + 2];
+    x[3 * j] = t0; x[3 * j + 1] = t1; x[3 * j + 2] = t2;
+    int64_t t = idx[i];
+    idx[i] = idx[j];
+    idx[j] = t;
+}
+
+static inline uint64_t xorshift64(uint64_t *s) {
+    uint64_t x = *s;
+    x ^= x << 13;
+    x ^= x >> 7;
+    x ^= x << 17;
+    *s = x;
+    return x;
+}
+
+/* Reorder the points [0, n) so that point m is the one of rank m along axis a, with
+ * smaller or equal ones before it and larger or equal ones after (quickselect, pivot
+ * the median of three pseudo-random points: expected O(n) whatever the input order). */
+static void select_axis(double *x, int64_t *idx, int64_t n, int64_t m, int a, uint64_t *rng) {
+    int64_t lo = 0, hi = n - 1;
+    while (hi - lo >= 16) {
+        uint64_t span = (uint64_t)(hi - lo + 1);
+        double v0 = x[3 * (lo + (int64_t)(xorshift64(rng) % span)) + a];
+        double v1 = x[3 * (lo + (int64_t)(xorshift64(rng) % span)) + a];
+        double v2 = x[3 * (lo + (int64_t)(xorshift64(rng) % span)) + a];
+        double pivot = v0 < v1 ? (v1 < v2 ? v1 : (v0 < v2 ? v2 : v0))
+                               : (v0 < v2 ? v0 : (v1 < v2 ? v2 : v1));
+        int64_t i = lo, j = hi;
+        while (i <= j) {
+            while (x[3 * i + a] < pivot) i++;
+            while (pivot < x[3 * j + a]) j--;
+            if (i <= j) { point_swap(x, idx, i, j); i++; j--; }
+        }
+        if (m <= j) hi = j;
+        else if (m >= i) lo = i;
+        else return;
+    }
+    for (int64_t i = lo + 1; i <= hi; i++) {
+        for (int64_t j = i; j > lo && x[3 * j + a] < x[3 * (j - 1) + a]; j--) {
+            point_swap(x, idx, j, j - 1);
+        }
+    }
+}
+
+/* Split the points [s, e) at their median along the widest side of their bounding box,
+ * recursively down to single points, so that the tree order also orders the points
+ * inside a leaf (consecutive points are near each other: see ms_cloud_pdis). The boxes
+ * of the nodes down to `depth` go into box (node t at depth d). */
+static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
+                       int depth, double *box, uint64_t *rng) {
+    if (e - s < 2 && d > depth) return;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int64_t j = s; j < e; j++) {
+        for (int a = 0; a < 3; a++) {
+            double v = x[3 * j + a];
+            if (v < lo[a]) lo[a] = v;
+            if (v > hi[a]) hi[a] = v;
+        }
+    }
+    if (d <= depth) {
+        double *b = box + 6 * t;
+        b[0] = lo[0]; b[1] = lo[1]; b[2] = lo[2];
+        b[3] = hi[0]; b[4] = hi[1]; b[5] = hi[2];
+    }
+    if (e - s < 2) return;
+    int a = 0;
+    for (int c = 1; c < 3; c++) {
+        if (hi[c] - lo[c] > hi[a] - lo[a]) a = c;
+    }
+    int64_t m = s + (e - s) / 2;
+    select_axis(x + 3 * s, idx + s, e - s, m - s, a, rng);
+    build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, box, rng);
+    build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, box, rng);
+}
+
+/* Build the tree of p (n, 3): the points in tree order into tp (n, 3), their indices
+ * into torig (n), the boxes of the 2^(depth + 1) - 1 nodes into box. */
+void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                     double *box) {
+    memcpy(tp, p, (size_t)n * 3 * sizeof(double));
+    for (int64_t i = 0; i < n; i++) torig[i] = i;
+    uint64_t rng = 0x9e3779b97f4a7c15ULL;
+    build_node(tp, torig, 0, n, 0, 0, depth, box, &rng);
+}
 
 typedef struct {
     double d2;
     int64_t idx; /* cleaned index (tie rule) */
-    int64_t pos; /* sorted position (coordinates) */
+    int64_t pos; /* tree position (coordinates) */
 } cand_t;
 
 static inline int cand_lt(const cand_t *x, const cand_t *y) {
@@ -270,139 +282,112 @@ static void select_sorted(cand_t *a, int64_t n, int64_t k) {
     insertion_sort(a, k);
 }
 
+/* The k best candidates seen by one query, a max-heap by (d2, idx); until it holds k,
+ * only candidates with d2 <= tau (an upper bound of the k-th squared distance) enter. */
+typedef struct {
+    cand_t *c;
+    int64_t n, k;
+    double tau;
+} heap_t;
+
+static inline double heap_bound(const heap_t *h) { return h->n < h->k ? h->tau : h->c[0].d2; }
+
+static void sift_down(cand_t *c, int64_t n, int64_t i) {
+    cand_t t = c[i];
+    while (1) {
+        int64_t l = 2 * i + 1;
+        if (l >= n) break;
+        if (l + 1 < n && cand_lt(&c[l], &c[l + 1])) l++;
+        if (!cand_lt(&t, &c[l])) break;
+        c[i] = c[l];
+        i = l;
+    }
+    c[i] = t;
+}
+
+static inline void heap_offer(heap_t *h, double d2, int64_t idx, int64_t pos) {
+    cand_t x = {d2, idx, pos};
+    if (h->n < h->k) {
+        int64_t i = h->n++;
+        while (i > 0) {
+            int64_t up = (i - 1) / 2;
+            if (!cand_lt(&h->c[up], &x)) break;
+            h->c[i] = h->c[up];
+            i = up;
+        }
+        h->c[i] = x;
+    } else if (cand_lt(&x, &h->c[0])) {
+        h->c[0] = x;
+        sift_down(h->c, h->n, 0);
+    }
+}
+
 typedef struct {
     const double *p;
     const int64_t *orig;
-    const uint64_t *codes;
+    const double *box;
     int64_t n;
-    double o[3];
-    double fine;
-    int level;
-    const uint64_t *hkeys;
-    const int64_t *hstart;
-    const int64_t *hend;
-    int64_t hmask;
-} grid_t;
+    int depth;
+} tree_t;
 
-static inline void cell_range(const grid_t *g, int lev, uint64_t key, int64_t *s, int64_t *e) {
-    if (lev == g->level) {
-        uint64_t h = hash64(key) & (uint64_t)g->hmask;
-        while (1) {
-            uint64_t k = g->hkeys[h];
-            if (k == key) { *s = g->hstart[h]; *e = g->hend[h]; return; }
-            if (k == EMPTY_KEY) { *s = *e = 0; return; }
-            h = (h + 1) & (uint64_t)g->hmask;
-        }
+/* Squared distance between boxes a and b (a point is a box with lo = hi), computed as
+ * the squared distance of two points is (axes summed in order): never larger than that
+ * of a point of a and a point of b, since IEEE rounding is monotone (the difference of
+ * the coordinates is at least the gap between the boxes on each axis). */
+static inline double box_dist2(const double *a, const double *b) {
+    double g[3];
+    for (int i = 0; i < 3; i++) {
+        g[i] = b[3 + i] < a[i] ? a[i] - b[3 + i] : (a[3 + i] < b[i] ? b[i] - a[3 + i] : 0.0);
     }
-    uint64_t lo = key << (3 * lev), hi = (key + 1) << (3 * lev);
-    if (lev == MORTON_BITS) { lo = 0; hi = UINT64_MAX; }
-    int64_t a = 0, b = g->n;
-    while (a < b) { int64_t m = (a + b) >> 1; if (g->codes[m] < lo) a = m + 1; else b = m; }
-    *s = a;
-    b = g->n;
-    while (a < b) { int64_t m = (a + b) >> 1; if (g->codes[m] < hi) a = m + 1; else b = m; }
-    *e = a;
+    return g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
 }
 
-typedef struct {
-    cand_t *c;
-    int64_t n, cap;
-} cbuf_t;
-
-static int cbuf_reserve(cbuf_t *b, int64_t need) {
-    if (need <= b->cap) return 0;
-    int64_t cap = b->cap ? b->cap : 256;
-    while (cap < need) cap *= 2;
-    cand_t *c = (cand_t *)realloc(b->c, (size_t)cap * sizeof(cand_t));
-    if (!c) return -1;
-    b->c = c;
-    b->cap = cap;
-    return 0;
-}
-
-/* k nearest of the point at sorted position i into buf->c[0..k), sorted by (d2, idx).
- * Returns 0, or -1 when out of memory. */
-static int knn_one(const grid_t *g, int64_t i, int64_t k, cbuf_t *buf) {
-    const double *pi = g->p + 3 * i;
-    uint64_t code = g->codes[i];
-    uint32_t gc[3] = {compact3(code), compact3(code >> 1), compact3(code >> 2)};
-    for (int lev = g->level;; lev++) {
-        if (lev > MORTON_BITS) lev = MORTON_BITS;
-        int64_t cmax = (int64_t)(MORTON_MAX >> lev);
-        int64_t c[3] = {gc[0] >> lev, gc[1] >> lev, gc[2] >> lev};
-        double cs = g->fine * (double)(1ULL << lev);
-        double margin = g->fine;
-        int rmax = lev == MORTON_BITS ? 0 : 3;
-        buf->n = 0;
-        for (int r = 0; r <= rmax; r++) {
-            /* add the shell of Chebyshev radius r */
-            for (int64_t dz = -r; dz <= r; dz++) {
-                int64_t z = c[2] + dz;
-                if (z < 0 || z > cmax) continue;
-                for (int64_t dy = -r; dy <= r; dy++) {
-                    int64_t y = c[1] + dy;
-                    if (y < 0 || y > cmax) continue;
-                    int edge = (dz == -r || dz == r || dy == -r || dy == r);
-                    int64_t step = edge ? 1 : 2 * r;
-                    for (int64_t dx = -r; dx <= r; dx += (step ? step : 1)) {
-                        int64_t x = c[0] + dx;
-                        if (x >= 0 && x <= cmax) {
-                            int64_t s, e;
-                            cell_range(g, lev, morton3((uint32_t)x, (uint32_t)y, (uint32_t)z),
-                                       &s, &e);
-                            if (e > s) {
-                                if (cbuf_reserve(buf, buf->n + (e - s))) return -1;
-                                cand_t *out = buf->c + buf->n;
-                                for (int64_t j = s; j < e; j++) {
-                                    const double *pj = g->p + 3 * j;
-                                    double dx_ = pj[0] - pi[0], dy_ = pj[1] - pi[1],
-                                           dz_ = pj[2] - pi[2];
-                                    out->d2 = dx_ * dx_ + dy_ * dy_ + dz_ * dz_;
-                                    out->idx = g->orig[j];
-                                    out->pos = j;
-                                    out++;
-                                }
-                                buf->n += e - s;
-                            }
-                        }
-                        if (r == 0) break;
-                    }
-                }
-            }
-            if (r == 0 && rmax > 0) continue;
-            /* distance from p to the outside of the searched block */
-            double bound = INFINITY;
-            for (int a = 0; a < 3; a++) {
-                if (c[a] - r > 0) {
-                    double face = g->o[a] + (double)(c[a] - r) * cs;
-                    double dd = pi[a] - face;
-                    if (dd < bound) bound = dd;
-                }
-                if (c[a] + r + 1 <= cmax) {
-                    double face = g->o[a] + (double)(c[a] + r + 1) * cs;
-                    double dd = face - pi[a];
-                    if (dd < bound) bound = dd;
-                }
-            }
-            if (bound == INFINITY) {
-                if (buf->n >= k) { select_sorted(buf->c, buf->n, k); return 0; }
-                break; /* cannot happen with n >= k */
-            }
-            bound -= margin;
-            if (bound > 0.0) {
-                double b2 = bound * bound;
-                int64_t inside = 0;
-                for (int64_t j = 0; j < buf->n; j++) inside += buf->c[j].d2 < b2;
-                if (inside >= k) { select_sorted(buf->c, buf->n, k); return 0; }
-            }
+/* Heap search of q (as a box qq: lo = hi = q), nearer child first. */
+static void search(const tree_t *T, const double *qq, int64_t t, int64_t s, int64_t e, int d,
+                   heap_t *h) {
+    if (d == T->depth) {
+        for (int64_t j = s; j < e; j++) {
+            const double *pj = T->p + 3 * j;
+            double dx = pj[0] - qq[0], dy = pj[1] - qq[1], dz = pj[2] - qq[2];
+            double d2 = dx * dx + dy * dy + dz * dz;
+            if (d2 <= heap_bound(h)) heap_offer(h, d2, T->orig[j], j);
         }
-        if (lev == MORTON_BITS) {
-            select_sorted(buf->c, buf->n, buf->n < k ? buf->n : k);
-            return 0;
-        }
+        return;
+    }
+    int64_t m = s + (e - s) / 2;
+    int64_t l = 2 * t + 1, r = 2 * t + 2;
+    double dl = box_dist2(T->box + 6 * l, qq), dr = box_dist2(T->box + 6 * r, qq);
+    if (dl <= dr) {
+        if (dl <= heap_bound(h)) search(T, qq, l, s, m, d + 1, h);
+        if (dr <= heap_bound(h)) search(T, qq, r, m, e, d + 1, h);
+    } else {
+        if (dr <= heap_bound(h)) search(T, qq, r, m, e, d + 1, h);
+        if (dl <= heap_bound(h)) search(T, qq, l, s, m, d + 1, h);
     }
 }
 
+/* The k nearest of q into h->c[0..k), sorted by (d2, idx); tau an upper bound of the
+ * k-th squared distance (INFINITY if none is known). */
+static void knn_search(const tree_t *T, const double *q, int64_t k, double tau, heap_t *h) {
+    double qq[6] = {q[0], q[1], q[2], q[0], q[1], q[2]};
+    h->k = k;
+    h->n = 0;
+    h->tau = tau;
+    search(T, qq, 0, 0, T->n, 0, h);
+    if (h->n < k) { /* tau too small: cannot happen, costs nothing to check */
+        h->n = 0;
+        h->tau = INFINITY;
+        search(T, qq, 0, 0, T->n, 0, h);
+    }
+    for (int64_t m = h->n; m > 1; m--) {
+        cand_t t = h->c[0];
+        h->c[0] = h->c[m - 1];
+        h->c[m - 1] = t;
+        sift_down(h->c, m - 1, 0);
+    }
+}
+
+/* The points of a leaf's neighbourhood, as arrays. */
 typedef struct {
     double *x, *y, *z, *d2;
     int64_t *idx, *pos;
@@ -429,142 +414,132 @@ static int block_reserve(block_t *b, int64_t need) {
     return 0;
 }
 
-/* The points of the 3x3x3 cells around cell c (level g->level), as arrays. */
-static int gather_block(const grid_t *g, const int64_t *c, block_t *b) {
-    int64_t cmax = (int64_t)(MORTON_MAX >> g->level);
-    b->n = 0;
-    for (int64_t dz = -1; dz <= 1; dz++) {
-        int64_t z = c[2] + dz;
-        if (z < 0 || z > cmax) continue;
-        for (int64_t dy = -1; dy <= 1; dy++) {
-            int64_t y = c[1] + dy;
-            if (y < 0 || y > cmax) continue;
-            for (int64_t dx = -1; dx <= 1; dx++) {
-                int64_t x = c[0] + dx;
-                if (x < 0 || x > cmax) continue;
-                int64_t s, e;
-                cell_range(g, g->level, morton3((uint32_t)x, (uint32_t)y, (uint32_t)z), &s, &e);
-                if (e <= s) continue;
-                if (block_reserve(b, b->n + (e - s))) return -1;
-                for (int64_t j = s; j < e; j++) {
-                    int64_t t = b->n++;
-                    b->x[t] = g->p[3 * j];
-                    b->y[t] = g->p[3 * j + 1];
-                    b->z[t] = g->p[3 * j + 2];
-                    b->idx[t] = g->orig[j];
-                    b->pos[t] = j;
-                }
-            }
-        }
+/* Append to b the points of the leaves whose box lies within squared distance r2 of
+ * box lb, unless more than limit points: returns 0, 1 (over the limit) or -1 (out of
+ * memory). Every point left out is farther than r2 from every point in lb. */
+static int gather(const tree_t *T, const double *lb, double r2, int64_t t, int64_t s,
+                  int64_t e, int d, int64_t limit, block_t *b) {
+    if (box_dist2(T->box + 6 * t, lb) > r2) return 0;
+    if (d < T->depth) {
+        int64_t m = s + (e - s) / 2;
+        int rc = gather(T, lb, r2, 2 * t + 1, s, m, d + 1, limit, b);
+        return rc ? rc : gather(T, lb, r2, 2 * t + 2, m, e, d + 1, limit, b);
+    }
+    if (b->n + (e - s) > limit) return 1;
+    if (block_reserve(b, b->n + (e - s))) return -1;
+    for (int64_t j = s; j < e; j++) {
+        int64_t u = b->n++;
+        b->x[u] = T->p[3 * j];
+        b->y[u] = T->p[3 * j + 1];
+        b->z[u] = T->p[3 * j + 2];
+        b->idx[u] = T->orig[j];
+        b->pos[u] = j;
     }
     return 0;
 }
 
-/* kNN of sorted positions [begin, end) at k = max(ks), then for each scale ks[s] the
+/* The leaf holding tree position i: its node, and its points [*s, *e). */
+static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
+    int64_t t = 0;
+    *s = 0;
+    *e = T->n;
+    for (int d = 0; d < T->depth; d++) {
+        int64_t m = *s + (*e - *s) / 2;
+        if (i < m) { t = 2 * t + 1; *e = m; }
+        else { t = 2 * t + 2; *s = m; }
+    }
+    return t;
+}
+
+/* Squared radius of a leaf's block, relative to the largest k-th squared distance of
+ * the previous leaf (radius x 1.25). */
+#define BLOCK_GROW 1.5625
+
+/* kNN of tree positions [begin, end) at k = max(ks), then for each scale ks[s] the
  * projected distance into out_pdis[s * n + orig[i]] (and the normal into
  * out_normals[(s * n + orig[i]) * 3], when not NULL). With out_idx (n, kmax) not NULL,
- * store the neighbour indices instead (no pdis). Returns 0, -1 out of memory.
+ * store the neighbour indices instead (no pdis). Returns 0, or -1 out of memory.
  *
- * Points are taken cell by cell: the 27 cells around a cell are gathered once for all
- * its points. A point's k nearest are among them when at least k lie closer than the
- * block's faces; the k-th distance of the previous point plus the distance between the
+ * Points are taken leaf by leaf. The points of the leaves within a radius r of the
+ * leaf's box are gathered once for all its points (r: 1.25 times the largest k-th
+ * distance of the previous leaf); a point's k nearest are among them when at least k
+ * lie within r. The k-th distance of the previous point plus the distance between the
  * two bounds this point's k-th distance (triangle inequality), which prunes the
- * candidates before the selection. Otherwise the search widens (knn_one). */
-int ms_cloud_pdis(const double *p, const int64_t *orig, const uint64_t *codes, int64_t n,
-                  double ox, double oy, double oz, double fine, int level,
-                  const uint64_t *hkeys, const int64_t *hstart, const int64_t *hend,
-                  int64_t hmask, const int64_t *ks, int nscales, int gaussian, int64_t begin,
-                  int64_t end, double *out_pdis, double *out_normals, int64_t *out_idx) {
-    grid_t g = {p, orig, codes, n, {ox, oy, oz}, fine, level, hkeys, hstart, hend, hmask};
+ * candidates before the selection. Otherwise (the k-th distance grew, or the block
+ * would exceed a few thousand points, as around a far outlier) the point gets a heap
+ * search of the tree: O(log n) per point whatever the spatial distribution. */
+int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
+                  const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
+                  double *out_pdis, double *out_normals, int64_t *out_idx) {
+    tree_t T = {p, orig, box, n, depth};
     int64_t kmax = ks[nscales - 1];
-    cbuf_t buf = {NULL, 0, 0};
+    int64_t limit = 32 * kmax + 512;
+    heap_t h = {(cand_t *)malloc((size_t)limit * sizeof(cand_t)), 0, kmax, INFINITY};
     block_t blk = {NULL, NULL, NULL, NULL, NULL, NULL, 0, 0};
     double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
     double *mu = (double *)malloc((size_t)kmax * sizeof(double));
-    int rc = 0;
-    uint64_t cell = EMPTY_KEY;
-    int64_t c[3] = {0, 0, 0};
-    int64_t cmax = (int64_t)(MORTON_MAX >> level);
-    double cs = fine * (double)(1ULL << level);
+    int rc = 0, have_block = 0;
+    int64_t leaf_s = 0, leaf_e = 0;
+    double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!q || !d2 || !mu) { rc = -1; goto done; }
+    if (!h.c || !q || !d2 || !mu) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
-        uint64_t key = codes[i] >> (3 * level);
-        if (key != cell) {
-            cell = key;
-            c[0] = compact3(key); c[1] = compact3(key >> 1); c[2] = compact3(key >> 2);
-            if (gather_block(&g, c, &blk)) { rc = -1; goto done; }
+        double tau = INFINITY;
+        if (prev_r >= 0.0) {
+            double ex = pi[0] - prev_p[0], ey = pi[1] - prev_p[1], ez = pi[2] - prev_p[2];
+            double t = prev_r + sqrt(ex * ex + ey * ey + ez * ez);
+            tau = t * t * (1.0 + 1e-9) + 1e-300;
         }
-        double bound = INFINITY;
-        for (int a = 0; a < 3; a++) {
-            if (c[a] - 1 > 0) {
-                double dd = pi[a] - (g.o[a] + (double)(c[a] - 1) * cs);
-                if (dd < bound) bound = dd;
-            }
-            if (c[a] + 2 <= cmax) {
-                double dd = (g.o[a] + (double)(c[a] + 2) * cs) - pi[a];
-                if (dd < bound) bound = dd;
+        if (i >= leaf_e) {
+            int64_t t = leaf_of(&T, i, &leaf_s, &leaf_e);
+            if (leaf_max > 0.0) r2 = leaf_max * BLOCK_GROW;
+            leaf_max = 0.0;
+            blk.n = 0;
+            have_block = 0;
+            if (r2 >= 0.0) {
+                int g = gather(&T, box + 6 * t, r2, 0, 0, n, 0, limit, &blk);
+                if (g < 0) { rc = -1; goto done; }
+                have_block = g == 0;
             }
         }
-        bound -= fine;
         int found = 0;
-        if (bound > 0.0 && blk.n >= kmax) {
-            double b2 = bound == INFINITY ? INFINITY : bound * bound;
+        if (have_block && blk.n >= kmax) {
+            double limit2 = tau < r2 ? tau : r2;
             double px = pi[0], py = pi[1], pz = pi[2];
-            int64_t nb = blk.n;
+            int64_t nb = blk.n, m = 0;
             double *bd = blk.d2;
             for (int64_t j = 0; j < nb; j++) {
                 double dx = blk.x[j] - px, dy = blk.y[j] - py, dz = blk.z[j] - pz;
                 bd[j] = dx * dx + dy * dy + dz * dz;
             }
-            double limit = b2;
-            if (prev_r >= 0.0) {
-                double ex = px - prev_p[0], ey = py - prev_p[1], ez = pz - prev_p[2];
-                double t = prev_r + sqrt(ex * ex + ey * ey + ez * ez);
-                double tau = t * t * (1.0 + 1e-9) + 1e-300;
-                if (tau < limit) limit = tau;
-            }
-            /* strictly inside the block (< b2), or within the triangle bound */
-            if (cbuf_reserve(&buf, nb)) { rc = -1; goto done; }
-            int64_t m = 0;
-            for (int64_t j = 0; j < nb; j++) {
-                if (bd[j] < limit || (limit < b2 && bd[j] == limit)) {
-                    buf.c[m].d2 = bd[j]; buf.c[m].idx = blk.idx[j]; buf.c[m].pos = blk.pos[j];
-                    m++;
-                }
-            }
-            if (m < kmax && limit < b2) {
-                /* rounding paranoia: retry with the block bound */
-                m = 0;
-                for (int64_t j = 0; j < nb; j++) {
-                    if (bd[j] < b2) {
-                        buf.c[m].d2 = bd[j]; buf.c[m].idx = blk.idx[j]; buf.c[m].pos = blk.pos[j];
-                        m++;
-                    }
-                }
+            for (int64_t j = 0; j < nb; j++) { /* branch-free: h.c holds limit >= nb */
+                h.c[m].d2 = bd[j]; h.c[m].idx = blk.idx[j]; h.c[m].pos = blk.pos[j];
+                m += bd[j] <= limit2;
             }
             if (m >= kmax) {
-                buf.n = m;
-                select_sorted(buf.c, m, kmax);
+                select_sorted(h.c, m, kmax);
                 found = 1;
             }
         }
-        if (!found && knn_one(&g, i, kmax, &buf)) { rc = -1; goto done; }
-        prev_r = sqrt(buf.c[kmax - 1].d2);
+        if (!found) knn_search(&T, pi, kmax, tau, &h);
+        double kth = h.c[kmax - 1].d2;
+        if (kth > leaf_max) leaf_max = kth;
+        if (r2 < 0.0) r2 = kth * BLOCK_GROW; /* the first point of the chunk */
+        prev_r = sqrt(kth);
         prev_p[0] = pi[0]; prev_p[1] = pi[1]; prev_p[2] = pi[2];
         int64_t oi = orig[i];
         if (out_idx != NULL) {
-            for (int64_t j = 0; j < kmax; j++) out_idx[oi * kmax + j] = buf.c[j].idx;
+            for (int64_t j = 0; j < kmax; j++) out_idx[oi * kmax + j] = h.c[j].idx;
             continue;
         }
         for (int64_t j = 0; j < kmax; j++) {
-            const double *pj = p + 3 * buf.c[j].pos;
+            const double *pj = p + 3 * h.c[j].pos;
             q[3 * j] = pj[0] - pi[0];
             q[3 * j + 1] = pj[1] - pi[1];
             q[3 * j + 2] = pj[2] - pi[2];
-            d2[j] = buf.c[j].d2;
+            d2[j] = h.c[j].d2;
         }
         double sx = 0, sy = 0, sz = 0, h2 = 0;
         int64_t j = 0;
@@ -580,7 +555,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, const uint64_t *codes, i
         }
     }
 done:
-    free(buf.c);
+    free(h.c);
     free(blk.x); free(blk.y); free(blk.z); free(blk.d2); free(blk.idx); free(blk.pos);
     free(q);
     free(d2);
@@ -591,13 +566,17 @@ done:
 /* ------------------------------------------------------------------ meshes */
 
 /* 1-ring adjacency of a triangle mesh, CSR with repeats (each face adds both other
- * corners to each corner): ptr (n + 1), idx (6 m). */
-void ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx) {
+ * corners to each corner): ptr (n + 1), idx (6 m). Returns 0, -1 out of memory, or -2
+ * when a face index lies outside [0, n) (nothing is written out of bounds). */
+int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx) {
+    for (int64_t f = 0; f < 3 * m; f++) {
+        if (faces[f] < 0 || faces[f] >= n) return -2;
+    }
+    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
+    if (fill == NULL) return -1;
     memset(ptr, 0, (size_t)(n + 1) * sizeof(int64_t));
     for (int64_t f = 0; f < 3 * m; f++) ptr[faces[f] + 1] += 2;
     for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
-    int64_t *fill = (int64_t *)malloc((size_t)n * sizeof(int64_t));
-    if (fill == NULL) return;
     memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
     for (int64_t f = 0; f < m; f++) {
         int64_t a = faces[3 * f], b = faces[3 * f + 1], c = faces[3 * f + 2];
@@ -606,6 +585,7 @@ void ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int3
         idx[fill[c]++] = (int32_t)a; idx[fill[c]++] = (int32_t)b;
     }
     free(fill);
+    return 0;
 }
 
 /* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
@@ -714,6 +694,15 @@ void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, i
 }
 
 /* ------------------------------------------------------------------ cleaning */
+
+static inline uint64_t hash64(uint64_t k) {
+    k ^= k >> 33;
+    k *= 0xff51afd7ed558ccdULL;
+    k ^= k >> 33;
+    k *= 0xc4ceb9fe1a85ec53ULL;
+    k ^= k >> 33;
+    return k;
+}
 
 static inline uint64_t point_hash(const double *x) {
     uint64_t h = 0x9e3779b97f4a7c15ULL;

@@ -22,26 +22,25 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import InputError
+
 #: Backends: "compiled" (the C kernels) and "numpy" (the reference implementation).
 BACKENDS: tuple[str, ...] = ("compiled", "numpy")
 #: Points per task handed to a thread.
 CHUNK = 8192
-#: Bits per axis of the fine Morton grid.
-MORTON_BITS = 21
+#: Most points in a leaf of the kd-tree.
+KD_LEAF = 16
 
 _c_void_p, _i64, _f64, _int = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
 _SIGNATURES = {
-    "ms_morton_codes": (None, [_c_void_p, _i64, _f64, _f64, _f64, _f64, _c_void_p]),
-    "ms_level_counts": (None, [_c_void_p, _i64, _c_void_p]),
-    "ms_build_cells": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p, _i64]),
+    "ms_kdtree_build": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
     "ms_eigvecs": (None, [_c_void_p, _i64, _c_void_p]),
     "ms_cloud_pdis": (
         _int,
-        [_c_void_p, _c_void_p, _c_void_p, _i64, _f64, _f64, _f64, _f64, _int]
-        + [_c_void_p, _c_void_p, _c_void_p, _i64, _c_void_p, _int, _int, _i64, _i64]
+        [_c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _int, _int, _i64, _i64]
         + [_c_void_p, _c_void_p, _c_void_p],
     ),
-    "ms_adjacency": (None, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
+    "ms_adjacency": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_ring_pdis": (
         _int,
         [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _int, _int, _i64, _i64]
@@ -156,69 +155,42 @@ def _run_chunks(n: int, workers: int, task: Callable[[int, int], int]) -> None:
 
 
 @dataclass
-class Grid:
-    """Points sorted along a Morton curve, bucketed in cubic cells for kNN queries.
+class KdTree:
+    """A balanced kd-tree of a cloud for exact k-NN queries (built in C).
 
-    The points keep their cleaned index in ``orig``: ties are broken by it and every
-    output is written in the cleaned order.
+    Stored implicitly: node 0 is the root, the children of node ``t`` are ``2t + 1``
+    and ``2t + 2``, every leaf is at depth ``depth``. The points are kept in tree order
+    with their cleaned index in ``orig``: ties are broken by it and every output is
+    written in the cleaned order. Median splits keep the tree balanced whatever the
+    spatial distribution (far outliers, distant clusters, points on a line).
     """
 
-    points: np.ndarray  # (n, 3) sorted
-    orig: np.ndarray  # (n,) int64 cleaned index of each sorted point
-    codes: np.ndarray  # (n,) uint64 sorted fine Morton codes
-    origin: np.ndarray  # (3,)
-    fine: float  # fine cell size
-    level: int  # cells of 2**level fine cells
-    hkeys: np.ndarray
-    hstart: np.ndarray
-    hend: np.ndarray
+    points: np.ndarray  # (n, 3) in tree order
+    orig: np.ndarray  # (n,) int64 cleaned index of each point in tree order
+    boxes: np.ndarray  # (2**(depth + 1) - 1, 6) tight box of each node: lo xyz, hi xyz
+    depth: int
 
     @property
     def n(self) -> int:
         return len(self.points)
 
 
-def build_grid(points: np.ndarray, k: int) -> Grid:
-    """Sort ``points`` (n, 3) along a Morton curve and choose cells for k-NN queries."""
+def build_tree(points: np.ndarray) -> KdTree:
+    """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     n = len(points)
-    lo = points.min(axis=0)
-    extent = float((points.max(axis=0) - lo).max())
-    cells = float(2**MORTON_BITS - 1)
-    fine = extent / cells * (1.0 + 1e-9) if extent > 0 else 1.0
-    codes = np.empty(n, dtype=np.uint64)
-    lib.ms_morton_codes(_ptr(points), n, *map(float, lo), 1.0 / fine, _ptr(codes))
-    order = np.argsort(codes, kind="stable")
-    codes = codes[order]
-    sorted_points = points[order]
-    counts = np.zeros(MORTON_BITS + 1, dtype=np.int64)
-    lib.ms_level_counts(_ptr(codes), n, _ptr(counts))
-    # Cells about as wide as the k-NN radius: on a surface about 0.4 k points a cell.
-    target = max(2.0, 0.4 * k)
-    per_cell = n / np.maximum(counts, 1)
-    level = int(np.argmin(np.abs(np.log(per_cell / target))))
-    size = 1 << int(np.ceil(np.log2(max(2 * counts[level], 2))))
-    hkeys = np.full(size, np.iinfo(np.uint64).max, dtype=np.uint64)
-    hstart = np.empty(size, dtype=np.int64)
-    hend = np.empty(size, dtype=np.int64)
-    lib.ms_build_cells(_ptr(codes), n, level, _ptr(hkeys), _ptr(hstart), _ptr(hend), size - 1)
-    return Grid(
-        sorted_points,
-        order.astype(np.int64, copy=False),
-        codes,
-        lo,
-        fine,
-        level,
-        hkeys,
-        hstart,
-        hend,
-    )
+    depth = max(0, int(np.ceil(np.log2(max(n, 1) / KD_LEAF))))
+    tree_points = np.empty_like(points)
+    orig = np.empty(n, dtype=np.int64)
+    boxes = np.empty((2 ** (depth + 1) - 1, 6))
+    lib.ms_kdtree_build(_ptr(points), n, depth, _ptr(tree_points), _ptr(orig), _ptr(boxes))
+    return KdTree(tree_points, orig, boxes, depth)
 
 
 def _cloud_call(
-    grid: Grid,
+    tree: KdTree,
     ks: np.ndarray,
     gaussian: bool,
     workers: int,
@@ -228,26 +200,22 @@ def _cloud_call(
 ) -> None:
     lib = _LIB
     assert lib is not None
-    g = grid
-    args = (
-        _ptr(g.points), _ptr(g.orig), _ptr(g.codes), g.n, *map(float, g.origin), g.fine,
-        g.level, _ptr(g.hkeys), _ptr(g.hstart), _ptr(g.hend), len(g.hkeys) - 1, _ptr(ks),
-        len(ks), int(gaussian),
-    )  # fmt: skip
+    t = tree
+    args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(ks), len(ks))
     tail = (_ptr(out_pdis), _ptr(out_normals), _ptr(out_idx))
-    _run_chunks(g.n, workers, lambda a, b: lib.ms_cloud_pdis(*args, a, b, *tail))
+    _run_chunks(t.n, workers, lambda a, b: lib.ms_cloud_pdis(*args, int(gaussian), a, b, *tail))
 
 
-def cloud_knn(grid: Grid, k: int, workers: int = -1) -> np.ndarray:
+def cloud_knn(tree: KdTree, k: int, workers: int = -1) -> np.ndarray:
     """The k nearest neighbours of every point (cleaned order), (n, k) int64, rows
     sorted by (squared distance, index)."""
-    out = np.empty((grid.n, k), dtype=np.int64)
-    _cloud_call(grid, np.array([k], dtype=np.int64), False, workers, None, None, out)
+    out = np.empty((tree.n, k), dtype=np.int64)
+    _cloud_call(tree, np.array([k], dtype=np.int64), False, workers, None, None, out)
     return out
 
 
 def cloud_projected_distances(
-    grid: Grid,
+    tree: KdTree,
     scales: Sequence[int],
     weighting: str = "gaussian",
     *,
@@ -257,9 +225,9 @@ def cloud_projected_distances(
     """Projected distances (s, n) at every kNN scale (cleaned order), and the normals
     (s, n, 3) when ``keep_normals``; one neighbour search at the largest scale."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
-    pdis = np.empty((len(ks), grid.n))
-    normals = np.empty((len(ks), grid.n, 3)) if keep_normals else None
-    _cloud_call(grid, ks, weighting == "gaussian", workers, pdis, normals, None)
+    pdis = np.empty((len(ks), tree.n))
+    normals = np.empty((len(ks), tree.n, 3)) if keep_normals else None
+    _cloud_call(tree, ks, weighting == "gaussian", workers, pdis, normals, None)
     return pdis, normals
 
 
@@ -275,7 +243,11 @@ def adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     ptr = np.empty(n + 1, dtype=np.int64)
     idx = np.empty(6 * len(faces), dtype=np.int32)
-    lib.ms_adjacency(_ptr(faces), len(faces), n, _ptr(ptr), _ptr(idx))
+    rc = lib.ms_adjacency(_ptr(faces), len(faces), n, _ptr(ptr), _ptr(idx))
+    if rc == -2:
+        raise InputError(f"a face index lies outside the {n} vertices")
+    if rc != 0:
+        raise MemoryError("out of memory building the mesh adjacency")
     return ptr, idx
 
 

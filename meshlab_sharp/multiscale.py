@@ -158,11 +158,11 @@ def _compiled_projected_distances(
         return None
     if list(scales) != sorted(set(scales)):
         return None
-    if isinstance(neighbourhoods, KnnNeighbourhoods) and neighbourhoods.grid is not None:
+    if isinstance(neighbourhoods, KnnNeighbourhoods) and neighbourhoods.tree is not None:
         if max(scales) > neighbourhoods.k_max or min(scales) < 1:
             return None
         return _kernels.cloud_projected_distances(
-            neighbourhoods.grid,
+            neighbourhoods.tree,
             scales,
             weighting,
             keep_normals=keep_normals,

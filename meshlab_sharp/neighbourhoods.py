@@ -7,14 +7,15 @@ for meshes each ring is grown from the previous one.
 
 Two backends give the same neighbourhoods (``tests/test_equivalence.py``): "numpy",
 the reference (cKDTree, sparse matrix powers), and "compiled" (the default when built,
-:mod:`meshlab_sharp._kernels`), which sorts the points along a Morton curve into grid
-cells and searches them in C. With the compiled backend the neighbourhoods are not
-stored: :func:`meshlab_sharp.multiscale.run_scales` searches them and uses them at once,
-point by point, and ``at()`` computes a scale's table only when asked for.
+:mod:`meshlab_sharp._kernels`), which builds a balanced kd-tree and searches it in C.
+With the compiled backend the neighbourhoods are not stored:
+:func:`meshlab_sharp.multiscale.run_scales` searches them and uses them at once, point by
+point, and ``at()`` computes a scale's table only when asked for.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -27,6 +28,9 @@ from .errors import InputError
 
 #: Rows per block of kNN queries (bounds the temporary memory).
 QUERY_BLOCK = 131072
+#: Coordinates up to 2**UNIT_RANGE in absolute value, and at least 2**-UNIT_RANGE for
+#: the largest, are used as they are; others are scaled (:func:`unit_scale`).
+UNIT_RANGE = 100
 
 
 @dataclass(frozen=True)
@@ -60,6 +64,38 @@ def squared_distances(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """
     d = points - centres
     return d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
+
+
+def unit_scale(points: np.ndarray) -> tuple[np.ndarray, int]:
+    """``points * 2**-e`` and ``e``: coordinates of O(1) whatever the unit.
+
+    Multiplying by a power of two is exact in IEEE arithmetic (short of underflow), so
+    every ratio of distances, every normal and every decision is the one the unscaled
+    points give where those do not underflow or overflow; on the scaled points (the
+    largest absolute coordinate in [0.5, 1)) no squared distance, area or covariance
+    does, whatever the unit (1e-300 to 1e300). When the largest absolute coordinate
+    already lies in [2**-100, 2**100) nothing in the detection can underflow or overflow
+    either (squared distances stay above 2**-306, covariances far from LAPACK's
+    rescaling bounds), so scaling would change no bit: the points are returned as they
+    are (``e = 0``), which saves a copy. No translation: it would round.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+        Finite coordinates.
+
+    Returns
+    -------
+    scaled : (n, 3) float64
+        A new array, or ``points`` itself when ``e`` is 0.
+    e : int
+        ``np.ldexp(scaled, e)`` gives ``points`` back.
+    """
+    largest = max(float(points.max()), -float(points.min())) if points.size else 0.0
+    e = math.frexp(largest)[1]
+    if largest == 0.0 or -UNIT_RANGE < e <= UNIT_RANGE:
+        return points, 0
+    return np.ldexp(points, -e), e
 
 
 def knn(points: np.ndarray, k: int, *, workers: int = -1) -> np.ndarray:
@@ -157,10 +193,10 @@ class KnnNeighbourhoods:
         self.workers = workers
         self.backend = _kernels.resolve(backend)
         self._indices: np.ndarray | None = None
-        #: The Morton-sorted grid of the compiled backend (None with numpy).
-        self.grid: _kernels.Grid | None = None
+        #: The kd-tree of the compiled backend (None with numpy).
+        self.tree: _kernels.KdTree | None = None
         if self.backend == "compiled":
-            self.grid = _kernels.build_grid(points, k_max)
+            self.tree = _kernels.build_tree(points)
         else:
             self._indices = knn(points, k_max, workers=workers)
 
@@ -168,8 +204,8 @@ class KnnNeighbourhoods:
     def indices(self) -> np.ndarray:
         """(n, k_max) neighbour indices, rows sorted by (squared distance, index)."""
         if self._indices is None:
-            assert self.grid is not None
-            idx = _kernels.cloud_knn(self.grid, self.k_max, self.workers)
+            assert self.tree is not None
+            idx = _kernels.cloud_knn(self.tree, self.k_max, self.workers)
             dtype = np.int32 if len(idx) < 2**31 else np.int64
             self._indices = idx.astype(dtype)
         return self._indices

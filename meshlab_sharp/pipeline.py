@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -18,7 +18,7 @@ from .cleaning import clean
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
-from .neighbourhoods import build_neighbourhoods
+from .neighbourhoods import build_neighbourhoods, unit_scale
 from .normals import WEIGHTINGS, Weighting, face_average_normals
 from .preprocessing import (
     Preprocessing,
@@ -242,9 +242,15 @@ def _detect(
     if steps is not None and steps.active:
         t = time.perf_counter()
         log: list[dict[str, Any]] = []
-        given = Geometry(geometry.vertices, None, geometry.source) if as_points else geometry
+        # pymeshlab's filters too run on coordinates of O(1) (some hang or empty the mesh
+        # at 1e100 units); the processed geometry is reported in the input's unit.
+        unit, exponent = unit_scale(geometry.vertices)
+        given = Geometry(unit, None if as_points else geometry.faces, geometry.source)
         processed, to_input = preprocess(given, steps, log=log)
-        report = PreprocessingReport(log, processed, to_input, seconds=time.perf_counter() - t)
+        in_unit = processed
+        if exponent:
+            in_unit = replace(processed, vertices=np.ldexp(processed.vertices, exponent))
+        report = PreprocessingReport(log, in_unit, to_input, seconds=time.perf_counter() - t)
         inner = detect(
             processed,
             scales=scales,
@@ -269,7 +275,11 @@ def _detect(
     )
 
     t = time.perf_counter()
-    cleaned = clean(geometry if is_mesh else Geometry(geometry.vertices, None, geometry.source))
+    # Exact power-of-two scaling to O(1) where needed: the answer does not depend on the
+    # unit (every output is unit-free), no squared distance or area underflows or
+    # overflows.
+    unit = unit_scale(geometry.vertices)[0]
+    cleaned = clean(Geometry(unit, geometry.faces if is_mesh else None, geometry.source))
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     points = cleaned.vertices

@@ -10,6 +10,11 @@ within 1e-9 of a threshold: none does in these shapes. No timings here.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from shapes import (
@@ -24,7 +29,12 @@ from shapes import (
 from meshlab_sharp import _kernels, detect
 from meshlab_sharp.cleaning import clean
 from meshlab_sharp.io import as_geometry
-from meshlab_sharp.neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods, knn
+from meshlab_sharp.neighbourhoods import (
+    KnnNeighbourhoods,
+    RingNeighbourhoods,
+    knn,
+    squared_distances,
+)
 from meshlab_sharp.normals import face_average_normals
 
 pytestmark = pytest.mark.skipif(
@@ -136,6 +146,108 @@ def test_knn_identical_with_ties(name):
     fast = KnnNeighbourhoods(points, 40, backend="compiled")
     np.testing.assert_array_equal(fast.indices, knn(points, 40))
     np.testing.assert_array_equal(fast.at(12).indices, knn(points, 12).reshape(-1))
+
+
+def _sphere(n: int, seed: int = 0) -> np.ndarray:
+    """n random points on the unit sphere. (n, 3)."""
+    p = np.random.default_rng(seed).normal(size=(n, 3))
+    return p / np.linalg.norm(p, axis=1, keepdims=True)
+
+
+def _far_outlier(n: int) -> np.ndarray:
+    p = _sphere(n)
+    p[-1] = 1e12
+    return p
+
+
+def _two_clusters(n: int) -> np.ndarray:
+    p = _sphere(n)
+    p[n // 2 :] += [1e9, -3e8, 2e9]
+    return p
+
+
+def _line(n: int) -> np.ndarray:
+    p = np.zeros((n, 3))
+    p[:, 0] = np.random.default_rng(1).random(n)
+    return p
+
+
+def _plane(n: int) -> np.ndarray:
+    p = np.zeros((n, 3))
+    p[:, :2] = np.random.default_rng(2).random((n, 2))
+    return p
+
+
+#: Spatial distributions that defeat a grid sized from the bounding box.
+SPREADS = {
+    "far_outlier_1e12": _far_outlier,
+    "two_clusters_1e9_apart": _two_clusters,
+    "line": _line,
+    "plane": _plane,
+}
+
+_COMPILED_KNN = """
+import sys
+import numpy as np
+from meshlab_sharp.neighbourhoods import KnnNeighbourhoods
+np.save(sys.argv[2], KnnNeighbourhoods(np.load(sys.argv[1]), 40, backend="compiled").indices)
+"""
+
+
+@pytest.mark.parametrize("name", sorted(SPREADS))
+def test_knn_any_spatial_distribution(name, tmp_path):
+    """100k points. A far outlier or distant clusters made the former grid search
+    quadratic (minutes); the kd-tree answers in about a second of CPU, so the compiled
+    search runs in a subprocess with a generous time limit. Both backends give the same table,
+    which agrees with brute force on sampled rows (the far point among them)."""
+    points = np.unique(SPREADS[name](100_000), axis=0)
+    np.save(tmp_path / "points.npy", points)
+    root = Path(__file__).resolve().parent.parent
+    subprocess.run(
+        [sys.executable, "-c", _COMPILED_KNN, tmp_path / "points.npy", tmp_path / "knn.npy"],
+        check=True,
+        timeout=60,
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )
+    compiled = np.load(tmp_path / "knn.npy")
+    np.testing.assert_array_equal(compiled, knn(points, 40))
+    rows = np.random.default_rng(0).choice(len(points), 100, replace=False)
+    rows[0] = np.argmax(np.abs(points).max(axis=1))
+    for i in rows:
+        d2 = squared_distances(points, points[i])
+        np.testing.assert_array_equal(compiled[i], np.lexsort((np.arange(len(points)), d2))[:40])
+
+
+_COMPILED_DETECT = """
+import sys
+import numpy as np
+from meshlab_sharp import detect
+points = np.load(sys.argv[1])
+masks = {m: detect(points, mode=m, backend="compiled").mask for m in ("paper", "robust")}
+np.savez(sys.argv[2], **masks)
+"""
+
+
+def test_detect_with_a_far_outlier_both_modes(tmp_path):
+    """The issue's case end to end: a scan with one stray point at 1e12, both modes
+    (robust mode searches neighbours again for thinning), with the numpy reference's
+    answer, in a subprocess with a time limit against a hang (the former grid search
+    was quadratic here; test_knn_any_spatial_distribution measures that at 100k)."""
+    points = _far_outlier(20_000)
+    np.save(tmp_path / "points.npy", points)
+    root = Path(__file__).resolve().parent.parent
+    subprocess.run(
+        [sys.executable, "-c", _COMPILED_DETECT, tmp_path / "points.npy", tmp_path / "masks.npz"],
+        check=True,
+        timeout=150,
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )
+    masks = np.load(tmp_path / "masks.npz")
+    for mode in ("paper", "robust"):
+        reference = detect(points, mode=mode, backend="numpy").mask
+        np.testing.assert_array_equal(masks[mode], reference, err_msg=mode)
 
 
 def test_rings_identical():

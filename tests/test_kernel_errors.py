@@ -1,0 +1,63 @@
+"""The compiled kernels report a failed allocation or a bad index as a Python error.
+
+Each allocation in ``_ckernels.c`` is checked: the kernel returns an error code and the
+wrapper raises MemoryError (or InputError for a face index outside the vertices)
+instead of writing through a null pointer. Memory is made to run out in a subprocess
+whose address space is limited just above what the wrapper's numpy arrays need, so
+that only the kernel's own allocation (the mesh adjacency's fill pointers) fails.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from meshlab_sharp import _kernels
+from meshlab_sharp.errors import InputError
+
+pytestmark = pytest.mark.skipif(not _kernels.available(), reason="compiled kernels not built")
+
+_UNDER_LIMIT = """
+import resource
+import numpy as np
+from meshlab_sharp import _kernels
+
+def vm_bytes():
+    with open("/proc/self/status") as f:
+        return next(int(l.split()[1]) * 1024 for l in f if l.startswith("VmSize:"))
+
+n = 4_000_000
+faces = np.array([[0, 1, 2]], dtype=np.int64)
+arrays = (n + 1) * 8 + 6 * 4  # ptr and idx; the kernel then needs n * 8 more
+resource.setrlimit(resource.RLIMIT_AS, (vm_bytes() + arrays + 16 * 2**20,) * 2)
+try:
+    _kernels.adjacency(faces, n)
+except MemoryError as e:
+    print("MemoryError:", e)
+"""
+
+
+def test_out_of_memory_is_a_memory_error():
+    root = Path(__file__).resolve().parent.parent
+    run = subprocess.run(
+        [sys.executable, "-c", _UNDER_LIMIT],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": str(root), "OPENBLAS_NUM_THREADS": "1"},
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith("MemoryError: out of memory"), run.stdout + run.stderr
+
+
+@pytest.mark.parametrize("bad", [-1, 3])
+def test_adjacency_rejects_face_index_outside_vertices(bad):
+    faces = np.array([[0, 1, 2], [0, 2, bad]], dtype=np.int64)
+    with pytest.raises(InputError, match="outside the 3 vertices"):
+        _kernels.adjacency(faces, 3)
