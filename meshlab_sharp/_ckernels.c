@@ -139,6 +139,105 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
     return fabs(mean[0] * nrm[0] + mean[1] * nrm[1] + mean[2] * nrm[2]);
 }
 
+/* ------------------------------------------------------------------ robust mode */
+
+/* numpy's pairwise summation of a[0], a[stride], ... (n terms), as its add.reduce
+ * inner loop computes it (numpy/_core/src/umath/loops_utils.h.src): fewer than 8
+ * terms summed in order from -0.0; up to 128 in 8 interleaved partial sums, combined
+ * as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)), then the remainder in order;
+ * more split in two at a multiple of 8. */
+static double pairwise_sum(const double *a, int64_t n, int64_t stride) {
+    if (n < 8) {
+        double res = -0.0;
+        for (int64_t i = 0; i < n; i++) res += a[i * stride];
+        return res;
+    }
+    if (n <= 128) {
+        double r[8];
+        for (int j = 0; j < 8; j++) r[j] = a[j * stride];
+        int64_t i = 8;
+        for (; i < n - (n % 8); i += 8) {
+            for (int j = 0; j < 8; j++) r[j] += a[(i + j) * stride];
+        }
+        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; i++) res += a[i * stride];
+        return res;
+    }
+    int64_t n2 = n / 2;
+    n2 -= n2 % 8;
+    return pairwise_sum(a, n2, stride) + pairwise_sum(a + n2 * stride, n - n2, stride);
+}
+
+/* The sum of a segment as numpy's add.reduceat computes it: the first term plus the
+ * pairwise sum of the others. */
+static inline double segment_sum(const double *a, int64_t n, int64_t stride) {
+    if (n == 0) return 0.0;
+    return n == 1 ? a[0] : a[0] + pairwise_sum(a + stride, n - 1, stride);
+}
+
+/* robust.local_scale of one neighbourhood: offsets q (m, 3) from the point, their
+ * lengths dist (m): *ell = (sum dist) / m, *off = |(sum q) / m| (0, 0 when m = 0). */
+static inline void local_scale_one(const double *q, const double *dist, int64_t m, double *ell,
+                                   double *off) {
+    if (m == 0) { *ell = 0.0; *off = 0.0; return; }
+    double c = (double)m;
+    *ell = segment_sum(dist, m, 1) / c;
+    double cx = segment_sum(q, m, 3) / c, cy = segment_sum(q + 1, m, 3) / c,
+           cz = segment_sum(q + 2, m, 3) / c;
+    *off = sqrt(cx * cx + cy * cy + cz * cz);
+}
+
+/* robust.local_scale over CSR lists (indptr, indices int32 or int64 when wide), points
+ * [begin, end): out_ell, out_off (n). Returns 0, or -1 out of memory. */
+int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indices, int wide,
+                       int64_t begin, int64_t end, double *out_ell, double *out_off) {
+    int64_t cap = 0;
+    double *q = NULL, *dist = NULL;
+    for (int64_t i = begin; i < end; i++) {
+        int64_t s = indptr[i], m = indptr[i + 1] - s;
+        if (m > cap) {
+            cap = m > 2 * cap ? m : 2 * cap;
+            free(q); free(dist);
+            q = (double *)malloc((size_t)cap * 3 * sizeof(double));
+            dist = (double *)malloc((size_t)cap * sizeof(double));
+            if (!q || !dist) { free(q); free(dist); return -1; }
+        }
+        const double *pi = p + 3 * i;
+        for (int64_t j = 0; j < m; j++) {
+            int64_t v = wide ? ((const int64_t *)indices)[s + j] : ((const int32_t *)indices)[s + j];
+            const double *pj = p + 3 * v;
+            double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
+            q[3 * j] = x; q[3 * j + 1] = y; q[3 * j + 2] = z;
+            dist[j] = sqrt(x * x + y * y + z * z);
+        }
+        local_scale_one(q, dist, m, out_ell + i, out_off + i);
+    }
+    free(q);
+    free(dist);
+    return 0;
+}
+
+/* robust.noise_scale_factor's ratio at one point: offsets q (k, 3) of its k nearest
+ * (itself first, then its nearest neighbour): |d . n| / |d| with d = q[1] and n the
+ * unweighted PCA normal of the k offsets (0 when |d| = 0). */
+static double noise_ratio(const double *q, int64_t k) {
+    double sx = 0, sy = 0, sz = 0;
+    for (int64_t j = 0; j < k; j++) { sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2]; }
+    double c[3] = {sx / (double)k, sy / (double)k, sz / (double)k};
+    double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
+    for (int64_t j = 0; j < k; j++) {
+        double rx = q[3 * j] - c[0], ry = q[3 * j + 1] - c[1], rz = q[3 * j + 2] - c[2];
+        c00 += rx * rx; c01 += rx * ry; c02 += rx * rz;
+        c11 += ry * ry; c12 += ry * rz; c22 += rz * rz;
+    }
+    double nrm[3];
+    smallest_eigvec(c00, c01, c02, c11, c12, c22, nrm);
+    const double *d = q + 3;
+    double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    double across = fabs(d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2]);
+    return length > 0 ? across / length : 0.0;
+}
+
 /* ------------------------------------------------------------------ kd-tree */
 
 /* A balanced kd-tree stored implicitly: node 0 is the root, the children of node t are
@@ -455,10 +554,26 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  * the previous leaf (radius x 1.25). */
 #define BLOCK_GROW 1.5625
 
-/* kNN of tree positions [begin, end) at k = max(ks), then for each scale ks[s] the
- * projected distance into out_pdis[s * n + orig[i]] (and the normal into
- * out_normals[(s * n + orig[i]) * 3], when not NULL). With out_idx (n, kmax) not NULL,
- * store the neighbour indices instead (no pdis). Returns 0, or -1 out of memory.
+/* What one pass over the points writes (each pointer may be NULL), per cleaned index
+ * oi = orig[i], s the scale's position in ks:
+ *   pdis[s * n + oi]          projected distance; normals[(s * n + oi) * 3] its normal;
+ *   idx[oi * kmax + j]        the neighbour indices (kNN table);
+ *   ell[s * n + oi], off[...] robust.local_scale (numpy's summation order);
+ *   noise[oi]                 robust.noise_scale_factor's ratio over the noise_k nearest;
+ *   near[oi]                  the nearest other point (column 1 of the kNN table);
+ *   kth_d2[oi], kth_idx[oi]   squared distance and index of the kmax-th neighbour. */
+typedef struct {
+    double *pdis, *normals;
+    int64_t *idx;
+    double *ell, *off, *noise;
+    int64_t noise_k;
+    int64_t *near;
+    double *kth_d2;
+    int64_t *kth_idx;
+} cloud_out_t;
+
+/* kNN of tree positions [begin, end) at k = max(ks), then what out asks for (see
+ * cloud_out_t). Returns 0, or -1 out of memory.
  *
  * Points are taken leaf by leaf. The points of the leaves within a radius r of the
  * leaf's box are gathered once for all its points (r: 1.25 times the largest k-th
@@ -470,7 +585,7 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  * search of the tree: O(log n) per point whatever the spatial distribution. */
 int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
-                  double *out_pdis, double *out_normals, int64_t *out_idx) {
+                  const cloud_out_t *out) {
     tree_t T = {p, orig, box, n, depth};
     int64_t kmax = ks[nscales - 1];
     int64_t limit = 32 * kmax + 512;
@@ -479,11 +594,12 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
     double *mu = (double *)malloc((size_t)kmax * sizeof(double));
+    double *dist = (double *)malloc((size_t)kmax * sizeof(double));
     int rc = 0, have_block = 0;
     int64_t leaf_s = 0, leaf_e = 0;
     double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu) { rc = -1; goto done; }
+    if (!h.c || !q || !d2 || !mu || !dist) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         double tau = INFINITY;
@@ -530,10 +646,15 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         prev_r = sqrt(kth);
         prev_p[0] = pi[0]; prev_p[1] = pi[1]; prev_p[2] = pi[2];
         int64_t oi = orig[i];
-        if (out_idx != NULL) {
-            for (int64_t j = 0; j < kmax; j++) out_idx[oi * kmax + j] = h.c[j].idx;
-            continue;
+        if (out->idx != NULL) {
+            for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = h.c[j].idx;
         }
+        if (out->near != NULL) out->near[oi] = kmax > 1 ? h.c[1].idx : oi;
+        if (out->kth_d2 != NULL) {
+            out->kth_d2[oi] = h.c[kmax - 1].d2;
+            out->kth_idx[oi] = h.c[kmax - 1].idx;
+        }
+        if (out->pdis == NULL && out->ell == NULL && out->noise == NULL) continue;
         for (int64_t j = 0; j < kmax; j++) {
             const double *pj = p + 3 * h.c[j].pos;
             q[3 * j] = pj[0] - pi[0];
@@ -541,6 +662,17 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             q[3 * j + 2] = pj[2] - pi[2];
             d2[j] = h.c[j].d2;
         }
+        if (out->noise != NULL) {
+            int64_t k0 = out->noise_k < kmax ? out->noise_k : kmax;
+            out->noise[oi] = k0 >= 2 ? noise_ratio(q, k0) : 0.0;
+        }
+        if (out->ell != NULL) {
+            for (int64_t j = 0; j < kmax; j++) dist[j] = sqrt(d2[j]);
+            for (int s = 0; s < nscales; s++) {
+                local_scale_one(q, dist, ks[s], out->ell + s * n + oi, out->off + s * n + oi);
+            }
+        }
+        if (out->pdis == NULL) continue;
         double sx = 0, sy = 0, sz = 0, h2 = 0;
         int64_t j = 0;
         for (int s = 0; s < nscales; s++) {
@@ -550,8 +682,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                 if (d2[j] > h2) h2 = d2[j];
             }
             double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
-            double *nrm = out_normals ? out_normals + 3 * (s * n + oi) : NULL;
-            out_pdis[s * n + oi] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
+            double *nrm = out->normals ? out->normals + 3 * (s * n + oi) : NULL;
+            out->pdis[s * n + oi] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
         }
     }
 done:
@@ -560,7 +692,24 @@ done:
     free(q);
     free(d2);
     free(mu);
+    free(dist);
     return rc;
+}
+
+/* For r in [begin, end): the k nearest of the point at tree position pos[r] into
+ * out_idx[r * k ...] (cleaned indices sorted by (squared distance, index), the rows of
+ * ms_cloud_pdis's kNN table). Returns 0, or -1 out of memory. */
+int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
+                const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx) {
+    tree_t T = {p, orig, box, n, depth};
+    heap_t h = {(cand_t *)malloc((size_t)k * sizeof(cand_t)), 0, k, INFINITY};
+    if (!h.c) return -1;
+    for (int64_t r = begin; r < end; r++) {
+        knn_search(&T, p + 3 * pos[r], k, INFINITY, &h);
+        for (int64_t j = 0; j < k; j++) out_idx[r * k + j] = h.c[j].idx;
+    }
+    free(h.c);
+    return 0;
 }
 
 /* ------------------------------------------------------------------ meshes */

@@ -38,7 +38,15 @@ _SIGNATURES = {
     "ms_cloud_pdis": (
         _int,
         [_c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _int, _int, _i64, _i64]
-        + [_c_void_p, _c_void_p, _c_void_p],
+        + [_c_void_p],
+    ),
+    "ms_knn_rows": (
+        _int,
+        [_c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _i64, _i64, _i64, _c_void_p],
+    ),
+    "ms_local_scale_csr": (
+        _int,
+        [_c_void_p, _c_void_p, _c_void_p, _int, _i64, _i64, _c_void_p, _c_void_p],
     ),
     "ms_adjacency": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_ring_pdis": (
@@ -189,28 +197,63 @@ def build_tree(points: np.ndarray) -> KdTree:
     return KdTree(tree_points, orig, boxes, depth)
 
 
+class _CloudOut(ctypes.Structure):
+    """What one pass of ``ms_cloud_pdis`` writes (``cloud_out_t``; NULL: nothing)."""
+
+    _fields_ = [
+        ("pdis", _c_void_p),
+        ("normals", _c_void_p),
+        ("idx", _c_void_p),
+        ("ell", _c_void_p),
+        ("off", _c_void_p),
+        ("noise", _c_void_p),
+        ("noise_k", _i64),
+        ("near", _c_void_p),
+        ("kth_d2", _c_void_p),
+        ("kth_idx", _c_void_p),
+    ]
+
+
 def _cloud_call(
-    tree: KdTree,
-    ks: np.ndarray,
-    gaussian: bool,
-    workers: int,
-    out_pdis: np.ndarray | None,
-    out_normals: np.ndarray | None,
-    out_idx: np.ndarray | None,
+    tree: KdTree, ks: np.ndarray, gaussian: bool, workers: int, **out: np.ndarray | int | None
 ) -> None:
+    """One pass of ``ms_cloud_pdis`` over the tree's points at the scales ``ks``; ``out``
+    names the arrays (fields of :class:`_CloudOut`) to fill, ``noise_k`` an int."""
     lib = _LIB
     assert lib is not None
     t = tree
+    fields = {
+        name: value if name == "noise_k" else _ptr(value)  # type: ignore[arg-type]
+        for name, value in out.items()
+        if value is not None
+    }
+    spec = _CloudOut(**fields)
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(ks), len(ks))
-    tail = (_ptr(out_pdis), _ptr(out_normals), _ptr(out_idx))
-    _run_chunks(t.n, workers, lambda a, b: lib.ms_cloud_pdis(*args, int(gaussian), a, b, *tail))
+    _run_chunks(
+        t.n, workers, lambda a, b: lib.ms_cloud_pdis(*args, int(gaussian), a, b, ctypes.byref(spec))
+    )
 
 
 def cloud_knn(tree: KdTree, k: int, workers: int = -1) -> np.ndarray:
     """The k nearest neighbours of every point (cleaned order), (n, k) int64, rows
     sorted by (squared distance, index)."""
     out = np.empty((tree.n, k), dtype=np.int64)
-    _cloud_call(tree, np.array([k], dtype=np.int64), False, workers, None, None, out)
+    _cloud_call(tree, np.array([k], dtype=np.int64), False, workers, idx=out)
+    return out
+
+
+def cloud_knn_rows(tree: KdTree, rows: np.ndarray, k: int, workers: int = -1) -> np.ndarray:
+    """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64, each by a
+    search of the tree (for a few rows: the table of every point is not built)."""
+    lib = _LIB
+    assert lib is not None
+    t = tree
+    where = np.empty(t.n, dtype=np.int64)
+    where[t.orig] = np.arange(t.n, dtype=np.int64)
+    pos = np.ascontiguousarray(where[np.asarray(rows, dtype=np.int64)])
+    out = np.empty((len(pos), k), dtype=np.int64)
+    args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(pos), k)
+    _run_chunks(len(pos), workers, lambda a, b: lib.ms_knn_rows(*args, a, b, _ptr(out)))
     return out
 
 
@@ -220,15 +263,65 @@ def cloud_projected_distances(
     weighting: str = "gaussian",
     *,
     keep_normals: bool = False,
+    local_scales: bool = False,
     workers: int = -1,
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """Projected distances (s, n) at every kNN scale (cleaned order), and the normals
-    (s, n, 3) when ``keep_normals``; one neighbour search at the largest scale."""
+) -> tuple[np.ndarray, np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
+    """Projected distances (s, n) at every kNN scale (cleaned order), the normals
+    (s, n, 3) when ``keep_normals``, and with ``local_scales`` robust mode's local
+    scales and centroid distances (each (s, n), as :func:`meshlab_sharp.robust.local_scale`
+    computes them bit for bit); one neighbour search at the largest scale."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
     pdis = np.empty((len(ks), tree.n))
     normals = np.empty((len(ks), tree.n, 3)) if keep_normals else None
-    _cloud_call(tree, ks, weighting == "gaussian", workers, pdis, normals, None)
-    return pdis, normals
+    local = (np.empty_like(pdis), np.empty_like(pdis)) if local_scales else None
+    ell, off = local if local is not None else (None, None)
+    _cloud_call(
+        tree, ks, weighting == "gaussian", workers, pdis=pdis, normals=normals, ell=ell, off=off
+    )
+    return pdis, normals, local
+
+
+@dataclass
+class CloudStats:
+    """Per point (cleaned order) what robust mode's set-up needs from the kNN lists at
+    ``k`` (:func:`cloud_stats`)."""
+
+    near: np.ndarray  # (n,) int64 nearest other point (column 1 of the kNN table)
+    kth_d2: np.ndarray  # (n,) float64 squared distance of the k-th neighbour
+    kth_idx: np.ndarray  # (n,) int64 its index
+    noise: np.ndarray  # (n,) float64 noise ratio over the noise_k nearest
+
+
+def cloud_stats(tree: KdTree, k: int, noise_k: int, workers: int = -1) -> CloudStats:
+    """:class:`CloudStats` of every point from one kNN search at ``k``, without the
+    (n, k) table."""
+    n = tree.n
+    stats = CloudStats(
+        np.empty(n, dtype=np.int64), np.empty(n), np.empty(n, dtype=np.int64), np.empty(n)
+    )
+    ks = np.array([k], dtype=np.int64)
+    _cloud_call(
+        tree, ks, False, workers, near=stats.near, kth_d2=stats.kth_d2, kth_idx=stats.kth_idx,
+        noise=stats.noise, noise_k=noise_k,
+    )  # fmt: skip
+    return stats
+
+
+def local_scale_csr(
+    points: np.ndarray, indptr: np.ndarray, indices: np.ndarray, workers: int = -1
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`meshlab_sharp.robust.local_scale` over CSR lists, bit for bit."""
+    lib = _LIB
+    assert lib is not None
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    indptr = np.ascontiguousarray(indptr, dtype=np.int64)
+    wide = np.asarray(indices).dtype.itemsize > 4
+    indices = np.ascontiguousarray(indices, dtype=np.int64 if wide else np.int32)
+    n = len(indptr) - 1
+    ell, off = np.empty(n), np.empty(n)
+    args = (_ptr(points), _ptr(indptr), _ptr(indices), int(wide))
+    _run_chunks(n, workers, lambda a, b: lib.ms_local_scale_csr(*args, a, b, _ptr(ell), _ptr(off)))
+    return ell, off
 
 
 # ---------------------------------------------------------------------------- meshes

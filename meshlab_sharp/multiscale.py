@@ -55,7 +55,8 @@ def run_scales(
     weighting: Weighting = "gaussian",
     keep_details: bool = False,
     on_scale: Callable[[int], None] | None = None,
-    rule: Callable[[int, int, np.ndarray], tuple[np.ndarray, float]] | None = None,
+    rule: Callable[..., tuple[np.ndarray, float]] | None = None,
+    local_scales: bool = False,
 ) -> ScaleResults:
     """Projected distance, normalisation and Otsu's threshold at each scale.
 
@@ -77,6 +78,11 @@ def run_scales(
         ``rule(i, scale, pdis) -> (values, threshold)`` replaces min-max normalisation
         and Otsu's threshold (robust mode, :class:`meshlab_sharp.robust.RelativeRule`).
         None: the paper's rule.
+    local_scales : bool, default False
+        Robust mode: where the compiled pass over a cloud computes the projected
+        distances it also computes each scale's :func:`meshlab_sharp.robust.local_scale`
+        (the same neighbours, bit for bit) and passes it to the rule as
+        ``rule(i, scale, pdis, local=(scale_l, offset))``; elsewhere the rule computes it.
 
     The backend is the neighbourhoods': with "compiled", the projected distances of
     every scale come from one pass of the C kernels over the points (neighbourhoods
@@ -85,7 +91,7 @@ def run_scales(
     """
     m, s = len(points), len(scales)
     fused = _compiled_projected_distances(
-        points, neighbourhoods, scales, normals, weighting, keep_details
+        points, neighbourhoods, scales, normals, weighting, keep_details, local_scales
     )
     flat_span = FLAT_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
     thresholds = np.empty(s)
@@ -103,6 +109,8 @@ def run_scales(
         if rule is None:
             v = normalise(pdis, flat_span=flat_span)
             thresholds[i] = otsu_threshold(v)
+        elif fused is not None and fused[2] is not None:
+            v, thresholds[i] = rule(i, scale, pdis, local=(fused[2][0][i], fused[2][1][i]))
         else:
             v, thresholds[i] = rule(i, scale, pdis)
         candidate = v >= thresholds[i]
@@ -133,7 +141,9 @@ def projected_distances_all(
 ) -> np.ndarray:
     """Raw projected distances (s, m) of every scale, with the neighbourhoods' backend
     (what :func:`run_scales` thresholds; for benchmarks and tests)."""
-    fused = _compiled_projected_distances(points, neighbourhoods, scales, normals, weighting, False)
+    fused = _compiled_projected_distances(
+        points, neighbourhoods, scales, normals, weighting, False, False
+    )
     if fused is not None:
         return fused[0]
     return np.stack(
@@ -151,9 +161,12 @@ def _compiled_projected_distances(
     normals: np.ndarray | None,
     weighting: Weighting,
     keep_normals: bool,
-) -> tuple[np.ndarray, np.ndarray | None] | None:
-    """Projected distances (s, m) and normals (s, m, 3) or None, of every scale at
-    once with the compiled kernels; None when the neighbourhoods are the numpy ones."""
+    local_scales: bool,
+) -> tuple[np.ndarray, np.ndarray | None, tuple[np.ndarray, np.ndarray] | None] | None:
+    """Projected distances (s, m), normals (s, m, 3) or None, and (clouds, when
+    ``local_scales``) robust mode's local scales and centroid distances ((s, m) each) or
+    None, of every scale at once with the compiled kernels; None when the
+    neighbourhoods are the numpy ones."""
     if not scales:
         return None
     if list(scales) != sorted(set(scales)):
@@ -166,15 +179,17 @@ def _compiled_projected_distances(
             scales,
             weighting,
             keep_normals=keep_normals,
+            local_scales=local_scales,
             workers=neighbourhoods.workers,
         )
     if isinstance(neighbourhoods, RingNeighbourhoods) and neighbourhoods.adjacency is not None:
         if min(scales) < 1:
             return None
         indptr, indices = neighbourhoods.adjacency
-        return _kernels.ring_projected_distances(
+        pdis, used = _kernels.ring_projected_distances(
             points, indptr, indices, scales, normals, weighting, keep_normals=keep_normals
         )
+        return pdis, used, None
     return None
 
 

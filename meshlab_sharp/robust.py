@@ -43,12 +43,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _kernels
 from .creases import CREASE_ANGLE, sharp_vertices
 from .neighbourhoods import (
     KnnNeighbourhoods,
     Neighbourhood,
     RingNeighbourhoods,
     build_neighbourhoods,
+    squared_distances,
 )
 from .threshold import otsu_threshold
 
@@ -165,9 +167,26 @@ def noise_scale_factor(points: np.ndarray, indices: np.ndarray, k: int) -> float
     length = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
     across = np.abs(d[:, 0] * normal[:, 0] + d[:, 1] * normal[:, 1] + d[:, 2] * normal[:, 2])
     ratio = np.where(length > 0, across / np.where(length > 0, length, 1.0), 0.0)
+    return _noise_factor(ratio)
+
+
+def _noise_factor(ratio: np.ndarray) -> float:
+    """:func:`noise_scale_factor` from the per-point ratios (n,)."""
     at = (len(ratio) - 1) // 2
     nu = float(np.partition(ratio, at)[at])
     return min(max(1.0, (nu / NOISE_TOLERATED) ** 2), NOISE_MAX_FACTOR)
+
+
+def _isolated_from_stats(points: np.ndarray, stats: _kernels.CloudStats) -> np.ndarray:
+    """:func:`isolated_points` from :func:`meshlab_sharp._kernels.cloud_stats` at
+    ``k_max`` (no kNN table): ``i`` is among the k_max nearest of ``j = near[i]`` when
+    ``(|p_i - p_j|^2, i)`` does not come after ``j``'s k_max-th neighbour in the
+    lists' order (squared distance, then index). (n,) bool."""
+    j = stats.near
+    d2 = squared_distances(points, points[j])
+    kth = stats.kth_d2[j]
+    among = (d2 < kth) | ((d2 == kth) & (np.arange(len(points)) <= stats.kth_idx[j]))
+    return ~among
 
 
 def _segment_sums(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
@@ -198,7 +217,9 @@ def _rows(lists: Neighbourhood, rows: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return owner, indices[flat] if len(flat) else np.zeros(0, np.int64)
 
 
-def local_scale(points: np.ndarray, neighbourhood: Neighbourhood) -> tuple[np.ndarray, np.ndarray]:
+def local_scale(
+    points: np.ndarray, neighbourhood: Neighbourhood, *, backend: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Mean distance from each point to its neighbourhood, and its centroid's distance.
 
     Parameters
@@ -206,6 +227,10 @@ def local_scale(points: np.ndarray, neighbourhood: Neighbourhood) -> tuple[np.nd
     points : (m, 3) float64
     neighbourhood : Neighbourhood
         CSR lists (``indptr`` (m + 1,), ``indices``); each point's own index included.
+    backend : {"compiled", "numpy"}, optional
+        Default :func:`meshlab_sharp._kernels.default_backend`. Both give the same bits:
+        the sums are numpy's ``add.reduceat`` (the first term plus the pairwise sum of
+        the others), which the C kernel reproduces.
 
     Returns
     -------
@@ -215,6 +240,8 @@ def local_scale(points: np.ndarray, neighbourhood: Neighbourhood) -> tuple[np.nd
         ``o_i = |(1 / |N(i)|) * sum_{j in N(i)} (p_j - p_i)|``, the distance from
         ``p_i`` to the centroid (0 for an empty list); ``o_i <= l_i``.
     """
+    if _kernels.resolve(backend) == "compiled":
+        return _kernels.local_scale_csr(points, neighbourhood.indptr, neighbourhood.indices)
     indptr = np.asarray(neighbourhood.indptr, np.int64)
     indices = np.asarray(neighbourhood.indices, np.int64)
     size = np.diff(indptr)
@@ -291,8 +318,18 @@ class RelativeRule:
     def __post_init__(self) -> None:
         self.score = np.zeros(len(self.points))
 
-    def __call__(self, i: int, scale: int, pdis: np.ndarray) -> tuple[np.ndarray, float]:
-        ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
+    def __call__(
+        self,
+        i: int,
+        scale: int,
+        pdis: np.ndarray,
+        local: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> tuple[np.ndarray, float]:
+        """Relative distances (m,) and threshold of scale ``scale``; ``local``: its
+        :func:`local_scale` when already computed (the compiled pass over a cloud)."""
+        if local is None:
+            local = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
+        ell, offset = local
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
         return r, robust_threshold(r)
@@ -486,19 +523,25 @@ class RobustSetup:
         self.neighbourhoods = neighbourhoods
         if faces is None:
             assert isinstance(neighbourhoods, KnnNeighbourhoods)
-            isolated = isolated_points(neighbourhoods.indices)
+            top = max(self.scales)
+            k0 = min(NOISE_KNN, top)
+            stats = self._stats(neighbourhoods, top, k0, workers)
+            if stats is None:
+                isolated = isolated_points(neighbourhoods.indices)
+            else:
+                isolated = _isolated_from_stats(points, stats)
             if isolated.any():
                 self.keep = np.flatnonzero(~isolated)
                 self.points = np.ascontiguousarray(points[self.keep])
                 self.neighbourhoods = build_neighbourhoods(
                     self.points, None, self.scales, workers=workers
                 )
-            factor = min(
-                noise_scale_factor(
-                    self.points, self.neighbourhoods.indices, min(NOISE_KNN, max(self.scales))
-                ),
-                len(self.points) / max(self.scales),
-            )
+                stats = self._stats(self.neighbourhoods, k0, k0, workers)
+            if stats is None:
+                noise = noise_scale_factor(self.points, self.neighbourhoods.indices, k0)
+            else:
+                noise = _noise_factor(stats.noise)
+            factor = min(noise, len(self.points) / top)
             if factor > 1.0:
                 self.scales = tuple(math.floor(k * factor + 0.5) for k in self.scales)
                 self.neighbourhoods = build_neighbourhoods(
@@ -506,6 +549,34 @@ class RobustSetup:
                 )
         self._rings: RingNeighbourhoods | None = None
         self.rule = RelativeRule(self.points, self._lists, len(self.scales))
+
+    @staticmethod
+    def _stats(
+        neighbourhoods: KnnNeighbourhoods, k: int, noise_k: int, workers: int
+    ) -> _kernels.CloudStats | None:
+        """:func:`meshlab_sharp._kernels.cloud_stats` at ``k`` with the compiled
+        backend (one search, no kNN table); None with numpy (use the table)."""
+        if neighbourhoods.tree is None:
+            return None
+        return _kernels.cloud_stats(neighbourhoods.tree, k, noise_k, workers)
+
+    def _candidate_lists(self, rows: np.ndarray, ks: tuple[int, ...]) -> list[Neighbourhood]:
+        """The kNN lists at each of ``ks`` (at most ``k_max``) for the points ``rows``
+        (increasing) only, the other rows empty: what support and thinning read."""
+        assert isinstance(self.neighbourhoods, KnnNeighbourhoods)
+        tree = self.neighbourhoods.tree
+        top = max(ks)
+        if tree is None:
+            table = np.asarray(self.neighbourhoods.indices)[rows, :top]
+        else:
+            table = _kernels.cloud_knn_rows(tree, rows, top, self.neighbourhoods.workers)
+        out = []
+        for k in ks:
+            sizes = np.zeros(len(self.points), dtype=np.int64)
+            sizes[rows] = k
+            indptr = np.concatenate([[0], np.cumsum(sizes)])
+            out.append(Neighbourhood(indptr, np.ascontiguousarray(table[:, :k]).reshape(-1)))
+        return out
 
     def _lists(self, scale: int) -> Neighbourhood:
         if self.faces is None:
@@ -534,9 +605,8 @@ class RobustSetup:
         if mask.any():
             top = max(self.scales)
             if self.faces is None:
-                around = self.neighbourhoods.at(min(SUPPORT_KNN, top))
-                compare = self.neighbourhoods.at(min(THIN_KNN, top))
-                direction = self.neighbourhoods.at(top)
+                ks = (min(SUPPORT_KNN, top), min(THIN_KNN, top), top)
+                around, compare, direction = self._candidate_lists(np.flatnonzero(mask), ks)
             else:
                 rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
                 around = compare = rings.at(min(THIN_RING, top))
