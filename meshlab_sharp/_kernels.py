@@ -257,34 +257,10 @@ def cloud_knn_rows(tree: KdTree, rows: np.ndarray, k: int, workers: int = -1) ->
     return out
 
 
-def cloud_projected_distances(
-    tree: KdTree,
-    scales: Sequence[int],
-    weighting: str = "gaussian",
-    *,
-    keep_normals: bool = False,
-    local_scales: bool = False,
-    workers: int = -1,
-) -> tuple[np.ndarray, np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
-    """Projected distances (s, n) at every kNN scale (cleaned order), the normals
-    (s, n, 3) when ``keep_normals``, and with ``local_scales`` robust mode's local
-    scales and centroid distances (each (s, n), as :func:`meshlab_sharp.robust.local_scale`
-    computes them bit for bit); one neighbour search at the largest scale."""
-    ks = np.ascontiguousarray(scales, dtype=np.int64)
-    pdis = np.empty((len(ks), tree.n))
-    normals = np.empty((len(ks), tree.n, 3)) if keep_normals else None
-    local = (np.empty_like(pdis), np.empty_like(pdis)) if local_scales else None
-    ell, off = local if local is not None else (None, None)
-    _cloud_call(
-        tree, ks, weighting == "gaussian", workers, pdis=pdis, normals=normals, ell=ell, off=off
-    )
-    return pdis, normals, local
-
-
 @dataclass
 class CloudStats:
-    """Per point (cleaned order) what robust mode's set-up needs from the kNN lists at
-    ``k`` (:func:`cloud_stats`)."""
+    """Per point (cleaned order) what robust mode's set-up reads from the kNN lists at
+    the largest scale ``k``, without the (n, k) table."""
 
     near: np.ndarray  # (n,) int64 nearest other point (column 1 of the kNN table)
     kth_d2: np.ndarray  # (n,) float64 squared distance of the k-th neighbour
@@ -292,19 +268,50 @@ class CloudStats:
     noise: np.ndarray  # (n,) float64 noise ratio over the noise_k nearest
 
 
-def cloud_stats(tree: KdTree, k: int, noise_k: int, workers: int = -1) -> CloudStats:
-    """:class:`CloudStats` of every point from one kNN search at ``k``, without the
-    (n, k) table."""
+@dataclass
+class ScalePass:
+    """What one pass over the points computed at every scale (cleaned order)."""
+
+    pdis: np.ndarray  # (s, n) projected distances
+    normals: np.ndarray | None  # (s, n, 3) their normals, when kept
+    #: robust.local_scale's (scale, offset) at each scale, (s, n) each, when asked for
+    local: tuple[np.ndarray, np.ndarray] | None = None
+    stats: CloudStats | None = None
+
+
+def cloud_projected_distances(
+    tree: KdTree,
+    scales: Sequence[int],
+    weighting: str = "gaussian",
+    *,
+    keep_normals: bool = False,
+    local_scales: bool = False,
+    noise_k: int = 0,
+    workers: int = -1,
+) -> ScalePass:
+    """Projected distances (s, n) at every kNN scale (cleaned order), the normals
+    (s, n, 3) when ``keep_normals``; with ``local_scales`` robust mode's local scales
+    and centroid distances (:func:`meshlab_sharp.robust.local_scale`, bit for bit);
+    with ``noise_k > 0`` the :class:`CloudStats` (noise ratio over the ``noise_k``
+    nearest). One neighbour search at the largest scale."""
+    ks = np.ascontiguousarray(scales, dtype=np.int64)
     n = tree.n
-    stats = CloudStats(
-        np.empty(n, dtype=np.int64), np.empty(n), np.empty(n, dtype=np.int64), np.empty(n)
-    )
-    ks = np.array([k], dtype=np.int64)
-    _cloud_call(
-        tree, ks, False, workers, near=stats.near, kth_d2=stats.kth_d2, kth_idx=stats.kth_idx,
-        noise=stats.noise, noise_k=noise_k,
-    )  # fmt: skip
-    return stats
+    out = ScalePass(np.empty((len(ks), n)), np.empty((len(ks), n, 3)) if keep_normals else None)
+    if local_scales:
+        out.local = (np.empty_like(out.pdis), np.empty_like(out.pdis))
+    if noise_k > 0:
+        i64 = np.int64
+        out.stats = CloudStats(np.empty(n, i64), np.empty(n), np.empty(n, i64), np.empty(n))
+    fields: dict[str, np.ndarray | int | None] = {"pdis": out.pdis, "normals": out.normals}
+    if out.local is not None:
+        fields.update(ell=out.local[0], off=out.local[1])
+    if out.stats is not None:
+        st = out.stats
+        fields.update(
+            near=st.near, kth_d2=st.kth_d2, kth_idx=st.kth_idx, noise=st.noise, noise_k=noise_k
+        )
+    _cloud_call(tree, ks, weighting == "gaussian", workers, **fields)
+    return out
 
 
 def local_scale_csr(

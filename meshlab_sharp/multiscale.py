@@ -57,6 +57,7 @@ def run_scales(
     on_scale: Callable[[int], None] | None = None,
     rule: Callable[..., tuple[np.ndarray, float]] | None = None,
     local_scales: bool = False,
+    fused: _kernels.ScalePass | None = None,
 ) -> ScaleResults:
     """Projected distance, normalisation and Otsu's threshold at each scale.
 
@@ -83,6 +84,10 @@ def run_scales(
         distances it also computes each scale's :func:`meshlab_sharp.robust.local_scale`
         (the same neighbours, bit for bit) and passes it to the rule as
         ``rule(i, scale, pdis, local=(scale_l, offset))``; elsewhere the rule computes it.
+    fused : ScalePass, optional
+        The compiled pass over these points at these scales, already run
+        (:class:`meshlab_sharp.robust.RobustSetup` runs it to read the isolated points
+        and the noise from the same search); None: run it here.
 
     The backend is the neighbourhoods': with "compiled", the projected distances of
     every scale come from one pass of the C kernels over the points (neighbourhoods
@@ -90,9 +95,10 @@ def run_scales(
     "numpy".
     """
     m, s = len(points), len(scales)
-    fused = _compiled_projected_distances(
-        points, neighbourhoods, scales, normals, weighting, keep_details, local_scales
-    )
+    if fused is None:
+        fused = _compiled_projected_distances(
+            points, neighbourhoods, scales, normals, weighting, keep_details, local_scales
+        )
     flat_span = FLAT_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
     thresholds = np.empty(s)
     counts = np.empty(s, dtype=np.int64)
@@ -101,7 +107,7 @@ def run_scales(
     used_normals = np.empty((s, m, 3)) if keep_details else None
     for i, scale in enumerate(scales):
         if fused is not None:
-            pdis, used = fused[0][i], None if fused[1] is None else fused[1][i]
+            pdis, used = fused.pdis[i], None if fused.normals is None else fused.normals[i]
         else:
             pdis, used = projected_distances(
                 points, neighbourhoods.at(scale), normals, weighting=weighting
@@ -109,8 +115,8 @@ def run_scales(
         if rule is None:
             v = normalise(pdis, flat_span=flat_span)
             thresholds[i] = otsu_threshold(v)
-        elif fused is not None and fused[2] is not None:
-            v, thresholds[i] = rule(i, scale, pdis, local=(fused[2][0][i], fused[2][1][i]))
+        elif fused is not None and fused.local is not None:
+            v, thresholds[i] = rule(i, scale, pdis, local=(fused.local[0][i], fused.local[1][i]))
         else:
             v, thresholds[i] = rule(i, scale, pdis)
         candidate = v >= thresholds[i]
@@ -145,7 +151,7 @@ def projected_distances_all(
         points, neighbourhoods, scales, normals, weighting, False, False
     )
     if fused is not None:
-        return fused[0]
+        return fused.pdis
     return np.stack(
         [
             projected_distances(points, neighbourhoods.at(k), normals, weighting=weighting)[0]
@@ -162,11 +168,11 @@ def _compiled_projected_distances(
     weighting: Weighting,
     keep_normals: bool,
     local_scales: bool,
-) -> tuple[np.ndarray, np.ndarray | None, tuple[np.ndarray, np.ndarray] | None] | None:
+) -> _kernels.ScalePass | None:
     """Projected distances (s, m), normals (s, m, 3) or None, and (clouds, when
-    ``local_scales``) robust mode's local scales and centroid distances ((s, m) each) or
-    None, of every scale at once with the compiled kernels; None when the
-    neighbourhoods are the numpy ones."""
+    ``local_scales``) robust mode's local scales and centroid distances, of every scale
+    at once with the compiled kernels; None when the neighbourhoods are the numpy
+    ones."""
     if not scales:
         return None
     if list(scales) != sorted(set(scales)):
@@ -189,7 +195,7 @@ def _compiled_projected_distances(
         pdis, used = _kernels.ring_projected_distances(
             points, indptr, indices, scales, normals, weighting, keep_normals=keep_normals
         )
-        return pdis, used, None
+        return _kernels.ScalePass(pdis, used)
     return None
 
 

@@ -292,7 +292,15 @@ def _detect(
     robust = None
     work, work_neighbourhoods = points, neighbourhoods
     if mode == "robust":
-        robust = RobustSetup(points, cleaned.faces, neighbourhoods, scales_t, workers=workers)
+        robust = RobustSetup(
+            points,
+            cleaned.faces,
+            neighbourhoods,
+            scales_t,
+            workers=workers,
+            weighting=weighting,
+            keep_normals=return_details,
+        )
         work, work_neighbourhoods = robust.points, robust.neighbourhoods
         scales_t = robust.scales
     timings["neighbourhoods"] = time.perf_counter() - t
@@ -309,6 +317,7 @@ def _detect(
         on_scale=lambda s: bar.step(f"scale {s}"),
         rule=None if robust is None else robust.rule,
         local_scales=robust is not None,
+        fused=None if robust is None else robust.fused,
     )
     timings["normals_projected_distance_threshold"] = time.perf_counter() - t
 

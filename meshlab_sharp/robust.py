@@ -52,6 +52,7 @@ from .neighbourhoods import (
     build_neighbourhoods,
     squared_distances,
 )
+from .normals import Weighting
 from .threshold import otsu_threshold
 
 __all__ = [
@@ -178,7 +179,7 @@ def _noise_factor(ratio: np.ndarray) -> float:
 
 
 def _isolated_from_stats(points: np.ndarray, stats: _kernels.CloudStats) -> np.ndarray:
-    """:func:`isolated_points` from :func:`meshlab_sharp._kernels.cloud_stats` at
+    """:func:`isolated_points` from the pass's :class:`~meshlab_sharp._kernels.CloudStats` at
     ``k_max`` (no kNN table): ``i`` is among the k_max nearest of ``j = near[i]`` when
     ``(|p_i - p_j|^2, i)`` does not come after ``j``'s k_max-th neighbour in the
     lists' order (squared distance, then index). (n,) bool."""
@@ -493,6 +494,10 @@ class RobustSetup:
         Increasing scales.
     workers : int, default -1
         Threads for a kNN query when isolated points are left out.
+    weighting : {"gaussian", "none"}, default "gaussian"
+    keep_normals : bool, default False
+        How :func:`meshlab_sharp.multiscale.run_scales` will be called (the compiled
+        pass that finds the isolated points and the noise also computes what it needs).
 
     Attributes
     ----------
@@ -504,6 +509,10 @@ class RobustSetup:
         points when there are any).
     rule : RelativeRule
         The per-scale rule to pass to ``run_scales``.
+    fused : ScalePass or None
+        The compiled pass over ``points`` at ``scales`` to pass to ``run_scales``, when
+        the set-up's search already made it (compiled backend, a cloud whose noise did
+        not grow the scales); None otherwise.
     """
 
     def __init__(
@@ -514,6 +523,8 @@ class RobustSetup:
         scales: tuple[int, ...],
         *,
         workers: int = -1,
+        weighting: Weighting = "gaussian",
+        keep_normals: bool = False,
     ) -> None:
         self.n = len(points)
         self.faces = faces
@@ -521,44 +532,59 @@ class RobustSetup:
         self.keep = np.arange(self.n, dtype=np.int64)
         self.points = points
         self.neighbourhoods = neighbourhoods
+        self.weighting = weighting
+        self.keep_normals = keep_normals
+        self.fused: _kernels.ScalePass | None = None
         if faces is None:
             assert isinstance(neighbourhoods, KnnNeighbourhoods)
             top = max(self.scales)
             k0 = min(NOISE_KNN, top)
-            stats = self._stats(neighbourhoods, top, k0, workers)
-            if stats is None:
-                isolated = isolated_points(neighbourhoods.indices)
+            compiled = neighbourhoods.tree is not None
+            if compiled:
+                self.fused = self._pass(k0)
+                assert self.fused.stats is not None
+                isolated = _isolated_from_stats(points, self.fused.stats)
             else:
-                isolated = _isolated_from_stats(points, stats)
+                isolated = isolated_points(neighbourhoods.indices)
             if isolated.any():
                 self.keep = np.flatnonzero(~isolated)
                 self.points = np.ascontiguousarray(points[self.keep])
                 self.neighbourhoods = build_neighbourhoods(
                     self.points, None, self.scales, workers=workers
                 )
-                stats = self._stats(self.neighbourhoods, k0, k0, workers)
-            if stats is None:
-                noise = noise_scale_factor(self.points, self.neighbourhoods.indices, k0)
+                if compiled:
+                    self.fused = self._pass(k0)
+            if self.fused is not None and self.fused.stats is not None:
+                noise = _noise_factor(self.fused.stats.noise)
             else:
-                noise = _noise_factor(stats.noise)
+                noise = noise_scale_factor(self.points, self.neighbourhoods.indices, k0)
             factor = min(noise, len(self.points) / top)
             if factor > 1.0:
                 self.scales = tuple(math.floor(k * factor + 0.5) for k in self.scales)
                 self.neighbourhoods = build_neighbourhoods(
                     self.points, None, self.scales, workers=workers
                 )
+                self.fused = None
         self._rings: RingNeighbourhoods | None = None
         self.rule = RelativeRule(self.points, self._lists, len(self.scales))
 
-    @staticmethod
-    def _stats(
-        neighbourhoods: KnnNeighbourhoods, k: int, noise_k: int, workers: int
-    ) -> _kernels.CloudStats | None:
-        """:func:`meshlab_sharp._kernels.cloud_stats` at ``k`` with the compiled
-        backend (one search, no kNN table); None with numpy (use the table)."""
-        if neighbourhoods.tree is None:
-            return None
-        return _kernels.cloud_stats(neighbourhoods.tree, k, noise_k, workers)
+    def _pass(self, noise_k: int) -> _kernels.ScalePass:
+        """The compiled pass at ``scales`` over ``points`` (whose kd-tree
+        ``neighbourhoods`` holds): projected distances, local scales, and the isolated
+        points' and the noise's statistics from the same search. It is the pass
+        ``run_scales`` needs when it finds no isolated points and no noise to grow the
+        scales for (``fused``)."""
+        assert isinstance(self.neighbourhoods, KnnNeighbourhoods)
+        assert self.neighbourhoods.tree is not None
+        return _kernels.cloud_projected_distances(
+            self.neighbourhoods.tree,
+            self.scales,
+            self.weighting,
+            keep_normals=self.keep_normals,
+            local_scales=True,
+            noise_k=noise_k,
+            workers=self.neighbourhoods.workers,
+        )
 
     def _candidate_lists(self, rows: np.ndarray, ks: tuple[int, ...]) -> list[Neighbourhood]:
         """The kNN lists at each of ``ks`` (at most ``k_max``) for the points ``rows``
