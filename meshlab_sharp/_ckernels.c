@@ -187,6 +187,51 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
     *off = sqrt(cx * cx + cy * cy + cz * cz);
 }
 
+/* local_scale_one for the prefixes of one neighbour list at every scale: v holds 4
+ * rows of ld values (the lengths |q_j|, then the x, y and z of q_j, j < max(ks)); scale
+ * s (ks increasing) writes ell[s * n] and off[s * n]. The same sums as segment_sum,
+ * but the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by
+ * the prefixes (the same numbers, added in the same order): O(max(ks)) per point
+ * instead of O(sum of ks) for lists of up to 129 points. */
+static void local_scale_prefixes(const double *v, int64_t ld, const int64_t *ks, int nscales,
+                                 int64_t n, double *ell, double *off) {
+    double r[4][8];
+    int64_t i = 0; /* terms v[t][1..i] in r, a multiple of 8 (0: r not started) */
+    for (int s = 0; s < nscales; s++) {
+        int64_t m = ks[s], nn = m - 1;
+        double sum[4];
+        if (nn >= 8 && nn <= 128) {
+            if (i == 0) {
+                for (int t = 0; t < 4; t++)
+                    for (int j = 0; j < 8; j++) r[t][j] = v[t * ld + 1 + j];
+                i = 8;
+            }
+            int64_t nb = nn - nn % 8;
+            for (; i < nb; i += 8) {
+                for (int t = 0; t < 4; t++)
+                    for (int j = 0; j < 8; j++) r[t][j] += v[t * ld + 1 + i + j];
+            }
+            for (int t = 0; t < 4; t++) {
+                const double *a = r[t];
+                double res = ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+                for (int64_t u = nb; u < nn; u++) res += v[t * ld + 1 + u];
+                sum[t] = v[t * ld] + res;
+            }
+        } else {
+            for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t * ld, m, 1);
+        }
+        if (m == 0) {
+            ell[s * n] = 0.0;
+            off[s * n] = 0.0;
+            continue;
+        }
+        double c = (double)m;
+        ell[s * n] = sum[0] / c;
+        double cx = sum[1] / c, cy = sum[2] / c, cz = sum[3] / c;
+        off[s * n] = sqrt(cx * cx + cy * cy + cz * cz);
+    }
+}
+
 /* robust.local_scale over CSR lists (indptr, indices int32 or int64 when wide), points
  * [begin, end): out_ell, out_off (n). Returns 0, or -1 out of memory. */
 int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indices, int wide,
@@ -594,12 +639,12 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
     double *mu = (double *)malloc((size_t)kmax * sizeof(double));
-    double *dist = (double *)malloc((size_t)kmax * sizeof(double));
+    double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
     int rc = 0, have_block = 0;
     int64_t leaf_s = 0, leaf_e = 0;
     double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !dist) { rc = -1; goto done; }
+    if (!h.c || !q || !d2 || !mu || !soa) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         double tau = INFINITY;
@@ -667,10 +712,13 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             out->noise[oi] = k0 >= 2 ? noise_ratio(q, k0) : 0.0;
         }
         if (out->ell != NULL) {
-            for (int64_t j = 0; j < kmax; j++) dist[j] = sqrt(d2[j]);
-            for (int s = 0; s < nscales; s++) {
-                local_scale_one(q, dist, ks[s], out->ell + s * n + oi, out->off + s * n + oi);
+            for (int64_t j = 0; j < kmax; j++) {
+                soa[j] = sqrt(d2[j]);
+                soa[kmax + j] = q[3 * j];
+                soa[2 * kmax + j] = q[3 * j + 1];
+                soa[3 * kmax + j] = q[3 * j + 2];
             }
+            local_scale_prefixes(soa, kmax, ks, nscales, n, out->ell + oi, out->off + oi);
         }
         if (out->pdis == NULL) continue;
         double sx = 0, sy = 0, sz = 0, h2 = 0;
@@ -692,7 +740,7 @@ done:
     free(q);
     free(d2);
     free(mu);
-    free(dist);
+    free(soa);
     return rc;
 }
 

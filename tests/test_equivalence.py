@@ -31,11 +31,19 @@ from meshlab_sharp.cleaning import clean
 from meshlab_sharp.io import as_geometry
 from meshlab_sharp.neighbourhoods import (
     KnnNeighbourhoods,
+    Neighbourhood,
     RingNeighbourhoods,
     knn,
     squared_distances,
 )
 from meshlab_sharp.normals import face_average_normals
+from meshlab_sharp.robust import (
+    _isolated_from_stats,
+    _noise_factor,
+    isolated_points,
+    local_scale,
+    noise_scale_factor,
+)
 
 pytestmark = pytest.mark.skipif(
     not _kernels.available(),
@@ -292,3 +300,112 @@ def test_eigenvectors_match_lapack():
     fast = _kernels.smallest_eigenvectors(cov)
     err = np.minimum(np.abs(fast - ref).max(axis=1), np.abs(fast + ref).max(axis=1))
     assert err.max() < 1e-12
+
+
+# ---------------------------------------------------------------------------- robust mode
+
+
+def _noisy(points, fraction=0.5, seed=7):
+    """Gaussian noise of ``fraction`` times the typical spacing along every axis: the
+    noise estimate grows the scales."""
+    rng = np.random.default_rng(seed)
+    spacing = float(np.median(np.sqrt(squared_distances(points[knn(points, 2)[:, 1]], points))))
+    return points + rng.normal(0.0, fraction * spacing, points.shape)
+
+
+def _with_outliers(points, count=25, seed=8):
+    rng = np.random.default_rng(seed)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    far = lo + (rng.random((count, 3)) * 3.0 - 1.0) * (hi - lo)
+    return np.concatenate([points, far])
+
+
+ROBUST_CLOUDS = {
+    "noisy_box_cylinder": lambda: _noisy(box_cylinder_points(4000)),
+    "outliers_random_box": lambda: _with_outliers(random_box_points(3000, seed=2)),
+    "outliers_grid_ties": lambda: _with_outliers(_shuffled(cube_grid_points(15))),
+    "noisy_outliers": lambda: _with_outliers(_noisy(_cad_like_points(4000))),
+}
+
+
+@pytest.mark.parametrize("name", sorted(ROBUST_CLOUDS))
+def test_robust_clouds_same_answers(name):
+    """Robust mode, both backends: the same isolated points, the same (noise-grown)
+    scales, thresholds, candidates, masks and strengths."""
+    ref, fast = _both(ROBUST_CLOUDS[name](), mode="robust")
+    assert fast.scales == ref.scales
+    _assert_same(ref, fast)
+
+
+def test_robust_inputs_exercise_isolated_points_and_noise():
+    """The cases above do what their names say (a guard on the inputs)."""
+    noisy = detect(ROBUST_CLOUDS["noisy_box_cylinder"](), mode="robust", backend="compiled")
+    assert max(noisy.scales) > 40
+    outliers = detect(ROBUST_CLOUDS["outliers_random_box"](), mode="robust", backend="compiled")
+    assert 0 < int((~outliers.kept).sum()) <= 25
+
+
+@pytest.mark.parametrize("noisy", [False, True])
+def test_robust_meshes_same_answers(noisy):
+    vertices, faces = cube_grid_mesh(6)
+    if noisy:
+        vertices = vertices + np.random.default_rng(4).normal(0.0, 0.01, vertices.shape)
+    ref, fast = _both(vertices, faces, mode="robust")
+    _assert_same(ref, fast)
+
+
+def _local_scale_both(points, lists):
+    ref = local_scale(points, lists, backend="numpy")
+    fast = local_scale(points, lists, backend="compiled")
+    for a, b in zip(ref, fast, strict=True):
+        assert np.array_equal(a, b)  # bit for bit: numpy's summation order
+
+
+@pytest.mark.parametrize("k", [1, 2, 8, 9, 17, 40, 129, 130, 200])
+def test_local_scale_identical_on_knn_lists(k):
+    """The C sums reproduce numpy's add.reduceat (the first term plus a pairwise sum:
+    sequential below 8 terms, 8 partial sums up to 128, split in two above)."""
+    points = box_cylinder_points(1500) * 37.3
+    _local_scale_both(points, KnnNeighbourhoods(points, k, backend="numpy").at(k))
+
+
+def test_local_scale_identical_on_rings_and_empty_lists():
+    vertices, faces = cube_grid_mesh(6)
+    rings = RingNeighbourhoods(np.asarray(faces, np.int64), len(vertices), backend="numpy")
+    for ring in (1, 2, 3):
+        _local_scale_both(vertices, rings.at(ring))
+    lists = Neighbourhood(np.array([0, 0, 2, 2, 5]), np.array([1, 0, 2, 0, 3]))
+    _local_scale_both(vertices[:4], lists)
+
+
+@pytest.mark.parametrize("scales", [(12, 16, 20, 24, 28, 32, 36, 40), (2, 9, 33, 106, 131)])
+def test_fused_local_scales_identical(scales):
+    """The local scales computed inside the kNN pass (prefixes of one sorted list, the
+    8 partial sums shared between scales) equal the numpy reference's, bit for bit."""
+    points = _noisy(box_cylinder_points(2000))
+    tree = _kernels.build_tree(points)
+    fused = _kernels.cloud_projected_distances(tree, scales, local_scales=True)
+    assert fused.local is not None
+    lists = KnnNeighbourhoods(points, max(scales), backend="numpy")
+    for i, k in enumerate(scales):
+        ell, offset = local_scale(points, lists.at(k), backend="numpy")
+        assert np.array_equal(fused.local[0][i], ell)
+        assert np.array_equal(fused.local[1][i], offset)
+
+
+@pytest.mark.parametrize("name", ["outliers_random_box", "outliers_grid_ties", "noisy_outliers"])
+def test_isolated_points_and_noise_from_one_search(name):
+    """The pass's per-point statistics give isolated_points' answer without the kNN
+    table (ties included), and the noise ratios agree with LAPACK's to round-off."""
+    points = np.unique(ROBUST_CLOUDS[name](), axis=0)
+    k_max = 40
+    fused = _kernels.cloud_projected_distances(_kernels.build_tree(points), (12, k_max), noise_k=7)
+    assert fused.stats is not None
+    table = knn(points, k_max)
+    np.testing.assert_array_equal(fused.stats.near, table[:, 1])
+    expected = isolated_points(table)
+    assert expected.any()
+    np.testing.assert_array_equal(_isolated_from_stats(points, fused.stats), expected)
+    assert _noise_factor(fused.stats.noise) == pytest.approx(
+        noise_scale_factor(points, table, 7), rel=1e-12
+    )
