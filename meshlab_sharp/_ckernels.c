@@ -189,12 +189,12 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
 
 /* local_scale_one for the prefixes of one neighbour list at every scale: v holds 4
  * rows of ld values (the lengths |q_j|, then the x, y and z of q_j, j < max(ks)); scale
- * s (ks increasing) writes ell[s * n] and off[s * n]. The same sums as segment_sum,
+ * s (ks increasing) writes ell[s] and off[s]. The same sums as segment_sum,
  * but the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by
  * the prefixes (the same numbers, added in the same order): O(max(ks)) per point
  * instead of O(sum of ks) for lists of up to 129 points. */
 static void local_scale_prefixes(const double *v, int64_t ld, const int64_t *ks, int nscales,
-                                 int64_t n, double *ell, double *off) {
+                                 double *ell, double *off) {
     double r[4][8];
     int64_t i = 0; /* terms v[t][1..i] in r, a multiple of 8 (0: r not started) */
     for (int s = 0; s < nscales; s++) {
@@ -221,14 +221,14 @@ static void local_scale_prefixes(const double *v, int64_t ld, const int64_t *ks,
             for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t * ld, m, 1);
         }
         if (m == 0) {
-            ell[s * n] = 0.0;
-            off[s * n] = 0.0;
+            ell[s] = 0.0;
+            off[s] = 0.0;
             continue;
         }
         double c = (double)m;
-        ell[s * n] = sum[0] / c;
+        ell[s] = sum[0] / c;
         double cx = sum[1] / c, cy = sum[2] / c, cz = sum[3] / c;
-        off[s * n] = sqrt(cx * cx + cy * cy + cz * cz);
+        off[s] = sqrt(cx * cx + cy * cy + cz * cz);
     }
 }
 
@@ -603,14 +603,17 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  * oi = orig[i], s the scale's position in ks:
  *   pdis[s * n + oi]          projected distance; normals[(s * n + oi) * 3] its normal;
  *   idx[oi * kmax + j]        the neighbour indices (kNN table);
- *   ell[s * n + oi], off[...] robust.local_scale (numpy's summation order);
+ *   relative[s * n + oi]      robust mode's relative distance r = min(pdis / l, 1) (0
+ *                             if l = 0; l = robust.local_scale in numpy's summation
+ *                             order), and score[oi] its ranking: the sum over the scales
+ *                             in order of min(o / l, 1) / nscales (RelativeRule's);
  *   noise[oi]                 robust.noise_scale_factor's ratio over the noise_k nearest;
  *   near[oi]                  the nearest other point (column 1 of the kNN table);
  *   kth_d2[oi], kth_idx[oi]   squared distance and index of the kmax-th neighbour. */
 typedef struct {
     double *pdis, *normals;
     int64_t *idx;
-    double *ell, *off, *noise;
+    double *relative, *score, *noise;
     int64_t noise_k;
     int64_t *near;
     double *kth_d2;
@@ -640,11 +643,12 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
     double *mu = (double *)malloc((size_t)kmax * sizeof(double));
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
+    double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
     int rc = 0, have_block = 0;
     int64_t leaf_s = 0, leaf_e = 0;
     double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !soa) { rc = -1; goto done; }
+    if (!h.c || !q || !d2 || !mu || !soa || !ell) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         double tau = INFINITY;
@@ -699,7 +703,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             out->kth_d2[oi] = h.c[kmax - 1].d2;
             out->kth_idx[oi] = h.c[kmax - 1].idx;
         }
-        if (out->pdis == NULL && out->ell == NULL && out->noise == NULL) continue;
+        if (out->pdis == NULL && out->relative == NULL && out->noise == NULL) continue;
         for (int64_t j = 0; j < kmax; j++) {
             const double *pj = p + 3 * h.c[j].pos;
             q[3 * j] = pj[0] - pi[0];
@@ -711,17 +715,17 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             int64_t k0 = out->noise_k < kmax ? out->noise_k : kmax;
             out->noise[oi] = k0 >= 2 ? noise_ratio(q, k0) : 0.0;
         }
-        if (out->ell != NULL) {
+        if (out->relative != NULL) {
             for (int64_t j = 0; j < kmax; j++) {
                 soa[j] = sqrt(d2[j]);
                 soa[kmax + j] = q[3 * j];
                 soa[2 * kmax + j] = q[3 * j + 1];
                 soa[3 * kmax + j] = q[3 * j + 2];
             }
-            local_scale_prefixes(soa, kmax, ks, nscales, n, out->ell + oi, out->off + oi);
+            local_scale_prefixes(soa, kmax, ks, nscales, ell, ell + nscales);
         }
-        if (out->pdis == NULL) continue;
-        double sx = 0, sy = 0, sz = 0, h2 = 0;
+        if (out->pdis == NULL && out->relative == NULL) continue;
+        double score = 0.0, sx = 0, sy = 0, sz = 0, h2 = 0;
         int64_t j = 0;
         for (int s = 0; s < nscales; s++) {
             int64_t m = ks[s];
@@ -731,8 +735,15 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             }
             double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
             double *nrm = out->normals ? out->normals + 3 * (s * n + oi) : NULL;
-            out->pdis[s * n + oi] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
+            double pd = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
+            if (out->pdis != NULL) out->pdis[s * n + oi] = pd;
+            if (out->relative != NULL) { /* min(x / l, 1) keeps a NaN, as np.minimum */
+                double l = ell[s], r = l > 0 ? pd / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
+                out->relative[s * n + oi] = r > 1.0 ? 1.0 : r;
+                score += (g > 1.0 ? 1.0 : g) / (double)nscales;
+            }
         }
+        if (out->score != NULL) out->score[oi] = score;
     }
 done:
     free(h.c);
@@ -741,6 +752,7 @@ done:
     free(d2);
     free(mu);
     free(soa);
+    free(ell);
     return rc;
 }
 

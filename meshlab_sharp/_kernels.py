@@ -204,8 +204,8 @@ class _CloudOut(ctypes.Structure):
         ("pdis", _c_void_p),
         ("normals", _c_void_p),
         ("idx", _c_void_p),
-        ("ell", _c_void_p),
-        ("off", _c_void_p),
+        ("relative", _c_void_p),
+        ("score", _c_void_p),
         ("noise", _c_void_p),
         ("noise_k", _i64),
         ("near", _c_void_p),
@@ -270,12 +270,16 @@ class CloudStats:
 
 @dataclass
 class ScalePass:
-    """What one pass over the points computed at every scale (cleaned order)."""
+    """What one pass over the points computed at every scale (cleaned order).
 
-    pdis: np.ndarray  # (s, n) projected distances
+    Robust mode (``relative``) gets, instead of the projected distances, what
+    :class:`meshlab_sharp.robust.RelativeRule` computes from them, bit for bit: the
+    relative distances and the thinning's score."""
+
+    pdis: np.ndarray | None  # (s, n) projected distances (paper mode)
     normals: np.ndarray | None  # (s, n, 3) their normals, when kept
-    #: robust.local_scale's (scale, offset) at each scale, (s, n) each, when asked for
-    local: tuple[np.ndarray, np.ndarray] | None = None
+    relative: np.ndarray | None = None  # (s, n) relative distances r (robust mode)
+    score: np.ndarray | None = None  # (n,) RelativeRule's score after every scale
     stats: CloudStats | None = None
 
 
@@ -285,26 +289,30 @@ def cloud_projected_distances(
     weighting: str = "gaussian",
     *,
     keep_normals: bool = False,
-    local_scales: bool = False,
+    relative: bool = False,
+    keep_pdis: bool | None = None,
     noise_k: int = 0,
     workers: int = -1,
 ) -> ScalePass:
     """Projected distances (s, n) at every kNN scale (cleaned order), the normals
-    (s, n, 3) when ``keep_normals``; with ``local_scales`` robust mode's local scales
-    and centroid distances (:func:`meshlab_sharp.robust.local_scale`, bit for bit);
-    with ``noise_k > 0`` the :class:`CloudStats` (noise ratio over the ``noise_k``
-    nearest). One neighbour search at the largest scale."""
+    (s, n, 3) when ``keep_normals``; with ``relative`` robust mode's relative distances
+    and score (:class:`ScalePass`), and then the projected distances only when
+    ``keep_pdis`` (default: not ``relative``); with ``noise_k > 0`` the
+    :class:`CloudStats` (noise ratio over the ``noise_k`` nearest). One neighbour
+    search at the largest scale."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
-    n = tree.n
-    out = ScalePass(np.empty((len(ks), n)), np.empty((len(ks), n, 3)) if keep_normals else None)
-    if local_scales:
-        out.local = (np.empty_like(out.pdis), np.empty_like(out.pdis))
+    n, s = tree.n, len(ks)
+    keep = not relative if keep_pdis is None else keep_pdis
+    out = ScalePass(
+        np.empty((s, n)) if keep else None, np.empty((s, n, 3)) if keep_normals else None
+    )
+    if relative:
+        out.relative, out.score = np.empty((s, n)), np.empty(n)
     if noise_k > 0:
         i64 = np.int64
         out.stats = CloudStats(np.empty(n, i64), np.empty(n), np.empty(n, i64), np.empty(n))
     fields: dict[str, np.ndarray | int | None] = {"pdis": out.pdis, "normals": out.normals}
-    if out.local is not None:
-        fields.update(ell=out.local[0], off=out.local[1])
+    fields.update(relative=out.relative, score=out.score)
     if out.stats is not None:
         st = out.stats
         fields.update(

@@ -56,7 +56,7 @@ def run_scales(
     keep_details: bool = False,
     on_scale: Callable[[int], None] | None = None,
     rule: Callable[..., tuple[np.ndarray, float]] | None = None,
-    local_scales: bool = False,
+    relative: bool = False,
     fused: _kernels.ScalePass | None = None,
 ) -> ScaleResults:
     """Projected distance, normalisation and Otsu's threshold at each scale.
@@ -79,11 +79,11 @@ def run_scales(
         ``rule(i, scale, pdis) -> (values, threshold)`` replaces min-max normalisation
         and Otsu's threshold (robust mode, :class:`meshlab_sharp.robust.RelativeRule`).
         None: the paper's rule.
-    local_scales : bool, default False
-        Robust mode: where the compiled pass over a cloud computes the projected
-        distances it also computes each scale's :func:`meshlab_sharp.robust.local_scale`
-        (the same neighbours, bit for bit) and passes it to the rule as
-        ``rule(i, scale, pdis, local=(scale_l, offset))``; elsewhere the rule computes it.
+    relative : bool, default False
+        Robust mode (``rule`` a :class:`meshlab_sharp.robust.RelativeRule`): where the
+        compiled pass over a cloud computes the projected distances it also computes
+        what the rule computes from them, bit for bit (the relative distances and the
+        score), and ``rule.from_pass`` takes them; elsewhere the rule is called.
     fused : ScalePass, optional
         The compiled pass over these points at these scales, already run
         (:class:`meshlab_sharp.robust.RobustSetup` runs it to read the isolated points
@@ -97,7 +97,7 @@ def run_scales(
     m, s = len(points), len(scales)
     if fused is None:
         fused = _compiled_projected_distances(
-            points, neighbourhoods, scales, normals, weighting, keep_details, local_scales
+            points, neighbourhoods, scales, normals, weighting, keep_details, relative
         )
     flat_span = FLAT_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
     thresholds = np.empty(s)
@@ -106,19 +106,21 @@ def run_scales(
     distances = np.empty((s, m)) if keep_details else None
     used_normals = np.empty((s, m, 3)) if keep_details else None
     for i, scale in enumerate(scales):
-        if fused is not None:
-            pdis, used = fused.pdis[i], None if fused.normals is None else fused.normals[i]
+        used = None if fused is None or fused.normals is None else fused.normals[i]
+        if fused is not None and fused.relative is not None and fused.score is not None:
+            v, thresholds[i] = rule.from_pass(fused.relative[i], fused.score)  # type: ignore[union-attr]
         else:
-            pdis, used = projected_distances(
-                points, neighbourhoods.at(scale), normals, weighting=weighting
-            )
-        if rule is None:
-            v = normalise(pdis, flat_span=flat_span)
-            thresholds[i] = otsu_threshold(v)
-        elif fused is not None and fused.local is not None:
-            v, thresholds[i] = rule(i, scale, pdis, local=(fused.local[0][i], fused.local[1][i]))
-        else:
-            v, thresholds[i] = rule(i, scale, pdis)
+            if fused is not None and fused.pdis is not None:
+                pdis = fused.pdis[i]
+            else:
+                pdis, used = projected_distances(
+                    points, neighbourhoods.at(scale), normals, weighting=weighting
+                )
+            if rule is None:
+                v = normalise(pdis, flat_span=flat_span)
+                thresholds[i] = otsu_threshold(v)
+            else:
+                v, thresholds[i] = rule(i, scale, pdis)
         candidate = v >= thresholds[i]
         counts[i] = int(candidate.sum())
         votes += candidate
@@ -150,7 +152,7 @@ def projected_distances_all(
     fused = _compiled_projected_distances(
         points, neighbourhoods, scales, normals, weighting, False, False
     )
-    if fused is not None:
+    if fused is not None and fused.pdis is not None:
         return fused.pdis
     return np.stack(
         [
@@ -167,12 +169,12 @@ def _compiled_projected_distances(
     normals: np.ndarray | None,
     weighting: Weighting,
     keep_normals: bool,
-    local_scales: bool,
+    relative: bool,
 ) -> _kernels.ScalePass | None:
-    """Projected distances (s, m), normals (s, m, 3) or None, and (clouds, when
-    ``local_scales``) robust mode's local scales and centroid distances, of every scale
-    at once with the compiled kernels; None when the neighbourhoods are the numpy
-    ones."""
+    """Projected distances (s, m) and normals (s, m, 3) or None, or (clouds, when
+    ``relative``) robust mode's relative distances and score instead of the distances,
+    of every scale at once with the compiled kernels; None when the neighbourhoods are
+    the numpy ones."""
     if not scales:
         return None
     if list(scales) != sorted(set(scales)):
@@ -185,7 +187,7 @@ def _compiled_projected_distances(
             scales,
             weighting,
             keep_normals=keep_normals,
-            local_scales=local_scales,
+            relative=relative,
             workers=neighbourhoods.workers,
         )
     if isinstance(neighbourhoods, RingNeighbourhoods) and neighbourhoods.adjacency is not None:

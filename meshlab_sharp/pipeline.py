@@ -316,7 +316,7 @@ def _detect(
         keep_details=return_details,
         on_scale=lambda s: bar.step(f"scale {s}"),
         rule=None if robust is None else robust.rule,
-        local_scales=robust is not None,
+        relative=robust is not None,
         fused=None if robust is None else robust.fused,
     )
     timings["normals_projected_distance_threshold"] = time.perf_counter() - t

@@ -319,21 +319,19 @@ class RelativeRule:
     def __post_init__(self) -> None:
         self.score = np.zeros(len(self.points))
 
-    def __call__(
-        self,
-        i: int,
-        scale: int,
-        pdis: np.ndarray,
-        local: tuple[np.ndarray, np.ndarray] | None = None,
-    ) -> tuple[np.ndarray, float]:
-        """Relative distances (m,) and threshold of scale ``scale``; ``local``: its
-        :func:`local_scale` when already computed (the compiled pass over a cloud)."""
-        if local is None:
-            local = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
-        ell, offset = local
+    def __call__(self, i: int, scale: int, pdis: np.ndarray) -> tuple[np.ndarray, float]:
+        """Relative distances (m,) and threshold of the i-th scale, ``scale``."""
+        ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
         return r, robust_threshold(r)
+
+    def from_pass(self, relative: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, float]:
+        """What ``__call__`` returns, from the compiled pass over a cloud, which computed
+        the relative distances (m,) of this scale and the final ``score`` (m,) with
+        this rule's arithmetic (:class:`meshlab_sharp._kernels.ScalePass`)."""
+        self.score = score
+        return relative, robust_threshold(relative)
 
 
 def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourhood) -> np.ndarray:
@@ -581,7 +579,7 @@ class RobustSetup:
             self.scales,
             self.weighting,
             keep_normals=self.keep_normals,
-            local_scales=True,
+            relative=True,
             noise_k=noise_k,
             workers=self.neighbourhoods.workers,
         )

@@ -38,6 +38,7 @@ from meshlab_sharp.neighbourhoods import (
 )
 from meshlab_sharp.normals import face_average_normals
 from meshlab_sharp.robust import (
+    RelativeRule,
     _isolated_from_stats,
     _noise_factor,
     isolated_points,
@@ -379,18 +380,21 @@ def test_local_scale_identical_on_rings_and_empty_lists():
 
 
 @pytest.mark.parametrize("scales", [(12, 16, 20, 24, 28, 32, 36, 40), (2, 9, 33, 106, 131)])
-def test_fused_local_scales_identical(scales):
-    """The local scales computed inside the kNN pass (prefixes of one sorted list, the
-    8 partial sums shared between scales) equal the numpy reference's, bit for bit."""
+def test_relative_distances_in_the_pass_identical(scales):
+    """The relative distances and the score computed inside the kNN pass (local scales
+    of the prefixes of one sorted list, the 8 partial sums shared between scales) are
+    RelativeRule's arithmetic on the same projected distances, bit for bit."""
     points = _noisy(box_cylinder_points(2000))
     tree = _kernels.build_tree(points)
-    fused = _kernels.cloud_projected_distances(tree, scales, local_scales=True)
-    assert fused.local is not None
+    fused = _kernels.cloud_projected_distances(tree, scales, relative=True, keep_pdis=True)
+    assert fused.pdis is not None and fused.relative is not None
     lists = KnnNeighbourhoods(points, max(scales), backend="numpy")
+    rule = RelativeRule(points, lists.at, len(scales))
     for i, k in enumerate(scales):
-        ell, offset = local_scale(points, lists.at(k), backend="numpy")
-        assert np.array_equal(fused.local[0][i], ell)
-        assert np.array_equal(fused.local[1][i], offset)
+        r, threshold = rule(i, k, fused.pdis[i])
+        assert np.array_equal(fused.relative[i], r)
+        assert rule.from_pass(fused.relative[i], rule.score)[1] == threshold
+    assert np.array_equal(fused.score, rule.score)
 
 
 @pytest.mark.parametrize("name", ["outliers_random_box", "outliers_grid_ties", "noisy_outliers"])
