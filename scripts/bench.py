@@ -12,11 +12,14 @@ detection and subtracted.
 Stages, timed separately: load (a binary PLY written beforehand, read with
 meshlab_sharp.io.load), clean, neighbourhoods, normals + projected distance, threshold
 (normalisation, Otsu, candidates, decision), save (a PLY with the mask and strength).
-``detect`` end to end is timed too, on the in-memory arrays: "cold" is the first call in
-the process, "warm" the best of the repeats.
+``detect`` end to end is timed too, on the in-memory arrays, in each ``--mode`` (paper,
+robust or both, run back to back in each repeat): "cold" is the first call in the
+process, "warm" the best of the repeats, "cpu" the best process CPU time (user + system,
+every thread: steadier than wall time on a shared machine). The stages are paper mode's.
 
     python3 scripts/bench.py --sizes 100k,1M --repeat 3 --json out/bench.json
     python3 scripts/bench.py --sizes 1M --kind mesh --backend numpy
+    python3 scripts/bench.py --sizes 1M --kind points --mode both --repeat 2
 """
 
 from __future__ import annotations
@@ -156,7 +159,14 @@ def _rss_bytes() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
-def run_one(n: int, kind: str, backend: str, repeat: int, workdir: Path) -> dict:
+def _cpu_seconds() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def run_one(
+    n: int, kind: str, backend: str, repeat: int, workdir: Path, modes: tuple[str, ...]
+) -> dict:
     """All stages on one input, in this process (call in a fresh subprocess)."""
     from meshlab_sharp import _kernels
     from meshlab_sharp.cleaning import clean
@@ -183,22 +193,33 @@ def run_one(n: int, kind: str, backend: str, repeat: int, workdir: Path) -> dict
     out: dict = {"kind": kind, "n": n_in, "backend": backend, "workers": _kernels._workers(-1)}
 
     with _kernels.use_backend(backend):
-        # End to end on in-memory arrays: the first call is cold (page faults, thread
-        # pool, first use of the library), the rest warm.
-        totals, peak_detect = [], 0
+        # End to end on in-memory arrays, the modes back to back in each repeat: the
+        # first call is cold (page faults, thread pool, first use of the library).
+        walls: dict[str, list[float]] = {m: [] for m in modes}
+        cpus: dict[str, list[float]] = {m: [] for m in modes}
+        peak_detect = 0
+        out["detect"] = {}
         for _ in range(repeat):
-            t = time.perf_counter()
-            result = detect(vertices, faces)
-            totals.append(time.perf_counter() - t)
-            peak_detect = max(peak_detect, _rss_bytes())
-        out["detect_cold_s"] = totals[0]
-        out["detect_warm_s"] = min(totals[1:]) if len(totals) > 1 else totals[0]
-        out["detect_points_per_s"] = n_in / out["detect_warm_s"]
-        out["n_features"] = int(result.n_features)
-        out["thresholds"] = [float(t) for t in result.thresholds]
+            for mode in modes:
+                t, c = time.perf_counter(), _cpu_seconds()
+                result = detect(vertices, faces, mode=mode)
+                walls[mode].append(time.perf_counter() - t)
+                cpus[mode].append(_cpu_seconds() - c)
+                peak_detect = max(peak_detect, _rss_bytes())
+                out["detect"][mode] = {
+                    "n_features": int(result.n_features),
+                    "scales": list(result.scales),
+                    "thresholds": [float(t) for t in result.thresholds],
+                }
+                del result
+        for mode in modes:
+            totals = walls[mode]
+            warm = min(totals[1:]) if len(totals) > 1 else totals[0]
+            out["detect"][mode].update(
+                cold_s=totals[0], warm_s=warm, cpu_s=min(cpus[mode]), points_per_s=n_in / warm
+            )
         out["peak_bytes_above_input"] = peak_detect - baseline
         out["peak_bytes_per_point"] = (peak_detect - baseline) / n_in
-        del result
 
         # Stage by stage (best of the repeats).
         import pymeshlab
@@ -273,6 +294,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sizes", default="100k,1M", help="comma-separated, e.g. 100k,1M,5M,20M")
     ap.add_argument("--kind", choices=["points", "mesh", "both"], default="both")
     ap.add_argument("--backend", choices=["compiled", "numpy"], default="compiled")
+    ap.add_argument("--mode", choices=["paper", "robust", "both"], default="both")
     ap.add_argument("--repeat", type=int, default=3, help="runs per size (best is reported)")
     ap.add_argument("--json", default="bench.json", help="where to write the results")
     ap.add_argument("--one", nargs=3, metavar=("N", "KIND", "WORKDIR"), help=argparse.SUPPRESS)
@@ -280,7 +302,8 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.one:
         n, kind, workdir = int(args.one[0]), args.one[1], Path(args.one[2])
-        print(json.dumps(run_one(n, kind, args.backend, args.repeat, workdir)))
+        modes = ("paper", "robust") if args.mode == "both" else (args.mode,)
+        print(json.dumps(run_one(n, kind, args.backend, args.repeat, workdir, modes)))
         return 0
 
     kinds = ["points", "mesh"] if args.kind == "both" else [args.kind]
@@ -291,6 +314,7 @@ def main(argv: list[str] | None = None) -> int:
                 cmd = [
                     sys.executable, __file__, "--one", str(size), kind, tmp,
                     "--backend", args.backend, "--repeat", str(args.repeat),
+                    "--mode", args.mode,
                 ]  # fmt: skip
                 proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
                 if proc.returncode != 0:
@@ -308,11 +332,20 @@ def main(argv: list[str] | None = None) -> int:
 def _print(r: dict) -> None:
     rate = r["stages_points_per_s"]
     print(
-        f"{r['kind']:6s} n={r['n']:>9,d} {r['backend']}: detect cold {r['detect_cold_s']:.2f} s, "
-        f"warm {r['detect_warm_s']:.2f} s ({r['detect_points_per_s'] / 1e3:,.0f}k pts/s), "
-        f"peak {r['peak_bytes_per_point']:.0f} B/pt"
+        f"{r['kind']:6s} n={r['n']:>9,d} {r['backend']}, peak {r['peak_bytes_per_point']:.0f} B/pt"
     )
-    print("   " + ", ".join(f"{k} {v / 1e3:,.0f}k/s" for k, v in rate.items()))
+    for mode, d in r["detect"].items():
+        print(
+            f"   {mode:6s} detect cold {d['cold_s']:.2f} s, warm {d['warm_s']:.2f} s "
+            f"({d['points_per_s'] / 1e3:,.0f}k pts/s), cpu {d['cpu_s']:.2f} s"
+        )
+    if len(r["detect"]) == 2:
+        p, q = r["detect"]["paper"], r["detect"]["robust"]
+        print(
+            f"   robust / paper: warm {q['warm_s'] / p['warm_s']:.2f}, "
+            f"cpu {q['cpu_s'] / p['cpu_s']:.2f}"
+        )
+    print("   paper stages " + ", ".join(f"{k} {v / 1e3:,.0f}k/s" for k, v in rate.items()))
 
 
 if __name__ == "__main__":
