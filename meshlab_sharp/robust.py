@@ -296,8 +296,9 @@ def robust_threshold(r: np.ndarray) -> float:
 class RelativeRule:
     """Per-scale rule of robust mode for :func:`meshlab_sharp.multiscale.run_scales`.
 
-    Called as ``rule(i, scale, pdis)`` for the i-th scale: returns the relative
-    distances (m,) and the threshold; it also accumulates ``score``, the mean over the
+    Called as ``rule(i, scale, pdis)`` for the i-th scale (or, with the compiled pass
+    over a cloud, which does this arithmetic itself, as ``rule.from_pass``): returns
+    the relative distances (m,) and the threshold; it also accumulates ``score``, the mean over the
     scales of ``o / l`` (:func:`local_scale`: the centroid's distance relative to the
     local scale), the ranking used by :func:`thin`. Not ``r``: at an acute edge the
     normal turns, the projected distance peaks beside the edge, the centroid's distance
