@@ -26,7 +26,7 @@ from .io import Geometry, OutputSet, load, save_features_ply, save_indices, save
 from .io.writers import HELD_SIGNALS
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
 from .normals import WEIGHTINGS
-from .pipeline import MAX_SCALES, DetectionResult, detect
+from .pipeline import DEFAULT_MODE, MAX_SCALES, MODES, DetectionResult, detect
 from .plugin import add_plugin_command
 from .preprocessing import Preprocessing
 from .progress import Progress
@@ -123,11 +123,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     det.add_argument(
         "--mode",
-        choices=("paper", "robust"),
-        default="paper",
-        help="paper: the paper's method as ALGORITHM.md reads it (default); robust: "
-        "ignores outliers, density-independent, no features on smooth objects, thin "
-        "lines (docs/robust-mode.md)",
+        choices=MODES,
+        default=DEFAULT_MODE,
+        help=f"robust (default: {DEFAULT_MODE}): ignores outliers, copes with noise, "
+        "uneven density and CAD tessellations, no features on smooth objects, lines one "
+        "point wide (docs/robust-mode.md); paper: the paper's method exactly as "
+        "ALGORITHM.md reads it",
     )
     det.add_argument("--ascii", action="store_true", help="write an ASCII PLY (default binary)")
     det.add_argument("--force", action="store_true", help="overwrite existing outputs")
@@ -373,6 +374,7 @@ def _print_summary(source: str, output: Path, result: DetectionResult) -> None:
     n = len(result.mask)
     print(
         f"{source}: {n} {'vertices' if result.kind == 'mesh' else 'points'}, "
+        f"{result.mode} mode, "
         f"{result.n_features} sharp features ({100.0 * result.n_features / n:.1f}%) "
         f"-> {output} [{result.timings.get('total', 0.0):.2f} s]"
     )

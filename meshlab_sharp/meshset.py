@@ -8,7 +8,7 @@ import pymeshlab
 
 from .io import add_vertex_attribute, select_vertices
 from .normals import Weighting
-from .pipeline import DetectionResult, detect
+from .pipeline import DEFAULT_MODE, DetectionResult, detect
 
 
 def detect_meshset(
@@ -17,6 +17,7 @@ def detect_meshset(
     scales: Sequence[int] | None = None,
     weighting: Weighting = "gaussian",
     as_points: bool = False,
+    mode: str = DEFAULT_MODE,
     colorize: bool = False,
     progress: bool = False,
 ) -> DetectionResult:
@@ -33,8 +34,8 @@ def detect_meshset(
     ----------
     ms : pymeshlab.MeshSet
         Its current mesh is read and annotated; vertices and faces are not changed.
-    scales, weighting, as_points, progress
-        As for :func:`meshlab_sharp.detect`.
+    scales, weighting, as_points, mode, progress
+        As for :func:`meshlab_sharp.detect` (``mode`` default "robust").
     colorize : bool, default False
         Also colour the vertices: features red, the rest by strength (MeshLab's
         quality colour ramp is not used, so the red is unambiguous).
@@ -43,7 +44,14 @@ def detect_meshset(
     -------
     DetectionResult
     """
-    result = detect(ms, scales=scales, weighting=weighting, as_points=as_points, progress=progress)
+    result = detect(
+        ms,
+        scales=scales,
+        weighting=weighting,
+        as_points=as_points,
+        mode=mode,
+        progress=progress,
+    )
     mesh = ms.current_mesh()
     name = add_vertex_attribute(mesh, "sharp_strength", result.strength)
     ms.compute_scalar_by_function_per_vertex(q=name)
