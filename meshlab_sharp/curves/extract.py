@@ -26,8 +26,8 @@ from .trace import (
 
 __all__ = ["MIN_CURVE_LENGTH", "Corners", "Curve", "extract_curves"]
 
-#: A curve with a free end (not at a corner, not joined) shorter than this, in
-#: spacings, is dropped: what is left of a spur, or a blob of false detections.
+#: An open curve shorter than this, in spacings, is dropped: what is left of a spur
+#: between two junctions, or a blob of false detections.
 MIN_CURVE_LENGTH = GAP_LENGTH
 #: Side of the grid cells, in feature spacings, that select the points near the curves
 #: for the refinement (3x3x3 cells around each feature hold its REFINE_NEIGHBOURS).
@@ -215,6 +215,12 @@ def _cloud_pieces(
     return out, spacing
 
 
+def _split(pieces: list[Piece], values: np.ndarray) -> list[tuple[Piece, np.ndarray]]:
+    """Each piece with its rows of ``values`` (the pieces' vertices concatenated)."""
+    cuts = np.cumsum([len(pc.points) for pc in pieces])[:-1]
+    return list(zip(pieces, np.split(values, cuts), strict=True))
+
+
 def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
     """Indices of the vertices that advance by at least MIN_ADVANCE spacings along the
     curve's direction from the previous one kept (the last vertex always kept)."""
@@ -252,17 +258,8 @@ def _mesh_pieces(
 
 
 def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
-    """Leave out pieces shorter than MIN_CURVE_LENGTH with an end that meets nothing."""
-    ends, clusters = end_clusters(pieces, spacing)
-    met = np.zeros(len(ends.piece), bool)
-    for c in clusters:
-        met[c] = True
-    free = {int(p) for p, m in zip(ends.piece, met, strict=True) if not m}
-    return [
-        pc
-        for i, pc in enumerate(pieces)
-        if pc.closed or i not in free or pc.length >= MIN_CURVE_LENGTH * spacing
-    ]
+    """Leave out open pieces shorter than MIN_CURVE_LENGTH spacings."""
+    return [pc for pc in pieces if pc.closed or pc.length >= MIN_CURVE_LENGTH * spacing]
 
 
 def _corners(pieces: list[Piece], spacing: float, *, mesh: bool) -> tuple[list[Piece], Corners]:

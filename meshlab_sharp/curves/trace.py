@@ -163,8 +163,11 @@ def turn_angles(piece: Piece, window: float) -> np.ndarray:
 def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
     """Split a piece where it turns by more than :data:`CORNER_TURN`.
 
-    The cut vertex is the sharpest turn within :data:`TURN_WINDOW` spacings of arc on
-    each side, and ends both pieces it separates.
+    A vertex is a corner when the piece turns there by more than CORNER_TURN both over
+    :data:`TURN_WINDOW` spacings of arc on each side and over twice that (a corner
+    turns over any window; one vertex off the line does not over the wider one). The
+    cut vertex is the sharpest turn within TURN_WINDOW spacings of arc, and ends both
+    pieces it separates.
 
     Parameters
     ----------
@@ -177,7 +180,7 @@ def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
         The piece itself when it has no sharp turn.
     """
     window = TURN_WINDOW * spacing
-    angle = turn_angles(piece, window)
+    angle = np.minimum(turn_angles(piece, window), turn_angles(piece, 2 * window))
     m = len(angle)
     cum = _arc(piece.points)
     cuts: list[int] = []
