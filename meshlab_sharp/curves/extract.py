@@ -15,7 +15,7 @@ from .graph import SPUR_LENGTH, cloud_graph, mesh_graph, prune_spurs, spanning_f
 from .refine import cell_neighbourhood, line_fit_positions, plane_intersection_positions
 from .trace import (
     GAP_LENGTH,
-    TURN_WINDOW,
+    TANGENT_WINDOW,
     Piece,
     cut_at_turns,
     end_clusters,
@@ -197,20 +197,26 @@ def _cloud_pieces(
         pieces.append(Piece(nodes, fp[nodes], closed))
     if not pieces:
         return [], spacing
-    # refine every vertex at once
-    dirs = np.concatenate([tangents(pc, TURN_WINDOW * spacing) for pc in pieces])
-    allp = np.concatenate([pc.points for pc in pieces])
-    moved, fitted = plane_intersection_positions(allp, dirs, tree, near_pts, mask[near], spacing)
-    out, start = [], 0
-    for pc in pieces:
-        m = len(pc.points)
-        sl = slice(start, start + m)
-        start += m
-        line = line_fit_positions(pc.points, dirs[sl], LINE_FIT_HALF, pc.closed)
-        p = np.where(fitted[sl, None], moved[sl], line)
-        keep = _advancing(
-            p, tangents(Piece(pc.nodes, p, pc.closed), TURN_WINDOW * spacing), spacing
+    # refine every vertex at once, twice: the second time along the directions of the
+    # first refinement, which are steadier than those of the raw skeleton
+    raw = np.concatenate([pc.points for pc in pieces])
+    moved = raw
+    for _ in range(2):
+        dirs = np.concatenate(
+            [
+                tangents(Piece(pc.nodes, p, pc.closed), TANGENT_WINDOW * spacing)
+                for pc, p in _split(pieces, moved)
+            ]
         )
+        moved, fitted = plane_intersection_positions(raw, dirs, tree, near_pts, mask[near], spacing)
+    out = []
+    for (pc, p), (_, d), (_, f) in zip(
+        _split(pieces, moved), _split(pieces, dirs), _split(pieces, fitted), strict=True
+    ):
+        p = np.where(f[:, None], p, line_fit_positions(pc.points, d, LINE_FIT_HALF, pc.closed))
+        # then smoothed along the curve: each vertex onto the line of its neighbours
+        p = line_fit_positions(p, d, LINE_FIT_HALF, pc.closed)
+        keep = _advancing(p, d, spacing)
         out.append(Piece(feat[pc.nodes[keep]], p[keep], pc.closed))
     return out, spacing
 

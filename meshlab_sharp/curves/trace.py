@@ -16,7 +16,9 @@ from .graph import adjacency
 __all__ = [
     "CORNER_TURN",
     "GAP_LENGTH",
-    "TURN_WINDOW",
+    "TANGENT_WINDOW",
+    "TURN_INNER",
+    "TURN_OUTER",
     "Piece",
     "cut_at_turns",
     "end_clusters",
@@ -25,18 +27,28 @@ __all__ = [
     "trace_paths",
 ]
 
-#: Degrees: a curve turning by more than this within :data:`TURN_WINDOW` spacings on
-#: each side of a vertex has a corner there; two curve ends meeting at more than this
-#: meet at a corner (less: one curve continues into the other). A circle turns by this
-#: within a window of w spacings when its radius is below ``2 w / radians(CORNER_TURN)``
-#: = 5.1 spacings: smaller holes than that are not sampled finely enough to be curves.
+#: Degrees: a curve turning by more than this at a vertex has a corner there; two curve
+#: ends meeting at more than this meet at a corner (less: one curve continues into the
+#: other). The turn at a vertex is the angle between the chords of the curve from
+#: TURN_OUTER to TURN_INNER spacings of arc before it and from TURN_INNER to TURN_OUTER
+#: after it: a circle of radius r turns by ``2 TURN_OUTER / r`` radians between them, so
+#: circles down to a radius of ``2 TURN_OUTER / radians(CORNER_TURN)`` = 7.6 spacings
+#: stay whole; the vertices within TURN_INNER of the corner, where the features are
+#: least reliable, do not count.
 CORNER_TURN = 45.0
-#: Spacings on each side of a vertex over which a curve's direction is measured.
-TURN_WINDOW = 2.0
+#: Chords measuring the turn at a vertex start this far from it, in spacings of arc ...
+TURN_INNER = 1.0
+#: ... and end this far.
+TURN_OUTER = 3.0
+#: Half-width, in spacings of arc, of the chord giving a curve's direction at a vertex.
+TANGENT_WINDOW = 2.0
 #: Curve ends closer than this, in spacings, are joined (one curve continues, a loop
 #: closes, or curves meet at a corner): detection leaves gaps of a few points at
 #: corners, where neighbourhoods straddle three faces.
 GAP_LENGTH = 4.0
+#: Two ends continue one curve only if each lies within this many spacings of the
+#: other's line: the width of a feature band (parallel edges are farther apart).
+LATERAL_OFFSET = 1.5
 
 
 @dataclass
@@ -145,28 +157,34 @@ def tangents(piece: Piece, window: float) -> np.ndarray:
     return t[pad : pad + m]
 
 
-def turn_angles(piece: Piece, window: float) -> np.ndarray:
-    """Degrees the piece turns at each vertex (between its directions over ``window``
-    before and after it); 0 at the ends of an open piece. Shape (m,)."""
+def _chords(piece: Piece, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Unit chords before and after each vertex (TURN_OUTER to TURN_INNER spacings of
+    arc before it, TURN_INNER to TURN_OUTER after), both pointing along the curve.
+    Shapes (m, 3); zero where an open piece's end is nearer than TURN_INNER."""
     m = len(piece.points)
     pad = m if piece.closed else 0
     p = _padded(piece, pad)
-    back, ahead = _window_ends(_arc(p), window)
-    i = np.arange(len(p))
-    before, after = _unit(p - p[back]), _unit(p[ahead] - p)
+    cum = _arc(p)
+    far_b, far_a = _window_ends(cum, TURN_OUTER * spacing)
+    near_b, near_a = _window_ends(cum, TURN_INNER * spacing)
+    before = p[near_b] - p[far_b]
+    after = p[far_a] - p[near_a]
+    return _unit(before)[pad : pad + m], _unit(after)[pad : pad + m]
+
+
+def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
+    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`); 0 near the ends
+    of an open piece. Shape (m,)."""
+    before, after = _chords(piece, spacing)
+    valid = (np.linalg.norm(before, axis=1) > 0) & (np.linalg.norm(after, axis=1) > 0)
     cos = np.einsum("ij,ij->i", before, after)
-    valid = (back < i) & (ahead > i)
-    angle = np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0)
-    return angle[pad : pad + m]
+    return np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0)
 
 
 def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
     """Split a piece where it turns by more than :data:`CORNER_TURN`.
 
-    A vertex is a corner when the piece turns there by more than CORNER_TURN both over
-    :data:`TURN_WINDOW` spacings of arc on each side and over twice that (a corner
-    turns over any window; one vertex off the line does not over the wider one). The
-    cut vertex is the sharpest turn within TURN_WINDOW spacings of arc, and ends both
+    The cut vertex is the sharpest turn within TURN_OUTER spacings of arc; it ends both
     pieces it separates.
 
     Parameters
@@ -179,8 +197,8 @@ def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
     list of Piece
         The piece itself when it has no sharp turn.
     """
-    window = TURN_WINDOW * spacing
-    angle = np.minimum(turn_angles(piece, window), turn_angles(piece, 2 * window))
+    window = TURN_OUTER * spacing
+    angle = turn_angles(piece, spacing)
     m = len(angle)
     cum = _arc(piece.points)
     cuts: list[int] = []
@@ -218,7 +236,7 @@ class _Ends:
     piece: np.ndarray  # (q,) piece of each end
     side: np.ndarray  # (q,) 0: first vertex, 1: last
     point: np.ndarray  # (q, 3)
-    out: np.ndarray  # (q, 3) unit direction leaving the curve
+    out: np.ndarray  # (q, 3) unit direction leaving the curve (its end chord)
 
 
 def _ends(pieces: list[Piece], spacing: float) -> _Ends:
@@ -226,9 +244,11 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
     for i, pc in enumerate(pieces):
         if pc.closed or len(pc.points) < 2:
             continue
-        t = tangents(Piece(pc.nodes, pc.points), TURN_WINDOW * spacing)
-        rows.append((i, 0, pc.points[0], -t[0]))
-        rows.append((i, 1, pc.points[-1], t[-1]))
+        before, after = _chords(pc, spacing)
+        first = after[0] if np.any(after[0]) else _unit(pc.points[-1] - pc.points[0])
+        last = before[-1] if np.any(before[-1]) else _unit(pc.points[-1] - pc.points[0])
+        rows.append((i, 0, pc.points[0], -first))
+        rows.append((i, 1, pc.points[-1], last))
     if not rows:
         z = np.zeros((0, 3))
         return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, z)
@@ -271,16 +291,15 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
 
 def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
     """Ends ``a`` and ``b`` belong to one curve: they face each other within
-    :data:`CORNER_TURN`, and so does the gap between them."""
-    limit = math.cos(math.radians(CORNER_TURN))
-    if -float(ends.out[a] @ ends.out[b]) < limit:
+    :data:`CORNER_TURN`, and each lies within :data:`LATERAL_OFFSET` spacings of the
+    other's line (ends may overlap side by side where a skeleton broke a loop)."""
+    out = ends.out
+    if -float(out[a] @ out[b]) < math.cos(math.radians(CORNER_TURN)):
         return False
     gap = ends.point[b] - ends.point[a]
-    length = float(np.linalg.norm(gap))
-    if length <= 0.5 * spacing:
-        return True
-    g = gap / length
-    return float(ends.out[a] @ g) >= limit and float(-ends.out[b] @ g) >= limit
+    off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
+    off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
+    return max(off_a, off_b) <= LATERAL_OFFSET * spacing
 
 
 def join_pieces(pieces: list[Piece], spacing: float) -> list[Piece]:
