@@ -278,7 +278,7 @@ def _corners(pieces: list[Piece], spacing: float, *, mesh: bool) -> tuple[list[P
         a = np.zeros((3, 3))
         b = np.zeros(3)
         for i in c:
-            proj = np.eye(3) - np.outer(ends.out[i], ends.out[i])
+            proj = np.eye(3) - np.outer(ends.out[0, i], ends.out[0, i])
             a += proj
             b += proj @ ends.point[i]
         mean = ends.point[c].mean(axis=0)

@@ -40,6 +40,8 @@ CORNER_TURN = 45.0
 TURN_INNER = 1.0
 #: ... and end this far.
 TURN_OUTER = 3.0
+#: The turn is also measured with chords this many times farther (see turn_angles).
+TURN_SCALE = 2.0
 #: Half-width, in spacings of arc, of the chord giving a curve's direction at a vertex.
 TANGENT_WINDOW = 2.0
 #: Curve ends closer than this, in spacings, are joined (one curve continues, a loop
@@ -159,8 +161,9 @@ def tangents(piece: Piece, window: float) -> np.ndarray:
 
 def _chords(piece: Piece, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Unit chords before and after each vertex (TURN_OUTER to TURN_INNER spacings of
-    arc before it, TURN_INNER to TURN_OUTER after), both pointing along the curve.
-    Shapes (m, 3); zero where an open piece's end is nearer than TURN_INNER."""
+    arc before it, TURN_INNER to TURN_OUTER after; ``spacing`` may be scaled), both
+    pointing along the curve. Shapes (m, 3); zero where an open piece's end is nearer
+    than TURN_INNER."""
     m = len(piece.points)
     pad = m if piece.closed else 0
     p = _padded(piece, pad)
@@ -173,12 +176,18 @@ def _chords(piece: Piece, spacing: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
-    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`); 0 near the ends
-    of an open piece. Shape (m,)."""
-    before, after = _chords(piece, spacing)
-    valid = (np.linalg.norm(before, axis=1) > 0) & (np.linalg.norm(after, axis=1) > 0)
-    cos = np.einsum("ij,ij->i", before, after)
-    return np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0)
+    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`), the smaller of
+    the turns measured with the chords at one and at :data:`TURN_SCALE` times their
+    distances (a corner turns at both; a vertex off the line sways only the short
+    chords; a circle turns more at the longer ones); 0 near the ends of an open piece.
+    Shape (m,)."""
+    angles = []
+    for scale in (1.0, TURN_SCALE):
+        before, after = _chords(piece, scale * spacing)
+        valid = (np.linalg.norm(before, axis=1) > 0) & (np.linalg.norm(after, axis=1) > 0)
+        cos = np.einsum("ij,ij->i", before, after)
+        angles.append(np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0))
+    return np.minimum(*angles)
 
 
 def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
@@ -236,7 +245,7 @@ class _Ends:
     piece: np.ndarray  # (q,) piece of each end
     side: np.ndarray  # (q,) 0: first vertex, 1: last
     point: np.ndarray  # (q, 3)
-    out: np.ndarray  # (q, 3) unit direction leaving the curve (its end chord)
+    out: np.ndarray  # (s, q, 3) unit direction leaving the curve (its end chord), per scale
 
 
 def _ends(pieces: list[Piece], spacing: float) -> _Ends:
@@ -244,19 +253,22 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
     for i, pc in enumerate(pieces):
         if pc.closed or len(pc.points) < 2:
             continue
-        before, after = _chords(pc, spacing)
-        first = after[0] if np.any(after[0]) else _unit(pc.points[-1] - pc.points[0])
-        last = before[-1] if np.any(before[-1]) else _unit(pc.points[-1] - pc.points[0])
-        rows.append((i, 0, pc.points[0], -first))
+        chord = _unit(pc.points[-1] - pc.points[0])
+        first, last = [], []
+        for scale in (1.0, TURN_SCALE):
+            before, after = _chords(pc, scale * spacing)
+            first.append(-after[0] if np.any(after[0]) else -chord)
+            last.append(before[-1] if np.any(before[-1]) else chord)
+        rows.append((i, 0, pc.points[0], first))
         rows.append((i, 1, pc.points[-1], last))
     if not rows:
         z = np.zeros((0, 3))
-        return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, z)
+        return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, np.zeros((2, 0, 3)))
     return _Ends(
         np.array([r[0] for r in rows]),
         np.array([r[1] for r in rows]),
         np.array([r[2] for r in rows]),
-        _unit(np.array([r[3] for r in rows])),
+        _unit(np.array([r[3] for r in rows]).transpose(1, 0, 2)),
     )
 
 
@@ -293,13 +305,15 @@ def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
     """Ends ``a`` and ``b`` belong to one curve: they face each other within
     :data:`CORNER_TURN`, and each lies within :data:`LATERAL_OFFSET` spacings of the
     other's line (ends may overlap side by side where a skeleton broke a loop)."""
-    out = ends.out
-    if -float(out[a] @ out[b]) < math.cos(math.radians(CORNER_TURN)):
-        return False
     gap = ends.point[b] - ends.point[a]
-    off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
-    off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
-    return max(off_a, off_b) <= LATERAL_OFFSET * spacing
+    for out in ends.out:  # either scale of the chords (the larger turn is the corner's)
+        if -float(out[a] @ out[b]) < math.cos(math.radians(CORNER_TURN)):
+            continue
+        off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
+        off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
+        if max(off_a, off_b) <= LATERAL_OFFSET * spacing:
+            return True
+    return False
 
 
 def join_pieces(pieces: list[Piece], spacing: float) -> list[Piece]:
