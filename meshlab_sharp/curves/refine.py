@@ -26,9 +26,14 @@ __all__ = [
 ]
 
 #: Points near a vertex that the two arms are fitted to (before the features among
-#: them are left out): a disc of about 3 spacings' radius.
-REFINE_NEIGHBOURS = 32
-#: Fewest non-feature points on each arm for a line fit.
+#: them are left out): a disc of about 3.5 spacings' radius.
+REFINE_NEIGHBOURS = 40
+#: Each point's weight in the arms' fits falls off with its distance d along the curve
+#: as ``exp(-(d / (SLAB * spacing))**2 / 2)``: on a curved edge of radius r the
+#: cross-section of a point d away is off by ``d**2 / (2 r)``, 0.06 spacing for
+#: d = 1 spacing and r = 8 spacings (unweighted, d up to 3.5 spacings: 0.8 spacing).
+SLAB = 1.0
+#: Fewest non-feature points on each arm for a line fit (total weight).
 MIN_ARM_POINTS = 3
 #: Largest move onto the intersection, in spacings: a detected point lies within about
 #: one spacing of the edge (a band 2 spacings wide), and the arms' fit adds noise.
@@ -140,13 +145,15 @@ def plane_intersection_positions(
     u, w = _frame(directions)
     d = tree_points[idx] - vertices[:, None, :]
     xy = np.stack([np.einsum("vkj,vj->vk", d, u), np.einsum("vkj,vj->vk", d, w)], axis=-1)
+    along = np.einsum("vkj,vj->vk", d, directions) / (SLAB * spacing)
+    weight = np.exp(-0.5 * along**2)
     r = np.linalg.norm(xy, axis=-1)
     use = ~tree_is_feature[idx] & (r > 1e-12 * spacing)
     unit = xy / np.where(r > 0, r, 1.0)[..., None]
     bisector = (unit * use[..., None]).sum(axis=1)
     side = (bisector[:, None, 0] * unit[..., 1] - bisector[:, None, 1] * unit[..., 0]) > 0
-    c1, a1, rms1, n1 = _arm_lines(xy, (use & side).astype(np.float64))
-    c2, a2, rms2, n2 = _arm_lines(xy, (use & ~side).astype(np.float64))
+    c1, a1, rms1, n1 = _arm_lines(xy, np.where(use & side, weight, 0.0))
+    c2, a2, rms2, n2 = _arm_lines(xy, np.where(use & ~side, weight, 0.0))
     cross = a1[:, 0] * a2[:, 1] - a1[:, 1] * a2[:, 0]
     safe = np.where(np.abs(cross) > 0, cross, 1.0)
     diff = c2 - c1
