@@ -5,8 +5,8 @@ Layout (``save_report``): a title with the counts and the time; two rendered vie
 the object (orthographic, points depth-sorted and shaded by their normal; strength as
 colour, features red and drawn larger; with ``detect(..., curves=True)`` the feature
 curves drawn over them, coloured by kind, and the corners as black dots); below, for
-each scale, the histogram of the normalised projected distances (the 256 bins Otsu's method uses, log counts) with the
-threshold marked and the candidates in red.
+each scale, the histogram of the normalised projected distances (the 256 bins Otsu's
+method uses, log counts) with the threshold marked and the candidates in red.
 
 Needs matplotlib (the ``plot`` extra: ``pip install 'meshlab-sharp[plot]'``); it draws
 with the Agg backend, so no display is needed.

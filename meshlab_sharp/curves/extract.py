@@ -11,11 +11,19 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .fit import classify
-from .graph import SPUR_LENGTH, cloud_graph, mesh_graph, prune_spurs, spanning_forest
+from .graph import (
+    SPUR_LENGTH,
+    MeshPaths,
+    cloud_graph,
+    mesh_graph,
+    prune_spurs,
+    spanning_forest,
+)
 from .refine import cell_neighbourhood, line_fit_positions, plane_intersection_positions
 from .trace import (
     GAP_LENGTH,
     TANGENT_WINDOW,
+    Bridge,
     Piece,
     cut_at_turns,
     end_clusters,
@@ -151,17 +159,20 @@ def extract_curves(
     empty = Corners(np.zeros((0, 3)), np.zeros(0, np.int64))
     if len(feat) < 2:
         return [], empty
+    paths: MeshPaths | None = None
     if faces is None:
         pieces, spacing = _cloud_pieces(pts, feat_mask, ok, feat, fp)
     else:
         pieces, spacing = _mesh_pieces(pts, np.asarray(faces), feat_mask & ok, feat, fp)
+        paths = MeshPaths(pts, np.asarray(faces), feat_mask & ok)
     if spacing <= 0:
         return [], empty
+    bridge = None if paths is None else _bridge(pts, paths, spacing)
     pieces = [q for pc in pieces for q in cut_at_turns(pc, spacing)]
-    pieces = join_pieces(pieces, spacing)
+    pieces = join_pieces(pieces, spacing, bridge)
     pieces = _drop_short(pieces, spacing)
-    pieces = join_pieces(pieces, spacing)
-    pieces, corners = _corners(pieces, spacing, mesh=faces is not None)
+    pieces = join_pieces(pieces, spacing, bridge)
+    pieces, corners = _corners(pieces, spacing, pts, paths)
     curves = [_curve(pc, spacing) for pc in pieces if len(pc.points) >= 2]
     curves.sort(key=lambda c: (*c.points[0], *c.points[-1], c.length))
     return curves, corners
@@ -263,14 +274,30 @@ def _mesh_pieces(
     return pieces, spacing
 
 
+def _bridge(pts: np.ndarray, paths: MeshPaths, spacing: float) -> Bridge:
+    """Mesh vertices between two curve vertices: the shortest path along the mesh edges
+    near the features (none when longer than twice GAP_LENGTH spacings)."""
+
+    def bridge(a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        inner = paths.path(a, b, 2 * GAP_LENGTH * spacing)
+        inner = np.zeros(0, np.int64) if inner is None else inner
+        return inner, pts[inner]
+
+    return bridge
+
+
 def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
     """Leave out open pieces shorter than MIN_CURVE_LENGTH spacings."""
     return [pc for pc in pieces if pc.closed or pc.length >= MIN_CURVE_LENGTH * spacing]
 
 
-def _corners(pieces: list[Piece], spacing: float, *, mesh: bool) -> tuple[list[Piece], Corners]:
-    """Corners where curve ends meet (not as one continuing curve); the ends are
-    brought onto them."""
+def _corners(
+    pieces: list[Piece], spacing: float, pts: np.ndarray, paths: MeshPaths | None
+) -> tuple[list[Piece], Corners]:
+    """Corners where curve ends meet (not as one continuing curve), and the ends brought
+    onto them. The corner is the point nearest the lines of the ends (least squares);
+    on a mesh, the mesh vertex nearest it, reached from each end along mesh edges
+    (``paths``)."""
     ends, clusters = end_clusters(pieces, spacing)
     points, indices = [], []
     pieces = [Piece(pc.nodes.copy(), pc.points.copy(), pc.closed) for pc in pieces]
@@ -287,11 +314,13 @@ def _corners(pieces: list[Piece], spacing: float, *, mesh: bool) -> tuple[list[P
             x = np.linalg.solve(a, b)
             if np.linalg.norm(x - mean) <= GAP_LENGTH * spacing:
                 corner = x
-        nearest = int(c[np.argmin(np.linalg.norm(ends.point[c] - corner, axis=1))])
-        pc0 = pieces[ends.piece[nearest]]
-        index = int(pc0.nodes[0] if ends.side[nearest] == 0 else pc0.nodes[-1])
-        if mesh:
-            corner = ends.point[nearest].copy()
+        if paths is None:
+            nearest = int(c[np.argmin(np.linalg.norm(ends.point[c] - corner, axis=1))])
+            pc0 = pieces[ends.piece[nearest]]
+            index = int(pc0.nodes[0] if ends.side[nearest] == 0 else pc0.nodes[-1])
+        else:
+            index = paths.nearest(corner)
+            corner = pts[index].copy()
         points.append(corner)
         indices.append(index)
         for i in c:
@@ -299,16 +328,19 @@ def _corners(pieces: list[Piece], spacing: float, *, mesh: bool) -> tuple[list[P
             at = 0 if ends.side[i] == 0 else len(pc.nodes) - 1
             here = int(pc.nodes[at])
             if here == index or (
-                not mesh and np.linalg.norm(pc.points[at] - corner) <= SNAP * spacing
+                paths is None and np.linalg.norm(pc.points[at] - corner) <= SNAP * spacing
             ):
                 pc.points[at] = corner
                 continue
+            inner = None if paths is None else paths.path(here, index, 2 * GAP_LENGTH * spacing)
+            add = np.append(np.zeros(0, np.int64) if inner is None else inner, index)
+            add_points = np.vstack([pts[add[:-1]], corner])
             if ends.side[i] == 0:
-                pc.nodes = np.concatenate([[index], pc.nodes])
-                pc.points = np.vstack([corner, pc.points])
+                pc.nodes = np.concatenate([add[::-1], pc.nodes])
+                pc.points = np.vstack([add_points[::-1], pc.points])
             else:
-                pc.nodes = np.append(pc.nodes, index)
-                pc.points = np.vstack([pc.points, corner])
+                pc.nodes = np.concatenate([pc.nodes, add])
+                pc.points = np.vstack([pc.points, add_points])
     if not points:
         return pieces, Corners(np.zeros((0, 3)), np.zeros(0, np.int64))
     p = np.array(points)
@@ -329,5 +361,9 @@ def _curve(pc: Piece, spacing: float) -> Curve:
         p, n = p[::-1], n[::-1]
     kind, params = classify(p, pc.closed, spacing)
     return Curve(
-        np.ascontiguousarray(p), np.ascontiguousarray(n, dtype=np.int64), pc.closed, kind, params
+        np.ascontiguousarray(p),
+        np.ascontiguousarray(n, dtype=np.int64),
+        bool(pc.closed),
+        kind,
+        params,
     )

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import minimum_spanning_tree
+from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
 __all__ = [
     "LINK_NEIGHBOURS",
     "LINK_RADIUS",
     "SPUR_LENGTH",
+    "MeshPaths",
     "adjacency",
     "cloud_graph",
     "mesh_graph",
@@ -216,3 +217,53 @@ def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: fl
         if not removed:
             break
     return edges[keep]
+
+
+class MeshPaths:
+    """Shortest paths along the mesh edges of the faces that touch a feature vertex: the
+    vertices joining curve ends across a gap, or a curve end to its corner, on a mesh.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int
+    mask : (n,) bool
+        Feature vertices.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> None:
+        f = np.asarray(faces, np.int64)
+        f = f[mask[f].any(axis=1)]
+        self.ids = np.unique(f)
+        local = np.searchsorted(self.ids, f)
+        e = np.concatenate([local[:, [0, 1]], local[:, [1, 2]], local[:, [2, 0]]])
+        e = np.unique(np.sort(e, axis=1), axis=0)
+        self.positions = vertices[self.ids]
+        length = np.linalg.norm(self.positions[e[:, 0]] - self.positions[e[:, 1]], axis=1)
+        n = len(self.ids)
+        self.graph = sp.coo_matrix(
+            (np.concatenate([length, length]), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+            shape=(n, n),
+        ).tocsr()
+        self.tree = cKDTree(self.positions) if n else None
+
+    def nearest(self, point: np.ndarray) -> int:
+        """The input index of the vertex nearest ``point`` (3,) among these faces'."""
+        assert self.tree is not None
+        return int(self.ids[self.tree.query(point)[1]])
+
+    def path(self, a: int, b: int, limit: float) -> np.ndarray | None:
+        """Input indices of the vertices strictly between ``a`` and ``b`` on the shortest
+        path (shape (k,)), or None when none is shorter than ``limit``."""
+        ia, ib = np.searchsorted(self.ids, [a, b])
+        if ia >= len(self.ids) or ib >= len(self.ids) or self.ids[ia] != a or self.ids[ib] != b:
+            return None
+        dist, pred = dijkstra(self.graph, indices=int(ia), limit=limit, return_predecessors=True)
+        if not np.isfinite(dist[ib]):
+            return None
+        inner = []
+        node = int(pred[ib])
+        while node != ia:
+            inner.append(node)
+            node = int(pred[node])
+        return self.ids[np.array(inner[::-1], np.int64)]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -316,7 +317,12 @@ def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
     return False
 
 
-def join_pieces(pieces: list[Piece], spacing: float) -> list[Piece]:
+#: Vertices (input indices, positions (k, 3)) strictly between two curve vertices given by
+#: input index, on a mesh.
+Bridge = Callable[[int, int], tuple[np.ndarray, np.ndarray]]
+
+
+def join_pieces(pieces: list[Piece], spacing: float, bridge: Bridge | None = None) -> list[Piece]:
     """Join pieces whose ends meet as one curve (two ends, facing each other), closing
     loops; ends meeting at a corner are left as they are.
 
@@ -324,6 +330,9 @@ def join_pieces(pieces: list[Piece], spacing: float) -> list[Piece]:
     ----------
     pieces : list of Piece
     spacing : float
+    bridge : callable, optional
+        The vertices to insert between two joined ends (meshes: a path along the mesh
+        edges); none (a straight segment) by default.
 
     Returns
     -------
@@ -358,6 +367,8 @@ def join_pieces(pieces: list[Piece], spacing: float) -> list[Piece]:
                 closed = nxt == (start, entry_side)
                 break
             p, side = nxt
+        if bridge is not None:
+            parts = _bridged(parts, closed, bridge)
         nodes = np.concatenate([q.nodes for q in parts])
         points = np.concatenate([q.points for q in parts])
         keep = np.ones(len(nodes), bool)  # a vertex shared by consecutive parts once
@@ -380,4 +391,20 @@ def join_pieces(pieces: list[Piece], spacing: float) -> list[Piece]:
     for i in range(len(pieces)):
         if not done[i]:
             out.append(chain(i, 0))
+    return out
+
+
+def _bridged(parts: list[Piece], closed: bool, bridge: Bridge) -> list[Piece]:
+    """``parts`` with the bridge between consecutive parts (and from the last to the
+    first when ``closed``) inserted where they do not share their end vertex."""
+    out: list[Piece] = []
+    pairs = list(zip(parts, parts[1:] + (parts[:1] if closed else []), strict=False))
+    for a, b in pairs:
+        out.append(a)
+        if a.nodes[-1] != b.nodes[0]:
+            nodes, points = bridge(int(a.nodes[-1]), int(b.nodes[0]))
+            if len(nodes):
+                out.append(Piece(nodes, points))
+    if not closed:
+        out.append(parts[-1])
     return out
