@@ -168,9 +168,8 @@ def extract_curves(
     if spacing <= 0:
         return [], empty
     bridge = None if paths is None else _bridge(pts, paths, spacing)
-    pieces = [q for pc in pieces for q in cut_at_turns(pc, spacing)]
-    pieces = join_pieces(pieces, spacing, bridge)
-    pieces = _drop_short(pieces, spacing)
+    pieces = _drop_short([q for pc in pieces for q in cut_at_turns(pc, spacing)], spacing)
+    pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
     pieces = join_pieces(pieces, spacing, bridge)
     pieces, corners = _corners(pieces, spacing, pts, paths)
     curves = [_curve(pc, spacing) for pc in pieces if len(pc.points) >= 2]

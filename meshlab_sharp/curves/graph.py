@@ -178,6 +178,10 @@ def adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
 def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: float) -> np.ndarray:
     """Remove branches from a free end to a junction shorter than ``min_length``.
 
+    At each junction the shortest such spurs go first, and never so many that the
+    junction is left with fewer than two branches: the ends of the main line are not
+    eaten away round after round.
+
     Parameters
     ----------
     n : int
@@ -199,19 +203,24 @@ def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: fl
         current = np.flatnonzero(keep)
         indptr, nbr, eid = adjacency(n, edges[current])
         degree = np.diff(indptr)
-        removed = False
+        spurs: dict[int, list[tuple[float, int, list[int]]]] = {}
         for leaf in np.flatnonzero(degree == 1):
             prev, node, length, path = -1, int(leaf), 0.0, []
             while True:
                 row = range(indptr[node], indptr[node + 1])
                 step = next(j for j in row if nbr[j] != prev)
-                path.append(current[eid[step]])
+                path.append(int(current[eid[step]]))
                 nxt = int(nbr[step])
                 length += float(np.linalg.norm(positions[nxt] - positions[node]))
                 prev, node = node, nxt
                 if degree[node] != 2 or length >= min_length:
                     break
             if degree[node] >= 3 and length < min_length:
+                spurs.setdefault(node, []).append((length, int(leaf), path))
+        removed = False
+        for junction, found in spurs.items():
+            found.sort()
+            for _, _, path in found[: max(0, int(degree[junction]) - 2)]:
                 keep[path] = False
                 removed = True
         if not removed:
