@@ -20,7 +20,6 @@ import json
 import math
 import platform
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -149,7 +148,8 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
         "",
         "## Summary against the targets (means over the 8 parts)",
         "",
-        "| condition | mode | precision | coverage | RMS (spacings) | count (min-max) | corners | time |",
+        "| condition | mode | precision | coverage | RMS (spacings) | count (min-max) "
+        "| corners | time |",
         "|---|---|---:|---:|---:|---:|---:|---:|",
     ]
     for c in CONDITIONS:
@@ -184,7 +184,8 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
             )
     lines += ["", "## Per part", ""]
     lines += [
-        "| part | condition | mode | precision | coverage | RMS | curves / exact | corners found / exact | kinds (line/arc/free) |",
+        "| part | condition | mode | precision | coverage | RMS | curves / exact "
+        "| corners found / exact | kinds (line/arc/free) |",
         "|---|---|---|---:|---:|---:|---:|---:|---|",
     ]
     for r in rows:
