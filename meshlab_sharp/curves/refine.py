@@ -33,11 +33,15 @@ REFINE_NEIGHBOURS = 40
 #: cross-section of a point d away is off by ``d**2 / (2 r)``, 0.06 spacing for
 #: d = 1 spacing and r = 8 spacings (unweighted, d up to 3.5 spacings: 0.8 spacing).
 SLAB = 1.0
+#: Rounds of fitting the two arms' lines, each point then going to the nearer line
+#: (the first split is by the side of the points' mean direction, which mixes the arms
+#: when the vertex lies on one of the faces rather than on the edge).
+ARM_ITERATIONS = 3
 #: Fewest non-feature points on each arm for a line fit (total weight).
 MIN_ARM_POINTS = 3
 #: Largest move onto the intersection, in spacings: a detected point lies within about
 #: one spacing of the edge (a band 2 spacings wide), and the arms' fit adds noise.
-MAX_SHIFT = 2.0
+MAX_SHIFT = 3.0
 #: Smallest angle, in degrees, between the two arms' lines: the crease angle below
 #: which an edge is not sharp (``robust.CREASE_ANGLE``).
 MIN_ARM_ANGLE = 20.0
@@ -105,6 +109,12 @@ def _arm_lines(
     return c, a, rms, total
 
 
+def _offset(xy: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Distance of 2-D points (v, k, 2) to the lines through c (v, 2) along a (v, 2)."""
+    d = xy - c[:, None, :]
+    return np.abs(d[..., 0] * a[:, None, 1] - d[..., 1] * a[:, None, 0])
+
+
 def plane_intersection_positions(
     vertices: np.ndarray,
     directions: np.ndarray,
@@ -152,8 +162,10 @@ def plane_intersection_positions(
     unit = xy / np.where(r > 0, r, 1.0)[..., None]
     bisector = (unit * use[..., None]).sum(axis=1)
     side = (bisector[:, None, 0] * unit[..., 1] - bisector[:, None, 1] * unit[..., 0]) > 0
-    c1, a1, rms1, n1 = _arm_lines(xy, np.where(use & side, weight, 0.0))
-    c2, a2, rms2, n2 = _arm_lines(xy, np.where(use & ~side, weight, 0.0))
+    for _ in range(ARM_ITERATIONS):
+        c1, a1, rms1, n1 = _arm_lines(xy, np.where(use & side, weight, 0.0))
+        c2, a2, rms2, n2 = _arm_lines(xy, np.where(use & ~side, weight, 0.0))
+        side = _offset(xy, c1, a1) <= _offset(xy, c2, a2)  # each point to its nearer line
     cross = a1[:, 0] * a2[:, 1] - a1[:, 1] * a2[:, 0]
     safe = np.where(np.abs(cross) > 0, cross, 1.0)
     diff = c2 - c1
