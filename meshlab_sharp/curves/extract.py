@@ -37,6 +37,9 @@ __all__ = ["MIN_CURVE_LENGTH", "Corners", "Curve", "extract_curves"]
 #: An open curve shorter than this, in spacings, is dropped: what is left of a spur
 #: between two junctions, or a blob of false detections.
 MIN_CURVE_LENGTH = GAP_LENGTH
+#: A piece shorter than this, in spacings, from a junction of three or more curve ends
+#: to a free end is a spur (noise beside a line) and is dropped.
+SPUR_PIECE = 2 * GAP_LENGTH
 #: Side of the grid cells, in feature spacings, that select the points near the curves
 #: for the refinement (3x3x3 cells around each feature hold its REFINE_NEIGHBOURS).
 CELL_SPACINGS = 4.0
@@ -286,8 +289,26 @@ def _bridge(pts: np.ndarray, paths: MeshPaths, spacing: float) -> Bridge:
 
 
 def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
-    """Leave out open pieces shorter than MIN_CURVE_LENGTH spacings."""
-    return [pc for pc in pieces if pc.closed or pc.length >= MIN_CURVE_LENGTH * spacing]
+    """Leave out open pieces shorter than MIN_CURVE_LENGTH spacings, and spurs: pieces
+    shorter than SPUR_PIECE spacings with one end free and the other where three or
+    more ends meet."""
+    ends, clusters = end_clusters(pieces, spacing)
+    size = np.ones(len(ends.piece), np.int64)
+    for c in clusters:
+        size[c] = len(c)
+    spur = set()
+    for i in range(0, len(ends.piece), 2):  # the two ends of one piece are consecutive
+        if sorted((size[i], size[i + 1]))[0] == 1 and max(size[i], size[i + 1]) >= 3:
+            spur.add(int(ends.piece[i]))
+    return [
+        pc
+        for i, pc in enumerate(pieces)
+        if pc.closed
+        or (
+            pc.length >= MIN_CURVE_LENGTH * spacing
+            and (i not in spur or pc.length >= SPUR_PIECE * spacing)
+        )
+    ]
 
 
 def _corners(

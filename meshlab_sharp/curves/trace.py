@@ -20,6 +20,7 @@ __all__ = [
     "TANGENT_WINDOW",
     "TURN_INNER",
     "TURN_OUTER",
+    "TURN_SCALES",
     "Piece",
     "cut_at_turns",
     "end_clusters",
@@ -41,8 +42,9 @@ CORNER_TURN = 45.0
 TURN_INNER = 1.0
 #: ... and end this far.
 TURN_OUTER = 3.0
-#: The turn is also measured with chords this many times farther (see turn_angles).
-TURN_SCALE = 2.0
+#: The turn is measured with the chords at these multiples of their distances (see
+#: turn_angles).
+TURN_SCALES = (1.0, 2.0, 4.0)
 #: Half-width, in spacings of arc, of the chord giving a curve's direction at a vertex.
 TANGENT_WINDOW = 2.0
 #: Curve ends closer than this, in spacings, are joined (one curve continues, a loop
@@ -178,17 +180,18 @@ def _chords(piece: Piece, spacing: float) -> tuple[np.ndarray, np.ndarray]:
 
 def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
     """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`), the smaller of
-    the turns measured with the chords at one and at :data:`TURN_SCALE` times their
-    distances (a corner turns at both; a vertex off the line sways only the short
-    chords; a circle turns more at the longer ones); 0 near the ends of an open piece.
+    the turns measured with the chords at :data:`TURN_SCALES` times their distances (a
+    corner turns at all; a vertex off the line sways only the short chords, noise along
+    the curve the shorter ones more; a circle turns more at the longer ones); 0 near the
+    ends of an open piece.
     Shape (m,)."""
     angles = []
-    for scale in (1.0, TURN_SCALE):
+    for scale in TURN_SCALES:
         before, after = _chords(piece, scale * spacing)
         valid = (np.linalg.norm(before, axis=1) > 0) & (np.linalg.norm(after, axis=1) > 0)
         cos = np.einsum("ij,ij->i", before, after)
         angles.append(np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0))
-    return np.minimum(*angles)
+    return np.min(angles, axis=0)
 
 
 def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
@@ -256,7 +259,7 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
             continue
         chord = _unit(pc.points[-1] - pc.points[0])
         first, last = [], []
-        for scale in (1.0, TURN_SCALE):
+        for scale in TURN_SCALES:
             before, after = _chords(pc, scale * spacing)
             first.append(-after[0] if np.any(after[0]) else -chord)
             last.append(before[-1] if np.any(before[-1]) else chord)
@@ -264,7 +267,8 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
         rows.append((i, 1, pc.points[-1], last))
     if not rows:
         z = np.zeros((0, 3))
-        return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, np.zeros((2, 0, 3)))
+        empty = np.zeros((len(TURN_SCALES), 0, 3))
+        return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, empty)
     return _Ends(
         np.array([r[0] for r in rows]),
         np.array([r[1] for r in rows]),
