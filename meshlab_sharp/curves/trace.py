@@ -51,6 +51,9 @@ TANGENT_WINDOW = 2.0
 #: closes, or curves meet at a corner): detection leaves gaps of a few points at
 #: corners, where neighbourhoods straddle three faces.
 GAP_LENGTH = 4.0
+#: Two free ends facing each other are joined across up to this many spacings: the
+#: gaps detection leaves along weak edges (a chamfer's 45-degree edges) and in noise.
+LONG_GAP = 12.0
 #: Two ends continue one curve only if each lies within this many spacings of the
 #: other's line: the width of a feature band (parallel edges are farther apart).
 LATERAL_OFFSET = 1.5
@@ -326,9 +329,20 @@ def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
 Bridge = Callable[[int, int], tuple[np.ndarray, np.ndarray]]
 
 
+def _faces_gap(ends: _Ends, a: int, b: int) -> bool:
+    """The gap from end ``a`` to end ``b`` leaves each end forwards (within
+    :data:`CORNER_TURN`), at the widest chord scale."""
+    gap = ends.point[b] - ends.point[a]
+    length = float(np.linalg.norm(gap))
+    limit = math.cos(math.radians(CORNER_TURN)) * length
+    return bool(gap @ ends.out[-1, a] >= limit and -gap @ ends.out[-1, b] >= limit)
+
+
 def join_pieces(pieces: list[Piece], spacing: float, bridge: Bridge | None = None) -> list[Piece]:
     """Join pieces whose ends meet as one curve (two ends, facing each other), closing
-    loops; ends meeting at a corner are left as they are.
+    loops; ends meeting at a corner are left as they are. Two free ends (no other end
+    within GAP_LENGTH) facing each other are also joined across up to
+    :data:`LONG_GAP` spacings, nearest pairs first.
 
     Parameters
     ----------
@@ -344,15 +358,32 @@ def join_pieces(pieces: list[Piece], spacing: float, bridge: Bridge | None = Non
     """
     ends, clusters = end_clusters(pieces, spacing)
     link: dict[tuple[int, int], tuple[int, int]] = {}
-    for c in clusters:
-        if len(c) != 2 or not _continues(ends, int(c[0]), int(c[1]), spacing):
-            continue
-        a, b = (int(ends.piece[i]) for i in c)
-        sa, sb = (int(ends.side[i]) for i in c)
+
+    def connect(i: int, j: int) -> None:
+        a, b = int(ends.piece[i]), int(ends.piece[j])
+        sa, sb = int(ends.side[i]), int(ends.side[j])
+        if (a, sa) in link or (b, sb) in link:
+            return
         if a == b and pieces[a].length < 3 * GAP_LENGTH * spacing:
-            continue  # a short piece bent onto itself is no loop
+            return  # a short piece bent onto itself is no loop
         link[(a, sa)] = (b, sb)
         link[(b, sb)] = (a, sa)
+
+    for c in clusters:
+        if len(c) == 2 and _continues(ends, int(c[0]), int(c[1]), spacing):
+            connect(int(c[0]), int(c[1]))
+    free = np.ones(len(ends.piece), bool)
+    for c in clusters:
+        free[c] = False
+    alone = np.flatnonzero(free)
+    if len(alone) >= 2:
+        pairs = cKDTree(ends.point[alone]).query_pairs(LONG_GAP * spacing, output_type="ndarray")
+        pairs = alone[pairs]
+        gaps = np.linalg.norm(ends.point[pairs[:, 0]] - ends.point[pairs[:, 1]], axis=1)
+        for k in np.lexsort((pairs[:, 1], pairs[:, 0], gaps)):
+            i, j = int(pairs[k, 0]), int(pairs[k, 1])
+            if _continues(ends, i, j, spacing) and _faces_gap(ends, i, j):
+                connect(i, j)
     if not link:
         return pieces
     done = np.zeros(len(pieces), bool)
