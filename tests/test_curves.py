@@ -110,7 +110,7 @@ def test_curves_do_not_depend_on_the_order_of_the_points(mode):
 
 
 def test_curves_are_opt_in_and_reported_in_the_summary():
-    points = shapes.cube_grid_points(11)
+    points = shapes.cube_grid_points(21)
     plain = meshlab_sharp.detect(points)
     assert plain.curves is None and plain.corners is None
     assert "curves" not in plain.summary() and "curves" not in plain.timings
@@ -155,16 +155,18 @@ def cube_curves():
 
 
 def _loaded(path):
+    """The MeshSet holding the file (a Mesh must not outlive its MeshSet)."""
     ms = pymeshlab.MeshSet()
     ms.load_new_mesh(str(path))
-    return ms.current_mesh()
+    return ms
 
 
 @pytest.mark.parametrize("ext", [".ply", ".obj"])
 def test_ply_and_obj_read_back_as_edge_meshes(tmp_path, cube_curves, ext):
     vertices, edges, _ = curve_arrays(cube_curves)
     path = save_curves(tmp_path / f"c{ext}", cube_curves)
-    mesh = _loaded(path)
+    ms = _loaded(path)
+    mesh = ms.current_mesh()
     assert mesh.vertex_number() == len(vertices)
     assert mesh.edge_number() == len(edges) == sum(len(c.points) - 1 for c in cube_curves)
     np.testing.assert_allclose(mesh.vertex_matrix(), vertices, atol=1e-6)
@@ -241,7 +243,7 @@ def test_cli_writes_curves(tmp_path, capsys, ext):
 
         assert len(ezdxf.readfile(out).modelspace()) == 12
     else:
-        assert _loaded(out).edge_number() == 12 * 20  # 21 grid points per edge
+        assert _loaded(out).current_mesh().edge_number() == 12 * 20  # 21 grid points per edge
     hidden = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
     assert hidden == []
 

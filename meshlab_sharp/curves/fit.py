@@ -81,7 +81,7 @@ def classify(points: np.ndarray, closed: bool, spacing: float) -> tuple[str, dic
             }
     if len(p) < 4:
         return "freeform", free
-    normal = vt[2]
+    normal = np.cross(vt[0], vt[1])  # right-handed with the in-plane axes
     height = rel @ normal
     if not _fits(height, tol):
         return "freeform", free
