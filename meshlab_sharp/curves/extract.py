@@ -40,10 +40,11 @@ MIN_CURVE_LENGTH = GAP_LENGTH
 #: A piece shorter than this, in spacings, from a junction of three or more curve ends
 #: to a free end is a spur (noise beside a line) and is dropped.
 SPUR_PIECE = 2 * GAP_LENGTH
-#: A skeleton piece of a cloud is kept only if the two-surface fit succeeds at this share
-#: of its vertices at least: false detections on a smooth or noisy surface have no two
-#: surfaces meeting at an angle around them.
-MIN_FITTED_SHARE = 0.5
+#: A skeleton piece of a cloud is dropped when at more than this share of its vertices
+#: the two surfaces fitted around it meet at less than the crease angle: false
+#: detections on a smooth or noisy surface (near corners the fit fails otherwise and
+#: does not count).
+MAX_FLAT_SHARE = 0.5
 #: Side of the grid cells, in feature spacings, that select the points near the curves
 #: for the refinement (3x3x3 cells around each feature hold its REFINE_NEIGHBOURS).
 CELL_SPACINGS = 4.0
@@ -225,12 +226,18 @@ def _cloud_pieces(
                 for pc, p in _split(pieces, moved)
             ]
         )
-        moved, fitted = plane_intersection_positions(raw, dirs, tree, near_pts, mask[near], spacing)
+        moved, fitted, flat = plane_intersection_positions(
+            raw, dirs, tree, near_pts, mask[near], spacing
+        )
     out = []
-    for (pc, p), (_, d), (_, f) in zip(
-        _split(pieces, moved), _split(pieces, dirs), _split(pieces, fitted), strict=True
+    for (pc, p), (_, d), (_, f), (_, no_edge) in zip(
+        _split(pieces, moved),
+        _split(pieces, dirs),
+        _split(pieces, fitted),
+        _split(pieces, flat),
+        strict=True,
     ):
-        if f.mean() < MIN_FITTED_SHARE:
+        if no_edge.mean() > MAX_FLAT_SHARE:
             continue  # not an edge between two surfaces: false detections
         p = np.where(f[:, None], p, line_fit_positions(pc.points, d, LINE_FIT_HALF, pc.closed))
         # then smoothed along the curve: each vertex onto the line of its neighbours

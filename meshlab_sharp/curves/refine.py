@@ -122,7 +122,7 @@ def plane_intersection_positions(
     tree_points: np.ndarray,
     tree_is_feature: np.ndarray,
     spacing: float,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Move curve vertices onto the intersection of the surfaces on each side.
 
     Parameters
@@ -145,10 +145,13 @@ def plane_intersection_positions(
         Moved vertices (unchanged where the fit failed).
     ok : (v,) bool
         Where the fit succeeded.
+    flat : (v,) bool
+        Where both arms were fitted well but meet at less than MIN_ARM_ANGLE: no edge
+        there (false detections on a smooth surface).
     """
     v = len(vertices)
     if v == 0:
-        return vertices.copy(), np.zeros(0, bool)
+        return vertices.copy(), np.zeros(0, bool), np.zeros(0, bool)
     k = min(REFINE_NEIGHBOURS, len(tree_points))
     _, idx = tree.query(vertices, k=k)
     idx = idx.reshape(v, k)
@@ -171,16 +174,20 @@ def plane_intersection_positions(
     diff = c2 - c1
     s = (diff[:, 0] * a2[:, 1] - diff[:, 1] * a2[:, 0]) / safe
     hit = c1 + s[:, None] * a1
-    ok = (
+    fitted = (
         (n1 >= MIN_ARM_POINTS)
         & (n2 >= MIN_ARM_POINTS)
-        & (np.abs(cross) >= math.sin(math.radians(MIN_ARM_ANGLE)))
         & (np.maximum(rms1, rms2) <= MAX_ARM_RMS * spacing)
+    )
+    crease = np.abs(cross) >= math.sin(math.radians(MIN_ARM_ANGLE))
+    ok = (
+        fitted
+        & crease
         & (np.linalg.norm(bisector, axis=1) > 0)
         & (np.linalg.norm(hit, axis=1) <= MAX_SHIFT * spacing)
     )
     moved = vertices + hit[:, :1] * u + hit[:, 1:] * w
-    return np.where(ok[:, None], moved, vertices), ok
+    return np.where(ok[:, None], moved, vertices), ok, fitted & ~crease
 
 
 def line_fit_positions(
