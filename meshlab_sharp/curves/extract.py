@@ -14,6 +14,7 @@ from .fit import classify
 from .graph import (
     SPUR_LENGTH,
     MeshPaths,
+    close_loops,
     cloud_graph,
     mesh_graph,
     prune_spurs,
@@ -22,6 +23,7 @@ from .graph import (
 from .refine import cell_neighbourhood, line_fit_positions, plane_intersection_positions
 from .trace import (
     GAP_LENGTH,
+    LOOP_LENGTH,
     TANGENT_WINDOW,
     Bridge,
     Piece,
@@ -189,6 +191,7 @@ def _skeleton_pieces(
     n: int, edges: np.ndarray, weights: np.ndarray, positions: np.ndarray, spacing: float
 ) -> list[np.ndarray]:
     forest = spanning_forest(n, edges, weights)
+    forest = close_loops(n, forest, edges, positions, LOOP_LENGTH * GAP_LENGTH * spacing)
     forest = prune_spurs(n, forest, positions, SPUR_LENGTH * spacing)
     return trace_paths(n, forest)
 

@@ -9,6 +9,9 @@ spanning forest of the graph, pruned of spurs shorter than :data:`SPUR_LENGTH` s
 
 from __future__ import annotations
 
+import heapq
+import math
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
@@ -20,6 +23,7 @@ __all__ = [
     "SPUR_LENGTH",
     "MeshPaths",
     "adjacency",
+    "close_loops",
     "cloud_graph",
     "mesh_graph",
     "prune_spurs",
@@ -150,6 +154,77 @@ def spanning_forest(n: int, edges: np.ndarray, weights: np.ndarray) -> np.ndarra
     return out[np.lexsort((out[:, 1], out[:, 0]))].astype(np.int64)
 
 
+def close_loops(
+    n: int, forest: np.ndarray, edges: np.ndarray, positions: np.ndarray, min_length: float
+) -> np.ndarray:
+    """Give back the links the spanning forest dropped to break long loops.
+
+    A dropped link at a free end of the forest is added back when the forest's path
+    between its two nodes is at least ``min_length`` long (a loop that long is a curve,
+    a circle or the cycle of a polygon's edges; shorter ones are the criss-cross of a
+    wide band). Links are tried shortest first, and each addition counts for the next.
+
+    Parameters
+    ----------
+    n : int
+    forest : (t, 2) int
+        The spanning forest.
+    edges : (e, 2) int
+        The graph it spans.
+    positions : (n, 3) float64
+    min_length : float
+
+    Returns
+    -------
+    (t + a, 2) int64
+        The forest and the links added back.
+    """
+    degree = np.bincount(forest.ravel(), minlength=n)
+    tree = {(int(a), int(b)) for a, b in forest}
+    free = (degree[edges[:, 0]] == 1) | (degree[edges[:, 1]] == 1)
+    cand = [(int(a), int(b)) for a, b in edges[free] if (int(a), int(b)) not in tree]
+    if not cand:
+        return forest
+    length = {e: float(np.linalg.norm(positions[e[0]] - positions[e[1]])) for e in cand}
+    cand.sort(key=lambda e: (length[e], e))
+    adj: dict[int, list[int]] = {}
+    for a, b in forest:
+        adj.setdefault(int(a), []).append(int(b))
+        adj.setdefault(int(b), []).append(int(a))
+    added = []
+    for a, b in cand:
+        if len(adj.get(a, [])) != 1 and len(adj.get(b, [])) != 1:
+            continue
+        if _path_shorter(adj, positions, a, b, min_length):
+            continue
+        added.append((a, b))
+        adj.setdefault(a, []).append(b)
+        adj.setdefault(b, []).append(a)
+    if not added:
+        return forest
+    return np.concatenate([forest, np.array(added, np.int64)])
+
+
+def _path_shorter(
+    adj: dict[int, list[int]], positions: np.ndarray, a: int, b: int, limit: float
+) -> bool:
+    """Whether a path from ``a`` to ``b`` shorter than ``limit`` exists (Dijkstra)."""
+    best = {a: 0.0}
+    heap = [(0.0, a)]
+    while heap:
+        d, node = heapq.heappop(heap)
+        if node == b:
+            return True
+        if d > best.get(node, math.inf):
+            continue
+        for nxt in adj.get(node, []):
+            nd = d + float(np.linalg.norm(positions[nxt] - positions[node]))
+            if nd < limit and nd < best.get(nxt, math.inf):
+                best[nxt] = nd
+                heapq.heappush(heap, (nd, nxt))
+    return False
+
+
 def adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """CSR adjacency of an undirected graph.
 
@@ -187,7 +262,7 @@ def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: fl
     n : int
         Number of nodes.
     edges : (e, 2) int
-        A forest.
+        A forest, with the long loops closed (:func:`close_loops`).
     positions : (n, 3) float64
         Node positions.
     min_length : float

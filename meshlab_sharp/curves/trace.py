@@ -51,6 +51,10 @@ TANGENT_WINDOW = 2.0
 #: closes, or curves meet at a corner): detection leaves gaps of a few points at
 #: corners, where neighbourhoods straddle three faces.
 GAP_LENGTH = 4.0
+#: A piece whose two ends meet is a loop only if it is at least this many times
+#: GAP_LENGTH long (a circle of 2 spacings' radius at least); a shorter one's two ends
+#: are not joined, nor taken for a corner.
+LOOP_LENGTH = 3
 #: Two free ends facing each other are joined across up to this many spacings: the
 #: gaps detection leaves along weak edges (a chamfer's 45-degree edges) and in noise.
 LONG_GAP = 12.0
@@ -301,6 +305,9 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
 
     if q:
         for a, b in sorted(cKDTree(ends.point).query_pairs(GAP_LENGTH * spacing)):
+            same = ends.piece[a] == ends.piece[b]
+            if same and pieces[ends.piece[a]].length < LOOP_LENGTH * GAP_LENGTH * spacing:
+                continue  # the two ends of a short piece: no loop
             ra, rb = root(a), root(b)
             if ra != rb:
                 parent[max(ra, rb)] = min(ra, rb)
@@ -364,7 +371,7 @@ def join_pieces(pieces: list[Piece], spacing: float, bridge: Bridge | None = Non
         sa, sb = int(ends.side[i]), int(ends.side[j])
         if (a, sa) in link or (b, sb) in link:
             return
-        if a == b and pieces[a].length < 3 * GAP_LENGTH * spacing:
+        if a == b and pieces[a].length < LOOP_LENGTH * GAP_LENGTH * spacing:
             return  # a short piece bent onto itself is no loop
         link[(a, sa)] = (b, sb)
         link[(b, sb)] = (a, sa)
