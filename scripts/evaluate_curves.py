@@ -90,7 +90,7 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-def timing(n: int, repeat: int = 2) -> dict:
+def timing(n: int, repeat: int = 1) -> dict:
     """Extra time of the curves over detection on the benchmark's n-point CAD cloud (best
     of ``repeat``), robust and paper modes."""
     sys.path.insert(0, str(ROOT / "scripts"))

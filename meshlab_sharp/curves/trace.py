@@ -37,14 +37,14 @@ __all__ = [
 #: circles down to a radius of ``2 TURN_OUTER / radians(CORNER_TURN)`` = 7.6 spacings
 #: stay whole; the vertices within TURN_INNER of the corner, where the features are
 #: least reliable, do not count.
-CORNER_TURN = 45.0
+CORNER_TURN = 35.0
 #: Chords measuring the turn at a vertex start this far from it, in spacings of arc ...
-TURN_INNER = 1.0
+TURN_INNER = 0.5
 #: ... and end this far.
-TURN_OUTER = 3.0
+TURN_OUTER = 2.0
 #: The turn is measured with the chords at these multiples of their distances (see
 #: turn_angles).
-TURN_SCALES = (1.0, 2.0, 4.0)
+TURN_SCALES = (1.0, 2.0, 4.0, 8.0)
 #: Half-width, in spacings of arc, of the chord giving a curve's direction at a vertex.
 TANGENT_WINDOW = 2.0
 #: Curve ends closer than this, in spacings, are joined (one curve continues, a loop
