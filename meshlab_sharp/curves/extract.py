@@ -181,6 +181,8 @@ def extract_curves(
     pieces = _drop_short([q for pc in pieces for q in cut_at_turns(pc, spacing)], spacing)
     pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
     pieces = join_pieces(pieces, spacing, bridge)
+    # joining may have run a curve round a corner whose vertex was near a piece's end
+    pieces = [q for pc in pieces for q in cut_at_turns(pc, spacing)]
     pieces, corners = _corners(pieces, spacing, pts, paths)
     curves = [_curve(pc, spacing) for pc in pieces if len(pc.points) >= 2]
     curves.sort(key=lambda c: (*c.points[0], *c.points[-1], c.length))

@@ -45,6 +45,8 @@ TURN_OUTER = 2.0
 #: The turn is measured with the chords at these multiples of their distances (see
 #: turn_angles).
 TURN_SCALES = (1.0, 2.0, 4.0, 8.0)
+#: Fewest chord scales that must fit on the piece for a turn to count.
+MIN_TURN_SCALES = 2
 #: Half-width, in spacings of arc, of the chord giving a curve's direction at a vertex.
 TANGENT_WINDOW = 2.0
 #: Curve ends closer than this, in spacings, are joined (one curve continues, a loop
@@ -197,8 +199,11 @@ def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
         before, after = _chords(piece, scale * spacing)
         valid = (np.linalg.norm(before, axis=1) > 0) & (np.linalg.norm(after, axis=1) > 0)
         cos = np.einsum("ij,ij->i", before, after)
-        angles.append(np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), 0.0))
-    return np.min(angles, axis=0)
+        angles.append(np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), np.inf))
+    stack = np.array(angles)
+    least = np.min(stack, axis=0)  # over the scales whose chords fit on the piece
+    enough = np.isfinite(stack).sum(axis=0) >= MIN_TURN_SCALES
+    return np.where(enough, least, 0.0)
 
 
 def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
