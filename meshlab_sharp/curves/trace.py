@@ -33,10 +33,11 @@ __all__ = [
 #: ends meeting at more than this meet at a corner (less: one curve continues into the
 #: other). The turn at a vertex is the angle between the chords of the curve from
 #: TURN_OUTER to TURN_INNER spacings of arc before it and from TURN_INNER to TURN_OUTER
-#: after it: a circle of radius r turns by ``2 TURN_OUTER / r`` radians between them, so
-#: circles down to a radius of ``2 TURN_OUTER / radians(CORNER_TURN)`` = 7.6 spacings
-#: stay whole; the vertices within TURN_INNER of the corner, where the features are
-#: least reliable, do not count.
+#: after it (at several scales, :data:`TURN_SCALES`): a circle of radius r turns by
+#: ``(TURN_INNER + TURN_OUTER) / r`` radians between the smallest chords, so circles down
+#: to a radius of ``2.5 / radians(CORNER_TURN)`` = 4.1 spacings stay whole; the edges of
+#: a 45-degree chamfer meet the faces' edges at 54.7 degrees, which the smoothing of
+#: the positions (a few vertices) rounds off by up to 15 degrees.
 CORNER_TURN = 35.0
 #: Chords measuring the turn at a vertex start this far from it, in spacings of arc ...
 TURN_INNER = 0.5
@@ -220,7 +221,7 @@ def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
     Returns
     -------
     list of Piece
-        The piece itself when it has no sharp turn.
+        The piece itself when it has no sharp turn (or is a loop with only one).
     """
     window = TURN_OUTER * spacing
     angle = turn_angles(piece, spacing)
@@ -238,8 +239,8 @@ def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
             ]
         if not near:
             cuts.append(int(i))
-    if not cuts:
-        return [piece]
+    if not cuts or (piece.closed and len(cuts) == 1):
+        return [piece]  # a loop with one sharp turn: a wobble, not a teardrop
     cuts.sort()
     if piece.closed:
         shift = cuts[0]
