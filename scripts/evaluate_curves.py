@@ -146,6 +146,32 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
         "- **time**: curve extraction time / detection time (these small inputs; the 1M-point "
         "figure is below).",
         "",
+        "## Method (`meshlab_sharp/curves/`)",
+        "",
+        "1. **Feature graph** (`graph.py`): clouds, each feature point linked to the features "
+        "among its 8 nearest within 2.5 spacings; meshes, the mesh edges between feature "
+        "vertices, weighted by length / (sin(turn / 2) + 0.05) so that the skeleton follows "
+        "the crease.",
+        "2. **Skeleton**: minimum spanning forest; the links it dropped at a free end are "
+        "given back where they close a loop at least 12 spacings long (circles, polygon "
+        "cycles); spurs shorter than 4 spacings removed (never so many that a junction "
+        "loses its two main branches).",
+        "3. **Polylines** (`trace.py`): traced between junctions; on clouds each vertex is "
+        "moved onto the intersection of the two surfaces on each side (`refine.py`: in the "
+        "plane across the curve the non-feature neighbours form two arms; two lines fitted "
+        "with reassignment, neighbours weighted by their distance along the curve; fallback: "
+        "the line of the curve's own vertices), smoothed over 5 vertices; pieces where the "
+        "two fitted surfaces are mostly flat (false detections) are dropped.",
+        "4. **Corners and joins**: cut where the curve turns by more than 35 degrees at every "
+        "chord scale that fits (chords 0.5-2 spacings from the vertex, times 1, 2, 4, 8); "
+        "ends within 4 spacings that face each other are joined (a loop closes), free ends "
+        "facing each other across up to 12 spacings too; other groups of ends are corners "
+        "(least-squares meeting point of the end lines; on meshes the nearest mesh vertex, "
+        "reached along mesh edges).",
+        "5. **Kinds** (`fit.py`): line if every vertex is within the tolerance (RMS 0.5 "
+        "spacing, max 2 spacings) of the principal axis, circular arc if within it of the "
+        "fitted plane and circle, free-form otherwise.",
+        "",
         "## Summary against the targets (means over the 8 parts)",
         "",
         "| condition | mode | precision | coverage | RMS (spacings) | count (min-max) "
