@@ -46,6 +46,9 @@ TURN_OUTER = 2.0
 #: The turn is measured with the chords at these multiples of their distances (see
 #: turn_angles).
 TURN_SCALES = (1.0, 2.0, 4.0, 8.0)
+#: Open pieces shorter than this, in spacings, are not cut (both parts would be shorter
+#: than the shortest curve kept, ``extract.MIN_CURVE_LENGTH`` = GAP_LENGTH).
+SHORTEST_CUT = 2 * 4.0
 #: Fewest chord scales that must fit on the piece for a turn to count.
 MIN_TURN_SCALES = 2
 #: Half-width, in spacings of arc, of the chord giving a curve's direction at a vertex.
@@ -223,6 +226,8 @@ def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
     list of Piece
         The piece itself when it has no sharp turn (or is a loop with only one).
     """
+    if not piece.closed and piece.length < SHORTEST_CUT * spacing:
+        return [piece]  # too short to hold two curves
     window = TURN_OUTER * spacing
     angle = turn_angles(piece, spacing)
     m = len(angle)
@@ -265,18 +270,33 @@ class _Ends:
     out: np.ndarray  # (s, q, 3) unit direction leaving the curve (its end chord), per scale
 
 
+def _end_chords(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """The chords of :func:`_chords` at an open piece's two ends, at every scale of
+    :data:`TURN_SCALES`: leaving the first vertex forwards and reaching the last one,
+    unit, shapes (S, 3); the whole piece's chord where a scale's chord is empty."""
+    cum = _arc(points)
+    m = len(points)
+    scales = np.asarray(TURN_SCALES) * spacing
+    near = np.clip(np.searchsorted(cum, TURN_INNER * scales, side="left"), 0, m - 1)
+    far = np.clip(np.searchsorted(cum, TURN_OUTER * scales, side="left"), 0, m - 1)
+    first = points[far] - points[near]
+    total = cum[-1]
+    near_b = np.clip(np.searchsorted(cum, total - TURN_INNER * scales, side="right") - 1, 0, m - 1)
+    far_b = np.clip(np.searchsorted(cum, total - TURN_OUTER * scales, side="right") - 1, 0, m - 1)
+    last = points[near_b] - points[far_b]
+    chord = points[-1] - points[0]
+    first[(near == far)] = chord
+    last[(near_b == far_b)] = chord
+    return _unit(first), _unit(last)
+
+
 def _ends(pieces: list[Piece], spacing: float) -> _Ends:
     rows = []
     for i, pc in enumerate(pieces):
         if pc.closed or len(pc.points) < 2:
             continue
-        chord = _unit(pc.points[-1] - pc.points[0])
-        first, last = [], []
-        for scale in TURN_SCALES:
-            before, after = _chords(pc, scale * spacing)
-            first.append(-after[0] if np.any(after[0]) else -chord)
-            last.append(before[-1] if np.any(before[-1]) else chord)
-        rows.append((i, 0, pc.points[0], first))
+        first, last = _end_chords(pc.points, spacing)
+        rows.append((i, 0, pc.points[0], -first))
         rows.append((i, 1, pc.points[-1], last))
     if not rows:
         z = np.zeros((0, 3))
@@ -286,7 +306,7 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
         np.array([r[0] for r in rows]),
         np.array([r[1] for r in rows]),
         np.array([r[2] for r in rows]),
-        _unit(np.array([r[3] for r in rows]).transpose(1, 0, 2)),
+        np.array([r[3] for r in rows]).transpose(1, 0, 2),
     )
 
 
