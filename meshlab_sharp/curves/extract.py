@@ -27,10 +27,10 @@ from .trace import (
     TANGENT_WINDOW,
     Bridge,
     Piece,
+    batch_tangents,
     cut_at_turns,
     end_clusters,
     join_pieces,
-    tangents,
     trace_paths,
 )
 
@@ -225,11 +225,9 @@ def _cloud_pieces(
     raw = np.concatenate([pc.points for pc in pieces])
     moved = raw
     for _ in range(2):
-        dirs = np.concatenate(
-            [
-                tangents(Piece(pc.nodes, p, pc.closed), TANGENT_WINDOW * spacing)
-                for pc, p in _split(pieces, moved)
-            ]
+        dirs = batch_tangents(
+            [Piece(pc.nodes, p, pc.closed) for pc, p in _split(pieces, moved)],
+            TANGENT_WINDOW * spacing,
         )
         moved, fitted, flat = plane_intersection_positions(
             raw, dirs, tree, near_pts, mask[near], spacing

@@ -22,6 +22,7 @@ __all__ = [
     "TURN_OUTER",
     "TURN_SCALES",
     "Piece",
+    "batch_tangents",
     "cut_at_turns",
     "end_clusters",
     "join_pieces",
@@ -175,6 +176,31 @@ def tangents(piece: Piece, window: float) -> np.ndarray:
     return t[pad : pad + m]
 
 
+def batch_tangents(pieces: list[Piece], window: float) -> np.ndarray:
+    """:func:`tangents` of many pieces at once (open pieces in one vectorised pass),
+    their vertices concatenated. Shape (sum of m, 3)."""
+    if not pieces:
+        return np.zeros((0, 3))
+    sizes = np.array([len(pc.points) for pc in pieces])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    points = np.concatenate([pc.points for pc in pieces])
+    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    step[starts[1:] - 1] = 0.0  # no step between pieces
+    cum = np.concatenate([[0.0], np.cumsum(step)])
+    piece = np.repeat(np.arange(len(pieces)), sizes)
+    cum -= cum[starts][piece]  # arc length within each piece
+    gap = float(cum.max()) + 2 * window + 1.0  # pieces far apart on one axis
+    key = cum + piece * gap
+    lo, hi = starts[piece], (starts + sizes - 1)[piece]
+    back = np.clip(np.searchsorted(key, key - window, side="right") - 1, lo, hi)
+    ahead = np.clip(np.searchsorted(key, key + window, side="left"), lo, hi)
+    out = _unit(points[ahead] - points[back])
+    for i, pc in enumerate(pieces):
+        if pc.closed:
+            out[starts[i] : starts[i] + sizes[i]] = tangents(pc, window)
+    return out
+
+
 def _chords(piece: Piece, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Unit chords before and after each vertex (TURN_OUTER to TURN_INNER spacings of
     arc before it, TURN_INNER to TURN_OUTER after; ``spacing`` may be scaled), both
@@ -270,44 +296,48 @@ class _Ends:
     out: np.ndarray  # (s, q, 3) unit direction leaving the curve (its end chord), per scale
 
 
-def _end_chords(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
-    """The chords of :func:`_chords` at an open piece's two ends, at every scale of
-    :data:`TURN_SCALES`: leaving the first vertex forwards and reaching the last one,
-    unit, shapes (S, 3); the whole piece's chord where a scale's chord is empty."""
-    cum = _arc(points)
-    m = len(points)
-    scales = np.asarray(TURN_SCALES) * spacing
-    near = np.clip(np.searchsorted(cum, TURN_INNER * scales, side="left"), 0, m - 1)
-    far = np.clip(np.searchsorted(cum, TURN_OUTER * scales, side="left"), 0, m - 1)
-    first = points[far] - points[near]
-    total = cum[-1]
-    near_b = np.clip(np.searchsorted(cum, total - TURN_INNER * scales, side="right") - 1, 0, m - 1)
-    far_b = np.clip(np.searchsorted(cum, total - TURN_OUTER * scales, side="right") - 1, 0, m - 1)
-    last = points[near_b] - points[far_b]
-    chord = points[-1] - points[0]
-    first[(near == far)] = chord
-    last[(near_b == far_b)] = chord
-    return _unit(first), _unit(last)
-
-
 def _ends(pieces: list[Piece], spacing: float) -> _Ends:
-    rows = []
-    for i, pc in enumerate(pieces):
-        if pc.closed or len(pc.points) < 2:
-            continue
-        first, last = _end_chords(pc.points, spacing)
-        rows.append((i, 0, pc.points[0], -first))
-        rows.append((i, 1, pc.points[-1], last))
-    if not rows:
+    """The two ends of every open piece, with the chords of :func:`_chords` there at
+    every scale of :data:`TURN_SCALES` (the whole piece's chord where a scale's chord
+    is empty), pointing out of the piece. All pieces in one vectorised pass."""
+    which = np.array(
+        [i for i, pc in enumerate(pieces) if not pc.closed and len(pc.points) >= 2], np.int64
+    )
+    if len(which) == 0:
         z = np.zeros((0, 3))
         empty = np.zeros((len(TURN_SCALES), 0, 3))
         return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, empty)
-    return _Ends(
-        np.array([r[0] for r in rows]),
-        np.array([r[1] for r in rows]),
-        np.array([r[2] for r in rows]),
-        np.array([r[3] for r in rows]).transpose(1, 0, 2),
-    )
+    sizes = np.array([len(pieces[i].points) for i in which])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    stops = starts + sizes - 1
+    points = np.concatenate([pieces[i].points for i in which])
+    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    step[starts[1:] - 1] = 0.0
+    cum = np.concatenate([[0.0], np.cumsum(step)])
+    piece = np.repeat(np.arange(len(which)), sizes)
+    cum -= cum[starts][piece]
+    scales = np.asarray(TURN_SCALES)[:, None] * spacing  # (S, 1)
+    gap = float(cum.max()) + 2 * TURN_OUTER * float(scales.max()) + 1.0
+    key = cum + piece * gap
+    first_key, last_key = key[starts], key[stops]
+
+    def index(target: np.ndarray, side: str, shift: int) -> np.ndarray:
+        return np.clip(np.searchsorted(key, target, side=side) + shift, starts, stops)
+
+    near = index(first_key + TURN_INNER * scales, "left", 0)  # (S, q)
+    far = index(first_key + TURN_OUTER * scales, "left", 0)
+    near_b = index(last_key - TURN_INNER * scales, "right", -1)
+    far_b = index(last_key - TURN_OUTER * scales, "right", -1)
+    chord = points[stops] - points[starts]  # (q, 3)
+    first = np.where((near == far)[..., None], chord, points[far] - points[near])
+    last = np.where((near_b == far_b)[..., None], chord, points[near_b] - points[far_b])
+    q = len(which)
+    out = np.empty((len(TURN_SCALES), 2 * q, 3))
+    out[:, 0::2] = -_unit(first)
+    out[:, 1::2] = _unit(last)
+    ends_points = np.empty((2 * q, 3))
+    ends_points[0::2], ends_points[1::2] = points[starts], points[stops]
+    return _Ends(np.repeat(which, 2), np.tile([0, 1], q), ends_points, out)
 
 
 def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.ndarray]]:
