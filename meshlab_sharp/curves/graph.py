@@ -185,29 +185,29 @@ def close_loops(
     cand = [(int(a), int(b)) for a, b in edges[free] if (int(a), int(b)) not in tree]
     if not cand:
         return forest
-    length = {e: float(np.linalg.norm(positions[e[0]] - positions[e[1]])) for e in cand}
-    cand.sort(key=lambda e: (length[e], e))
-    adj: dict[int, list[int]] = {}
-    for a, b in forest:
-        adj.setdefault(int(a), []).append(int(b))
-        adj.setdefault(int(b), []).append(int(a))
+    pairs = np.array(cand, np.int64)
+    cand_length = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
+    tree_length = np.linalg.norm(positions[forest[:, 0]] - positions[forest[:, 1]], axis=1)
+    adj: dict[int, list[tuple[int, float]]] = {}
+    for (a, b), d in zip(forest.tolist(), tree_length.tolist(), strict=True):
+        adj.setdefault(a, []).append((b, d))
+        adj.setdefault(b, []).append((a, d))
     added = []
-    for a, b in cand:
+    for k in np.lexsort((pairs[:, 1], pairs[:, 0], cand_length)):
+        a, b, d = int(pairs[k, 0]), int(pairs[k, 1]), float(cand_length[k])
         if len(adj.get(a, [])) != 1 and len(adj.get(b, [])) != 1:
             continue
-        if _path_shorter(adj, positions, a, b, min_length):
+        if _path_shorter(adj, a, b, min_length):
             continue
         added.append((a, b))
-        adj.setdefault(a, []).append(b)
-        adj.setdefault(b, []).append(a)
+        adj.setdefault(a, []).append((b, d))
+        adj.setdefault(b, []).append((a, d))
     if not added:
         return forest
     return np.concatenate([forest, np.array(added, np.int64)])
 
 
-def _path_shorter(
-    adj: dict[int, list[int]], positions: np.ndarray, a: int, b: int, limit: float
-) -> bool:
+def _path_shorter(adj: dict[int, list[tuple[int, float]]], a: int, b: int, limit: float) -> bool:
     """Whether a path from ``a`` to ``b`` shorter than ``limit`` exists (Dijkstra)."""
     best = {a: 0.0}
     heap = [(0.0, a)]
@@ -217,8 +217,8 @@ def _path_shorter(
             return True
         if d > best.get(node, math.inf):
             continue
-        for nxt in adj.get(node, []):
-            nd = d + float(np.linalg.norm(positions[nxt] - positions[node]))
+        for nxt, step in adj.get(node, []):
+            nd = d + step
             if nd < limit and nd < best.get(nxt, math.inf):
                 best[nxt] = nd
                 heapq.heappush(heap, (nd, nxt))
@@ -274,6 +274,7 @@ def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: fl
         The remaining edges, in their given order.
     """
     keep = np.ones(len(edges), bool)
+    edge_length = np.linalg.norm(positions[edges[:, 0]] - positions[edges[:, 1]], axis=1)
     for _ in range(PRUNE_ROUNDS):
         current = np.flatnonzero(keep)
         indptr, nbr, eid = adjacency(n, edges[current])
@@ -284,9 +285,10 @@ def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: fl
             while True:
                 row = range(indptr[node], indptr[node + 1])
                 step = next(j for j in row if nbr[j] != prev)
-                path.append(int(current[eid[step]]))
+                edge = int(current[eid[step]])
+                path.append(edge)
                 nxt = int(nbr[step])
-                length += float(np.linalg.norm(positions[nxt] - positions[node]))
+                length += float(edge_length[edge])
                 prev, node = node, nxt
                 if degree[node] != 2 or length >= min_length:
                     break
