@@ -31,6 +31,7 @@ from .trace import (
     cut_at_turns,
     end_clusters,
     join_pieces,
+    split_at_touches,
     trace_paths,
 )
 
@@ -183,6 +184,7 @@ def extract_curves(
     pieces = join_pieces(pieces, spacing, bridge)
     # joining may have run a curve round a corner whose vertex was near a piece's end
     pieces = [q for pc in pieces for q in cut_at_turns(pc, spacing)]
+    pieces = split_at_touches(pieces, spacing)
     pieces, corners = _corners(pieces, spacing, pts, paths)
     curves = [_curve(pc, spacing) for pc in pieces if len(pc.points) >= 2]
     curves.sort(key=lambda c: (*c.points[0], *c.points[-1], c.length))

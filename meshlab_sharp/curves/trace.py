@@ -26,6 +26,7 @@ __all__ = [
     "cut_at_turns",
     "end_clusters",
     "join_pieces",
+    "split_at_touches",
     "tangents",
     "trace_paths",
 ]
@@ -505,4 +506,62 @@ def _bridged(parts: list[Piece], closed: bool, bridge: Bridge) -> list[Piece]:
                 out.append(Piece(nodes, points))
     if not closed:
         out.append(parts[-1])
+    return out
+
+
+def split_at_touches(pieces: list[Piece], spacing: float) -> list[Piece]:
+    """Cut a curve where the free end of another one touches it (a T-junction whose
+    stem detection left short of the line): at the vertex nearest the end, if it is
+    within GAP_LENGTH spacings of the end and farther than that from both ends of its
+    own curve. The cut and the end then meet at a corner.
+
+    Parameters
+    ----------
+    pieces : list of Piece
+    spacing : float
+
+    Returns
+    -------
+    list of Piece
+    """
+    ends, clusters = end_clusters(pieces, spacing)
+    free = np.ones(len(ends.piece), bool)
+    for c in clusters:
+        free[c] = False
+    if not free.any():
+        return pieces
+    owner = np.concatenate([np.full(len(pc.points), i) for i, pc in enumerate(pieces)])
+    local = np.concatenate([np.arange(len(pc.points)) for pc in pieces])
+    tree = cKDTree(np.concatenate([pc.points for pc in pieces]))
+    reach = GAP_LENGTH * spacing
+    cuts: dict[int, set[int]] = {}
+    for e in np.flatnonzero(free):
+        near = tree.query_ball_point(ends.point[e], reach)
+        near = [j for j in near if owner[j] != ends.piece[e]]
+        if not near:
+            continue
+        j = min(near, key=lambda j: (float(np.linalg.norm(tree.data[j] - ends.point[e])), j))
+        pc, v = pieces[owner[j]], int(local[j])
+        cum = _arc(pc.points)
+        if pc.closed or (cum[v] > reach and cum[-1] - cum[v] > reach):
+            cuts.setdefault(int(owner[j]), set()).add(v)
+    if not cuts:
+        return pieces
+    out = []
+    for i, pc in enumerate(pieces):
+        if i not in cuts:
+            out.append(pc)
+            continue
+        at = sorted(cuts[i])
+        if pc.closed:
+            m = len(pc.points)
+            order = np.concatenate([np.arange(at[0], m), np.arange(at[0] + 1)])
+            bounds = [a - at[0] for a in at] + [m]
+        else:
+            order = np.arange(len(pc.points))
+            bounds = [0, *at, len(pc.points) - 1]
+        for a, b in itertools.pairwise(bounds):
+            if b > a:
+                sel = order[a : b + 1]
+                out.append(Piece(pc.nodes[sel], pc.points[sel]))
     return out
