@@ -244,7 +244,8 @@ def _cloud_pieces(
     ):
         if no_edge.mean() > MAX_FLAT_SHARE:
             continue  # not an edge between two surfaces: false detections
-        p = np.where(f[:, None], p, line_fit_positions(pc.points, d, LINE_FIT_HALF, pc.closed))
+        if not f.all():
+            p = np.where(f[:, None], p, line_fit_positions(pc.points, d, LINE_FIT_HALF, pc.closed))
         # then smoothed along the curve: each vertex onto the line of its neighbours
         p = line_fit_positions(p, d, LINE_FIT_HALF, pc.closed)
         keep = _advancing(p, d, spacing)
