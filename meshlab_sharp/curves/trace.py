@@ -204,36 +204,41 @@ def batch_tangents(pieces: list[Piece], window: float) -> np.ndarray:
 
 def _chords(piece: Piece, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Unit chords before and after each vertex (TURN_OUTER to TURN_INNER spacings of
-    arc before it, TURN_INNER to TURN_OUTER after; ``spacing`` may be scaled), both
-    pointing along the curve. Shapes (m, 3); zero where an open piece's end is nearer
-    than TURN_INNER."""
+    arc before it, TURN_INNER to TURN_OUTER after), at every scale of
+    :data:`TURN_SCALES`, both pointing along the curve. Shapes (S, m, 3); zero where an
+    open piece's end is nearer than TURN_INNER (times the scale)."""
     m = len(piece.points)
     pad = m if piece.closed else 0
     p = _padded(piece, pad)
     cum = _arc(p)
-    far_b, far_a = _window_ends(cum, TURN_OUTER * spacing)
-    near_b, near_a = _window_ends(cum, TURN_INNER * spacing)
-    before = p[near_b] - p[far_b]
-    after = p[far_a] - p[near_a]
-    return _unit(before)[pad : pad + m], _unit(after)[pad : pad + m]
+    scales = np.asarray(TURN_SCALES)[:, None] * spacing  # (S, 1)
+    last = len(p) - 1
+
+    def window(offset: np.ndarray, side: str, shift: int) -> np.ndarray:
+        return np.clip(np.searchsorted(cum, cum[None, :] + offset, side=side) + shift, 0, last)
+
+    far_b = window(-TURN_OUTER * scales, "right", -1)
+    near_b = window(-TURN_INNER * scales, "right", -1)
+    far_a = window(TURN_OUTER * scales, "left", 0)
+    near_a = window(TURN_INNER * scales, "left", 0)
+    before = _unit(p[near_b] - p[far_b])
+    after = _unit(p[far_a] - p[near_a])
+    return before[:, pad : pad + m], after[:, pad : pad + m]
 
 
 def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
-    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`), the smaller of
-    the turns measured with the chords at :data:`TURN_SCALES` times their distances (a
-    corner turns at all; a vertex off the line sways only the short chords, noise along
-    the curve the shorter ones more; a circle turns more at the longer ones); 0 near the
-    ends of an open piece.
+    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`): the smallest
+    of the turns measured with the chords at the :data:`TURN_SCALES` (a corner turns at
+    all; a vertex off the line sways only the short chords, noise the shorter ones
+    more; a circle turns more at the longer ones), over the scales whose chords fit on
+    the piece; 0 where fewer than MIN_TURN_SCALES fit (near an open piece's ends).
     Shape (m,)."""
-    angles = []
-    for scale in TURN_SCALES:
-        before, after = _chords(piece, scale * spacing)
-        valid = (np.linalg.norm(before, axis=1) > 0) & (np.linalg.norm(after, axis=1) > 0)
-        cos = np.einsum("ij,ij->i", before, after)
-        angles.append(np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), np.inf))
-    stack = np.array(angles)
-    least = np.min(stack, axis=0)  # over the scales whose chords fit on the piece
-    enough = np.isfinite(stack).sum(axis=0) >= MIN_TURN_SCALES
+    before, after = _chords(piece, spacing)
+    valid = (np.linalg.norm(before, axis=2) > 0) & (np.linalg.norm(after, axis=2) > 0)
+    cos = np.einsum("sij,sij->si", before, after)
+    stack = np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), np.inf)
+    least = np.min(stack, axis=0)
+    enough = valid.sum(axis=0) >= MIN_TURN_SCALES
     return np.where(enough, least, 0.0)
 
 
