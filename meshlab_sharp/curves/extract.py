@@ -20,7 +20,12 @@ from .graph import (
     prune_spurs,
     spanning_forest,
 )
-from .refine import cell_neighbourhood, line_fit_positions, plane_intersection_positions
+from .refine import (
+    cell_neighbourhood,
+    line_fit_positions,
+    plane_intersection_positions,
+    refine_neighbours,
+)
 from .trace import (
     GAP_LENGTH,
     LOOP_LENGTH,
@@ -226,13 +231,14 @@ def _cloud_pieces(
     # first refinement, which are steadier than those of the raw skeleton
     raw = np.concatenate([pc.points for pc in pieces])
     moved = raw
+    neighbours = refine_neighbours(tree, raw)
     for _ in range(2):
         dirs = batch_tangents(
             [Piece(pc.nodes, p, pc.closed) for pc, p in _split(pieces, moved)],
             TANGENT_WINDOW * spacing,
         )
         moved, fitted, flat = plane_intersection_positions(
-            raw, dirs, tree, near_pts, mask[near], spacing
+            raw, dirs, neighbours, near_pts, mask[near], spacing
         )
     out = []
     for (pc, p), (_, d), (_, f), (_, no_edge) in zip(

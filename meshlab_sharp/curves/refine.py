@@ -23,6 +23,7 @@ __all__ = [
     "cell_neighbourhood",
     "line_fit_positions",
     "plane_intersection_positions",
+    "refine_neighbours",
 ]
 
 #: Points near a vertex that the two arms are fitted to (before the features among
@@ -82,6 +83,14 @@ def cell_neighbourhood(
     return np.flatnonzero(np.isin(all_keys, wanted) & valid)
 
 
+def refine_neighbours(tree: cKDTree, vertices: np.ndarray) -> np.ndarray:
+    """The REFINE_NEIGHBOURS nearest points of each vertex, (v, k) indices into the
+    tree's points (k = REFINE_NEIGHBOURS, or all the points when fewer)."""
+    k = min(REFINE_NEIGHBOURS, tree.n)
+    _, idx = tree.query(vertices, k=k)
+    return idx.reshape(len(vertices), k)
+
+
 def _frame(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors orthogonal to each unit row of ``t`` and to each other."""
     helper = np.where(np.abs(t[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
@@ -118,7 +127,7 @@ def _offset(xy: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
 def plane_intersection_positions(
     vertices: np.ndarray,
     directions: np.ndarray,
-    tree: cKDTree,
+    neighbours: np.ndarray,
     tree_points: np.ndarray,
     tree_is_feature: np.ndarray,
     spacing: float,
@@ -131,8 +140,9 @@ def plane_intersection_positions(
         Curve vertices.
     directions : (v, 3) float64
         Unit curve direction at each vertex.
-    tree : cKDTree
-        Of ``tree_points``.
+    neighbours : (v, k) int
+        Each vertex's REFINE_NEIGHBOURS nearest points, indices into ``tree_points``
+        (:func:`refine_neighbours`).
     tree_points : (s, 3) float64
         Points near the curves.
     tree_is_feature : (s,) bool
@@ -152,9 +162,7 @@ def plane_intersection_positions(
     v = len(vertices)
     if v == 0:
         return vertices.copy(), np.zeros(0, bool), np.zeros(0, bool)
-    k = min(REFINE_NEIGHBOURS, len(tree_points))
-    _, idx = tree.query(vertices, k=k)
-    idx = idx.reshape(v, k)
+    idx = neighbours
     u, w = _frame(directions)
     d = tree_points[idx] - vertices[:, None, :]
     xy = np.stack([np.einsum("vkj,vj->vk", d, u), np.einsum("vkj,vj->vk", d, w)], axis=-1)
