@@ -386,6 +386,13 @@ def _corners(
             else:
                 pc.nodes = np.concatenate([pc.nodes, add])
                 pc.points = np.vstack([pc.points, add_points])
+    # a short piece with both ends brought onto one corner is a knot of detections there
+    short = LOOP_LENGTH * GAP_LENGTH * spacing
+    pieces = [
+        pc
+        for pc in pieces
+        if pc.closed or not np.array_equal(pc.points[0], pc.points[-1]) or pc.length >= short
+    ]
     if not points:
         return pieces, Corners(np.zeros((0, 3)), np.zeros(0, np.int64))
     p = np.array(points)
