@@ -48,9 +48,6 @@ TURN_OUTER = 2.0
 #: The turn is measured with the chords at these multiples of their distances (see
 #: turn_angles).
 TURN_SCALES = (1.0, 2.0, 4.0, 8.0)
-#: Open pieces shorter than this, in spacings, are not cut (both parts would be shorter
-#: than the shortest curve kept, ``extract.MIN_CURVE_LENGTH`` = GAP_LENGTH).
-SHORTEST_CUT = 2 * 4.0
 #: Fewest chord scales that must fit on the piece for a turn to count.
 MIN_TURN_SCALES = 2
 #: Half-width, in spacings of arc, of the chord giving a curve's direction at a vertex.
@@ -59,6 +56,9 @@ TANGENT_WINDOW = 2.0
 #: closes, or curves meet at a corner): detection leaves gaps of a few points at
 #: corners, where neighbourhoods straddle three faces.
 GAP_LENGTH = 4.0
+#: Open pieces shorter than this, in spacings, are not cut: both parts would be shorter
+#: than the shortest curve kept (``extract.MIN_CURVE_LENGTH`` = GAP_LENGTH).
+SHORTEST_CUT = 2 * GAP_LENGTH
 #: A piece whose two ends meet is a loop only if it is at least this many times
 #: GAP_LENGTH long (a circle of 2 spacings' radius at least); a shorter one's two ends
 #: are not joined, nor taken for a corner.
