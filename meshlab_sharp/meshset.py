@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
 import pymeshlab
 
-from .io import add_vertex_attribute, select_vertices
+from .io import add_vertex_attribute, curve_arrays, select_vertices
 from .normals import Weighting
 from .pipeline import DEFAULT_MODE, DetectionResult, detect
 
@@ -20,6 +21,7 @@ def detect_meshset(
     mode: str = DEFAULT_MODE,
     colorize: bool = False,
     progress: bool = False,
+    curves: bool = False,
 ) -> DetectionResult:
     """Detect sharp features on ``ms.current_mesh()`` and store them in it.
 
@@ -39,6 +41,10 @@ def detect_meshset(
     colorize : bool, default False
         Also colour the vertices: features red, the rest by strength (MeshLab's
         quality colour ramp is not used, so the red is unambiguous).
+    curves : bool, default False
+        Also extract the feature curves and add them to ``ms`` as a new mesh of edges
+        named ``sharp_curves`` (vertex quality = the curve's number); the analysed mesh
+        stays the current one.
 
     Returns
     -------
@@ -49,8 +55,9 @@ def detect_meshset(
         scales=scales,
         weighting=weighting,
         as_points=as_points,
-        mode=mode,
         progress=progress,
+        curves=curves,
+        mode=mode,
     )
     mesh = ms.current_mesh()
     name = add_vertex_attribute(mesh, "sharp_strength", result.strength)
@@ -63,4 +70,21 @@ def detect_meshset(
             z=f"({name} >= 1) ? 13 : 200",
             a="255",
         )
+    if result.curves is not None:
+        _add_curve_mesh(ms, result)
     return result
+
+
+def _add_curve_mesh(ms: pymeshlab.MeshSet, result: DetectionResult) -> None:
+    """Add the result's curves to ``ms`` as an edge mesh; the current mesh stays current."""
+    assert result.curves is not None
+    current = ms.current_mesh_id()
+    vertices, edges, _ = curve_arrays(result.curves)
+    number = np.repeat(
+        np.arange(len(result.curves), dtype=np.float64), [len(c.points) for c in result.curves]
+    )
+    kwargs = {"vertex_matrix": vertices, "v_scalar_array": number}
+    if len(edges):
+        kwargs["edge_matrix"] = edges
+    ms.add_mesh(pymeshlab.Mesh(**kwargs), "sharp_curves")
+    ms.set_current_mesh(current)
