@@ -37,6 +37,14 @@ _MAX_DRAWN = 120_000
 CURVE_COLOURS = {"line": "#1f5fbf", "arc": "#1a9850", "freeform": "#8e24aa"}
 
 
+#: What the histograms show, per mode: min-max normalised projected distances (paper)
+#: or projected distances relative to the local spacing (robust).
+DISTANCE_LABELS = {
+    "paper": "normalised projected distance",
+    "robust": "relative projected distance (pdis / local spacing)",
+}
+
+
 def require_matplotlib() -> Any:
     """Import matplotlib (drawing goes through its Agg canvas: no display, no pyplot
     state is touched), or raise a one-line error."""
@@ -156,7 +164,7 @@ def report_figure(
         if i % cols == 0:
             ax.set_ylabel("points (log)", fontsize=10)
         if i // cols == rows - 1:
-            ax.set_xlabel("normalised projected distance", fontsize=10)
+            ax.set_xlabel(DISTANCE_LABELS.get(shown.mode, DISTANCE_LABELS["paper"]), fontsize=10)
     return fig
 
 
@@ -189,7 +197,7 @@ def _title(result: Any, geom: Geometry, title: str | None) -> str:
     kind = "vertices" if result.kind == "mesh" else "points"
     head = title or str(geom.source).removesuffix(" (preprocessed)")
     line = (
-        f"{head}: {n:,} {kind}, {result.n_features:,} sharp features "
+        f"{head}: {n:,} {kind}, {result.mode} mode, {result.n_features:,} sharp features "
         f"({100.0 * result.n_features / max(n, 1):.1f}%), {len(result.scales)} scales, "
         f"{result.timings.get('total', 0.0):.2f} s"
     )
