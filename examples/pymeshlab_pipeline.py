@@ -65,7 +65,8 @@ def main(argv: list[str] | None = None) -> int:
         ms.meshing_close_holes(maxholesize=30)
         ms.apply_coord_taubin_smoothing(stepsmoothnum=5)
     else:
-        # Far outliers would set the scale of the normalisation and hide every edge.
+        # Stray points: robust mode (the default) leaves isolated ones out by itself;
+        # MeshLab's filter removes them before, as a scan pipeline would.
         ms.compute_selection_point_cloud_outliers(propthreshold=0.8, knearest=32)
         ms.meshing_remove_selected_vertices()
     n_clean = ms.current_mesh().vertex_number()

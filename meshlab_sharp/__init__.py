@@ -13,14 +13,16 @@ from .errors import InputError, MeshlabSharpError
 from .io import Geometry, load, save_features_ply
 from .meshset import detect_meshset
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
-from .pipeline import DetectionResult, detect
+from .pipeline import DEFAULT_MODE, MODES, DetectionResult, detect
 from .preprocessing import Preprocessing, PreprocessingReport, preprocess
 
 __version__ = "0.1.0"
 
 __all__ = [
     "DEFAULT_KNN_SCALES",
+    "DEFAULT_MODE",
     "DEFAULT_RING_SCALES",
+    "MODES",
     "DetectionResult",
     "Geometry",
     "InputError",

@@ -22,11 +22,20 @@ from typing import NoReturn
 
 from . import __version__, _kernels
 from .errors import MeshlabSharpError
-from .io import Geometry, OutputSet, load, save_features_ply, save_indices, save_json
+from .io import (
+    Geometry,
+    OutputSet,
+    check_curves_path,
+    load,
+    save_curves,
+    save_features_ply,
+    save_indices,
+    save_json,
+)
 from .io.writers import HELD_SIGNALS
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
 from .normals import WEIGHTINGS
-from .pipeline import MAX_SCALES, DetectionResult, detect
+from .pipeline import DEFAULT_MODE, MAX_SCALES, MODES, DetectionResult, detect
 from .plugin import add_plugin_command
 from .preprocessing import Preprocessing
 from .progress import Progress
@@ -106,6 +115,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     det.add_argument("--indices", metavar="FILE", help="write 0-based feature indices, one a line")
     det.add_argument("--report", metavar="FILE", help="write counts, thresholds, timings as JSON")
+    det.add_argument(
+        "--curves",
+        metavar="FILE",
+        help="write the feature curves: .ply (edge mesh MeshLab opens), .obj (l lines) or "
+        ".dxf (3D polylines; needs ezdxf: pip install 'meshlab-sharp[dxf]')",
+    )
     det.add_argument("--as-points", action="store_true", help="treat a mesh as a point cloud")
     det.add_argument(
         "--scales",
@@ -123,11 +138,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     det.add_argument(
         "--mode",
-        choices=("paper", "robust"),
-        default="paper",
-        help="paper: the paper's method as ALGORITHM.md reads it (default); robust: "
-        "ignores outliers, density-independent, no features on smooth objects, thin "
-        "lines (docs/robust-mode.md)",
+        choices=MODES,
+        default=DEFAULT_MODE,
+        help=f"robust (default: {DEFAULT_MODE}): ignores outliers, copes with noise, "
+        "uneven density and CAD tessellations, no features on smooth objects, lines one "
+        "point wide (docs/robust-mode.md); paper: the paper's method exactly as "
+        "ALGORITHM.md reads it",
     )
     det.add_argument("--ascii", action="store_true", help="write an ASCII PLY (default binary)")
     det.add_argument("--force", action="store_true", help="overwrite existing outputs")
@@ -261,7 +277,9 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
     output = Path(args.output) if args.output else folder / f"{stem}_sharp.ply"
     if output.suffix.lower() != ".ply":
         raise MeshlabSharpError(f"{output}: the output must be a .ply file")
-    extra = (args.indices, args.report, args.save_processed, args.plot)
+    if args.curves is not None:
+        check_curves_path(args.curves)
+    extra = (args.indices, args.report, args.save_processed, args.plot, args.curves)
     _check_outputs(source, [output, *(Path(p) for p in extra if p is not None)], force=args.force)
     steps = _preprocessing_from_args(args)
 
@@ -277,6 +295,7 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
         progress=progress,
         preprocessing=steps,
         return_details=args.plot is not None,
+        curves=args.curves is not None,
     )
     result.timings["load"] = load_time
     t = time.perf_counter()
@@ -304,6 +323,9 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
             binary=binary,
             into=outputs,
         )
+    if args.curves:
+        assert result.curves is not None
+        save_curves(args.curves, result.curves, into=outputs)
     if args.plot:
         from .plot import save_report
 
@@ -313,7 +335,7 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
     if args.report:
         report = result.summary()
         report["input"] = geometry.source
-        report["outputs"] = {"ply": str(output), "indices": args.indices}
+        report["outputs"] = {"ply": str(output), "indices": args.indices, "curves": args.curves}
         save_json(args.report, report, into=outputs)
     _pause_for_tests()
     outputs.commit()
@@ -370,9 +392,15 @@ def _print_summary(source: str, output: Path, result: DetectionResult) -> None:
     unit = "k" if result.kind == "points" else "ring"
     for s, t, c in zip(result.scales, result.thresholds, result.candidate_counts, strict=True):
         print(f"  {unit} = {s:3d}: threshold {t:.4f}, {c} candidates")
+    if result.curves is not None:
+        kinds = [c.kind for c in result.curves]
+        counts = ", ".join(f"{kinds.count(k)} {k}" for k in sorted(set(kinds)))
+        corners = 0 if result.corners is None else len(result.corners)
+        print(f"  curves: {len(kinds)} ({counts or 'none'}), {corners} corners")
     n = len(result.mask)
     print(
         f"{source}: {n} {'vertices' if result.kind == 'mesh' else 'points'}, "
+        f"{result.mode} mode, "
         f"{result.n_features} sharp features ({100.0 * result.n_features / n:.1f}%) "
         f"-> {output} [{result.timings.get('total', 0.0):.2f} s]"
     )

@@ -43,14 +43,17 @@ if TYPE_CHECKING:
 
 __all__ = [
     "POISSON_NN",
+    "CurveScores",
     "Scores",
     "density_spacing",
     "distance_to_segments",
     "evaluate",
+    "evaluate_curves",
     "evaluate_vertices",
     "local_spacing",
     "sample_segments",
     "score_part",
+    "truth_curves",
 ]
 
 
@@ -329,3 +332,173 @@ def score_part(part: SamplePart, mask: np.ndarray) -> Scores:
         return evaluate_vertices(part.vertices, mask, part.edges)
     spacing = part.extra.get("local_spacing", part.spacing)
     return evaluate(part.vertices, mask, part.edges, spacing, cover=part.extra.get("visible_edges"))
+
+
+# ----------------------------------------------------------------------------------
+# Feature curves (issue 11)
+# ----------------------------------------------------------------------------------
+
+#: Degrees: exact edges are split into curves where they turn by more than this (the
+#: curve extraction's ``trace.CORNER_TURN``).
+TRUTH_CORNER_TURN = 45.0
+
+
+def truth_curves(segments: np.ndarray) -> tuple[int, np.ndarray]:
+    """The exact edges as curves between corners, and the corners.
+
+    Segments are chained at shared end points; a chain ends where the degree is not 2
+    or where consecutive segments turn by more than :data:`TRUTH_CORNER_TURN` degrees.
+
+    Parameters
+    ----------
+    segments : (e, 2, 3) float
+
+    Returns
+    -------
+    n_curves : int
+        Chains (closed loops count once).
+    corners : (c, 3) float64
+        End points where three or more segments meet or the edges turn sharply.
+    """
+    seg = np.asarray(segments, np.float64).reshape(-1, 2, 3)
+    if len(seg) == 0:
+        return 0, np.zeros((0, 3))
+    ends = seg.reshape(-1, 3)
+    scale = float(np.linalg.norm(np.ptp(ends, axis=0))) or 1.0
+    _, node = np.unique(np.round(ends / (scale * 1e-7)), axis=0, return_inverse=True)
+    node = node.reshape(-1, 2)
+    n = int(node.max()) + 1
+    pos = np.zeros((n, 3))
+    pos[node.reshape(-1)] = ends
+    incident: list[list[int]] = [[] for _ in range(n)]
+    for i, (a, b) in enumerate(node):
+        incident[a].append(i)
+        incident[b].append(i)
+    limit = math.cos(math.radians(TRUTH_CORNER_TURN))
+
+    def direction(i: int, away_from: int) -> np.ndarray:
+        a, b = node[i]
+        d = pos[b] - pos[a] if a == away_from else pos[a] - pos[b]
+        return d / np.linalg.norm(d)
+
+    corner = np.zeros(n, bool)
+    for v, inc in enumerate(incident):
+        if len(inc) >= 3 or (
+            len(inc) == 2 and -float(direction(inc[0], v) @ direction(inc[1], v)) < limit
+        ):
+            corner[v] = True
+    stop = corner | np.array([len(inc) != 2 for inc in incident])
+    # chains: union segments through non-stop vertices
+    parent = np.arange(len(seg))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = int(parent[i])
+        return i
+
+    for v, inc in enumerate(incident):
+        if not stop[v]:
+            ra, rb = root(inc[0]), root(inc[1])
+            parent[max(ra, rb)] = min(ra, rb)
+    n_curves = len({root(i) for i in range(len(seg))})
+    return n_curves, pos[corner]
+
+
+@dataclass(frozen=True)
+class CurveScores:
+    """Scores of extracted curves against exact edges (see :func:`evaluate_curves`)."""
+
+    precision: float
+    coverage: float
+    rms: float
+    count_ratio: float
+    corners_found: float
+    n_curves: int
+    n_truth_curves: int
+    n_corners: int
+    n_truth_corners: int
+
+    def as_dict(self) -> dict:
+        """Plain dict (for JSON and tables)."""
+        return asdict(self)
+
+
+def evaluate_curves(
+    curves: list,
+    corners: np.ndarray,
+    segments: np.ndarray,
+    spacing: float,
+) -> CurveScores:
+    """Score feature curves against exact edge segments.
+
+    - **precision**: share of the curves' length within ``1 * spacing`` of an edge;
+    - **coverage**: share of the edges' length within ``1.5 * spacing`` of a curve;
+    - **rms**: RMS distance of the curves' vertices to the edges, in spacings;
+    - **count_ratio**: number of curves / number of exact curves between corners
+      (:func:`truth_curves`);
+    - **corners_found**: share of the exact corners with a corner within
+      ``2 * spacing`` (NaN when the part has none).
+
+    Parameters
+    ----------
+    curves : list of Curve
+        ``DetectionResult.curves`` (anything with ``points`` (m, 3) and ``closed``).
+    corners : (c, 3) float
+        Corner positions (``DetectionResult.corners.points``).
+    segments : (e, 2, 3) float
+        Exact sharp edges (``SamplePart.edges``).
+    spacing : float
+        Point spacing (``SamplePart.spacing``).
+
+    Returns
+    -------
+    CurveScores
+    """
+    seg = np.asarray(segments, np.float64).reshape(-1, 2, 3)
+    n_truth, truth_corners = truth_curves(seg)
+    pieces = [
+        np.stack([c.points, np.roll(c.points, -1, axis=0)], axis=1)[
+            : len(c.points) if c.closed else len(c.points) - 1
+        ]
+        for c in curves
+    ]
+    curve_seg = np.concatenate(pieces) if pieces else np.zeros((0, 2, 3))
+    step = spacing / 4
+    nan = math.nan
+    if len(curve_seg):
+        samples, piece, _ = sample_segments(curve_seg, step)
+        near = distance_to_segments(samples, seg, step=step) <= spacing
+        precision = float(piece[near].sum() / piece.sum()) if piece.sum() > 0 else nan
+        verts = np.concatenate([c.points for c in curves])
+        rms = float(np.sqrt(np.mean((distance_to_segments(verts, seg, step=step) / spacing) ** 2)))
+    else:
+        precision, rms = nan, nan
+    if len(seg) and len(curve_seg):
+        samples, piece, _ = sample_segments(seg, spacing / 8)
+        covered = distance_to_segments(samples, curve_seg, step=step) <= 1.5 * spacing
+        coverage = float(piece[covered].sum() / piece.sum())
+    else:
+        coverage = 0.0 if len(seg) else nan
+    c = np.asarray(corners, np.float64).reshape(-1, 3)
+    if len(truth_corners):
+        found = (
+            cKDTree(c).query(truth_corners)[0] <= 2 * spacing
+            if len(c)
+            else np.zeros(len(truth_corners), bool)
+        )
+        corners_found = float(found.mean())
+    else:
+        corners_found = nan
+    ratio = len(curves) / n_truth if n_truth else nan
+    return CurveScores(
+        precision,
+        coverage,
+        rms,
+        ratio,
+        corners_found,
+        len(curves),
+        n_truth,
+        len(c),
+        len(truth_corners),
+    )

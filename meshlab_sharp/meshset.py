@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
 import pymeshlab
 
-from .io import add_vertex_attribute, select_vertices
+from .io import add_vertex_attribute, curve_arrays, select_vertices
 from .normals import Weighting
-from .pipeline import DetectionResult, detect
+from .pipeline import DEFAULT_MODE, DetectionResult, detect
 
 
 def detect_meshset(
@@ -17,8 +18,10 @@ def detect_meshset(
     scales: Sequence[int] | None = None,
     weighting: Weighting = "gaussian",
     as_points: bool = False,
+    mode: str = DEFAULT_MODE,
     colorize: bool = False,
     progress: bool = False,
+    curves: bool = False,
 ) -> DetectionResult:
     """Detect sharp features on ``ms.current_mesh()`` and store them in it.
 
@@ -33,17 +36,29 @@ def detect_meshset(
     ----------
     ms : pymeshlab.MeshSet
         Its current mesh is read and annotated; vertices and faces are not changed.
-    scales, weighting, as_points, progress
-        As for :func:`meshlab_sharp.detect`.
+    scales, weighting, as_points, mode, progress
+        As for :func:`meshlab_sharp.detect` (``mode`` default "robust").
     colorize : bool, default False
         Also colour the vertices: features red, the rest by strength (MeshLab's
         quality colour ramp is not used, so the red is unambiguous).
+    curves : bool, default False
+        Also extract the feature curves and add them to ``ms`` as a new mesh of edges
+        named ``sharp_curves`` (vertex quality = the curve's number); the analysed mesh
+        stays the current one.
 
     Returns
     -------
     DetectionResult
     """
-    result = detect(ms, scales=scales, weighting=weighting, as_points=as_points, progress=progress)
+    result = detect(
+        ms,
+        scales=scales,
+        weighting=weighting,
+        as_points=as_points,
+        progress=progress,
+        curves=curves,
+        mode=mode,
+    )
     mesh = ms.current_mesh()
     name = add_vertex_attribute(mesh, "sharp_strength", result.strength)
     ms.compute_scalar_by_function_per_vertex(q=name)
@@ -55,4 +70,21 @@ def detect_meshset(
             z=f"({name} >= 1) ? 13 : 200",
             a="255",
         )
+    if result.curves is not None:
+        _add_curve_mesh(ms, result)
     return result
+
+
+def _add_curve_mesh(ms: pymeshlab.MeshSet, result: DetectionResult) -> None:
+    """Add the result's curves to ``ms`` as an edge mesh; the current mesh stays current."""
+    assert result.curves is not None
+    current = ms.current_mesh_id()
+    vertices, edges, _ = curve_arrays(result.curves)
+    number = np.repeat(
+        np.arange(len(result.curves), dtype=np.float64), [len(c.points) for c in result.curves]
+    )
+    kwargs = {"vertex_matrix": vertices, "v_scalar_array": number}
+    if len(edges):
+        kwargs["edge_matrix"] = edges
+    ms.add_mesh(pymeshlab.Mesh(**kwargs), "sharp_curves")
+    ms.set_current_mesh(current)

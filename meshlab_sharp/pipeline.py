@@ -15,6 +15,7 @@ import pymeshlab
 
 from . import _kernels
 from .cleaning import clean
+from .curves import Corners, Curve, extract_curves
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
@@ -80,6 +81,12 @@ class DetectionResult:
         its map to the input and the detection in its order.
     mode : str
         "paper" or "robust".
+    curves : list of Curve or None
+        With ``detect(..., curves=True)``: the feature curves (:mod:`meshlab_sharp.curves`),
+        each with ``points`` (m, 3), ``indices`` (m,) of the input points, ``closed``,
+        ``kind`` ("line", "arc", "freeform") and ``params``.
+    corners : Corners or None
+        With ``curves=True``: ``points`` (c, 3) and ``indices`` (c,) of the corners.
     """
 
     mask: np.ndarray
@@ -96,6 +103,8 @@ class DetectionResult:
     normals: np.ndarray | None = None
     preprocessing: PreprocessingReport | None = None
     mode: str = "robust"
+    curves: list[Curve] | None = None
+    corners: Corners | None = None
 
     @property
     def indices(self) -> np.ndarray:
@@ -130,7 +139,21 @@ class DetectionResult:
                 if self.preprocessing is None
                 else {"preprocessing": self.preprocessing.summary()}
             ),
+            **({} if self.curves is None else _curves_summary(self.curves, self.corners)),
         }
+
+
+def _curves_summary(curves: list[Curve], corners: Corners | None) -> dict[str, Any]:
+    """The ``curves`` part of :meth:`DetectionResult.summary`."""
+    kinds = [c.kind for c in curves]
+    return {
+        "curves": {
+            "n_curves": len(curves),
+            "n_corners": 0 if corners is None else len(corners),
+            "kinds": {k: kinds.count(k) for k in sorted(set(kinds))},
+            "list": [c.summary() for c in curves],
+        }
+    }
 
 
 def detect(
@@ -146,6 +169,7 @@ def detect(
     preprocessing: Preprocessing | dict[str, Any] | None = None,
     mode: str = DEFAULT_MODE,
     backend: str | None = None,
+    curves: bool = False,
 ) -> DetectionResult:
     """Find the sharp features of a point cloud or triangle mesh.
 
@@ -185,6 +209,10 @@ def detect(
     backend : {"compiled", "numpy"}, optional
         The compiled kernels (default when built) or the numpy reference path; both
         give the same answers. Default: ``MESHLAB_SHARP_BACKEND`` or "compiled".
+    curves : bool, default False
+        Also extract the feature curves and corners (``result.curves``,
+        ``result.corners``; :mod:`meshlab_sharp.curves`): mesh edge chains on meshes,
+        refined polylines on clouds. Off by default, so detection's time is unchanged.
 
     Returns
     -------
@@ -213,6 +241,7 @@ def detect(
             workers=workers,
             preprocessing=preprocessing,
             mode=mode,
+            curves=curves,
         )
 
 
@@ -228,6 +257,7 @@ def _detect(
     workers: int,
     preprocessing: Preprocessing | dict[str, Any] | None,
     mode: str,
+    curves: bool = False,
 ) -> DetectionResult:
     """:func:`detect` under the chosen backend."""
     if weighting not in WEIGHTINGS:
@@ -262,6 +292,8 @@ def _detect(
         )
         result = map_to_input(inner, to_input, len(geometry.vertices), report)
         result.timings = {**inner.timings, "load": timings["load"], "preprocess": report.seconds}
+        if curves:
+            _add_curves(result, geometry, as_points)
         result.timings["total"] = time.perf_counter() - t0
         return result
 
@@ -351,11 +383,23 @@ def _detect(
         )
         result.normals = np.stack([cleaned.to_input_order(n, np.nan) for n in per_scale.normals])
     timings["decide"] = time.perf_counter() - t
+    if curves:
+        _add_curves(result, geometry, as_points)
     timings["total"] = time.perf_counter() - t0
     bar.step("done")
     if not isinstance(progress, Progress):
         bar.close()
     return result
+
+
+def _add_curves(result: DetectionResult, geometry: Geometry, as_points: bool) -> None:
+    """Extract the feature curves of ``result`` on the input geometry (timed)."""
+    t = time.perf_counter()
+    faces = None if as_points else geometry.faces
+    result.curves, result.corners = extract_curves(
+        geometry.vertices, result.mask, faces, result.kept
+    )
+    result.timings["curves"] = time.perf_counter() - t
 
 
 def _as_input(source: Source, faces: np.ndarray | None, as_points: bool) -> Geometry:

@@ -3,9 +3,10 @@ on the object.
 
 Layout (``save_report``): a title with the counts and the time; two rendered views of
 the object (orthographic, points depth-sorted and shaded by their normal; strength as
-colour, features red and drawn larger); below, for each scale, the histogram of the
-normalised projected distances (the 256 bins Otsu's method uses, log counts) with the
-threshold marked and the candidates in red.
+colour, features red and drawn larger; with ``detect(..., curves=True)`` the feature
+curves drawn over them, coloured by kind, and the corners as black dots); below, for
+each scale, the histogram of the normalised projected distances (the 256 bins Otsu's
+method uses, log counts) with the threshold marked and the candidates in red.
 
 Needs matplotlib (the ``plot`` extra: ``pip install 'meshlab-sharp[plot]'``); it draws
 with the Agg backend, so no display is needed.
@@ -32,6 +33,16 @@ VIEWS = ((-60.0, 30.0), (120.0, 30.0))
 _DPI = 100
 _BINS = 256
 _MAX_DRAWN = 120_000
+#: Colour of each curve kind in the views.
+CURVE_COLOURS = {"line": "#1f5fbf", "arc": "#1a9850", "freeform": "#8e24aa"}
+
+
+#: What the histograms show, per mode: min-max normalised projected distances (paper)
+#: or projected distances relative to the local spacing (robust).
+DISTANCE_LABELS = {
+    "paper": "normalised projected distance",
+    "robust": "relative projected distance (pdis / local spacing)",
+}
 
 
 def require_matplotlib() -> Any:
@@ -137,6 +148,8 @@ def report_figure(
     points, normals, mask, strength = _drawable(shown, geom)
     for ax, (azim, elev) in zip(view_axes, VIEWS, strict=True):
         _render(ax, points, normals, mask, strength, azim, elev, cmap)
+        if result.curves is not None:
+            _draw_curves(ax, result, points, azim, elev)
     mappable = ScalarMappable(norm=mcolors.Normalize(0.0, 1.0), cmap=cmap)
     bar = fig.colorbar(mappable, ax=view_axes, fraction=0.02, pad=0.01, shrink=0.8)
     bar.set_label("feature strength (fraction of scales)", fontsize=11)
@@ -151,7 +164,7 @@ def report_figure(
         if i % cols == 0:
             ax.set_ylabel("points (log)", fontsize=10)
         if i // cols == rows - 1:
-            ax.set_xlabel("normalised projected distance", fontsize=10)
+            ax.set_xlabel(DISTANCE_LABELS.get(shown.mode, DISTANCE_LABELS["paper"]), fontsize=10)
     return fig
 
 
@@ -184,7 +197,7 @@ def _title(result: Any, geom: Geometry, title: str | None) -> str:
     kind = "vertices" if result.kind == "mesh" else "points"
     head = title or str(geom.source).removesuffix(" (preprocessed)")
     line = (
-        f"{head}: {n:,} {kind}, {result.n_features:,} sharp features "
+        f"{head}: {n:,} {kind}, {result.mode} mode, {result.n_features:,} sharp features "
         f"({100.0 * result.n_features / max(n, 1):.1f}%), {len(result.scales)} scales, "
         f"{result.timings.get('total', 0.0):.2f} s"
     )
@@ -218,6 +231,40 @@ def _drawable(shown: Any, geom: Geometry) -> tuple[np.ndarray, np.ndarray, np.nd
     )
 
 
+def _frame(points: np.ndarray, azim: float, elev: float) -> tuple[np.ndarray, np.ndarray]:
+    """The view's screen axes (right, up, towards the viewer) as rows (3, 3), and the
+    centre (3,) of the points' bounding box."""
+    a, e = np.radians(azim), np.radians(elev)
+    view = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])  # to viewer
+    right = np.array([-np.sin(a), np.cos(a), 0.0])
+    up = np.cross(view, right)
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0)) if len(points) else np.zeros(3)
+    return np.stack([right, up, view]), centre
+
+
+def _draw_curves(ax: Any, result: Any, points: np.ndarray, azim: float, elev: float) -> None:
+    """The result's curves over a view (on top: the views are small), coloured by kind,
+    with the corners as black dots and a legend of the kinds."""
+    axes, centre = _frame(points, azim, elev)
+    kinds: dict[str, int] = {}
+    for c in result.curves:
+        p = (np.vstack([c.points, c.points[:1]]) if c.closed else c.points) - centre
+        colour = CURVE_COLOURS.get(c.kind, "k")
+        ax.plot(p @ axes[0], p @ axes[1], color=colour, linewidth=1.6, solid_capstyle="round")
+        kinds[c.kind] = kinds.get(c.kind, 0) + 1
+    if result.corners is not None and len(result.corners):
+        q = result.corners.points - centre
+        ax.scatter(q @ axes[0], q @ axes[1], s=14, c="k", zorder=3, linewidths=0)
+    if kinds:
+        from matplotlib.lines import Line2D
+
+        handles = [
+            Line2D([], [], color=CURVE_COLOURS[k], linewidth=2, label=f"{n} {k}")
+            for k, n in sorted(kinds.items())
+        ]
+        ax.legend(handles=handles, loc="lower left", fontsize=8, frameon=False)
+
+
 def _render(
     ax: Any,
     points: np.ndarray,
@@ -229,11 +276,7 @@ def _render(
     cmap: Any,
 ) -> None:
     """Orthographic view: points sorted back to front, shaded by |n . light|."""
-    a, e = np.radians(azim), np.radians(elev)
-    view = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])  # to viewer
-    right = np.array([-np.sin(a), np.cos(a), 0.0])
-    up = np.cross(view, right)
-    centre = 0.5 * (points.min(axis=0) + points.max(axis=0)) if len(points) else np.zeros(3)
+    (right, up, view), centre = _frame(points, azim, elev)
     rel = points - centre
     x, y, depth = rel @ right, rel @ up, rel @ view
     light = view + 0.6 * up + 0.3 * right

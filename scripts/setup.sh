@@ -34,8 +34,8 @@ python=${PYTHON:-python3}
 if [[ ! -x .venv/bin/python ]]; then
   "$python" -m venv .venv
 fi
-extras="[plot]"
-[[ $all == 1 ]] && extras="[plot,test]"
+extras="[plot,dxf]"
+[[ $all == 1 ]] && extras="[plot,dxf,test]"
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".${extras}"
 if [[ $all == 1 ]]; then

@@ -137,7 +137,7 @@ HOSTILE = {
     "stl-size-mismatch": ("size.stl", _stl(_NAN_TRIANGLE[:1])[:-7]),
     "xyz-hex": ("hex.xyz", b"1 2 3\n4 5 6\n7 8 0x1F\n"),
     "xyz-two-columns": ("two.xyz", b"1 2 3\n4 5\n"),
-    "unsupported-format": ("mesh.gltf", b"{}"),
+    "unsupported-format": ("part.step", b"ISO-10303-21;\n"),
 }
 
 ERRORS = {
@@ -160,7 +160,7 @@ ERRORS = {
     "stl-size-mismatch": "a binary STL with 1 triangles has 134 bytes, this file has 127",
     "xyz-hex": "line 3: '0x1F' is not a number",
     "xyz-two-columns": "line 2: two values; a point needs x y z",
-    "unsupported-format": "unsupported format '.gltf'",
+    "unsupported-format": "unsupported format '.step'",
     "missing": "no such file",
     "empty-ply": "empty",
     "empty-xyz": "empty",

@@ -76,7 +76,7 @@ def test_detect_writes_ply_indices_and_report(tmp_path, capsys):
     assert report["n_features"] == int(expected.sum())
     assert [s["scale"] for s in report["scales"]] == [1, 2, 3, 4]
     assert all(0 < s["threshold"] <= 1 for s in report["scales"])
-    assert report["options"] == {"scales": [1, 2, 3, 4], "weighting": "gaussian"}
+    assert report["options"] == {"scales": [1, 2, 3, 4], "weighting": "gaussian", "mode": "robust"}
     assert {"load", "clean", "save", "total"} <= set(report["timings_s"])
 
 

@@ -61,7 +61,13 @@ def test_flat_square_mesh_has_no_features():
 
 def test_strength_is_the_fraction_of_scales():
     points = shapes.random_box_points(1500, seed=2)
-    result = meshlab_sharp.detect(points, return_details=True)
+    robust = meshlab_sharp.detect(points, return_details=True)
+    votes = (robust.distances >= robust.thresholds[:, None]).sum(axis=0)
+    np.testing.assert_allclose(robust.strength, votes / len(robust.scales))
+    # robust mode: support and thinning keep a subset of the candidates at every scale
+    assert robust.n_features > 0
+    assert (votes[robust.mask] == len(robust.scales)).all()
+    result = meshlab_sharp.detect(points, return_details=True, mode="paper")
     votes = (result.distances >= result.thresholds[:, None]).sum(axis=0)
     np.testing.assert_allclose(result.strength, votes / len(result.scales))
     np.testing.assert_array_equal(result.mask, votes == len(result.scales))

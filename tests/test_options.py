@@ -37,7 +37,7 @@ def test_too_many_scales_fail_before_any_work():
 def test_robust_mode_reports_isolated_points_as_not_kept():
     far = np.array([[50.0, 50.0, 50.0], [-40.0, 60.0, 0.0]])
     cloud = np.vstack([CUBE, far])
-    paper = meshlab_sharp.detect(cloud)
+    paper = meshlab_sharp.detect(cloud, mode="paper")
     robust = meshlab_sharp.detect(cloud, mode="robust")
     assert paper.kept.all()
     expected = np.ones(len(cloud), bool)

@@ -36,13 +36,16 @@ def test_bad_mode_is_an_input_error():
             meshlab_sharp.detect(points, mode=bad)
 
 
-def test_paper_is_the_default_and_unchanged():
+def test_robust_is_the_default_and_the_report_names_the_mode():
     points = shapes.box_cylinder_points(1500, seed=2)
     default = meshlab_sharp.detect(points)
+    robust = meshlab_sharp.detect(points, mode="robust")
     paper = meshlab_sharp.detect(points, mode="paper")
-    np.testing.assert_array_equal(default.mask, paper.mask)
-    np.testing.assert_array_equal(default.thresholds, paper.thresholds)
-    assert default.mode == "paper" and "mode" not in default.summary()["options"]
+    assert meshlab_sharp.DEFAULT_MODE == "robust"
+    np.testing.assert_array_equal(default.mask, robust.mask)
+    np.testing.assert_array_equal(default.thresholds, robust.thresholds)
+    assert default.mode == "robust" and default.summary()["options"]["mode"] == "robust"
+    assert paper.summary()["options"]["mode"] == "paper"
 
 
 @pytest.mark.parametrize("m", [15, 21])
@@ -63,7 +66,7 @@ def test_cube_grid_mesh_gives_exactly_the_12_edges():
 def test_outliers_robust_finds_the_edges_paper_does_not():
     # the cone: with these samples, paper mode's min-max range is taken by outliers
     part = gt.add_outliers(gt.make_part("cone", n_points=N, seed=3), 0.01, seed=1)
-    paper = _f1(part, meshlab_sharp.detect(part.vertices).mask)
+    paper = _f1(part, meshlab_sharp.detect(part.vertices, mode="paper").mask)
     result = meshlab_sharp.detect(part.vertices, mode="robust")
     scores = _f1(part, result.mask)
     assert paper.f1 < 0.2
@@ -74,7 +77,7 @@ def test_outliers_robust_finds_the_edges_paper_does_not():
 
 def test_smooth_control_has_almost_no_features():
     part = gt.make_part("sphere", n_points=N, seed=1)
-    paper = meshlab_sharp.detect(part.vertices)
+    paper = meshlab_sharp.detect(part.vertices, mode="paper")
     result = meshlab_sharp.detect(part.vertices, mode="robust")
     assert paper.mask.mean() > 0.1
     assert result.mask.mean() <= 0.01

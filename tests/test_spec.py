@@ -138,7 +138,9 @@ def test_matches_independent_reading_of_the_spec(case):
         meshlab_sharp.DEFAULT_RING_SCALES if faces is not None else meshlab_sharp.DEFAULT_KNN_SCALES
     )
     expected_mask, expected_t, values = spec_detect(points, faces, default, weighting)
-    result = meshlab_sharp.detect(points, faces, weighting=weighting, return_details=True)
+    result = meshlab_sharp.detect(
+        points, faces, weighting=weighting, return_details=True, mode="paper"
+    )
     np.testing.assert_array_equal(result.thresholds, expected_t)
     # Only points within 1e-9 of a threshold may differ (ALGORITHM.md's tolerance).
     near = (np.abs(values - expected_t[:, None]) < 1e-9).any(axis=0)

@@ -1,0 +1,15 @@
+"""Feature curves: the polylines along the detected sharp features.
+
+>>> result = meshlab_sharp.detect("part.ply", curves=True)   # doctest: +SKIP
+>>> [(c.kind, c.closed, len(c.points)) for c in result.curves]  # doctest: +SKIP
+
+Built from a detection's mask and the geometry (:func:`extract_curves`): the feature
+graph and its skeleton (:mod:`.graph`), traced into polylines cut at corners and joined
+across gaps (:mod:`.trace`), positions refined below the spacing on clouds
+(:mod:`.refine`), and each curve classified (:mod:`.fit`). Deterministic.
+"""
+
+from .extract import Corners, Curve, extract_curves
+from .fit import KINDS, classify
+
+__all__ = ["KINDS", "Corners", "Curve", "classify", "extract_curves"]

@@ -1,0 +1,421 @@
+"""Feature curves from a detection: the skeleton of the feature points, traced into
+polylines, refined (clouds), cut and joined at corners, and classified.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .fit import classify
+from .graph import (
+    SPUR_LENGTH,
+    MeshPaths,
+    close_loops,
+    cloud_graph,
+    mesh_graph,
+    prune_spurs,
+    spanning_forest,
+)
+from .refine import (
+    cell_neighbourhood,
+    line_fit_positions,
+    plane_intersection_positions,
+    refine_neighbours,
+)
+from .trace import (
+    GAP_LENGTH,
+    LOOP_LENGTH,
+    TANGENT_WINDOW,
+    Bridge,
+    Piece,
+    batch_tangents,
+    cut_at_turns,
+    end_clusters,
+    join_pieces,
+    split_at_touches,
+    trace_paths,
+)
+
+__all__ = ["MIN_CURVE_LENGTH", "Corners", "Curve", "extract_curves"]
+
+#: An open curve shorter than this, in spacings, is dropped: what is left of a spur
+#: between two junctions, or a blob of false detections.
+MIN_CURVE_LENGTH = GAP_LENGTH
+#: A piece shorter than this, in spacings, from a junction of three or more curve ends
+#: to a free end is a spur (noise beside a line) and is dropped.
+SPUR_PIECE = 2 * GAP_LENGTH
+#: A skeleton piece of a cloud is dropped when at more than this share of its vertices
+#: the two surfaces fitted around it meet at less than the crease angle: false
+#: detections on a smooth or noisy surface (near corners the fit fails otherwise and
+#: does not count).
+MAX_FLAT_SHARE = 0.5
+#: Side of the grid cells, in feature spacings, that select the points near the curves
+#: for the refinement (3x3x3 cells around each feature hold its REFINE_NEIGHBOURS).
+CELL_SPACINGS = 4.0
+#: Cloud vertices closer than this along the curve's direction to the previous vertex
+#: kept, in spacings, are dropped after refinement (a skeleton that zigzags across a
+#: wide band of features leaves vertices that double back once refined).
+MIN_ADVANCE = 0.3
+#: Vertices on each side of a vertex in the fallback line fit (2 spacings or so).
+LINE_FIT_HALF = 2
+#: A curve end farther than this, in spacings, from its corner gets the corner as an
+#: extra vertex; a nearer one moves onto the corner (clouds).
+SNAP = 0.75
+
+
+@dataclass
+class Curve:
+    """One feature curve.
+
+    Attributes
+    ----------
+    points : (m, 3) float64
+        Vertices in order. Clouds: refined positions; meshes: mesh vertices.
+    indices : (m,) int64
+        The input point (mesh vertex) each vertex came from; on clouds a vertex moved
+        onto a corner keeps the index of the point it came from, an added corner vertex
+        has the corner's index.
+    closed : bool
+        A loop: the last vertex connects to the first (which is not repeated).
+    kind : {"line", "arc", "freeform"}
+    params : dict
+        See :func:`meshlab_sharp.curves.fit.classify` (``length`` and ``rms`` always;
+        line: ``point``, ``direction``; arc: ``centre``, ``radius``, ``normal``,
+        ``angle``).
+    """
+
+    points: np.ndarray
+    indices: np.ndarray
+    closed: bool
+    kind: str
+    params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def length(self) -> float:
+        """Polyline length (closing segment included for loops)."""
+        return float(self.params["length"])
+
+    @property
+    def segments(self) -> np.ndarray:
+        """Vertex pairs of the polyline's segments, local indices, shape (s, 2)."""
+        m = len(self.points)
+        a = np.arange(m if self.closed else m - 1)
+        return np.stack([a, (a + 1) % m], axis=1)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: kind, closed, vertex count and parameters."""
+        params = {
+            k: (v.tolist() if isinstance(v, np.ndarray) else float(v))
+            for k, v in self.params.items()
+        }
+        return {"kind": self.kind, "closed": self.closed, "vertices": len(self.points), **params}
+
+
+@dataclass
+class Corners:
+    """Where curves meet at an angle or three or more curves meet.
+
+    Attributes
+    ----------
+    points : (c, 3) float64
+        Positions (clouds: where the curves' end lines meet; meshes: a mesh vertex).
+    indices : (c,) int64
+        The input point (mesh vertex) nearest each corner among the curves' ends.
+    """
+
+    points: np.ndarray
+    indices: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+def extract_curves(
+    vertices: np.ndarray,
+    mask: np.ndarray,
+    faces: np.ndarray | None = None,
+    valid: np.ndarray | None = None,
+) -> tuple[list[Curve], Corners]:
+    """Feature curves and corners of a detection.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        The input's points (mesh vertices), in input order.
+    mask : (n,) bool
+        Detected features (``DetectionResult.mask``).
+    faces : (m, 3) int, optional
+        Triangles: the curves are chains of mesh edges. None: a cloud.
+    valid : (n,) bool, optional
+        Points that took part in detection (``DetectionResult.kept``); the others are
+        not used to refine positions.
+
+    Returns
+    -------
+    curves : list of Curve
+        In a deterministic order (by first vertex), independent of the input's order.
+    corners : Corners
+    """
+    pts = np.asarray(vertices, np.float64)
+    feat_mask = np.asarray(mask, bool)
+    ok = np.ones(len(pts), bool) if valid is None else np.asarray(valid, bool)
+    feat = np.flatnonzero(feat_mask & ok)
+    # nodes: distinct feature positions in coordinate order (independent of input order)
+    fp = pts[feat]
+    order = np.lexsort((feat, fp[:, 2], fp[:, 1], fp[:, 0]))
+    feat, fp = feat[order], fp[order]
+    if len(fp):
+        first = np.ones(len(fp), bool)
+        first[1:] = (fp[1:] != fp[:-1]).any(axis=1)
+        feat, fp = feat[first], fp[first]
+    empty = Corners(np.zeros((0, 3)), np.zeros(0, np.int64))
+    if len(feat) < 2:
+        return [], empty
+    paths: MeshPaths | None = None
+    if faces is None:
+        pieces, spacing = _cloud_pieces(pts, feat_mask, ok, feat, fp)
+    else:
+        pieces, spacing = _mesh_pieces(pts, np.asarray(faces), feat_mask & ok, feat, fp)
+        paths = MeshPaths(pts, np.asarray(faces), feat_mask & ok)
+    if spacing <= 0:
+        return [], empty
+    bridge = None if paths is None else _bridge(pts, paths, spacing)
+    pieces = _drop_short([q for pc in pieces for q in cut_at_turns(pc, spacing)], spacing)
+    pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
+    pieces = join_pieces(pieces, spacing, bridge)
+    # joining may have run a curve round a corner whose vertex was near a piece's end
+    pieces = [q for pc in pieces for q in cut_at_turns(pc, spacing)]
+    pieces = split_at_touches(pieces, spacing)
+    pieces, corners = _corners(pieces, spacing, pts, paths)
+    curves = [_curve(pc, spacing) for pc in pieces if len(pc.points) >= 2]
+    curves.sort(key=lambda c: (*c.points[0], *c.points[-1], c.length))
+    return curves, corners
+
+
+def _skeleton_pieces(
+    n: int, edges: np.ndarray, weights: np.ndarray, positions: np.ndarray, spacing: float
+) -> list[np.ndarray]:
+    forest = spanning_forest(n, edges, weights)
+    forest = close_loops(n, forest, edges, positions, LOOP_LENGTH * GAP_LENGTH * spacing)
+    forest = prune_spurs(n, forest, positions, SPUR_LENGTH * spacing)
+    return trace_paths(n, forest)
+
+
+def _cloud_pieces(
+    pts: np.ndarray, mask: np.ndarray, ok: np.ndarray, feat: np.ndarray, fp: np.ndarray
+) -> tuple[list[Piece], float]:
+    """Skeleton polylines of a cloud's features, refined; and the spacing."""
+    d, _ = cKDTree(fp).query(fp, k=2)
+    feature_spacing = float(np.median(d[:, 1]))
+    near = cell_neighbourhood(pts, ok, fp, CELL_SPACINGS * feature_spacing)
+    near_pts = pts[near]
+    order = np.lexsort((near_pts[:, 2], near_pts[:, 1], near_pts[:, 0]))
+    near, near_pts = near[order], near_pts[order]
+    tree = cKDTree(near_pts)
+    d, _ = tree.query(fp, k=2)
+    spacing = float(np.median(d[:, 1]))
+    edges, lengths = cloud_graph(fp, spacing)
+    paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
+    pieces = []
+    for path in paths:
+        closed = len(path) > 2 and path[0] == path[-1]
+        nodes = path[:-1] if closed else path
+        pieces.append(Piece(nodes, fp[nodes], closed))
+    if not pieces:
+        return [], spacing
+    # refine every vertex at once, twice: the second time along the directions of the
+    # first refinement, which are steadier than those of the raw skeleton
+    raw = np.concatenate([pc.points for pc in pieces])
+    moved = raw
+    neighbours = refine_neighbours(tree, raw)
+    for _ in range(2):
+        dirs = batch_tangents(
+            [Piece(pc.nodes, p, pc.closed) for pc, p in _split(pieces, moved)],
+            TANGENT_WINDOW * spacing,
+        )
+        moved, fitted, flat = plane_intersection_positions(
+            raw, dirs, neighbours, near_pts, mask[near], spacing
+        )
+    out = []
+    for (pc, p), (_, d), (_, f), (_, no_edge) in zip(
+        _split(pieces, moved),
+        _split(pieces, dirs),
+        _split(pieces, fitted),
+        _split(pieces, flat),
+        strict=True,
+    ):
+        if no_edge.mean() > MAX_FLAT_SHARE:
+            continue  # not an edge between two surfaces: false detections
+        if not f.all():
+            p = np.where(f[:, None], p, line_fit_positions(pc.points, d, LINE_FIT_HALF, pc.closed))
+        # then smoothed along the curve: each vertex onto the line of its neighbours
+        p = line_fit_positions(p, d, LINE_FIT_HALF, pc.closed)
+        keep = _advancing(p, d, spacing)
+        out.append(Piece(feat[pc.nodes[keep]], p[keep], pc.closed))
+    return out, spacing
+
+
+def _split(pieces: list[Piece], values: np.ndarray) -> list[tuple[Piece, np.ndarray]]:
+    """Each piece with its rows of ``values`` (the pieces' vertices concatenated)."""
+    cuts = np.cumsum([len(pc.points) for pc in pieces])[:-1]
+    return list(zip(pieces, np.split(values, cuts), strict=True))
+
+
+def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
+    """Indices of the vertices that advance by at least MIN_ADVANCE spacings along the
+    curve's direction from the previous one kept (the last vertex always kept)."""
+    keep, last = [0], p[0]
+    step = MIN_ADVANCE * spacing
+    for i in range(1, len(p) - 1):
+        if float((p[i] - last) @ t[i]) >= step:
+            keep.append(i)
+            last = p[i]
+    if len(p) > 1:
+        keep.append(len(p) - 1)
+    return np.array(keep, np.int64)
+
+
+def _mesh_pieces(
+    pts: np.ndarray, faces: np.ndarray, mask: np.ndarray, feat: np.ndarray, fp: np.ndarray
+) -> tuple[list[Piece], float]:
+    """Chains of mesh edges between feature vertices; and the spacing (median length
+    of the edges around the features)."""
+    edges, weights, around = mesh_graph(pts, faces, mask)
+    if len(edges) == 0:
+        return [], 0.0
+    spacing = float(np.median(around))
+    node = np.full(len(pts), -1, np.int64)
+    node[feat] = np.arange(len(feat))
+    local = node[edges]
+    keep = (local >= 0).all(axis=1)  # duplicated positions keep one vertex
+    paths = _skeleton_pieces(len(feat), local[keep], weights[keep], fp, spacing)
+    pieces = []
+    for path in paths:
+        closed = len(path) > 2 and path[0] == path[-1]
+        nodes = path[:-1] if closed else path
+        pieces.append(Piece(feat[nodes], fp[nodes], closed))
+    return pieces, spacing
+
+
+def _bridge(pts: np.ndarray, paths: MeshPaths, spacing: float) -> Bridge:
+    """Mesh vertices between two curve vertices: the shortest path along the mesh edges
+    near the features (none when longer than twice GAP_LENGTH spacings)."""
+
+    def bridge(a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        inner = paths.path(a, b, 2 * GAP_LENGTH * spacing)
+        inner = np.zeros(0, np.int64) if inner is None else inner
+        return inner, pts[inner]
+
+    return bridge
+
+
+def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
+    """Leave out open pieces shorter than MIN_CURVE_LENGTH spacings, and spurs: pieces
+    shorter than SPUR_PIECE spacings with one end free and the other where three or
+    more ends meet."""
+    ends, clusters = end_clusters(pieces, spacing)
+    size = np.ones(len(ends.piece), np.int64)
+    for c in clusters:
+        size[c] = len(c)
+    spur = set()
+    for i in range(0, len(ends.piece), 2):  # the two ends of one piece are consecutive
+        if sorted((size[i], size[i + 1]))[0] == 1 and max(size[i], size[i + 1]) >= 3:
+            spur.add(int(ends.piece[i]))
+    return [
+        pc
+        for i, pc in enumerate(pieces)
+        if pc.closed
+        or (
+            pc.length >= MIN_CURVE_LENGTH * spacing
+            and (i not in spur or pc.length >= SPUR_PIECE * spacing)
+        )
+    ]
+
+
+def _corners(
+    pieces: list[Piece], spacing: float, pts: np.ndarray, paths: MeshPaths | None
+) -> tuple[list[Piece], Corners]:
+    """Corners where curve ends meet (not as one continuing curve), and the ends brought
+    onto them. The corner is the point nearest the lines of the ends (least squares);
+    on a mesh, the mesh vertex nearest it, reached from each end along mesh edges
+    (``paths``)."""
+    ends, clusters = end_clusters(pieces, spacing)
+    points, indices = [], []
+    pieces = [Piece(pc.nodes.copy(), pc.points.copy(), pc.closed) for pc in pieces]
+    for c in clusters:
+        a = np.zeros((3, 3))
+        b = np.zeros(3)
+        for i in c:
+            proj = np.eye(3) - np.outer(ends.out[0, i], ends.out[0, i])
+            a += proj
+            b += proj @ ends.point[i]
+        mean = ends.point[c].mean(axis=0)
+        corner = mean
+        if np.linalg.cond(a) < 1e6:
+            x = np.linalg.solve(a, b)
+            if np.linalg.norm(x - mean) <= GAP_LENGTH * spacing:
+                corner = x
+        if paths is None:
+            nearest = int(c[np.argmin(np.linalg.norm(ends.point[c] - corner, axis=1))])
+            pc0 = pieces[ends.piece[nearest]]
+            index = int(pc0.nodes[0] if ends.side[nearest] == 0 else pc0.nodes[-1])
+        else:
+            index = paths.nearest(corner)
+            corner = pts[index].copy()
+        points.append(corner)
+        indices.append(index)
+        for i in c:
+            pc = pieces[ends.piece[i]]
+            at = 0 if ends.side[i] == 0 else len(pc.nodes) - 1
+            here = int(pc.nodes[at])
+            if here == index or (
+                paths is None and np.linalg.norm(pc.points[at] - corner) <= SNAP * spacing
+            ):
+                pc.points[at] = corner
+                continue
+            inner = None if paths is None else paths.path(here, index, 2 * GAP_LENGTH * spacing)
+            add = np.append(np.zeros(0, np.int64) if inner is None else inner, index)
+            add_points = np.vstack([pts[add[:-1]], corner])
+            if ends.side[i] == 0:
+                pc.nodes = np.concatenate([add[::-1], pc.nodes])
+                pc.points = np.vstack([add_points[::-1], pc.points])
+            else:
+                pc.nodes = np.concatenate([pc.nodes, add])
+                pc.points = np.vstack([pc.points, add_points])
+    # a short piece with both ends brought onto one corner is a knot of detections there
+    short = LOOP_LENGTH * GAP_LENGTH * spacing
+    pieces = [
+        pc
+        for pc in pieces
+        if pc.closed or not np.array_equal(pc.points[0], pc.points[-1]) or pc.length >= short
+    ]
+    if not points:
+        return pieces, Corners(np.zeros((0, 3)), np.zeros(0, np.int64))
+    p = np.array(points)
+    order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
+    return pieces, Corners(p[order], np.array(indices, np.int64)[order])
+
+
+def _curve(pc: Piece, spacing: float) -> Curve:
+    """The final curve in canonical orientation, classified."""
+    p, n = pc.points, pc.nodes
+    if pc.closed:
+        start = int(np.lexsort(p.T[::-1])[0])
+        p, n = np.roll(p, -start, axis=0), np.roll(n, -start)
+        if len(p) > 2 and tuple(p[-1]) < tuple(p[1]):
+            p = np.vstack([p[:1], p[:0:-1]])
+            n = np.concatenate([n[:1], n[:0:-1]])
+    elif tuple(p[-1]) < tuple(p[0]):
+        p, n = p[::-1], n[::-1]
+    kind, params = classify(p, pc.closed, spacing)
+    return Curve(
+        np.ascontiguousarray(p),
+        np.ascontiguousarray(n, dtype=np.int64),
+        bool(pc.closed),
+        kind,
+        params,
+    )

@@ -1,0 +1,355 @@
+"""The feature graph: which detected points are linked, and its skeleton.
+
+Clouds: every feature point is linked to the feature points among its
+:data:`LINK_NEIGHBOURS` nearest features that lie within :data:`LINK_RADIUS` spacings.
+Meshes: the mesh's own edges whose two vertices are features, weighted so that the
+skeleton prefers the edges where the surface turns most. The skeleton is the minimum
+spanning forest of the graph, pruned of spurs shorter than :data:`SPUR_LENGTH` spacings.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "LINK_NEIGHBOURS",
+    "LINK_RADIUS",
+    "SPUR_LENGTH",
+    "MeshPaths",
+    "adjacency",
+    "close_loops",
+    "cloud_graph",
+    "mesh_graph",
+    "prune_spurs",
+    "spanning_forest",
+]
+
+#: Feature neighbours a cloud feature point is linked to, at most: enough for a band
+#: three points wide (the paper mode's lines) to stay connected along its length.
+LINK_NEIGHBOURS = 8
+#: Longest link, in spacings: one missing point on a line (a gap of 2 spacings) is
+#: bridged; two parallel lines 3 spacings apart are not linked.
+LINK_RADIUS = 2.5
+#: Spurs (a branch from a free end to a junction) shorter than this, in spacings, are
+#: removed: a band of feature points up to 4 spacings wide leaves side branches up to
+#: about half its width plus one link.
+SPUR_LENGTH = 4.0
+#: Mesh edge weight: length / (sin(turn / 2) + MESH_FLAT_WEIGHT); a flat edge (turn 0)
+#: costs 20 times its length, a 90-degree crease 1.3 times: the skeleton follows the
+#: crease, not the band of feature vertices beside it.
+MESH_FLAT_WEIGHT = 0.05
+#: Rounds of spur pruning (a spur on a spur is removed in the next round).
+PRUNE_ROUNDS = 4
+
+
+def cloud_graph(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Links between feature points of a cloud.
+
+    Parameters
+    ----------
+    points : (f, 3) float64
+        Distinct feature points.
+    spacing : float
+        Point spacing.
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        Node pairs ``a < b``, sorted.
+    weights : (e,) float64
+        Link lengths.
+    """
+    n = len(points)
+    if n < 2:
+        return np.zeros((0, 2), np.int64), np.zeros(0)
+    k = min(LINK_NEIGHBOURS + 1, n)
+    _, idx = cKDTree(points).query(points, k=k, distance_upper_bound=LINK_RADIUS * spacing)
+    rows = np.repeat(np.arange(n), k).reshape(n, k)
+    ok = (idx < n) & (idx != rows)
+    a, b = rows[ok], idx[ok]
+    pairs = np.unique(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1), axis=0)
+    lengths = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
+    return pairs.astype(np.int64), lengths
+
+
+def mesh_graph(
+    vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mesh edges between feature vertices.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int
+    mask : (n,) bool
+        Feature vertices.
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        Vertex pairs ``a < b`` (input vertex indices), sorted.
+    weights : (e,) float64
+        ``length / (sin(turn / 2) + MESH_FLAT_WEIGHT)``, ``turn`` the angle between the
+        normals of the edge's faces (boundary and non-manifold edges: 90 degrees).
+    all_lengths : (g,) float64
+        Lengths of every edge of the faces touching two feature vertices (for the
+        spacing).
+    """
+    f = np.asarray(faces, np.int64)
+    near = f[mask[f].sum(axis=1) >= 2]
+    if len(near) == 0:
+        z = np.zeros(0)
+        return np.zeros((0, 2), np.int64), z, z
+    p = vertices[near]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    norm = np.linalg.norm(normal, axis=1, keepdims=True)
+    normal = normal / np.where(norm > 0, norm, 1.0)
+    e = np.concatenate([near[:, [0, 1]], near[:, [1, 2]], near[:, [2, 0]]])
+    face = np.tile(np.arange(len(near)), 3)
+    e.sort(axis=1)
+    order = np.lexsort((e[:, 1], e[:, 0]))
+    e, face = e[order], face[order]
+    first = np.ones(len(e), bool)
+    first[1:] = (e[1:] != e[:-1]).any(axis=1)
+    start = np.flatnonzero(first)
+    count = np.diff(np.append(start, len(e)))
+    all_lengths = np.linalg.norm(vertices[e[start, 0]] - vertices[e[start, 1]], axis=1)
+    both = mask[e[start, 0]] & mask[e[start, 1]]
+    s, c = start[both], count[both]
+    edges = e[s]
+    lengths = all_lengths[both]
+    cos_turn = np.zeros(len(s))  # boundary / non-manifold: 90 degrees
+    two = c == 2
+    cos_turn[two] = np.einsum("ij,ij->i", normal[face[s[two]]], normal[face[s[two] + 1]])
+    sin_half = np.sqrt(np.clip((1.0 - cos_turn) / 2.0, 0.0, 1.0))
+    return edges, lengths / (sin_half + MESH_FLAT_WEIGHT), all_lengths
+
+
+def spanning_forest(n: int, edges: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Minimum spanning forest.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes.
+    edges : (e, 2) int
+    weights : (e,) float64, > 0
+
+    Returns
+    -------
+    (t, 2) int64
+        The forest's edges, ``a < b``, sorted.
+    """
+    if len(edges) == 0:
+        return np.zeros((0, 2), np.int64)
+    graph = sp.coo_matrix((weights, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
+    tree = minimum_spanning_tree(graph).tocoo()
+    out = np.stack([np.minimum(tree.row, tree.col), np.maximum(tree.row, tree.col)], axis=1)
+    return out[np.lexsort((out[:, 1], out[:, 0]))].astype(np.int64)
+
+
+def close_loops(
+    n: int, forest: np.ndarray, edges: np.ndarray, positions: np.ndarray, min_length: float
+) -> np.ndarray:
+    """Give back the links the spanning forest dropped to break long loops.
+
+    A dropped link at a free end of the forest is added back when the forest's path
+    between its two nodes is at least ``min_length`` long (a loop that long is a curve,
+    a circle or the cycle of a polygon's edges; shorter ones are the criss-cross of a
+    wide band). Links are tried shortest first, and each addition counts for the next.
+
+    Parameters
+    ----------
+    n : int
+    forest : (t, 2) int
+        The spanning forest.
+    edges : (e, 2) int
+        The graph it spans.
+    positions : (n, 3) float64
+    min_length : float
+
+    Returns
+    -------
+    (t + a, 2) int64
+        The forest and the links added back.
+    """
+    degree = np.bincount(forest.ravel(), minlength=n)
+    tree = {(int(a), int(b)) for a, b in forest}
+    free = (degree[edges[:, 0]] == 1) | (degree[edges[:, 1]] == 1)
+    cand = [(int(a), int(b)) for a, b in edges[free] if (int(a), int(b)) not in tree]
+    if not cand:
+        return forest
+    pairs = np.array(cand, np.int64)
+    cand_length = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
+    tree_length = np.linalg.norm(positions[forest[:, 0]] - positions[forest[:, 1]], axis=1)
+    adj: dict[int, list[tuple[int, float]]] = {}
+    for (a, b), d in zip(forest.tolist(), tree_length.tolist(), strict=True):
+        adj.setdefault(a, []).append((b, d))
+        adj.setdefault(b, []).append((a, d))
+    added = []
+    for k in np.lexsort((pairs[:, 1], pairs[:, 0], cand_length)):
+        a, b, d = int(pairs[k, 0]), int(pairs[k, 1]), float(cand_length[k])
+        if len(adj.get(a, [])) != 1 and len(adj.get(b, [])) != 1:
+            continue
+        if _path_shorter(adj, a, b, min_length):
+            continue
+        added.append((a, b))
+        adj.setdefault(a, []).append((b, d))
+        adj.setdefault(b, []).append((a, d))
+    if not added:
+        return forest
+    return np.concatenate([forest, np.array(added, np.int64)])
+
+
+def _path_shorter(adj: dict[int, list[tuple[int, float]]], a: int, b: int, limit: float) -> bool:
+    """Whether a path from ``a`` to ``b`` shorter than ``limit`` exists (Dijkstra)."""
+    best = {a: 0.0}
+    heap = [(0.0, a)]
+    while heap:
+        d, node = heapq.heappop(heap)
+        if node == b:
+            return True
+        if d > best.get(node, math.inf):
+            continue
+        for nxt, step in adj.get(node, []):
+            nd = d + step
+            if nd < limit and nd < best.get(nxt, math.inf):
+                best[nxt] = nd
+                heapq.heappush(heap, (nd, nxt))
+    return False
+
+
+def adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR adjacency of an undirected graph.
+
+    Parameters
+    ----------
+    n : int
+    edges : (e, 2) int
+
+    Returns
+    -------
+    indptr : (n + 1,) int64
+    neighbours : (2e,) int64
+        Neighbours of node ``i``: ``neighbours[indptr[i]:indptr[i + 1]]``, ascending.
+    edge_ids : (2e,) int64
+        The edge (row of ``edges``) of each entry.
+    """
+    a = np.concatenate([edges[:, 0], edges[:, 1]]).astype(np.int64)
+    b = np.concatenate([edges[:, 1], edges[:, 0]]).astype(np.int64)
+    ids = np.tile(np.arange(len(edges), dtype=np.int64), 2)
+    order = np.lexsort((b, a))
+    indptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(a, minlength=n), out=indptr[1:])
+    return indptr, b[order], ids[order]
+
+
+def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: float) -> np.ndarray:
+    """Remove branches from a free end to a junction shorter than ``min_length``.
+
+    At each junction the shortest such spurs go first, and never so many that the
+    junction is left with fewer than two branches: the ends of the main line are not
+    eaten away round after round.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes.
+    edges : (e, 2) int
+        A forest, with the long loops closed (:func:`close_loops`).
+    positions : (n, 3) float64
+        Node positions.
+    min_length : float
+        Shortest branch kept.
+
+    Returns
+    -------
+    (t, 2) int64
+        The remaining edges, in their given order.
+    """
+    keep = np.ones(len(edges), bool)
+    edge_length = np.linalg.norm(positions[edges[:, 0]] - positions[edges[:, 1]], axis=1)
+    for _ in range(PRUNE_ROUNDS):
+        current = np.flatnonzero(keep)
+        indptr, nbr, eid = adjacency(n, edges[current])
+        degree = np.diff(indptr)
+        spurs: dict[int, list[tuple[float, int, list[int]]]] = {}
+        for leaf in np.flatnonzero(degree == 1):
+            prev, node, length, path = -1, int(leaf), 0.0, []
+            while True:
+                row = range(indptr[node], indptr[node + 1])
+                step = next(j for j in row if nbr[j] != prev)
+                edge = int(current[eid[step]])
+                path.append(edge)
+                nxt = int(nbr[step])
+                length += float(edge_length[edge])
+                prev, node = node, nxt
+                if degree[node] != 2 or length >= min_length:
+                    break
+            if degree[node] >= 3 and length < min_length:
+                spurs.setdefault(node, []).append((length, int(leaf), path))
+        removed = False
+        for junction, found in spurs.items():
+            found.sort()
+            for _, _, path in found[: max(0, int(degree[junction]) - 2)]:
+                keep[path] = False
+                removed = True
+        if not removed:
+            break
+    return edges[keep]
+
+
+class MeshPaths:
+    """Shortest paths along the mesh edges of the faces that touch a feature vertex: the
+    vertices joining curve ends across a gap, or a curve end to its corner, on a mesh.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int
+    mask : (n,) bool
+        Feature vertices.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> None:
+        f = np.asarray(faces, np.int64)
+        f = f[mask[f].any(axis=1)]
+        self.ids = np.unique(f)
+        local = np.searchsorted(self.ids, f)
+        e = np.concatenate([local[:, [0, 1]], local[:, [1, 2]], local[:, [2, 0]]])
+        e = np.unique(np.sort(e, axis=1), axis=0)
+        self.positions = vertices[self.ids]
+        length = np.linalg.norm(self.positions[e[:, 0]] - self.positions[e[:, 1]], axis=1)
+        n = len(self.ids)
+        self.graph = sp.coo_matrix(
+            (np.concatenate([length, length]), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+            shape=(n, n),
+        ).tocsr()
+        self.tree = cKDTree(self.positions) if n else None
+
+    def nearest(self, point: np.ndarray) -> int:
+        """The input index of the vertex nearest ``point`` (3,) among these faces'."""
+        assert self.tree is not None
+        return int(self.ids[self.tree.query(point)[1]])
+
+    def path(self, a: int, b: int, limit: float) -> np.ndarray | None:
+        """Input indices of the vertices strictly between ``a`` and ``b`` on the shortest
+        path (shape (k,)), or None when none is shorter than ``limit``."""
+        ia, ib = np.searchsorted(self.ids, [a, b])
+        if ia >= len(self.ids) or ib >= len(self.ids) or self.ids[ia] != a or self.ids[ib] != b:
+            return None
+        dist, pred = dijkstra(self.graph, indices=int(ia), limit=limit, return_predecessors=True)
+        if not np.isfinite(dist[ib]):
+            return None
+        inner = []
+        node = int(pred[ib])
+        while node != ia:
+            inner.append(node)
+            node = int(pred[node])
+        return self.ids[np.array(inner[::-1], np.int64)]

@@ -1,0 +1,233 @@
+"""Curve positions below the point spacing (clouds).
+
+Each curve vertex moves onto the intersection line of the two surfaces that meet at the
+edge: in the plane across the curve (normal to its direction), the non-feature points
+near the vertex form two arms, one per surface; a line is fitted to each arm and the
+vertex moves to their intersection. Where that fails (fewer than
+:data:`MIN_ARM_POINTS` on an arm, arms nearly parallel, a poor fit, or a move of more
+than :data:`MAX_SHIFT` spacings: near corners, or on false detections) the vertex is
+projected onto the line fitted to the curve's own vertices nearby.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "MAX_SHIFT",
+    "MIN_ARM_POINTS",
+    "REFINE_NEIGHBOURS",
+    "cell_neighbourhood",
+    "line_fit_positions",
+    "plane_intersection_positions",
+    "refine_neighbours",
+]
+
+#: Points near a vertex that the two arms are fitted to (before the features among
+#: them are left out): a disc of about 3.5 spacings' radius.
+REFINE_NEIGHBOURS = 40
+#: Each point's weight in the arms' fits falls off with its distance d along the curve
+#: as ``exp(-(d / (SLAB * spacing))**2 / 2)``: on a curved edge of radius r the
+#: cross-section of a point d away is off by ``d**2 / (2 r)``, 0.06 spacing for
+#: d = 1 spacing and r = 8 spacings (unweighted, d up to 3.5 spacings: 0.8 spacing).
+SLAB = 1.0
+#: Rounds of fitting the two arms' lines, each point then going to the nearer line
+#: (the first split is by the side of the points' mean direction, which mixes the arms
+#: when the vertex lies on one of the faces rather than on the edge).
+ARM_ITERATIONS = 3
+#: Fewest non-feature points on each arm for a line fit (total weight).
+MIN_ARM_POINTS = 3
+#: Largest move onto the intersection, in spacings: a detected point lies within about
+#: one spacing of the edge (a band 2 spacings wide), and the arms' fit adds noise.
+MAX_SHIFT = 3.0
+#: Smallest angle, in degrees, between the two arms' lines: the crease angle below
+#: which an edge is not sharp (``robust.CREASE_ANGLE``).
+MIN_ARM_ANGLE = 20.0
+#: Largest RMS distance of an arm's points to its line, in spacings (the scanner noise
+#: the fit copes with: 25 % of the spacing is one standard deviation).
+MAX_ARM_RMS = 0.5
+
+
+def cell_neighbourhood(
+    points: np.ndarray, valid: np.ndarray, centres: np.ndarray, radius: float
+) -> np.ndarray:
+    """Indices of the valid points in the grid cells (side ``radius``) around the centres.
+
+    A cheap superset of the points within ``radius`` of a centre, so that the kd-tree
+    of the refinement holds only the points near the curves.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    valid : (n,) bool
+    centres : (f, 3) float64
+    radius : float > 0
+
+    Returns
+    -------
+    (s,) int64, ascending.
+    """
+    lo = points.min(axis=0)
+    dims = np.floor((points.max(axis=0) - lo) / radius).astype(np.int64) + 3
+
+    def key(cells: np.ndarray) -> np.ndarray:
+        return (cells[..., 0] * dims[1] + cells[..., 1]) * dims[2] + cells[..., 2]
+
+    cells = np.floor((centres - lo) / radius).astype(np.int64) + 1
+    offsets = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    wanted = np.unique(key(cells[:, None, :] + offsets[None, :, :]))
+    all_keys = key(np.floor((points - lo) / radius).astype(np.int64) + 1)
+    return np.flatnonzero(np.isin(all_keys, wanted) & valid)
+
+
+def refine_neighbours(tree: cKDTree, vertices: np.ndarray) -> np.ndarray:
+    """The REFINE_NEIGHBOURS nearest points of each vertex, (v, k) indices into the
+    tree's points (k = REFINE_NEIGHBOURS, or all the points when fewer)."""
+    k = min(REFINE_NEIGHBOURS, tree.n)
+    _, idx = tree.query(vertices, k=k)
+    return idx.reshape(len(vertices), k)
+
+
+def _frame(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors orthogonal to each unit row of ``t`` and to each other."""
+    helper = np.where(np.abs(t[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(t, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(t, u)
+
+
+def _arm_lines(
+    xy: np.ndarray, w: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted 2-D line fits: centroid (v, 2), direction (v, 2), RMS residual (v,),
+    weight total (v,)."""
+    total = w.sum(axis=1)
+    safe = np.where(total > 0, total, 1.0)
+    c = (w[..., None] * xy).sum(axis=1) / safe[:, None]
+    d = xy - c[:, None, :]
+    sxx = (w * d[..., 0] ** 2).sum(axis=1)
+    syy = (w * d[..., 1] ** 2).sum(axis=1)
+    sxy = (w * d[..., 0] * d[..., 1]).sum(axis=1)
+    theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)
+    a = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    off = d[..., 0] * -a[:, None, 1] + d[..., 1] * a[:, None, 0]
+    rms = np.sqrt((w * off**2).sum(axis=1) / safe)
+    return c, a, rms, total
+
+
+def _offset(xy: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Distance of 2-D points (v, k, 2) to the lines through c (v, 2) along a (v, 2)."""
+    d = xy - c[:, None, :]
+    return np.abs(d[..., 0] * a[:, None, 1] - d[..., 1] * a[:, None, 0])
+
+
+def plane_intersection_positions(
+    vertices: np.ndarray,
+    directions: np.ndarray,
+    neighbours: np.ndarray,
+    tree_points: np.ndarray,
+    tree_is_feature: np.ndarray,
+    spacing: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Move curve vertices onto the intersection of the surfaces on each side.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float64
+        Curve vertices.
+    directions : (v, 3) float64
+        Unit curve direction at each vertex.
+    neighbours : (v, k) int
+        Each vertex's REFINE_NEIGHBOURS nearest points, indices into ``tree_points``
+        (:func:`refine_neighbours`).
+    tree_points : (s, 3) float64
+        Points near the curves.
+    tree_is_feature : (s,) bool
+        Which of them are features (left out of the fits).
+    spacing : float
+
+    Returns
+    -------
+    positions : (v, 3) float64
+        Moved vertices (unchanged where the fit failed).
+    ok : (v,) bool
+        Where the fit succeeded.
+    flat : (v,) bool
+        Where both arms were fitted well but meet at less than MIN_ARM_ANGLE: no edge
+        there (false detections on a smooth surface).
+    """
+    v = len(vertices)
+    if v == 0:
+        return vertices.copy(), np.zeros(0, bool), np.zeros(0, bool)
+    idx = neighbours
+    u, w = _frame(directions)
+    d = tree_points[idx] - vertices[:, None, :]
+    xy = np.stack([np.einsum("vkj,vj->vk", d, u), np.einsum("vkj,vj->vk", d, w)], axis=-1)
+    along = np.einsum("vkj,vj->vk", d, directions) / (SLAB * spacing)
+    weight = np.exp(-0.5 * along**2)
+    r = np.linalg.norm(xy, axis=-1)
+    use = ~tree_is_feature[idx] & (r > 1e-12 * spacing)
+    unit = xy / np.where(r > 0, r, 1.0)[..., None]
+    bisector = (unit * use[..., None]).sum(axis=1)
+    side = (bisector[:, None, 0] * unit[..., 1] - bisector[:, None, 1] * unit[..., 0]) > 0
+    for _ in range(ARM_ITERATIONS):
+        c1, a1, rms1, n1 = _arm_lines(xy, np.where(use & side, weight, 0.0))
+        c2, a2, rms2, n2 = _arm_lines(xy, np.where(use & ~side, weight, 0.0))
+        side = _offset(xy, c1, a1) <= _offset(xy, c2, a2)  # each point to its nearer line
+    cross = a1[:, 0] * a2[:, 1] - a1[:, 1] * a2[:, 0]
+    safe = np.where(np.abs(cross) > 0, cross, 1.0)
+    diff = c2 - c1
+    s = (diff[:, 0] * a2[:, 1] - diff[:, 1] * a2[:, 0]) / safe
+    hit = c1 + s[:, None] * a1
+    fitted = (
+        (n1 >= MIN_ARM_POINTS)
+        & (n2 >= MIN_ARM_POINTS)
+        & (np.maximum(rms1, rms2) <= MAX_ARM_RMS * spacing)
+    )
+    crease = np.abs(cross) >= math.sin(math.radians(MIN_ARM_ANGLE))
+    ok = (
+        fitted
+        & crease
+        & (np.linalg.norm(bisector, axis=1) > 0)
+        & (np.linalg.norm(hit, axis=1) <= MAX_SHIFT * spacing)
+    )
+    moved = vertices + hit[:, :1] * u + hit[:, 1:] * w
+    return np.where(ok[:, None], moved, vertices), ok, fitted & ~crease
+
+
+def line_fit_positions(
+    points: np.ndarray, directions: np.ndarray, half: int, closed: bool
+) -> np.ndarray:
+    """Project each vertex onto the line through the mean of its ``2 half + 1``
+    neighbours along the curve, in the curve's direction there.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+    directions : (m, 3) float64
+        Unit directions.
+    half : int
+        Vertices on each side.
+    closed : bool
+        The curve is a loop.
+
+    Returns
+    -------
+    (m, 3) float64
+    """
+    m = len(points)
+    if closed:
+        padded = np.concatenate([points[-half:], points, points[:half]]) if m > half else points
+    else:
+        padded = np.concatenate(
+            [np.repeat(points[:1], half, 0), points, np.repeat(points[-1:], half, 0)]
+        )
+    if len(padded) != m + 2 * half:
+        return points.copy()
+    cs = np.concatenate([np.zeros((1, 3)), np.cumsum(padded, axis=0)])
+    mean = (cs[2 * half + 1 :] - cs[:m]) / (2 * half + 1)
+    rel = points - mean
+    return mean + np.einsum("ij,ij->i", rel, directions)[:, None] * directions

@@ -1,0 +1,572 @@
+"""Polylines from the skeleton: traced between junctions, cut at sharp turns, and their
+ends joined: across small gaps, into loops, and at corners.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .graph import adjacency
+
+__all__ = [
+    "CORNER_TURN",
+    "GAP_LENGTH",
+    "TANGENT_WINDOW",
+    "TURN_INNER",
+    "TURN_OUTER",
+    "TURN_SCALES",
+    "Piece",
+    "batch_tangents",
+    "cut_at_turns",
+    "end_clusters",
+    "join_pieces",
+    "split_at_touches",
+    "tangents",
+    "trace_paths",
+]
+
+#: Degrees: a curve turning by more than this at a vertex has a corner there; two curve
+#: ends meeting at more than this meet at a corner (less: one curve continues into the
+#: other). The turn at a vertex is the angle between the chords of the curve from
+#: TURN_OUTER to TURN_INNER spacings of arc before it and from TURN_INNER to TURN_OUTER
+#: after it (at several scales, :data:`TURN_SCALES`): a circle of radius r turns by
+#: ``(TURN_INNER + TURN_OUTER) / r`` radians between the smallest chords, so circles down
+#: to a radius of ``2.5 / radians(CORNER_TURN)`` = 4.1 spacings stay whole; the edges of
+#: a 45-degree chamfer meet the faces' edges at 54.7 degrees, which the smoothing of
+#: the positions (a few vertices) rounds off by up to 15 degrees.
+CORNER_TURN = 35.0
+#: Chords measuring the turn at a vertex start this far from it, in spacings of arc ...
+TURN_INNER = 0.5
+#: ... and end this far.
+TURN_OUTER = 2.0
+#: The turn is measured with the chords at these multiples of their distances (see
+#: turn_angles).
+TURN_SCALES = (1.0, 2.0, 4.0, 8.0)
+#: Fewest chord scales that must fit on the piece for a turn to count.
+MIN_TURN_SCALES = 2
+#: Half-width, in spacings of arc, of the chord giving a curve's direction at a vertex.
+TANGENT_WINDOW = 2.0
+#: Curve ends closer than this, in spacings, are joined (one curve continues, a loop
+#: closes, or curves meet at a corner): detection leaves gaps of a few points at
+#: corners, where neighbourhoods straddle three faces.
+GAP_LENGTH = 4.0
+#: Open pieces shorter than this, in spacings, are not cut: both parts would be shorter
+#: than the shortest curve kept (``extract.MIN_CURVE_LENGTH`` = GAP_LENGTH).
+SHORTEST_CUT = 2 * GAP_LENGTH
+#: A piece whose two ends meet is a loop only if it is at least this many times
+#: GAP_LENGTH long (a circle of 2 spacings' radius at least); a shorter one's two ends
+#: are not joined, nor taken for a corner.
+LOOP_LENGTH = 3
+#: Two free ends facing each other are joined across up to this many spacings: the
+#: gaps detection leaves along weak edges (a chamfer's 45-degree edges) and in noise.
+LONG_GAP = 12.0
+#: Two ends continue one curve only if each lies within this many spacings of the
+#: other's line: the width of a feature band (parallel edges are farther apart).
+LATERAL_OFFSET = 1.5
+
+
+@dataclass
+class Piece:
+    """A polyline during extraction.
+
+    Attributes
+    ----------
+    nodes : (m,) int64
+        Input point index of each vertex.
+    points : (m, 3) float64
+        Vertex positions.
+    closed : bool
+        True for a loop (the last vertex connects to the first, not repeated).
+    """
+
+    nodes: np.ndarray
+    points: np.ndarray
+    closed: bool = False
+
+    @property
+    def length(self) -> float:
+        """Length of the polyline (the closing segment included for loops)."""
+        p = np.vstack([self.points, self.points[:1]]) if self.closed else self.points
+        return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def trace_paths(n: int, edges: np.ndarray) -> list[np.ndarray]:
+    """Split a graph into paths between nodes whose degree is not 2, and cycles.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes.
+    edges : (e, 2) int
+
+    Returns
+    -------
+    list of (m,) int64
+        Node sequences; a cycle is returned with its first node repeated at the end.
+    """
+    indptr, nbr, eid = adjacency(n, edges)
+    degree = np.diff(indptr)
+    used = np.zeros(len(edges), bool)
+    paths: list[np.ndarray] = []
+
+    def walk(start: int, j: int) -> np.ndarray:
+        path = [start]
+        while True:
+            used[eid[j]] = True
+            node = int(nbr[j])
+            path.append(node)
+            if degree[node] != 2:
+                return np.array(path, np.int64)
+            j = next((k for k in range(indptr[node], indptr[node + 1]) if not used[eid[k]]), -1)
+            if j < 0:  # back at the start of a cycle
+                return np.array(path, np.int64)
+
+    for node in np.flatnonzero((degree != 2) & (degree > 0)):
+        for j in range(indptr[node], indptr[node + 1]):
+            if not used[eid[j]]:
+                paths.append(walk(int(node), j))
+    for node in np.flatnonzero(degree == 2):
+        j = indptr[node]
+        if not used[eid[j]]:
+            paths.append(walk(int(node), int(j)))
+    return paths
+
+
+def _window_ends(cum: np.ndarray, window: float) -> tuple[np.ndarray, np.ndarray]:
+    """For each vertex, the vertices about ``window`` of arc length before and after."""
+    m = len(cum)
+    back = np.clip(np.searchsorted(cum, cum - window, side="right") - 1, 0, m - 1)
+    ahead = np.clip(np.searchsorted(cum, cum + window, side="left"), 0, m - 1)
+    return back, ahead
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(norm > 0, norm, 1.0)
+
+
+def _arc(points: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+
+
+def _padded(piece: Piece, pad: int) -> np.ndarray:
+    """The piece's points, a closed piece's wrapped by ``pad`` vertices on each side."""
+    if not piece.closed:
+        return piece.points
+    p = piece.points
+    reps = -(-pad // len(p))
+    return np.concatenate([*([p] * reps), p, *([p] * reps)])[len(p) * reps - pad :][
+        : len(p) + 2 * pad
+    ]
+
+
+def tangents(piece: Piece, window: float) -> np.ndarray:
+    """Unit direction of the piece at each vertex, over ``window`` of arc length on each
+    side. Shape (m, 3)."""
+    m = len(piece.points)
+    pad = m if piece.closed else 0
+    p = _padded(piece, pad)
+    back, ahead = _window_ends(_arc(p), window)
+    t = _unit(p[ahead] - p[back])
+    return t[pad : pad + m]
+
+
+def batch_tangents(pieces: list[Piece], window: float) -> np.ndarray:
+    """:func:`tangents` of many pieces at once (open pieces in one vectorised pass),
+    their vertices concatenated. Shape (sum of m, 3)."""
+    if not pieces:
+        return np.zeros((0, 3))
+    sizes = np.array([len(pc.points) for pc in pieces])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    points = np.concatenate([pc.points for pc in pieces])
+    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    step[starts[1:] - 1] = 0.0  # no step between pieces
+    cum = np.concatenate([[0.0], np.cumsum(step)])
+    piece = np.repeat(np.arange(len(pieces)), sizes)
+    cum -= cum[starts][piece]  # arc length within each piece
+    gap = float(cum.max()) + 2 * window + 1.0  # pieces far apart on one axis
+    key = cum + piece * gap
+    lo, hi = starts[piece], (starts + sizes - 1)[piece]
+    back = np.clip(np.searchsorted(key, key - window, side="right") - 1, lo, hi)
+    ahead = np.clip(np.searchsorted(key, key + window, side="left"), lo, hi)
+    out = _unit(points[ahead] - points[back])
+    for i, pc in enumerate(pieces):
+        if pc.closed:
+            out[starts[i] : starts[i] + sizes[i]] = tangents(pc, window)
+    return out
+
+
+def _chords(piece: Piece, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Unit chords before and after each vertex (TURN_OUTER to TURN_INNER spacings of
+    arc before it, TURN_INNER to TURN_OUTER after), at every scale of
+    :data:`TURN_SCALES`, both pointing along the curve. Shapes (S, m, 3); zero where an
+    open piece's end is nearer than TURN_INNER (times the scale)."""
+    m = len(piece.points)
+    pad = m if piece.closed else 0
+    p = _padded(piece, pad)
+    cum = _arc(p)
+    scales = np.asarray(TURN_SCALES)[:, None] * spacing  # (S, 1)
+    last = len(p) - 1
+
+    def window(offset: np.ndarray, side: str, shift: int) -> np.ndarray:
+        return np.clip(np.searchsorted(cum, cum[None, :] + offset, side=side) + shift, 0, last)
+
+    far_b = window(-TURN_OUTER * scales, "right", -1)
+    near_b = window(-TURN_INNER * scales, "right", -1)
+    far_a = window(TURN_OUTER * scales, "left", 0)
+    near_a = window(TURN_INNER * scales, "left", 0)
+    before = _unit(p[near_b] - p[far_b])
+    after = _unit(p[far_a] - p[near_a])
+    return before[:, pad : pad + m], after[:, pad : pad + m]
+
+
+def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
+    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`): the smallest
+    of the turns measured with the chords at the :data:`TURN_SCALES` (a corner turns at
+    all; a vertex off the line sways only the short chords, noise the shorter ones
+    more; a circle turns more at the longer ones), over the scales whose chords fit on
+    the piece; 0 where fewer than MIN_TURN_SCALES fit (near an open piece's ends).
+    Shape (m,)."""
+    before, after = _chords(piece, spacing)
+    valid = (np.linalg.norm(before, axis=2) > 0) & (np.linalg.norm(after, axis=2) > 0)
+    cos = np.einsum("sij,sij->si", before, after)
+    stack = np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), np.inf)
+    least = np.min(stack, axis=0)
+    enough = valid.sum(axis=0) >= MIN_TURN_SCALES
+    return np.where(enough, least, 0.0)
+
+
+def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
+    """Split a piece where it turns by more than :data:`CORNER_TURN`.
+
+    The cut vertex is the sharpest turn within TURN_OUTER spacings of arc; it ends both
+    pieces it separates.
+
+    Parameters
+    ----------
+    piece : Piece
+    spacing : float
+
+    Returns
+    -------
+    list of Piece
+        The piece itself when it has no sharp turn (or is a loop with only one).
+    """
+    if not piece.closed and piece.length < SHORTEST_CUT * spacing:
+        return [piece]  # too short to hold two curves
+    window = TURN_OUTER * spacing
+    angle = turn_angles(piece, spacing)
+    m = len(angle)
+    cum = _arc(piece.points)
+    cuts: list[int] = []
+    for i in np.argsort(-angle, kind="stable"):
+        if angle[i] <= CORNER_TURN:
+            break
+        near = [c for c in cuts if abs(cum[c] - cum[i]) < window]
+        if piece.closed:
+            total = piece.length
+            near = [
+                c for c in cuts if min(abs(cum[c] - cum[i]), total - abs(cum[c] - cum[i])) < window
+            ]
+        if not near:
+            cuts.append(int(i))
+    if not cuts or (piece.closed and len(cuts) == 1):
+        return [piece]  # a loop with one sharp turn: a wobble, not a teardrop
+    cuts.sort()
+    if piece.closed:
+        shift = cuts[0]
+        idx = np.concatenate([np.arange(shift, m), np.arange(shift + 1)])
+        bounds = [c - shift for c in cuts] + [m]
+    else:
+        idx = np.arange(m)
+        bounds = [0, *cuts, m - 1]
+    out = []
+    for a, b in itertools.pairwise(bounds):
+        if b > a:
+            sel = idx[a : b + 1]
+            out.append(Piece(piece.nodes[sel], piece.points[sel]))
+    return out
+
+
+@dataclass
+class _Ends:
+    piece: np.ndarray  # (q,) piece of each end
+    side: np.ndarray  # (q,) 0: first vertex, 1: last
+    point: np.ndarray  # (q, 3)
+    out: np.ndarray  # (s, q, 3) unit direction leaving the curve (its end chord), per scale
+
+
+def _ends(pieces: list[Piece], spacing: float) -> _Ends:
+    """The two ends of every open piece, with the chords of :func:`_chords` there at
+    every scale of :data:`TURN_SCALES` (the whole piece's chord where a scale's chord
+    is empty), pointing out of the piece. All pieces in one vectorised pass."""
+    which = np.array(
+        [i for i, pc in enumerate(pieces) if not pc.closed and len(pc.points) >= 2], np.int64
+    )
+    if len(which) == 0:
+        z = np.zeros((0, 3))
+        empty = np.zeros((len(TURN_SCALES), 0, 3))
+        return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, empty)
+    sizes = np.array([len(pieces[i].points) for i in which])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    stops = starts + sizes - 1
+    points = np.concatenate([pieces[i].points for i in which])
+    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    step[starts[1:] - 1] = 0.0
+    cum = np.concatenate([[0.0], np.cumsum(step)])
+    piece = np.repeat(np.arange(len(which)), sizes)
+    cum -= cum[starts][piece]
+    scales = np.asarray(TURN_SCALES)[:, None] * spacing  # (S, 1)
+    gap = float(cum.max()) + 2 * TURN_OUTER * float(scales.max()) + 1.0
+    key = cum + piece * gap
+    first_key, last_key = key[starts], key[stops]
+
+    def index(target: np.ndarray, side: str, shift: int) -> np.ndarray:
+        return np.clip(np.searchsorted(key, target, side=side) + shift, starts, stops)
+
+    near = index(first_key + TURN_INNER * scales, "left", 0)  # (S, q)
+    far = index(first_key + TURN_OUTER * scales, "left", 0)
+    near_b = index(last_key - TURN_INNER * scales, "right", -1)
+    far_b = index(last_key - TURN_OUTER * scales, "right", -1)
+    chord = points[stops] - points[starts]  # (q, 3)
+    first = np.where((near == far)[..., None], chord, points[far] - points[near])
+    last = np.where((near_b == far_b)[..., None], chord, points[near_b] - points[far_b])
+    q = len(which)
+    out = np.empty((len(TURN_SCALES), 2 * q, 3))
+    out[:, 0::2] = -_unit(first)
+    out[:, 1::2] = _unit(last)
+    ends_points = np.empty((2 * q, 3))
+    ends_points[0::2], ends_points[1::2] = points[starts], points[stops]
+    return _Ends(np.repeat(which, 2), np.tile([0, 1], q), ends_points, out)
+
+
+def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.ndarray]]:
+    """Curve ends grouped by distance (:data:`GAP_LENGTH` spacings, transitively).
+
+    Returns
+    -------
+    ends : the ends (piece, side, point (q, 3), outward direction (q, 3))
+    clusters : list of (c,) int64
+        Indices into ``ends``, every cluster of two or more ends, deterministic order.
+    """
+    ends = _ends(pieces, spacing)
+    q = len(ends.piece)
+    parent = np.arange(q)
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = int(parent[i])
+        return i
+
+    if q:
+        for a, b in sorted(cKDTree(ends.point).query_pairs(GAP_LENGTH * spacing)):
+            same = ends.piece[a] == ends.piece[b]
+            if same and pieces[ends.piece[a]].length < LOOP_LENGTH * GAP_LENGTH * spacing:
+                continue  # the two ends of a short piece: no loop
+            ra, rb = root(a), root(b)
+            if ra != rb:
+                parent[max(ra, rb)] = min(ra, rb)
+    roots = np.array([root(i) for i in range(q)], np.int64)
+    clusters = [np.flatnonzero(roots == r) for r in np.unique(roots)]
+    return ends, [c for c in clusters if len(c) >= 2]
+
+
+def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
+    """Ends ``a`` and ``b`` belong to one curve: they face each other within
+    :data:`CORNER_TURN`, and each lies within :data:`LATERAL_OFFSET` spacings of the
+    other's line (ends may overlap side by side where a skeleton broke a loop)."""
+    gap = ends.point[b] - ends.point[a]
+    for out in ends.out:  # either scale of the chords (the larger turn is the corner's)
+        if -float(out[a] @ out[b]) < math.cos(math.radians(CORNER_TURN)):
+            continue
+        off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
+        off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
+        if max(off_a, off_b) <= LATERAL_OFFSET * spacing:
+            return True
+    return False
+
+
+#: Vertices (input indices, positions (k, 3)) strictly between two curve vertices given by
+#: input index, on a mesh.
+Bridge = Callable[[int, int], tuple[np.ndarray, np.ndarray]]
+
+
+def _faces_gap(ends: _Ends, a: int, b: int) -> bool:
+    """The gap from end ``a`` to end ``b`` leaves each end forwards (within
+    :data:`CORNER_TURN`), at the widest chord scale."""
+    gap = ends.point[b] - ends.point[a]
+    length = float(np.linalg.norm(gap))
+    limit = math.cos(math.radians(CORNER_TURN)) * length
+    return bool(gap @ ends.out[-1, a] >= limit and -gap @ ends.out[-1, b] >= limit)
+
+
+def join_pieces(pieces: list[Piece], spacing: float, bridge: Bridge | None = None) -> list[Piece]:
+    """Join pieces whose ends meet as one curve (two ends, facing each other), closing
+    loops; ends meeting at a corner are left as they are. Two free ends (no other end
+    within GAP_LENGTH) facing each other are also joined across up to
+    :data:`LONG_GAP` spacings, nearest pairs first.
+
+    Parameters
+    ----------
+    pieces : list of Piece
+    spacing : float
+    bridge : callable, optional
+        The vertices to insert between two joined ends (meshes: a path along the mesh
+        edges); none (a straight segment) by default.
+
+    Returns
+    -------
+    list of Piece
+    """
+    ends, clusters = end_clusters(pieces, spacing)
+    link: dict[tuple[int, int], tuple[int, int]] = {}
+
+    def connect(i: int, j: int) -> None:
+        a, b = int(ends.piece[i]), int(ends.piece[j])
+        sa, sb = int(ends.side[i]), int(ends.side[j])
+        if (a, sa) in link or (b, sb) in link:
+            return
+        if a == b and pieces[a].length < LOOP_LENGTH * GAP_LENGTH * spacing:
+            return  # a short piece bent onto itself is no loop
+        link[(a, sa)] = (b, sb)
+        link[(b, sb)] = (a, sa)
+
+    for c in clusters:
+        if len(c) == 2 and _continues(ends, int(c[0]), int(c[1]), spacing):
+            connect(int(c[0]), int(c[1]))
+    free = np.ones(len(ends.piece), bool)
+    for c in clusters:
+        free[c] = False
+    alone = np.flatnonzero(free)
+    if len(alone) >= 2:
+        pairs = cKDTree(ends.point[alone]).query_pairs(LONG_GAP * spacing, output_type="ndarray")
+        pairs = alone[pairs]
+        gaps = np.linalg.norm(ends.point[pairs[:, 0]] - ends.point[pairs[:, 1]], axis=1)
+        for k in np.lexsort((pairs[:, 1], pairs[:, 0], gaps)):
+            i, j = int(pairs[k, 0]), int(pairs[k, 1])
+            if _continues(ends, i, j, spacing) and _faces_gap(ends, i, j):
+                connect(i, j)
+    if not link:
+        return pieces
+    done = np.zeros(len(pieces), bool)
+    out: list[Piece] = []
+
+    def chain(start: int, entry_side: int) -> Piece:
+        parts, (p, side), closed = [], (start, entry_side), False
+        while True:
+            done[p] = True
+            pc = pieces[p]
+            parts.append(pc if side == 0 else Piece(pc.nodes[::-1], pc.points[::-1]))
+            nxt = link.get((p, 1 - side))
+            if nxt is None:
+                break
+            if done[nxt[0]]:
+                closed = nxt == (start, entry_side)
+                break
+            p, side = nxt
+        if bridge is not None:
+            parts = _bridged(parts, closed, bridge)
+        nodes = np.concatenate([q.nodes for q in parts])
+        points = np.concatenate([q.points for q in parts])
+        keep = np.ones(len(nodes), bool)  # a vertex shared by consecutive parts once
+        keep[1:] = nodes[1:] != nodes[:-1]
+        nodes, points = nodes[keep], points[keep]
+        if closed and len(nodes) > 1 and nodes[0] == nodes[-1]:
+            nodes, points = nodes[:-1], points[:-1]
+        return Piece(nodes, points, closed)
+
+    for i, pc in enumerate(pieces):
+        if done[i]:
+            continue
+        if pc.closed:
+            done[i] = True
+            out.append(pc)
+        elif (i, 0) not in link:
+            out.append(chain(i, 0))
+        elif (i, 1) not in link:
+            out.append(chain(i, 1))
+    for i in range(len(pieces)):
+        if not done[i]:
+            out.append(chain(i, 0))
+    return out
+
+
+def _bridged(parts: list[Piece], closed: bool, bridge: Bridge) -> list[Piece]:
+    """``parts`` with the bridge between consecutive parts (and from the last to the
+    first when ``closed``) inserted where they do not share their end vertex."""
+    out: list[Piece] = []
+    pairs = list(zip(parts, parts[1:] + (parts[:1] if closed else []), strict=False))
+    for a, b in pairs:
+        out.append(a)
+        if a.nodes[-1] != b.nodes[0]:
+            nodes, points = bridge(int(a.nodes[-1]), int(b.nodes[0]))
+            if len(nodes):
+                out.append(Piece(nodes, points))
+    if not closed:
+        out.append(parts[-1])
+    return out
+
+
+def split_at_touches(pieces: list[Piece], spacing: float) -> list[Piece]:
+    """Cut a curve where the free end of another one touches it (a T-junction whose
+    stem detection left short of the line): at the vertex nearest the end, if it is
+    within GAP_LENGTH spacings of the end and farther than that from both ends of its
+    own curve. The cut and the end then meet at a corner.
+
+    Parameters
+    ----------
+    pieces : list of Piece
+    spacing : float
+
+    Returns
+    -------
+    list of Piece
+    """
+    ends, clusters = end_clusters(pieces, spacing)
+    free = np.ones(len(ends.piece), bool)
+    for c in clusters:
+        free[c] = False
+    if not free.any():
+        return pieces
+    owner = np.concatenate([np.full(len(pc.points), i) for i, pc in enumerate(pieces)])
+    local = np.concatenate([np.arange(len(pc.points)) for pc in pieces])
+    tree = cKDTree(np.concatenate([pc.points for pc in pieces]))
+    reach = GAP_LENGTH * spacing
+    cuts: dict[int, set[int]] = {}
+    for e in np.flatnonzero(free):
+        near = tree.query_ball_point(ends.point[e], reach)
+        near = [j for j in near if owner[j] != ends.piece[e]]
+        if not near:
+            continue
+        j = min(near, key=lambda j: (float(np.linalg.norm(tree.data[j] - ends.point[e])), j))
+        pc, v = pieces[owner[j]], int(local[j])
+        cum = _arc(pc.points)
+        if pc.closed or (cum[v] > reach and cum[-1] - cum[v] > reach):
+            cuts.setdefault(int(owner[j]), set()).add(v)
+    if not cuts:
+        return pieces
+    out = []
+    for i, pc in enumerate(pieces):
+        if i not in cuts:
+            out.append(pc)
+            continue
+        at = sorted(cuts[i])
+        if pc.closed:
+            m = len(pc.points)
+            order = np.concatenate([np.arange(at[0], m), np.arange(at[0] + 1)])
+            bounds = [a - at[0] for a in at] + [m]
+        else:
+            order = np.arange(len(pc.points))
+            bounds = [0, *at, len(pc.points) - 1]
+        for a, b in itertools.pairwise(bounds):
+            if b > a:
+                sel = order[a : b + 1]
+                out.append(Piece(pc.nodes[sel], pc.points[sel]))
+    return out

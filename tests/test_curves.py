@@ -1,0 +1,311 @@
+"""Feature curves (issue 11): known answers on a cube and a cylinder, invariance to the
+input's order, the writers read back by pymeshlab and ezdxf, the MeshSet edge mesh, the
+command line, and the curve scores."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pymeshlab
+import pytest
+import shapes
+from files import write_ply
+
+import meshlab_sharp
+from meshlab_sharp import groundtruth as gt
+from meshlab_sharp.cli import main
+from meshlab_sharp.curves import classify, extract_curves
+from meshlab_sharp.errors import InputError, MeshlabSharpError
+from meshlab_sharp.evaluation import evaluate_curves, truth_curves
+from meshlab_sharp.io import curve_arrays, require_ezdxf, save_curves
+
+MODES = ("paper", "robust")
+CUBE_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+
+
+def _cube_checks(result, spacing):
+    """12 straight curves along the cube's edges, each about 2 long, 8 corners at the
+    cube's corners."""
+    assert len(result.curves) == 12
+    assert [c.kind for c in result.curves] == ["line"] * 12
+    assert not any(c.closed for c in result.curves)
+    for c in result.curves:
+        d = np.abs(c.params["direction"])
+        assert d.max() > 0.999  # along an axis
+        assert abs(c.length - 2.0) < 3 * spacing
+        # on an edge: two coordinates at +-1
+        assert np.all(np.sum(np.abs(np.abs(c.points) - 1) < spacing, axis=1) >= 2)
+    assert len(result.corners) == 8
+    d = np.linalg.norm(result.corners.points[:, None] - CUBE_CORNERS[None], axis=2)
+    assert np.all(d.min(axis=1) < spacing)
+    assert sorted(d.argmin(axis=1)) == list(range(8))
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_cube_cloud_gives_12_lines_and_8_corners(mode):
+    points = shapes.cube_grid_points(21)  # spacing 0.1
+    result = meshlab_sharp.detect(points, mode=mode, curves=True)
+    _cube_checks(result, 0.1)
+    # every curve vertex came from a detected point
+    for c in result.curves:
+        assert result.mask[c.indices].all()
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_cube_mesh_curves_are_chains_of_mesh_edges(mode):
+    vertices, faces = shapes.cube_grid_mesh(4)  # edge length 0.125
+    result = meshlab_sharp.detect(vertices, faces, mode=mode, curves=True)
+    _cube_checks(result, 0.125)
+    edges = {tuple(sorted(e)) for f in faces for e in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0]))}
+    for c in result.curves:
+        np.testing.assert_array_equal(c.points, vertices[c.indices])  # mesh vertices
+        for a, b in c.segments:
+            assert tuple(sorted((c.indices[a], c.indices[b]))) in edges
+    np.testing.assert_array_equal(result.corners.points, vertices[result.corners.indices])
+    assert np.abs(np.abs(result.corners.points) - 1).max() == 0.0  # exactly the corners
+
+
+def test_sampled_box_cloud_gives_12_lines_and_8_corners():
+    part = gt.make_part("box", n_points=6000, seed=3)
+    result = meshlab_sharp.detect(part.vertices, mode="robust", curves=True)
+    scores = evaluate_curves(result.curves, result.corners.points, part.edges, part.spacing)
+    assert (scores.n_curves, scores.n_corners) == (12, 8)
+    assert scores.corners_found == 1.0
+    assert scores.precision > 0.99 and scores.coverage > 0.97
+    assert scores.rms < 0.35  # below the spacing: refined onto the planes' intersection
+
+
+@pytest.mark.parametrize(
+    ("kind", "mode"), [("points", "robust"), ("points", "paper"), ("mesh", "robust")]
+)
+def test_cylinder_gives_two_closed_circles_of_its_radius(kind, mode):
+    part = gt.make_part("cylinder", kind, n_points=6000 if kind == "points" else 3000, seed=2)
+    result = meshlab_sharp.detect(part.vertices, part.faces, mode=mode, curves=True)
+    assert len(result.curves) == 2
+    assert len(result.corners) == 0
+    heights = []
+    for c in result.curves:
+        assert c.kind == "arc" and c.closed
+        assert abs(c.params["radius"] - 20.0) < 0.02 * 20.0
+        assert abs(abs(c.params["normal"][2]) - 1.0) < 1e-3
+        assert np.linalg.norm(c.params["centre"][:2]) < 0.1
+        assert c.params["angle"] == 360.0
+        heights.append(c.params["centre"][2])
+    np.testing.assert_allclose(sorted(heights), [0.0, 40.0], atol=0.1)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_curves_do_not_depend_on_the_order_of_the_points(mode):
+    part = gt.make_part("box", n_points=6000, seed=3)
+    order = np.random.default_rng(5).permutation(part.n)
+    a = meshlab_sharp.detect(part.vertices, mode=mode, curves=True)
+    b = meshlab_sharp.detect(part.vertices[order], mode=mode, curves=True)
+    assert len(a.curves) == len(b.curves)
+    for ca, cb in zip(a.curves, b.curves, strict=True):
+        np.testing.assert_allclose(ca.points, cb.points, atol=1e-9)
+        np.testing.assert_array_equal(ca.indices, order[cb.indices])
+        assert (ca.kind, ca.closed) == (cb.kind, cb.closed)
+    np.testing.assert_allclose(a.corners.points, b.corners.points, atol=1e-9)
+
+
+def test_curves_are_opt_in_and_reported_in_the_summary():
+    points = shapes.cube_grid_points(21)
+    plain = meshlab_sharp.detect(points)
+    assert plain.curves is None and plain.corners is None
+    assert "curves" not in plain.summary() and "curves" not in plain.timings
+    result = meshlab_sharp.detect(points, curves=True)
+    summary = result.summary()["curves"]
+    assert summary["n_curves"] == 12 and summary["n_corners"] == 8
+    assert summary["kinds"] == {"line": 12}
+    assert result.timings["curves"] >= 0
+
+
+def test_no_features_no_curves():
+    result = meshlab_sharp.detect(shapes.flat_square(20), scales=[8, 12], curves=True)
+    assert result.curves == [] and len(result.corners) == 0
+    curves, corners = extract_curves(np.zeros((5, 3)), np.zeros(5, bool))
+    assert curves == [] and corners.points.shape == (0, 3)
+
+
+def test_classify_known_shapes():
+    t = np.linspace(0, 1, 30)
+    line = np.c_[t, 2 * t, np.zeros_like(t)]
+    kind, p = classify(line, False, 0.01)
+    assert kind == "line"
+    np.testing.assert_allclose(p["direction"], np.array([1, 2, 0]) / np.sqrt(5), atol=1e-12)
+    a = np.linspace(0, np.pi, 40)
+    arc = np.c_[3 + 2 * np.cos(a), 1 + 2 * np.sin(a), np.full_like(a, 5.0)]
+    kind, p = classify(arc, False, 0.01)
+    assert kind == "arc"
+    np.testing.assert_allclose(p["centre"], [3, 1, 5], atol=1e-9)
+    assert abs(p["radius"] - 2) < 1e-9 and abs(p["angle"] - 180) < 1e-6
+    np.testing.assert_allclose(p["normal"], [0, 0, 1], atol=1e-9)
+    helix = np.c_[np.cos(3 * a), np.sin(3 * a), a]
+    assert classify(helix, False, 0.01)[0] == "freeform"
+
+
+# -- writers ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def cube_curves():
+    result = meshlab_sharp.detect(shapes.cube_grid_points(21), curves=True)
+    return result.curves
+
+
+def _loaded(path):
+    """The MeshSet holding the file (a Mesh must not outlive its MeshSet)."""
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(path))
+    return ms
+
+
+@pytest.mark.parametrize("ext", [".ply", ".obj"])
+def test_ply_and_obj_read_back_as_edge_meshes(tmp_path, cube_curves, ext):
+    vertices, edges, _ = curve_arrays(cube_curves)
+    path = save_curves(tmp_path / f"c{ext}", cube_curves)
+    ms = _loaded(path)
+    mesh = ms.current_mesh()
+    assert mesh.vertex_number() == len(vertices)
+    assert mesh.edge_number() == len(edges) == sum(len(c.points) - 1 for c in cube_curves)
+    np.testing.assert_allclose(mesh.vertex_matrix(), vertices, atol=1e-6)
+    np.testing.assert_array_equal(mesh.edge_matrix(), edges)
+    assert [p.name for p in tmp_path.iterdir()] == [f"c{ext}"]  # no temporary left
+
+
+def test_dxf_has_one_3d_polyline_per_curve(tmp_path):
+    ezdxf = pytest.importorskip("ezdxf")
+    part = gt.make_part("cylinder", "mesh", n_points=3000)
+    result = meshlab_sharp.detect(part.vertices, part.faces, curves=True)
+    cube = meshlab_sharp.detect(shapes.cube_grid_points(21), curves=True)
+    curves = result.curves + cube.curves
+    save_curves(tmp_path / "c.dxf", curves)
+    doc = ezdxf.readfile(tmp_path / "c.dxf")
+    entities = list(doc.modelspace())
+    assert len(entities) == len(curves) == 14
+    for e, c in zip(entities, curves, strict=True):
+        assert e.dxftype() == "POLYLINE" and e.is_3d_polyline
+        assert e.is_closed == c.closed
+        assert e.dxf.layer == f"SHARP_{c.kind.upper()}"
+        np.testing.assert_allclose([v.dxf.location for v in e.vertices], c.points, atol=1e-9)
+
+
+def test_dxf_without_ezdxf_is_a_one_line_error(tmp_path, monkeypatch, cube_curves):
+    monkeypatch.setitem(sys.modules, "ezdxf", None)  # import ezdxf now fails
+    with pytest.raises(MeshlabSharpError, match=r"pip install 'meshlab-sharp\[dxf\]'"):
+        require_ezdxf()
+    with pytest.raises(MeshlabSharpError, match="needs ezdxf"):
+        save_curves(tmp_path / "c.dxf", cube_curves)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unknown_curve_format_is_refused(tmp_path, cube_curves):
+    with pytest.raises(InputError, match=r"must end in \.ply, \.obj, \.dxf"):
+        save_curves(tmp_path / "c.stl", cube_curves)
+
+
+# -- pymeshlab ----------------------------------------------------------------------
+
+
+def test_detect_meshset_adds_the_curves_as_an_edge_mesh():
+    vertices, faces = shapes.cube_grid_mesh(3)
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices, face_matrix=faces), "cube")
+    result = meshlab_sharp.detect_meshset(ms, curves=True)
+    assert ms.mesh_number() == 2
+    assert ms.current_mesh().face_number() == len(faces)  # the analysed mesh stays current
+    added = ms.mesh(1)
+    assert added.face_number() == 0
+    assert added.edge_number() == sum(len(c.segments) for c in result.curves)
+    np.testing.assert_array_equal(
+        added.vertex_matrix(), np.concatenate([c.points for c in result.curves])
+    )
+    without = pymeshlab.MeshSet()
+    without.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices, face_matrix=faces))
+    assert meshlab_sharp.detect_meshset(without).curves is None
+    assert without.mesh_number() == 1
+
+
+# -- command line -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("ext", [".ply", ".obj", ".dxf"])
+def test_cli_writes_curves(tmp_path, capsys, ext):
+    if ext == ".dxf":
+        pytest.importorskip("ezdxf")
+    src = write_ply(tmp_path / "cube.ply", shapes.cube_grid_points(21))
+    out = tmp_path / f"curves{ext}"
+    assert main(["detect", str(src), "--curves", str(out)]) == 0
+    assert "curves: 12 (12 line), 8 corners" in capsys.readouterr().out
+    if ext == ".dxf":
+        import ezdxf
+
+        assert len(ezdxf.readfile(out).modelspace()) == 12
+    else:
+        assert _loaded(out).current_mesh().edge_number() == 12 * 20  # 21 grid points per edge
+    hidden = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert hidden == []
+
+
+def test_cli_curves_checked_before_computation(tmp_path, capsys):
+    absent = tmp_path / "absent.ply"  # the input does not exist: the outputs fail first
+    missing = tmp_path / "missing"
+    assert main(["detect", str(absent), "--curves", str(missing / "c.ply")]) == 1
+    assert capsys.readouterr().err == (
+        f"meshlab-sharp: error: cannot write {missing / 'c.ply'}: the folder {missing} "
+        "does not exist\n"
+    )
+    assert main(["detect", str(absent), "--curves", str(tmp_path / "c.stl")]) == 1
+    assert "must end in .ply, .obj, .dxf" in capsys.readouterr().err
+    src = write_ply(tmp_path / "cube.ply", shapes.cube_grid_points(9))
+    (tmp_path / "c.ply").write_text("old\n")
+    assert main(["detect", str(src), "--curves", str(tmp_path / "c.ply")]) == 1
+    assert capsys.readouterr().err.endswith("c.ply exists; use --force to overwrite it\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.ply", "cube.ply"]
+
+
+def test_cli_curves_are_all_or_nothing_with_the_other_outputs(tmp_path, capsys):
+    src = write_ply(tmp_path / "cube.ply", shapes.cube_grid_points(9))
+    (tmp_path / "r.json").write_text("old\n")
+    # the report exists: nothing is written, the curves neither
+    code = main(
+        [
+            "detect",
+            str(src),
+            "--curves",
+            str(tmp_path / "c.obj"),
+            "--report",
+            str(tmp_path / "r.json"),
+        ]
+    )
+    assert code == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cube.ply", "r.json"]
+
+
+# -- scores -------------------------------------------------------------------------
+
+
+def test_truth_curves_and_perfect_scores_of_the_exact_edges():
+    part = gt.make_part("box", n_points=2000)
+    n, corners = truth_curves(part.edges)
+    assert n == 12 and len(corners) == 8
+    exact = [
+        meshlab_sharp.curves.Curve(seg, np.zeros(2, np.int64), False, "line", {})
+        for seg in part.edges
+    ]
+    s = evaluate_curves(exact, corners, part.edges, part.spacing)
+    assert (s.precision, s.coverage, s.rms, s.count_ratio, s.corners_found) == (1, 1, 0, 1, 1)
+    n, corners = truth_curves(gt.make_part("cylinder", n_points=2000).edges)
+    assert n == 2 and len(corners) == 0
+
+
+def test_report_picture_draws_the_curves(tmp_path):
+    pytest.importorskip("matplotlib")
+    from meshlab_sharp.io import Geometry
+    from meshlab_sharp.plot import save_report
+
+    points = shapes.cube_grid_points(11)
+    result = meshlab_sharp.detect(points, curves=True, return_details=True)
+    path = save_report(tmp_path / "r.png", result, Geometry(points, None, "cube"), size=(400, 300))
+    assert path.read_bytes().startswith(b"\x89PNG")
