@@ -6,6 +6,11 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 1. **Isolated points are left out** (point clouds): point ``i`` is isolated when it is
    not among the ``k_max`` nearest neighbours of its own nearest neighbour. Detection
    runs on the other points; isolated points are never features.
+1b. **Scales from the noise** (point clouds): the median over the points of
+   ``|d . n| / |d|`` (``d`` the offset to the nearest neighbour, ``n`` the normal of the
+   point and its 6 nearest) measures the noise; above ``NOISE_TOLERATED`` the scales
+   grow as its square, at most ``NOISE_MAX_FACTOR``-fold (the noise of ``r`` falls as
+   ``1 / sqrt(k)``).
 2. **Relative projected distance** instead of min-max normalisation: per scale,
    ``r_i = pdis_i / l_i`` with ``l_i`` the mean distance from ``p_i`` to the members of
    its neighbourhood (itself included). ``0 <= r_i <= 1`` always (``pdis_i`` is the
@@ -17,14 +22,15 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    ``(2 / pi) * sin(10 deg)``. On a smooth object Otsu still splits the histogram, but
    below the floor: "no sharp features" becomes a possible answer.
 4. **Support**: a point that is a candidate at every scale is kept only when at least
-   ``SUPPORT_MIN`` (2) other such points lie among its ``SUPPORT_KNN`` (16) nearest (its
-   ``THIN_RING``-ring on meshes): a line has neighbours along it, a point lifted by
-   noise does not.
+   ``SUPPORT_MIN`` (2) other such points among its ``SUPPORT_KNN`` (16) nearest (its
+   ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
+   along it, a point lifted by noise has none, or only the line it lies beside.
 5. **Thinning**: a point is dropped when a supported neighbour among its ``THIN_KNN``
    (8) nearest, lying across the feature line (more than 60 degrees from the line's
-   direction), has a larger mean relative distance (non-maximum suppression across
-   the line), so lines stay one point wide; comparing only within about 1.5 spacings
-   keeps two parallel lines (the rims of a thin wall) apart.
+   direction), ranks higher (mean over the scales of the centroid's distance relative
+   to ``l``, which peaks on acute edges where ``r`` does not): non-maximum suppression
+   across the line, so lines stay one point wide; comparing only within about 1.5
+   spacings keeps two parallel lines (the rims of a thin wall) apart.
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
    an edge whose two faces turn by more than ``CREASE_ANGLE`` (more on a noisy mesh)
    are features too. On a CAD tessellation they are all of them.
@@ -48,6 +54,9 @@ from .threshold import otsu_threshold
 
 __all__ = [
     "CREASE_ANGLE",
+    "NOISE_KNN",
+    "NOISE_MAX_FACTOR",
+    "NOISE_TOLERATED",
     "R_MIN",
     "SUPPORT_KNN",
     "SUPPORT_MIN",
@@ -85,15 +94,21 @@ THIN_RING = 2
 #: alone by noise has none.
 SUPPORT_KNN = 16
 SUPPORT_MIN = 2
+#: The plane of the noise estimate: the point and its 6 nearest (the 1-ring of a
+#: regular triangulation of the samples); the smallest scale (12) takes in the other
+#: sheet of a wall 2 spacings thick and reads it as noise.
+NOISE_KNN = 7
 #: Noise the default scales tolerate, as the median of ``|d . n| / |d|`` between nearest
-#: neighbours (``d``) across the plane (normal ``n``) of the smallest scale. Measured on
-#: Poisson-disk samples: 0 clean, 0.2 with normal noise of 25 % of the spacing, 0.29 at
-#: 50 %; 0.1-0.17 on walls 1-2 spacings thick (two sheets in one PCA), 0.03 on the
-#: smooth controls. Above it the scales grow as the square of the ratio (the noise of
-#: ``r`` at scale k goes as ``sigma / sqrt(k)``): about x2 at 50 % noise. Set at the
-#: 25 % level, where larger scales stopped paying (+0.01 F1) and above the thin walls
-#: (which larger scales hurt); 0.15 measured: noise 25 % +0.015, thin2 -0.014.
-NOISE_TOLERATED = 0.2
+#: neighbours (``d``) across the plane (normal ``n``) of the ``NOISE_KNN`` nearest.
+#: Measured on Poisson-disk samples: 0 clean, 0.20 with normal noise of 25 % of the
+#: spacing, 0.30 at 50 %, 0.01-0.02 on walls 2-3 spacings thick, 0.03 at most on the
+#: smooth controls, 0.08-0.13 on the simulated scans. Above it the scales grow as the
+#: square of the ratio (the noise of ``r`` at scale k goes as ``sigma / sqrt(k)``).
+NOISE_TOLERATED = 0.15
+#: The scales grow at most 3-fold (``k_max`` 120 with the default scales: the kNN table
+#: of a million points stays below 0.5 GB); measured at 50 % noise, quick size: x2 0.64,
+#: x3 0.66.
+NOISE_MAX_FACTOR = 3.0
 
 
 def isolated_points(indices: np.ndarray) -> np.ndarray:
@@ -129,15 +144,15 @@ def noise_scale_factor(points: np.ndarray, indices: np.ndarray, k: int) -> float
     indices : (n, k_max) int
         kNN lists sorted by distance, the point itself first, ``k_max >= k >= 2``.
     k : int
-        The smallest scale: its first ``k`` columns give each point's plane (unweighted
-        PCA normal ``n_i``).
+        The first ``k`` columns give each point's plane (unweighted PCA normal ``n_i``;
+        ``NOISE_KNN``).
 
     Returns
     -------
     float
-        ``max(1, (nu / NOISE_TOLERATED)**2)``, ``nu`` the lower median over the points
-        of ``|d . n_i| / |d|``, ``d = p_{N(i)[1]} - p_i`` (the nearest neighbour's
-        offset across the plane, relative to its distance).
+        ``min(max(1, (nu / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)``, ``nu`` the lower
+        median over the points of ``|d . n_i| / |d|``, ``d = p_{N(i)[1]} - p_i`` (the
+        nearest neighbour's offset across the plane, relative to its distance).
     """
     idx = np.asarray(indices)[:, :k]
     q = points[idx] - points[:, None, :]
@@ -151,7 +166,7 @@ def noise_scale_factor(points: np.ndarray, indices: np.ndarray, k: int) -> float
     ratio = np.where(length > 0, across / np.where(length > 0, length, 1.0), 0.0)
     at = (len(ratio) - 1) // 2
     nu = float(np.partition(ratio, at)[at])
-    return max(1.0, (nu / NOISE_TOLERATED) ** 2)
+    return min(max(1.0, (nu / NOISE_TOLERATED) ** 2), NOISE_MAX_FACTOR)
 
 
 def _segment_sums(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
@@ -478,7 +493,9 @@ class RobustSetup:
                     self.points, None, self.scales, workers=workers
                 )
             factor = min(
-                noise_scale_factor(self.points, self.neighbourhoods.indices, min(self.scales)),
+                noise_scale_factor(
+                    self.points, self.neighbourhoods.indices, min(NOISE_KNN, max(self.scales))
+                ),
                 len(self.points) / max(self.scales),
             )
             if factor > 1.0:
