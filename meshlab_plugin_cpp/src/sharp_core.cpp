@@ -23,7 +23,9 @@ const double ZERO_NORMAL = 1e-12;          // normals.ZERO_NORMAL
 const double R_MIN = 0.11054786333836651;
 const double CREASE_ANGLE = 20.0;          // creases.CREASE_ANGLE (degrees)
 const double NOISE_FACTOR = 4.0 / 0.3186;  // creases.NOISE_FACTOR (lower quartiles)
-const double NOISE_TOLERATED = 0.2;        // robust.NOISE_TOLERATED
+const int NOISE_KNN = 7;                   // robust.NOISE_KNN
+const double NOISE_TOLERATED = 0.15;       // robust.NOISE_TOLERATED
+const double NOISE_MAX_FACTOR = 3.0;       // robust.NOISE_MAX_FACTOR
 const double THIN_CONE_COS = 0.5;          // robust.THIN_CONE_COS (60 degrees)
 const int THIN_KNN = 8;                    // robust.THIN_KNN
 const int THIN_RING = 2;                   // robust.THIN_RING
@@ -413,8 +415,9 @@ std::vector<char> supportAndThin(const std::vector<Point> &pts, const std::vecto
 	return f2;
 }
 
-// robust.noise_scale_factor: max(1, (nu / NOISE_TOLERATED)^2), nu the lower median of
-// |d . n| / |d|, n the plain PCA normal of the k nearest, d the offset of the nearest.
+// robust.noise_scale_factor: min(max(1, (nu / NOISE_TOLERATED)^2), NOISE_MAX_FACTOR), nu
+// the lower median of |d . n| / |d|, n the plain PCA normal of the k nearest, d the
+// offset of the nearest.
 double noiseScaleFactor(const std::vector<Point> &pts, const std::vector<std::vector<long>> &hoods, int k) {
 	const long n = long(pts.size());
 	std::vector<double> ratio(n, 0.0);
@@ -448,7 +451,7 @@ double noiseScaleFactor(const std::vector<Point> &pts, const std::vector<std::ve
 	}
 	const long at = (n - 1) / 2;
 	std::nth_element(ratio.begin(), ratio.begin() + at, ratio.end());
-	return std::max(1.0, std::pow(ratio[at] / NOISE_TOLERATED, 2.0));
+	return std::min(std::max(1.0, std::pow(ratio[at] / NOISE_TOLERATED, 2.0)), NOISE_MAX_FACTOR);
 }
 
 // creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
@@ -674,7 +677,8 @@ Decision robustMode(std::vector<Point> pts, const Clean &c, const Options &optio
 		}
 		const long n = long(pts.size());
 		const double factor =
-		    std::min(noiseScaleFactor(pts, hoods, r.scales.front()), double(n) / double(r.scales.back()));
+		    std::min(noiseScaleFactor(pts, hoods, std::min(NOISE_KNN, r.scales.back())),
+		             double(n) / double(r.scales.back()));
 		if (factor > 1.0) {
 			for (int &k : r.scales) k = int(std::floor(k * factor + 0.5));
 			hoods = knn(pts, r.scales.back(), progress);
