@@ -3,6 +3,7 @@ Xvfb, read back, and compared with the Python package on the same files."""
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import shutil
@@ -18,13 +19,15 @@ import shapes
 from files import write_ply
 
 import meshlab_sharp
-from meshlab_sharp import plugin
+from meshlab_sharp import groundtruth, plugin
 from meshlab_sharp.cli import main
 from meshlab_sharp.io import mesh_arrays
 from meshlab_sharp.sample import sample_part
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "meshlab_plugin_cpp" / "examples"
 _SCALE = re.compile(r"(k|ring)=(\d+):T=([0-9.]+),candidates=(\d+)")
+#: The filter's ``mode`` values (RichEnum, in this order) and Python's names for them.
+MODES = {"0": "paper", "1": "robust"}
 
 #: In CI a skip here is a failure (conftest.py): set-up installs MeshLab there.
 REQUIRED_IN_CI = True
@@ -61,11 +64,15 @@ def run_meshlabserver(root: Path, src: Path, out: Path, **params) -> tuple[int, 
     return proc.returncode, proc.stdout + proc.stderr
 
 
-def parse_log(log: str) -> tuple[np.ndarray, np.ndarray]:
-    """Per-scale thresholds and candidate counts from the filter's log line."""
+def parse_log(log: str) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+    """Per-scale thresholds, candidate counts and scales from the filter's log line."""
     line = next(ln for ln in log.splitlines() if "vertices are features" in ln)
     found = _SCALE.findall(line)
-    return np.array([float(t) for _, _, t, _ in found]), np.array([int(c) for *_, c in found])
+    return (
+        np.array([float(t) for _, _, t, _ in found]),
+        np.array([int(c) for *_, c in found]),
+        tuple(int(k) for _, k, _, _ in found),
+    )
 
 
 def read_back(path: Path):
@@ -88,10 +95,17 @@ def test_meshlabserver_lists_the_filter(meshlab_root, tmp_path):
     assert plugin.FILTER_NAME in dump.read_text(errors="replace")
 
 
-def test_cube_mesh_gives_the_12_edges(meshlab_root, tmp_path):
+def test_the_example_script_runs_robust_mode_by_default():
+    """The .mlx lists every parameter at the filter's default: mode 1 (Robust)."""
+    script = (EXAMPLE / "sharp_features_default.mlx").read_text()
+    assert re.search(r'value="1" name="mode" enum_val0="Paper" enum_val1="Robust"', script)
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
+def test_cube_mesh_gives_the_12_edges(meshlab_root, tmp_path, mode):
     vertices, faces = shapes.cube_grid_mesh(4)
     src = write_ply(tmp_path / "cube.ply", vertices, faces, binary=True)
-    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply")
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply", mode=mode)
     assert code == 0, log
     v, f, quality, selection = read_back(tmp_path / "out.ply")
     expected = shapes.on_cube_edges(v, tol=1e-6)
@@ -99,55 +113,100 @@ def test_cube_mesh_gives_the_12_edges(meshlab_root, tmp_path):
     np.testing.assert_array_equal(selection, expected)
     np.testing.assert_array_equal(quality[expected], 1.0)
     np.testing.assert_array_equal(f, faces)
-    thresholds, _ = parse_log(log)
-    np.testing.assert_array_equal(thresholds, meshlab_sharp.detect(src).thresholds)
+    thresholds, _, _ = parse_log(log)
+    np.testing.assert_array_equal(
+        thresholds, meshlab_sharp.detect(src, mode=MODES[mode]).thresholds
+    )
 
 
 def test_cube_points_give_the_12_edges(meshlab_root, tmp_path):
     points = shapes.cube_grid_points(15)
     src = write_ply(tmp_path / "cube.ply", points)
-    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply")
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply", mode="0")
     assert code == 0, log
     _, _, quality, selection = read_back(tmp_path / "out.ply")
     expected = shapes.on_cube_edges(points)
     np.testing.assert_array_equal(selection, expected)
     np.testing.assert_array_equal(quality[expected], 1.0)
-    assert "points (kNN)" in log
+    assert "points (kNN), paper mode" in log
 
 
-def test_flat_square_has_no_features(meshlab_root, tmp_path):
+@pytest.mark.parametrize("mode", sorted(MODES))
+def test_flat_square_has_no_features(meshlab_root, tmp_path, mode):
     src = write_ply(tmp_path / "flat.ply", shapes.flat_square(20) @ shapes.random_rotation(4).T)
-    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply")
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply", mode=mode)
     assert code == 0, log
-    assert "no features: all points lie on one plane" in log
+    # the flat-scale rule is paper mode's; robust mode's floor finds nothing either
+    assert ("no features: all points lie on one plane" in log) == (mode == "0")
+    assert "0 of 400 vertices are features" in log
     _, _, quality, selection = read_back(tmp_path / "out.ply")
     assert not selection.any()
     assert not quality.any()
 
 
-def _agreement_cases():
-    part_points = sample_part("points", n_points=20000)
-    part_mesh = sample_part("mesh")
-    cube_v, cube_f = shapes.cube_grid_mesh(3)
-    return {
-        "sample-points": (part_points.vertices, None, {}),
-        "sample-mesh": (part_mesh.vertices, part_mesh.faces, {}),
-        "sample-mesh-as-points": (part_mesh.vertices, part_mesh.faces, {"asPoints": "true"}),
-        "box-cylinder-unweighted": (
-            shapes.box_cylinder_points(6000, seed=3),
-            None,
-            {"weighting": "1"},
-        ),
-        "box-points-other-scales": (
-            shapes.random_box_points(5000, seed=8),
-            None,
-            {"knnScales": "8:32:6"},
-        ),
-        "cube-mesh-rings-1-6": (cube_v, cube_f, {"ringScales": "1 2 3 4 5 6"}),
-        "robust-sample-points": (part_points.vertices, None, {"mode": "1"}),
-        "robust-sample-mesh": (part_mesh.vertices, part_mesh.faces, {"mode": "1"}),
-        "robust-outliers": (_with_outliers(part_points.vertices), None, {"mode": "1"}),
-    }
+def _condition(part: str, condition: str, n_points: int):
+    sample = groundtruth.make_condition(part, condition, n_points=n_points)
+    return sample.vertices, sample.faces
+
+
+@functools.cache
+def _agreement_case(case: str) -> tuple[np.ndarray, np.ndarray | None, dict[str, str]]:
+    """Vertices, faces (None: a cloud) and the filter's parameters (``mode`` always)."""
+    paper, robust = {"mode": "0"}, {"mode": "1"}
+    if case.endswith("sample-points"):
+        part = sample_part("points", n_points=20000)
+        return part.vertices, None, paper if case.startswith("paper") else robust
+    if case.endswith("sample-mesh") or case.endswith("sample-mesh-as-points"):
+        part = sample_part("mesh")
+        params = paper if case.startswith("paper") else robust
+        if case.endswith("as-points"):
+            params = {**params, "asPoints": "true"}
+        return part.vertices, part.faces, params
+    if case == "paper-box-cylinder-unweighted":
+        return shapes.box_cylinder_points(6000, seed=3), None, {**paper, "weighting": "1"}
+    if case.endswith("box-points-other-scales"):
+        params = paper if case.startswith("paper") else robust
+        return shapes.random_box_points(5000, seed=8), None, {**params, "knnScales": "8:32:6"}
+    if case == "paper-cube-mesh-rings-1-6":
+        v, f = shapes.cube_grid_mesh(3)
+        return v, f, {**paper, "ringScales": "1 2 3 4 5 6"}
+    if case == "robust-outliers":
+        return _with_outliers(sample_part("points", n_points=20000).vertices), None, robust
+    if case == "robust-cad-fandisk":  # the CSG kernel's own triangles, as exported
+        v, f, _ = groundtruth.reference_surface("fandisk")
+        return v, f, robust
+    if case == "robust-cad-coarse-cylinder":
+        return (*_condition("cylinder", "cad_coarse", 6000), robust)
+    if case == "robust-thin-wall":
+        return (*_condition("sheet_bracket", "thin2", 8000), robust)
+    if case == "robust-noise50":
+        return (*_condition("fandisk", "noise50", 10000), robust)
+    if case == "robust-density-gradient":
+        return (*_condition("fandisk", "density4", 10000), robust)
+    if case == "robust-unweighted":
+        return shapes.box_cylinder_points(6000, seed=3), None, {**robust, "weighting": "1"}
+    raise AssertionError(case)
+
+
+AGREEMENT = [
+    "paper-sample-points",
+    "paper-sample-mesh",
+    "paper-sample-mesh-as-points",
+    "paper-box-cylinder-unweighted",
+    "paper-box-points-other-scales",
+    "paper-cube-mesh-rings-1-6",
+    "robust-sample-points",
+    "robust-sample-mesh",
+    "robust-sample-mesh-as-points",
+    "robust-outliers",
+    "robust-cad-fandisk",
+    "robust-cad-coarse-cylinder",
+    "robust-thin-wall",
+    "robust-noise50",
+    "robust-density-gradient",
+    "robust-unweighted",
+    "robust-box-points-other-scales",
+]
 
 
 def _with_outliers(points: np.ndarray) -> np.ndarray:
@@ -159,12 +218,11 @@ def _with_outliers(points: np.ndarray) -> np.ndarray:
     return np.concatenate([points, extra])
 
 
-AGREEMENT = _agreement_cases()
-
-
-@pytest.mark.parametrize("case", sorted(AGREEMENT))
+@pytest.mark.parametrize("case", AGREEMENT)
 def test_agrees_with_the_python_package(meshlab_root, tmp_path, case):
-    vertices, faces, params = AGREEMENT[case]
+    """Same selection and quality as ``meshlab_sharp.detect`` in the same mode, point for
+    point, and the same scales, thresholds and candidate counts."""
+    vertices, faces, params = _agreement_case(case)
     src = write_ply(tmp_path / "in.ply", vertices.astype(np.float32), faces, binary=True)
     code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply", **params)
     assert code == 0, log
@@ -173,24 +231,25 @@ def test_agrees_with_the_python_package(meshlab_root, tmp_path, case):
     options = {
         "as_points": params.get("asPoints") == "true",
         "weighting": "none" if params.get("weighting") == "1" else "gaussian",
-        "mode": "robust" if params.get("mode") == "1" else "paper",
+        "mode": MODES[params["mode"]],
     }
     if "knnScales" in params:
         options["scales"] = range(8, 33, 6)
     if "ringScales" in params:
         options["scales"] = [1, 2, 3, 4, 5, 6]
-    expected = meshlab_sharp.detect(src, **options, return_details=True)
-    thresholds, counts = parse_log(log)
+    expected = meshlab_sharp.detect(src, **options)
+    thresholds, counts, scales = parse_log(log)
+    assert scales == expected.scales
     np.testing.assert_array_equal(thresholds, expected.thresholds)
-
-    agree = np.mean(selection == expected.mask)
-    assert agree >= 0.999, f"{agree:.5f} of the points agree"
-    near = (np.abs(expected.distances - expected.thresholds[:, None]) < 1e-9).any(axis=0)
-    assert np.array_equal(selection[~near], expected.mask[~near])
-    np.testing.assert_allclose(quality, expected.strength, atol=1e-6)
-    assert f"{options['mode']} mode" in log
     np.testing.assert_array_equal(counts, expected.candidate_counts)
+    assert int((selection != expected.mask).sum()) == 0, "points differ"
+    np.testing.assert_array_equal(quality, expected.strength.astype(np.float32))
+    assert f"{options['mode']} mode" in log
     assert expected.n_features > 0
+    if case == "robust-noise50":  # the noise rule grew the scales; the log reports them
+        assert scales[0] > 12 and len(scales) == 8
+    if case.startswith("robust-cad"):  # nearly every vertex lies on a sharp edge
+        assert expected.n_features > 0.8 * len(vertices)
 
 
 def _bad(tmp_path: Path, case: str) -> Path:
@@ -232,7 +291,8 @@ def test_bad_input_fails_cleanly(meshlab_root, tmp_path, case):
     assert "core dumped" not in log.lower()
 
 
-def test_non_manifold_mesh_and_isolated_vertices(meshlab_root, tmp_path):
+@pytest.mark.parametrize("mode", sorted(MODES))
+def test_non_manifold_mesh_and_isolated_vertices(meshlab_root, tmp_path, mode):
     vertices, faces = shapes.cube_grid_mesh(3)
     n = len(vertices)
     # A fin: two extra triangles on one cube edge make it non-manifold; two isolated vertices.
@@ -242,12 +302,12 @@ def test_non_manifold_mesh_and_isolated_vertices(meshlab_root, tmp_path):
     all_v = np.concatenate([vertices, extra])
     all_f = np.concatenate([faces, [[corner, other, n]]])
     src = write_ply(tmp_path / "nm.ply", all_v, all_f)
-    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply")
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply", mode=mode)
     assert code == 0, log
     _, _, quality, selection = read_back(tmp_path / "out.ply")
     assert not selection[n + 1 :].any()
     np.testing.assert_array_equal(quality[n + 1 :], 0.0)
-    expected = meshlab_sharp.detect(src)
+    expected = meshlab_sharp.detect(src, mode=MODES[mode])
     np.testing.assert_array_equal(selection, expected.mask)
 
 

@@ -87,14 +87,17 @@ def display(tmp_path):
 
 
 def test_gui_applies_the_filter_and_shows_red_features(meshlab_root, display, tmp_path):
+    """With the dialog's defaults (a fresh settings folder): robust mode."""
     part = sample_part("mesh")
     src = write_ply(tmp_path / "sample_part.ply", part.vertices, part.faces, binary=True)
-    gui = subprocess.Popen(
-        [str(meshlab_root / "bin" / "meshlab"), str(src)],
-        env=display,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-    )
+    output = tmp_path / "meshlab.log"  # MeshLab's log, which it also prints (qDebug)
+    with output.open("w") as sink:
+        gui = subprocess.Popen(
+            [str(meshlab_root / "bin" / "meshlab"), str(src)],
+            env=display,
+            stdout=sink,
+            stderr=subprocess.STDOUT,
+        )
     try:
         assert _wait_for(lambda: bool(_windows(display, "MeshLab")), 60), "no MeshLab window"
         time.sleep(3)  # the mesh is drawn
@@ -143,3 +146,5 @@ def test_gui_applies_the_filter_and_shows_red_features(meshlab_root, display, tm
                 gui.wait(10)
     # MeshLab ended by itself (0) or by the signal we sent; any other signal is a crash
     assert gui.returncode in (0, -ours), f"MeshLab ended with {gui.returncode}"
+    log = output.read_text(errors="replace")
+    assert "Sharp features: mesh (k-rings), robust mode" in log, log[-2000:]

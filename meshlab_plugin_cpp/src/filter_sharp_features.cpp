@@ -34,8 +34,14 @@ QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType) const
 	       "between the vertex and the centroid of its neighbourhood along the normal; Otsu's "
 	       "threshold on its histogram; at several scales (k-rings on a mesh, k nearest "
 	       "neighbours on a point cloud). A vertex is a feature if it is a candidate at every "
-	       "scale. Vertex quality is set to the feature strength (fraction of scales), the "
-	       "selection to the features. The same algorithm as the meshlab-sharp Python package.";
+	       "scale. The default Robust mode also leaves out isolated points (outliers), grows "
+	       "the scales on noisy clouds, divides the distance by the local spacing, never "
+	       "thresholds below a 20-degree edge (no features on smooth objects), keeps points "
+	       "with neighbours along their feature line, thins lines to one point across, and on "
+	       "meshes adds the vertices of edges whose faces turn by more than 20 degrees (CAD "
+	       "tessellations). Paper mode is the method as the paper describes it. Vertex quality "
+	       "is set to the feature strength (fraction of scales), the selection to the features. "
+	       "The same algorithm as the meshlab-sharp Python package.";
 }
 
 MeshFilterInterface::FilterClass FilterSharpFeaturesPlugin::getClass(QAction *)
@@ -70,12 +76,14 @@ void FilterSharpFeaturesPlugin::initParameterSet(QAction *, MeshModel &, RichPar
 	                      "neighbour, or none (plain PCA)."));
 	par.addParam(RichBool("asPoints", false, "Treat a mesh as points",
 	                      "Ignore the faces and use k nearest neighbours."));
-	par.addParam(RichEnum("mode", 0, QStringList() << "Paper" << "Robust", "Mode",
-	                      "Paper: the method as the paper describes it (ALGORITHM.md). Robust: "
-	                      "isolated points left out, projected distance relative to the local "
-	                      "spacing, a threshold floor of a 20-degree edge, lines thinned to one "
-	                      "point (docs/robust-mode.md): survives outliers, says 'no features' "
-	                      "on smooth objects, copes with uneven density."));
+	par.addParam(RichEnum("mode", 1, QStringList() << "Paper" << "Robust", "Mode",
+	                      "Robust (default): isolated points left out, scales grown with the "
+	                      "measured noise, projected distance relative to the local spacing, a "
+	                      "threshold floor of a 20-degree edge, support along and thinning across "
+	                      "the feature lines, and on meshes the edges whose faces turn by more "
+	                      "than 20 degrees (docs/robust-mode.md): survives outliers and noise, "
+	                      "says 'no features' on smooth objects, handles CAD tessellations. "
+	                      "Paper: the method as the paper describes it (ALGORITHM.md)."));
 	par.addParam(RichBool("colorize", true, "Colour the features",
 	                      "Features red, the other vertices grey."));
 }
@@ -158,7 +166,7 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const R
 		scales += QString(" %1=%2:T=%3,candidates=%4")
 		              .arg(r.mesh ? "ring" : "k")
 		              .arg(r.scales[s])
-		              .arg(r.thresholds[s], 0, 'f', 8)
+		              .arg(r.thresholds[s], 0, 'g', 17)
 		              .arg(r.candidates[s]);
 	Log("Sharp features: %s, %s mode, %ld of %d vertices are features;%s",
 	    r.mesh ? "mesh (k-rings)" : "points (kNN)", options.robust ? "robust" : "paper", r.nFeatures,

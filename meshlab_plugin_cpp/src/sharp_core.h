@@ -1,6 +1,7 @@
 // meshlab-sharp: the projected-distance sharp feature detector (Tran et al. 2014),
 // independent of MeshLab's types. It follows ../shared/ALGORITHM.md and the arithmetic
-// pinned down in docs/implementation-notes.md, as the Python package does, in double.
+// pinned down in docs/implementation-notes.md and docs/robust-mode.md, as the Python
+// package does, in double.
 #ifndef MESHLAB_SHARP_CORE_H
 #define MESHLAB_SHARP_CORE_H
 
@@ -23,11 +24,11 @@ struct Options {
 
 struct Result {
 	bool mesh = false;                 // k-rings (true) or kNN (false)
-	std::vector<int> scales;
-	std::vector<double> thresholds;    // Otsu's T per scale (1.0 on a flat scale)
+	std::vector<int> scales;           // the scales used (robust mode grows them on noisy clouds)
+	std::vector<double> thresholds;    // T per scale (1.0 on a flat scale)
 	std::vector<long> candidates;      // candidates per scale
 	std::vector<double> strength;      // per input vertex: fraction of scales
-	std::vector<char> feature;         // per input vertex: candidate at every scale
+	std::vector<char> feature;         // per input vertex: a sharp feature
 	std::vector<char> kept;            // per input vertex: took part (not dropped)
 	long nClean = 0;
 	long nFeatures = 0;
