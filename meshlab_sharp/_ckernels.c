@@ -463,7 +463,7 @@ static int gather_block(const grid_t *g, const int64_t *c, block_t *b) {
 /* kNN of sorted positions [begin, end) at k = max(ks), then for each scale ks[s] the
  * projected distance into out_pdis[s * n + orig[i]] (and the normal into
  * out_normals[(s * n + orig[i]) * 3], when not NULL). With out_idx (n, kmax) not NULL,
- * store the neighbour indices instead (no pdis). Returns 0, -1 out of memory.
+ * store the neighbour indices (and the pdis too when out_pdis is not NULL). Returns 0, -1 out of memory.
  *
  * Points are taken cell by cell: the 27 cells around a cell are gathered once for all
  * its points. A point's k nearest are among them when at least k lie closer than the
@@ -557,7 +557,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, const uint64_t *codes, i
         int64_t oi = orig[i];
         if (out_idx != NULL) {
             for (int64_t j = 0; j < kmax; j++) out_idx[oi * kmax + j] = buf.c[j].idx;
-            continue;
+            if (out_pdis == NULL) continue;
         }
         for (int64_t j = 0; j < kmax; j++) {
             const double *pj = p + 3 * buf.c[j].pos;

@@ -263,6 +263,18 @@ def cloud_projected_distances(
     return pdis, normals
 
 
+def cloud_knn_projected_distances(
+    grid: Grid, scales: Sequence[int], weighting: str = "gaussian", workers: int = -1
+) -> tuple[np.ndarray, np.ndarray]:
+    """The k = max(scales) nearest neighbours (n, k) int64 and the projected distances
+    (s, n) of every point (cleaned order) from one neighbour search."""
+    ks = np.ascontiguousarray(scales, dtype=np.int64)
+    idx = np.empty((grid.n, int(ks[-1])), dtype=np.int64)
+    pdis = np.empty((len(ks), grid.n))
+    _cloud_call(grid, ks, weighting == "gaussian", workers, pdis, None, idx)
+    return idx, pdis
+
+
 # ---------------------------------------------------------------------------- meshes
 
 
