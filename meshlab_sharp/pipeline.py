@@ -297,8 +297,7 @@ def _detect(
     t = time.perf_counter()
     mask, strength = decide(per_scale.votes, len(scales_t))
     if robust is not None:
-        mask = robust.expand(robust.thin(mask), False)
-        strength = robust.expand(strength, 0.0)
+        mask, strength = robust.finish(mask, strength)
         if per_scale.distances is not None and per_scale.normals is not None:
             per_scale.distances = np.stack([robust.expand(d, np.nan) for d in per_scale.distances])
             per_scale.normals = np.stack([robust.expand(n, np.nan) for n in per_scale.normals])

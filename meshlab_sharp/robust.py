@@ -1,6 +1,6 @@
 """Robust mode: the projected-distance method where the paper's reading fails.
 
-``detect(..., mode="robust")`` changes four things of the paper's method (measured
+``detect(..., mode="robust")`` changes these things of the paper's method (measured
 choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plugin):
 
 1. **Isolated points are left out** (point clouds): point ``i`` is isolated when it is
@@ -16,10 +16,18 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    ``r`` on a straight edge that turns by ``CREASE_ANGLE`` (20) degrees,
    ``(2 / pi) * sin(10 deg)``. On a smooth object Otsu still splits the histogram, but
    below the floor: "no sharp features" becomes a possible answer.
-4. **Thinning**: among the points that are candidates at every scale, a point is
-   dropped when a candidate neighbour lying across the feature line (more than 60
-   degrees from the line's direction) has a larger mean relative distance (non-maximum
-   suppression across the line), so lines stay one point wide.
+4. **Support**: a point that is a candidate at every scale is kept only when at least
+   ``SUPPORT_MIN`` (2) other such points lie among its ``SUPPORT_KNN`` (16) nearest (its
+   ``THIN_RING``-ring on meshes): a line has neighbours along it, a point lifted by
+   noise does not.
+5. **Thinning**: a point is dropped when a supported neighbour among its ``THIN_KNN``
+   (8) nearest, lying across the feature line (more than 60 degrees from the line's
+   direction), has a larger mean relative distance (non-maximum suppression across
+   the line), so lines stay one point wide; comparing only within about 1.5 spacings
+   keeps two parallel lines (the rims of a thin wall) apart.
+6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
+   an edge whose two faces turn by more than ``CREASE_ANGLE`` (more on a noisy mesh)
+   are features too. On a CAD tessellation they are all of them.
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .creases import CREASE_ANGLE, sharp_vertices
 from .neighbourhoods import (
     KnnNeighbourhoods,
     Neighbourhood,
@@ -40,31 +49,41 @@ from .threshold import otsu_threshold
 __all__ = [
     "CREASE_ANGLE",
     "R_MIN",
+    "SUPPORT_KNN",
+    "SUPPORT_MIN",
     "THIN_CONE_COS",
     "THIN_KNN",
     "THIN_RING",
     "RelativeRule",
     "RobustSetup",
     "isolated_points",
+    "line_directions",
     "local_scale",
     "relative_distances",
     "robust_threshold",
+    "supported",
     "thin",
 ]
 
-#: Degrees: the smallest turn of the surface that counts as a sharp edge (the ground
-#: truth's crease angle, ``groundtruth.CREASE_ANGLE``).
-CREASE_ANGLE = 20.0
 #: Relative projected distance at a point on a straight edge turning by CREASE_ANGLE,
 #: with a disc-shaped neighbourhood: ``(2 / pi) * sin(CREASE_ANGLE / 2)`` = 0.1106.
 R_MIN = (2.0 / math.pi) * math.sin(math.radians(CREASE_ANGLE / 2.0))
 #: Thinning compares a point with candidate neighbours whose offset makes more than
 #: 60 degrees with the line direction: ``|d . e| < THIN_CONE_COS * |d|``.
 THIN_CONE_COS = 0.5
-#: Neighbourhood of the comparison in thinning: the 16 nearest points (clouds) ...
-THIN_KNN = 16
-#: ... or the 2-ring (meshes; about 19 vertices on a regular mesh).
+#: Neighbourhood of the comparison in thinning: the 8 nearest points (clouds; within
+#: about 1.5 spacings, the half-width of the band of candidates, so that two lines 2-3
+#: spacings apart are both kept) ...
+THIN_KNN = 8
+#: ... or the 2-ring (meshes; about 19 vertices on a regular mesh). The 2-ring is also
+#: the support neighbourhood on meshes.
 THIN_RING = 2
+#: Support: a feature needs at least SUPPORT_MIN other features among its SUPPORT_KNN
+#: nearest points (clouds), the neighbourhood that thinning used to compare with: a
+#: line one point wide has two neighbours along it within 16 points, a point lifted
+#: alone by noise has none.
+SUPPORT_KNN = 16
+SUPPORT_MIN = 2
 
 
 def isolated_points(indices: np.ndarray) -> np.ndarray:
@@ -209,24 +228,118 @@ class RelativeRule:
         return r, robust_threshold(r)
 
 
+def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourhood) -> np.ndarray:
+    """Direction of the line of features through each feature point.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+    mask : (m,) bool
+        Feature points.
+    direction : Neighbourhood
+        CSR lists (the largest scale; each point's own index included).
+
+    Returns
+    -------
+    (m, 3) float64
+        For a feature point ``i``: the unit eigenvector of the largest eigenvalue of
+        ``C = sum_j (q_j - qbar)(q_j - qbar)^T`` over the feature points ``j`` of
+        ``direction[i]`` (``i`` included), ``q_j = p_j - p_i``, ``qbar`` their mean
+        (its sign is arbitrary). Zero rows for the other points.
+    """
+    mask = np.asarray(mask, bool)
+    e = np.zeros((len(points), 3))
+    cand = np.flatnonzero(mask)
+    if len(cand) == 0:
+        return e
+    owner, members = _rows(direction, cand)
+    use = mask[members]
+    owner, members = owner[use], members[use]
+    q = points[members] - points[cand[owner]]
+    sizes = np.bincount(owner, minlength=len(cand))
+    ptr = np.concatenate([[0], np.cumsum(sizes)])
+    qsum = _segment_sums(q, ptr)
+    outer = _segment_sums(q[:, :, None] * q[:, None, :], ptr)
+    safe = np.maximum(sizes.astype(np.float64), 1.0)[:, None]
+    qbar = qsum / safe
+    cov = outer - safe[:, :, None] * qbar[:, :, None] * qbar[:, None, :]
+    _, vecs = np.linalg.eigh(cov)
+    e[cand] = vecs[:, :, 2]
+    return e
+
+
+def _feature_pairs(
+    points: np.ndarray, mask: np.ndarray, e: np.ndarray, lists: Neighbourhood, cone_cos: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs (i, j) of features, ``j != i`` in ``lists[i]``: the position of ``i`` among
+    the features, ``i``, ``j`` and whether ``d = p_j - p_i`` lies across the line
+    through ``i`` (``|d . e_i| < cone_cos * |d|``)."""
+    cand = np.flatnonzero(mask)
+    owner, nb = _rows(lists, cand)
+    ci = cand[owner]
+    use = mask[nb] & (nb != ci)
+    owner, nb, ci = owner[use], nb[use], ci[use]
+    d = points[nb] - points[ci]
+    along = np.abs((d * e[ci]).sum(axis=1))
+    across = along < cone_cos * np.sqrt((d * d).sum(axis=1))
+    return owner, ci, nb, across
+
+
+def supported(
+    points: np.ndarray,
+    mask: np.ndarray,
+    e: np.ndarray,
+    around: Neighbourhood,
+    minimum: int = SUPPORT_MIN,
+    *,
+    cone_cos: float = THIN_CONE_COS,
+) -> np.ndarray:
+    """Features with at least ``minimum`` other features along their line.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+    mask : (m,) bool
+        Features before the test.
+    e : (m, 3) float64
+        :func:`line_directions` of ``mask``.
+    around : Neighbourhood
+        CSR lists (each point's own index included; it is not counted).
+    minimum : int, default SUPPORT_MIN (2)
+    cone_cos : float, default THIN_CONE_COS (0.5)
+
+    Returns
+    -------
+    (m,) bool
+        ``mask[i]`` and at least ``minimum`` features ``j != i`` of ``around[i]`` with
+        ``d = p_j - p_i`` along the line: ``|d . e_i| >= cone_cos * |d|``.
+    """
+    mask = np.asarray(mask, bool)
+    cand = np.flatnonzero(mask)
+    if len(cand) == 0:
+        return mask.copy()
+    owner, _, _, across = _feature_pairs(points, mask, e, around, cone_cos)
+    count = np.bincount(owner[~across], minlength=len(cand))
+    out = mask.copy()
+    out[cand[count < minimum]] = False
+    return out
+
+
 def thin(
     points: np.ndarray,
     mask: np.ndarray,
     score: np.ndarray,
-    direction: Neighbourhood,
+    e: np.ndarray,
     compare: Neighbourhood,
     *,
     cone_cos: float = THIN_CONE_COS,
 ) -> np.ndarray:
     """Non-maximum suppression of feature points across the feature line.
 
-    For a feature point ``i``: ``e_i`` is the unit eigenvector of the largest eigenvalue
-    of ``C = sum_j (q_j - qbar)(q_j - qbar)^T`` over the feature points ``j`` of
-    ``direction[i]`` (``i`` included), ``q_j = p_j - p_i`` and ``qbar`` their mean
-    (the direction of the line of features through ``i``). ``i`` is dropped when some
-    feature point ``j != i`` of ``compare[i]`` with ``d = p_j - p_i`` satisfies
-    ``|d . e_i| < cone_cos * |d|`` (it lies across the line) and
-    ``score[j] > score[i]``. Every decision uses the mask before thinning.
+    A feature point ``i`` is dropped when some feature point ``j != i`` of
+    ``compare[i]`` with ``d = p_j - p_i`` lies across the line through ``i``
+    (``|d . e_i| < cone_cos * |d|``) and ``score[j] > score[i]``. Every decision uses
+    the mask before thinning.
 
     Parameters
     ----------
@@ -235,8 +348,8 @@ def thin(
         Feature points before thinning.
     score : (m,) float64
         Ranking (mean relative projected distance over the scales).
-    direction : Neighbourhood
-        CSR lists for the line direction (the largest scale).
+    e : (m, 3) float64
+        Line directions (:func:`line_directions`).
     compare : Neighbourhood
         CSR lists for the comparison (``THIN_KNN`` nearest or the ``THIN_RING``-ring).
     cone_cos : float, default THIN_CONE_COS (0.5)
@@ -250,28 +363,7 @@ def thin(
     cand = np.flatnonzero(mask)
     if len(cand) == 0:
         return mask.copy()
-    # line direction from the candidate members of direction[i]
-    owner, members = _rows(direction, cand)
-    use = mask[members]
-    owner, members = owner[use], members[use]
-    q = points[members] - points[cand[owner]]
-    counts = np.bincount(owner, minlength=len(cand)).astype(np.float64)
-    ptr = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=len(cand)))])
-    qsum = _segment_sums(q, ptr)
-    outer = _segment_sums(q[:, :, None] * q[:, None, :], ptr)
-    safe = np.maximum(counts, 1.0)[:, None]
-    qbar = qsum / safe
-    cov = outer - safe[:, :, None] * qbar[:, :, None] * qbar[:, None, :]
-    _, vecs = np.linalg.eigh(cov)
-    e = vecs[:, :, 2]
-    # comparison with candidate neighbours across the line
-    owner, nb = _rows(compare, cand)
-    ci = cand[owner]
-    use = mask[nb] & (nb != ci)
-    owner, nb, ci = owner[use], nb[use], ci[use]
-    d = points[nb] - points[ci]
-    along = np.abs((d * e[owner]).sum(axis=1))
-    across = along < cone_cos * np.sqrt((d * d).sum(axis=1))
+    owner, ci, nb, across = _feature_pairs(points, mask, e, compare, cone_cos)
     beaten = across & (score[nb] > score[ci])
     suppressed = np.bincount(owner[beaten], minlength=len(cand)) > 0
     out = mask.copy()
@@ -341,19 +433,41 @@ class RobustSetup:
             self._rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
         return self._rings.at(scale)
 
-    def thin(self, mask: np.ndarray) -> np.ndarray:
-        """:func:`thin` of the processed points' features; (p,) bool -> (p,) bool."""
-        if not mask.any():
-            return mask
-        top = max(self.scales)
-        if self.faces is None:
-            compare = self.neighbourhoods.at(min(THIN_KNN, top))
-            direction = self.neighbourhoods.at(top)
-        else:
-            rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
-            compare = rings.at(min(THIN_RING, top))
-            direction = rings.at(top)
-        return thin(self.points, mask, self.rule.score, direction, compare, cone_cos=THIN_CONE_COS)
+    def finish(self, mask: np.ndarray, strength: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Support, thinning and (meshes) the sharp mesh edges, on all cleaned points.
+
+        Parameters
+        ----------
+        mask : (p,) bool
+            Candidates at every scale, per processed point.
+        strength : (p,) float64
+            Fraction of scales at which each processed point was a candidate.
+
+        Returns
+        -------
+        mask, strength : (m,) bool, (m,) float64
+            Per cleaned point (isolated points: False, 0). On a mesh, vertices of a
+            sharp edge (:func:`meshlab_sharp.creases.sharp_vertices`) are features with
+            strength 1.
+        """
+        if mask.any():
+            top = max(self.scales)
+            if self.faces is None:
+                around = self.neighbourhoods.at(min(SUPPORT_KNN, top))
+                compare = self.neighbourhoods.at(min(THIN_KNN, top))
+                direction = self.neighbourhoods.at(top)
+            else:
+                rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
+                around = compare = rings.at(min(THIN_RING, top))
+                direction = rings.at(top)
+            e = line_directions(self.points, mask, direction)
+            mask = supported(self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS)
+            mask = thin(self.points, mask, self.rule.score, e, compare, cone_cos=THIN_CONE_COS)
+        if self.faces is not None:
+            edges, _ = sharp_vertices(self.points, self.faces)
+            mask = mask | edges
+            strength = np.where(edges, 1.0, strength)
+        return self.expand(mask, False), self.expand(strength, 0.0)
 
     def expand(self, values: np.ndarray, fill: object) -> np.ndarray:
         """Per-processed-point values (p, ...) to all cleaned points (m, ...), ``fill``
