@@ -1,0 +1,321 @@
+"""Out-of-core and distributed detection of point clouds: spatial tiles with halos.
+
+``detect(cloud, max_memory="1GB")`` (CLI ``--max-memory 1GB``) and ``detect(cloud,
+dask="local:2")`` (CLI ``--dask``) come here. The cloud is sorted into tiles
+(:mod:`.layout`) on disk (:mod:`.store`); each mode is a sequence of steps
+(:mod:`.steps`) run tile by tile (:mod:`.run`): local steps on each tile's exact
+neighbourhoods (:mod:`.neighbours`, the halo proven wide enough per point) and
+pointwise steps, with the global quantities (min-max ranges, the 256-bin histograms
+that give Otsu's thresholds, counts) reduced exactly over the tiles. The result is the
+in-memory result, bit for bit: same features, strengths and thresholds.
+
+Point clouds only: a mesh's k-rings follow its faces, not space, and meshes are not
+tiled (an input with faces is an error unless ``as_points``).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack
+from typing import Any
+
+import numpy as np
+
+from .. import robust
+from ..errors import InputError
+from ..io import Geometry
+from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
+from .layout import build_layout
+from .neighbours import Query
+from .run import Runner, peak_rss
+from .steps import (
+    Step,
+    paper_decide,
+    paper_distances,
+    paper_histograms,
+    robust_decide,
+    robust_isolated,
+    robust_nearest,
+    robust_relative,
+    robust_support,
+    robust_thin,
+)
+from .store import Store
+
+__all__ = ["PointSource", "detect_tiled", "parse_memory"]
+
+#: Bytes a point of a tile (with its halo) takes while its neighbourhoods are searched,
+#: beyond ``8 * k_max`` for the neighbour lists (measured, with a margin).
+BYTES_PER_POINT = 700
+#: Halo points per tile point assumed when sizing the tiles.
+HALO_FACTOR = 2.5
+#: Default memory of a tile task on a Dask worker without ``max_memory``.
+DASK_TILE_MEMORY = 1 << 30
+
+_UNITS = {"": 1, "B": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def parse_memory(text: str | int) -> int:
+    """``"1GB"``, ``"512M"``, ``"2.5 GiB"`` or a number of bytes -> bytes."""
+    if isinstance(text, int | np.integer) and not isinstance(text, bool):
+        value = int(text)
+    else:
+        m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([kKmMgGtT]?)(?:i?[bB])?\s*", str(text))
+        if m is None:
+            raise InputError(f"cannot read the memory size {text!r}; write e.g. 1GB or 512MB")
+        value = int(float(m.group(1)) * _UNITS[m.group(2).upper()])
+    if value <= 0:
+        raise InputError(f"the memory size must be positive, got {text!r}")
+    return value
+
+
+class PointSource:
+    """A point cloud read in blocks.
+
+    Parameters
+    ----------
+    n : int
+        Number of points.
+    blocks : callable
+        ``blocks(size)`` yields the coordinates, (c, 3) float64 blocks of at most
+        ``size`` points, in order; it may be called several times.
+    name : str
+        For messages.
+    """
+
+    def __init__(self, n: int, blocks: Callable[[int], Iterator[np.ndarray]], name: str) -> None:
+        self.n = n
+        self.blocks = blocks
+        self.name = name
+
+    @classmethod
+    def from_array(cls, points: np.ndarray, name: str = "array") -> PointSource:
+        """A source over an (n, 3) array already in memory."""
+
+        def blocks(size: int) -> Iterator[np.ndarray]:
+            for s in range(0, len(points), size):
+                yield np.ascontiguousarray(points[s : s + size], dtype=np.float64)
+
+        return cls(len(points), blocks, name)
+
+
+def detect_tiled(
+    source: PointSource | np.ndarray | Geometry,
+    *,
+    scales: tuple[int, ...],
+    weighting: str = "gaussian",
+    mode: str = "paper",
+    max_memory: str | int | None = None,
+    tile_points: int | None = None,
+    dask: str | Any = None,
+    scratch: str | os.PathLike[str] | None = None,
+    on_tile: Callable[[str, int, int], None] | None = None,
+    workers: int = -1,
+) -> dict[str, Any]:
+    """Detect the sharp features of a cloud tile by tile.
+
+    Parameters
+    ----------
+    source : PointSource, (n, 3) array or Geometry (its vertices)
+    scales : tuple of int
+        Increasing kNN scales (checked by the caller).
+    weighting, mode
+        As :func:`meshlab_sharp.detect`.
+    max_memory : str or int, optional
+        Peak memory to stay under ("1GB"); sizes the tiles.
+    tile_points : int, optional
+        Points per tile, instead of deriving it from ``max_memory`` (tests).
+    dask : str or dask.distributed.Client, optional
+        ``"local:N"`` (a LocalCluster of N single-thread worker processes),
+        ``"tcp://host:port"`` (a running scheduler) or a Client.
+    scratch : path, optional
+        Folder for the tiles' arrays (deleted afterwards); with a cluster on several
+        machines, a path that every worker reaches. Default: the system's temp folder.
+    on_tile : callable, optional
+        ``on_tile(label, done, n_tiles)`` after each tile task.
+    workers : int
+        Threads of the kNN search in each tile task.
+
+    Returns
+    -------
+    dict
+        ``mask`` (n,) bool, ``strength`` (n,) float64, ``kept`` (n,) bool in input
+        order; ``thresholds`` (s,), ``candidate_counts`` (s,), ``n_clean``, ``timings``,
+        and ``tiling`` (tiles, steps, tasks, halo, peak memory of this process and of
+        the workers).
+    """
+    if isinstance(source, Geometry):
+        source = PointSource.from_array(source.vertices, source.source)
+    elif isinstance(source, np.ndarray):
+        source = PointSource.from_array(source)
+    t0 = time.perf_counter()
+    k_max = max(scales)
+    limit = None if max_memory is None else parse_memory(max_memory)
+    if tile_points is None:
+        budget = limit if limit is not None else DASK_TILE_MEMORY
+        if dask is None:
+            budget -= _resident() + 10 * source.n
+        per_point = (BYTES_PER_POINT + 8 * k_max + 16 * len(scales)) * HALO_FACTOR
+        tile_points = int(budget / per_point)
+        if tile_points < 4 * k_max:
+            raise InputError(
+                f"--max-memory {max_memory}: too little memory for tiles of "
+                f"{source.n} points (this process already uses {_resident() >> 20} MB)"
+            )
+    chunk = int(min(max(tile_points, 65536), 1 << 20))
+    with ExitStack() as stack:
+        root = tempfile.mkdtemp(prefix="meshlab-sharp-tiles-", dir=scratch)
+        stack.callback(shutil.rmtree, root, True)
+        store = Store(root)
+        client = _client(dask, stack)
+        timings: dict[str, float] = {}
+        t = time.perf_counter()
+        layout = build_layout(
+            source.n,
+            lambda: source.blocks(chunk),
+            store,
+            tile_points=tile_points,
+            source=source.name,
+        )
+        timings["tiles"] = time.perf_counter() - t
+        if layout.n_clean < k_max:
+            raise InputError(
+                f"{source.name}: {layout.n_clean} distinct points, fewer than the largest "
+                f"scale k = {k_max}; use smaller --scales"
+            )
+        runner = Runner(
+            store,
+            layout,
+            most_points=int(HALO_FACTOR * tile_points),
+            workers=1 if client is not None and str(dask).startswith("local:") else workers,
+            on_tile=on_tile,
+            client=client,
+        )
+        t = time.perf_counter()
+        run = _paper if mode == "paper" else _robust
+        thresholds, counts, mask, kept = run(runner, store, layout, scales, weighting)
+        timings["detect"] = time.perf_counter() - t
+        t = time.perf_counter()
+        out = runner.finish(source.n, mask, kept)
+        timings["finish"] = time.perf_counter() - t
+        worker_peak = runner.peak if client is not None else 0
+    timings["total"] = time.perf_counter() - t0
+    out.update(
+        thresholds=thresholds,
+        candidate_counts=counts,
+        n_clean=layout.n_clean,
+        timings=timings,
+        tiling={
+            "tiles": layout.n_tiles,
+            "tile_points": tile_points,
+            "tasks": runner.tasks,
+            "largest_search": runner.gathered,
+            "halo_max": float(runner.halos.max(initial=0.0)),
+            "peak_bytes": peak_rss(),
+            "worker_peak_bytes": worker_peak,
+            "max_memory": limit,
+            "dask": None if dask is None else str(dask),
+        },
+    )
+    return out
+
+
+def _paper(
+    runner: Runner, store: Store, layout: Any, scales: tuple[int, ...], weighting: str
+) -> tuple[np.ndarray, np.ndarray, str, str | None]:
+    """The paper's method: distances, global min-max, histograms, decision."""
+    n, s = layout.n, len(scales)
+    store.create("pdis", (n, s), np.float64)
+    store.create("mask", (n,), bool)
+    store.create("strength", (n,), np.float64)
+    query = Query(max(scales), scales=scales, weighting=weighting)
+    ranges = runner.step(Step("distances", paper_distances, query, {"s": s}))
+    flat = FLAT_TOLERANCE * float(np.linalg.norm(layout.hi - layout.lo))
+    norm = {"lo": ranges["pdis_min"], "hi": ranges["pdis_max"], "flat": flat}
+    hist = runner.step(Step("histograms", paper_histograms, None, norm))["hist"]
+    thresholds = np.array([otsu_from_histogram(h) for h in hist])
+    decided = runner.step(Step("decide", paper_decide, None, {**norm, "thresholds": thresholds}))
+    return thresholds, decided["counts"], "mask", None
+
+
+def _robust(
+    runner: Runner, store: Store, layout: Any, scales: tuple[int, ...], weighting: str
+) -> tuple[np.ndarray, np.ndarray, str, str | None]:
+    """Robust mode (:mod:`meshlab_sharp.robust`) on a cloud, step by step."""
+    n, s, top = layout.n, len(scales), max(scales)
+    for name, shape, dtype in (
+        ("nn1", (n,), np.int64),
+        ("kd2", (n,), np.float64),
+        ("kid", (n,), np.int64),
+        ("kept", (n,), bool),
+        ("r", (n, s), np.float64),
+        ("score", (n,), np.float64),
+        ("mask", (n,), bool),
+        ("strength", (n,), np.float64),
+        ("e", (n, 3), np.float64),
+        ("mask1", (n,), bool),
+        ("final", (n,), bool),
+    ):
+        store.create(name, shape, dtype)
+    runner.step(Step("nearest", robust_nearest, Query(top)))
+    runner.step(Step("isolated", robust_isolated))
+    query = Query(top, kept="kept", scales=scales, weighting=weighting)
+    hist = runner.step(Step("relative", robust_relative, query, {"scales": scales}))["hist"]
+    thresholds = np.array([max(otsu_from_histogram(h), robust.R_MIN) for h in hist])
+    decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
+    support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
+    runner.step(Step("support", robust_support, Query(top, "kept", "mask"), support))
+    compare = min(robust.THIN_KNN, top)
+    runner.step(Step("thin", robust_thin, Query(compare, "kept", "mask1"), {"compare": compare}))
+    return thresholds, decided["counts"], "final", "kept"
+
+
+def _resident() -> int:
+    """Resident memory of this process now, bytes."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except OSError:
+        return peak_rss()
+
+
+def _client(dask: str | Any, stack: ExitStack) -> Any:
+    """A Dask client for ``dask`` (None: none); closed with ``stack``."""
+    if dask is None:
+        return None
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise InputError(
+            "--dask needs dask.distributed: pip install 'meshlab-sharp[dask]'"
+        ) from None
+    if not isinstance(dask, str):
+        return dask
+    if dask.startswith("local:"):
+        try:
+            n = int(dask.split(":", 1)[1])
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise InputError(f"--dask {dask}: write local:N with N >= 1 workers")
+        cluster = stack.enter_context(
+            LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                host="127.0.0.1",
+            )
+        )
+        return stack.enter_context(Client(cluster))
+    if dask.startswith("tcp://"):
+        try:
+            return stack.enter_context(Client(dask, timeout=30))
+        except OSError as exc:
+            raise InputError(f"--dask {dask}: cannot reach the scheduler: {exc}") from None
+    raise InputError(f"--dask {dask!r}: write local:N or tcp://HOST:PORT")
