@@ -78,6 +78,8 @@ class DetectionResult:
         its map to the input and the detection in its order.
     mode : str
         "paper" or "robust".
+    tiling : dict or None
+        Out of core (``max_memory``/``dask``): tiles, tasks, halo and peak memory.
     """
 
     mask: np.ndarray
@@ -94,6 +96,7 @@ class DetectionResult:
     normals: np.ndarray | None = None
     preprocessing: PreprocessingReport | None = None
     mode: str = "paper"
+    tiling: dict[str, Any] | None = None
 
     @property
     def indices(self) -> np.ndarray:
@@ -128,6 +131,7 @@ class DetectionResult:
                 if self.preprocessing is None
                 else {"preprocessing": self.preprocessing.summary()}
             ),
+            **({} if self.tiling is None else {"tiling": self.tiling}),
         }
 
 
@@ -144,6 +148,9 @@ def detect(
     preprocessing: Preprocessing | dict[str, Any] | None = None,
     mode: str = "paper",
     backend: str | None = None,
+    max_memory: str | int | None = None,
+    dask: Any = None,
+    scratch: str | os.PathLike[str] | None = None,
 ) -> DetectionResult:
     """Find the sharp features of a point cloud or triangle mesh.
 
@@ -179,6 +186,16 @@ def detect(
     backend : {"compiled", "numpy"}, optional
         The compiled kernels (default when built) or the numpy reference path; both
         give the same answers. Default: ``MESHLAB_SHARP_BACKEND`` or "compiled".
+    max_memory : str or int, optional
+        Out of core ("1GB"): a point cloud is processed in spatial tiles with halos
+        (:mod:`meshlab_sharp.tiles`), keeping the peak memory under this; the result is
+        the in-memory one. Point clouds only (a mesh needs ``as_points``); a path is
+        streamed (binary PLY, LAS/LAZ, E57) instead of loaded whole.
+    dask : str or dask.distributed.Client, optional
+        Run the tiles as Dask tasks: "local:N" (N local worker processes),
+        "tcp://HOST:PORT" (a running scheduler) or a Client. Same result.
+    scratch : path, optional
+        Folder for the tiles' on-disk arrays (with a cluster: one every worker reaches).
 
     Returns
     -------
@@ -195,6 +212,23 @@ def detect(
         _kernels.resolve(backend)
     except (ValueError, RuntimeError) as exc:
         raise InputError(str(exc)) from None
+    if max_memory is not None or dask is not None:
+        from .tiles import detect_out_of_core
+
+        options = dict(scales=scales, weighting=weighting, as_points=as_points, mode=mode)
+        return detect_out_of_core(
+            source,
+            faces,
+            **options,
+            return_details=return_details,
+            progress=progress,
+            workers=workers,
+            preprocessing=preprocessing,
+            backend=backend,
+            max_memory=max_memory,
+            dask=dask,
+            scratch=scratch,
+        )
     with _kernels.use_backend(_kernels.resolve(backend)):
         return _detect(
             source,

@@ -12,6 +12,7 @@ import os
 import re
 from pathlib import Path
 
+import numpy as np
 import pymeshlab
 
 from ..errors import InputError
@@ -65,6 +66,11 @@ def load(path: str | os.PathLike[str], *, as_points: bool = False) -> Geometry:
     if p.stat().st_size == 0:
         raise InputError(f"{name}: the file is empty")
     ext = p.suffix.lower()
+    if ext in (".las", ".laz", ".e57"):  # not pymeshlab's: laspy, pye57 (optional extras)
+        from .stream import open_points
+
+        source = open_points(p)
+        return as_geometry(np.concatenate(list(source.blocks(1 << 20))), None, source=name)
     expected_vertices = _check_before_load(p, ext)
 
     ms = pymeshlab.MeshSet()

@@ -20,15 +20,20 @@ import re
 import shutil
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Sequence
 from contextlib import ExitStack
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import robust
+from .. import _kernels, robust
 from ..errors import InputError
 from ..io import Geometry
+from ..io.stream import PointSource, open_points
+from ..multiscale import DEFAULT_KNN_SCALES
+from ..normals import WEIGHTINGS
+from ..preprocessing import as_preprocessing
+from ..progress import Progress
 from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
 from .layout import build_layout
 from .neighbours import Query
@@ -47,7 +52,10 @@ from .steps import (
 )
 from .store import Store
 
-__all__ = ["PointSource", "detect_tiled", "parse_memory"]
+if TYPE_CHECKING:
+    from ..pipeline import DetectionResult
+
+__all__ = ["PointSource", "detect_out_of_core", "detect_tiled", "parse_memory"]
 
 #: Bytes a point of a tile (with its halo) takes while its neighbourhoods are searched,
 #: beyond ``8 * k_max`` for the neighbour lists (measured, with a margin).
@@ -72,36 +80,6 @@ def parse_memory(text: str | int) -> int:
     if value <= 0:
         raise InputError(f"the memory size must be positive, got {text!r}")
     return value
-
-
-class PointSource:
-    """A point cloud read in blocks.
-
-    Parameters
-    ----------
-    n : int
-        Number of points.
-    blocks : callable
-        ``blocks(size)`` yields the coordinates, (c, 3) float64 blocks of at most
-        ``size`` points, in order; it may be called several times.
-    name : str
-        For messages.
-    """
-
-    def __init__(self, n: int, blocks: Callable[[int], Iterator[np.ndarray]], name: str) -> None:
-        self.n = n
-        self.blocks = blocks
-        self.name = name
-
-    @classmethod
-    def from_array(cls, points: np.ndarray, name: str = "array") -> PointSource:
-        """A source over an (n, 3) array already in memory."""
-
-        def blocks(size: int) -> Iterator[np.ndarray]:
-            for s in range(0, len(points), size):
-                yield np.ascontiguousarray(points[s : s + size], dtype=np.float64)
-
-        return cls(len(points), blocks, name)
 
 
 def detect_tiled(
@@ -223,6 +201,97 @@ def detect_tiled(
         },
     )
     return out
+
+
+def detect_out_of_core(
+    source: Any,
+    faces: np.ndarray | None,
+    *,
+    scales: Sequence[int] | int | None,
+    weighting: str,
+    as_points: bool,
+    mode: str,
+    return_details: bool,
+    progress: bool | Progress,
+    workers: int,
+    preprocessing: Any,
+    backend: str | None,
+    max_memory: str | int | None,
+    dask: Any,
+    scratch: str | os.PathLike[str] | None,
+) -> DetectionResult:
+    """:func:`meshlab_sharp.detect` with ``max_memory`` or ``dask``: checks what the
+    tiled run supports and returns its :class:`~meshlab_sharp.DetectionResult`."""
+    from ..pipeline import MODES, DetectionResult, _as_input, _check_scales
+
+    if weighting not in WEIGHTINGS:
+        raise InputError(f"unknown weighting {weighting!r}; choose from {', '.join(WEIGHTINGS)}")
+    if not isinstance(mode, str) or mode not in MODES:
+        raise InputError(f"unknown mode {mode!r}; choose from {', '.join(MODES)}")
+    if return_details:
+        raise InputError(
+            "return_details keeps per-scale arrays in memory: not with max_memory/dask"
+        )
+    steps = as_preprocessing(preprocessing)
+    if steps is not None and steps.active:
+        raise InputError(
+            "preprocessing runs pymeshlab on the whole input: not with max_memory/dask"
+        )
+    if _kernels.resolve(backend) != "compiled":
+        raise InputError("out-of-core detection needs the compiled kernels (backend 'compiled')")
+    t0 = time.perf_counter()
+    if isinstance(source, PointSource):
+        points = source
+    elif isinstance(source, str | os.PathLike):
+        if faces is not None:
+            raise InputError("faces are taken from the file; do not pass faces with a path")
+        points = open_points(source, as_points=as_points)
+    else:
+        geometry = _as_input(source, faces, as_points)
+        if geometry.is_mesh and not as_points:
+            raise InputError(
+                f"{geometry.source}: a mesh; out-of-core detection (max_memory, dask) "
+                "handles point clouds only: pass as_points=True, or no max_memory"
+            )
+        points = PointSource.from_array(geometry.vertices, geometry.source)
+    scales_t = _check_scales(scales, DEFAULT_KNN_SCALES, "points")
+    bar = progress if isinstance(progress, Progress) else Progress(1, enabled=bool(progress))
+
+    def on_tile(label: str, done: int, total: int) -> None:
+        if bar.total <= 1:
+            bar.total = total * 9 + 1
+        bar.step(f"{label} {done}/{total}")
+
+    with _kernels.use_backend("compiled"):
+        out = detect_tiled(
+            points,
+            scales=scales_t,
+            weighting=weighting,
+            mode=mode,
+            max_memory=max_memory,
+            dask=dask,
+            scratch=scratch,
+            on_tile=on_tile,
+            workers=workers,
+        )
+    if not isinstance(progress, Progress):
+        bar.close()
+    timings = {"load": 0.0, **out["timings"]}
+    timings["total"] = time.perf_counter() - t0
+    return DetectionResult(
+        mask=out["mask"],
+        strength=out["strength"],
+        kind="points",
+        scales=scales_t,
+        thresholds=out["thresholds"],
+        candidate_counts=out["candidate_counts"],
+        kept=out["kept"],
+        weighting=weighting,
+        n_clean=out["n_clean"],
+        timings=timings,
+        mode=mode,
+        tiling=out["tiling"],
+    )
 
 
 def _paper(

@@ -103,7 +103,12 @@ class Context:
 
 
 def gather(
-    store: Store, layout: Layout, tiles: np.ndarray, blo: np.ndarray, bhi: np.ndarray, kept: str | None
+    store: Store,
+    layout: Layout,
+    tiles: np.ndarray,
+    blo: np.ndarray,
+    bhi: np.ndarray,
+    kept: str | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Distinct (and kept) points of ``tiles`` inside ``[blo, bhi]``.
 

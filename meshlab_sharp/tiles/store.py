@@ -8,7 +8,6 @@ memory of a tiled run is that of one tile, not of the whole cloud.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -78,13 +77,3 @@ class Store:
         m[np.asarray(rows, np.int64)] = values
         m.flush()
         del m
-
-    def remove(self) -> None:
-        """Delete every array file and the folder."""
-        for name in self.arrays:
-            self.path(name).unlink(missing_ok=True)
-        self.arrays.clear()
-        try:
-            os.rmdir(self.root)
-        except OSError:
-            pass
