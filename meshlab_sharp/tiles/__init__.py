@@ -193,6 +193,7 @@ def detect_tiled(
             "tile_points": tile_points,
             "tasks": runner.tasks,
             "largest_search": runner.gathered,
+            "streamed": runner.streamed,
             "halo_max": float(runner.halos.max(initial=0.0)),
             "peak_bytes": peak_rss(),
             "worker_peak_bytes": worker_peak,

@@ -162,7 +162,7 @@ def neighbours(
     halo: float,
     most_points: int,
     workers: int = -1,
-) -> tuple[list[Context], float, int]:
+) -> tuple[list[Context], float, int, int]:
     """Exact neighbourhoods of the tile's rows.
 
     Parameters
@@ -184,6 +184,8 @@ def neighbours(
         The halo that held the tile's points.
     gathered : int
         Most points searched at once.
+    streamed : int
+        Rows that took the streaming route.
     """
     a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
     lo0, hi0 = layout.boxes[tile]
@@ -199,7 +201,7 @@ def neighbours(
             break
         rows = _rows(store, pos, a, b, query)
         if len(rows) == 0:
-            return [], h, biggest
+            return [], h, biggest, 0
         if len(points) < query.k:
             if full:
                 raise InputError(
@@ -218,7 +220,7 @@ def neighbours(
             ok = need < np.minimum(p - blo, bhi - p).min(axis=1)
         last = (pos, points, rows, idx, pdis, ok, r, h)
         if ok.all():
-            return [Context(store, points, pos, rows, idx, pdis)], h, biggest
+            return [Context(store, points, pos, rows, idx, pdis)], h, biggest, 0
         p, nd = points[rows[~ok]], need[~ok][:, None]
         want = float(np.max(np.maximum(lo0 - (p - nd), (p + nd) - hi0)))
         h = max(want * (1.0 + 1e-6), h * 1.01 + 1e-12 * diag)
@@ -236,7 +238,7 @@ def neighbours(
             contexts.append(Context(store, points, pos, rows[keep], idx[keep], sub))
         rows, upper = rows[~ok], r[~ok]
     contexts.extend(streamed(store, layout, pos[rows], points[rows], upper, query, workers))
-    return contexts, h, biggest
+    return contexts, h, biggest, len(rows)
 
 
 def _rows(store: Store, pos: np.ndarray, a: int, b: int, query: Query) -> np.ndarray:

@@ -31,12 +31,13 @@ def peak_rss() -> int:
 
 @dataclass(frozen=True)
 class Outcome:
-    """What a tile task returns: the partial, the halo that held, points searched, the
-    process's peak memory."""
+    """What a tile task returns: the partial, the halo that held, points searched, rows
+    that took the streaming route, the process's peak memory."""
 
     partial: Partial
     halo: float
     gathered: int
+    streamed: int
     peak: int
 
 
@@ -54,12 +55,13 @@ def tile_task(
     with _kernels.use_backend(backend):
         if step.query is None:
             a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
-            return Outcome(step.fn(Span(store, a, b), **step.params), halo, b - a, peak_rss())
-        contexts, used, gathered = neighbours(
+            partial = step.fn(Span(store, a, b), **step.params)
+            return Outcome(partial, halo, b - a, 0, peak_rss())
+        contexts, used, gathered, streamed = neighbours(
             store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
         )
         partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
-        return Outcome(partial, used, gathered, peak_rss())
+        return Outcome(partial, used, gathered, streamed, peak_rss())
 
 
 def finish_task(store: Store, layout: Layout, tile: int, mask: str, kept: str | None) -> dict:
@@ -104,6 +106,7 @@ class Runner:
         self.peak = 0
         self.tasks = 0
         self.gathered = 0
+        self.streamed = 0
         self.backend = _kernels.default_backend()
 
     def step(self, step: Step) -> Partial:
@@ -141,6 +144,7 @@ class Runner:
             self.halos[t] = max(self.halos[t], o.halo)
             self.peak = max(self.peak, o.peak)
             self.gathered = max(self.gathered, o.gathered)
+            self.streamed += o.streamed
         self.tasks += n
         return reduced
 
