@@ -89,12 +89,13 @@ class Context:
         """Store array ``name`` at the set's points, (L, ...)."""
         return self.store.read_at(name, self.pos)
 
-    def lists(self, k: int) -> Neighbourhood:
-        """CSR lists over the whole set: the rows' k nearest, empty for the others."""
+    def lists(self, k: int, part: slice = slice(None)) -> Neighbourhood:
+        """CSR lists over the whole set: the k nearest of the rows (of ``rows[part]``),
+        empty lists for the other points."""
         sizes = np.zeros(len(self.points), np.int64)
-        sizes[self.rows] = k
+        sizes[self.rows[part]] = k
         indptr = np.concatenate([[0], np.cumsum(sizes)])
-        return Neighbourhood(indptr, np.ascontiguousarray(self.idx[:, :k]).reshape(-1))
+        return Neighbourhood(indptr, np.ascontiguousarray(self.idx[part, :k]).reshape(-1))
 
     @property
     def own(self) -> np.ndarray:

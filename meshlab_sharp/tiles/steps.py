@@ -27,6 +27,8 @@ from .neighbours import Context, Query
 from .store import Store
 
 Partial = dict[str, np.ndarray]
+#: Rows per block of the local scale's computation.
+ROWS_PER_BLOCK = 16384
 
 
 @dataclass(frozen=True)
@@ -151,10 +153,12 @@ def robust_relative(ctx: Context, *, scales: tuple[int, ...]) -> Partial:
     assert ctx.pdis is not None
     r = np.empty_like(ctx.pdis)
     score = np.zeros(len(ctx.rows))
-    for i, k in enumerate(scales):
-        ell = robust.local_scale(ctx.points, ctx.lists(k))[ctx.rows]
-        r[:, i] = robust.relative_distances(ctx.pdis[:, i], ell)
-        score += r[:, i] / len(scales)
+    for start in range(0, len(ctx.rows), ROWS_PER_BLOCK):  # bounds the (rows * k, 3) temporaries
+        part = slice(start, start + ROWS_PER_BLOCK)
+        for i, k in enumerate(scales):
+            ell = robust.local_scale(ctx.points, ctx.lists(k, part))[ctx.rows[part]]
+            r[part, i] = robust.relative_distances(ctx.pdis[part, i], ell)
+            score[part] += r[part, i] / len(scales)
     ctx.store.write_at("r", ctx.own, r)
     ctx.store.write_at("score", ctx.own, score)
     return {"hist": np.stack([histogram(r[:, i], BINS) for i in range(len(scales))])}
