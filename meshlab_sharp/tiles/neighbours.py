@@ -294,15 +294,26 @@ def streamed(
         if len(tpos) == 0:
             continue
         tree = cKDTree(tpts)
-        for i in np.flatnonzero(reach):
-            cand = _nearest(tree, tpts, points[i], k)
-            d2 = np.concatenate([best_d2[i], squared_distances(tpts[cand], points[i])])
-            ids = np.concatenate([best_id[i], tids[cand]])
-            ps = np.concatenate([best_pos[i], tpos[cand]])
-            order = np.lexsort((ids, d2))[:k]
-            best_d2[i], best_id[i], best_pos[i] = d2[order], ids[order], ps[order]
-            if np.isfinite(best_d2[i, -1]):
-                bound[i] = min(bound[i], float(np.sqrt(best_d2[i, -1])))
+        which = np.flatnonzero(reach)
+        kq = min(k + 1, len(tpts))
+        _, cand = tree.query(points[which], kq)
+        cand = cand.reshape(len(which), kq)
+        d2 = squared_distances(tpts[cand], points[which][:, None, :])
+        ids = tids[cand]
+        order = np.lexsort((ids, d2), axis=-1)
+        d2, cand = np.take_along_axis(d2, order, -1), np.take_along_axis(cand, order, -1)
+        tied = np.zeros(len(which), bool) if kq <= k else d2[:, k - 1] == d2[:, k]
+        for j in np.flatnonzero(tied):  # a tie across the k-th place: all of it, exactly
+            i = which[j]
+            ball = np.asarray(tree.query_ball_point(points[i], np.sqrt(d2[j, k - 1]) * 1.000001))
+            _merge(best_d2, best_id, best_pos, i, squared_distances(tpts[ball], points[i]),
+                   tids[ball], tpos[ball])  # fmt: skip
+        plain = ~tied
+        rows = which[plain]
+        cand = cand[plain, : min(k, kq)]
+        _merge(best_d2, best_id, best_pos, rows, d2[plain, : min(k, kq)], tids[cand], tpos[cand])
+        done = np.isfinite(best_d2[which, -1])
+        bound[which[done]] = np.minimum(bound[which[done]], np.sqrt(best_d2[which[done], -1]))
     out = []
     for i in range(f):
         if best_pos[i, -1] < 0:
@@ -316,15 +327,22 @@ def streamed(
     return out
 
 
-def _nearest(tree: cKDTree, pts: np.ndarray, p: np.ndarray, k: int) -> np.ndarray:
-    """Indices of the k nearest of ``p`` in ``pts`` by (squared distance, index), all of
-    a tie across the k-th place included (fewer when ``pts`` has fewer)."""
-    kq = min(k + 1, len(pts))
-    _, idx = tree.query(p, kq)
-    idx = np.atleast_1d(idx)
-    d2 = squared_distances(pts[idx], p)
-    if kq > k:
-        d2s = np.sort(d2)
-        if d2s[k - 1] == d2s[k]:
-            idx = np.asarray(tree.query_ball_point(p, np.sqrt(d2s[k - 1]) * (1.0 + MARGIN)))
-    return idx
+def _merge(
+    best_d2: np.ndarray,
+    best_id: np.ndarray,
+    best_pos: np.ndarray,
+    rows: np.ndarray | int,
+    d2: np.ndarray,
+    ids: np.ndarray,
+    pos: np.ndarray,
+) -> None:
+    """Keep the k best by (squared distance, input index) of the current best of
+    ``rows`` and new candidates (same leading shape as ``best_*[rows]``)."""
+    k = best_d2.shape[1]
+    all_d2 = np.concatenate([best_d2[rows], d2], axis=-1)
+    all_id = np.concatenate([best_id[rows], ids], axis=-1)
+    all_pos = np.concatenate([best_pos[rows], pos], axis=-1)
+    order = np.lexsort((all_id, all_d2), axis=-1)[..., :k]
+    best_d2[rows] = np.take_along_axis(all_d2, order, -1)
+    best_id[rows] = np.take_along_axis(all_id, order, -1)
+    best_pos[rows] = np.take_along_axis(all_pos, order, -1)
