@@ -65,6 +65,9 @@ HALO_FACTOR = 2.5
 #: Default memory of a tile task on a Dask worker without ``max_memory``.
 DASK_TILE_MEMORY = 1 << 30
 
+#: Tile steps of each mode (progress bar).
+STEPS = {"paper": 3, "robust": 6}
+
 _UNITS = {"": 1, "B": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
 
@@ -258,9 +261,12 @@ def detect_out_of_core(
     scales_t = _check_scales(scales, DEFAULT_KNN_SCALES, "points")
     bar = progress if isinstance(progress, Progress) else Progress(1, enabled=bool(progress))
 
+    sized: list[bool] = []
+
     def on_tile(label: str, done: int, total: int) -> None:
-        if bar.total <= 1:
-            bar.total = total * 9 + 1
+        if not sized:  # one bar step per tile task
+            bar.total, bar.done = total * STEPS[mode] + 1, 0
+            sized.append(True)
         bar.step(f"{label} {done}/{total}")
 
     with _kernels.use_backend("compiled"):
