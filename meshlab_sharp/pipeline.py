@@ -180,9 +180,11 @@ def detect(
         ones: not features, ``kept`` False; vertices added by hole filling: left out).
     mode : {"paper", "robust"}, default "paper"
         "paper": ALGORITHM.md's reading of the paper. "robust": isolated points left
-        out, projected distances relative to the local spacing, a threshold floor (no
-        features on smooth objects) and thinning across the lines
-        (:mod:`meshlab_sharp.robust`); ``distances`` are then the relative distances.
+        out, scales grown with the measured noise, projected distances relative to the
+        local spacing, a threshold floor (no features on smooth objects), support along
+        and thinning across the lines, and on meshes the mesh's own sharp edges
+        (:mod:`meshlab_sharp.robust`, docs/robust-mode.md); ``distances`` are then the
+        relative distances and ``scales`` the scales used.
     backend : {"compiled", "numpy"}, optional
         The compiled kernels (default when built) or the numpy reference path; both
         give the same answers. Default: ``MESHLAB_SHARP_BACKEND`` or "compiled".
@@ -312,6 +314,7 @@ def _detect(
     if mode == "robust":
         robust = RobustSetup(points, cleaned.faces, neighbourhoods, scales_t, workers=workers)
         work, work_neighbourhoods = robust.points, robust.neighbourhoods
+        scales_t = robust.scales
     timings["neighbourhoods"] = time.perf_counter() - t
     bar.step("neighbourhoods")
 

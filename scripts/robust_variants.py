@@ -40,6 +40,11 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "no sharp mesh edges": ((creases, "CREASE_ANGLE", 180.0),),
     "mesh edges: no noise factor": ((creases, "NOISE_FACTOR", 0.0),),
     "no threshold floor": ((robust, "R_MIN", 0.0),),
+    "noise-scaled scales off": ((robust, "NOISE_TOLERATED", math.inf),),
+    "noise tolerated 0.2": ((robust, "NOISE_TOLERATED", 0.2),),
+    "noise tolerated 0.1": ((robust, "NOISE_TOLERATED", 0.1),),
+    "noise plane of the smallest scale": ((robust, "NOISE_KNN", 12),),
+    "noise growth at most x2": ((robust, "NOISE_MAX_FACTOR", 2.0),),
 }
 
 

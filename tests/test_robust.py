@@ -14,6 +14,7 @@ from meshlab_sharp import creases, robust
 from meshlab_sharp import groundtruth as gt
 from meshlab_sharp.cli import main
 from meshlab_sharp.evaluation import evaluate
+from meshlab_sharp.neighbourhoods import knn
 
 N = 4000
 
@@ -295,3 +296,20 @@ def test_thinning_cone(cone_cos, dropped):
     out = robust.thin(pts, np.ones(6, bool), score, e, everyone, cone_cos=cone_cos)
     assert out[0] == (not dropped)
     assert robust.THIN_CONE_COS == 0.5
+
+
+def test_noise_grows_the_scales():
+    grid = shapes.flat_square(40)
+    assert robust.noise_scale_factor(grid, knn(grid, 40), 7) == 1.0
+    assert robust.NOISE_TOLERATED == 0.15 and robust.NOISE_KNN == 7
+    clean = gt.make_part("box", n_points=N, seed=3)
+    assert robust.noise_scale_factor(clean.vertices, knn(clean.vertices, 40), 7) == 1.0
+    part = gt.add_noise(clean, 0.5, seed=1)
+    f = robust.noise_scale_factor(part.vertices, knn(part.vertices, 40), 7)
+    # median |d . n| / |d| is about 0.30 at 50 % noise on Poisson-disk samples: f ~ 4,
+    # capped at 3
+    assert f == robust.NOISE_MAX_FACTOR == 3.0
+    result = meshlab_sharp.detect(part.vertices, mode="robust")
+    defaults = meshlab_sharp.DEFAULT_KNN_SCALES
+    assert result.scales == tuple(math.floor(k * f + 0.5) for k in defaults)
+    assert meshlab_sharp.detect(part.vertices, mode="paper").scales == defaults
