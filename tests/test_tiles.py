@@ -177,3 +177,41 @@ def test_bad_options() -> None:
         meshlab_sharp.detect(pts, dask="local:0")
     with pytest.raises(InputError, match="fewer than the largest scale"):
         meshlab_sharp.detect(pts[:10], scales=[16], max_memory="1GB")
+
+
+def test_noise_grown_scales_equal_in_memory() -> None:
+    """Robust mode's scales grow with the measured noise (a lower median over all
+    points, reduced exactly): the tiled run grows them the same way."""
+    pts = hostile_cloud(3000, seed=7)
+    noisy = pts + np.random.default_rng(1).normal(scale=0.012, size=pts.shape)
+    ref = meshlab_sharp.detect(noisy, mode="robust")
+    assert ref.scales != DEFAULT_KNN_SCALES
+    out = detect_tiled(noisy, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500)
+    assert out["scales"] == ref.scales
+    assert_same(out, ref)
+
+
+@pytest.mark.parametrize("collect", [1, 7, 1 << 21])
+def test_order_statistic_is_exact(tmp_path, monkeypatch, collect: int) -> None:
+    """The k-th smallest by counting passes equals np.partition's, with many equal
+    values and values gathered from a tiny bin."""
+    from meshlab_sharp.tiles import select
+    from meshlab_sharp.tiles.run import Runner
+
+    monkeypatch.setattr(select, "COLLECT", collect)
+    rng = np.random.default_rng(0)
+    pts = rng.random((3000, 3))
+    values = np.concatenate([np.zeros(900), rng.random(1500) ** 3, np.full(600, 0.25)])
+    keep = rng.random(3000) < 0.9
+    store = Store(str(tmp_path))
+    layout = build_layout(3000, lambda: iter([pts]), store, tile_points=400, source="t")
+    ids = store.read("ids", 0, 3000)
+    store.create("v", (3000,), np.float64)
+    store.create("keep", (3000,), bool)
+    store.write("v", 0, values[ids])
+    store.write("keep", 0, keep[ids])
+    runner = Runner(store, layout, most_points=1000, workers=1)
+    kept = values[keep]
+    for rank in (0, 1, len(kept) // 3, (len(kept) - 1) // 2, len(kept) - 1):
+        want = np.partition(kept, rank)[rank]
+        assert select.order_statistic(runner, "v", "keep", rank) == want

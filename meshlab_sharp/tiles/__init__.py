@@ -38,6 +38,7 @@ from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
 from .layout import build_layout
 from .neighbours import Query
 from .run import Runner, peak_rss
+from .select import order_statistic
 from .steps import (
     Step,
     paper_decide,
@@ -46,6 +47,7 @@ from .steps import (
     robust_decide,
     robust_isolated,
     robust_nearest,
+    robust_noise,
     robust_relative,
     robust_support,
     robust_thin,
@@ -66,7 +68,7 @@ HALO_FACTOR = 2.5
 DASK_TILE_MEMORY = 1 << 30
 
 #: Tile steps of each mode (progress bar).
-STEPS = {"paper": 3, "robust": 6}
+STEPS = {"paper": 3, "robust": 11}
 
 _UNITS = {"": 1, "B": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
@@ -179,7 +181,7 @@ def detect_tiled(
         )
         t = time.perf_counter()
         run = _paper if mode == "paper" else _robust
-        thresholds, counts, mask, kept = run(runner, store, layout, scales, weighting)
+        thresholds, counts, mask, kept, used = run(runner, store, layout, scales, weighting)
         timings["detect"] = time.perf_counter() - t
         t = time.perf_counter()
         out = runner.finish(source.n, mask, kept)
@@ -187,6 +189,7 @@ def detect_tiled(
         worker_peak = runner.peak if client is not None else 0
     timings["total"] = time.perf_counter() - t0
     out.update(
+        scales=used,
         thresholds=thresholds,
         candidate_counts=counts,
         n_clean=layout.n_clean,
@@ -289,7 +292,7 @@ def detect_out_of_core(
         mask=out["mask"],
         strength=out["strength"],
         kind="points",
-        scales=scales_t,
+        scales=out["scales"],
         thresholds=out["thresholds"],
         candidate_counts=out["candidate_counts"],
         kept=out["kept"],
@@ -303,7 +306,7 @@ def detect_out_of_core(
 
 def _paper(
     runner: Runner, store: Store, layout: Any, scales: tuple[int, ...], weighting: str
-) -> tuple[np.ndarray, np.ndarray, str, str | None]:
+) -> tuple[np.ndarray, np.ndarray, str, str | None, tuple[int, ...]]:
     """The paper's method: distances, global min-max, histograms, decision."""
     n, s = layout.n, len(scales)
     store.create("pdis", (n, s), np.float64)
@@ -316,20 +319,21 @@ def _paper(
     hist = runner.step(Step("histograms", paper_histograms, None, norm))["hist"]
     thresholds = np.array([otsu_from_histogram(h) for h in hist])
     decided = runner.step(Step("decide", paper_decide, None, {**norm, "thresholds": thresholds}))
-    return thresholds, decided["counts"], "mask", None
+    return thresholds, decided["counts"], "mask", None, scales
 
 
 def _robust(
     runner: Runner, store: Store, layout: Any, scales: tuple[int, ...], weighting: str
-) -> tuple[np.ndarray, np.ndarray, str, str | None]:
-    """Robust mode (:mod:`meshlab_sharp.robust`) on a cloud, step by step."""
-    n, s, top = layout.n, len(scales), max(scales)
+) -> tuple[np.ndarray, np.ndarray, str, str | None, tuple[int, ...]]:
+    """Robust mode (:mod:`meshlab_sharp.robust`, :class:`~meshlab_sharp.robust.RobustSetup`)
+    on a cloud, step by step."""
+    n = layout.n
     for name, shape, dtype in (
         ("nn1", (n,), np.int64),
         ("kd2", (n,), np.float64),
         ("kid", (n,), np.int64),
         ("kept", (n,), bool),
-        ("r", (n, s), np.float64),
+        ("ratio", (n,), np.float64),
         ("score", (n,), np.float64),
         ("mask", (n,), bool),
         ("strength", (n,), np.float64),
@@ -338,8 +342,21 @@ def _robust(
         ("final", (n,), bool),
     ):
         store.create(name, shape, dtype)
-    runner.step(Step("nearest", robust_nearest, Query(top)))
-    runner.step(Step("isolated", robust_isolated))
+    runner.step(Step("nearest", robust_nearest, Query(max(scales))))
+    isolated = int(runner.step(Step("isolated", robust_isolated))["isolated"])
+    n_kept = layout.n_clean - isolated
+    if n_kept < max(scales):
+        raise InputError(
+            f"{n_kept} points are not isolated, fewer than the largest scale k = {max(scales)}"
+        )
+    k = min(robust.NOISE_KNN, max(scales))
+    runner.step(Step("noise", robust_noise, Query(k, kept="kept"), {"k": k}))
+    nu = order_statistic(runner, "ratio", "kept", (n_kept - 1) // 2)
+    factor = min(robust.noise_factor(nu), n_kept / max(scales))
+    if factor > 1.0:
+        scales = robust.grown_scales(scales, factor)
+    s, top = len(scales), max(scales)
+    store.create("r", (n, s), np.float64)
     query = Query(top, kept="kept", scales=scales, weighting=weighting)
     hist = runner.step(Step("relative", robust_relative, query, {"scales": scales}))["hist"]
     thresholds = np.array([max(otsu_from_histogram(h), robust.R_MIN) for h in hist])
@@ -348,7 +365,7 @@ def _robust(
     runner.step(Step("support", robust_support, Query(top, "kept", "mask"), support))
     compare = min(robust.THIN_KNN, top)
     runner.step(Step("thin", robust_thin, Query(compare, "kept", "mask1"), {"compare": compare}))
-    return thresholds, decided["counts"], "final", "kept"
+    return thresholds, decided["counts"], "final", "kept", scales
 
 
 def _resident() -> int:

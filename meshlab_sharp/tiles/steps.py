@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -27,8 +28,8 @@ from .neighbours import Context, Query
 from .store import Store
 
 Partial = dict[str, np.ndarray]
-#: Rows per block of the local scale's computation.
-ROWS_PER_BLOCK = 16384
+#: Neighbour entries (rows * k) per block of the local scale's computation.
+ENTRIES_PER_BLOCK = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -60,12 +61,15 @@ class Step:
 
 
 def combine(parts: list[Partial]) -> Partial:
-    """Reduce partials: ``*_min`` by minimum, ``*_max`` by maximum, others by sum."""
+    """Reduce partials: ``*_min`` by minimum, ``*_max`` by maximum, ``*_cat`` by
+    concatenation, others by sum."""
     out: Partial = {}
     for part in parts:
         for key, value in part.items():
             if key not in out:
                 out[key] = np.array(value)
+            elif key.endswith("_cat"):
+                out[key] = np.concatenate([out[key], value])
             elif key.endswith("_min"):
                 out[key] = np.minimum(out[key], value)
             elif key.endswith("_max"):
@@ -147,18 +151,31 @@ def robust_isolated(span: Span) -> Partial:
     return {"isolated": np.array(int((~inside).sum()))}
 
 
+def robust_noise(ctx: Context, *, k: int) -> Partial:
+    """:func:`meshlab_sharp.robust.noise_ratios` of the rows (to ``ratio``)."""
+    lists = np.repeat(np.arange(len(ctx.points))[:, None], k, axis=1)
+    lists[ctx.rows] = ctx.idx[:, :k]
+    ratio = robust.noise_ratios(ctx.points, lists, k)
+    ctx.store.write_at("ratio", ctx.own, ratio[ctx.rows])
+    return {}
+
+
 def robust_relative(ctx: Context, *, scales: tuple[int, ...]) -> Partial:
     """:class:`meshlab_sharp.robust.RelativeRule` on the rows: relative distances
     ``r`` (r, s), the score, and the histograms of ``r``."""
     assert ctx.pdis is not None
     r = np.empty_like(ctx.pdis)
-    score = np.zeros(len(ctx.rows))
-    for start in range(0, len(ctx.rows), ROWS_PER_BLOCK):  # bounds the (rows * k, 3) temporaries
-        part = slice(start, start + ROWS_PER_BLOCK)
+    score = np.empty(len(ctx.rows))
+    pdis = np.zeros(len(ctx.points))
+    block = max(1, ENTRIES_PER_BLOCK // max(scales))  # bounds the (rows * k, 3) temporaries
+    for start in range(0, len(ctx.rows), block):
+        part = slice(start, start + block)
+        rows = ctx.rows[part]
+        rule = robust.RelativeRule(ctx.points, partial(ctx.lists, part=part), len(scales))
         for i, k in enumerate(scales):
-            ell = robust.local_scale(ctx.points, ctx.lists(k, part))[ctx.rows[part]]
-            r[part, i] = robust.relative_distances(ctx.pdis[part, i], ell)
-            score[part] += r[part, i] / len(scales)
+            pdis[rows] = ctx.pdis[part, i]
+            r[part, i] = rule(i, k, pdis)[0][rows]
+        score[part] = rule.score[rows]
     ctx.store.write_at("r", ctx.own, r)
     ctx.store.write_at("score", ctx.own, score)
     return {"hist": np.stack([histogram(r[:, i], BINS) for i in range(len(scales))])}
