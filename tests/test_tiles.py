@@ -215,3 +215,34 @@ def test_order_statistic_is_exact(tmp_path, monkeypatch, collect: int) -> None:
     for rank in (0, 1, len(kept) // 3, (len(kept) - 1) // 2, len(kept) - 1):
         want = np.partition(kept, rank)[rank]
         assert select.order_statistic(runner, "v", "keep", rank) == want
+
+
+def test_peak_memory_stays_under_the_limit(tmp_path) -> None:
+    """A fresh process reading a 400k-point binary PLY with --max-memory 300MB peaks
+    below 300 MB (ru_maxrss: interpreter, imports, tiles and result included)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    rng = np.random.default_rng(0)
+    pts = random_box_points(400_000, seed=1) + rng.normal(scale=1e-4, size=(400_000, 3))
+    path = tmp_path / "big.ply"
+    header = (
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(pts)}\n"
+        "property double x\nproperty double y\nproperty double z\nend_header\n"
+    )
+    path.write_bytes(header.encode() + pts.astype("<f8").tobytes())
+    code = (
+        "import resource, sys, meshlab_sharp\n"
+        f"r = meshlab_sharp.detect({str(path)!r}, max_memory='300MB')\n"
+        "print(r.tiling['tiles'], r.n_features,"
+        " resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)\n"
+    )
+    root = str(Path(__file__).resolve().parent.parent)
+    env = {"PYTHONPATH": root, "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    )
+    tiles, features, peak = map(int, proc.stdout.split())
+    assert tiles >= 2 and features > 0
+    assert peak < 300 * 2**20
