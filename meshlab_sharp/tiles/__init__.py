@@ -67,6 +67,8 @@ HALO_FACTOR = 2.5
 #: Default memory of a tile task on a Dask worker without ``max_memory``.
 DASK_TILE_MEMORY = 1 << 30
 
+#: Memory of a Dask worker before its first tile (interpreter, numpy, scipy, dask).
+WORKER_BASELINE = 200 << 20
 #: Tile steps of each mode (progress bar).
 STEPS = {"paper": 3, "robust": 11}
 
@@ -143,7 +145,11 @@ def detect_tiled(
         budget = limit if limit is not None else DASK_TILE_MEMORY
         if dask is None:
             budget -= _resident() + 10 * source.n
-        per_point = (BYTES_PER_POINT + 8 * k_max + 16 * len(scales)) * HALO_FACTOR
+        else:  # a worker's interpreter and imports
+            budget -= WORKER_BASELINE
+        # robust mode may grow the scales with the noise, up to NOISE_MAX_FACTOR-fold
+        k_most = k_max * (robust.NOISE_MAX_FACTOR if mode == "robust" else 1.0)
+        per_point = (BYTES_PER_POINT + 8 * k_most + 16 * len(scales)) * HALO_FACTOR
         tile_points = int(budget / per_point)
         if tile_points < 4 * k_max:
             raise InputError(
