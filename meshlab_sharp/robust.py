@@ -26,11 +26,11 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
    along it, a point lifted by noise has none, or only the line it lies beside.
 5. **Thinning**: a point is dropped when a supported neighbour among its ``THIN_KNN``
-   (8) nearest, lying across the feature line (more than 60 degrees from the line's
+   (12) nearest, lying across the feature line (more than 60 degrees from the line's
    direction), ranks higher (mean over the scales of the centroid's distance relative
    to ``l``, which peaks on acute edges where ``r`` does not): non-maximum suppression
-   across the line, so lines stay one point wide; comparing only within about 1.5
-   spacings keeps two parallel lines (the rims of a thin wall) apart.
+   across the line, so lines stay one point wide; comparing only within about 1.9
+   spacings keeps most of two parallel lines (the rims of a thin wall) apart.
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
    an edge whose two faces turn by more than ``CREASE_ANGLE`` (more on a noisy mesh)
    are features too. On a CAD tessellation they are all of them.
@@ -84,10 +84,11 @@ R_MIN = (2.0 / math.pi) * math.sin(math.radians(CREASE_ANGLE / 2.0))
 #: Thinning compares a point with candidate neighbours whose offset makes more than
 #: 60 degrees with the line direction: ``|d . e| < THIN_CONE_COS * |d|``.
 THIN_CONE_COS = 0.5
-#: Neighbourhood of the comparison in thinning: the 8 nearest points (clouds; within
-#: about 1.5 spacings, the half-width of the band of candidates, so that two lines 2-3
-#: spacings apart are both kept) ...
-THIN_KNN = 8
+#: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
+#: about 1.9 spacings: across the band of candidates (1.3-1.5 spacings) and the points
+#: that noise lifts beside it, mostly short of a second line 2-3 spacings away, such as
+#: the other rim of a thin wall) ...
+THIN_KNN = 12
 #: ... or the 2-ring (meshes; about 19 vertices on a regular mesh). The 2-ring is also
 #: the support neighbourhood on meshes.
 THIN_RING = 2

@@ -35,7 +35,7 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "support >= 1": ((robust, "SUPPORT_MIN", 1),),
     "support >= 3": ((robust, "SUPPORT_MIN", 3),),
     "thinning compares 16 nearest": ((robust, "THIN_KNN", 16),),
-    "thinning compares 12 nearest": ((robust, "THIN_KNN", 12),),
+    "thinning compares 8 nearest": ((robust, "THIN_KNN", 8),),
     "thinning cone 45 deg": ((robust, "THIN_CONE_COS", math.cos(math.radians(45))),),
     "no sharp mesh edges": ((creases, "CREASE_ANGLE", 180.0),),
     "mesh edges: no noise factor": ((creases, "NOISE_FACTOR", 0.0),),

@@ -296,6 +296,7 @@ def test_thinning_cone(cone_cos, dropped):
     out = robust.thin(pts, np.ones(6, bool), score, e, everyone, cone_cos=cone_cos)
     assert out[0] == (not dropped)
     assert robust.THIN_CONE_COS == 0.5
+    assert robust.THIN_KNN == 12 and robust.THIN_RING == 2
 
 
 def test_noise_grows_the_scales():
