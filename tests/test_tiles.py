@@ -117,14 +117,23 @@ def test_max_memory_api_and_cli_output(tmp_path) -> None:
     assert (tmp_path / "a.ply.txt").read_text() == (tmp_path / "b.ply.txt").read_text()
 
 
-def test_dask_local_cluster_equals_in_memory() -> None:
-    pytest.importorskip("dask.distributed")
+def test_dask_equals_in_memory() -> None:
+    """--dask local:2 (paper) and --dask tcp://127.0.0.1:PORT (robust, a running
+    cluster of 2 worker processes on the loopback)."""
+    distributed = pytest.importorskip("dask.distributed")
     pts = hostile_cloud(2500, seed=9)
-    for mode in ("paper", "robust"):
-        ref = meshlab_sharp.detect(pts, scales=SCALES, mode=mode)
-        out = detect_tiled(pts, scales=SCALES, mode=mode, tile_points=400, dask="local:2")
-        assert out["tiling"]["worker_peak_bytes"] > 0
-        assert_same(out, ref)
+    ref = meshlab_sharp.detect(pts, scales=SCALES)
+    out = detect_tiled(pts, scales=SCALES, tile_points=400, dask="local:2")
+    assert out["tiling"]["worker_peak_bytes"] > 0 and out["tiling"]["tiles"] >= 4
+    assert_same(out, ref)
+    ref = meshlab_sharp.detect(pts, scales=SCALES, mode="robust")
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tcp://127.0.0.1:")
+        out = detect_tiled(pts, scales=SCALES, mode="robust", tile_points=400, dask=address)
+    assert_same(out, ref)
 
 
 def test_las_laz_round_trip_keeps_order(tmp_path) -> None:
