@@ -270,8 +270,10 @@ def cloud_knn_projected_distances(
     (s, n) of every point (cleaned order) from one neighbour search."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
     idx = np.empty((grid.n, int(ks[-1])), dtype=np.int64)
-    pdis = np.empty((len(ks), grid.n))
+    pdis = np.full((len(ks), grid.n), np.nan)
     _cloud_call(grid, ks, weighting == "gaussian", workers, pdis, None, idx)
+    if grid.n and np.isnan(pdis[:, 0]).any():  # a library built before this function
+        raise RuntimeError("the compiled kernels are out of date: rebuild (pip install -e .)")
     return idx, pdis
 
 
