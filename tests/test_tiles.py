@@ -128,7 +128,7 @@ def test_dask_equals_in_memory() -> None:
     assert_same(out, ref)
     ref = meshlab_sharp.detect(pts, scales=SCALES, mode="robust")
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+        n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address="127.0.0.1:0"
     ) as cluster:
         address = cluster.scheduler_address
         assert address.startswith("tcp://127.0.0.1:")

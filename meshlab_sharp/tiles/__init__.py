@@ -407,7 +407,7 @@ def _client(dask: str | Any, stack: ExitStack) -> Any:
                 n_workers=n,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=None,
+                dashboard_address="127.0.0.1:0",
                 host="127.0.0.1",
             )
         )
