@@ -339,6 +339,20 @@ def local_scale_csr(
     return ell, off
 
 
+def cloud_knn_projected_distances(
+    tree: KdTree, scales: Sequence[int], weighting: str = "gaussian", workers: int = -1
+) -> tuple[np.ndarray, np.ndarray]:
+    """The k = max(scales) nearest neighbours (n, k) int64 and the projected distances
+    (s, n) of every point (cleaned order) from one neighbour search."""
+    ks = np.ascontiguousarray(scales, dtype=np.int64)
+    idx = np.empty((tree.n, int(ks[-1])), dtype=np.int64)
+    pdis = np.full((len(ks), tree.n), np.nan)
+    _cloud_call(tree, ks, weighting == "gaussian", workers, pdis=pdis, idx=idx)
+    if tree.n and np.isnan(pdis[:, 0]).any():  # a library built before this function
+        raise RuntimeError("the compiled kernels are out of date: rebuild (pip install -e .)")
+    return idx, pdis
+
+
 # ---------------------------------------------------------------------------- meshes
 
 

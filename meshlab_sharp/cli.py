@@ -145,6 +145,22 @@ def build_parser() -> argparse.ArgumentParser:
         "point wide (docs/robust-mode.md); paper: the paper's method exactly as "
         "ALGORITHM.md reads it",
     )
+    det.add_argument(
+        "--max-memory",
+        metavar="SIZE",
+        help="point clouds out of core: spatial tiles with halos, peak memory under SIZE "
+        "(e.g. 1GB); the same result as in memory (binary PLY, LAS/LAZ, E57 streamed)",
+    )
+    det.add_argument(
+        "--dask",
+        metavar="CLUSTER",
+        help="run the tiles on Dask: local:N (N local workers) or tcp://HOST:PORT",
+    )
+    det.add_argument(
+        "--scratch",
+        metavar="DIR",
+        help="folder for the tiles' arrays (with --dask on several machines: shared)",
+    )
     det.add_argument("--ascii", action="store_true", help="write an ASCII PLY (default binary)")
     det.add_argument("--force", action="store_true", help="overwrite existing outputs")
     det.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
@@ -284,6 +300,8 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
     steps = _preprocessing_from_args(args)
 
     start = time.perf_counter()
+    if args.max_memory is not None or args.dask is not None:
+        return _detect_tiled(args, source, sample, output, outputs, progress, steps)
     geometry = _sample_geometry(sample) if source is None else load(source)
     load_time = time.perf_counter() - start
     result = detect(
@@ -348,6 +366,61 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
     return 0
 
 
+def _detect_tiled(
+    args: argparse.Namespace,
+    source: Path | None,
+    sample: str | None,
+    output: Path,
+    outputs: OutputSet,
+    progress: Progress,
+    steps: Preprocessing | None,
+) -> int:
+    """``detect --max-memory``/``--dask``: the input streamed, the output written in
+    blocks (:mod:`meshlab_sharp.io.stream`)."""
+    from .io.stream import PointSource, open_points, write_features_ply
+
+    for flag, given in (
+        ("--ascii", args.ascii),
+        ("--plot", args.plot),
+        ("--save-processed", args.save_processed),
+    ):
+        if given:
+            raise MeshlabSharpError(f"{flag} is not available with --max-memory/--dask")
+    start = time.perf_counter()
+    if source is None:
+        points = PointSource.from_array(_sample_geometry(sample).vertices, "sample part")
+    else:
+        points = open_points(source, as_points=args.as_points)
+    result = detect(
+        points,
+        scales=args.scales,
+        weighting=args.weighting,
+        mode=args.mode,
+        progress=progress,
+        preprocessing=steps,
+        max_memory=args.max_memory,
+        dask=args.dask,
+        scratch=args.scratch,
+    )
+    t = time.perf_counter()
+    write_features_ply(output, points, result.strength, result.mask, into=outputs)
+    if args.indices:
+        save_indices(args.indices, result.mask, into=outputs)
+    result.timings["save"] = time.perf_counter() - t
+    result.timings["total"] = time.perf_counter() - start
+    if args.report:
+        report = result.summary()
+        report["input"] = points.name
+        report["outputs"] = {"ply": str(output), "indices": args.indices}
+        save_json(args.report, report, into=outputs)
+    _pause_for_tests()
+    outputs.commit()
+    progress.close()
+    if not args.quiet:
+        _print_summary(points.name, output, result)
+    return 0
+
+
 def _pause_for_tests() -> None:
     """The :data:`PAUSE_ENV` test hook: hold between staging and renaming."""
     flag = os.environ.get(PAUSE_ENV)
@@ -404,6 +477,14 @@ def _print_summary(source: str, output: Path, result: DetectionResult) -> None:
         f"{result.n_features} sharp features ({100.0 * result.n_features / n:.1f}%) "
         f"-> {output} [{result.timings.get('total', 0.0):.2f} s]"
     )
+    if result.tiling is not None:
+        tiling = result.tiling
+        workers = tiling["worker_peak_bytes"]
+        print(
+            f"  out of core: {tiling['tiles']} tiles, {tiling['tasks']} tile tasks, peak "
+            f"memory {tiling['peak_bytes'] / 2**20:.0f} MB"
+            + (f" (workers {workers / 2**20:.0f} MB)" if workers else "")
+        )
 
 
 def _add_preprocessing_arguments(det: argparse.ArgumentParser) -> None:

@@ -87,6 +87,8 @@ class DetectionResult:
         ``kind`` ("line", "arc", "freeform") and ``params``.
     corners : Corners or None
         With ``curves=True``: ``points`` (c, 3) and ``indices`` (c,) of the corners.
+    tiling : dict or None
+        Out of core (``max_memory``/``dask``): tiles, tasks, halo and peak memory.
     """
 
     mask: np.ndarray
@@ -105,6 +107,7 @@ class DetectionResult:
     mode: str = "robust"
     curves: list[Curve] | None = None
     corners: Corners | None = None
+    tiling: dict[str, Any] | None = None
 
     @property
     def indices(self) -> np.ndarray:
@@ -140,6 +143,7 @@ class DetectionResult:
                 else {"preprocessing": self.preprocessing.summary()}
             ),
             **({} if self.curves is None else _curves_summary(self.curves, self.corners)),
+            **({} if self.tiling is None else {"tiling": self.tiling}),
         }
 
 
@@ -170,6 +174,9 @@ def detect(
     mode: str = DEFAULT_MODE,
     backend: str | None = None,
     curves: bool = False,
+    max_memory: str | int | None = None,
+    dask: Any = None,
+    scratch: str | os.PathLike[str] | None = None,
 ) -> DetectionResult:
     """Find the sharp features of a point cloud or triangle mesh.
 
@@ -213,6 +220,16 @@ def detect(
         Also extract the feature curves and corners (``result.curves``,
         ``result.corners``; :mod:`meshlab_sharp.curves`): mesh edge chains on meshes,
         refined polylines on clouds. Off by default, so detection's time is unchanged.
+    max_memory : str or int, optional
+        Out of core ("1GB"): a point cloud is processed in spatial tiles with halos
+        (:mod:`meshlab_sharp.tiles`), keeping the peak memory under this; the result is
+        the in-memory one. Point clouds only (a mesh needs ``as_points``); a path is
+        streamed (binary PLY, LAS/LAZ, E57) instead of loaded whole.
+    dask : str or dask.distributed.Client, optional
+        Run the tiles as Dask tasks: "local:N" (N local worker processes),
+        "tcp://HOST:PORT" (a running scheduler) or a Client. Same result.
+    scratch : path, optional
+        Folder for the tiles' on-disk arrays (with a cluster: one every worker reaches).
 
     Returns
     -------
@@ -229,6 +246,26 @@ def detect(
         _kernels.resolve(backend)
     except (ValueError, RuntimeError) as exc:
         raise InputError(str(exc)) from None
+    if max_memory is not None or dask is not None:
+        from .tiles import detect_out_of_core
+
+        if curves:
+            raise InputError("curves are not extracted out of core (max_memory, dask) yet")
+
+        options = dict(scales=scales, weighting=weighting, as_points=as_points, mode=mode)
+        return detect_out_of_core(
+            source,
+            faces,
+            **options,
+            return_details=return_details,
+            progress=progress,
+            workers=workers,
+            preprocessing=preprocessing,
+            backend=backend,
+            max_memory=max_memory,
+            dask=dask,
+            scratch=scratch,
+        )
     with _kernels.use_backend(_kernels.resolve(backend)):
         return _detect(
             source,

@@ -68,9 +68,12 @@ __all__ = [
     "THIN_RING",
     "RelativeRule",
     "RobustSetup",
+    "grown_scales",
     "isolated_points",
     "line_directions",
     "local_scale",
+    "noise_factor",
+    "noise_ratios",
     "noise_scale_factor",
     "relative_distances",
     "robust_threshold",
@@ -155,9 +158,16 @@ def noise_scale_factor(points: np.ndarray, indices: np.ndarray, k: int) -> float
     -------
     float
         ``min(max(1, (nu / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)``, ``nu`` the lower
-        median over the points of ``|d . n_i| / |d|``, ``d = p_{N(i)[1]} - p_i`` (the
-        nearest neighbour's offset across the plane, relative to its distance).
+        median over the points of :func:`noise_ratios`.
     """
+    return _noise_factor(noise_ratios(points, indices, k))
+
+
+def noise_ratios(points: np.ndarray, indices: np.ndarray, k: int) -> np.ndarray:
+    """``|d . n_i| / |d|`` of every point, ``d = p_{N(i)[1]} - p_i`` (the nearest
+    neighbour's offset across the plane of the ``k`` nearest, relative to its distance;
+    0 when ``d = 0``). ``points`` (n, 3), ``indices`` (n, >= k) as
+    :func:`noise_scale_factor`; returns (n,) float64."""
     idx = np.asarray(indices)[:, :k]
     q = points[idx] - points[:, None, :]
     c = q.mean(axis=1)
@@ -167,15 +177,24 @@ def noise_scale_factor(points: np.ndarray, indices: np.ndarray, k: int) -> float
     d = q[:, 1]
     length = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
     across = np.abs(d[:, 0] * normal[:, 0] + d[:, 1] * normal[:, 1] + d[:, 2] * normal[:, 2])
-    ratio = np.where(length > 0, across / np.where(length > 0, length, 1.0), 0.0)
-    return _noise_factor(ratio)
+    return np.where(length > 0, across / np.where(length > 0, length, 1.0), 0.0)
+
+
+def noise_factor(nu: float) -> float:
+    """The scales' growth for the median noise ratio ``nu``:
+    ``min(max(1, (nu / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)``."""
+    return min(max(1.0, (nu / NOISE_TOLERATED) ** 2), NOISE_MAX_FACTOR)
+
+
+def grown_scales(scales: tuple[int, ...], factor: float) -> tuple[int, ...]:
+    """The scales times ``factor``, rounded half up."""
+    return tuple(math.floor(k * factor + 0.5) for k in scales)
 
 
 def _noise_factor(ratio: np.ndarray) -> float:
-    """:func:`noise_scale_factor` from the per-point ratios (n,)."""
+    """:func:`noise_factor` of the lower median of the per-point ratios (n,)."""
     at = (len(ratio) - 1) // 2
-    nu = float(np.partition(ratio, at)[at])
-    return min(max(1.0, (nu / NOISE_TOLERATED) ** 2), NOISE_MAX_FACTOR)
+    return noise_factor(float(np.partition(ratio, at)[at]))
 
 
 def _isolated_from_stats(points: np.ndarray, stats: _kernels.CloudStats) -> np.ndarray:
@@ -559,7 +578,7 @@ class RobustSetup:
                 noise = noise_scale_factor(self.points, self.neighbourhoods.indices, k0)
             factor = min(noise, len(self.points) / top)
             if factor > 1.0:
-                self.scales = tuple(math.floor(k * factor + 0.5) for k in self.scales)
+                self.scales = grown_scales(self.scales, factor)
                 self.neighbourhoods = build_neighbourhoods(
                     self.points, None, self.scales, workers=workers
                 )

@@ -65,7 +65,13 @@ def otsu_threshold(values: np.ndarray, bins: int = BINS) -> float:
         such as the all-zero output of a flat scale), so that no point passes unless it
         equals 1.
     """
-    counts = histogram(values, bins)
+    return otsu_from_histogram(histogram(values, bins))
+
+
+def otsu_from_histogram(counts: np.ndarray) -> float:
+    """:func:`otsu_threshold` from the histogram's counts (B,) int: the same threshold,
+    so that histograms summed over parts of the points give the whole's threshold."""
+    bins = len(counts)
     n = counts.sum()
     weighted = counts * (2 * np.arange(bins, dtype=np.int64) + 1)
     n0 = np.cumsum(counts)[:-1].astype(np.float64)

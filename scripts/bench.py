@@ -289,6 +289,94 @@ def run_one(
 # ----------------------------------------------------------------------------- driver
 
 
+# ----------------------------------------------------------------- out of core, Dask
+
+
+def write_cloud_ply(path: Path, points: np.ndarray) -> None:
+    """A binary PLY of double x, y, z (what the tiled runs memory-map)."""
+    header = (
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(points)}\n"
+        "property double x\nproperty double y\nproperty double z\nend_header\n"
+    )
+    with open(path, "wb") as fh:
+        fh.write(header.encode("ascii"))
+        for s in range(0, len(points), 1 << 20):
+            fh.write(np.ascontiguousarray(points[s : s + (1 << 20)], "<f8").tobytes())
+
+
+def run_tiled_one(path: Path, mode: str, how: str, out: Path) -> dict:
+    """One detection of the cloud at ``path`` in this process (call in a fresh
+    subprocess): ``how`` is "memory", "tiled:SIZE" or "dask:SIZE:CLUSTER". The mask,
+    strength and thresholds go to ``out`` (.npz) for the comparison."""
+    import meshlab_sharp
+
+    kwargs: dict = {}
+    if how.startswith("tiled:"):
+        kwargs["max_memory"] = how.split(":", 1)[1]
+    elif how.startswith("dask:"):
+        _, size, cluster = how.split(":", 2)
+        kwargs.update(max_memory=size, dask=cluster)
+    t = time.perf_counter()
+    result = meshlab_sharp.detect(str(path), mode=mode, **kwargs)
+    seconds = time.perf_counter() - t
+    np.savez(out, mask=result.mask, strength=result.strength, thresholds=result.thresholds)
+    tiling = result.tiling or {}
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
+    return {
+        "n": len(result.mask),
+        "mode": mode,
+        "how": how,
+        "seconds": seconds,
+        "points_per_s": len(result.mask) / seconds,
+        "peak_bytes": _rss_bytes(),
+        "worker_peak_bytes": max(
+            int(tiling.get("worker_peak_bytes", 0)), children if "dask" in how else 0
+        ),
+        "tiles": tiling.get("tiles"),
+        "features": result.n_features,
+    }
+
+
+def bench_tiled(sizes: list[int], modes: list[str], hows: list[str], out_json: str) -> int:
+    """In-memory, tiled and Dask runs of each size and mode; checks they agree."""
+    results = []
+    with tempfile.TemporaryDirectory(prefix="meshlab_sharp_bench_") as tmp:
+        for size in sizes:
+            path = Path(tmp) / f"cloud_{size}.ply"
+            write_cloud_ply(path, cad_cloud(size))
+            for mode in modes:
+                first = None
+                for how in hows:
+                    npz = Path(tmp) / f"r_{size}_{mode}_{len(results)}.npz"
+                    cmd = [sys.executable, __file__, "--tiled-one", str(path), mode, how, str(npz)]
+                    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+                    if proc.returncode != 0:
+                        print(proc.stderr, file=sys.stderr)
+                        return proc.returncode
+                    r = json.loads(proc.stdout.strip().splitlines()[-1])
+                    got = np.load(npz)
+                    if first is None:
+                        first = got
+                    r["identical_to_first"] = all(
+                        np.array_equal(got[k], first[k]) for k in ("mask", "strength", "thresholds")
+                    )
+                    r["load_average"] = os.getloadavg()[0]
+                    results.append(r)
+                    mb = (r["peak_bytes"] / 2**20, r["worker_peak_bytes"] / 2**20)
+                    print(
+                        f"{mode:6s} n={r['n']:>11,d} {how:24s} {r['seconds']:8.1f} s "
+                        f"{r['points_per_s'] / 1e3:7.0f}k pts/s peak {mb[0]:6.0f} MB"
+                        f" workers {mb[1]:6.0f} MB tiles {r['tiles']} "
+                        f"identical {r['identical_to_first']} load {r['load_average']:.1f}",
+                        flush=True,
+                    )
+            path.unlink()
+    Path(out_json).parent.mkdir(parents=True, exist_ok=True)
+    Path(out_json).write_text(json.dumps({"results": results, "cpus": os.cpu_count()}, indent=1))
+    print(f"wrote {out_json}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", default="100k,1M", help="comma-separated, e.g. 100k,1M,5M,20M")
@@ -298,7 +386,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="runs per size (best is reported)")
     ap.add_argument("--json", default="bench.json", help="where to write the results")
     ap.add_argument("--one", nargs=3, metavar=("N", "KIND", "WORKDIR"), help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--tiled",
+        metavar="RUNS",
+        help="out-of-core benchmark instead: comma-separated runs among memory, "
+        "tiled:SIZE, dask:SIZE:CLUSTER (e.g. memory,tiled:1GB,dask:1GB:local:2)",
+    )
+    ap.add_argument("--modes", default="paper,robust", help="modes of the --tiled runs")
+    ap.add_argument("--tiled-one", nargs=4, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+
+    if args.tiled_one:
+        path, mode, how, out = args.tiled_one
+        print(json.dumps(run_tiled_one(Path(path), mode, how, Path(out))))
+        return 0
+    if args.tiled:
+        sizes = [parse_size(s) for s in args.sizes.split(",")]
+        hows = _split_runs(args.tiled)
+        return bench_tiled(sizes, args.modes.split(","), hows, args.json)
 
     if args.one:
         n, kind, workdir = int(args.one[0]), args.one[1], Path(args.one[2])
@@ -327,6 +432,12 @@ def main(argv: list[str] | None = None) -> int:
     Path(args.json).write_text(json.dumps({"results": results, "cpus": os.cpu_count()}, indent=1))
     print(f"wrote {args.json}")
     return 0
+
+
+def _split_runs(text: str) -> list[str]:
+    """ "memory,tiled:1GB,dask:1GB:local:2" -> its runs (a Dask cluster may hold a comma
+    only in a tcp:// address, which has none)."""
+    return [part.strip() for part in text.split(",") if part.strip()]
 
 
 def _print(r: dict) -> None:

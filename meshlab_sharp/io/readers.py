@@ -36,7 +36,17 @@ _READERS: dict[str, _Reader] = {
     ".stl": read_stl,
     **dict.fromkeys(POINT_LIST_EXTENSIONS, read_point_list),
     **dict.fromkeys(CHILD_EXTENSIONS, read_with_pymeshlab),
+    **dict.fromkeys((".las", ".laz", ".e57"), lambda p, name: _read_scanner(p)),
 }
+
+
+def _read_scanner(path: Path) -> tuple[np.ndarray, None]:
+    """A LAS/LAZ (laspy) or E57 (pye57) scan, read in blocks; the optional extras ``las``
+    and ``e57``."""
+    from .stream import open_points
+
+    source = open_points(path)
+    return np.concatenate(list(source.blocks(1 << 20))), None
 
 
 def load(path: str | os.PathLike[str], *, as_points: bool = False) -> Geometry:

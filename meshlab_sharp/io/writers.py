@@ -323,16 +323,21 @@ def add_vertex_attribute(mesh: pymeshlab.Mesh, name: str, values: np.ndarray) ->
     return candidate
 
 
+#: Mask entries per block when writing indices.
+INDEX_BLOCK = 1 << 22
+
+
 def save_indices(
     path: str | os.PathLike[str], mask: np.ndarray, *, into: OutputSet | None = None
 ) -> Path:
     """Write the 0-based indices of the features, one per line (``mask``: (n,) bool;
     ``into``: see :func:`atomic_write`)."""
-    idx = np.flatnonzero(mask)
 
     def write(tmp: str) -> None:
         with open(tmp, "w", encoding="ascii") as fh:
-            fh.writelines(f"{i}\n" for i in idx)
+            for start in range(0, len(mask), INDEX_BLOCK):
+                idx = start + np.flatnonzero(mask[start : start + INDEX_BLOCK])
+                fh.writelines(f"{i}\n" for i in idx)
 
     return atomic_write(path, write, into=into)
 

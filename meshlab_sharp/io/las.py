@@ -1,0 +1,62 @@
+"""LAS and LAZ point clouds through laspy (``pip install 'meshlab-sharp[las]'``, which
+brings ``lazrs`` for LAZ), read in blocks: the coordinates are the scaled ones
+(``X * scale + offset``), in the file's point order."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .stream import PointSource
+
+
+def _laspy():
+    try:
+        import laspy
+    except ImportError:
+        raise InputError("reading LAS/LAZ needs laspy: pip install 'meshlab-sharp[las]'") from None
+    return laspy
+
+
+def las_points(path: str | os.PathLike[str]) -> PointSource:
+    """A LAS/LAZ file's points as a :class:`~meshlab_sharp.io.stream.PointSource`."""
+    laspy = _laspy()
+    p = Path(path)
+    try:
+        with laspy.open(p) as reader:
+            n = int(reader.header.point_count)
+    except Exception as exc:  # laspy raises its own and OS errors
+        raise InputError(f"{p}: cannot read the LAS/LAZ file: {exc}") from None
+
+    def blocks(size: int) -> Iterator[np.ndarray]:
+        with laspy.open(p) as reader:
+            for chunk in reader.chunk_iterator(size):
+                yield np.column_stack(
+                    [np.asarray(chunk.x), np.asarray(chunk.y), np.asarray(chunk.z)]
+                )
+
+    return PointSource(n, blocks, str(p))
+
+
+def read_las(path: str | os.PathLike[str]) -> np.ndarray:
+    """All points of a LAS/LAZ file, (n, 3) float64 in the file's order."""
+    source = las_points(path)
+    parts = list(source.blocks(1 << 20))
+    return np.concatenate(parts) if parts else np.zeros((0, 3))
+
+
+def write_las(path: str | os.PathLike[str], points: np.ndarray, *, scale: float = 1e-4) -> None:
+    """Write (n, 3) points to a LAS (``.las``) or LAZ (``.laz``) file, point format 0,
+    coordinates rounded to ``scale`` (tests, examples)."""
+    laspy = _laspy()
+    pts = np.asarray(points, np.float64)
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales = np.array([scale] * 3)
+    header.offsets = pts.min(axis=0) if len(pts) else np.zeros(3)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
+    las.write(str(path))

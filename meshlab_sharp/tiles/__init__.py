@@ -1,0 +1,420 @@
+"""Out-of-core and distributed detection of point clouds: spatial tiles with halos.
+
+``detect(cloud, max_memory="1GB")`` (CLI ``--max-memory 1GB``) and ``detect(cloud,
+dask="local:2")`` (CLI ``--dask``) come here. The cloud is sorted into tiles
+(:mod:`.layout`) on disk (:mod:`.store`); each mode is a sequence of steps
+(:mod:`.steps`) run tile by tile (:mod:`.run`): local steps on each tile's exact
+neighbourhoods (:mod:`.neighbours`, the halo proven wide enough per point) and
+pointwise steps, with the global quantities (min-max ranges, the 256-bin histograms
+that give Otsu's thresholds, counts) reduced exactly over the tiles. The result is the
+in-memory result, bit for bit: same features, strengths and thresholds.
+
+Point clouds only: a mesh's k-rings follow its faces, not space, and meshes are not
+tiled (an input with faces is an error unless ``as_points``).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .. import _kernels, robust
+from ..errors import InputError
+from ..io import Geometry
+from ..io.stream import PointSource, open_points
+from ..multiscale import DEFAULT_KNN_SCALES
+from ..normals import WEIGHTINGS
+from ..preprocessing import as_preprocessing
+from ..progress import Progress
+from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
+from .layout import build_layout
+from .neighbours import Query
+from .run import Runner, peak_rss
+from .select import order_statistic
+from .steps import (
+    Step,
+    paper_decide,
+    paper_distances,
+    paper_histograms,
+    robust_decide,
+    robust_isolated,
+    robust_nearest,
+    robust_noise,
+    robust_relative,
+    robust_support,
+    robust_thin,
+)
+from .store import Store
+
+if TYPE_CHECKING:
+    from ..pipeline import DetectionResult
+
+__all__ = ["PointSource", "detect_out_of_core", "detect_tiled", "parse_memory"]
+
+#: Bytes a point of a tile (with its halo) takes while its neighbourhoods are searched,
+#: beyond ``8 * k_max`` for the neighbour lists (measured, with a margin).
+BYTES_PER_POINT = 700
+#: Halo points per tile point assumed when sizing the tiles.
+HALO_FACTOR = 2.5
+#: Default memory of a tile task on a Dask worker without ``max_memory``.
+DASK_TILE_MEMORY = 1 << 30
+
+#: Memory of a Dask worker before its first tile (interpreter, numpy, scipy, dask).
+WORKER_BASELINE = 200 << 20
+#: Tile steps of each mode (progress bar).
+STEPS = {"paper": 3, "robust": 11}
+
+_UNITS = {"": 1, "B": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def parse_memory(text: str | int) -> int:
+    """``"1GB"``, ``"512M"``, ``"2.5 GiB"`` or a number of bytes -> bytes."""
+    if isinstance(text, int | np.integer) and not isinstance(text, bool):
+        value = int(text)
+    else:
+        m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([kKmMgGtT]?)(?:i?[bB])?\s*", str(text))
+        if m is None:
+            raise InputError(f"cannot read the memory size {text!r}; write e.g. 1GB or 512MB")
+        value = int(float(m.group(1)) * _UNITS[m.group(2).upper()])
+    if value <= 0:
+        raise InputError(f"the memory size must be positive, got {text!r}")
+    return value
+
+
+def detect_tiled(
+    source: PointSource | np.ndarray | Geometry,
+    *,
+    scales: tuple[int, ...],
+    weighting: str = "gaussian",
+    mode: str = "paper",
+    max_memory: str | int | None = None,
+    tile_points: int | None = None,
+    dask: str | Any = None,
+    scratch: str | os.PathLike[str] | None = None,
+    on_tile: Callable[[str, int, int], None] | None = None,
+    workers: int = -1,
+) -> dict[str, Any]:
+    """Detect the sharp features of a cloud tile by tile.
+
+    Parameters
+    ----------
+    source : PointSource, (n, 3) array or Geometry (its vertices)
+    scales : tuple of int
+        Increasing kNN scales (checked by the caller).
+    weighting, mode
+        As :func:`meshlab_sharp.detect`.
+    max_memory : str or int, optional
+        Peak memory to stay under ("1GB"); sizes the tiles.
+    tile_points : int, optional
+        Points per tile, instead of deriving it from ``max_memory`` (tests).
+    dask : str or dask.distributed.Client, optional
+        ``"local:N"`` (a LocalCluster of N single-thread worker processes),
+        ``"tcp://host:port"`` (a running scheduler) or a Client.
+    scratch : path, optional
+        Folder for the tiles' arrays (deleted afterwards); with a cluster on several
+        machines, a path that every worker reaches. Default: the system's temp folder.
+    on_tile : callable, optional
+        ``on_tile(label, done, n_tiles)`` after each tile task.
+    workers : int
+        Threads of the kNN search in each tile task.
+
+    Returns
+    -------
+    dict
+        ``mask`` (n,) bool, ``strength`` (n,) float64, ``kept`` (n,) bool in input
+        order; ``thresholds`` (s,), ``candidate_counts`` (s,), ``n_clean``, ``timings``,
+        and ``tiling`` (tiles, steps, tasks, halo, peak memory of this process and of
+        the workers).
+    """
+    if isinstance(source, Geometry):
+        source = PointSource.from_array(source.vertices, source.source)
+    elif isinstance(source, np.ndarray):
+        source = PointSource.from_array(source)
+    t0 = time.perf_counter()
+    k_max = max(scales)
+    limit = None if max_memory is None else parse_memory(max_memory)
+    if tile_points is None:
+        budget = limit if limit is not None else DASK_TILE_MEMORY
+        if dask is None:
+            budget -= _resident() + 10 * source.n
+        else:  # a worker's interpreter and imports
+            budget -= WORKER_BASELINE
+        # robust mode may grow the scales with the noise, up to NOISE_MAX_FACTOR-fold
+        k_most = k_max * (robust.NOISE_MAX_FACTOR if mode == "robust" else 1.0)
+        per_point = (BYTES_PER_POINT + 8 * k_most + 16 * len(scales)) * HALO_FACTOR
+        tile_points = int(budget / per_point)
+        if tile_points < 4 * k_max:
+            raise InputError(
+                f"--max-memory {max_memory}: too little memory for tiles of "
+                f"{source.n} points (this process already uses {_resident() >> 20} MB)"
+            )
+    chunk = int(min(max(tile_points, 65536), 1 << 20))
+    with ExitStack() as stack:
+        root = tempfile.mkdtemp(prefix="meshlab-sharp-tiles-", dir=scratch)
+        stack.callback(shutil.rmtree, root, True)
+        store = Store(root)
+        client = _client(dask, stack)
+        timings: dict[str, float] = {}
+        t = time.perf_counter()
+        layout = build_layout(
+            source.n,
+            lambda: source.blocks(chunk),
+            store,
+            tile_points=tile_points,
+            source=source.name,
+        )
+        timings["tiles"] = time.perf_counter() - t
+        if layout.n_clean < k_max:
+            raise InputError(
+                f"{source.name}: {layout.n_clean} distinct points, fewer than the largest "
+                f"scale k = {k_max}; use smaller --scales"
+            )
+        runner = Runner(
+            store,
+            layout,
+            most_points=int(HALO_FACTOR * tile_points),
+            workers=1 if client is not None and str(dask).startswith("local:") else workers,
+            on_tile=on_tile,
+            client=client,
+        )
+        t = time.perf_counter()
+        run = _paper if mode == "paper" else _robust
+        thresholds, counts, mask, kept, used = run(runner, store, layout, scales, weighting)
+        timings["detect"] = time.perf_counter() - t
+        t = time.perf_counter()
+        out = runner.finish(source.n, mask, kept)
+        timings["finish"] = time.perf_counter() - t
+        worker_peak = runner.peak if client is not None else 0
+    timings["total"] = time.perf_counter() - t0
+    out.update(
+        scales=used,
+        thresholds=thresholds,
+        candidate_counts=counts,
+        n_clean=layout.n_clean,
+        timings=timings,
+        tiling={
+            "tiles": layout.n_tiles,
+            "tile_points": tile_points,
+            "tasks": runner.tasks,
+            "largest_search": runner.gathered,
+            "streamed": runner.streamed,
+            "halo_max": float(runner.halos.max(initial=0.0)),
+            "peak_bytes": peak_rss(),
+            "worker_peak_bytes": worker_peak,
+            "max_memory": limit,
+            "dask": None if dask is None else str(dask),
+        },
+    )
+    return out
+
+
+def detect_out_of_core(
+    source: Any,
+    faces: np.ndarray | None,
+    *,
+    scales: Sequence[int] | int | None,
+    weighting: str,
+    as_points: bool,
+    mode: str,
+    return_details: bool,
+    progress: bool | Progress,
+    workers: int,
+    preprocessing: Any,
+    backend: str | None,
+    max_memory: str | int | None,
+    dask: Any,
+    scratch: str | os.PathLike[str] | None,
+) -> DetectionResult:
+    """:func:`meshlab_sharp.detect` with ``max_memory`` or ``dask``: checks what the
+    tiled run supports and returns its :class:`~meshlab_sharp.DetectionResult`."""
+    from ..pipeline import MODES, DetectionResult, _as_input, _check_scales
+
+    if weighting not in WEIGHTINGS:
+        raise InputError(f"unknown weighting {weighting!r}; choose from {', '.join(WEIGHTINGS)}")
+    if not isinstance(mode, str) or mode not in MODES:
+        raise InputError(f"unknown mode {mode!r}; choose from {', '.join(MODES)}")
+    if return_details:
+        raise InputError(
+            "return_details keeps per-scale arrays in memory: not with max_memory/dask"
+        )
+    steps = as_preprocessing(preprocessing)
+    if steps is not None and steps.active:
+        raise InputError(
+            "preprocessing runs pymeshlab on the whole input: not with max_memory/dask"
+        )
+    if _kernels.resolve(backend) != "compiled":
+        raise InputError("out-of-core detection needs the compiled kernels (backend 'compiled')")
+    t0 = time.perf_counter()
+    if isinstance(source, PointSource):
+        points = source
+    elif isinstance(source, str | os.PathLike):
+        if faces is not None:
+            raise InputError("faces are taken from the file; do not pass faces with a path")
+        points = open_points(source, as_points=as_points)
+    else:
+        geometry = _as_input(source, faces, as_points)
+        if geometry.is_mesh and not as_points:
+            raise InputError(
+                f"{geometry.source}: a mesh; out-of-core detection (max_memory, dask) "
+                "handles point clouds only: pass as_points=True, or no max_memory"
+            )
+        points = PointSource.from_array(geometry.vertices, geometry.source)
+    scales_t = _check_scales(scales, DEFAULT_KNN_SCALES, "points")
+    bar = progress if isinstance(progress, Progress) else Progress(1, enabled=bool(progress))
+
+    sized: list[bool] = []
+
+    def on_tile(label: str, done: int, total: int) -> None:
+        if not sized:  # one bar step per tile task
+            bar.total, bar.done = total * STEPS[mode] + 1, 0
+            sized.append(True)
+        bar.step(f"{label} {done}/{total}")
+
+    with _kernels.use_backend("compiled"):
+        out = detect_tiled(
+            points,
+            scales=scales_t,
+            weighting=weighting,
+            mode=mode,
+            max_memory=max_memory,
+            dask=dask,
+            scratch=scratch,
+            on_tile=on_tile,
+            workers=workers,
+        )
+    if not isinstance(progress, Progress):
+        bar.close()
+    timings = {"load": 0.0, **out["timings"]}
+    timings["total"] = time.perf_counter() - t0
+    return DetectionResult(
+        mask=out["mask"],
+        strength=out["strength"],
+        kind="points",
+        scales=out["scales"],
+        thresholds=out["thresholds"],
+        candidate_counts=out["candidate_counts"],
+        kept=out["kept"],
+        weighting=weighting,
+        n_clean=out["n_clean"],
+        timings=timings,
+        mode=mode,
+        tiling=out["tiling"],
+    )
+
+
+def _paper(
+    runner: Runner, store: Store, layout: Any, scales: tuple[int, ...], weighting: str
+) -> tuple[np.ndarray, np.ndarray, str, str | None, tuple[int, ...]]:
+    """The paper's method: distances, global min-max, histograms, decision."""
+    n, s = layout.n, len(scales)
+    store.create("pdis", (n, s), np.float64)
+    store.create("mask", (n,), bool)
+    store.create("strength", (n,), np.float64)
+    query = Query(max(scales), scales=scales, weighting=weighting)
+    ranges = runner.step(Step("distances", paper_distances, query, {"s": s}))
+    flat = FLAT_TOLERANCE * float(np.linalg.norm(layout.hi - layout.lo))
+    norm = {"lo": ranges["pdis_min"], "hi": ranges["pdis_max"], "flat": flat}
+    hist = runner.step(Step("histograms", paper_histograms, None, norm))["hist"]
+    thresholds = np.array([otsu_from_histogram(h) for h in hist])
+    decided = runner.step(Step("decide", paper_decide, None, {**norm, "thresholds": thresholds}))
+    return thresholds, decided["counts"], "mask", None, scales
+
+
+def _robust(
+    runner: Runner, store: Store, layout: Any, scales: tuple[int, ...], weighting: str
+) -> tuple[np.ndarray, np.ndarray, str, str | None, tuple[int, ...]]:
+    """Robust mode (:mod:`meshlab_sharp.robust`, :class:`~meshlab_sharp.robust.RobustSetup`)
+    on a cloud, step by step."""
+    n = layout.n
+    for name, shape, dtype in (
+        ("nn1", (n,), np.int64),
+        ("kd2", (n,), np.float64),
+        ("kid", (n,), np.int64),
+        ("kept", (n,), bool),
+        ("ratio", (n,), np.float64),
+        ("score", (n,), np.float64),
+        ("mask", (n,), bool),
+        ("strength", (n,), np.float64),
+        ("e", (n, 3), np.float64),
+        ("mask1", (n,), bool),
+        ("final", (n,), bool),
+    ):
+        store.create(name, shape, dtype)
+    runner.step(Step("nearest", robust_nearest, Query(max(scales))))
+    isolated = int(runner.step(Step("isolated", robust_isolated))["isolated"])
+    n_kept = layout.n_clean - isolated
+    if n_kept < max(scales):
+        raise InputError(
+            f"{n_kept} points are not isolated, fewer than the largest scale k = {max(scales)}"
+        )
+    k = min(robust.NOISE_KNN, max(scales))
+    runner.step(Step("noise", robust_noise, Query(k, kept="kept"), {"k": k}))
+    nu = order_statistic(runner, "ratio", "kept", (n_kept - 1) // 2)
+    factor = min(robust.noise_factor(nu), n_kept / max(scales))
+    if factor > 1.0:
+        scales = robust.grown_scales(scales, factor)
+    s, top = len(scales), max(scales)
+    store.create("r", (n, s), np.float64)
+    query = Query(top, kept="kept", scales=scales, weighting=weighting)
+    hist = runner.step(Step("relative", robust_relative, query, {"scales": scales}))["hist"]
+    thresholds = np.array([max(otsu_from_histogram(h), robust.R_MIN) for h in hist])
+    decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
+    support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
+    runner.step(Step("support", robust_support, Query(top, "kept", "mask"), support))
+    compare = min(robust.THIN_KNN, top)
+    runner.step(Step("thin", robust_thin, Query(compare, "kept", "mask1"), {"compare": compare}))
+    return thresholds, decided["counts"], "final", "kept", scales
+
+
+def _resident() -> int:
+    """Resident memory of this process now, bytes."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except OSError:
+        return peak_rss()
+
+
+def _client(dask: str | Any, stack: ExitStack) -> Any:
+    """A Dask client for ``dask`` (None: none); closed with ``stack``."""
+    if dask is None:
+        return None
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise InputError(
+            "--dask needs dask.distributed: pip install 'meshlab-sharp[dask]'"
+        ) from None
+    if not isinstance(dask, str):
+        return dask
+    if dask.startswith("local:"):
+        try:
+            n = int(dask.split(":", 1)[1])
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise InputError(f"--dask {dask}: write local:N with N >= 1 workers")
+        cluster = stack.enter_context(
+            LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address="127.0.0.1:0",
+                host="127.0.0.1",
+            )
+        )
+        return stack.enter_context(Client(cluster))
+    if dask.startswith("tcp://"):
+        try:
+            return stack.enter_context(Client(dask, timeout=30))
+        except OSError as exc:
+            raise InputError(f"--dask {dask}: cannot reach the scheduler: {exc}") from None
+    raise InputError(f"--dask {dask!r}: write local:N or tcp://HOST:PORT")

@@ -1,0 +1,197 @@
+"""Spatial tiles: the cloud sorted into boxes of about ``tile_points`` points each.
+
+Built in three streaming passes over the input, ``chunk`` points at a time:
+
+1. copy the coordinates (input order) to the store, checking that they are finite, and
+   take the bounding box;
+2. count the points in the cells of a ``GRID**3`` grid over the box;
+3. split the grid's cells into boxes of at most ``tile_points`` points (k-d splits at
+   the weighted median), then write every point's coordinates and input index to its
+   tile's range of positions, in increasing input index within a tile.
+
+Exact duplicates share their coordinates, hence their cell and tile: each tile merges
+its own duplicates into their first occurrence, which is the first occurrence in the
+whole input, exactly as the in-memory cleaning does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _kernels
+from ..errors import InputError
+from .store import Store
+
+#: Cells per axis of the grid the tiles are made of.
+GRID = 64
+
+
+@dataclass
+class Layout:
+    """Where every tile's points are.
+
+    Attributes
+    ----------
+    n : int
+        Input points.
+    lo, hi : (3,) float64
+        Bounding box of all points.
+    offsets : (t + 1,) int64
+        Tile ``i`` holds positions ``offsets[i]:offsets[i + 1]`` of the store's arrays.
+    boxes : (t, 2, 3) float64
+        Bounding box of each tile's points (min row, max row).
+    n_clean : int
+        Distinct points.
+    """
+
+    n: int
+    lo: np.ndarray
+    hi: np.ndarray
+    offsets: np.ndarray
+    boxes: np.ndarray
+    n_clean: int
+
+    @property
+    def n_tiles(self) -> int:
+        """Number of (non-empty) tiles."""
+        return len(self.offsets) - 1
+
+    def counts(self) -> np.ndarray:
+        """Points (with duplicates) in each tile, shape (t,)."""
+        return np.diff(self.offsets)
+
+    def tiles_meeting(self, blo: np.ndarray, bhi: np.ndarray) -> np.ndarray:
+        """Tiles whose box meets the box ``[blo, bhi]``, shape (r,) int."""
+        meet = np.all((self.boxes[:, 0] <= bhi) & (self.boxes[:, 1] >= blo), axis=1)
+        return np.flatnonzero(meet)
+
+
+def build_layout(
+    n: int,
+    chunks: Callable[[], Iterator[np.ndarray]],
+    store: Store,
+    *,
+    tile_points: int,
+    source: str,
+) -> Layout:
+    """Sort the input into tiles; fills the store's ``coords`` (n, 3), ``ids`` (n,) and
+    ``rep`` (n,) (position of each point's first occurrence) in tile order.
+
+    Parameters
+    ----------
+    n : int
+        Number of input points.
+    chunks : callable
+        ``chunks()`` yields the input's coordinates, (c, 3) float64 blocks in order;
+        called three times.
+    store : Store
+    tile_points : int
+        Most points of a tile (a tile that is one grid cell may hold more).
+    source : str
+        Name of the input, for error messages.
+    """
+    if n == 0:
+        raise InputError(f"{source}: no points")
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    seen = 0
+    for block in chunks():
+        if not np.isfinite(block).all():
+            bad = seen + int(np.flatnonzero(~np.isfinite(block).all(axis=1))[0])
+            raise InputError(f"{source}: point {bad} has a non-finite coordinate")
+        lo = np.minimum(lo, block.min(axis=0))
+        hi = np.maximum(hi, block.max(axis=0))
+        seen += len(block)
+    if seen != n:
+        raise InputError(f"{source}: {seen} points read, the header says {n}")
+    cells = np.zeros(GRID**3, np.int64)
+    for block in chunks():
+        cells += np.bincount(_cells(block, lo, hi), minlength=GRID**3)
+    leaves = _split(cells.reshape(GRID, GRID, GRID), tile_points)
+    table = np.full((GRID, GRID, GRID), -1, np.int64)
+    grid_counts = cells.reshape(GRID, GRID, GRID)
+    sizes = []
+    for t, (clo, chi) in enumerate(leaves):
+        box = (slice(clo[0], chi[0]), slice(clo[1], chi[1]), slice(clo[2], chi[2]))
+        table[box] = t
+        sizes.append(int(grid_counts[box].sum()))
+    table = table.reshape(-1)
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    store.create("coords", (n, 3), np.float64)
+    store.create("ids", (n,), np.int64)
+    store.create("rep", (n,), np.int64)
+    cursor = offsets[:-1].copy()
+    start = 0
+    for block in chunks():
+        tile = table[_cells(block, lo, hi)]
+        order = np.argsort(tile, kind="stable")
+        ts = tile[order]
+        first = np.searchsorted(ts, ts, side="left")
+        pos = cursor[ts] + (np.arange(len(ts)) - first)
+        cursor += np.bincount(tile, minlength=len(sizes))
+        store.write_at("coords", pos, block[order])
+        store.write_at("ids", pos, start + order)
+        start += len(block)
+    boxes = np.empty((len(sizes), 2, 3))
+    n_clean = 0
+    for t in range(len(sizes)):
+        a, b = int(offsets[t]), int(offsets[t + 1])
+        pts = store.read("coords", a, b)
+        boxes[t, 0], boxes[t, 1] = pts.min(axis=0), pts.max(axis=0)
+        to_first, from_first = _kernels.merge_duplicates(pts)
+        store.write("rep", a, a + to_first[from_first])
+        n_clean += len(to_first)
+    return Layout(n, lo, hi, offsets, boxes, n_clean)
+
+
+def _cells(block: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Grid cell (flat index) of each point of ``block`` (c, 3)."""
+    extent = np.where(hi > lo, hi - lo, 1.0)
+    c = np.floor((block - lo) / extent * GRID).astype(np.int64)
+    np.clip(c, 0, GRID - 1, out=c)
+    return (c[:, 0] * GRID + c[:, 1]) * GRID + c[:, 2]
+
+
+def _split(counts: np.ndarray, most: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Boxes of cells ``[lo, hi)`` holding at most ``most`` points each (single cells
+    excepted), empty boxes left out; k-d splits of the longest side at the median."""
+    prefix = np.zeros(tuple(s + 1 for s in counts.shape), np.int64)
+    prefix[1:, 1:, 1:] = counts.cumsum(0).cumsum(1).cumsum(2)
+
+    def total(lo: np.ndarray, hi: np.ndarray) -> int:
+        x0, y0, z0 = lo
+        x1, y1, z1 = hi
+        p = prefix
+        return int(
+            p[x1, y1, z1] - p[x0, y1, z1] - p[x1, y0, z1] - p[x1, y1, z0]
+            + p[x0, y0, z1] + p[x0, y1, z0] + p[x1, y0, z0] - p[x0, y0, z0]
+        )  # fmt: skip
+
+    out: list[tuple[np.ndarray, np.ndarray]] = []
+    stack = [(np.zeros(3, np.int64), np.array(counts.shape, np.int64))]
+    while stack:
+        lo, hi = stack.pop()
+        count = total(lo, hi)
+        if count == 0:
+            continue
+        side = hi - lo
+        if count <= most or side.max() == 1:
+            out.append((lo, hi))
+            continue
+        axis = int(np.argmax(side))
+        below = []
+        for c in range(lo[axis] + 1, hi[axis]):
+            h = hi.copy()
+            h[axis] = c
+            below.append(total(lo, h))
+        cut = lo[axis] + 1 + int(np.searchsorted(np.array(below), count / 2.0))
+        cut = min(max(cut, lo[axis] + 1), hi[axis] - 1)
+        left_hi, right_lo = hi.copy(), lo.copy()
+        left_hi[axis] = right_lo[axis] = cut
+        stack.append((right_lo, hi))
+        stack.append((lo, left_hi))
+    out.sort(key=lambda box: tuple(box[0]))
+    return out

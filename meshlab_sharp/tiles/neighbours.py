@@ -1,0 +1,348 @@
+"""Exact k nearest neighbours of a tile's points, from the tile and a halo around it.
+
+A point's k nearest neighbours found among the points of a box are its k nearest in the
+whole cloud when the ball of its k-th neighbour distance lies inside the box: every
+point outside the box is then farther than the k-th. This is checked for every point
+(with a relative margin of 1e-9 against rounding). Where it fails the halo is widened
+to hold the failing points' balls (their distance inside the box bounds the true one
+from above) and the search is run again. Points whose balls would need a box of more
+than ``most_points`` points (far outliers) take a streaming route instead: every tile
+near enough is searched in turn and the k best kept, then their neighbourhood is
+computed on exactly those k points.
+
+The points of a box are ordered by input index, which is the cleaned order, so that
+ties in distance are broken as in the in-memory run; the neighbour lists, projected
+distances and everything computed from them are then bit for bit the same.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .. import _kernels
+from ..errors import InputError
+from ..neighbourhoods import Neighbourhood, _knn_block, squared_distances
+from .layout import Layout
+from .store import Store
+
+#: Relative margin of the ball-in-box test.
+MARGIN = 1e-9
+#: Widenings of a tile's halo before its failing points take the streaming route.
+ROUNDS = 4
+
+
+@dataclass(frozen=True)
+class Query:
+    """What neighbourhoods a step needs.
+
+    Attributes
+    ----------
+    k : int
+        Neighbours per point (the point itself first).
+    kept : str or None
+        Store array (bool) of the points searched; None: every distinct point.
+    rows : str or None
+        Store array (bool) of the points whose neighbours are needed; None: every
+        searched point.
+    scales : tuple of int or None
+        Also the projected distances at these kNN scales (``k == max(scales)``).
+    weighting : str
+    """
+
+    k: int
+    kept: str | None = None
+    rows: str | None = None
+    scales: tuple[int, ...] | None = None
+    weighting: str = "gaussian"
+
+
+@dataclass
+class Context:
+    """Exact neighbourhoods of some points (the rows) inside a set of points.
+
+    Attributes
+    ----------
+    store : Store
+    points : (L, 3) float64
+        The set, in increasing input index.
+    pos : (L,) int64
+        Store positions of the set's points.
+    rows : (r,) int64
+        Increasing local indices of the points whose neighbourhoods are exact.
+    idx : (r, k) int64
+        Local indices of their k nearest, sorted by (squared distance, input index).
+    pdis : (r, s) float64 or None
+        Their projected distances at the query's scales.
+    """
+
+    store: Store
+    points: np.ndarray
+    pos: np.ndarray
+    rows: np.ndarray
+    idx: np.ndarray
+    pdis: np.ndarray | None = None
+
+    def gather(self, name: str) -> np.ndarray:
+        """Store array ``name`` at the set's points, (L, ...)."""
+        return self.store.read_at(name, self.pos)
+
+    def lists(self, k: int, part: slice = slice(None)) -> Neighbourhood:
+        """CSR lists over the whole set: the k nearest of the rows (of ``rows[part]``),
+        empty lists for the other points."""
+        sizes = np.zeros(len(self.points), np.int64)
+        sizes[self.rows[part]] = k
+        indptr = np.concatenate([[0], np.cumsum(sizes)])
+        return Neighbourhood(indptr, np.ascontiguousarray(self.idx[part, :k]).reshape(-1))
+
+    @property
+    def own(self) -> np.ndarray:
+        """Store positions of the rows, (r,)."""
+        return self.pos[self.rows]
+
+
+def gather(
+    store: Store,
+    layout: Layout,
+    tiles: np.ndarray,
+    blo: np.ndarray,
+    bhi: np.ndarray,
+    kept: str | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Distinct (and kept) points of ``tiles`` inside ``[blo, bhi]``.
+
+    Returns
+    -------
+    pos : (L,) int64, points : (L, 3) float64, ids : (L,) int64
+        In increasing input index.
+    """
+    parts = []
+    for t in tiles:
+        a, b = int(layout.offsets[t]), int(layout.offsets[t + 1])
+        pts = store.read("coords", a, b)
+        use = np.all((pts >= blo) & (pts <= bhi), axis=1)
+        use &= store.read("rep", a, b) == np.arange(a, b)
+        if kept is not None:
+            use &= store.read(kept, a, b)
+        where = np.flatnonzero(use)
+        parts.append((a + where, pts[where], store.read("ids", a, b)[where]))
+    if not parts:
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64)
+    pos = np.concatenate([p[0] for p in parts])
+    points = np.concatenate([p[1] for p in parts])
+    ids = np.concatenate([p[2] for p in parts])
+    order = np.argsort(ids, kind="stable")
+    return pos[order], points[order], ids[order]
+
+
+def _search(
+    points: np.ndarray, rows: np.ndarray, query: Query, all_rows: bool, workers: int
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """k nearest (and projected distances) of ``rows`` within ``points``."""
+    k = query.k
+    if query.scales is not None or all_rows:
+        grid = _kernels.build_grid(points, k)
+        if query.scales is not None:
+            idx, pdis = _kernels.cloud_knn_projected_distances(
+                grid, query.scales, query.weighting, workers
+            )
+            return idx[rows], np.ascontiguousarray(pdis[:, rows].T)
+        return _kernels.cloud_knn(grid, k, workers)[rows], None
+    tree = cKDTree(points)
+    return _knn_block(tree, points, rows, k, workers).astype(np.int64), None
+
+
+def neighbours(
+    store: Store,
+    layout: Layout,
+    tile: int,
+    query: Query,
+    *,
+    halo: float,
+    most_points: int,
+    workers: int = -1,
+) -> tuple[list[Context], float, int, int]:
+    """Exact neighbourhoods of the tile's rows.
+
+    Parameters
+    ----------
+    store, layout
+    tile : int
+    query : Query
+    halo : float
+        The first halo width to try.
+    most_points : int
+        Largest box (points, duplicates included) a widening may reach.
+    workers : int
+
+    Returns
+    -------
+    contexts : list of Context
+        One for the tile (rows whose balls fit), one per point of the streaming route.
+    halo : float
+        The halo that held the tile's points.
+    gathered : int
+        Most points searched at once.
+    streamed : int
+        Rows that took the streaming route.
+    """
+    a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
+    lo0, hi0 = layout.boxes[tile]
+    diag = float(np.linalg.norm(layout.hi - layout.lo)) or 1.0
+    h = float(halo)
+    biggest = 0
+    last = None
+    for _ in range(ROUNDS):
+        blo, bhi = lo0 - h, hi0 + h
+        full = bool(np.all(blo <= layout.lo) and np.all(bhi >= layout.hi))
+        pos, points, _ = gather(store, layout, layout.tiles_meeting(blo, bhi), blo, bhi, query.kept)
+        if last is not None and len(points) > most_points:
+            break
+        rows = _rows(store, pos, a, b, query)
+        if len(rows) == 0:
+            return [], h, biggest, 0
+        if len(points) < query.k:
+            if full:
+                raise InputError(
+                    f"{len(points)} points left, fewer than the largest scale k = {query.k}"
+                )
+            h = max(2.0 * h, float(np.linalg.norm(hi0 - lo0)), 1e-3 * diag)
+            continue
+        biggest = max(biggest, len(points))
+        idx, pdis = _search(points, rows, query, query.rows is None, workers)
+        r = np.sqrt(squared_distances(points[idx[:, -1]], points[rows]))
+        need = r * (1.0 + MARGIN) + 1e-300
+        if full:
+            ok = np.ones(len(rows), bool)
+        else:
+            p = points[rows]
+            ok = need < np.minimum(p - blo, bhi - p).min(axis=1)
+        last = (pos, points, rows, idx, pdis, ok, r, h)
+        if ok.all():
+            return [Context(store, points, pos, rows, idx, pdis)], h, biggest, 0
+        p, nd = points[rows[~ok]], need[~ok][:, None]
+        want = float(np.max(np.maximum(lo0 - (p - nd), (p + nd) - hi0)))
+        h = max(want * (1.0 + 1e-6), h * 1.01 + 1e-12 * diag)
+    contexts: list[Context] = []
+    h = h if last is None else last[-1]
+    if last is None:  # too few points near the tile: all its rows take the streaming route
+        pos, points, _ = gather(store, layout, np.array([tile]), lo0, hi0, query.kept)
+        rows = _rows(store, pos, a, b, query)
+        upper = np.full(len(rows), np.inf)
+    else:
+        pos, points, rows, idx, pdis, ok, r, _ = last
+        keep = np.flatnonzero(ok)
+        if len(keep):
+            sub = None if pdis is None else pdis[keep]
+            contexts.append(Context(store, points, pos, rows[keep], idx[keep], sub))
+        rows, upper = rows[~ok], r[~ok]
+    contexts.extend(streamed(store, layout, pos[rows], points[rows], upper, query, workers))
+    return contexts, h, biggest, len(rows)
+
+
+def _rows(store: Store, pos: np.ndarray, a: int, b: int, query: Query) -> np.ndarray:
+    """Local indices of the points at ``pos`` that are the tile's (positions a..b) rows."""
+    own = (pos >= a) & (pos < b)
+    if query.rows is not None:
+        own &= store.read_at(query.rows, pos).astype(bool)
+    return np.flatnonzero(own)
+
+
+def streamed(
+    store: Store,
+    layout: Layout,
+    pos: np.ndarray,
+    points: np.ndarray,
+    upper: np.ndarray,
+    query: Query,
+    workers: int = -1,
+) -> list[Context]:
+    """Exact neighbourhoods of a few points, tile by tile (the streaming route).
+
+    Parameters
+    ----------
+    pos : (f,) int64
+        Store positions of the points.
+    points : (f, 3) float64
+    upper : (f,) float64
+        Upper bounds of their k-th neighbour distances (inf: unknown).
+    query : Query
+
+    Returns
+    -------
+    list of Context
+        One per point, on exactly its k nearest (itself included).
+    """
+    f, k = len(pos), query.k
+    if f == 0:
+        return []
+    best_d2 = np.full((f, k), np.inf)
+    best_id = np.full((f, k), np.iinfo(np.int64).max)
+    best_pos = np.full((f, k), -1, np.int64)
+    bound = upper.astype(np.float64).copy()
+    centre = points.mean(axis=0)
+    near = np.maximum(0.0, np.maximum(layout.boxes[:, 0] - centre, centre - layout.boxes[:, 1]))
+    for t in np.argsort((near * near).sum(axis=1), kind="stable"):
+        lo, hi = layout.boxes[t]
+        gap = np.maximum(0.0, np.maximum(lo - points, points - hi))
+        reach = np.sqrt((gap * gap).sum(axis=1)) <= bound * (1.0 + MARGIN)
+        if not reach.any():
+            continue
+        tpos, tpts, tids = gather(store, layout, np.array([t]), lo, hi, query.kept)
+        if len(tpos) == 0:
+            continue
+        tree = cKDTree(tpts)
+        which = np.flatnonzero(reach)
+        kq = min(k + 1, len(tpts))
+        _, cand = tree.query(points[which], kq)
+        cand = cand.reshape(len(which), kq)
+        d2 = squared_distances(tpts[cand], points[which][:, None, :])
+        ids = tids[cand]
+        order = np.lexsort((ids, d2), axis=-1)
+        d2, cand = np.take_along_axis(d2, order, -1), np.take_along_axis(cand, order, -1)
+        tied = np.zeros(len(which), bool) if kq <= k else d2[:, k - 1] == d2[:, k]
+        for j in np.flatnonzero(tied):  # a tie across the k-th place: all of it, exactly
+            i = which[j]
+            ball = np.asarray(tree.query_ball_point(points[i], np.sqrt(d2[j, k - 1]) * 1.000001))
+            _merge(best_d2, best_id, best_pos, i, squared_distances(tpts[ball], points[i]),
+                   tids[ball], tpos[ball])  # fmt: skip
+        plain = ~tied
+        rows = which[plain]
+        cand = cand[plain, : min(k, kq)]
+        _merge(best_d2, best_id, best_pos, rows, d2[plain, : min(k, kq)], tids[cand], tpos[cand])
+        done = np.isfinite(best_d2[which, -1])
+        bound[which[done]] = np.minimum(bound[which[done]], np.sqrt(best_d2[which[done], -1]))
+    out = []
+    for i in range(f):
+        if best_pos[i, -1] < 0:
+            raise InputError(f"fewer than the largest scale k = {k} points left")
+        order = np.argsort(best_id[i], kind="stable")
+        mpos = best_pos[i][order]
+        mpts = store.read_at("coords", mpos)
+        row = np.flatnonzero(mpos == pos[i])
+        idx, pdis = _search(mpts, row, query, True, workers)
+        out.append(Context(store, mpts, mpos, row, idx, pdis))
+    return out
+
+
+def _merge(
+    best_d2: np.ndarray,
+    best_id: np.ndarray,
+    best_pos: np.ndarray,
+    rows: np.ndarray | int,
+    d2: np.ndarray,
+    ids: np.ndarray,
+    pos: np.ndarray,
+) -> None:
+    """Keep the k best by (squared distance, input index) of the current best of
+    ``rows`` and new candidates (same leading shape as ``best_*[rows]``)."""
+    k = best_d2.shape[1]
+    all_d2 = np.concatenate([best_d2[rows], d2], axis=-1)
+    all_id = np.concatenate([best_id[rows], ids], axis=-1)
+    all_pos = np.concatenate([best_pos[rows], pos], axis=-1)
+    order = np.lexsort((all_id, all_d2), axis=-1)[..., :k]
+    best_d2[rows] = np.take_along_axis(all_d2, order, -1)
+    best_id[rows] = np.take_along_axis(all_id, order, -1)
+    best_pos[rows] = np.take_along_axis(all_pos, order, -1)

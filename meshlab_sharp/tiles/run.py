@@ -1,0 +1,178 @@
+"""Running the steps over the tiles: one after another, or as Dask tasks.
+
+A tile task is :func:`tile_task` (a module-level function of picklable arguments), so
+that it runs the same in this process or on a Dask worker; the partials it returns are
+reduced with :func:`meshlab_sharp.tiles.steps.combine`, locally or as a Dask tree
+reduction.
+"""
+
+from __future__ import annotations
+
+import resource
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .. import _kernels
+from .layout import Layout
+from .neighbours import neighbours
+from .steps import Partial, Span, Step, combine, finish
+from .store import Store
+
+
+def peak_rss() -> int:
+    """Peak resident memory of this process so far, bytes."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(peak) * (1 if sys.platform == "darwin" else 1024)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a tile task returns: the partial, the halo that held, points searched, rows
+    that took the streaming route, the process's peak memory."""
+
+    partial: Partial
+    halo: float
+    gathered: int
+    streamed: int
+    peak: int
+
+
+def tile_task(
+    step: Step,
+    store: Store,
+    layout: Layout,
+    tile: int,
+    halo: float,
+    most_points: int,
+    workers: int,
+    backend: str,
+) -> Outcome:
+    """Run ``step`` on one tile."""
+    with _kernels.use_backend(backend):
+        if step.query is None:
+            a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
+            partial = step.fn(Span(store, a, b), **step.params)
+            return Outcome(partial, halo, b - a, 0, peak_rss())
+        contexts, used, gathered, streamed = neighbours(
+            store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
+        )
+        partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
+        return Outcome(partial, used, gathered, streamed, peak_rss())
+
+
+def finish_task(store: Store, layout: Layout, tile: int, mask: str, kept: str | None) -> dict:
+    """:func:`meshlab_sharp.tiles.steps.finish` of one tile."""
+    a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
+    return finish(Span(store, a, b), mask=mask, kept=kept)
+
+
+class Runner:
+    """Runs steps on every tile and reduces their partials.
+
+    Parameters
+    ----------
+    store, layout
+    most_points : int
+        Largest box a halo may widen to.
+    workers : int
+        Threads of each tile's kNN search.
+    on_tile : callable, optional
+        ``on_tile(label, tile, n_tiles)`` after each tile (progress).
+    client : dask.distributed.Client, optional
+        Run the tiles as Dask tasks on this client.
+    """
+
+    def __init__(
+        self,
+        store: Store,
+        layout: Layout,
+        *,
+        most_points: int,
+        workers: int,
+        on_tile: Callable[[str, int, int], None] | None = None,
+        client: Any = None,
+    ) -> None:
+        self.store = store
+        self.layout = layout
+        self.most_points = most_points
+        self.workers = workers
+        self.on_tile = on_tile
+        self.client = client
+        self.halos = np.zeros(layout.n_tiles)
+        self.peak = 0
+        self.tasks = 0
+        self.gathered = 0
+        self.streamed = 0
+        self.backend = _kernels.default_backend()
+
+    def step(self, step: Step) -> Partial:
+        """Run ``step`` on every tile; the reduced partial."""
+        n = self.layout.n_tiles
+        args = (self.most_points, self.workers, self.backend)
+        if self.client is None:
+            outcomes = []
+            guess = float(self.halos.max(initial=0.0))
+            for t in range(n):
+                halo = self.halos[t] if self.halos[t] > 0 else guess
+                outcomes.append(tile_task(step, self.store, self.layout, t, halo, *args))
+                guess = max(guess, outcomes[-1].halo) if step.query is not None else guess
+                if self.on_tile is not None:
+                    self.on_tile(step.label, t + 1, n)
+            reduced = combine([o.partial for o in outcomes])
+        else:
+            futures = [
+                self.client.submit(
+                    tile_task, step, self.store, self.layout, t, self.halos[t], *args, pure=False
+                )
+                for t in range(n)
+            ]
+            partials = [self.client.submit(_partial, f) for f in futures]
+            total = self.client.submit(_combine_all, partials)
+            from dask.distributed import as_completed
+
+            for done, f in enumerate(as_completed(futures), start=1):
+                f.result()
+                if self.on_tile is not None:
+                    self.on_tile(step.label, done, n)
+            outcomes = self.client.gather(futures)
+            reduced = total.result()
+        for t, o in enumerate(outcomes):
+            self.halos[t] = max(self.halos[t], o.halo)
+            self.peak = max(self.peak, o.peak)
+            self.gathered = max(self.gathered, o.gathered)
+            self.streamed += o.streamed
+        self.tasks += n
+        return reduced
+
+    def finish(self, n: int, mask: str, kept: str | None) -> dict[str, np.ndarray]:
+        """Per input point (input order): mask, strength, kept."""
+        out = {
+            "mask": np.zeros(n, bool),
+            "strength": np.zeros(n),
+            "kept": np.zeros(n, bool),
+        }
+        tiles = range(self.layout.n_tiles)
+        if self.client is None:
+            parts = (finish_task(self.store, self.layout, t, mask, kept) for t in tiles)
+        else:
+            futures = [
+                self.client.submit(finish_task, self.store, self.layout, t, mask, kept)
+                for t in tiles
+            ]
+            parts = (f.result() for f in futures)
+        for part in parts:
+            for key in ("mask", "strength", "kept"):
+                out[key][part["ids"]] = part[key]
+        return out
+
+
+def _partial(outcome: Outcome) -> Partial:
+    return outcome.partial
+
+
+def _combine_all(parts: list[Partial]) -> Partial:
+    return combine(parts)

@@ -1,0 +1,233 @@
+"""Each mode as a sequence of steps over the tiles.
+
+A step is either *local*: a function of the exact neighbourhoods of the tile's points
+(:class:`~meshlab_sharp.tiles.neighbours.Context`) that writes per-point values to the
+store; or *pointwise*: a function of the store's values on the tile's positions. Both
+return a small *partial* (dict of arrays) that the driver, or Dask, reduces over the
+tiles: keys ending in ``_min``/``_max`` by minimum/maximum, the others by sum. Between
+steps the reduced values (min-max ranges, the 256-bin histograms and so Otsu's
+thresholds) are fixed, exactly as the in-memory run computes them from all points.
+
+The arithmetic is the in-memory modules' own functions (:mod:`meshlab_sharp.threshold`,
+:mod:`meshlab_sharp.robust`) applied to the same values, never a copy of them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
+
+import numpy as np
+
+from .. import robust
+from ..neighbourhoods import squared_distances
+from ..threshold import BINS, histogram
+from .neighbours import Context, Query
+from .store import Store
+
+Partial = dict[str, np.ndarray]
+#: Neighbour entries (rows * k) per block of the local scale's computation.
+ENTRIES_PER_BLOCK = 1 << 20
+
+
+@dataclass(frozen=True)
+class Span:
+    """The tile's positions ``a:b`` in the store, for a pointwise step."""
+
+    store: Store
+    a: int
+    b: int
+
+    def read(self, name: str) -> np.ndarray:
+        """Store array ``name`` on the span."""
+        return self.store.read(name, self.a, self.b)
+
+    @property
+    def distinct(self) -> np.ndarray:
+        """Span-relative indices of the distinct points (first occurrences)."""
+        return np.flatnonzero(self.read("rep") == np.arange(self.a, self.b))
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step: ``fn(ctx_or_span, **params) -> Partial``; ``query`` None: pointwise."""
+
+    label: str
+    fn: Callable[..., Partial]
+    query: Query | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+def combine(parts: list[Partial]) -> Partial:
+    """Reduce partials: ``*_min`` by minimum, ``*_max`` by maximum, ``*_cat`` by
+    concatenation, others by sum."""
+    out: Partial = {}
+    for part in parts:
+        for key, value in part.items():
+            if key not in out:
+                out[key] = np.array(value)
+            elif key.endswith("_cat"):
+                out[key] = np.concatenate([out[key], value])
+            elif key.endswith("_min"):
+                out[key] = np.minimum(out[key], value)
+            elif key.endswith("_max"):
+                out[key] = np.maximum(out[key], value)
+            else:
+                out[key] = out[key] + value
+    return out
+
+
+# ----------------------------------------------------------------------------- paper
+
+
+def paper_distances(ctx: Context, *, s: int) -> Partial:
+    """Projected distances (r, s) of the rows to ``pdis``; their per-scale min and max."""
+    assert ctx.pdis is not None
+    ctx.store.write_at("pdis", ctx.own, ctx.pdis)
+    return {"pdis_min": ctx.pdis.min(axis=0), "pdis_max": ctx.pdis.max(axis=0)}
+
+
+def _normalised(pdis: np.ndarray, lo: np.ndarray, hi: np.ndarray, flat: float) -> np.ndarray:
+    """:func:`meshlab_sharp.threshold.normalise` of each scale (column) with the global
+    ``lo``, ``hi``: the same expression, value by value."""
+    out = np.zeros_like(pdis)
+    for i in range(pdis.shape[1]):
+        lo_i, hi_i = float(lo[i]), float(hi[i])
+        if not hi_i - lo_i <= flat:
+            out[:, i] = (pdis[:, i] - lo_i) / (hi_i - lo_i)
+    return out
+
+
+def paper_histograms(span: Span, *, lo: np.ndarray, hi: np.ndarray, flat: float) -> Partial:
+    """256-bin histograms (s, B) of the normalised distances."""
+    v = _normalised(span.read("pdis")[span.distinct], lo, hi, flat)
+    return {"hist": np.stack([histogram(v[:, i], BINS) for i in range(v.shape[1])])}
+
+
+def paper_decide(
+    span: Span, *, lo: np.ndarray, hi: np.ndarray, flat: float, thresholds: np.ndarray
+) -> Partial:
+    """Candidates at every scale: ``mask`` and ``strength``; candidates per scale."""
+    d = span.distinct
+    candidate = _normalised(span.read("pdis")[d], lo, hi, flat) >= thresholds
+    return _decided(span, d, candidate)
+
+
+def _decided(span: Span, d: np.ndarray, candidate: np.ndarray) -> Partial:
+    votes = candidate.sum(axis=1)
+    s = candidate.shape[1]
+    span.store.write_at("mask", span.a + d, votes == s)
+    span.store.write_at("strength", span.a + d, votes / float(s))
+    return {"counts": candidate.sum(axis=0).astype(np.int64)}
+
+
+# ---------------------------------------------------------------------------- robust
+
+
+def robust_nearest(ctx: Context) -> Partial:
+    """Each row's nearest neighbour (position), k-th neighbour distance and index."""
+    store = ctx.store
+    far = ctx.idx[:, -1]
+    store.write_at("nn1", ctx.own, ctx.pos[ctx.idx[:, 1]])
+    store.write_at("kd2", ctx.own, squared_distances(ctx.points[far], ctx.points[ctx.rows]))
+    store.write_at("kid", ctx.own, store.read_at("ids", ctx.pos[far]))
+    return {}
+
+
+def robust_isolated(span: Span) -> Partial:
+    """:func:`meshlab_sharp.robust.isolated_points`: ``i`` is isolated when it is not
+    among the k nearest of its nearest ``j``, i.e. when ``(d2(j, i), i)`` comes after
+    ``j``'s k-th neighbour in the (squared distance, index) order. Writes ``kept``."""
+    d = span.distinct
+    pos = span.a + d
+    store = span.store
+    nn = store.read("nn1", span.a, span.b)[d]
+    d2 = squared_distances(span.read("coords")[d], store.read_at("coords", nn))
+    kd2, kid = store.read_at("kd2", nn), store.read_at("kid", nn)
+    inside = (d2 < kd2) | ((d2 == kd2) & (span.read("ids")[d] <= kid))
+    store.write_at("kept", pos, inside)
+    return {"isolated": np.array(int((~inside).sum()))}
+
+
+def robust_noise(ctx: Context, *, k: int) -> Partial:
+    """:func:`meshlab_sharp.robust.noise_ratios` of the rows (to ``ratio``)."""
+    lists = np.repeat(np.arange(len(ctx.points))[:, None], k, axis=1)
+    lists[ctx.rows] = ctx.idx[:, :k]
+    ratio = robust.noise_ratios(ctx.points, lists, k)
+    ctx.store.write_at("ratio", ctx.own, ratio[ctx.rows])
+    return {}
+
+
+def robust_relative(ctx: Context, *, scales: tuple[int, ...]) -> Partial:
+    """:class:`meshlab_sharp.robust.RelativeRule` on the rows: relative distances
+    ``r`` (r, s), the score, and the histograms of ``r``."""
+    assert ctx.pdis is not None
+    r = np.empty_like(ctx.pdis)
+    score = np.empty(len(ctx.rows))
+    pdis = np.zeros(len(ctx.points))
+    block = max(1, ENTRIES_PER_BLOCK // max(scales))  # bounds the (rows * k, 3) temporaries
+    for start in range(0, len(ctx.rows), block):
+        part = slice(start, start + block)
+        rows = ctx.rows[part]
+        rule = robust.RelativeRule(ctx.points, partial(ctx.lists, part=part), len(scales))
+        for i, k in enumerate(scales):
+            pdis[rows] = ctx.pdis[part, i]
+            r[part, i] = rule(i, k, pdis)[0][rows]
+        score[part] = rule.score[rows]
+    ctx.store.write_at("r", ctx.own, r)
+    ctx.store.write_at("score", ctx.own, score)
+    return {"hist": np.stack([histogram(r[:, i], BINS) for i in range(len(scales))])}
+
+
+def robust_decide(span: Span, *, thresholds: np.ndarray) -> Partial:
+    """Candidates at every scale (``mask``), strength, candidates per scale."""
+    d = span.distinct
+    d = d[span.read("kept")[d]]
+    return _decided(span, d, span.read("r")[d] >= thresholds)
+
+
+def robust_support(ctx: Context, *, top: int, around: int) -> Partial:
+    """The rows' line directions (:func:`meshlab_sharp.robust.line_directions`, to
+    ``e``) and :func:`meshlab_sharp.robust.supported` (to ``mask1``)."""
+    mask = ctx.gather("mask")
+    e = robust.line_directions(ctx.points, mask, ctx.lists(top))
+    out = robust.supported(
+        ctx.points,
+        mask,
+        e,
+        ctx.lists(around),
+        robust.SUPPORT_MIN,
+        cone_cos=robust.THIN_CONE_COS,
+    )
+    ctx.store.write_at("e", ctx.own, e[ctx.rows])
+    ctx.store.write_at("mask1", ctx.own, out[ctx.rows])
+    return {}
+
+
+def robust_thin(ctx: Context, *, compare: int) -> Partial:
+    """:func:`meshlab_sharp.robust.thin` of the rows; writes ``final``."""
+    out = robust.thin(
+        ctx.points,
+        ctx.gather("mask1"),
+        ctx.gather("score"),
+        ctx.gather("e"),
+        ctx.lists(compare),
+        cone_cos=robust.THIN_CONE_COS,
+    )
+    ctx.store.write_at("final", ctx.own, out[ctx.rows])
+    return {}
+
+
+def finish(span: Span, *, mask: str, kept: str | None) -> dict[str, np.ndarray]:
+    """The tile's results per input point: input index, mask, strength, kept (duplicates
+    take their first occurrence's values)."""
+    rep = span.read("rep") - span.a
+    out = {
+        "ids": span.read("ids"),
+        "mask": span.read(mask)[rep],
+        "strength": span.read("strength")[rep],
+    }
+    out["kept"] = np.ones(len(rep), bool) if kept is None else span.read(kept)[rep]
+    return out

@@ -1,0 +1,79 @@
+"""Per-point arrays on disk, shared by the tiles (and by Dask workers on other machines).
+
+Every array is a raw file ``<root>/<name>.bin`` whose first axis runs over the points in
+tile order. Each access maps the file, copies what it needs and unmaps it again, so
+that a long run never keeps file pages in the process's resident memory: the peak
+memory of a tiled run is that of one tile, not of the whole cloud.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class Store:
+    """A folder of named per-point arrays (picklable: a path and the arrays' layouts).
+
+    Attributes
+    ----------
+    root : str
+        The folder; with Dask on several machines, a path every worker can reach.
+    arrays : dict of str to (shape, dtype str)
+    """
+
+    root: str
+    arrays: dict[str, tuple[tuple[int, ...], str]] = field(default_factory=dict)
+
+    def path(self, name: str) -> Path:
+        """The file of array ``name``."""
+        return Path(self.root) / f"{name}.bin"
+
+    def create(self, name: str, shape: tuple[int, ...], dtype: np.dtype | str) -> None:
+        """A new array of zeros (a sparse file)."""
+        dt = np.dtype(dtype)
+        size = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
+        with open(self.path(name), "wb") as f:
+            f.truncate(size)
+        self.arrays[name] = (tuple(int(s) for s in shape), dt.str)
+
+    def _map(self, name: str, mode: str) -> np.ndarray:
+        shape, dtype = self.arrays[name]
+        if shape[0] == 0:
+            return np.zeros(shape, dtype)
+        return np.memmap(self.path(name), dtype=np.dtype(dtype), mode=mode, shape=shape)
+
+    def read(self, name: str, start: int, stop: int) -> np.ndarray:
+        """A copy of rows ``start:stop``."""
+        m = self._map(name, "r")
+        out = np.array(m[start:stop])
+        del m
+        return out
+
+    def read_at(self, name: str, rows: np.ndarray) -> np.ndarray:
+        """A copy of the given rows (any order)."""
+        m = self._map(name, "r")
+        out = np.array(m[np.asarray(rows, np.int64)])
+        del m
+        return out
+
+    def write(self, name: str, start: int, values: np.ndarray) -> None:
+        """Rows ``start:start + len(values)`` := ``values``."""
+        if len(values) == 0:
+            return
+        m = self._map(name, "r+")
+        m[start : start + len(values)] = values
+        m.flush()
+        del m
+
+    def write_at(self, name: str, rows: np.ndarray, values: np.ndarray) -> None:
+        """The given rows := ``values``."""
+        if len(rows) == 0:
+            return
+        m = self._map(name, "r+")
+        m[np.asarray(rows, np.int64)] = values
+        m.flush()
+        del m

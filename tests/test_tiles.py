@@ -1,0 +1,257 @@
+"""Out-of-core detection (meshlab_sharp.tiles): tiled and Dask runs equal the in-memory
+run bit for bit, the halos are proven, the streaming readers and writers keep order."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from shapes import random_box_points
+
+import meshlab_sharp
+from meshlab_sharp import _kernels
+from meshlab_sharp.errors import InputError
+from meshlab_sharp.multiscale import DEFAULT_KNN_SCALES
+from meshlab_sharp.neighbourhoods import KnnNeighbourhoods
+from meshlab_sharp.tiles import detect_tiled, parse_memory
+from meshlab_sharp.tiles.layout import build_layout
+from meshlab_sharp.tiles.neighbours import Query, neighbours
+from meshlab_sharp.tiles.store import Store
+
+pytestmark = pytest.mark.skipif(not _kernels.available(), reason="needs the compiled kernels")
+
+SCALES = (8, 12, 16)
+
+
+def hostile_cloud(n: int = 4000, seed: int = 7) -> np.ndarray:
+    """A sampled box (edges and corners everywhere, so tiles cut through them) with
+    exact duplicates, a near outlier (isolated in robust mode), a lone far outlier, a
+    far pair and a far cluster of 3, shuffled."""
+    rng = np.random.default_rng(seed)
+    pts = random_box_points(n, seed=seed)
+    far = np.array(
+        [[1.5, 0.1, 0.1], [25.0, 25.0, 25.0], [-20.0, 3.0, 1.0], [-20.0, 3.05, 1.0]]
+        + [[0.5, 40.0, 0.2], [0.55, 40.0, 0.2], [0.5, 40.05, 0.25]]
+    )
+    pts = np.concatenate([pts, pts[rng.choice(n, 60)], far])
+    return pts[rng.permutation(len(pts))]
+
+
+def assert_same(tiled: dict, ref: meshlab_sharp.DetectionResult) -> None:
+    assert np.array_equal(tiled["mask"], ref.mask)
+    assert np.array_equal(tiled["strength"], ref.strength)
+    assert np.array_equal(tiled["kept"], ref.kept)
+    assert np.array_equal(tiled["thresholds"], ref.thresholds)
+    assert np.array_equal(tiled["candidate_counts"], ref.candidate_counts)
+    assert tiled["n_clean"] == ref.n_clean
+
+
+@pytest.mark.parametrize("mode", ["paper", "robust"])
+@pytest.mark.parametrize("tile_points", [300, 1200])
+def test_tiled_equals_in_memory(mode: str, tile_points: int) -> None:
+    pts = hostile_cloud()
+    ref = meshlab_sharp.detect(pts, scales=SCALES, mode=mode)
+    out = detect_tiled(pts, scales=SCALES, mode=mode, tile_points=tile_points)
+    assert out["tiling"]["tiles"] >= 4
+    assert out["tiling"]["streamed"] > 0  # the far points took the streaming route
+    assert ref.n_features > 50
+    assert_same(out, ref)
+
+
+def test_default_scales_and_far_outliers_only_tiles() -> None:
+    """Default scales (k up to 40), tiles that hold nothing but far points (and, in
+    robust mode, nothing but isolated points)."""
+    pts = hostile_cloud(3000, seed=11)
+    for mode in ("paper", "robust"):
+        ref = meshlab_sharp.detect(pts, mode=mode)
+        out = detect_tiled(pts, scales=DEFAULT_KNN_SCALES, mode=mode, tile_points=500)
+        assert_same(out, ref)
+    assert not ref.kept.all()  # robust mode left the lone outlier out
+
+
+def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path) -> None:
+    """The halo check: whatever the first halo (none at all), every row's k nearest in
+    its tile context are the cloud's k nearest, in the same order."""
+    pts = hostile_cloud(2500, seed=3)
+    store = Store(str(tmp_path))
+    layout = build_layout(
+        len(pts), lambda: iter([pts[:1000], pts[1000:]]), store, tile_points=250, source="t"
+    )
+    to_first, _ = _kernels.merge_duplicates(pts)
+    k = 12
+    ref = KnnNeighbourhoods(pts[to_first], k).indices
+    ids = store.read("ids", 0, len(pts))
+    seen, halos, streamed = 0, [], 0
+    for t in range(layout.n_tiles):
+        contexts, halo, _, far = neighbours(store, layout, t, Query(k), halo=0.0, most_points=900)
+        halos.append(halo)
+        streamed += far
+        for ctx in contexts:
+            input_ids = ids[ctx.pos]
+            cleaned = np.searchsorted(to_first, input_ids)
+            rows = cleaned[ctx.rows]
+            assert np.array_equal(cleaned[ctx.idx], ref[rows])
+            seen += len(rows)
+    assert seen == len(to_first)
+    assert max(halos) > 0.0  # widened from nothing
+    assert streamed >= 5  # the far points
+
+
+def test_max_memory_api_and_cli_output(tmp_path) -> None:
+    """detect(max_memory=) gives the in-memory result; the CLI's streamed PLY has the
+    bytes of the in-memory CLI's PLY, and the same indices."""
+    from meshlab_sharp.cli import main
+    from meshlab_sharp.io import save_features_ply
+
+    pts = hostile_cloud(3000, seed=5)
+    src = tmp_path / "cloud.ply"
+    save_features_ply(src, pts, None, np.zeros(len(pts)), np.zeros(len(pts), bool))
+    ref = meshlab_sharp.detect(pts, mode="robust")
+    res = meshlab_sharp.detect(src, mode="robust", max_memory="2GB")
+    assert np.array_equal(res.mask, ref.mask) and np.array_equal(res.strength, ref.strength)
+    assert res.tiling is not None and res.summary()["tiling"]["tiles"] >= 1
+    a, b = tmp_path / "a.ply", tmp_path / "b.ply"
+    assert main(["detect", str(src), "-o", str(a), "--indices", str(a) + ".txt", "-q"]) == 0
+    args = ["detect", str(src), "-o", str(b), "--indices", str(b) + ".txt", "-q"]
+    assert main([*args, "--max-memory", "1GB"]) == 0
+    assert a.read_bytes() == b.read_bytes()
+    assert (tmp_path / "a.ply.txt").read_text() == (tmp_path / "b.ply.txt").read_text()
+
+
+def test_dask_equals_in_memory() -> None:
+    """--dask local:2 (paper) and --dask tcp://127.0.0.1:PORT (robust, a running
+    cluster of 2 worker processes on the loopback)."""
+    distributed = pytest.importorskip("dask.distributed")
+    pts = hostile_cloud(2500, seed=9)
+    ref = meshlab_sharp.detect(pts, scales=SCALES)
+    out = detect_tiled(pts, scales=SCALES, tile_points=400, dask="local:2")
+    assert out["tiling"]["worker_peak_bytes"] > 0 and out["tiling"]["tiles"] >= 4
+    assert_same(out, ref)
+    ref = meshlab_sharp.detect(pts, scales=SCALES, mode="robust")
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address="127.0.0.1:0"
+    ) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tcp://127.0.0.1:")
+        out = detect_tiled(pts, scales=SCALES, mode="robust", tile_points=400, dask=address)
+    assert_same(out, ref)
+
+
+def test_las_laz_round_trip_keeps_order(tmp_path) -> None:
+    pytest.importorskip("laspy")
+    pytest.importorskip("lazrs")
+    from meshlab_sharp.io.las import read_las, write_las
+
+    pts = np.round(hostile_cloud(1500, seed=2), 4)
+    for ext in (".las", ".laz"):
+        path = tmp_path / f"cloud{ext}"
+        write_las(path, pts)
+        back = read_las(path)
+        assert np.allclose(back, pts, atol=1e-9, rtol=0)
+        ref = meshlab_sharp.detect(back, scales=SCALES)
+        res = meshlab_sharp.detect(path, scales=SCALES, max_memory="1GB")
+        assert np.array_equal(res.mask, ref.mask)
+        assert np.array_equal(meshlab_sharp.detect(path, scales=SCALES).mask, ref.mask)
+
+
+def test_e57_round_trip(tmp_path) -> None:
+    pytest.importorskip("pye57")
+    from meshlab_sharp.io.e57 import read_e57, write_e57
+
+    pts = hostile_cloud(1200, seed=4)
+    path = tmp_path / "cloud.e57"
+    write_e57(path, pts)
+    back = read_e57(path)  # pye57 stores single precision
+    assert np.allclose(back, pts, atol=1e-6, rtol=0)
+    ref = meshlab_sharp.detect(back, scales=SCALES)
+    assert np.array_equal(
+        meshlab_sharp.detect(path, scales=SCALES, max_memory="1GB").mask, ref.mask
+    )
+
+
+def test_bad_options() -> None:
+    pts = hostile_cloud(800)
+    assert parse_memory("1GB") == 1 << 30
+    assert parse_memory("512 MiB") == 512 << 20
+    assert parse_memory(1000) == 1000
+    for bad in ("lots", "-1GB", "0"):
+        with pytest.raises(InputError):
+            parse_memory(bad)
+    with pytest.raises(InputError, match="point clouds only"):
+        meshlab_sharp.detect(pts[:3], np.array([[0, 1, 2]]), max_memory="1GB")
+    with pytest.raises(InputError, match="return_details"):
+        meshlab_sharp.detect(pts, max_memory="1GB", return_details=True)
+    with pytest.raises(InputError, match="too little memory"):
+        meshlab_sharp.detect(pts, max_memory="1MB")
+    with pytest.raises(InputError, match="local:N"):
+        meshlab_sharp.detect(pts, dask="local:0")
+    with pytest.raises(InputError, match="fewer than the largest scale"):
+        meshlab_sharp.detect(pts[:10], scales=[16], max_memory="1GB")
+
+
+def test_noise_grown_scales_equal_in_memory() -> None:
+    """Robust mode's scales grow with the measured noise (a lower median over all
+    points, reduced exactly): the tiled run grows them the same way."""
+    pts = hostile_cloud(3000, seed=7)
+    noisy = pts + np.random.default_rng(1).normal(scale=0.012, size=pts.shape)
+    ref = meshlab_sharp.detect(noisy, mode="robust")
+    assert ref.scales != DEFAULT_KNN_SCALES
+    out = detect_tiled(noisy, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500)
+    assert out["scales"] == ref.scales
+    assert_same(out, ref)
+
+
+@pytest.mark.parametrize("collect", [1, 7, 1 << 21])
+def test_order_statistic_is_exact(tmp_path, monkeypatch, collect: int) -> None:
+    """The k-th smallest by counting passes equals np.partition's, with many equal
+    values and values gathered from a tiny bin."""
+    from meshlab_sharp.tiles import select
+    from meshlab_sharp.tiles.run import Runner
+
+    monkeypatch.setattr(select, "COLLECT", collect)
+    rng = np.random.default_rng(0)
+    pts = rng.random((3000, 3))
+    values = np.concatenate([np.zeros(900), rng.random(1500) ** 3, np.full(600, 0.25)])
+    keep = rng.random(3000) < 0.9
+    store = Store(str(tmp_path))
+    layout = build_layout(3000, lambda: iter([pts]), store, tile_points=400, source="t")
+    ids = store.read("ids", 0, 3000)
+    store.create("v", (3000,), np.float64)
+    store.create("keep", (3000,), bool)
+    store.write("v", 0, values[ids])
+    store.write("keep", 0, keep[ids])
+    runner = Runner(store, layout, most_points=1000, workers=1)
+    kept = values[keep]
+    for rank in (0, 1, len(kept) // 3, (len(kept) - 1) // 2, len(kept) - 1):
+        want = np.partition(kept, rank)[rank]
+        assert select.order_statistic(runner, "v", "keep", rank) == want
+
+
+def test_peak_memory_stays_under_the_limit(tmp_path) -> None:
+    """A fresh process reading a 400k-point binary PLY with --max-memory 300MB peaks
+    below 300 MB (ru_maxrss: interpreter, imports, tiles and result included)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    rng = np.random.default_rng(0)
+    pts = random_box_points(400_000, seed=1) + rng.normal(scale=1e-4, size=(400_000, 3))
+    path = tmp_path / "big.ply"
+    header = (
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(pts)}\n"
+        "property double x\nproperty double y\nproperty double z\nend_header\n"
+    )
+    path.write_bytes(header.encode() + pts.astype("<f8").tobytes())
+    code = (
+        "import resource, sys, meshlab_sharp\n"
+        f"r = meshlab_sharp.detect({str(path)!r}, max_memory='300MB')\n"
+        "print(r.tiling['tiles'], r.n_features,"
+        " resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)\n"
+    )
+    root = str(Path(__file__).resolve().parent.parent)
+    env = {"PYTHONPATH": root, "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    )
+    tiles, features, peak = map(int, proc.stdout.split())
+    assert tiles >= 2 and features > 0
+    assert peak < 300 * 2**20
