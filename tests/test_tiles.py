@@ -122,8 +122,8 @@ def test_dask_equals_in_memory() -> None:
     cluster of 2 worker processes on the loopback)."""
     distributed = pytest.importorskip("dask.distributed")
     pts = hostile_cloud(2500, seed=9)
-    ref = meshlab_sharp.detect(pts, scales=SCALES)
-    out = detect_tiled(pts, scales=SCALES, tile_points=400, dask="local:2")
+    ref = meshlab_sharp.detect(pts, scales=SCALES, mode="paper")
+    out = detect_tiled(pts, scales=SCALES, mode="paper", tile_points=400, dask="local:2")
     assert out["tiling"]["worker_peak_bytes"] > 0 and out["tiling"]["tiles"] >= 4
     assert_same(out, ref)
     ref = meshlab_sharp.detect(pts, scales=SCALES, mode="robust")

@@ -94,7 +94,7 @@ def detect_tiled(
     *,
     scales: tuple[int, ...],
     weighting: str = "gaussian",
-    mode: str = "paper",
+    mode: str = "robust",
     max_memory: str | int | None = None,
     tile_points: int | None = None,
     dask: str | Any = None,

@@ -143,13 +143,13 @@ def _search(
     """k nearest (and projected distances) of ``rows`` within ``points``."""
     k = query.k
     if query.scales is not None or all_rows:
-        grid = _kernels.build_grid(points, k)
+        tree = _kernels.build_tree(points)
         if query.scales is not None:
             idx, pdis = _kernels.cloud_knn_projected_distances(
-                grid, query.scales, query.weighting, workers
+                tree, query.scales, query.weighting, workers
             )
             return idx[rows], np.ascontiguousarray(pdis[:, rows].T)
-        return _kernels.cloud_knn(grid, k, workers)[rows], None
+        return _kernels.cloud_knn(tree, k, workers)[rows], None
     tree = cKDTree(points)
     return _knn_block(tree, points, rows, k, workers).astype(np.int64), None
 
