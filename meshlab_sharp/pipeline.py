@@ -173,9 +173,11 @@ def detect(
         ones: not features, ``kept`` False; vertices added by hole filling: left out).
     mode : {"paper", "robust"}, default "paper"
         "paper": ALGORITHM.md's reading of the paper. "robust": isolated points left
-        out, projected distances relative to the local spacing, a threshold floor (no
-        features on smooth objects) and thinning across the lines
-        (:mod:`meshlab_sharp.robust`); ``distances`` are then the relative distances.
+        out, scales grown with the measured noise, projected distances relative to the
+        local spacing, a threshold floor (no features on smooth objects), support along
+        and thinning across the lines, and on meshes the mesh's own sharp edges
+        (:mod:`meshlab_sharp.robust`, docs/robust-mode.md); ``distances`` are then the
+        relative distances and ``scales`` the scales used.
     backend : {"compiled", "numpy"}, optional
         The compiled kernels (default when built) or the numpy reference path; both
         give the same answers. Default: ``MESHLAB_SHARP_BACKEND`` or "compiled".
@@ -278,6 +280,7 @@ def _detect(
     if mode == "robust":
         robust = RobustSetup(points, cleaned.faces, neighbourhoods, scales_t, workers=workers)
         work, work_neighbourhoods = robust.points, robust.neighbourhoods
+        scales_t = robust.scales
     timings["neighbourhoods"] = time.perf_counter() - t
     bar.step("neighbourhoods")
 
@@ -297,8 +300,7 @@ def _detect(
     t = time.perf_counter()
     mask, strength = decide(per_scale.votes, len(scales_t))
     if robust is not None:
-        mask = robust.expand(robust.thin(mask), False)
-        strength = robust.expand(strength, 0.0)
+        mask, strength = robust.finish(mask, strength)
         if per_scale.distances is not None and per_scale.normals is not None:
             per_scale.distances = np.stack([robust.expand(d, np.nan) for d in per_scale.distances])
             per_scale.normals = np.stack([robust.expand(n, np.nan) for n in per_scale.normals])

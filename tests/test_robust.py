@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
 import shapes
 
 import meshlab_sharp
+from meshlab_sharp import creases, robust
 from meshlab_sharp import groundtruth as gt
-from meshlab_sharp import robust
 from meshlab_sharp.cli import main
 from meshlab_sharp.evaluation import evaluate
+from meshlab_sharp.neighbourhoods import knn
 
 N = 4000
 
@@ -144,3 +146,171 @@ def test_cli_mode(tmp_path):
     assert data["n_features"] == int(shapes.on_cube_edges(points).sum())
     with pytest.raises(SystemExit):
         main(["detect", str(src), "--mode", "fast", "-q"])
+
+
+# ---------------------------------------------------------------------------------
+# Sharp mesh edges (meshlab_sharp.creases), support and thinning: each step pinned
+# ---------------------------------------------------------------------------------
+
+
+def _pipe(n: int = 40, r0: float = 10.0, r1: float = 7.0, h: float = 30.0):
+    """A CAD-style pipe: n-gon rings only (4n vertices, all on a sharp rim), long thin
+    triangles between them."""
+    a = 2 * np.pi * np.arange(n) / n
+    ring = [
+        np.c_[r * np.cos(a), r * np.sin(a), np.full(n, z)]
+        for r, z in ((r0, 0.0), (r0, h), (r1, 0.0), (r1, h))
+    ]
+    ob, ot, ib, it = 0, n, 2 * n, 3 * n
+    faces = []
+    for i in range(n):
+        j = (i + 1) % n
+        faces += [(ob + i, ob + j, ot + j), (ob + i, ot + j, ot + i)]
+        faces += [(ib + i, it + j, ib + j), (ib + i, it + i, it + j)]
+        faces += [(ot + i, ot + j, it + j), (ot + i, it + j, it + i)]
+        faces += [(ob + i, ib + j, ob + j), (ob + i, ib + i, ib + j)]
+    return np.vstack(ring), np.array(faces)
+
+
+def _fold(angle_deg: float, m: int = 12):
+    """A grid folded along x = 0: the half x > 0 turns by angle_deg (a crease of that
+    angle). Returns vertices, faces, and the mask of the fold's vertices."""
+    xs = np.arange(-m, m + 1, dtype=float)
+    ys = np.arange(0, m + 1, dtype=float)
+    x, y = np.meshgrid(xs, ys, indexing="ij")
+    t = math.radians(angle_deg)
+    px = np.where(x > 0, x * math.cos(t), x)
+    pz = np.where(x > 0, x * math.sin(t), 0.0)
+    verts = np.c_[px.ravel(), y.ravel(), pz.ravel()]
+    ny = len(ys)
+    faces = []
+    for i in range(len(xs) - 1):
+        for j in range(ny - 1):
+            a, b, c, d = i * ny + j, (i + 1) * ny + j, (i + 1) * ny + j + 1, i * ny + j + 1
+            faces += [(a, b, c), (a, c, d)]
+    return verts, np.array(faces), x.ravel() == 0
+
+
+def test_cad_pipe_every_rim_vertex():
+    # issue 10: 160 vertices, all on sharp rims; the old thinning removed all of them
+    verts, faces = _pipe()
+    result = meshlab_sharp.detect(verts, faces, mode="robust")
+    assert result.mask.all() and (result.strength == 1.0).all()
+
+
+def test_cad_polygon_facets_below_the_crease_angle_are_not_edges():
+    # rims turn by 90 degrees (4 rings of n edges); the side facets of an n-gon turn by
+    # 360 / n: 18.9 degrees for n = 19 (not sharp), 21.2 for n = 17 (2 n more edges)
+    for n, sharp in ((24, 4 * 24), (19, 4 * 19), (17, 6 * 17)):
+        _, angles = creases.dihedral_angles(*_pipe(n))
+        mask, threshold = creases.sharp_vertices(*_pipe(n))
+        assert threshold == math.radians(creases.CREASE_ANGLE)
+        assert (angles > threshold).sum() == sharp
+        assert mask.all()
+
+
+@pytest.mark.parametrize(("angle", "sharp"), [(21.0, True), (19.0, False)])
+def test_a_fold_is_sharp_just_above_the_crease_angle(angle, sharp):
+    verts, faces, fold = _fold(angle)
+    result = meshlab_sharp.detect(verts, faces, mode="robust")
+    if sharp:
+        np.testing.assert_array_equal(result.mask, fold)
+    else:
+        assert not result.mask.any()
+
+
+def test_dihedral_angles_of_a_box():
+    verts, faces, _ = gt.reference_surface("box")
+    edges, angles = creases.dihedral_angles(verts, faces)
+    flat = len(edges) - 12  # 12 box edges, the others inside the triangulated faces
+    np.testing.assert_allclose(np.sort(np.degrees(angles)), [0.0] * flat + [90.0] * 12, atol=1e-9)
+    assert (edges[:, 0] < edges[:, 1]).all()
+
+
+def test_crease_threshold_rises_with_the_lower_quartile():
+    floor = math.radians(creases.CREASE_ANGLE)
+    assert creases.crease_threshold(np.zeros(0)) == floor
+    assert creases.crease_threshold(np.r_[np.zeros(3), np.full(9, 1.5)]) == floor
+    # 9 angles: the lower quartile is element (9 - 1) // 4 = 2 of the sorted angles
+    angles = np.radians([9.0, 1.0, 3.0, 2.0, 8.0, 7.0, 6.0, 5.0, 4.0])
+    assert creases.crease_threshold(angles) == creases.NOISE_FACTOR * math.radians(3.0)
+    assert creases.NOISE_FACTOR == 4.0 / 0.3186
+
+
+def test_noisy_mesh_raises_the_threshold_and_still_finds_the_edges():
+    part = gt.make_part("box", "mesh", n_points=1500)
+    rng = np.random.default_rng(4)
+    noisy = part.vertices + part.normals * rng.normal(0, 0.1 * part.spacing, part.n)[:, None]
+    _, angles = creases.dihedral_angles(noisy, part.faces)
+    assert creases.crease_threshold(angles) > math.radians(25.0)
+    scores = _f1(part, meshlab_sharp.detect(noisy, part.faces, mode="robust").mask)
+    assert scores.f1 >= 0.95, scores
+
+
+def _csr(lists):
+    indptr = np.r_[0, np.cumsum([len(x) for x in lists])].astype(np.int64)
+    return robust.Neighbourhood(indptr, np.concatenate(lists).astype(np.int64))
+
+
+def test_line_directions_follow_the_features():
+    pts = np.array([[0.0, 0, 0], [1, 0.1, 0], [2, 0, 0], [-1, -0.1, 0], [0, 5, 0]])
+    mask = np.array([True, True, True, True, False])
+    e = robust.line_directions(pts, mask, _csr([list(range(5))] * 5))
+    assert (e[4] == 0).all()
+    np.testing.assert_allclose(np.abs(e[:4, 0]), 1.0, atol=0.01)
+
+
+def test_supported_counts_other_features_along_the_line():
+    # features on the x axis, one beside it (across the line of the others)
+    pts = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [-1, 0, 0], [0, 1, 0], [0, 0, 3]])
+    mask = np.array([True, True, True, True, True, False])
+    e = np.tile([1.0, 0.0, 0.0], (6, 1))
+    around = _csr([[0, 1, 3, 4, 5], [1, 0, 2], [2, 1], [3, 0], [4, 0, 1, 2, 3], [5, 0]])
+    # 0: 1 and 3 along (4 across, 5 no feature); 1: 0 and 2; 2: only 1; 3: only 0;
+    # 4: 1, 2 and 3 along (|cos| 0.71, 0.89, 0.71 >= 0.5), 0 across (|cos| 0)
+    out = robust.supported(pts, mask, e, around, 2)
+    np.testing.assert_array_equal(out, [True, True, False, False, True, False])
+    out = robust.supported(pts, mask, e, around, 1)
+    np.testing.assert_array_equal(out, [True, True, True, True, True, False])
+    assert robust.SUPPORT_MIN == 2 and robust.SUPPORT_KNN == 16
+
+
+@pytest.mark.parametrize(("cone_cos", "dropped"), [(0.5, True), (0.4, False)])
+def test_thinning_cone(cone_cos, dropped):
+    # features on the x axis and one stronger feature j at 63 degrees from it
+    # (|cos| = 0.454): across the line for a 60-degree cone (0.5), along it for 0.4
+    t = math.radians(63.0)
+    pts = np.array(
+        [
+            [0.0, 0, 0],
+            [1, 0, 0],
+            [2, 0, 0],
+            [-1, 0, 0],
+            [-2, 0, 0],
+            [0.3 * math.cos(t), 0.3 * math.sin(t), 0],
+        ]
+    )
+    everyone = _csr([list(range(6))] * 6)
+    e = robust.line_directions(pts, np.ones(6, bool), everyone)
+    score = np.array([0.5, 0.5, 0.5, 0.5, 0.5, 0.9])
+    out = robust.thin(pts, np.ones(6, bool), score, e, everyone, cone_cos=cone_cos)
+    assert out[0] == (not dropped)
+    assert robust.THIN_CONE_COS == 0.5
+    assert robust.THIN_KNN == 12 and robust.THIN_RING == 2
+
+
+def test_noise_grows_the_scales():
+    grid = shapes.flat_square(40)
+    assert robust.noise_scale_factor(grid, knn(grid, 40), 7) == 1.0
+    assert robust.NOISE_TOLERATED == 0.15 and robust.NOISE_KNN == 7
+    clean = gt.make_part("box", n_points=N, seed=3)
+    assert robust.noise_scale_factor(clean.vertices, knn(clean.vertices, 40), 7) == 1.0
+    part = gt.add_noise(clean, 0.5, seed=1)
+    f = robust.noise_scale_factor(part.vertices, knn(part.vertices, 40), 7)
+    # median |d . n| / |d| is about 0.30 at 50 % noise on Poisson-disk samples: f ~ 4,
+    # capped at 3
+    assert f == robust.NOISE_MAX_FACTOR == 3.0
+    result = meshlab_sharp.detect(part.vertices, mode="robust")
+    defaults = meshlab_sharp.DEFAULT_KNN_SCALES
+    assert result.scales == tuple(math.floor(k * f + 0.5) for k in defaults)
+    assert meshlab_sharp.detect(part.vertices, mode="paper").scales == defaults

@@ -1,0 +1,98 @@
+#!/usr/bin/env python3
+"""Robust mode's choices, each measured by changing one of them (docs/robust-mode.md).
+
+Runs robust mode as chosen and with one constant changed at a time on the evaluation's
+inputs (``scripts/evaluate.py``'s generators and cache), and prints one markdown row per
+variant: mean F1 per condition (share of points flagged for the smooth controls).
+
+    python3 scripts/robust_variants.py --quick
+    python3 scripts/robust_variants.py --quick --conditions clean,noise25 --variants chosen
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "scripts"))
+
+import evaluate  # noqa: E402
+
+from meshlab_sharp import creases, detect, robust  # noqa: E402
+from meshlab_sharp import groundtruth as gt  # noqa: E402
+from meshlab_sharp.evaluation import score_part  # noqa: E402
+
+#: name -> ((module, constant, value), ...) changed from the chosen mode.
+VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
+    "chosen": (),
+    "no support": ((robust, "SUPPORT_MIN", 0),),
+    "support >= 1": ((robust, "SUPPORT_MIN", 1),),
+    "support >= 3": ((robust, "SUPPORT_MIN", 3),),
+    "thinning compares 16 nearest": ((robust, "THIN_KNN", 16),),
+    "thinning compares 8 nearest": ((robust, "THIN_KNN", 8),),
+    "thinning cone 45 deg": ((robust, "THIN_CONE_COS", math.cos(math.radians(45))),),
+    "no sharp mesh edges": ((creases, "CREASE_ANGLE", 180.0),),
+    "mesh edges: no noise factor": ((creases, "NOISE_FACTOR", 0.0),),
+    "no threshold floor": ((robust, "R_MIN", 0.0),),
+    "noise-scaled scales off": ((robust, "NOISE_TOLERATED", math.inf),),
+    "noise tolerated 0.2": ((robust, "NOISE_TOLERATED", 0.2),),
+    "noise tolerated 0.1": ((robust, "NOISE_TOLERATED", 0.1),),
+    "noise plane of the smallest scale": ((robust, "NOISE_KNN", 12),),
+    "noise growth at most x2": ((robust, "NOISE_MAX_FACTOR", 2.0),),
+}
+
+
+def run_variant(name: str, pairs: list[tuple[str, str]], n: int, cache: Path) -> dict[str, float]:
+    """Mean F1 (or flagged share, in %) per condition with one variant."""
+    saved = [(m, a, getattr(m, a)) for m, a, _ in VARIANTS[name]]
+    for m, a, v in VARIANTS[name]:
+        setattr(m, a, v)
+    try:
+        per: dict[str, list[float]] = {}
+        for part_name, condition in pairs:
+            part, _ = evaluate.generate(part_name, condition, n, 0, cache)
+            s = score_part(part, detect(part.vertices, part.faces, mode="robust").mask)
+            if len(part.edges):
+                per.setdefault(condition, []).append(s.f1)
+            else:
+                per.setdefault(f"{condition} flagged %", []).append(100 * s.fp_rate)
+        return {c: float(np.mean(v)) for c, v in per.items()}
+    finally:
+        for m, a, v in saved:
+            setattr(m, a, v)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line."""
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="6,000 points, quick parts")
+    ap.add_argument("--conditions", help="comma-separated conditions (default: all)")
+    ap.add_argument("--variants", help="comma-separated variant names (default: all)")
+    args = ap.parse_args(argv)
+    n = 6000 if args.quick else 20000
+    pairs = gt.suite(
+        quick=args.quick,
+        conditions=args.conditions.split(",") if args.conditions else None,
+    )
+    cache = ROOT / "build" / "evaluation-cache" / evaluate._generator_hash()
+    names = args.variants.split(",") if args.variants else list(VARIANTS)
+    header = False
+    for name in names:
+        means = run_variant(name, pairs, n, cache)
+        if not header:
+            print("| variant | " + " | ".join(means) + " |")
+            print("|---|" + "---|" * len(means))
+            header = True
+        cells = [f"{v:.2f}" if c.endswith("%") else f"{v:.3f}" for c, v in means.items()]
+        print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
