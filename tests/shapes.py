@@ -116,24 +116,33 @@ def pipe_mesh(
     return np.vstack(ring), np.array(faces)
 
 
-def fold_mesh(angle_deg: float, m: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A grid folded along x = 0: the half x > 0 turns by angle_deg (a crease of that
-    angle). Returns vertices (v, 3), faces (f, 3) and the mask of the fold's vertices
-    (v,)."""
+def fold_mesh(
+    angle_deg: float, m: int = 12, steps: int = 1
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A grid folded along the columns x = 0, ..., steps - 1, each turning by
+    ``angle_deg / steps`` (one crease of angle_deg for ``steps = 1``, a rounded one
+    otherwise). Returns vertices (v, 3), faces (f, 3) and the mask of the folding
+    columns' vertices (v,)."""
     xs = np.arange(-m, m + 1, dtype=float)
     ys = np.arange(0, m + 1, dtype=float)
-    x, y = np.meshgrid(xs, ys, indexing="ij")
-    t = math.radians(angle_deg)
-    px = np.where(x > 0, x * math.cos(t), x)
-    pz = np.where(x > 0, x * math.sin(t), 0.0)
-    verts = np.c_[px.ravel(), y.ravel(), pz.ravel()]
+    # profile in the xz plane: unit segments, turning at the folding columns
+    turn = math.radians(angle_deg) / steps * np.clip(xs[:-1] + 1, 0, steps)
+    seg = np.c_[np.cos(turn), np.sin(turn)]
+    seg[xs[:-1] < 0] = (1.0, 0.0)
+    start = np.searchsorted(xs, 0.0)
+    profile = np.zeros((len(xs), 2))
+    profile[start + 1 :] = np.cumsum(seg[start:], axis=0)
+    profile[:start] = np.c_[xs[:start], np.zeros(start)]
+    x, y = np.meshgrid(np.arange(len(xs)), ys, indexing="ij")
+    verts = np.c_[profile[x.ravel(), 0], y.ravel(), profile[x.ravel(), 1]]
     ny = len(ys)
     faces = []
     for i in range(len(xs) - 1):
         for j in range(ny - 1):
             a, b, c, d = i * ny + j, (i + 1) * ny + j, (i + 1) * ny + j + 1, i * ny + j + 1
             faces += [(a, b, c), (a, c, d)]
-    return verts, np.array(faces), x.ravel() == 0
+    column = xs[x.ravel()]
+    return verts, np.array(faces), (column >= 0) & (column < steps)
 
 
 def noisy_box_points(n: int, noise: float, seed: int = 0) -> np.ndarray:
