@@ -276,3 +276,12 @@ def test_noise_grows_the_scales():
     defaults = meshlab_sharp.DEFAULT_KNN_SCALES
     assert result.scales == tuple(math.floor(k * f + 0.5) for k in defaults)
     assert meshlab_sharp.detect(part.vertices, mode="paper").scales == defaults
+
+
+def test_backends_agree_with_grown_scales():
+    part = gt.add_noise(gt.make_part("fandisk", n_points=N, seed=1), 0.5, seed=2)
+    compiled = meshlab_sharp.detect(part.vertices, mode="robust", backend="compiled")
+    reference = meshlab_sharp.detect(part.vertices, mode="robust", backend="numpy")
+    assert compiled.scales == reference.scales != meshlab_sharp.DEFAULT_KNN_SCALES
+    np.testing.assert_array_equal(compiled.mask, reference.mask)
+    np.testing.assert_array_equal(compiled.thresholds, reference.thresholds)
