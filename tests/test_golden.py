@@ -75,3 +75,16 @@ def test_every_constant_is_pinned_by_the_golden_outputs(inputs, monkeypatch, nud
         if golden.outputs(*inputs[shape], "robust") != golden.load(shape)["robust"]
     ]
     assert changed, f"{nudge}: robust mode's golden outputs do not see {name}"
+
+
+def test_every_named_constant_is_nudged():
+    # a new constant of robust mode needs its nudges above; robust.CREASE_ANGLE is
+    # creases.CREASE_ANGLE, re-exported
+    named = {
+        (module.__name__, name)
+        for module in (robust, creases)
+        for name in module.__all__
+        if name.isupper() and not (module is robust and name == "CREASE_ANGLE")
+    }
+    assert robust.CREASE_ANGLE is creases.CREASE_ANGLE
+    assert named == {(module.__name__, name) for module, name, _ in NUDGES.values()}
