@@ -221,6 +221,9 @@ def _sharp_vertices(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return sharp
 
 
+#: Cases whose answer is: no feature.
+NO_FEATURES = {"fold-18.5-mesh"}
+
 CASES = {
     # the doc's own example of a repeated largest eigenvalue: corners of a regular grid
     "cube-grid-points": lambda: (shapes.cube_grid_points(11), None),
@@ -236,6 +239,8 @@ CASES = {
     ),
     "cube-grid-mesh": lambda: shapes.cube_grid_mesh(3),
     "cad-pipe-mesh": lambda: shapes.pipe_mesh(24),
+    # a crease of 18.5 degrees: not sharp, and r below the floor at ring 1: no feature
+    "fold-18.5-mesh": lambda: shapes.fold_mesh(18.5)[:2],
     # noise of 20 % of the edge length: the quartile rule keeps 35 vertices of sharp
     # edges, the vote on rings (support, thinning) finds the others
     "noisy-cube-mesh": lambda: shapes.noisy_mesh(*shapes.cube_grid_mesh(4), 0.2),
@@ -256,4 +261,4 @@ def test_robust_mode_matches_an_independent_reading_of_its_doc(case):
     # excluded: at most the 8 corners of a cube grid and 5 % of the features
     unsure = expected.maybe & ~expected.sure
     assert unsure.sum() <= 8 + 0.05 * expected.sure.sum(), unsure.sum()
-    assert expected.sure.any()
+    assert expected.sure.any() == (case not in NO_FEATURES)
