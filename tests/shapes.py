@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pymeshlab
 
@@ -91,3 +93,81 @@ def random_rotation(seed: int = 0) -> np.ndarray:
     if np.linalg.det(q) < 0:
         q[:, 0] = -q[:, 0]
     return q
+
+
+def pipe_mesh(
+    n: int = 40, r0: float = 10.0, r1: float = 7.0, h: float = 30.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """A CAD-style pipe: n-gon rings only (4n vertices, all on a sharp rim), long thin
+    triangles between them. (4n, 3), (8n, 3)."""
+    a = 2 * np.pi * np.arange(n) / n
+    ring = [
+        np.c_[r * np.cos(a), r * np.sin(a), np.full(n, z)]
+        for r, z in ((r0, 0.0), (r0, h), (r1, 0.0), (r1, h))
+    ]
+    ob, ot, ib, it = 0, n, 2 * n, 3 * n
+    faces = []
+    for i in range(n):
+        j = (i + 1) % n
+        faces += [(ob + i, ob + j, ot + j), (ob + i, ot + j, ot + i)]
+        faces += [(ib + i, it + j, ib + j), (ib + i, it + i, it + j)]
+        faces += [(ot + i, ot + j, it + j), (ot + i, it + j, it + i)]
+        faces += [(ob + i, ib + j, ob + j), (ob + i, ib + i, ib + j)]
+    return np.vstack(ring), np.array(faces)
+
+
+def fold_mesh(
+    angle_deg: float, m: int = 12, steps: int = 1
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A grid folded along the columns x = 0, ..., steps - 1, each turning by
+    ``angle_deg / steps`` (one crease of angle_deg for ``steps = 1``, a rounded one
+    otherwise). Returns vertices (v, 3), faces (f, 3) and the mask of the folding
+    columns' vertices (v,)."""
+    xs = np.arange(-m, m + 1, dtype=float)
+    ys = np.arange(0, m + 1, dtype=float)
+    # profile in the xz plane: unit segments, turning at the folding columns
+    turn = math.radians(angle_deg) / steps * np.clip(xs[:-1] + 1, 0, steps)
+    seg = np.c_[np.cos(turn), np.sin(turn)]
+    seg[xs[:-1] < 0] = (1.0, 0.0)
+    start = np.searchsorted(xs, 0.0)
+    profile = np.zeros((len(xs), 2))
+    profile[start + 1 :] = np.cumsum(seg[start:], axis=0)
+    profile[:start] = np.c_[xs[:start], np.zeros(start)]
+    x, y = np.meshgrid(np.arange(len(xs)), ys, indexing="ij")
+    verts = np.c_[profile[x.ravel(), 0], y.ravel(), profile[x.ravel(), 1]]
+    ny = len(ys)
+    faces = []
+    for i in range(len(xs) - 1):
+        for j in range(ny - 1):
+            a, b, c, d = i * ny + j, (i + 1) * ny + j, (i + 1) * ny + j + 1, i * ny + j + 1
+            faces += [(a, b, c), (a, c, d)]
+    column = xs[x.ravel()]
+    return verts, np.array(faces), (column >= 0) & (column < steps)
+
+
+def noisy_box_points(n: int, noise: float, seed: int = 0) -> np.ndarray:
+    """:func:`random_box_points` moved by normal noise of ``noise`` times the mean
+    spacing ``sqrt(area / n)`` along each axis. (n, 3)."""
+    points = random_box_points(n, seed=seed)
+    spacing = np.sqrt(2 * (2.0 * 1.4 + 2.0 * 1.0 + 1.4 * 1.0) / n)
+    return points + np.random.default_rng(seed + 1).normal(0, noise * spacing, (n, 3))
+
+
+def with_outliers(points: np.ndarray, count: int, seed: int = 0) -> np.ndarray:
+    """``points`` followed by ``count`` uniform points in their bounding box grown by half
+    its size on each side. (n + count, 3)."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    pad = 0.5 * (hi - lo)
+    extra = np.random.default_rng(seed).uniform(lo - pad, hi + pad, (count, 3))
+    return np.vstack([points, extra])
+
+
+def noisy_mesh(
+    vertices: np.ndarray, faces: np.ndarray, noise: float, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh with each vertex moved by normal noise of ``noise`` times the mean edge
+    length along each axis. (n, 3), (m, 3)."""
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).mean()
+    moved = vertices + np.random.default_rng(seed).normal(0, noise * length, vertices.shape)
+    return moved, faces

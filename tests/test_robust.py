@@ -156,47 +156,9 @@ def test_cli_mode(tmp_path):
 # ---------------------------------------------------------------------------------
 
 
-def _pipe(n: int = 40, r0: float = 10.0, r1: float = 7.0, h: float = 30.0):
-    """A CAD-style pipe: n-gon rings only (4n vertices, all on a sharp rim), long thin
-    triangles between them."""
-    a = 2 * np.pi * np.arange(n) / n
-    ring = [
-        np.c_[r * np.cos(a), r * np.sin(a), np.full(n, z)]
-        for r, z in ((r0, 0.0), (r0, h), (r1, 0.0), (r1, h))
-    ]
-    ob, ot, ib, it = 0, n, 2 * n, 3 * n
-    faces = []
-    for i in range(n):
-        j = (i + 1) % n
-        faces += [(ob + i, ob + j, ot + j), (ob + i, ot + j, ot + i)]
-        faces += [(ib + i, it + j, ib + j), (ib + i, it + i, it + j)]
-        faces += [(ot + i, ot + j, it + j), (ot + i, it + j, it + i)]
-        faces += [(ob + i, ib + j, ob + j), (ob + i, ib + i, ib + j)]
-    return np.vstack(ring), np.array(faces)
-
-
-def _fold(angle_deg: float, m: int = 12):
-    """A grid folded along x = 0: the half x > 0 turns by angle_deg (a crease of that
-    angle). Returns vertices, faces, and the mask of the fold's vertices."""
-    xs = np.arange(-m, m + 1, dtype=float)
-    ys = np.arange(0, m + 1, dtype=float)
-    x, y = np.meshgrid(xs, ys, indexing="ij")
-    t = math.radians(angle_deg)
-    px = np.where(x > 0, x * math.cos(t), x)
-    pz = np.where(x > 0, x * math.sin(t), 0.0)
-    verts = np.c_[px.ravel(), y.ravel(), pz.ravel()]
-    ny = len(ys)
-    faces = []
-    for i in range(len(xs) - 1):
-        for j in range(ny - 1):
-            a, b, c, d = i * ny + j, (i + 1) * ny + j, (i + 1) * ny + j + 1, i * ny + j + 1
-            faces += [(a, b, c), (a, c, d)]
-    return verts, np.array(faces), x.ravel() == 0
-
-
 def test_cad_pipe_every_rim_vertex():
     # issue 10: 160 vertices, all on sharp rims; the old thinning removed all of them
-    verts, faces = _pipe()
+    verts, faces = shapes.pipe_mesh()
     result = meshlab_sharp.detect(verts, faces, mode="robust")
     assert result.mask.all() and (result.strength == 1.0).all()
 
@@ -205,8 +167,8 @@ def test_cad_polygon_facets_below_the_crease_angle_are_not_edges():
     # rims turn by 90 degrees (4 rings of n edges); the side facets of an n-gon turn by
     # 360 / n: 18.9 degrees for n = 19 (not sharp), 21.2 for n = 17 (2 n more edges)
     for n, sharp in ((24, 4 * 24), (19, 4 * 19), (17, 6 * 17)):
-        _, angles = creases.dihedral_angles(*_pipe(n))
-        mask, threshold = creases.sharp_vertices(*_pipe(n))
+        _, angles = creases.dihedral_angles(*shapes.pipe_mesh(n))
+        mask, threshold = creases.sharp_vertices(*shapes.pipe_mesh(n))
         assert threshold == math.radians(creases.CREASE_ANGLE)
         assert (angles > threshold).sum() == sharp
         assert mask.all()
@@ -214,7 +176,7 @@ def test_cad_polygon_facets_below_the_crease_angle_are_not_edges():
 
 @pytest.mark.parametrize(("angle", "sharp"), [(21.0, True), (19.0, False)])
 def test_a_fold_is_sharp_just_above_the_crease_angle(angle, sharp):
-    verts, faces, fold = _fold(angle)
+    verts, faces, fold = shapes.fold_mesh(angle)
     result = meshlab_sharp.detect(verts, faces, mode="robust")
     if sharp:
         np.testing.assert_array_equal(result.mask, fold)

@@ -56,7 +56,7 @@ def spec_pca_normal(points: np.ndarray, i: int, nb: np.ndarray, weighting: str) 
     d = np.linalg.norm(q - points[i], axis=1)
     h = d.max()
     mu = np.exp(-(d**2) / h**2) if (weighting == "gaussian" and h > 0) else np.ones(len(nb))
-    cov = sum(m * np.outer(x - c, x - c) for m, x in zip(mu, q, strict=True))
+    cov = (mu[:, None] * (q - c)).T @ (q - c)
     return np.linalg.eigh(cov)[1][:, 0]
 
 

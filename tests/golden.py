@@ -1,0 +1,77 @@
+"""Golden outputs of ``detect`` on a few deterministic shapes (``tests/data/golden``).
+
+``scripts/make_golden.py`` writes them; ``tests/test_golden.py`` compares them exactly.
+Each shape is chosen so that some constant of robust mode decides part of its answer
+(the comments say which).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import shapes
+
+import meshlab_sharp
+
+FOLDER = Path(__file__).parent / "data" / "golden"
+MODES = ("robust", "paper")
+
+Shape = Callable[[], tuple[np.ndarray, np.ndarray | None]]
+
+SHAPES: dict[str, Shape] = {
+    # isolation; support and thinning on clean lines
+    "box_points_outliers": lambda: (
+        shapes.with_outliers(shapes.random_box_points(1500, seed=2), 15),
+        None,
+    ),
+    # normal noise of 12 % of the spacing on uniform samples: the scales grow x2.76,
+    # below the cap (the noise constants)
+    "noisy_box_points": lambda: (shapes.noisy_box_points(1500, 0.12), None),
+    # noise of 25 %: the growth is capped (x3)
+    "noisier_box_points": lambda: (shapes.noisy_box_points(1500, 0.25), None),
+    # a plate 1.7 spacings thick: thinning between the two rims
+    "thin_plate_points": lambda: (
+        shapes.random_box_points(1500, seed=3, size=(2.0, 1.6, 0.12)),
+        None,
+    ),
+    # noise of 20 % of the edge length: the quartile rule and the vote on rings
+    "noisy_cube_mesh": lambda: shapes.noisy_mesh(*shapes.cube_grid_mesh(4), 0.2),
+    # creases of 18.5 and 21.5 degrees: sharp or not by CREASE_ANGLE (20); thresholds
+    # at the floor R_MIN
+    "fold_18_5_mesh": lambda: shapes.fold_mesh(18.5)[:2],
+    "fold_21_5_mesh": lambda: shapes.fold_mesh(21.5)[:2],
+}
+
+
+def outputs(points: np.ndarray, faces: np.ndarray | None, mode: str) -> dict[str, Any]:
+    """The scales, thresholds, candidates per scale and feature indices of one mode."""
+    result = meshlab_sharp.detect(points, faces, mode=mode)
+    return {
+        "scales": list(result.scales),
+        "thresholds": [float(t) for t in result.thresholds],
+        "candidate_counts": [int(c) for c in result.candidate_counts],
+        "indices": [int(i) for i in result.indices],
+    }
+
+
+def record(points: np.ndarray, faces: np.ndarray | None) -> dict[str, Any]:
+    """What the golden file of one shape holds: its size and coordinate sum (to tell a
+    changed input from a changed answer) and :func:`outputs` per mode."""
+    out: dict[str, Any] = {"n_points": len(points), "coordinate_sum": float(points.sum())}
+    for mode in MODES:
+        out[mode] = outputs(points, faces, mode)
+    return out
+
+
+def path(name: str) -> Path:
+    """The golden file of a shape."""
+    return FOLDER / f"{name}.json"
+
+
+def load(name: str) -> dict[str, Any]:
+    """The stored golden record of a shape."""
+    return json.loads(path(name).read_text())

@@ -1,0 +1,90 @@
+"""Golden outputs (tests/data/golden, written by scripts/make_golden.py), and that each
+named constant of robust mode decides part of them.
+
+A change of either mode's answers must be deliberate: regenerate the files with
+``python3 scripts/make_golden.py`` and commit them with the change.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from types import ModuleType
+
+import golden
+import numpy as np
+import pytest
+
+from meshlab_sharp import creases, robust
+
+
+@pytest.fixture(scope="module")
+def inputs() -> dict[str, tuple[np.ndarray, np.ndarray | None]]:
+    return {name: make() for name, make in golden.SHAPES.items()}
+
+
+@pytest.mark.parametrize("name", sorted(golden.SHAPES))
+@pytest.mark.parametrize("mode", golden.MODES)
+def test_golden_outputs(inputs, name, mode):
+    points, faces = inputs[name]
+    stored = golden.load(name)
+    assert stored["n_points"] == len(points)
+    assert stored["coordinate_sum"] == pytest.approx(float(points.sum()), rel=1e-12, abs=1e-9)
+    assert golden.outputs(points, faces, mode) == stored[mode]
+
+
+#: Every named constant of robust mode, moved a little each way (relative to its
+#: current value, so that retuning a constant does not silence its test).
+#: ``robust.CREASE_ANGLE`` is ``creases.CREASE_ANGLE`` imported: robust mode reads the
+#: crease angle through ``creases.CREASE_ANGLE`` (the sharp mesh edges) and through
+#: ``robust.R_MIN`` (the threshold floor, computed from it at import), patched here
+#: separately. The lower quartile's position ``(E - 1) // 4`` and the 256 bins are not
+#: named constants of robust mode; test_robust_spec.py pins them.
+NUDGES: dict[str, tuple[ModuleType, str, Callable[[float], float]]] = {
+    "crease angle -3 deg": (creases, "CREASE_ANGLE", lambda v: v - 3.0),
+    "crease angle +3 deg": (creases, "CREASE_ANGLE", lambda v: v + 3.0),
+    "R_MIN x0.85 (17 deg)": (robust, "R_MIN", lambda v: v * 0.85),
+    "R_MIN x1.15 (23 deg)": (robust, "R_MIN", lambda v: v * 1.15),
+    "cone cos -0.1": (robust, "THIN_CONE_COS", lambda v: v - 0.1),
+    "cone cos +0.1": (robust, "THIN_CONE_COS", lambda v: v + 0.1),
+    "thinning kNN -2": (robust, "THIN_KNN", lambda v: v - 2),
+    "thinning kNN +2": (robust, "THIN_KNN", lambda v: v + 2),
+    "mesh ring -1": (robust, "THIN_RING", lambda v: v - 1),
+    "mesh ring +1": (robust, "THIN_RING", lambda v: v + 1),
+    "support kNN -2": (robust, "SUPPORT_KNN", lambda v: v - 2),
+    "support kNN +2": (robust, "SUPPORT_KNN", lambda v: v + 2),
+    "support min -1": (robust, "SUPPORT_MIN", lambda v: v - 1),
+    "support min +1": (robust, "SUPPORT_MIN", lambda v: v + 1),
+    "noise kNN -1": (robust, "NOISE_KNN", lambda v: v - 1),
+    "noise kNN +1": (robust, "NOISE_KNN", lambda v: v + 1),
+    "noise tolerated x0.93": (robust, "NOISE_TOLERATED", lambda v: v * 0.93),
+    "noise tolerated x1.07": (robust, "NOISE_TOLERATED", lambda v: v * 1.07),
+    "noise cap x0.85": (robust, "NOISE_MAX_FACTOR", lambda v: v * 0.85),
+    "noise cap x1.15": (robust, "NOISE_MAX_FACTOR", lambda v: v * 1.15),
+    "quartile factor x0.9": (creases, "NOISE_FACTOR", lambda v: v * 0.9),
+    "quartile factor x1.1": (creases, "NOISE_FACTOR", lambda v: v * 1.1),
+}
+
+
+@pytest.mark.parametrize("nudge", list(NUDGES))
+def test_every_constant_is_pinned_by_the_golden_outputs(inputs, monkeypatch, nudge):
+    module, name, change = NUDGES[nudge]
+    monkeypatch.setattr(module, name, change(getattr(module, name)))
+    changed = [
+        shape
+        for shape in sorted(golden.SHAPES)
+        if golden.outputs(*inputs[shape], "robust") != golden.load(shape)["robust"]
+    ]
+    assert changed, f"{nudge}: robust mode's golden outputs do not see {name}"
+
+
+def test_every_named_constant_is_nudged():
+    # a new constant of robust mode needs its nudges above; robust.CREASE_ANGLE is
+    # creases.CREASE_ANGLE, re-exported
+    named = {
+        (module.__name__, name)
+        for module in (robust, creases)
+        for name in module.__all__
+        if name.isupper() and not (module is robust and name == "CREASE_ANGLE")
+    }
+    assert robust.CREASE_ANGLE is creases.CREASE_ANGLE
+    assert named == {(module.__name__, name) for module, name, _ in NUDGES.values()}
