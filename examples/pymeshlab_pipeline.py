@@ -25,15 +25,31 @@ import meshlab_sharp
 
 
 def make_scan(path: Path, n_points: int) -> Path:
-    """Write the sample part with noise and outliers to ``path`` (a stand-in scan)."""
-    import numpy as np
+    """Write the sample part with noise and outliers to ``path`` (a stand-in scan).
 
-    from meshlab_sharp.groundtruth import add_noise, add_outliers
+    Noise: each point moves along its true normal by N(0, (0.1 spacing)^2), a scanner's
+    depth error. Outliers: 1 % more points, uniform in the bounding box grown by 20 % of
+    its diagonal, at least 2 spacings from the surface.
+    """
+    import numpy as np
+    from scipy.spatial import cKDTree
+
     from meshlab_sharp.sample import sample_part
 
-    part = add_outliers(add_noise(sample_part("points", n_points=n_points), 0.1), 0.01)
+    part = sample_part("points", n_points=n_points)
+    rng = np.random.default_rng(0)
+    points = part.vertices + part.normals * rng.normal(0.0, 0.1 * part.spacing, part.n)[:, None]
+    points = points.astype(np.float32).astype(np.float64)
+    rng, k = np.random.default_rng(0), round(0.01 * part.n)
+    lo, hi = points.min(0), points.max(0)
+    pad = 0.2 * float(np.linalg.norm(hi - lo))
+    tree, strays = cKDTree(points), np.empty((0, 3))
+    while len(strays) < k:
+        c = rng.uniform(lo - pad, hi + pad, size=(2 * (k - len(strays)) + 8, 3))
+        strays = np.vstack([strays, c[tree.query(c)[0] > 2 * part.spacing]])
+    points = np.vstack([points, strays[:k].astype(np.float32)])
     ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(part.vertices, np.float64)))
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(points, np.float64)))
     ms.save_current_mesh(str(path), binary=True)
     return path
 

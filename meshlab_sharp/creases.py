@@ -29,7 +29,7 @@ __all__ = [
 ]
 
 #: Degrees: the smallest turn of the surface that counts as a sharp edge (the ground
-#: truth's crease angle, ``groundtruth.CREASE_ANGLE``).
+#: truth's crease angle, ``meshlab_sharp.parts.CREASE_ANGLE``).
 CREASE_ANGLE = 20.0
 #: On a noisy mesh the dihedral angles of flat regions are close to half-normal
 #: (measured: median / lower quartile = 2.1, half-normal 2.11): their lower quartile is

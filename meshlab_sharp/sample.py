@@ -5,7 +5,7 @@ A 100 x 60 x 40 block (units: mm) with planes, a step (concave 90-degree edge), 
 right top edge), a cylindrical boss (convex rim, concave foot)
 and a countersunk drilled hole (two 45-degree circles, a 90-degree rim below): strong
 and weak, convex and concave sharp edges, all known exactly. It is the ``"fandisk"``
-part of ``meshlab_sharp.groundtruth``; see there for how it is built and sampled.
+part of ``meshlab_sharp.parts``; see there for how it is built and sampled.
 
 >>> from meshlab_sharp.sample import sample_part
 >>> part = sample_part()              # 50,000 Poisson-disk points   # doctest: +SKIP
@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__, groundtruth
+from . import __version__, parts
 from .cache import cache_dir
-from .groundtruth import SamplePart, make_part
 from .io import atomic_write
+from .parts import SamplePart, make_part
 
 __all__ = ["SAMPLE_NAME", "SamplePart", "sample_part"]
 
@@ -80,7 +80,7 @@ _FIELDS = ("vertices", "edges", "normals", "outliers")
 def _cache_file(kind: str, n_points: int | None, seed: int) -> Path:
     """The cache file of one part: its arguments, the version and a digest of the
     generator's source in the name."""
-    source = b"".join(Path(m).read_bytes() for m in (__file__, groundtruth.__file__))
+    source = b"".join(Path(m).read_bytes() for m in (__file__, parts.__file__))
     digest = hashlib.sha256(source).hexdigest()[:12]
     size = "default" if n_points is None else str(int(n_points))
     name = f"{SAMPLE_NAME}-{kind}-{size}-seed{seed}-{__version__}-{digest}.npz"

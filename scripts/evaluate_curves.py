@@ -4,7 +4,7 @@
 For every sharp part (``groundtruth.part_names(smooth=False)``) as a clean cloud, a
 noisy cloud (normal noise of 25 % of the spacing) and an isotropic mesh, runs
 ``detect(..., curves=True)`` in both modes and scores the curves with
-:func:`meshlab_sharp.evaluation.evaluate_curves` (precision, coverage, RMS distance in
+:func:`evaluation.scoring.evaluate_curves` (precision, coverage, RMS distance in
 spacings, curve count / exact curve count, corners found), and the time of the curves
 over the time of detection. Writes ``docs/curves.md`` and ``docs/curves.json``.
 
@@ -28,10 +28,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from evaluation import groundtruth as gt  # noqa: E402
+from evaluation.scoring import evaluate_curves  # noqa: E402
 from meshlab_sharp import detect  # noqa: E402
-from meshlab_sharp import groundtruth as gt  # noqa: E402
 from meshlab_sharp.curves import extract_curves  # noqa: E402
-from meshlab_sharp.evaluation import evaluate_curves  # noqa: E402
 
 MODES = ("robust", "paper")
 CONDITIONS = ("clean", "noise25", "mesh")
@@ -146,9 +146,9 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
         "`python3 scripts/evaluate_curves.py` "
         f"({meta['n_points']:,} points per cloud, about half as many mesh vertices; seed "
         f"{meta['seed']}; {meta['machine']}). Every sharp part of "
-        "`meshlab_sharp.groundtruth` as a clean cloud, a cloud with normal noise of 25 % of "
+        "`evaluation.groundtruth` as a clean cloud, a cloud with normal noise of 25 % of "
         "the spacing, and an isotropic mesh; `detect(..., curves=True)` in robust and paper "
-        "mode; scores from `meshlab_sharp.evaluation.evaluate_curves`:",
+        "mode; scores from `evaluation.scoring.evaluate_curves`:",
         "",
         "- **precision**: share of the curves' length within 1 spacing of an exact edge;",
         "- **coverage**: share of the exact edges' length within 1.5 spacings of a curve;",

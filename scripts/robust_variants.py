@@ -24,9 +24,9 @@ sys.path.insert(0, str(ROOT / "scripts"))
 
 import evaluate  # noqa: E402
 
+from evaluation import groundtruth as gt  # noqa: E402
+from evaluation.scoring import score_part  # noqa: E402
 from meshlab_sharp import creases, detect, robust  # noqa: E402
-from meshlab_sharp import groundtruth as gt  # noqa: E402
-from meshlab_sharp.evaluation import score_part  # noqa: E402
 
 #: name -> ((module, constant, value), ...) changed from the chosen mode.
 VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {

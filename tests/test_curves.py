@@ -13,11 +13,11 @@ import shapes
 from files import write_ply
 
 import meshlab_sharp
-from meshlab_sharp import groundtruth as gt
+from evaluation import groundtruth as gt
+from evaluation.scoring import evaluate_curves, truth_curves
 from meshlab_sharp.cli import main
 from meshlab_sharp.curves import classify, extract_curves
 from meshlab_sharp.errors import InputError, MeshlabSharpError
-from meshlab_sharp.evaluation import evaluate_curves, truth_curves
 from meshlab_sharp.io import curve_arrays, require_ezdxf, save_curves
 
 MODES = ("paper", "robust")

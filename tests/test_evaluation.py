@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from meshlab_sharp import groundtruth as gt
-from meshlab_sharp.evaluation import (
+from evaluation import groundtruth as gt
+from evaluation.scoring import (
     density_spacing,
     distance_to_segments,
     evaluate,

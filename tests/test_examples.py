@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshlab_sharp.evaluation import evaluate
+from evaluation.scoring import evaluate
 from meshlab_sharp.io import load
 from meshlab_sharp.sample import sample_part
 

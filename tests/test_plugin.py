@@ -19,7 +19,8 @@ import shapes
 from files import write_ply
 
 import meshlab_sharp
-from meshlab_sharp import groundtruth, plugin
+from evaluation import groundtruth
+from meshlab_sharp import plugin
 from meshlab_sharp.cli import main
 from meshlab_sharp.io import mesh_arrays
 from meshlab_sharp.sample import sample_part

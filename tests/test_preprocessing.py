@@ -88,7 +88,7 @@ def test_preprocess_keeps_positions_and_map(cube_with_outliers):
 
 @pytest.fixture(scope="module")
 def noisy_sample_mesh():
-    from meshlab_sharp.groundtruth import add_noise
+    from evaluation.groundtruth import add_noise
     from meshlab_sharp.sample import sample_part
 
     part = sample_part("mesh", n_points=8000)
@@ -96,7 +96,7 @@ def noisy_sample_mesh():
 
 
 def test_denoise_raises_precision_on_noisy_sample_mesh(noisy_sample_mesh):
-    from meshlab_sharp.evaluation import evaluate
+    from evaluation.scoring import evaluate
 
     part, noisy = noisy_sample_mesh
     plain = meshlab_sharp.detect(noisy.vertices, noisy.faces, mode="paper")

@@ -10,10 +10,10 @@ import pytest
 import shapes
 
 import meshlab_sharp
+from evaluation import groundtruth as gt
+from evaluation.scoring import evaluate
 from meshlab_sharp import creases, robust
-from meshlab_sharp import groundtruth as gt
 from meshlab_sharp.cli import main
-from meshlab_sharp.evaluation import evaluate
 from meshlab_sharp.neighbourhoods import knn
 
 N = 4000

@@ -9,9 +9,9 @@ import pymeshlab
 import pytest
 from scipy.spatial import cKDTree
 
+from evaluation.groundtruth import crease_segments
+from evaluation.scoring import distance_to_segments
 from meshlab_sharp import sample
-from meshlab_sharp.evaluation import distance_to_segments
-from meshlab_sharp.groundtruth import crease_segments
 from meshlab_sharp.sample import sample_part
 
 N = 6_000
