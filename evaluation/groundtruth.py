@@ -2,24 +2,8 @@
 edges are known exactly), thin-walled parts, CAD tessellations, a simulated scan, and
 corruptions of them.
 
-Every part is built the same way (see :mod:`meshlab_sharp.parts`):
-
-1. A **reference surface**: a closed, consistently oriented triangle mesh of the exact
-   solid, made from numpy primitives (boxes, prisms, frustums, convex hulls, swept
-   surfaces) and pymeshlab's exact mesh booleans. Round surfaces are polygons with
-   128 segments per turn, so facets meet at about 3 degrees and lie within
-   ``r * (1 - cos(pi / 128))`` (0.03 % of the radius) of the round surface.
-2. The **truth**: every edge of the reference surface whose two faces turn by more
-   than ``CREASE_ANGLE`` (20) degrees, as straight segments. Facet edges of round
-   surfaces (about 3 degrees) are never included; smooth controls have none.
-3. A **point cloud**: Poisson-disk samples of the reference surface (a maximal
-   Poisson-disk set drawn from random area-weighted candidates, then trimmed to exactly
-   ``n_points``), every point exactly on a reference triangle, with that triangle's
-   normal. Deterministic for a given seed.
-4. A **mesh**: the reference surface remeshed isotropically by pymeshlab with the
-   creases kept as mesh edges, about ``n_points`` vertices. Deterministic (no seed).
-
-Coordinates are rounded to float32 (MeshLab stores float) and returned as float64.
+Parts are built as :mod:`meshlab_sharp.parts` says: a reference surface, its exact
+sharp edges, Poisson-disk points or an isotropic remesh.
 
 The evaluation's **conditions** (``CONDITIONS``, ``suite``, ``make_condition``) add
 corruptions (noise, outliers, a density gradient), CAD tessellations (``cad_part``: the

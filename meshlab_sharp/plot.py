@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import InputError, MeshlabSharpError
+from .errors import InputError
+from .extras import require
 from .io import Geometry, OutputSet, atomic_write
 
 __all__ = ["DEFAULT_SIZE", "VIEWS", "report_figure", "require_matplotlib", "save_report"]
@@ -48,14 +49,8 @@ DISTANCE_LABELS = {
 def require_matplotlib() -> Any:
     """Import matplotlib (drawing goes through its Agg canvas: no display, no pyplot
     state is touched), or raise a one-line error."""
-    try:
-        import matplotlib
-        from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
-    except ImportError:
-        raise MeshlabSharpError(
-            "the report picture needs matplotlib: pip install 'meshlab-sharp[plot]'"
-        ) from None
-    return matplotlib
+    require("matplotlib.backends.backend_agg", "the report picture", "plot")
+    return require("matplotlib", "the report picture", "plot")
 
 
 def save_report(

@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, MeshlabSharpError
+from ..errors import InputError
+from ..extras import require
 from .writers import OutputSet, atomic_write
 
 __all__ = ["CURVE_FORMATS", "check_curves_path", "curve_arrays", "require_ezdxf", "save_curves"]
@@ -30,13 +31,7 @@ CURVE_FORMATS = (".ply", ".obj", ".dxf")
 
 def require_ezdxf() -> Any:
     """Import ezdxf, or raise a one-line error saying how to install it."""
-    try:
-        import ezdxf
-    except ImportError:
-        raise MeshlabSharpError(
-            "writing DXF needs ezdxf: pip install 'meshlab-sharp[dxf]' (or pip install ezdxf)"
-        ) from None
-    return ezdxf
+    return require("ezdxf", "writing DXF", "dxf")
 
 
 def check_curves_path(path: str | os.PathLike[str]) -> Path:

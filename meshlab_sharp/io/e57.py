@@ -11,20 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..extras import require
 from .stream import PointSource
-
-
-def _pye57():
-    try:
-        import pye57
-    except ImportError:
-        raise InputError("reading E57 needs pye57: pip install 'meshlab-sharp[e57]'") from None
-    return pye57
 
 
 def e57_points(path: str | os.PathLike[str]) -> PointSource:
     """An E57 file's points as a :class:`~meshlab_sharp.io.stream.PointSource`."""
-    pye57 = _pye57()
+    pye57 = require("pye57", "reading E57", "e57")
     p = Path(path)
     try:
         e57 = pye57.E57(str(p))
@@ -51,7 +44,7 @@ def read_e57(path: str | os.PathLike[str]) -> np.ndarray:
 
 def write_e57(path: str | os.PathLike[str], points: np.ndarray) -> None:
     """Write (n, 3) points as one E57 scan (tests, examples)."""
-    pye57 = _pye57()
+    pye57 = require("pye57", "reading E57", "e57")
     pts = np.asarray(points, np.float64)
     writer = pye57.E57(str(path), mode="w")
     writer.write_scan_raw(

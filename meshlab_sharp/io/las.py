@@ -11,20 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..extras import require
 from .stream import PointSource
-
-
-def _laspy():
-    try:
-        import laspy
-    except ImportError:
-        raise InputError("reading LAS/LAZ needs laspy: pip install 'meshlab-sharp[las]'") from None
-    return laspy
 
 
 def las_points(path: str | os.PathLike[str]) -> PointSource:
     """A LAS/LAZ file's points as a :class:`~meshlab_sharp.io.stream.PointSource`."""
-    laspy = _laspy()
+    laspy = require("laspy", "reading LAS/LAZ", "las")
     p = Path(path)
     try:
         with laspy.open(p) as reader:
@@ -52,7 +45,7 @@ def read_las(path: str | os.PathLike[str]) -> np.ndarray:
 def write_las(path: str | os.PathLike[str], points: np.ndarray, *, scale: float = 1e-4) -> None:
     """Write (n, 3) points to a LAS (``.las``) or LAZ (``.laz``) file, point format 0,
     coordinates rounded to ``scale`` (tests, examples)."""
-    laspy = _laspy()
+    laspy = require("laspy", "reading LAS/LAZ", "las")
     pts = np.asarray(points, np.float64)
     header = laspy.LasHeader(point_format=0, version="1.2")
     header.scales = np.array([scale] * 3)

@@ -28,6 +28,7 @@ import numpy as np
 
 from .. import _kernels, robust
 from ..errors import InputError
+from ..extras import require
 from ..io import Geometry
 from ..io.stream import PointSource, open_points
 from ..multiscale import DEFAULT_KNN_SCALES
@@ -387,12 +388,8 @@ def _client(dask: str | Any, stack: ExitStack) -> Any:
     """A Dask client for ``dask`` (None: none); closed with ``stack``."""
     if dask is None:
         return None
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError:
-        raise InputError(
-            "--dask needs dask.distributed: pip install 'meshlab-sharp[dask]'"
-        ) from None
+    distributed = require("dask.distributed", "--dask", "dask")
+    Client, LocalCluster = distributed.Client, distributed.LocalCluster
     if not isinstance(dask, str):
         return dask
     if dask.startswith("local:"):
