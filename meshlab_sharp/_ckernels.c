@@ -964,3 +964,109 @@ void ms_face_double_areas(const double *p, const int64_t *faces, int64_t m, doub
         out[f] = sqrt(x * x + y * y + z * z);
     }
 }
+
+/* ------------------------------------------------------------ robust mode on meshes */
+
+static int cmp_i32(const void *a, const void *b) {
+    int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* RingNeighbourhoods.one_ring as CSR: each vertex's 1-ring and itself, sorted, without
+ * repeats (scipy's sorted boolean matrix), from ms_adjacency's lists (ptr, adj), which
+ * have repeats. out_idx: room for ptr[n] + n entries; out_ptr (n + 1). */
+void ms_sorted_one_ring(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t *out_ptr,
+                        int32_t *out_idx) {
+    int64_t w = 0;
+    out_ptr[0] = 0;
+    for (int64_t v = 0; v < n; v++) {
+        int32_t *a = out_idx + w;
+        int64_t m = 0;
+        a[m++] = (int32_t)v;
+        for (int64_t t = ptr[v]; t < ptr[v + 1]; t++) a[m++] = adj[t];
+        if (m <= 32) {
+            for (int64_t i = 1; i < m; i++) {
+                int32_t x = a[i];
+                int64_t j = i;
+                for (; j > 0 && a[j - 1] > x; j--) a[j] = a[j - 1];
+                a[j] = x;
+            }
+        } else {
+            qsort(a, (size_t)m, sizeof(int32_t), cmp_i32);
+        }
+        int64_t u = 1;
+        for (int64_t i = 1; i < m; i++)
+            if (a[i] != a[u - 1]) a[u++] = a[i];
+        w += u;
+        out_ptr[v + 1] = w;
+    }
+}
+
+/* robust.local_scale of vertices [begin, end) over their k-rings, k = rings[s] (increasing),
+ * the rings listed in the order of RingNeighbourhoods.at (scipy's sparse product), which
+ * fixes the rounding of the sums: ring k + 1 lists the vertices met first when walking
+ * ring k's list and, for each member, its sorted one_ring (ptr1, one: ms_sorted_one_ring),
+ * in reverse order. mark: (n,) int64 scratch of this thread, all -1 initially (or left by
+ * an earlier call). out_ell, out_off: (nscales, n). Returns 0, or -1 out of memory. */
+int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const int32_t *one,
+                        const int64_t *rings, int nscales, int64_t begin, int64_t end,
+                        int64_t *mark, double *out_ell, double *out_off) {
+    int64_t cap = 1024, rmax = rings[nscales - 1];
+    int32_t *cur = (int32_t *)malloc((size_t)cap * sizeof(int32_t));
+    int32_t *next = (int32_t *)malloc((size_t)cap * sizeof(int32_t));
+    double *q = (double *)malloc((size_t)cap * 3 * sizeof(double));
+    double *dist = (double *)malloc((size_t)cap * sizeof(double));
+    int rc = 0;
+    if (!cur || !next || !q || !dist) { rc = -1; goto done; }
+    for (int64_t i = begin; i < end; i++) {
+        const double *pi = p + 3 * i;
+        int64_t m = 1;
+        cur[0] = (int32_t)i;
+        int s = 0;
+        for (int64_t ring = 1; ring <= rmax && s < nscales; ring++) {
+            int64_t gen = i * (rmax + 1) + ring, k = 0;
+            for (int64_t a = 0; a < m; a++) {
+                int32_t v = cur[a];
+                for (int64_t t = ptr1[v]; t < ptr1[v + 1]; t++) {
+                    int32_t w = one[t];
+                    if (mark[w] == gen) continue;
+                    mark[w] = gen;
+                    if (k == cap) {
+                        int64_t nc = 2 * cap;
+                        int32_t *c2 = (int32_t *)realloc(cur, (size_t)nc * sizeof(int32_t));
+                        if (!c2) { rc = -1; goto done; }
+                        cur = c2;
+                        int32_t *n2 = (int32_t *)realloc(next, (size_t)nc * sizeof(int32_t));
+                        if (!n2) { rc = -1; goto done; }
+                        next = n2;
+                        double *q2 = (double *)realloc(q, (size_t)nc * 3 * sizeof(double));
+                        if (!q2) { rc = -1; goto done; }
+                        q = q2;
+                        double *d2 = (double *)realloc(dist, (size_t)nc * sizeof(double));
+                        if (!d2) { rc = -1; goto done; }
+                        dist = d2;
+                        cap = nc;
+                    }
+                    next[k++] = w;
+                }
+            }
+            for (int64_t a = 0; a < k; a++) cur[a] = next[k - 1 - a]; /* reversed */
+            m = k;
+            if (ring != rings[s]) continue;
+            for (int64_t j = 0; j < m; j++) {
+                const double *pj = p + 3 * (int64_t)cur[j];
+                double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
+                q[3 * j] = x; q[3 * j + 1] = y; q[3 * j + 2] = z;
+                dist[j] = sqrt(x * x + y * y + z * z);
+            }
+            local_scale_one(q, dist, m, out_ell + s * n + i, out_off + s * n + i);
+            s++;
+        }
+    }
+done:
+    free(cur);
+    free(next);
+    free(q);
+    free(dist);
+    return rc;
+}

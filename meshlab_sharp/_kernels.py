@@ -14,6 +14,7 @@ from __future__ import annotations
 import ctypes
 import importlib.machinery
 import os
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
@@ -57,6 +58,12 @@ _SIGNATURES = {
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_face_double_areas": (None, [_c_void_p, _c_void_p, _i64, _c_void_p]),
+    "ms_sorted_one_ring": (None, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p]),
+    "ms_ring_local_scale": (
+        _int,
+        [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _int, _i64, _i64, _c_void_p]
+        + [_c_void_p, _c_void_p],
+    ),
 }
 
 
@@ -396,7 +403,6 @@ def ring_projected_distances(
     out_normals = np.empty((len(rs), n, 3)) if keep_normals else None
     w = _workers(workers)
     stamps: dict[int, np.ndarray] = {}
-    import threading
 
     def task(a: int, b: int) -> int:
         tid = threading.get_ident()
@@ -410,6 +416,64 @@ def ring_projected_distances(
 
     _run_chunks(n, w, task)
     return pdis, out_normals
+
+
+def sorted_one_ring(adjacent: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's 1-ring and itself, sorted, without repeats, in CSR form: indptr
+    (n + 1,) int64, indices int32, the lists of ``RingNeighbourhoods.one_ring``, from
+    :func:`adjacency`'s lists."""
+    lib = _LIB
+    assert lib is not None
+    ptr, adj = adjacent
+    n = len(ptr) - 1
+    out_ptr = np.empty(n + 1, dtype=np.int64)
+    out_idx = np.empty(len(adj) + n, dtype=np.int32)
+    lib.ms_sorted_one_ring(_ptr(ptr), _ptr(adj), n, _ptr(out_ptr), _ptr(out_idx))
+    return out_ptr, out_idx[: out_ptr[-1]]
+
+
+def ring_local_scale(
+    points: np.ndarray,
+    one_ring: tuple[np.ndarray, np.ndarray],
+    rings: Sequence[int],
+    workers: int = -1,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`meshlab_sharp.robust.local_scale` over the k-rings of every vertex, for
+    each k in ``rings`` (increasing), bit for bit as over ``RingNeighbourhoods.at(k)``
+    (whose order of the members it follows), without building the lists.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    one_ring : (indptr (n + 1,) int64, indices int32)
+        :func:`sorted_one_ring` of the mesh.
+    rings : sequence of int
+    workers : int, default -1
+
+    Returns
+    -------
+    ell, off : (s, n) float64
+    """
+    lib = _LIB
+    assert lib is not None
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    n = len(points)
+    rs = np.ascontiguousarray(rings, dtype=np.int64)
+    ptr, idx = (np.ascontiguousarray(a) for a in one_ring)
+    ell, off = np.empty((len(rs), n)), np.empty((len(rs), n))
+    marks: dict[int, np.ndarray] = {}
+
+    def task(a: int, b: int) -> int:
+        mark = marks.get(threading.get_ident())
+        if mark is None:
+            mark = marks[threading.get_ident()] = np.full(n, -1, dtype=np.int64)
+        return lib.ms_ring_local_scale(
+            _ptr(points), n, _ptr(ptr), _ptr(idx), _ptr(rs), len(rs), a, b, _ptr(mark),
+            _ptr(ell), _ptr(off),
+        )  # fmt: skip
+
+    _run_chunks(n, workers, task)
+    return ell, off
 
 
 def face_average_normals(points: np.ndarray, faces: np.ndarray, zero: float) -> np.ndarray:

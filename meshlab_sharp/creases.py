@@ -68,19 +68,22 @@ def dihedral_angles(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     fn = np.cross(p1 - p0, p2 - p0)
     length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
     fn = fn / np.where(length > 0, length, 1.0)[:, None]
-    pairs = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    owner = np.tile(np.arange(len(faces)), 3)
-    key = np.sort(pairs, axis=1)
-    order = np.lexsort((owner, key[:, 1], key[:, 0]))
-    key, owner = key[order], owner[order]
-    new = np.ones(len(key), bool)
-    new[1:] = (key[1:] != key[:-1]).any(axis=1)
+    # the 3 edges of each face in turn, so that owners never decrease: a stable sort of
+    # the edge codes lo * n + hi (< 2**63 for n < 3e9) orders equal edges by owner
+    pairs = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    n = np.int64(len(points))
+    code = np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1])
+    order = np.argsort(code, kind="stable")
+    code, owner = code[order], order // 3
+    new = np.ones(len(code), bool)
+    new[1:] = code[1:] != code[:-1]
     starts = np.flatnonzero(new)
-    counts = np.diff(np.append(starts, len(key)))
+    counts = np.diff(np.append(starts, len(code)))
     two = starts[counts == 2]
     u, v = fn[owner[two]], fn[owner[two + 1]]
     dot = u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] + u[:, 2] * v[:, 2]
-    return key[two], np.arccos(np.clip(dot, -1.0, 1.0))
+    edges = np.stack([code[two] // n, code[two] % n], axis=1)
+    return edges, np.arccos(np.clip(dot, -1.0, 1.0))
 
 
 def crease_threshold(angles: np.ndarray) -> float:

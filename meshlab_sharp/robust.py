@@ -39,9 +39,11 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from . import _kernels
 from .creases import CREASE_ANGLE, sharp_vertices
@@ -330,18 +332,25 @@ class RelativeRule:
         ``lists(scale) -> Neighbourhood``, the neighbourhoods of that scale (called in
         increasing order of scale).
     n_scales : int
+    local : callable, optional
+        ``local(i, scale) -> (l, o)``, :func:`local_scale` of the i-th scale computed
+        without the lists (the compiled ring pass); default: from ``lists``.
     """
 
     points: np.ndarray
     lists: object
     n_scales: int
+    local: Callable[[int, int], tuple[np.ndarray, np.ndarray]] | None = None
 
     def __post_init__(self) -> None:
         self.score = np.zeros(len(self.points))
 
     def __call__(self, i: int, scale: int, pdis: np.ndarray) -> tuple[np.ndarray, float]:
         """Relative distances (m,) and threshold of the i-th scale, ``scale``."""
-        ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
+        if self.local is not None:
+            ell, offset = self.local(i, scale)
+        else:
+            ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
         return r, robust_threshold(r)
@@ -584,7 +593,13 @@ class RobustSetup:
                 )
                 self.fused = None
         self._rings: RingNeighbourhoods | None = None
-        self.rule = RelativeRule(self.points, self._lists, len(self.scales))
+        self._one_ring: sp.csr_matrix | None = None
+        self._ring_scales: tuple[np.ndarray, np.ndarray] | None = None
+        compiled_rings = isinstance(neighbourhoods, RingNeighbourhoods) and (
+            neighbourhoods.adjacency is not None
+        )
+        local = self._ring_local_scale if compiled_rings else None
+        self.rule = RelativeRule(self.points, self._lists, len(self.scales), local)
 
     def _pass(self, noise_k: int) -> _kernels.ScalePass:
         """The compiled pass at ``scales`` over ``points`` (whose kd-tree
@@ -622,6 +637,42 @@ class RobustSetup:
             out.append(Neighbourhood(indptr, np.ascontiguousarray(table[:, :k]).reshape(-1)))
         return out
 
+    def _ring_local_scale(self, i: int, scale: int) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`local_scale` at the i-th ring scale, from one compiled pass over every
+        ring (the same bits as over ``RingNeighbourhoods.at(scale)``)."""
+        if self._ring_scales is None:
+            assert isinstance(self.neighbourhoods, RingNeighbourhoods)
+            assert self.neighbourhoods.adjacency is not None
+            one = _kernels.sorted_one_ring(self.neighbourhoods.adjacency)
+            self._one_ring = sp.csr_matrix(
+                (np.ones(len(one[1]), dtype=bool), one[1], one[0]), shape=(self.n, self.n)
+            )
+            self._ring_scales = _kernels.ring_local_scale(self.points, one, self.scales)
+        ell, off = self._ring_scales
+        return ell[i], off[i]
+
+    def _ring_rows(self, rows: np.ndarray, rings: tuple[int, ...]) -> list[Neighbourhood]:
+        """The k-rings, k in ``rings`` (increasing), of the vertices ``rows`` only (the
+        other rows empty), each listed as ``RingNeighbourhoods.at(k)`` lists it: a row of
+        a sparse product depends only on that row."""
+        one = self._one_ring
+        if one is None:
+            one = self._one_ring = RingNeighbourhoods(self.faces, self.n, backend="numpy").one_ring
+        current = sp.csr_matrix(
+            (np.ones(len(rows), dtype=bool), rows, np.arange(len(rows) + 1)),
+            shape=(len(rows), self.n),
+        )
+        out, ring = [], 0
+        for k in rings:
+            while ring < k:
+                current = (current @ one).tocsr()
+                ring += 1
+            sizes = np.zeros(self.n, dtype=np.int64)
+            sizes[rows] = np.diff(current.indptr)
+            indptr = np.concatenate([[0], np.cumsum(sizes)])
+            out.append(Neighbourhood(indptr, current.indices.astype(np.int64)))
+        return out
+
     def _lists(self, scale: int) -> Neighbourhood:
         if self.faces is None:
             return self.neighbourhoods.at(scale)
@@ -652,9 +703,9 @@ class RobustSetup:
                 ks = (min(SUPPORT_KNN, top), min(THIN_KNN, top), top)
                 around, compare, direction = self._candidate_lists(np.flatnonzero(mask), ks)
             else:
-                rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
-                around = compare = rings.at(min(THIN_RING, top))
-                direction = rings.at(top)
+                ks = (min(THIN_RING, top), top)
+                around, direction = self._ring_rows(np.flatnonzero(mask), ks)
+                compare = around
             e = line_directions(self.points, mask, direction)
             mask = supported(self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS)
             mask = thin(self.points, mask, self.rule.score, e, compare, cone_cos=THIN_CONE_COS)

@@ -413,3 +413,38 @@ def test_isolated_points_and_noise_from_one_search(name):
     assert _noise_factor(fused.stats.noise) == pytest.approx(
         noise_scale_factor(points, table, 7), rel=1e-12
     )
+
+
+def _fan_and_grid_mesh() -> tuple[np.ndarray, np.ndarray]:
+    """A grid mesh plus a cone of 60 faces around one apex: valences 6 and 60 (the C
+    kernel sorts short 1-rings by insertion, long ones with qsort)."""
+    vertices, faces = cube_grid_mesh(5)
+    vertices, faces = np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
+    t = np.linspace(0.0, 2.0 * np.pi, 60, endpoint=False)
+    rim = np.stack([3.0 + np.cos(t), np.sin(t), np.zeros(60)], axis=1)
+    apex = np.array([[3.0, 0.0, 1.5]])
+    base = len(vertices)
+    ring = base + 1 + np.arange(60)
+    fan = np.stack([np.full(60, base), ring, np.roll(ring, -1)], axis=1)
+    return np.vstack([vertices, apex, rim]), np.vstack([faces, fan])
+
+
+def test_compiled_ring_local_scales_identical_to_the_ring_lists():
+    """The compiled ring pass lists each k-ring in the order of the sparse product
+    (``RingNeighbourhoods.at``), so its sums are the reference's, bit for bit."""
+    vertices, faces = _fan_and_grid_mesh()
+    rings = RingNeighbourhoods(faces, len(vertices), backend="numpy")
+    one = _kernels.sorted_one_ring(_kernels.adjacency(faces, len(vertices)))
+    assert np.array_equal(one[0], rings.one_ring.indptr)
+    assert np.array_equal(one[1], rings.one_ring.indices)
+    ell, off = _kernels.ring_local_scale(vertices, one, (1, 2, 4))
+    for s, k in enumerate((1, 2, 4)):
+        ref_ell, ref_off = local_scale(vertices, rings.at(k), backend="numpy")
+        assert np.array_equal(ell[s], ref_ell)
+        assert np.array_equal(off[s], ref_off)
+
+
+def test_robust_mesh_with_a_high_valence_vertex_same_answers():
+    vertices, faces = _fan_and_grid_mesh()
+    ref, fast = _both(vertices, faces, mode="robust")
+    _assert_same(ref, fast)
