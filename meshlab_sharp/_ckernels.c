@@ -1070,3 +1070,68 @@ done:
     free(dist);
     return rc;
 }
+
+static int cmp_pair_i64(const void *a, const void *b) {
+    const int64_t *x = (const int64_t *)a, *y = (const int64_t *)b;
+    if (x[0] != y[0]) return (x[0] > y[0]) - (x[0] < y[0]);
+    return (x[1] > y[1]) - (x[1] < y[1]);
+}
+
+/* creases.dihedral_angles without the angle: the edges (a, b), a < b, with exactly two
+ * faces, sorted lexicographically, into out_edges (at most 3 m rows), and the dot product
+ * u . v of the two faces' unit normals fn (m, 3) (face order: the lower index first) into
+ * out_dot. Returns the number of edges, or -1 out of memory. */
+int64_t ms_two_face_edges(const int64_t *faces, int64_t m, int64_t n, const double *fn,
+                          int64_t *out_edges, double *out_dot) {
+    int64_t *ptr = (int64_t *)calloc((size_t)n + 1, sizeof(int64_t));
+    int64_t *item = (int64_t *)malloc((size_t)(3 * m > 0 ? 3 * m : 1) * 2 * sizeof(int64_t));
+    if (!ptr || !item) { free(ptr); free(item); return -1; }
+    for (int64_t f = 0; f < m; f++)
+        for (int c = 0; c < 3; c++) {
+            int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
+            ptr[(a < b ? a : b) + 1]++;
+        }
+    for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
+    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
+    if (!fill) { free(ptr); free(item); return -1; }
+    memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
+    for (int64_t f = 0; f < m; f++)
+        for (int c = 0; c < 3; c++) {
+            int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
+            int64_t lo = a < b ? a : b, hi = a < b ? b : a, t = fill[lo]++;
+            item[2 * t] = hi;
+            item[2 * t + 1] = f;
+        }
+    free(fill);
+    int64_t e = 0;
+    for (int64_t v = 0; v < n; v++) {
+        int64_t *it = item + 2 * ptr[v];
+        int64_t k = ptr[v + 1] - ptr[v];
+        /* sort by the other end, then the face (faces were filled in increasing order):
+         * insertion sort for short lists, qsort for long ones (a fan of many faces) */
+        if (k > 32) qsort(it, (size_t)k, 2 * sizeof(int64_t), cmp_pair_i64);
+        else for (int64_t i = 1; i < k; i++) {
+            int64_t hb = it[2 * i], hf = it[2 * i + 1], j = i;
+            for (; j > 0 && it[2 * (j - 1)] > hb; j--) {
+                it[2 * j] = it[2 * (j - 1)];
+                it[2 * j + 1] = it[2 * (j - 1) + 1];
+            }
+            it[2 * j] = hb;
+            it[2 * j + 1] = hf;
+        }
+        for (int64_t i = 0; i < k;) {
+            int64_t j = i + 1;
+            while (j < k && it[2 * j] == it[2 * i]) j++;
+            if (j - i == 2) {
+                const double *u = fn + 3 * it[2 * i + 1], *w = fn + 3 * it[2 * i + 3];
+                out_edges[2 * e] = v;
+                out_edges[2 * e + 1] = it[2 * i];
+                out_dot[e++] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+            }
+            i = j;
+        }
+    }
+    free(ptr);
+    free(item);
+    return e;
+}

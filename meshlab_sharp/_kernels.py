@@ -58,6 +58,7 @@ _SIGNATURES = {
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_face_double_areas": (None, [_c_void_p, _c_void_p, _i64, _c_void_p]),
+    "ms_two_face_edges": (_i64, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_sorted_one_ring": (None, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_ring_local_scale": (
         _int,
@@ -416,6 +417,24 @@ def ring_projected_distances(
 
     _run_chunks(n, w, task)
     return pdis, out_normals
+
+
+def two_face_edges(
+    faces: np.ndarray, n: int, face_normals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The edges with exactly two faces, (e, 2) int64 ``a < b`` sorted lexicographically,
+    and the dot products (e,) of their faces' unit normals ``face_normals`` (m, 3), as
+    :func:`meshlab_sharp.creases.dihedral_angles` pairs them."""
+    lib = _LIB
+    assert lib is not None
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    fn = np.ascontiguousarray(face_normals, dtype=np.float64)
+    edges = np.empty((3 * len(faces), 2), dtype=np.int64)
+    dot = np.empty(3 * len(faces))
+    e = lib.ms_two_face_edges(_ptr(faces), len(faces), n, _ptr(fn), _ptr(edges), _ptr(dot))
+    if e < 0:
+        raise MemoryError("out of memory pairing the faces of the mesh's edges")
+    return edges[:e].copy(), dot[:e].copy()
 
 
 def sorted_one_ring(adjacent: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

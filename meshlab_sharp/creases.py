@@ -20,6 +20,8 @@ import math
 
 import numpy as np
 
+from . import _kernels
+
 __all__ = [
     "CREASE_ANGLE",
     "NOISE_FACTOR",
@@ -41,7 +43,9 @@ CREASE_ANGLE = 20.0
 NOISE_FACTOR = 4.0 / 0.3186
 
 
-def dihedral_angles(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def dihedral_angles(
+    points: np.ndarray, faces: np.ndarray, *, backend: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Edges with exactly two faces and the angle between their face normals.
 
     Parameters
@@ -49,6 +53,8 @@ def dihedral_angles(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     points : (n, 3) float64
     faces : (f, 3) int
         Triangles of non-zero area (cleaned).
+    backend : {"compiled", "numpy"}, optional
+        Default :func:`meshlab_sharp._kernels.default_backend`; the same result.
 
     Returns
     -------
@@ -68,6 +74,9 @@ def dihedral_angles(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     fn = np.cross(p1 - p0, p2 - p0)
     length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
     fn = fn / np.where(length > 0, length, 1.0)[:, None]
+    if _kernels.resolve(backend) == "compiled":
+        edges, dot = _kernels.two_face_edges(faces, len(points), fn)
+        return edges, np.arccos(np.clip(dot, -1.0, 1.0))
     # the 3 edges of each face in turn, so that owners never decrease: a stable sort of
     # the edge codes lo * n + hi (< 2**63 for n < 3e9) orders equal edges by owner
     pairs = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)

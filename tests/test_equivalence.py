@@ -448,3 +448,19 @@ def test_robust_mesh_with_a_high_valence_vertex_same_answers():
     vertices, faces = _fan_and_grid_mesh()
     ref, fast = _both(vertices, faces, mode="robust")
     _assert_same(ref, fast)
+
+
+def test_dihedral_angles_identical():
+    """The compiled pairing of faces gives the reference's edges and angles: two-face
+    edges only (boundaries and a three-face, non-manifold edge left out), sorted."""
+    from meshlab_sharp.creases import dihedral_angles
+
+    vertices, faces = _fan_and_grid_mesh()
+    extra = np.array([[0.5, 0.5, 3.0]])
+    fin = np.array([[faces[0, 0], faces[0, 1], len(vertices)]])  # a third face on an edge
+    vertices, faces = np.vstack([vertices, extra]), np.vstack([faces, fin])
+    ref = dihedral_angles(vertices, faces, backend="numpy")
+    fast = dihedral_angles(vertices, faces, backend="compiled")
+    assert np.array_equal(ref[0], fast[0]) and np.array_equal(ref[1], fast[1])
+    a, b = sorted(faces[0, :2])
+    assert not ((ref[0][:, 0] == a) & (ref[0][:, 1] == b)).any()
