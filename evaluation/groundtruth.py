@@ -444,7 +444,7 @@ def scan_part(
 ) -> SamplePart:
     """Part ``name`` scanned from four positions (``scan.scanner_positions``) and merged.
 
-    About ``n_points`` points (see :func:`meshlab_sharp.scan.scan`): occlusion, density
+    About ``n_points`` points (see :func:`evaluation.scan.scan`): occlusion, density
     falling with range, range noise growing with range squared (``noise`` pixel
     footprints at the scanners' mean distance). ``extra["local_spacing"]`` (n,) is each
     point's spacing from the local density (``evaluation.density_spacing``: where views
