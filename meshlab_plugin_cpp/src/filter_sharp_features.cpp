@@ -14,13 +14,14 @@ const char *NAME = "Select Sharp Features (Projected Distance)";
 const char *CURVES_NAME = "Extract Sharp Feature Curves";
 const char *CURVES_LAYER = "sharp_curves";
 
-// The curves as a new layer (vertices and edges; vertex quality: the curve's number),
-// the current layer staying current, as meshlab_sharp.detect_meshset(ms, curves=True).
+// The curves as a new layer (vertices and edges; vertex quality: the curve's number; red,
+// the features' colour), the current layer staying current, as
+// meshlab_sharp.detect_meshset(ms, curves=True) does.
 void addCurvesLayer(MeshDocument &md, const sharp::Curves &c)
 {
 	MeshModel *current = md.mm();
 	MeshModel *layer = md.addNewMesh("", CURVES_LAYER, false);
-	layer->updateDataMask(MeshModel::MM_VERTQUALITY);
+	layer->updateDataMask(MeshModel::MM_VERTQUALITY | MeshModel::MM_VERTCOLOR);
 	CMeshO &m = layer->cm;
 	size_t nv = 0, ne = 0;
 	for (const sharp::Curve &curve : c.curves) {
@@ -36,6 +37,7 @@ void addCurvesLayer(MeshDocument &md, const sharp::Curves &c)
 		for (const sharp::Vec3 &p : curve.points) {
 			m.vert[v].P() = CMeshO::CoordType(p[0], p[1], p[2]);
 			m.vert[v].Q() = CMeshO::VertexType::QualityType(k);
+			m.vert[v].C() = vcg::Color4b(230, 13, 13, 255);
 			++v;
 		}
 		for (size_t i = 0; i < (curve.closed ? count : count - 1); ++i, ++e) {
@@ -70,7 +72,7 @@ QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType filter) const
 	if (filter == FP_SHARP_CURVES)
 		return "Detects the sharp features as 'Select Sharp Features (Projected Distance)' does "
 		       "and adds the feature curves as a new layer 'sharp_curves' of vertices and edges "
-		       "(vertex quality: the curve's number): one polyline per edge of the object, cut at "
+		       "(vertex quality: the curve's number; drawn in red): one polyline per edge of the object, cut at "
 		       "corners and sharp turns, without fragments or spurs. On a mesh the curves are "
 		       "chains of the mesh's own edges through feature vertices; on a point cloud the "
 		       "skeleton of the feature points, moved onto the intersection of the surfaces "
