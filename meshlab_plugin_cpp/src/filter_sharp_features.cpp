@@ -72,8 +72,8 @@ QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType filter) const
 	if (filter == FP_SHARP_CURVES)
 		return "Detects the sharp features as 'Select Sharp Features (Projected Distance)' does "
 		       "and adds the feature curves as a new layer 'sharp_curves' of vertices and edges "
-		       "(vertex quality: the curve's number; drawn in red): one polyline per edge of the object, cut at "
-		       "corners and sharp turns, without fragments or spurs. On a mesh the curves are "
+		       "(vertex quality: the curve's number; red vertices): one polyline per edge of the "
+		       "object, cut at corners and sharp turns, without fragments or spurs. On a mesh the curves are "
 		       "chains of the mesh's own edges through feature vertices; on a point cloud the "
 		       "skeleton of the feature points, moved onto the intersection of the surfaces "
 		       "fitted on each side (below the point spacing). The same steps and arithmetic as "
@@ -203,19 +203,6 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 		return fail(QString("internal error: ") + e.what());
 	}
 
-	QString scales;
-	for (size_t s = 0; s < r.scales.size(); ++s)
-		scales += QString(" %1=%2:T=%3,candidates=%4")
-		              .arg(r.mesh ? "ring" : "k")
-		              .arg(r.scales[s])
-		              .arg(r.thresholds[s], 0, 'g', 17)
-		              .arg(r.candidates[s]);
-	Log("Sharp features: %s, %s mode, %ld of %d vertices are features;%s",
-	    r.mesh ? "mesh (k-rings)" : "points (kNN)", options.robust ? "robust" : "paper", r.nFeatures,
-	    int(live.size()), qUtf8Printable(scales));
-	if (r.allFlat)
-		Log("Sharp features: no features: all points lie on one plane.");
-
 	if (ID(action) == FP_SHARP_CURVES) {
 		sharp::Curves c;
 		try {
@@ -227,8 +214,11 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 		size_t vertices = 0, closed = 0;
 		for (const sharp::Curve &curve : c.curves)
 			vertices += curve.points.size(), closed += curve.closed;
-		Log("Sharp feature curves: %d curves (%d closed), %d vertices, %d corners, spacing %.17g",
-		    int(c.curves.size()), int(closed), int(vertices), int(c.corners.size()), c.spacing);
+		Log("Sharp feature curves: %d curves (%d closed), %d vertices, %d corners, spacing %.17g; "
+		    "%s, %s mode, %ld of %d vertices are features",
+		    int(c.curves.size()), int(closed), int(vertices), int(c.corners.size()), c.spacing,
+		    r.mesh ? "mesh (k-rings)" : "points (kNN)", options.robust ? "robust" : "paper",
+		    r.nFeatures, int(live.size()));
 		return true;
 	}
 
@@ -244,6 +234,19 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 		if (colorize)
 			live[i]->C() = r.feature[i] ? vcg::Color4b(230, 13, 13, 255) : vcg::Color4b(200, 200, 200, 255);
 	}
+
+	QString scales;
+	for (size_t s = 0; s < r.scales.size(); ++s)
+		scales += QString(" %1=%2:T=%3,candidates=%4")
+		              .arg(r.mesh ? "ring" : "k")
+		              .arg(r.scales[s])
+		              .arg(r.thresholds[s], 0, 'g', 17)
+		              .arg(r.candidates[s]);
+	Log("Sharp features: %s, %s mode, %ld of %d vertices are features;%s",
+	    r.mesh ? "mesh (k-rings)" : "points (kNN)", options.robust ? "robust" : "paper", r.nFeatures,
+	    int(live.size()), qUtf8Printable(scales));
+	if (r.allFlat)
+		Log("Sharp features: no features: all points lie on one plane.");
 	return true;
 }
 
