@@ -22,9 +22,11 @@ import pytest
 import shapes
 from files import write_ply
 from test_plugin import read_back, run_meshlabserver
+from test_plugin_fuzz import CASES, CRASH_WORDS, FILTER_FAILED, KNOWN_DISAGREEMENTS
 
 import meshlab_sharp
-from meshlab_sharp import groundtruth, plugin
+from meshlab_sharp import DetectionResult, groundtruth, plugin
+from meshlab_sharp.errors import InputError
 from meshlab_sharp.io.curves import curve_arrays
 from meshlab_sharp.sample import sample_part
 
@@ -99,10 +101,17 @@ def test_curves_agree_with_the_python_package(meshlab_root, tmp_path, case):
     assert code == 0, log
     expected = meshlab_sharp.detect(src, mode={"0": "paper", "1": "robust"}[mode], curves=True)
     assert expected.curves, "no curves to compare"
+    _assert_same_curves(log, out, ply, expected)
+    assert f"saved as {kept} ({len(vertices)} vn" in log  # the input stays the current layer
+    if case.startswith("cube"):  # one curve per edge of the cube, from corner to corner
+        assert len(expected.curves) == 12 and len(expected.corners) == 8
+        assert not any(c.closed for c in expected.curves)
+
+
+def _assert_same_curves(log: str, out: Path, ply: Path, expected: DetectionResult) -> None:
+    """The layer saved as ``out`` (OBJ) and ``ply`` holds ``expected.curves``; the log line
+    counts them and ``expected.corners``."""
     ex_vertices, ex_edges, _ = curve_arrays(expected.curves)
-    got_vertices, _, _, _ = read_back(ply)
-    np.testing.assert_array_equal(got_vertices, ex_vertices.astype(np.float32))
-    np.testing.assert_array_equal(read_obj_edges(out), ex_edges)
     summary = _SUMMARY.search(log)
     assert summary is not None, log
     n_curves, n_closed, n_vertices, n_corners = map(int, summary.groups())
@@ -110,8 +119,32 @@ def test_curves_agree_with_the_python_package(meshlab_root, tmp_path, case):
     assert n_closed == sum(c.closed for c in expected.curves)
     assert n_vertices == len(ex_vertices)
     assert n_corners == len(expected.corners)
+    if not len(ex_vertices):
+        return  # an empty layer: meshlabserver saves nothing
     assert f"saved as {out} ({len(ex_vertices)} vn 0 fn)" in log
     assert f"saved as {ply} ({len(ex_vertices)} vn 0 fn)" in log
-    assert f"saved as {kept} ({len(vertices)} vn" in log  # the input stays the current layer
-    if case.startswith("cube"):  # one curve per edge of the cube, from corner to corner
-        assert n_curves == 12 and n_corners == 8 and n_closed == 0
+    np.testing.assert_array_equal(read_obj_edges(out), ex_edges)
+    got_vertices, _, _, _ = read_back(ply)
+    np.testing.assert_array_equal(got_vertices, ex_vertices.astype(np.float32))
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_hostile_geometry_gives_the_same_curves_or_a_clean_refusal(meshlab_root, tmp_path, case):
+    """Robust mode on test_plugin_fuzz's hostile inputs: no crash; Python's curves, or an
+    error where Python refuses the input (duplicate faces: the selections differ, known)."""
+    vertices, faces = CASES[case]
+    src = write_ply(tmp_path / "in.ply", vertices, faces, binary=True)
+    out, ply = tmp_path / "curves.obj", tmp_path / "curves.ply"
+    save = ("-l", "x", "-o", str(ply), "-l", "x")
+    code, log = run_meshlabserver(meshlab_root, src, out, example=EXAMPLE, save=save, mode="1")
+    assert code in (0, FILTER_FAILED), f"meshlabserver died with status {code}:\n{log}"
+    assert not any(word in log.lower() for word in CRASH_WORDS), log
+    try:
+        expected = meshlab_sharp.detect(src, curves=True)
+    except InputError:
+        assert code == FILTER_FAILED, log
+        assert "Sharp features: error:" in log, log
+        return
+    assert code == 0, log
+    if KNOWN_DISAGREEMENTS.get((case, "1")) != "selection":
+        _assert_same_curves(log, out, ply, expected)

@@ -392,9 +392,10 @@ class MeshPaths:
         self.tree = cKDTree(self.positions) if n else None
 
     def nearest(self, point: np.ndarray) -> int:
-        """The input index of the vertex nearest ``point`` (3,) among these faces'."""
+        """The input index of the vertex nearest ``point`` (3,) among these faces' (the
+        lowest of equally near ones)."""
         assert self.tree is not None
-        return int(self.ids[self.tree.query(point)[1]])
+        return int(self.ids[nearest(self.tree, np.asarray(point)[None, :], 1)[0, 0]])
 
     def path(self, a: int, b: int, limit: float) -> np.ndarray | None:
         """Input indices of the vertices strictly between ``a`` and ``b`` on the shortest
