@@ -991,12 +991,17 @@ public:
 	}
 
 	// vertices strictly between a and b on the shortest path; found = false when none is
-	// within limit (scipy's dijkstra with limit and predecessors)
+	// within limit (MeshPaths.path: a heap of (distance, vertex), a vertex's predecessor
+	// the first settled vertex reaching it at its final distance)
 	std::vector<long> path(long a, long b, double limit, bool &found) const
 	{
 		found = false;
 		const long ia = local(a), ib = local(b);
 		if (ia < 0 || ib < 0) return {};
+		if (ia == ib) {
+			found = true;
+			return {};
+		}
 		const long n = long(ids_.size());
 		std::vector<double> val(n, INF);
 		std::vector<long> pred(n, -1);

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
+from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial import cKDTree
 
 from ..neighbourhoods import squared_distances
@@ -399,16 +399,37 @@ class MeshPaths:
 
     def path(self, a: int, b: int, limit: float) -> np.ndarray | None:
         """Input indices of the vertices strictly between ``a`` and ``b`` on the shortest
-        path (shape (k,)), or None when none is shorter than ``limit``."""
-        ia, ib = np.searchsorted(self.ids, [a, b])
+        path (shape (k,)), or None when none is at most ``limit`` long.
+
+        Dijkstra with a heap of (distance, vertex): of equally near vertices the lowest
+        is settled first, and a vertex's predecessor is the first settled vertex that
+        reaches it at its final distance; so among equally short paths (a regular grid)
+        the one taken is fixed, and the same in the MeshLab plugin.
+        """
+        ia, ib = (int(i) for i in np.searchsorted(self.ids, [a, b]))
         if ia >= len(self.ids) or ib >= len(self.ids) or self.ids[ia] != a or self.ids[ib] != b:
             return None
-        dist, pred = dijkstra(self.graph, indices=int(ia), limit=limit, return_predecessors=True)
-        if not np.isfinite(dist[ib]):
+        indptr, indices, weights = self.graph.indptr, self.graph.indices, self.graph.data
+        dist, pred, settled = {ia: 0.0}, {ia: ia}, set()
+        heap = [(0.0, ia)]
+        while heap:
+            d, node = heapq.heappop(heap)
+            if node in settled:
+                continue
+            settled.add(node)
+            if node == ib:
+                break
+            for j in range(indptr[node], indptr[node + 1]):
+                nxt = int(indices[j])
+                step = d + float(weights[j])
+                if nxt not in settled and step <= limit and step < dist.get(nxt, math.inf):
+                    dist[nxt], pred[nxt] = step, node
+                    heapq.heappush(heap, (step, nxt))
+        if ib not in settled:
             return None
         inner = []
-        node = int(pred[ib])
+        node = pred[ib]
         while node != ia:
             inner.append(node)
-            node = int(pred[node])
+            node = pred[node]
         return self.ids[np.array(inner[::-1], np.int64)]
