@@ -214,12 +214,12 @@ public:
 		return heap;
 	}
 
-	// indices within r (squared distance <= r^2)
+	// indices of the points within r (squared distance <= r^2), ascending
 	std::vector<long> ball(const Vec3 &q, double r) const
 	{
 		std::vector<long> out;
-		for (size_t i = 0; i < pts_.size(); ++i)
-			if (sq(sub(q, pts_[i])) <= r * r) out.push_back(long(i));
+		if (!nodes_.empty()) collect(0, q, r * r, out);
+		std::sort(out.begin(), out.end());
 		return out;
 	}
 
@@ -255,6 +255,19 @@ private:
 		nodes_[id].left = left;
 		nodes_[id].right = right;
 		return id;
+	}
+
+	void collect(long id, const Vec3 &q, double r2, std::vector<long> &out) const
+	{
+		const Node &nd = nodes_[id];
+		if (nd.dim < 0) {
+			for (long i = nd.lo; i < nd.hi; ++i)
+				if (sq(sub(q, pts_[idx_[i]])) <= r2) out.push_back(idx_[i]);
+			return;
+		}
+		const double diff = q[nd.dim] - nd.split;
+		if (diff <= 0 || diff * diff <= r2) collect(nd.left, q, r2, out);
+		if (diff >= 0 || diff * diff <= r2) collect(nd.right, q, r2, out);
 	}
 
 	void search(long id, const Vec3 &q, size_t k, double b2,
@@ -751,10 +764,11 @@ Ends ends(const std::vector<Piece> &pieces, double spacing)
 // scipy's query_pairs(r): pairs i < j with squared distance <= r^2, sorted
 std::vector<Edge> pairsWithin(const std::vector<Vec3> &pts, double r)
 {
+	const KdTree tree(pts);
 	std::vector<Edge> out;
 	for (size_t i = 0; i < pts.size(); ++i)
-		for (size_t j = i + 1; j < pts.size(); ++j)
-			if (sq(sub(pts[i], pts[j])) <= r * r) out.push_back({long(i), long(j)});
+		for (long j : tree.ball(pts[i], r))
+			if (j > long(i)) out.push_back({long(i), j});
 	return out;
 }
 
@@ -917,15 +931,16 @@ std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spaci
 		for (size_t k = 0; k < pieces[i].points.size(); ++k)
 			owner.push_back(long(i)), local.push_back(long(k)), data.push_back(pieces[i].points[k]);
 	const double reach = GAP_LENGTH * spacing;
+	const KdTree tree(data);
 	std::map<long, std::set<long>> cuts;
 	for (size_t q = 0; q < isFree.size(); ++q) {
 		if (!isFree[q]) continue;
 		long best = -1;
 		double bestD = INF;
-		for (size_t j = 0; j < data.size(); ++j) {
-			if (owner[j] == e.piece[q] || !(sq(sub(data[j], e.point[q])) <= reach * reach)) continue;
+		for (long j : tree.ball(e.point[q], reach)) {
+			if (owner[j] == e.piece[q]) continue;
 			const double d = norm(sub(data[j], e.point[q]));
-			if (d < bestD) bestD = d, best = long(j);
+			if (d < bestD) bestD = d, best = j;
 		}
 		if (best < 0) continue;
 		const Piece &pc = pieces[owner[best]];
@@ -977,18 +992,12 @@ public:
 		}
 		for (auto &r : rows) std::sort(r.begin(), r.end());
 		rows_ = rows;
+		for (long v : ids_) positions_.push_back(pts_[v]);
+		tree_.reset(new KdTree(positions_));
 	}
 
-	long nearest(const Vec3 &p) const
-	{
-		long best = -1;
-		double bestD = INF;
-		for (size_t i = 0; i < ids_.size(); ++i) {
-			const double d = sq(sub(pts_[ids_[i]], p));
-			if (d < bestD) bestD = d, best = long(i);
-		}
-		return ids_[best];
-	}
+	// the nearest vertex, the lowest of equally near ones
+	long nearest(const Vec3 &p) const { return ids_[tree_->query(p, 1)[0].second]; }
 
 	// vertices strictly between a and b on the shortest path; found = false when none is
 	// within limit (MeshPaths.path: a heap of (distance, vertex), a vertex's predecessor
@@ -1040,6 +1049,8 @@ private:
 	const std::vector<Vec3> &pts_;
 	std::vector<long> ids_;
 	std::vector<std::vector<std::pair<long, double>>> rows_;
+	std::vector<Vec3> positions_;
+	std::unique_ptr<KdTree> tree_;
 
 	long local(long v) const
 	{
