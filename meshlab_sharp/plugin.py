@@ -41,6 +41,7 @@ SOURCE_FOLDER = "meshlab-2020.09+dfsg1"
 SYSTEM_LIB = Path("/usr/lib/x86_64-linux-gnu/meshlab")
 PLUGIN_FILE = "libfilter_sharp_features.so"
 FILTER_NAME = "Select Sharp Features (Projected Distance)"
+CURVES_FILTER_NAME = "Extract Sharp Feature Curves"
 _DEB_SRC = Path("/etc/apt/sources.list.d/meshlab-sharp-src.sources")
 
 
@@ -113,6 +114,9 @@ def _run_install(args: argparse.Namespace) -> int:
         dest = install_system(library)
         print(f"plugin: installed {dest}; Debian's meshlab and meshlabserver now list")
         print(f"plugin: Filters > Selection > {FILTER_NAME}")
+        print(
+            f"plugin: Filters > Remeshing, Simplification and Reconstruction > {CURVES_FILTER_NAME}"
+        )
     return 0
 
 

@@ -11,12 +11,14 @@ import pymeshlab
 import pytest
 import shapes
 from files import write_ply
+from scipy.spatial import cKDTree
 
 import meshlab_sharp
 from evaluation import groundtruth as gt
 from evaluation.scoring import evaluate_curves, truth_curves
 from meshlab_sharp.cli import main
 from meshlab_sharp.curves import classify, extract_curves
+from meshlab_sharp.curves.graph import nearest
 from meshlab_sharp.errors import InputError, MeshlabSharpError
 from meshlab_sharp.io import curve_arrays, require_ezdxf, save_curves
 
@@ -119,6 +121,22 @@ def test_curves_are_opt_in_and_reported_in_the_summary():
     assert summary["n_curves"] == 12 and summary["n_corners"] == 8
     assert summary["kinds"] == {"line": 12}
     assert result.timings["curves"] >= 0
+
+
+def test_nearest_orders_ties_by_index():
+    """On a grid most neighbours lie at equal distances: the k nearest within the bound
+    are those of a brute-force sort by (squared distance, index), whatever the kd-tree's
+    own order (the plugin's order)."""
+    points = shapes.cube_grid_points(7)
+    queries = points[::5] + 0.01 * np.arange(3)
+    for k, bound in [(9, 2.5 / 3), (40, np.inf), (3, 0.2)]:
+        got = nearest(cKDTree(points), queries, k, bound)
+        for q, row in zip(queries, got, strict=True):
+            d2 = ((points - q) ** 2).sum(axis=1)
+            order = np.lexsort((np.arange(len(points)), d2))
+            expected = [i for i in order[:k] if d2[i] < bound**2]
+            expected += [len(points)] * (k - len(expected))
+            np.testing.assert_array_equal(row, expected)
 
 
 def test_no_features_no_curves():

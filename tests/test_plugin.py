@@ -37,9 +37,18 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def run_meshlabserver(root: Path, src: Path, out: Path, **params) -> tuple[int, str]:
-    """Apply the filter with ``params`` overriding the example script's defaults."""
-    script = (EXAMPLE / "sharp_features_default.mlx").read_text()
+def run_meshlabserver(
+    root: Path,
+    src: Path,
+    out: Path,
+    *,
+    example: str = "sharp_features_default.mlx",
+    save: tuple[str, ...] = ("-m", "vq", "vf", "vc"),
+    **params: str,
+) -> tuple[int, str]:
+    """Apply the example script's filter with ``params`` overriding its defaults; save the
+    current layer to ``out`` with the options ``save`` (``-l x``: the last layer)."""
+    script = (EXAMPLE / example).read_text()
     for name, value in params.items():
         script = re.sub(rf'value="[^"]*" name="{name}"', f'value="{value}" name="{name}"', script)
     mlx = out.with_suffix(".mlx")
@@ -54,10 +63,7 @@ def run_meshlabserver(root: Path, src: Path, out: Path, **params) -> tuple[int, 
         str(src),
         "-o",
         str(out),
-        "-m",
-        "vq",
-        "vf",
-        "vc",
+        *save,
         "-s",
         str(mlx),
     ]

@@ -1,18 +1,58 @@
 // MeshLab glue around sharp_core: reads the current layer, runs the detector in double,
-// writes vertex quality (strength), vertex selection (features) and optional colour.
+// writes vertex quality (strength), vertex selection (features) and optional colour; or
+// adds the feature curves (curves_core) as a new layer of edges.
 #include "filter_sharp_features.h"
 
+#include "curves_core.h"
 #include "sharp_core.h"
 
+#include <vcg/complex/algorithms/update/bounding.h>
 #include <vcg/complex/algorithms/update/selection.h>
 
 namespace {
 const char *NAME = "Select Sharp Features (Projected Distance)";
+const char *CURVES_NAME = "Extract Sharp Feature Curves";
+const char *CURVES_LAYER = "sharp_curves";
+
+// The curves as a new layer (vertices and edges; vertex quality: the curve's number; red,
+// the features' colour), the current layer staying current, as
+// meshlab_sharp.detect_meshset(ms, curves=True) does.
+void addCurvesLayer(MeshDocument &md, const sharp::Curves &c)
+{
+	MeshModel *current = md.mm();
+	MeshModel *layer = md.addNewMesh("", CURVES_LAYER, false);
+	layer->updateDataMask(MeshModel::MM_VERTQUALITY | MeshModel::MM_VERTCOLOR);
+	CMeshO &m = layer->cm;
+	size_t nv = 0, ne = 0;
+	for (const sharp::Curve &curve : c.curves) {
+		nv += curve.points.size();
+		ne += curve.closed ? curve.points.size() : curve.points.size() - 1;
+	}
+	vcg::tri::Allocator<CMeshO>::AddVertices(m, nv);
+	vcg::tri::Allocator<CMeshO>::AddEdges(m, ne);
+	size_t v = 0, e = 0;
+	for (size_t k = 0; k < c.curves.size(); ++k) {
+		const sharp::Curve &curve = c.curves[k];
+		const size_t first = v, count = curve.points.size();
+		for (const sharp::Vec3 &p : curve.points) {
+			m.vert[v].P() = CMeshO::CoordType(p[0], p[1], p[2]);
+			m.vert[v].Q() = CMeshO::VertexType::QualityType(k);
+			m.vert[v].C() = vcg::Color4b(230, 13, 13, 255);
+			++v;
+		}
+		for (size_t i = 0; i < (curve.closed ? count : count - 1); ++i, ++e) {
+			m.edge[e].V(0) = &m.vert[first + i];
+			m.edge[e].V(1) = &m.vert[first + (i + 1) % count];
+		}
+	}
+	vcg::tri::UpdateBounding<CMeshO>::Box(m);
+	md.setCurrentMesh(current->id());
+}
 }
 
 FilterSharpFeaturesPlugin::FilterSharpFeaturesPlugin()
 {
-	typeList << FP_SHARP_FEATURES;
+	typeList << FP_SHARP_FEATURES << FP_SHARP_CURVES;
 	for (FilterIDType tt : types())
 		actionList << new QAction(filterName(tt), this);
 }
@@ -22,13 +62,22 @@ QString FilterSharpFeaturesPlugin::pluginName() const
 	return "FilterSharpFeatures";
 }
 
-QString FilterSharpFeaturesPlugin::filterName(FilterIDType) const
+QString FilterSharpFeaturesPlugin::filterName(FilterIDType filter) const
 {
-	return NAME;
+	return filter == FP_SHARP_CURVES ? CURVES_NAME : NAME;
 }
 
-QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType) const
+QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType filter) const
 {
+	if (filter == FP_SHARP_CURVES)
+		return "Detects the sharp features as 'Select Sharp Features (Projected Distance)' does "
+		       "and adds the feature curves as a new layer 'sharp_curves' of vertices and edges "
+		       "(vertex quality: the curve's number; red vertices): one polyline per edge of the "
+		       "object, cut at corners and sharp turns, without fragments or spurs. On a mesh the curves are "
+		       "chains of the mesh's own edges through feature vertices; on a point cloud the "
+		       "skeleton of the feature points, moved onto the intersection of the surfaces "
+		       "fitted on each side (below the point spacing). The same steps and arithmetic as "
+		       "the meshlab-sharp Python package (detect(..., curves=True), docs/curves.md).";
 	return "Selects the sharp features (creases, corners) of a mesh or point cloud automatically, "
 	       "with the projected-distance method of Tran et al. (2014): per vertex, the distance "
 	       "between the vertex and the centroid of its neighbourhood along the normal; Otsu's "
@@ -44,8 +93,10 @@ QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType) const
 	       "The same algorithm as the meshlab-sharp Python package.";
 }
 
-MeshFilterInterface::FilterClass FilterSharpFeaturesPlugin::getClass(QAction *)
+MeshFilterInterface::FilterClass FilterSharpFeaturesPlugin::getClass(QAction *a)
 {
+	if (ID(a) == FP_SHARP_CURVES)
+		return MeshFilterInterface::Remeshing;
 	return FilterClass(MeshFilterInterface::Selection | MeshFilterInterface::Quality);
 }
 
@@ -59,12 +110,14 @@ int FilterSharpFeaturesPlugin::getPreConditions(QAction *) const
 	return MeshModel::MM_NONE;
 }
 
-int FilterSharpFeaturesPlugin::postCondition(QAction *) const
+int FilterSharpFeaturesPlugin::postCondition(QAction *a) const
 {
+	if (ID(a) == FP_SHARP_CURVES)
+		return MeshModel::MM_NONE;  // a new layer; the current one is unchanged
 	return MeshModel::MM_VERTQUALITY | MeshModel::MM_VERTFLAGSELECT | MeshModel::MM_VERTCOLOR;
 }
 
-void FilterSharpFeaturesPlugin::initParameterSet(QAction *, MeshModel &, RichParameterList &par)
+void FilterSharpFeaturesPlugin::initParameterSet(QAction *a, MeshModel &, RichParameterList &par)
 {
 	par.addParam(RichString("knnScales", "12 16 20 24 28 32 36 40", "Point-cloud scales (k)",
 	                        "Neighbourhood sizes k (k nearest neighbours, the point included) used "
@@ -84,11 +137,13 @@ void FilterSharpFeaturesPlugin::initParameterSet(QAction *, MeshModel &, RichPar
 	                      "than 20 degrees (docs/robust-mode.md): survives outliers and noise, "
 	                      "says 'no features' on smooth objects, handles CAD tessellations. "
 	                      "Paper: the method as the paper describes it (ALGORITHM.md)."));
+	if (ID(a) == FP_SHARP_CURVES)
+		return;
 	par.addParam(RichBool("colorize", true, "Colour the features",
 	                      "Features red, the other vertices grey."));
 }
 
-bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const RichParameterList &par,
+bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, const RichParameterList &par,
                                             vcg::CallBackPos *cb)
 {
 	// Errors go to MeshLab's log (meshlabserver prints it) and to errorMessage (the GUI).
@@ -146,6 +201,25 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const R
 		return fail(e.what());
 	} catch (const std::exception &e) {
 		return fail(QString("internal error: ") + e.what());
+	}
+
+	if (ID(action) == FP_SHARP_CURVES) {
+		sharp::Curves c;
+		try {
+			c = sharp::extractCurves(pts, r.feature, r.kept, options.asPoints ? decltype(faces)() : faces);
+		} catch (const std::exception &e) {
+			return fail(QString("internal error: ") + e.what());
+		}
+		addCurvesLayer(md, c);
+		size_t vertices = 0, closed = 0;
+		for (const sharp::Curve &curve : c.curves)
+			vertices += curve.points.size(), closed += curve.closed;
+		Log("Sharp feature curves: %d curves (%d closed), %d vertices, %d corners, spacing %.17g; "
+		    "%s, %s mode, %ld of %d vertices are features",
+		    int(c.curves.size()), int(closed), int(vertices), int(c.corners.size()), c.spacing,
+		    r.mesh ? "mesh (k-rings)" : "points (kNN)", options.robust ? "robust" : "paper",
+		    r.nFeatures, int(live.size()));
+		return true;
 	}
 
 	mm->updateDataMask(MeshModel::MM_VERTQUALITY);

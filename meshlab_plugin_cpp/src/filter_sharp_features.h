@@ -1,4 +1,5 @@
-// meshlab-sharp MeshLab 2020.09 filter plugin: "Select Sharp Features (Projected Distance)".
+// meshlab-sharp MeshLab 2020.09 filter plugin: "Select Sharp Features (Projected Distance)" and
+// "Extract Sharp Feature Curves".
 #ifndef FILTER_SHARP_FEATURES_H
 #define FILTER_SHARP_FEATURES_H
 
@@ -11,7 +12,7 @@ class FilterSharpFeaturesPlugin : public QObject, public MeshFilterInterface
 	Q_INTERFACES(MeshFilterInterface)
 
 public:
-	enum { FP_SHARP_FEATURES };
+	enum { FP_SHARP_FEATURES, FP_SHARP_CURVES };
 
 	FilterSharpFeaturesPlugin();
 

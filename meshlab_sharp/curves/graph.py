@@ -14,8 +14,10 @@ import math
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
+from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial import cKDTree
+
+from ..neighbourhoods import squared_distances
 
 __all__ = [
     "LINK_NEIGHBOURS",
@@ -26,6 +28,7 @@ __all__ = [
     "close_loops",
     "cloud_graph",
     "mesh_graph",
+    "nearest",
     "prune_spurs",
     "spanning_forest",
 ]
@@ -69,13 +72,68 @@ def cloud_graph(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndar
     if n < 2:
         return np.zeros((0, 2), np.int64), np.zeros(0)
     k = min(LINK_NEIGHBOURS + 1, n)
-    _, idx = cKDTree(points).query(points, k=k, distance_upper_bound=LINK_RADIUS * spacing)
+    idx = nearest(cKDTree(points), points, k, LINK_RADIUS * spacing)
     rows = np.repeat(np.arange(n), k).reshape(n, k)
     ok = (idx < n) & (idx != rows)
     a, b = rows[ok], idx[ok]
     pairs = np.unique(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1), axis=0)
     lengths = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
     return pairs.astype(np.int64), lengths
+
+
+def nearest(tree: cKDTree, queries: np.ndarray, k: int, bound: float = math.inf) -> np.ndarray:
+    """The ``k`` nearest of the tree's points to each query, nearer than ``bound``, ordered
+    by squared distance, ties by the lower index (whatever order the kd-tree returns tied
+    points in: the MeshLab plugin's order, and the same on a regular grid).
+
+    Parameters
+    ----------
+    tree : cKDTree
+        Of ``n`` points.
+    queries : (q, 3) float64
+    k : int
+        ``1 <= k <= n``.
+    bound : float, default inf
+        Only points at a distance below it.
+
+    Returns
+    -------
+    (q, k) int64
+        Indices into the tree's points; ``n`` where fewer than ``k`` are nearer than
+        ``bound``.
+    """
+    n = tree.n
+    kq = min(k + 1, n)
+    idx = _sorted_query(tree, queries, kq, bound)
+    if kq > k:
+        d2 = _d2(tree, queries, idx)
+        # a tie across the k-th place may involve points the query left out: widen
+        for r in np.flatnonzero((d2[:, k - 1] == d2[:, k]) & np.isfinite(d2[:, k])):
+            wider = kq
+            while True:
+                wider = min(2 * wider, n)
+                row = _sorted_query(tree, queries[r : r + 1], wider, bound)
+                d2r = _d2(tree, queries[r : r + 1], row)[0]
+                if wider == n or d2r[-1] != d2r[k - 1]:
+                    idx[r, :k] = row[0, :k]
+                    break
+    return idx[:, :k]
+
+
+def _sorted_query(tree: cKDTree, queries: np.ndarray, kq: int, bound: float) -> np.ndarray:
+    """kd-tree query, each row re-ordered by (squared distance, index); (q, kq) int64."""
+    _, idx = tree.query(queries, k=kq, distance_upper_bound=bound)
+    idx = np.asarray(idx, np.int64).reshape(len(queries), kq)
+    order = np.lexsort((idx, _d2(tree, queries, idx)), axis=-1)
+    return np.take_along_axis(idx, order, axis=-1)
+
+
+def _d2(tree: cKDTree, queries: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Squared distances of the queries to their neighbours ``idx`` (q, kq); inf where
+    ``idx == tree.n`` (none)."""
+    found = idx < tree.n
+    d2 = squared_distances(tree.data[np.where(found, idx, 0)], queries[:, None, :])
+    return np.where(found, d2, np.inf)
 
 
 def mesh_graph(
@@ -334,22 +392,44 @@ class MeshPaths:
         self.tree = cKDTree(self.positions) if n else None
 
     def nearest(self, point: np.ndarray) -> int:
-        """The input index of the vertex nearest ``point`` (3,) among these faces'."""
+        """The input index of the vertex nearest ``point`` (3,) among these faces' (the
+        lowest of equally near ones)."""
         assert self.tree is not None
-        return int(self.ids[self.tree.query(point)[1]])
+        return int(self.ids[nearest(self.tree, np.asarray(point)[None, :], 1)[0, 0]])
 
     def path(self, a: int, b: int, limit: float) -> np.ndarray | None:
         """Input indices of the vertices strictly between ``a`` and ``b`` on the shortest
-        path (shape (k,)), or None when none is shorter than ``limit``."""
-        ia, ib = np.searchsorted(self.ids, [a, b])
+        path (shape (k,)), or None when none is at most ``limit`` long.
+
+        Dijkstra with a heap of (distance, vertex): of equally near vertices the lowest
+        is settled first, and a vertex's predecessor is the first settled vertex that
+        reaches it at its final distance; so among equally short paths (a regular grid)
+        the one taken is fixed, and the same in the MeshLab plugin.
+        """
+        ia, ib = (int(i) for i in np.searchsorted(self.ids, [a, b]))
         if ia >= len(self.ids) or ib >= len(self.ids) or self.ids[ia] != a or self.ids[ib] != b:
             return None
-        dist, pred = dijkstra(self.graph, indices=int(ia), limit=limit, return_predecessors=True)
-        if not np.isfinite(dist[ib]):
+        indptr, indices, weights = self.graph.indptr, self.graph.indices, self.graph.data
+        dist, pred, settled = {ia: 0.0}, {ia: ia}, set()
+        heap = [(0.0, ia)]
+        while heap:
+            d, node = heapq.heappop(heap)
+            if node in settled:
+                continue
+            settled.add(node)
+            if node == ib:
+                break
+            for j in range(indptr[node], indptr[node + 1]):
+                nxt = int(indices[j])
+                step = d + float(weights[j])
+                if nxt not in settled and step <= limit and step < dist.get(nxt, math.inf):
+                    dist[nxt], pred[nxt] = step, node
+                    heapq.heappush(heap, (step, nxt))
+        if ib not in settled:
             return None
         inner = []
-        node = int(pred[ib])
+        node = pred[ib]
         while node != ia:
             inner.append(node)
-            node = int(pred[node])
+            node = pred[node]
         return self.ids[np.array(inner[::-1], np.int64)]

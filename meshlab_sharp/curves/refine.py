@@ -16,6 +16,8 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .graph import nearest
+
 __all__ = [
     "MAX_SHIFT",
     "MIN_ARM_POINTS",
@@ -85,10 +87,9 @@ def cell_neighbourhood(
 
 def refine_neighbours(tree: cKDTree, vertices: np.ndarray) -> np.ndarray:
     """The REFINE_NEIGHBOURS nearest points of each vertex, (v, k) indices into the
-    tree's points (k = REFINE_NEIGHBOURS, or all the points when fewer)."""
-    k = min(REFINE_NEIGHBOURS, tree.n)
-    _, idx = tree.query(vertices, k=k)
-    return idx.reshape(len(vertices), k)
+    tree's points (k = REFINE_NEIGHBOURS, or all the points when fewer), ordered by
+    squared distance, ties by the lower index (:func:`.graph.nearest`)."""
+    return nearest(tree, vertices, min(REFINE_NEIGHBOURS, tree.n))
 
 
 def _frame(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,1583 @@
+// meshlab-sharp feature curves: a line-for-line port of meshlab_sharp/curves (see
+// curves_core.h). Sums, dot products and reductions are evaluated in the order numpy
+// evaluates them (pairwise sums along an array's last axis, sequential sums along the
+// others, einsum's (0, 2, 1) order over three components), so that mesh curves agree
+// exactly and cloud curves to rounding where LAPACK/BLAS are involved.
+#include "curves_core.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <map>
+#include <memory>
+#include <numeric>
+#include <queue>
+#include <set>
+#include <tuple>
+#include <unordered_set>
+#include <utility>
+
+namespace sharp {
+namespace {
+
+// graph.py
+const int LINK_NEIGHBOURS = 8;
+const double LINK_RADIUS = 2.5;
+const double SPUR_LENGTH = 4.0;
+const double MESH_FLAT_WEIGHT = 0.05;
+const int PRUNE_ROUNDS = 4;
+// trace.py
+const double CORNER_TURN = 35.0;
+const double TURN_INNER = 0.5;
+const double TURN_OUTER = 2.0;
+const double TURN_SCALES[] = {1.0, 2.0, 4.0, 8.0};
+const int N_SCALES = 4;
+const int MIN_TURN_SCALES = 2;
+const double TANGENT_WINDOW = 2.0;
+const double GAP_LENGTH = 4.0;
+const double SHORTEST_CUT = 2 * GAP_LENGTH;
+const double LOOP_LENGTH = 3;
+const double LONG_GAP = 12.0;
+const double LATERAL_OFFSET = 1.5;
+// extract.py
+const double MIN_CURVE_LENGTH = GAP_LENGTH;
+const double SPUR_PIECE = 2 * GAP_LENGTH;
+const double MAX_FLAT_SHARE = 0.5;
+const double CELL_SPACINGS = 4.0;
+const double MIN_ADVANCE = 0.3;
+const int LINE_FIT_HALF = 2;
+const double SNAP = 0.75;
+// refine.py
+const int REFINE_NEIGHBOURS = 40;
+const double SLAB = 1.0;
+const int ARM_ITERATIONS = 3;
+const double MIN_ARM_POINTS = 3;
+const double MAX_SHIFT = 3.0;
+const double MIN_ARM_ANGLE = 20.0;
+const double MAX_ARM_RMS = 0.5;
+
+const double PI = 3.141592653589793238462643383279502884;
+const double INF = std::numeric_limits<double>::infinity();
+
+using Edge = std::array<long, 2>;
+
+// ---------------------------------------------------------------- arithmetic
+
+Vec3 sub(const Vec3 &a, const Vec3 &b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec3 add(const Vec3 &a, const Vec3 &b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+Vec3 mul(double s, const Vec3 &a) { return {s * a[0], s * a[1], s * a[2]}; }
+Vec3 neg(const Vec3 &a) { return {-a[0], -a[1], -a[2]}; }
+// np.linalg.norm along an axis of length 3 (and scipy's squared distances)
+double sq(const Vec3 &a) { return (a[0] * a[0] + a[1] * a[1]) + a[2] * a[2]; }
+double norm(const Vec3 &a) { return std::sqrt(sq(a)); }
+// a @ b of two 3-vectors
+double dot(const Vec3 &a, const Vec3 &b) { return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]; }
+// np.einsum("ij,ij->i") over 3 components
+double edot(const Vec3 &a, const Vec3 &b) { return (a[0] * b[0] + a[2] * b[2]) + a[1] * b[1]; }
+Vec3 cross(const Vec3 &a, const Vec3 &b)
+{
+	return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+Vec3 unit(const Vec3 &v)
+{
+	const double n = norm(v);
+	const double d = n > 0 ? n : 1.0;
+	return {v[0] / d, v[1] / d, v[2] / d};
+}
+double radians(double deg) { return deg * (PI / 180.0); }
+double degrees(double rad) { return rad * (180.0 / PI); }
+
+// numpy's pairwise summation (a reduction along the last axis)
+double pairwiseSum(const double *a, size_t n)
+{
+	if (n < 8) {
+		double res = -0.0;
+		for (size_t i = 0; i < n; ++i) res += a[i];
+		return res;
+	}
+	if (n <= 128) {
+		double r[8];
+		for (int j = 0; j < 8; ++j) r[j] = a[j];
+		size_t i = 8;
+		for (; i < n - (n % 8); i += 8)
+			for (int j = 0; j < 8; ++j) r[j] += a[i + j];
+		double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+		for (; i < n; ++i) res += a[i];
+		return res;
+	}
+	size_t n2 = n / 2;
+	n2 -= n2 % 8;
+	return pairwiseSum(a, n2) + pairwiseSum(a + n2, n - n2);
+}
+double pairwiseSum(const std::vector<double> &a) { return pairwiseSum(a.data(), a.size()); }
+
+double median(std::vector<double> v)
+{
+	std::sort(v.begin(), v.end());
+	const size_t n = v.size();
+	if (n % 2) return v[n / 2];
+	return (v[n / 2 - 1] + v[n / 2]) / 2.0;
+}
+
+bool lexLess(const Vec3 &a, const Vec3 &b)
+{
+	return std::lexicographical_compare(a.begin(), a.end(), b.begin(), b.end());
+}
+
+long searchLeft(const std::vector<double> &a, double x)
+{
+	return long(std::lower_bound(a.begin(), a.end(), x) - a.begin());
+}
+long searchRight(const std::vector<double> &a, double x)
+{
+	return long(std::upper_bound(a.begin(), a.end(), x) - a.begin());
+}
+long clip(long v, long lo, long hi) { return std::max(lo, std::min(v, hi)); }
+
+// 3x3 symmetric eigenvalues (Jacobi), for np.linalg.cond of a symmetric matrix
+double condition(std::array<std::array<double, 3>, 3> a)
+{
+	for (int sweep = 0; sweep < 50; ++sweep) {
+		double off = std::fabs(a[0][1]) + std::fabs(a[0][2]) + std::fabs(a[1][2]);
+		if (off == 0) break;
+		for (int p = 0; p < 2; ++p)
+			for (int q = p + 1; q < 3; ++q) {
+				if (a[p][q] == 0) continue;
+				const double theta = (a[q][q] - a[p][p]) / (2 * a[p][q]);
+				const double t = (theta >= 0 ? 1.0 : -1.0) / (std::fabs(theta) + std::sqrt(theta * theta + 1));
+				const double c = 1 / std::sqrt(t * t + 1), s = t * c;
+				for (int k = 0; k < 3; ++k) {
+					const double akp = a[k][p], akq = a[k][q];
+					a[k][p] = c * akp - s * akq;
+					a[k][q] = s * akp + c * akq;
+				}
+				for (int k = 0; k < 3; ++k) {
+					const double apk = a[p][k], aqk = a[q][k];
+					a[p][k] = c * apk - s * aqk;
+					a[q][k] = s * apk + c * aqk;
+				}
+			}
+	}
+	double lo = INF, hi = 0;
+	for (int k = 0; k < 3; ++k) {
+		lo = std::min(lo, std::fabs(a[k][k]));
+		hi = std::max(hi, std::fabs(a[k][k]));
+	}
+	return lo > 0 ? hi / lo : INF;
+}
+
+// np.linalg.solve of a 3x3 system (LU with partial pivoting)
+Vec3 solve3(std::array<std::array<double, 3>, 3> a, Vec3 b)
+{
+	for (int c = 0; c < 3; ++c) {
+		int piv = c;
+		for (int r = c + 1; r < 3; ++r)
+			if (std::fabs(a[r][c]) > std::fabs(a[piv][c])) piv = r;
+		std::swap(a[c], a[piv]);
+		std::swap(b[c], b[piv]);
+		for (int r = c + 1; r < 3; ++r) {
+			const double f = a[r][c] / a[c][c];
+			for (int k = c; k < 3; ++k) a[r][k] -= f * a[c][k];
+			b[r] -= f * b[c];
+		}
+	}
+	Vec3 x{};
+	for (int r = 2; r >= 0; --r) {
+		double s = b[r];
+		for (int k = r + 1; k < 3; ++k) s -= a[r][k] * x[k];
+		x[r] = s / a[r][r];
+	}
+	return x;
+}
+
+// ---------------------------------------------------------------- k nearest neighbours
+
+// A kd-tree: k nearest neighbours ordered by (squared distance, index), as cKDTree
+// orders them (ties by index).
+class KdTree {
+public:
+	explicit KdTree(const std::vector<Vec3> &points) : pts_(points), idx_(points.size())
+	{
+		std::iota(idx_.begin(), idx_.end(), 0L);
+		if (!pts_.empty()) build(0, long(idx_.size()));
+	}
+	size_t size() const { return pts_.size(); }
+
+	// (squared distance, index) of the k nearest, nearer than `bound` (strictly).
+	std::vector<std::pair<double, long>> query(const Vec3 &q, size_t k, double bound = INF) const
+	{
+		std::vector<std::pair<double, long>> heap;  // max-heap on (d2, index)
+		const double b2 = bound == INF ? INF : bound * bound;
+		if (!nodes_.empty()) search(0, q, k, b2, heap);
+		std::sort_heap(heap.begin(), heap.end());
+		return heap;
+	}
+
+	// indices of the points within r (squared distance <= r^2), ascending
+	std::vector<long> ball(const Vec3 &q, double r) const
+	{
+		std::vector<long> out;
+		if (!nodes_.empty()) collect(0, q, r * r, out);
+		std::sort(out.begin(), out.end());
+		return out;
+	}
+
+private:
+	struct Node { long lo, hi; int dim; double split; long left, right; };
+	const std::vector<Vec3> &pts_;
+	std::vector<long> idx_;
+	std::vector<Node> nodes_;
+
+	long build(long lo, long hi)
+	{
+		const long id = long(nodes_.size());
+		nodes_.push_back({lo, hi, -1, 0.0, -1, -1});
+		if (hi - lo <= 16) return id;
+		Vec3 mn{INF, INF, INF}, mx{-INF, -INF, -INF};
+		for (long i = lo; i < hi; ++i)
+			for (int d = 0; d < 3; ++d) {
+				mn[d] = std::min(mn[d], pts_[idx_[i]][d]);
+				mx[d] = std::max(mx[d], pts_[idx_[i]][d]);
+			}
+		int dim = 0;
+		for (int d = 1; d < 3; ++d)
+			if (mx[d] - mn[d] > mx[dim] - mn[dim]) dim = d;
+		if (mx[dim] - mn[dim] <= 0) return id;
+		const long mid = (lo + hi) / 2;
+		std::nth_element(idx_.begin() + lo, idx_.begin() + mid, idx_.begin() + hi,
+		                 [&](long a, long b) { return pts_[a][dim] < pts_[b][dim]; });
+		const double split = pts_[idx_[mid]][dim];
+		nodes_[id].dim = dim;
+		nodes_[id].split = split;
+		const long left = build(lo, mid);
+		const long right = build(mid, hi);
+		nodes_[id].left = left;
+		nodes_[id].right = right;
+		return id;
+	}
+
+	void collect(long id, const Vec3 &q, double r2, std::vector<long> &out) const
+	{
+		const Node &nd = nodes_[id];
+		if (nd.dim < 0) {
+			for (long i = nd.lo; i < nd.hi; ++i)
+				if (sq(sub(q, pts_[idx_[i]])) <= r2) out.push_back(idx_[i]);
+			return;
+		}
+		const double diff = q[nd.dim] - nd.split;
+		if (diff <= 0 || diff * diff <= r2) collect(nd.left, q, r2, out);
+		if (diff >= 0 || diff * diff <= r2) collect(nd.right, q, r2, out);
+	}
+
+	void search(long id, const Vec3 &q, size_t k, double b2,
+	            std::vector<std::pair<double, long>> &heap) const
+	{
+		const Node &nd = nodes_[id];
+		if (nd.dim < 0) {
+			for (long i = nd.lo; i < nd.hi; ++i) {
+				const long j = idx_[i];
+				const double d2 = sq(sub(pts_[j], q));
+				if (!(d2 < b2)) continue;
+				const std::pair<double, long> item{d2, j};
+				if (heap.size() < k) {
+					heap.push_back(item);
+					std::push_heap(heap.begin(), heap.end());
+				} else if (item < heap.front()) {
+					std::pop_heap(heap.begin(), heap.end());
+					heap.back() = item;
+					std::push_heap(heap.begin(), heap.end());
+				}
+			}
+			return;
+		}
+		const double diff = q[nd.dim] - nd.split;
+		const long first = diff < 0 ? nd.left : nd.right;
+		const long second = diff < 0 ? nd.right : nd.left;
+		search(first, q, k, b2, heap);
+		const double worst = heap.size() < k ? b2 : std::min(b2, heap.front().first);
+		if (diff * diff <= worst) search(second, q, k, b2, heap);
+	}
+};
+
+// ---------------------------------------------------------------- graph.py
+
+struct Adjacency { std::vector<long> indptr, nbr, eid; };
+
+Adjacency adjacency(long n, const std::vector<Edge> &edges)
+{
+	const long e = long(edges.size());
+	std::vector<long> a(2 * e), b(2 * e), ids(2 * e), order(2 * e);
+	for (long i = 0; i < e; ++i) {
+		a[i] = edges[i][0], b[i] = edges[i][1], ids[i] = i;
+		a[e + i] = edges[i][1], b[e + i] = edges[i][0], ids[e + i] = i;
+	}
+	std::iota(order.begin(), order.end(), 0L);
+	std::stable_sort(order.begin(), order.end(),
+	                 [&](long x, long y) { return a[x] != a[y] ? a[x] < a[y] : b[x] < b[y]; });
+	Adjacency adj;
+	adj.indptr.assign(n + 1, 0);
+	for (long x : a) adj.indptr[x + 1] += 1;
+	for (long i = 0; i < n; ++i) adj.indptr[i + 1] += adj.indptr[i];
+	for (long x : order) {
+		adj.nbr.push_back(b[x]);
+		adj.eid.push_back(ids[x]);
+	}
+	return adj;
+}
+
+std::vector<Edge> sortedPairs(std::vector<Edge> out)
+{
+	for (Edge &p : out)
+		if (p[0] > p[1]) std::swap(p[0], p[1]);
+	std::sort(out.begin(), out.end());
+	return out;
+}
+
+// scipy.sparse.csgraph.minimum_spanning_tree (Kruskal, edges in stable weight order of
+// the canonical CSR matrix)
+std::vector<Edge> spanningForest(long n, const std::vector<Edge> &edges, const std::vector<double> &w)
+{
+	std::vector<long> order(edges.size());
+	std::iota(order.begin(), order.end(), 0L);
+	std::sort(order.begin(), order.end(), [&](long x, long y) { return edges[x] < edges[y]; });
+	std::stable_sort(order.begin(), order.end(), [&](long x, long y) { return w[x] < w[y]; });
+	std::vector<long> parent(n);
+	std::iota(parent.begin(), parent.end(), 0L);
+	std::function<long(long)> root = [&](long x) {
+		while (parent[x] != x) x = parent[x] = parent[parent[x]];
+		return x;
+	};
+	std::vector<Edge> tree;
+	for (long j : order) {
+		if (w[j] == 0) continue;  // an explicit zero is no edge
+		const long r1 = root(edges[j][0]), r2 = root(edges[j][1]);
+		if (r1 == r2) continue;
+		parent[std::max(r1, r2)] = std::min(r1, r2);
+		tree.push_back(edges[j]);
+	}
+	return sortedPairs(tree);
+}
+
+using AdjList = std::map<long, std::vector<std::pair<long, double>>>;
+
+bool pathShorter(const AdjList &adj, long a, long b, double limit)
+{
+	std::map<long, double> best{{a, 0.0}};
+	std::priority_queue<std::pair<double, long>, std::vector<std::pair<double, long>>,
+	                    std::greater<std::pair<double, long>>> heap;
+	heap.push({0.0, a});
+	while (!heap.empty()) {
+		const double d = heap.top().first;
+		const long node = heap.top().second;
+		heap.pop();
+		if (node == b) return true;
+		auto it = best.find(node);
+		if (it != best.end() && d > it->second) continue;
+		auto found = adj.find(node);
+		if (found == adj.end()) continue;
+		for (const auto &entry : found->second) {
+			const long nxt = entry.first;
+			const double nd = d + entry.second;
+			auto bt = best.find(nxt);
+			if (nd < limit && (bt == best.end() || nd < bt->second)) {
+				best[nxt] = nd;
+				heap.push({nd, nxt});
+			}
+		}
+	}
+	return false;
+}
+
+std::vector<Edge> closeLoops(long n, const std::vector<Edge> &forest, const std::vector<Edge> &edges,
+                             const std::vector<Vec3> &pos, double minLength)
+{
+	std::vector<long> degree(n, 0);
+	for (const Edge &e : forest) degree[e[0]]++, degree[e[1]]++;
+	std::set<Edge> tree(forest.begin(), forest.end());
+	std::vector<Edge> cand;
+	for (const Edge &e : edges)
+		if ((degree[e[0]] == 1 || degree[e[1]] == 1) && !tree.count(e)) cand.push_back(e);
+	if (cand.empty()) return forest;
+	std::vector<double> candLength(cand.size());
+	for (size_t i = 0; i < cand.size(); ++i) candLength[i] = norm(sub(pos[cand[i][0]], pos[cand[i][1]]));
+	AdjList adj;
+	for (const Edge &e : forest) {
+		const double d = norm(sub(pos[e[0]], pos[e[1]]));
+		adj[e[0]].push_back({e[1], d});
+		adj[e[1]].push_back({e[0], d});
+	}
+	std::vector<long> order(cand.size());
+	std::iota(order.begin(), order.end(), 0L);
+	std::stable_sort(order.begin(), order.end(), [&](long x, long y) {
+		if (candLength[x] != candLength[y]) return candLength[x] < candLength[y];
+		return cand[x] < cand[y];
+	});
+	auto degreeOf = [&](long v) { auto it = adj.find(v); return it == adj.end() ? 0 : long(it->second.size()); };
+	std::vector<Edge> out = forest;
+	for (long k : order) {
+		const long a = cand[k][0], b = cand[k][1];
+		if (degreeOf(a) != 1 && degreeOf(b) != 1) continue;
+		if (pathShorter(adj, a, b, minLength)) continue;
+		out.push_back({a, b});
+		adj[a].push_back({b, candLength[k]});
+		adj[b].push_back({a, candLength[k]});
+	}
+	return out;
+}
+
+std::vector<Edge> pruneSpurs(long n, const std::vector<Edge> &edges, const std::vector<Vec3> &pos,
+                             double minLength)
+{
+	std::vector<char> keep(edges.size(), 1);
+	std::vector<double> edgeLength(edges.size());
+	for (size_t i = 0; i < edges.size(); ++i) edgeLength[i] = norm(sub(pos[edges[i][0]], pos[edges[i][1]]));
+	for (int round = 0; round < PRUNE_ROUNDS; ++round) {
+		std::vector<long> current;
+		std::vector<Edge> sub_;
+		for (size_t i = 0; i < edges.size(); ++i)
+			if (keep[i]) current.push_back(long(i)), sub_.push_back(edges[i]);
+		const Adjacency adj = adjacency(n, sub_);
+		std::vector<long> degree(n);
+		for (long i = 0; i < n; ++i) degree[i] = adj.indptr[i + 1] - adj.indptr[i];
+		std::map<long, std::vector<std::tuple<double, long, std::vector<long>>>> spurs;
+		std::vector<long> junctionOrder;
+		for (long leaf = 0; leaf < n; ++leaf) {
+			if (degree[leaf] != 1) continue;
+			long prev = -1, node = leaf;
+			double length = 0.0;
+			std::vector<long> path;
+			while (true) {
+				long step = adj.indptr[node];
+				while (adj.nbr[step] == prev) ++step;
+				const long edge = current[adj.eid[step]];
+				path.push_back(edge);
+				const long nxt = adj.nbr[step];
+				length += edgeLength[edge];
+				prev = node, node = nxt;
+				if (degree[node] != 2 || length >= minLength) break;
+			}
+			if (degree[node] >= 3 && length < minLength) {
+				if (!spurs.count(node)) junctionOrder.push_back(node);
+				spurs[node].push_back({length, leaf, path});
+			}
+		}
+		bool removed = false;
+		for (long junction : junctionOrder) {
+			auto &found = spurs[junction];
+			std::sort(found.begin(), found.end());
+			const long drop = std::max(0L, degree[junction] - 2);
+			for (long i = 0; i < std::min(drop, long(found.size())); ++i) {
+				for (long e : std::get<2>(found[i])) keep[e] = 0;
+				removed = true;
+			}
+		}
+		if (!removed) break;
+	}
+	std::vector<Edge> out;
+	for (size_t i = 0; i < edges.size(); ++i)
+		if (keep[i]) out.push_back(edges[i]);
+	return out;
+}
+
+std::vector<std::vector<long>> tracePaths(long n, const std::vector<Edge> &edges)
+{
+	const Adjacency adj = adjacency(n, edges);
+	std::vector<long> degree(n);
+	for (long i = 0; i < n; ++i) degree[i] = adj.indptr[i + 1] - adj.indptr[i];
+	std::vector<char> used(edges.size(), 0);
+	std::vector<std::vector<long>> paths;
+	auto walk = [&](long start, long j) {
+		std::vector<long> path{start};
+		while (true) {
+			used[adj.eid[j]] = 1;
+			const long node = adj.nbr[j];
+			path.push_back(node);
+			if (degree[node] != 2) return path;
+			j = -1;
+			for (long k = adj.indptr[node]; k < adj.indptr[node + 1]; ++k)
+				if (!used[adj.eid[k]]) { j = k; break; }
+			if (j < 0) return path;
+		}
+	};
+	for (long node = 0; node < n; ++node) {
+		if (degree[node] == 2 || degree[node] == 0) continue;
+		for (long j = adj.indptr[node]; j < adj.indptr[node + 1]; ++j)
+			if (!used[adj.eid[j]]) paths.push_back(walk(node, j));
+	}
+	for (long node = 0; node < n; ++node) {
+		if (degree[node] != 2) continue;
+		const long j = adj.indptr[node];
+		if (!used[adj.eid[j]]) paths.push_back(walk(node, j));
+	}
+	return paths;
+}
+
+// ---------------------------------------------------------------- pieces (trace.py)
+
+struct Piece {
+	std::vector<long> nodes;
+	std::vector<Vec3> points;
+	bool closed = false;
+
+	double length() const
+	{
+		std::vector<double> seg;
+		for (size_t i = 1; i < points.size(); ++i) seg.push_back(norm(sub(points[i], points[i - 1])));
+		if (closed && !points.empty()) seg.push_back(norm(sub(points[0], points.back())));
+		return pairwiseSum(seg);
+	}
+	Piece reversed() const
+	{
+		Piece r{nodes, points, false};
+		std::reverse(r.nodes.begin(), r.nodes.end());
+		std::reverse(r.points.begin(), r.points.end());
+		return r;
+	}
+	Piece select(const std::vector<long> &sel) const
+	{
+		Piece r;
+		for (long i : sel) r.nodes.push_back(nodes[i]), r.points.push_back(points[i]);
+		return r;
+	}
+};
+
+std::vector<double> arc(const std::vector<Vec3> &p)
+{
+	std::vector<double> cum{0.0};
+	for (size_t i = 1; i < p.size(); ++i) cum.push_back(cum.back() + norm(sub(p[i], p[i - 1])));
+	return cum;
+}
+
+std::vector<Vec3> padded(const Piece &pc, long pad)
+{
+	if (!pc.closed) return pc.points;
+	const long m = long(pc.points.size());
+	const long reps = (pad + m - 1) / m;
+	std::vector<Vec3> all;
+	for (long r = 0; r < 2 * reps + 1; ++r) all.insert(all.end(), pc.points.begin(), pc.points.end());
+	return std::vector<Vec3>(all.begin() + (m * reps - pad), all.begin() + (m * reps - pad) + m + 2 * pad);
+}
+
+std::vector<Vec3> tangents(const Piece &pc, double window)
+{
+	const long m = long(pc.points.size());
+	const long pad = pc.closed ? m : 0;
+	const std::vector<Vec3> p = padded(pc, pad);
+	const std::vector<double> cum = arc(p);
+	const long last = long(cum.size()) - 1;
+	std::vector<Vec3> t(m);
+	for (long i = 0; i < m; ++i) {
+		const long at = i + pad;
+		const long back = clip(searchRight(cum, cum[at] - window) - 1, 0, last);
+		const long ahead = clip(searchLeft(cum, cum[at] + window), 0, last);
+		t[i] = unit(sub(p[ahead], p[back]));
+	}
+	return t;
+}
+
+// Concatenated pieces, arc length within each piece and the key that keeps pieces apart
+// (batch_tangents, _ends).
+struct Batch {
+	std::vector<Vec3> points;
+	std::vector<long> starts, stops, piece;
+	std::vector<double> cum;
+};
+
+Batch batch(const std::vector<const Piece *> &pieces)
+{
+	Batch b;
+	for (size_t i = 0; i < pieces.size(); ++i) {
+		b.starts.push_back(long(b.points.size()));
+		b.points.insert(b.points.end(), pieces[i]->points.begin(), pieces[i]->points.end());
+		b.stops.push_back(long(b.points.size()) - 1);
+		b.piece.insert(b.piece.end(), pieces[i]->points.size(), long(i));
+	}
+	const size_t total = b.points.size();
+	std::vector<double> step(total > 0 ? total - 1 : 0);
+	for (size_t i = 0; i + 1 < total; ++i) step[i] = norm(sub(b.points[i + 1], b.points[i]));
+	for (size_t i = 1; i < b.starts.size(); ++i) step[b.starts[i] - 1] = 0.0;
+	b.cum.assign(1, 0.0);
+	for (double s : step) b.cum.push_back(b.cum.back() + s);
+	std::vector<double> base(total);
+	for (size_t i = 0; i < total; ++i) base[i] = b.cum[b.starts[b.piece[i]]];
+	for (size_t i = 0; i < total; ++i) b.cum[i] -= base[i];
+	return b;
+}
+
+std::vector<double> keys(const Batch &b, double gap)
+{
+	std::vector<double> key(b.cum.size());
+	for (size_t i = 0; i < key.size(); ++i) key[i] = b.cum[i] + double(b.piece[i]) * gap;
+	return key;
+}
+
+double maxOf(const std::vector<double> &v)
+{
+	double m = -INF;
+	for (double x : v) m = std::max(m, x);
+	return m;
+}
+
+std::vector<Vec3> batchTangents(const std::vector<Piece> &pieces, double window)
+{
+	std::vector<const Piece *> ptrs;
+	for (const Piece &pc : pieces) ptrs.push_back(&pc);
+	const Batch b = batch(ptrs);
+	std::vector<Vec3> out(b.points.size());
+	if (out.empty()) return out;
+	const double gap = maxOf(b.cum) + 2 * window + 1.0;
+	const std::vector<double> key = keys(b, gap);
+	for (size_t i = 0; i < key.size(); ++i) {
+		const long lo = b.starts[b.piece[i]], hi = b.stops[b.piece[i]];
+		const long back = clip(searchRight(key, key[i] - window) - 1, lo, hi);
+		const long ahead = clip(searchLeft(key, key[i] + window), lo, hi);
+		out[i] = unit(sub(b.points[ahead], b.points[back]));
+	}
+	for (size_t i = 0; i < pieces.size(); ++i)
+		if (pieces[i].closed) {
+			const std::vector<Vec3> t = tangents(pieces[i], window);
+			std::copy(t.begin(), t.end(), out.begin() + b.starts[i]);
+		}
+	return out;
+}
+
+std::vector<double> turnAngles(const Piece &pc, double spacing)
+{
+	const long m = long(pc.points.size());
+	const long pad = pc.closed ? m : 0;
+	const std::vector<Vec3> p = padded(pc, pad);
+	const std::vector<double> cum = arc(p);
+	const long last = long(p.size()) - 1;
+	std::vector<double> least(m, INF);
+	std::vector<int> valid(m, 0);
+	for (int s = 0; s < N_SCALES; ++s) {
+		const double scale = TURN_SCALES[s] * spacing;
+		for (long i = 0; i < m; ++i) {
+			const double c = cum[i + pad];
+			const long farB = clip(searchRight(cum, c + -TURN_OUTER * scale) - 1, 0, last);
+			const long nearB = clip(searchRight(cum, c + -TURN_INNER * scale) - 1, 0, last);
+			const long farA = clip(searchLeft(cum, c + TURN_OUTER * scale), 0, last);
+			const long nearA = clip(searchLeft(cum, c + TURN_INNER * scale), 0, last);
+			const Vec3 before = unit(sub(p[nearB], p[farB]));
+			const Vec3 after = unit(sub(p[farA], p[nearA]));
+			if (!(norm(before) > 0 && norm(after) > 0)) continue;
+			valid[i]++;
+			const double cs = std::max(-1.0, std::min(1.0, edot(before, after)));
+			least[i] = std::min(least[i], degrees(std::acos(cs)));
+		}
+	}
+	std::vector<double> angle(m);
+	for (long i = 0; i < m; ++i) angle[i] = valid[i] >= MIN_TURN_SCALES ? least[i] : 0.0;
+	return angle;
+}
+
+// Split a piece at the vertices `at` (sorted): closed pieces start at the first.
+std::vector<Piece> splitAt(const Piece &pc, const std::vector<long> &at)
+{
+	const long m = long(pc.points.size());
+	std::vector<long> idx, bounds;
+	if (pc.closed) {
+		for (long i = at[0]; i < m; ++i) idx.push_back(i);
+		for (long i = 0; i <= at[0]; ++i) idx.push_back(i);
+		for (long c : at) bounds.push_back(c - at[0]);
+		bounds.push_back(m);
+	} else {
+		for (long i = 0; i < m; ++i) idx.push_back(i);
+		bounds.push_back(0);
+		bounds.insert(bounds.end(), at.begin(), at.end());
+		bounds.push_back(m - 1);
+	}
+	std::vector<Piece> out;
+	for (size_t k = 0; k + 1 < bounds.size(); ++k) {
+		const long a = bounds[k], b = bounds[k + 1];
+		if (b > a) out.push_back(pc.select(std::vector<long>(idx.begin() + a, idx.begin() + b + 1)));
+	}
+	return out;
+}
+
+std::vector<Piece> cutAtTurns(const Piece &pc, double spacing)
+{
+	if (!pc.closed && pc.length() < SHORTEST_CUT * spacing) return {pc};
+	const double window = TURN_OUTER * spacing;
+	const std::vector<double> angle = turnAngles(pc, spacing);
+	const std::vector<double> cum = arc(pc.points);
+	std::vector<long> order(angle.size());
+	std::iota(order.begin(), order.end(), 0L);
+	std::stable_sort(order.begin(), order.end(), [&](long x, long y) { return -angle[x] < -angle[y]; });
+	const double total = pc.closed ? pc.length() : 0.0;
+	std::vector<long> cuts;
+	for (long i : order) {
+		if (angle[i] <= CORNER_TURN) break;
+		bool near = false;
+		for (long c : cuts) {
+			const double d = std::fabs(cum[c] - cum[i]);
+			if (pc.closed ? std::min(d, total - d) < window : d < window) near = true;
+		}
+		if (!near) cuts.push_back(i);
+	}
+	if (cuts.empty() || (pc.closed && cuts.size() == 1)) return {pc};
+	std::sort(cuts.begin(), cuts.end());
+	return splitAt(pc, cuts);
+}
+
+struct Ends {
+	std::vector<long> piece, side;
+	std::vector<Vec3> point;
+	std::vector<Vec3> out[N_SCALES];
+};
+
+Ends ends(const std::vector<Piece> &pieces, double spacing)
+{
+	Ends e;
+	std::vector<long> which;
+	std::vector<const Piece *> ptrs;
+	for (size_t i = 0; i < pieces.size(); ++i)
+		if (!pieces[i].closed && pieces[i].points.size() >= 2) which.push_back(long(i)), ptrs.push_back(&pieces[i]);
+	if (which.empty()) return e;
+	const Batch b = batch(ptrs);
+	const double smax = TURN_SCALES[N_SCALES - 1] * spacing;
+	const double gap = maxOf(b.cum) + 2 * TURN_OUTER * smax + 1.0;
+	const std::vector<double> key = keys(b, gap);
+	const size_t q = which.size();
+	for (size_t i = 0; i < q; ++i) {
+		const long start = b.starts[i], stop = b.stops[i];
+		e.piece.push_back(which[i]), e.piece.push_back(which[i]);
+		e.side.push_back(0), e.side.push_back(1);
+		e.point.push_back(b.points[start]), e.point.push_back(b.points[stop]);
+		const Vec3 chord = sub(b.points[stop], b.points[start]);
+		for (int s = 0; s < N_SCALES; ++s) {
+			const double scale = TURN_SCALES[s] * spacing;
+			const long nearF = clip(searchLeft(key, key[start] + TURN_INNER * scale), start, stop);
+			const long farF = clip(searchLeft(key, key[start] + TURN_OUTER * scale), start, stop);
+			const long nearL = clip(searchRight(key, key[stop] - TURN_INNER * scale) - 1, start, stop);
+			const long farL = clip(searchRight(key, key[stop] - TURN_OUTER * scale) - 1, start, stop);
+			const Vec3 first = nearF == farF ? chord : sub(b.points[farF], b.points[nearF]);
+			const Vec3 lastv = nearL == farL ? chord : sub(b.points[nearL], b.points[farL]);
+			e.out[s].push_back(neg(unit(first)));
+			e.out[s].push_back(unit(lastv));
+		}
+	}
+	return e;
+}
+
+// scipy's query_pairs(r): pairs i < j with squared distance <= r^2, sorted
+std::vector<Edge> pairsWithin(const std::vector<Vec3> &pts, double r)
+{
+	const KdTree tree(pts);
+	std::vector<Edge> out;
+	for (size_t i = 0; i < pts.size(); ++i)
+		for (long j : tree.ball(pts[i], r))
+			if (j > long(i)) out.push_back({long(i), j});
+	return out;
+}
+
+std::vector<std::vector<long>> endClusters(const Ends &e, const std::vector<Piece> &pieces, double spacing)
+{
+	const long q = long(e.piece.size());
+	std::vector<long> parent(q);
+	std::iota(parent.begin(), parent.end(), 0L);
+	auto root = [&](long i) {
+		while (parent[i] != i) i = parent[i] = parent[parent[i]];
+		return i;
+	};
+	for (const Edge &p : pairsWithin(e.point, GAP_LENGTH * spacing)) {
+		if (e.piece[p[0]] == e.piece[p[1]] && pieces[e.piece[p[0]]].length() < LOOP_LENGTH * GAP_LENGTH * spacing)
+			continue;
+		const long ra = root(p[0]), rb = root(p[1]);
+		if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+	}
+	std::map<long, std::vector<long>> groups;
+	for (long i = 0; i < q; ++i) groups[root(i)].push_back(i);
+	std::vector<std::vector<long>> clusters;
+	for (auto &g : groups)
+		if (g.second.size() >= 2) clusters.push_back(g.second);
+	return clusters;
+}
+
+bool continues(const Ends &e, long a, long b, double spacing)
+{
+	const Vec3 gap = sub(e.point[b], e.point[a]);
+	for (int s = 0; s < N_SCALES; ++s) {
+		const Vec3 &oa = e.out[s][a], &ob = e.out[s][b];
+		if (-dot(oa, ob) < std::cos(radians(CORNER_TURN))) continue;
+		const double offA = norm(sub(gap, mul(dot(gap, oa), oa)));
+		const double offB = norm(sub(gap, mul(dot(gap, ob), ob)));
+		if (std::max(offA, offB) <= LATERAL_OFFSET * spacing) return true;
+	}
+	return false;
+}
+
+bool facesGap(const Ends &e, long a, long b)
+{
+	const Vec3 gap = sub(e.point[b], e.point[a]);
+	const double limit = std::cos(radians(CORNER_TURN)) * norm(gap);
+	return dot(gap, e.out[N_SCALES - 1][a]) >= limit && dot(neg(gap), e.out[N_SCALES - 1][b]) >= limit;
+}
+
+using Bridge = std::function<Piece(long, long)>;
+
+std::vector<Piece> bridged(const std::vector<Piece> &parts, bool closed, const Bridge &bridge)
+{
+	std::vector<Piece> out;
+	const size_t n = parts.size();
+	const size_t pairs = closed ? n : n - 1;
+	for (size_t k = 0; k < pairs; ++k) {
+		const Piece &a = parts[k], &b = parts[(k + 1) % n];
+		out.push_back(a);
+		if (a.nodes.back() != b.nodes.front()) {
+			Piece mid = bridge(a.nodes.back(), b.nodes.front());
+			if (!mid.nodes.empty()) out.push_back(mid);
+		}
+	}
+	if (!closed) out.push_back(parts.back());
+	return out;
+}
+
+std::vector<Piece> joinPieces(const std::vector<Piece> &pieces, double spacing, const Bridge *bridge)
+{
+	const Ends e = ends(pieces, spacing);
+	const auto clusters = endClusters(e, pieces, spacing);
+	std::map<std::pair<long, long>, std::pair<long, long>> link;
+	auto connect = [&](long i, long j) {
+		const long a = e.piece[i], b = e.piece[j], sa = e.side[i], sb = e.side[j];
+		if (link.count({a, sa}) || link.count({b, sb})) return;
+		if (a == b && pieces[a].length() < LOOP_LENGTH * GAP_LENGTH * spacing) return;
+		link[{a, sa}] = {b, sb};
+		link[{b, sb}] = {a, sa};
+	};
+	for (const auto &c : clusters)
+		if (c.size() == 2 && continues(e, c[0], c[1], spacing)) connect(c[0], c[1]);
+	std::vector<char> isFree(e.piece.size(), 1);
+	for (const auto &c : clusters)
+		for (long i : c) isFree[i] = 0;
+	std::vector<long> alone;
+	for (size_t i = 0; i < isFree.size(); ++i)
+		if (isFree[i]) alone.push_back(long(i));
+	if (alone.size() >= 2) {
+		std::vector<Vec3> pts;
+		for (long i : alone) pts.push_back(e.point[i]);
+		std::vector<Edge> pairs;
+		for (const Edge &p : pairsWithin(pts, LONG_GAP * spacing)) pairs.push_back({alone[p[0]], alone[p[1]]});
+		std::vector<double> gaps(pairs.size());
+		for (size_t k = 0; k < pairs.size(); ++k) gaps[k] = norm(sub(e.point[pairs[k][0]], e.point[pairs[k][1]]));
+		std::vector<long> order(pairs.size());
+		std::iota(order.begin(), order.end(), 0L);
+		std::stable_sort(order.begin(), order.end(), [&](long x, long y) {
+			if (gaps[x] != gaps[y]) return gaps[x] < gaps[y];
+			return pairs[x] < pairs[y];
+		});
+		for (long k : order) {
+			const long i = pairs[k][0], j = pairs[k][1];
+			if (continues(e, i, j, spacing) && facesGap(e, i, j)) connect(i, j);
+		}
+	}
+	if (link.empty()) return pieces;
+	std::vector<char> done(pieces.size(), 0);
+	std::vector<Piece> out;
+	auto chain = [&](long start, long entry) {
+		std::vector<Piece> parts;
+		long p = start, side = entry;
+		bool closed = false;
+		while (true) {
+			done[p] = 1;
+			parts.push_back(side == 0 ? Piece{pieces[p].nodes, pieces[p].points, false} : pieces[p].reversed());
+			auto nxt = link.find({p, 1 - side});
+			if (nxt == link.end()) break;
+			if (done[nxt->second.first]) {
+				closed = nxt->second == std::make_pair(start, entry);
+				break;
+			}
+			p = nxt->second.first, side = nxt->second.second;
+		}
+		if (bridge != nullptr) parts = bridged(parts, closed, *bridge);
+		Piece r;
+		for (const Piece &q : parts)
+			for (size_t k = 0; k < q.nodes.size(); ++k)
+				if (r.nodes.empty() || q.nodes[k] != r.nodes.back())
+					r.nodes.push_back(q.nodes[k]), r.points.push_back(q.points[k]);
+		if (closed && r.nodes.size() > 1 && r.nodes.front() == r.nodes.back())
+			r.nodes.pop_back(), r.points.pop_back();
+		r.closed = closed;
+		return r;
+	};
+	for (size_t i = 0; i < pieces.size(); ++i) {
+		if (done[i]) continue;
+		if (pieces[i].closed) {
+			done[i] = 1;
+			out.push_back(pieces[i]);
+		} else if (!link.count({long(i), 0})) {
+			out.push_back(chain(long(i), 0));
+		} else if (!link.count({long(i), 1})) {
+			out.push_back(chain(long(i), 1));
+		}
+	}
+	for (size_t i = 0; i < pieces.size(); ++i)
+		if (!done[i]) out.push_back(chain(long(i), 0));
+	return out;
+}
+
+std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spacing)
+{
+	const Ends e = ends(pieces, spacing);
+	const auto clusters = endClusters(e, pieces, spacing);
+	std::vector<char> isFree(e.piece.size(), 1);
+	for (const auto &c : clusters)
+		for (long i : c) isFree[i] = 0;
+	if (std::find(isFree.begin(), isFree.end(), 1) == isFree.end()) return pieces;
+	std::vector<long> owner, local;
+	std::vector<Vec3> data;
+	for (size_t i = 0; i < pieces.size(); ++i)
+		for (size_t k = 0; k < pieces[i].points.size(); ++k)
+			owner.push_back(long(i)), local.push_back(long(k)), data.push_back(pieces[i].points[k]);
+	const double reach = GAP_LENGTH * spacing;
+	const KdTree tree(data);
+	std::map<long, std::set<long>> cuts;
+	for (size_t q = 0; q < isFree.size(); ++q) {
+		if (!isFree[q]) continue;
+		long best = -1;
+		double bestD = INF;
+		for (long j : tree.ball(e.point[q], reach)) {
+			if (owner[j] == e.piece[q]) continue;
+			const double d = norm(sub(data[j], e.point[q]));
+			if (d < bestD) bestD = d, best = j;
+		}
+		if (best < 0) continue;
+		const Piece &pc = pieces[owner[best]];
+		const long v = local[best];
+		const std::vector<double> cum = arc(pc.points);
+		if (pc.closed || (cum[v] > reach && cum.back() - cum[v] > reach)) cuts[owner[best]].insert(v);
+	}
+	if (cuts.empty()) return pieces;
+	std::vector<Piece> out;
+	for (size_t i = 0; i < pieces.size(); ++i) {
+		auto it = cuts.find(long(i));
+		if (it == cuts.end()) {
+			out.push_back(pieces[i]);
+			continue;
+		}
+		for (Piece &pc : splitAt(pieces[i], std::vector<long>(it->second.begin(), it->second.end())))
+			out.push_back(pc);
+	}
+	return out;
+}
+
+// ---------------------------------------------------------------- meshes
+
+// Shortest paths along the mesh edges of the faces touching a feature vertex (MeshPaths).
+class MeshPaths {
+public:
+	MeshPaths(const std::vector<Vec3> &pts, const std::vector<std::array<int, 3>> &faces,
+	          const std::vector<char> &mask)
+	    : pts_(pts)
+	{
+		std::vector<std::array<int, 3>> f;
+		for (const auto &t : faces)
+			if (mask[t[0]] || mask[t[1]] || mask[t[2]]) f.push_back(t);
+		for (const auto &t : f) ids_.insert(ids_.end(), t.begin(), t.end());
+		std::sort(ids_.begin(), ids_.end());
+		ids_.erase(std::unique(ids_.begin(), ids_.end()), ids_.end());
+		std::set<Edge> e;
+		for (const auto &t : f)
+			for (int k = 0; k < 3; ++k) {
+				const long a = local(t[k]), b = local(t[(k + 1) % 3]);
+				e.insert({std::min(a, b), std::max(a, b)});
+			}
+		const long n = long(ids_.size());
+		std::vector<std::vector<std::pair<long, double>>> rows(n);
+		for (const Edge &x : e) {
+			const double d = norm(sub(pts_[ids_[x[0]]], pts_[ids_[x[1]]]));
+			rows[x[0]].push_back({x[1], d});
+			rows[x[1]].push_back({x[0], d});
+		}
+		for (auto &r : rows) std::sort(r.begin(), r.end());
+		rows_ = rows;
+		for (long v : ids_) positions_.push_back(pts_[v]);
+		tree_.reset(new KdTree(positions_));
+	}
+
+	// the nearest vertex, the lowest of equally near ones
+	long nearest(const Vec3 &p) const { return ids_[tree_->query(p, 1)[0].second]; }
+
+	// vertices strictly between a and b on the shortest path; found = false when none is
+	// within limit (MeshPaths.path: a heap of (distance, vertex), a vertex's predecessor
+	// the first settled vertex reaching it at its final distance)
+	std::vector<long> path(long a, long b, double limit, bool &found) const
+	{
+		found = false;
+		const long ia = local(a), ib = local(b);
+		if (ia < 0 || ib < 0) return {};
+		if (ia == ib) {
+			found = true;
+			return {};
+		}
+		const long n = long(ids_.size());
+		std::vector<double> val(n, INF);
+		std::vector<long> pred(n, -1);
+		std::vector<char> state(n, 0);  // 0 not in heap, 1 in heap, 2 scanned
+		std::priority_queue<std::pair<double, long>, std::vector<std::pair<double, long>>,
+		                    std::greater<std::pair<double, long>>> heap;
+		val[ia] = 0.0, state[ia] = 1;
+		heap.push({0.0, ia});
+		while (!heap.empty()) {
+			const double d = heap.top().first;
+			const long v = heap.top().second;
+			heap.pop();
+			if (state[v] == 2 || d != val[v]) continue;
+			state[v] = 2;
+			if (v == ib) break;
+			for (const auto &entry : rows_[v]) {
+				const long j = entry.first;
+				if (state[j] == 2) continue;
+				const double next = d + entry.second;
+				if (!(next <= limit)) continue;
+				if (state[j] == 0 || val[j] > next) {
+					state[j] = 1, val[j] = next, pred[j] = v;
+					heap.push({next, j});
+				}
+			}
+		}
+		if (state[ib] != 2) return {};
+		found = true;
+		std::vector<long> inner;
+		for (long v = pred[ib]; v != ia; v = pred[v]) inner.push_back(ids_[v]);
+		std::reverse(inner.begin(), inner.end());
+		return inner;
+	}
+
+private:
+	const std::vector<Vec3> &pts_;
+	std::vector<long> ids_;
+	std::vector<std::vector<std::pair<long, double>>> rows_;
+	std::vector<Vec3> positions_;
+	std::unique_ptr<KdTree> tree_;
+
+	long local(long v) const
+	{
+		auto it = std::lower_bound(ids_.begin(), ids_.end(), v);
+		return (it == ids_.end() || *it != v) ? -1 : long(it - ids_.begin());
+	}
+};
+
+std::vector<Piece> skeletonPieces(long n, const std::vector<Edge> &edges, const std::vector<double> &w,
+                                  const std::vector<Vec3> &pos, double spacing,
+                                  const std::vector<long> &feat)
+{
+	std::vector<Edge> forest = spanningForest(n, edges, w);
+	forest = closeLoops(n, forest, edges, pos, LOOP_LENGTH * GAP_LENGTH * spacing);
+	forest = pruneSpurs(n, forest, pos, SPUR_LENGTH * spacing);
+	std::vector<Piece> pieces;
+	for (std::vector<long> path : tracePaths(n, forest)) {
+		const bool closed = path.size() > 2 && path.front() == path.back();
+		if (closed) path.pop_back();
+		Piece pc;
+		pc.closed = closed;
+		for (long v : path) pc.nodes.push_back(feat.empty() ? v : feat[v]), pc.points.push_back(pos[v]);
+		pieces.push_back(pc);
+	}
+	return pieces;
+}
+
+std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<std::array<int, 3>> &faces,
+                              const std::vector<char> &mask, const std::vector<long> &feat,
+                              const std::vector<Vec3> &fp, double &spacing)
+{
+	spacing = 0.0;
+	std::vector<std::array<int, 3>> near;
+	for (const auto &t : faces)
+		if (int(mask[t[0]] != 0) + int(mask[t[1]] != 0) + int(mask[t[2]] != 0) >= 2) near.push_back(t);
+	if (near.empty()) return {};
+	std::vector<Vec3> normal(near.size());
+	for (size_t i = 0; i < near.size(); ++i) {
+		const Vec3 &p0 = pts[near[i][0]], &p1 = pts[near[i][1]], &p2 = pts[near[i][2]];
+		const Vec3 c = cross(sub(p1, p0), sub(p2, p0));
+		const double nrm = norm(c);
+		const double d = nrm > 0 ? nrm : 1.0;
+		normal[i] = {c[0] / d, c[1] / d, c[2] / d};
+	}
+	const long m = long(near.size());
+	std::vector<Edge> e(3 * m);
+	std::vector<long> face(3 * m);
+	for (long i = 0; i < m; ++i)
+		for (int k = 0; k < 3; ++k) {
+			const long a = near[i][k], b = near[i][(k + 1) % 3];
+			e[k * m + i] = {std::min(a, b), std::max(a, b)};
+			face[k * m + i] = i;
+		}
+	std::vector<long> order(3 * m);
+	std::iota(order.begin(), order.end(), 0L);
+	std::stable_sort(order.begin(), order.end(), [&](long x, long y) { return e[x] < e[y]; });
+	std::vector<double> allLengths;
+	std::vector<Edge> edges;
+	std::vector<double> weights;
+	for (size_t s = 0; s < order.size();) {
+		size_t t = s + 1;
+		while (t < order.size() && e[order[t]] == e[order[s]]) ++t;
+		const Edge ed = e[order[s]];
+		const double length = norm(sub(pts[ed[0]], pts[ed[1]]));
+		allLengths.push_back(length);
+		if (mask[ed[0]] && mask[ed[1]]) {
+			double cosTurn = 0.0;  // boundary / non-manifold: 90 degrees
+			if (t - s == 2) cosTurn = edot(normal[face[order[s]]], normal[face[order[s + 1]]]);
+			const double sinHalf = std::sqrt(std::max(0.0, std::min(1.0, (1.0 - cosTurn) / 2.0)));
+			edges.push_back(ed);
+			weights.push_back(length / (sinHalf + MESH_FLAT_WEIGHT));
+		}
+		s = t;
+	}
+	if (edges.empty()) return {};
+	spacing = median(allLengths);
+	std::vector<long> node(pts.size(), -1);
+	for (size_t i = 0; i < feat.size(); ++i) node[feat[i]] = long(i);
+	std::vector<Edge> local;
+	std::vector<double> w;
+	for (size_t i = 0; i < edges.size(); ++i) {
+		const long a = node[edges[i][0]], b = node[edges[i][1]];
+		if (a >= 0 && b >= 0) local.push_back({a, b}), w.push_back(weights[i]);
+	}
+	return skeletonPieces(long(feat.size()), local, w, fp, spacing, feat);
+}
+
+// ---------------------------------------------------------------- clouds (refine.py)
+
+std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vector<char> &valid,
+                                    const std::vector<Vec3> &centres, double radius)
+{
+	Vec3 lo{INF, INF, INF}, hi{-INF, -INF, -INF};
+	for (const Vec3 &p : pts)
+		for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], p[d]), hi[d] = std::max(hi[d], p[d]);
+	long dims[3];
+	for (int d = 0; d < 3; ++d) dims[d] = long(std::floor((hi[d] - lo[d]) / radius)) + 3;
+	auto cell = [&](const Vec3 &p, int d) { return long(std::floor((p[d] - lo[d]) / radius)) + 1; };
+	auto key = [&](long a, long b, long c) { return (a * dims[1] + b) * dims[2] + c; };
+	std::unordered_set<long> wanted;
+	for (const Vec3 &c : centres) {
+		const long a = cell(c, 0), b = cell(c, 1), z = cell(c, 2);
+		for (long i = -1; i <= 1; ++i)
+			for (long j = -1; j <= 1; ++j)
+				for (long k = -1; k <= 1; ++k) wanted.insert(key(a + i, b + j, z + k));
+	}
+	std::vector<long> out;
+	for (size_t i = 0; i < pts.size(); ++i)
+		if (valid[i] && wanted.count(key(cell(pts[i], 0), cell(pts[i], 1), cell(pts[i], 2)))) out.push_back(long(i));
+	return out;
+}
+
+struct ArmLine { double c[2], a[2], rms, total; };
+
+ArmLine armLine(const std::vector<std::array<double, 2>> &xy, const std::vector<double> &w)
+{
+	const size_t k = xy.size();
+	ArmLine r{};
+	r.total = pairwiseSum(w);
+	const double safe = r.total > 0 ? r.total : 1.0;
+	for (int j = 0; j < 2; ++j) {
+		double s = w[0] * xy[0][j];
+		for (size_t i = 1; i < k; ++i) s += w[i] * xy[i][j];
+		r.c[j] = s / safe;
+	}
+	std::vector<double> xx(k), yy(k), xyv(k);
+	for (size_t i = 0; i < k; ++i) {
+		const double d0 = xy[i][0] - r.c[0], d1 = xy[i][1] - r.c[1];
+		xx[i] = w[i] * (d0 * d0);
+		yy[i] = w[i] * (d1 * d1);
+		xyv[i] = (w[i] * d0) * d1;
+	}
+	const double sxx = pairwiseSum(xx), syy = pairwiseSum(yy), sxy = pairwiseSum(xyv);
+	const double theta = 0.5 * std::atan2(2 * sxy, sxx - syy);
+	r.a[0] = std::cos(theta), r.a[1] = std::sin(theta);
+	std::vector<double> off2(k);
+	for (size_t i = 0; i < k; ++i) {
+		const double d0 = xy[i][0] - r.c[0], d1 = xy[i][1] - r.c[1];
+		const double off = d0 * -r.a[1] + d1 * r.a[0];
+		off2[i] = w[i] * (off * off);
+	}
+	r.rms = std::sqrt(pairwiseSum(off2) / safe);
+	return r;
+}
+
+double lineOffset(const std::array<double, 2> &p, const ArmLine &l)
+{
+	const double d0 = p[0] - l.c[0], d1 = p[1] - l.c[1];
+	return std::fabs(d0 * l.a[1] - d1 * l.a[0]);
+}
+
+struct Refined { Vec3 position; bool ok, flat; };
+
+Refined planeIntersection(const Vec3 &vertex, const Vec3 &t, const std::vector<long> &nbrs,
+                          const std::vector<Vec3> &treePts, const std::vector<char> &treeFeature,
+                          double spacing)
+{
+	const Vec3 helper = std::fabs(t[0]) < 0.9 ? Vec3{1.0, 0.0, 0.0} : Vec3{0.0, 1.0, 0.0};
+	Vec3 u = cross(t, helper);
+	const double un = norm(u);
+	u = {u[0] / un, u[1] / un, u[2] / un};
+	const Vec3 w = cross(t, u);
+	const size_t k = nbrs.size();
+	std::vector<std::array<double, 2>> xy(k), unitv(k);
+	std::vector<double> weight(k);
+	std::vector<char> use(k);
+	for (size_t i = 0; i < k; ++i) {
+		const Vec3 d = sub(treePts[nbrs[i]], vertex);
+		xy[i] = {edot(d, u), edot(d, w)};
+		const double along = edot(d, t) / (SLAB * spacing);
+		weight[i] = std::exp(-0.5 * (along * along));
+		const double r = std::sqrt(xy[i][0] * xy[i][0] + xy[i][1] * xy[i][1]);
+		use[i] = !treeFeature[nbrs[i]] && r > 1e-12 * spacing;
+		const double rr = r > 0 ? r : 1.0;
+		unitv[i] = {xy[i][0] / rr, xy[i][1] / rr};
+	}
+	double bis[2];
+	for (int j = 0; j < 2; ++j) {
+		double s = unitv[0][j] * double(use[0]);
+		for (size_t i = 1; i < k; ++i) s += unitv[i][j] * double(use[i]);
+		bis[j] = s;
+	}
+	std::vector<char> side(k);
+	for (size_t i = 0; i < k; ++i) side[i] = (bis[0] * unitv[i][1] - bis[1] * unitv[i][0]) > 0;
+	ArmLine l1{}, l2{};
+	std::vector<double> w1(k), w2(k);
+	for (int it = 0; it < ARM_ITERATIONS; ++it) {
+		for (size_t i = 0; i < k; ++i) {
+			w1[i] = (use[i] && side[i]) ? weight[i] : 0.0;
+			w2[i] = (use[i] && !side[i]) ? weight[i] : 0.0;
+		}
+		l1 = armLine(xy, w1);
+		l2 = armLine(xy, w2);
+		for (size_t i = 0; i < k; ++i) side[i] = lineOffset(xy[i], l1) <= lineOffset(xy[i], l2);
+	}
+	const double crossA = l1.a[0] * l2.a[1] - l1.a[1] * l2.a[0];
+	const double safe = std::fabs(crossA) > 0 ? crossA : 1.0;
+	const double diff0 = l2.c[0] - l1.c[0], diff1 = l2.c[1] - l1.c[1];
+	const double s = (diff0 * l2.a[1] - diff1 * l2.a[0]) / safe;
+	const double hit0 = l1.c[0] + s * l1.a[0], hit1 = l1.c[1] + s * l1.a[1];
+	const bool fitted = l1.total >= MIN_ARM_POINTS && l2.total >= MIN_ARM_POINTS &&
+	                    std::max(l1.rms, l2.rms) <= MAX_ARM_RMS * spacing;
+	const bool crease = std::fabs(crossA) >= std::sin(radians(MIN_ARM_ANGLE));
+	const bool ok = fitted && crease && std::sqrt(bis[0] * bis[0] + bis[1] * bis[1]) > 0 &&
+	                std::sqrt(hit0 * hit0 + hit1 * hit1) <= MAX_SHIFT * spacing;
+	const Vec3 moved = add(add(vertex, mul(hit0, u)), mul(hit1, w));
+	return {ok ? moved : vertex, ok, fitted && !crease};
+}
+
+std::vector<Vec3> lineFitPositions(const std::vector<Vec3> &points, const std::vector<Vec3> &dirs,
+                                   int half, bool closed)
+{
+	const long m = long(points.size());
+	std::vector<Vec3> pad;
+	if (closed) {
+		if (m > half) {
+			pad.insert(pad.end(), points.end() - half, points.end());
+			pad.insert(pad.end(), points.begin(), points.end());
+			pad.insert(pad.end(), points.begin(), points.begin() + half);
+		} else {
+			pad = points;
+		}
+	} else {
+		pad.insert(pad.end(), half, points.front());
+		pad.insert(pad.end(), points.begin(), points.end());
+		pad.insert(pad.end(), half, points.back());
+	}
+	if (long(pad.size()) != m + 2 * half) return points;
+	std::vector<Vec3> cs(pad.size() + 1, Vec3{0.0, 0.0, 0.0});
+	for (size_t i = 0; i < pad.size(); ++i) cs[i + 1] = add(cs[i], pad[i]);
+	std::vector<Vec3> out(m);
+	const double count = 2 * half + 1;
+	for (long i = 0; i < m; ++i) {
+		const Vec3 diff = sub(cs[i + 2 * half + 1], cs[i]);
+		const Vec3 mean{diff[0] / count, diff[1] / count, diff[2] / count};
+		const double along = edot(sub(points[i], mean), dirs[i]);
+		out[i] = add(mean, mul(along, dirs[i]));
+	}
+	return out;
+}
+
+std::vector<long> advancing(const std::vector<Vec3> &p, const std::vector<Vec3> &t, double spacing)
+{
+	std::vector<long> keep{0};
+	Vec3 last = p[0];
+	const double step = MIN_ADVANCE * spacing;
+	for (size_t i = 1; i + 1 < p.size(); ++i)
+		if (dot(sub(p[i], last), t[i]) >= step) keep.push_back(long(i)), last = p[i];
+	if (p.size() > 1) keep.push_back(long(p.size()) - 1);
+	return keep;
+}
+
+std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<char> &mask,
+                               const std::vector<char> &ok, const std::vector<long> &feat,
+                               const std::vector<Vec3> &fp, double &spacing)
+{
+	const KdTree fpTree(fp);
+	std::vector<double> d1(fp.size());
+	for (size_t i = 0; i < fp.size(); ++i) d1[i] = std::sqrt(fpTree.query(fp[i], 2)[1].first);
+	const double featureSpacing = median(d1);
+	std::vector<long> near = cellNeighbourhood(pts, ok, fp, CELL_SPACINGS * featureSpacing);
+	std::stable_sort(near.begin(), near.end(), [&](long a, long b) { return lexLess(pts[a], pts[b]); });
+	std::vector<Vec3> nearPts;
+	std::vector<char> nearFeature;
+	for (long i : near) nearPts.push_back(pts[i]), nearFeature.push_back(mask[i]);
+	const KdTree tree(nearPts);
+	for (size_t i = 0; i < fp.size(); ++i) d1[i] = std::sqrt(tree.query(fp[i], 2)[1].first);
+	spacing = median(d1);
+	// cloud_graph
+	const long n = long(fp.size());
+	const size_t k = std::min<size_t>(LINK_NEIGHBOURS + 1, fp.size());
+	std::set<Edge> pairSet;
+	for (long i = 0; i < n; ++i)
+		for (const auto &hit : fpTree.query(fp[i], k, LINK_RADIUS * spacing))
+			if (hit.second != i) pairSet.insert({std::min(i, hit.second), std::max(i, hit.second)});
+	const std::vector<Edge> edges(pairSet.begin(), pairSet.end());
+	std::vector<double> lengths(edges.size());
+	for (size_t i = 0; i < edges.size(); ++i) lengths[i] = norm(sub(fp[edges[i][0]], fp[edges[i][1]]));
+	std::vector<Piece> pieces = skeletonPieces(n, edges, lengths, fp, spacing, {});
+	if (pieces.empty()) return {};
+	// refine every vertex at once, twice (the second time along the first's directions)
+	std::vector<Vec3> raw;
+	for (const Piece &pc : pieces) raw.insert(raw.end(), pc.points.begin(), pc.points.end());
+	const size_t kk = std::min<size_t>(REFINE_NEIGHBOURS, tree.size());
+	std::vector<std::vector<long>> nbrs(raw.size());
+	for (size_t i = 0; i < raw.size(); ++i)
+		for (const auto &hit : tree.query(raw[i], kk)) nbrs[i].push_back(hit.second);
+	std::vector<Vec3> moved = raw, dirs;
+	std::vector<char> fitted(raw.size()), flat(raw.size());
+	for (int round = 0; round < 2; ++round) {
+		std::vector<Piece> current;
+		size_t at = 0;
+		for (const Piece &pc : pieces) {
+			Piece c{pc.nodes, std::vector<Vec3>(moved.begin() + at, moved.begin() + at + pc.points.size()), pc.closed};
+			at += pc.points.size();
+			current.push_back(c);
+		}
+		dirs = batchTangents(current, TANGENT_WINDOW * spacing);
+		for (size_t i = 0; i < raw.size(); ++i) {
+			const Refined r = planeIntersection(raw[i], dirs[i], nbrs[i], nearPts, nearFeature, spacing);
+			moved[i] = r.position, fitted[i] = r.ok, flat[i] = r.flat;
+		}
+	}
+	std::vector<Piece> out;
+	size_t at = 0;
+	for (const Piece &pc : pieces) {
+		const size_t m = pc.points.size();
+		std::vector<Vec3> p(moved.begin() + at, moved.begin() + at + m);
+		const std::vector<Vec3> d(dirs.begin() + at, dirs.begin() + at + m);
+		long nFlat = 0;
+		bool all = true;
+		for (size_t i = 0; i < m; ++i) nFlat += flat[at + i], all = all && fitted[at + i];
+		const size_t first = at;
+		at += m;
+		if (double(nFlat) / double(m) > MAX_FLAT_SHARE) continue;  // false detections
+		if (!all) {
+			const std::vector<Vec3> line = lineFitPositions(pc.points, d, LINE_FIT_HALF, pc.closed);
+			for (size_t i = 0; i < m; ++i)
+				if (!fitted[first + i]) p[i] = line[i];
+		}
+		p = lineFitPositions(p, d, LINE_FIT_HALF, pc.closed);
+		Piece q;
+		q.closed = pc.closed;
+		for (long i : advancing(p, d, spacing)) q.nodes.push_back(feat[pc.nodes[i]]), q.points.push_back(p[i]);
+		out.push_back(q);
+	}
+	return out;
+}
+
+// ---------------------------------------------------------------- extract.py
+
+std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing)
+{
+	const Ends e = ends(pieces, spacing);
+	const auto clusters = endClusters(e, pieces, spacing);
+	std::vector<long> size(e.piece.size(), 1);
+	for (const auto &c : clusters)
+		for (long i : c) size[i] = long(c.size());
+	std::set<long> spur;
+	for (size_t i = 0; i < e.piece.size(); i += 2)
+		if (std::min(size[i], size[i + 1]) == 1 && std::max(size[i], size[i + 1]) >= 3) spur.insert(e.piece[i]);
+	std::vector<Piece> out;
+	for (size_t i = 0; i < pieces.size(); ++i) {
+		if (pieces[i].closed) {
+			out.push_back(pieces[i]);
+			continue;
+		}
+		const double length = pieces[i].length();
+		if (length >= MIN_CURVE_LENGTH * spacing && (!spur.count(long(i)) || length >= SPUR_PIECE * spacing))
+			out.push_back(pieces[i]);
+	}
+	return out;
+}
+
+std::vector<Piece> cutAll(const std::vector<Piece> &pieces, double spacing)
+{
+	std::vector<Piece> out;
+	for (const Piece &pc : pieces)
+		for (Piece &q : cutAtTurns(pc, spacing)) out.push_back(q);
+	return out;
+}
+
+std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std::vector<Vec3> &pts,
+                           const MeshPaths *paths, Curves &result)
+{
+	const Ends e = ends(pieces, spacing);
+	const auto clusters = endClusters(e, pieces, spacing);
+	std::vector<Vec3> points;
+	std::vector<long> indices;
+	for (const auto &c : clusters) {
+		std::array<std::array<double, 3>, 3> a{};
+		Vec3 b{0.0, 0.0, 0.0};
+		for (long i : c) {
+			const Vec3 &o = e.out[0][i];
+			std::array<std::array<double, 3>, 3> proj{};
+			for (int r = 0; r < 3; ++r)
+				for (int k = 0; k < 3; ++k) proj[r][k] = (r == k ? 1.0 : 0.0) - o[r] * o[k];
+			for (int r = 0; r < 3; ++r)
+				for (int k = 0; k < 3; ++k) a[r][k] += proj[r][k];
+			for (int r = 0; r < 3; ++r) b[r] += dot(proj[r], e.point[i]);
+		}
+		Vec3 sum = e.point[c[0]];
+		for (size_t j = 1; j < c.size(); ++j) sum = add(sum, e.point[c[j]]);
+		const double cnt = double(c.size());
+		const Vec3 mean{sum[0] / cnt, sum[1] / cnt, sum[2] / cnt};
+		Vec3 corner = mean;
+		if (condition(a) < 1e6) {
+			const Vec3 x = solve3(a, b);
+			if (norm(sub(x, mean)) <= GAP_LENGTH * spacing) corner = x;
+		}
+		long index;
+		if (paths == nullptr) {
+			long nearest = c[0];
+			double best = INF;
+			for (long i : c) {
+				const double d = norm(sub(e.point[i], corner));
+				if (d < best) best = d, nearest = i;
+			}
+			const Piece &pc0 = pieces[e.piece[nearest]];
+			index = e.side[nearest] == 0 ? pc0.nodes.front() : pc0.nodes.back();
+		} else {
+			index = paths->nearest(corner);
+			corner = pts[index];
+		}
+		points.push_back(corner);
+		indices.push_back(index);
+		for (long i : c) {
+			Piece &pc = pieces[e.piece[i]];
+			const size_t at = e.side[i] == 0 ? 0 : pc.nodes.size() - 1;
+			const long here = pc.nodes[at];
+			if (here == index || (paths == nullptr && norm(sub(pc.points[at], corner)) <= SNAP * spacing)) {
+				pc.points[at] = corner;
+				continue;
+			}
+			bool found = false;
+			std::vector<long> add_;
+			if (paths != nullptr) add_ = paths->path(here, index, 2 * GAP_LENGTH * spacing, found);
+			std::vector<Vec3> addPoints;
+			for (long v : add_) addPoints.push_back(pts[v]);
+			add_.push_back(index);
+			addPoints.push_back(corner);
+			if (e.side[i] == 0) {
+				pc.nodes.insert(pc.nodes.begin(), add_.rbegin(), add_.rend());
+				pc.points.insert(pc.points.begin(), addPoints.rbegin(), addPoints.rend());
+			} else {
+				pc.nodes.insert(pc.nodes.end(), add_.begin(), add_.end());
+				pc.points.insert(pc.points.end(), addPoints.begin(), addPoints.end());
+			}
+		}
+	}
+	const double shortest = LOOP_LENGTH * GAP_LENGTH * spacing;
+	std::vector<Piece> out;
+	for (const Piece &pc : pieces)
+		if (pc.closed || pc.points.front() != pc.points.back() || pc.length() >= shortest) out.push_back(pc);
+	std::vector<long> order(points.size());
+	std::iota(order.begin(), order.end(), 0L);
+	std::stable_sort(order.begin(), order.end(), [&](long x, long y) { return lexLess(points[x], points[y]); });
+	for (long i : order) result.corners.push_back(points[i]), result.cornerIndices.push_back(indices[i]);
+	return out;
+}
+
+Curve finalCurve(const Piece &pc)
+{
+	std::vector<Vec3> p = pc.points;
+	std::vector<long> n = pc.nodes;
+	const size_t m = p.size();
+	if (pc.closed) {
+		size_t start = 0;
+		for (size_t i = 1; i < m; ++i)
+			if (lexLess(p[i], p[start])) start = i;
+		std::rotate(p.begin(), p.begin() + start, p.end());
+		std::rotate(n.begin(), n.begin() + start, n.end());
+		if (m > 2 && lexLess(p[m - 1], p[1])) {
+			std::reverse(p.begin() + 1, p.end());
+			std::reverse(n.begin() + 1, n.end());
+		}
+	} else if (lexLess(p.back(), p.front())) {
+		std::reverse(p.begin(), p.end());
+		std::reverse(n.begin(), n.end());
+	}
+	Curve c;
+	c.points = p;
+	c.indices = n;
+	c.closed = pc.closed;
+	c.length = Piece{n, p, pc.closed}.length();
+	return c;
+}
+
+}  // namespace
+
+Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char> &feature,
+                     const std::vector<char> &valid, const std::vector<std::array<int, 3>> &faces)
+{
+	Curves result;
+	const size_t n = vertices.size();
+	std::vector<Vec3> pts(n);
+	for (size_t i = 0; i < n; ++i) pts[i] = {vertices[i].x, vertices[i].y, vertices[i].z};
+	std::vector<char> ok(n), both(n);
+	for (size_t i = 0; i < n; ++i) ok[i] = valid.empty() ? 1 : valid[i] != 0, both[i] = feature[i] && ok[i];
+	std::vector<long> feat;
+	for (size_t i = 0; i < n; ++i)
+		if (both[i]) feat.push_back(long(i));
+	std::stable_sort(feat.begin(), feat.end(), [&](long a, long b) { return lexLess(pts[a], pts[b]); });
+	std::vector<long> distinct;
+	for (long i : feat)
+		if (distinct.empty() || pts[i] != pts[distinct.back()]) distinct.push_back(i);
+	feat = distinct;
+	if (feat.size() < 2) return result;
+	std::vector<Vec3> fp;
+	for (long i : feat) fp.push_back(pts[i]);
+	std::vector<Piece> pieces;
+	double spacing = 0.0;
+	std::unique_ptr<MeshPaths> paths;
+	if (faces.empty()) {
+		std::vector<char> mask(n);
+		for (size_t i = 0; i < n; ++i) mask[i] = feature[i] != 0;
+		pieces = cloudPieces(pts, mask, ok, feat, fp, spacing);
+	} else {
+		pieces = meshPieces(pts, faces, both, feat, fp, spacing);
+		paths.reset(new MeshPaths(pts, faces, both));
+	}
+	if (spacing <= 0) return result;
+	result.spacing = spacing;
+	Bridge bridgeFn = [&](long a, long b) {
+		bool found = false;
+		Piece mid;
+		mid.nodes = paths->path(a, b, 2 * GAP_LENGTH * spacing, found);
+		for (long v : mid.nodes) mid.points.push_back(pts[v]);
+		return mid;
+	};
+	const Bridge *bridge = paths ? &bridgeFn : nullptr;
+	pieces = dropShort(cutAll(pieces, spacing), spacing);
+	pieces = dropShort(joinPieces(pieces, spacing, bridge), spacing);
+	pieces = joinPieces(pieces, spacing, bridge);
+	pieces = cutAll(pieces, spacing);
+	pieces = splitAtTouches(pieces, spacing);
+	pieces = corners(pieces, spacing, pts, paths.get(), result);
+	for (const Piece &pc : pieces)
+		if (pc.points.size() >= 2) result.curves.push_back(finalCurve(pc));
+	std::stable_sort(result.curves.begin(), result.curves.end(), [](const Curve &a, const Curve &b) {
+		const std::array<double, 7> ka{a.points.front()[0], a.points.front()[1], a.points.front()[2],
+		                               a.points.back()[0], a.points.back()[1], a.points.back()[2], a.length};
+		const std::array<double, 7> kb{b.points.front()[0], b.points.front()[1], b.points.front()[2],
+		                               b.points.back()[0], b.points.back()[1], b.points.back()[2], b.length};
+		return ka < kb;
+	});
+	return result;
+}
+
+}  // namespace sharp
