@@ -31,6 +31,11 @@ from meshlab_sharp.evaluation import score_part  # noqa: E402
 #: name -> ((module, constant, value), ...) changed from the chosen mode.
 VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "chosen": (),
+    "no sheet filter": ((robust, "SHEET_MIN", 10**9),),
+    "sheet gap 0.35": ((robust, "SHEET_GAP", 0.35),),
+    "sheet gap 0.7": ((robust, "SHEET_GAP", 0.7),),
+    "sheet filter drops >= 1": ((robust, "SHEET_MIN", 1),),
+    "sheet filter drops >= 12": ((robust, "SHEET_MIN", 12),),
     "no support": ((robust, "SUPPORT_MIN", 0),),
     "support >= 1": ((robust, "SUPPORT_MIN", 1),),
     "support >= 3": ((robust, "SUPPORT_MIN", 3),),
