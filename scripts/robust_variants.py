@@ -32,7 +32,10 @@ from meshlab_sharp.evaluation import score_part  # noqa: E402
 VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "chosen": (),
     "no sheet filter": ((robust, "SHEET_MIN", 10**9),),
+    "sheet gap 0.25": ((robust, "SHEET_GAP", 0.25),),
     "sheet gap 0.35": ((robust, "SHEET_GAP", 0.35),),
+    "sheet gap 0.4": ((robust, "SHEET_GAP", 0.4),),
+    "sheet gap 0.5": ((robust, "SHEET_GAP", 0.5),),
     "sheet gap 0.7": ((robust, "SHEET_GAP", 0.7),),
     "sheet filter drops >= 1": ((robust, "SHEET_MIN", 1),),
     "sheet filter drops >= 12": ((robust, "SHEET_MIN", 12),),
