@@ -286,9 +286,10 @@ static double noise_ratio(const double *q, int64_t k) {
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
  * squared lengths d2 (k), the list's normal nrm; hs (k) scratch. Writes keep[j] (1:
  * kept) and returns the number of neighbours dropped (0 when fewer than minimum would
- * be: then every keep[j] is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m =
- * min(6, k - 1), summed in order; the kept h are those reached from 0 (the point's
- * own) through the sorted h by steps of at most gap * a. */
+ * be, or more than it keeps: then every keep[j] is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m =
+ * min(6, k - 1), summed in order; a gap is a step > gap * a between consecutive sorted
+ * h. Above 0 (the point's own h), the points beyond the gap are dropped when there is
+ * exactly one gap above 0; likewise below. */
 static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const double *nrm,
                           double gap, int64_t minimum, double *hs, char *keep) {
     for (int64_t j = 0; j < k; j++) keep[j] = 1;
@@ -306,17 +307,19 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
         while (u > 0 && hs[u - 1] > v) { hs[u] = hs[u - 1]; u--; }
         hs[u] = v;
     }
-    int64_t up = z, down = z;
+    int64_t up = z, down = z, gaps_up = 0, gaps_down = 0;
+    for (int64_t j = z; j + 1 < k; j++) gaps_up += hs[j + 1] - hs[j] > g;
+    for (int64_t j = z; j > 0; j--) gaps_down += hs[j] - hs[j - 1] > g;
     while (up + 1 < k && !(hs[up + 1] - hs[up] > g)) up++;
     while (down > 0 && !(hs[down] - hs[down - 1] > g)) down--;
-    double hi = up + 1 < k ? hs[up] : INFINITY, lo = down > 0 ? hs[down] : -INFINITY;
+    double hi = gaps_up == 1 ? hs[up] : INFINITY, lo = gaps_down == 1 ? hs[down] : -INFINITY;
     int64_t dropped = 0;
     for (int64_t j = 0; j < k; j++) {
         double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
         keep[j] = v >= lo && v <= hi;
         dropped += !keep[j];
     }
-    if (dropped < minimum) {
+    if (dropped < minimum || dropped > k - dropped) {
         for (int64_t j = 0; j < k; j++) keep[j] = 1;
         return 0;
     }

@@ -266,10 +266,14 @@ def sheet_mask(
     (n, k) bool
         ``keep[i, j]``: with ``q_j = p_{indices[i, j]} - p_i``, ``h_j = q_j . n_i``
         (``x*x' + y*y' + z*z'``), ``a_i`` the mean of ``|q_1| .. |q_m|`` (``m = min(6,
-        k - 1)``, added in order) and the ``h`` sorted increasingly: ``lo <= h_j <= hi``
-        with ``[lo, hi]`` the sorted run around 0 (``i``'s own height) whose steps are
-        all ``<= gap * a_i`` (a step ``> gap * a_i`` ends it). A row drops fewer than
-        ``minimum`` points: it keeps them all.
+        k - 1)``, added in order) and the ``h`` sorted increasingly, a gap is a step
+        ``> gap * a_i`` between consecutive ``h``. Above 0 (``i``'s own height) the
+        points beyond the first gap are dropped when there is exactly one gap above 0
+        (they form one sheet; several gaps: rows of a lattice, as on a face of a
+        regular grid that turns away, are kept); likewise below 0. A row that would
+        drop fewer than ``minimum`` points, or more than it keeps (the point's own sheet
+        is at least half of its list; the points of an edge or a corner have all
+        their neighbours to one side), keeps them all.
     """
     idx = np.asarray(indices, np.int64)
     n, k = idx.shape
@@ -294,11 +298,12 @@ def sheet_mask(
         up = step & (col >= z[:, None])
         down = step & (col < z[:, None])
         r = np.arange(len(rows))
-        hi = np.where(up.any(axis=1), hs[r, up.argmax(axis=1)], np.inf)
+        hi = np.where(up.sum(axis=1) == 1, hs[r, up.argmax(axis=1)], np.inf)
         last = (k - 1) - down[:, ::-1].argmax(axis=1)
-        lo = np.where(down.any(axis=1), hs[r, last], -np.inf)
+        lo = np.where(down.sum(axis=1) == 1, hs[r, last], -np.inf)
         kept = (h >= lo[:, None]) & (h <= hi[:, None])
-        kept[(~kept).sum(axis=1) < minimum] = True
+        dropped = (~kept).sum(axis=1)
+        kept[(dropped < minimum) | (dropped > k - dropped)] = True
         keep[rows] = kept
     return keep
 
