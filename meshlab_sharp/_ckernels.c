@@ -286,12 +286,13 @@ static double noise_ratio(const double *q, int64_t k) {
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
  * squared lengths d2 (k), the list's normal nrm; hs (k) scratch. Writes keep[j] (1:
  * kept) and returns the number of neighbours dropped (0 when fewer than minimum would
- * be, or more than it keeps: then every keep[j] is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m =
+ * be, or it would keep fewer than own times as many as it drops: then every keep[j]
+ * is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m =
  * min(6, k - 1), summed in order; a gap is a step > gap * a between consecutive sorted
  * h. Above 0 (the point's own h), the points beyond the gap are dropped when there is
  * exactly one gap above 0; likewise below. */
 static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const double *nrm,
-                          double gap, int64_t minimum, double *hs, char *keep) {
+                          double gap, int64_t minimum, double own, double *hs, char *keep) {
     for (int64_t j = 0; j < k; j++) keep[j] = 1;
     int64_t m = k - 1 < 6 ? k - 1 : 6;
     if (m < 1) return 0;
@@ -319,7 +320,7 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
         keep[j] = v >= lo && v <= hi;
         dropped += !keep[j];
     }
-    if (dropped < minimum || dropped > k - dropped) {
+    if (dropped < minimum || (double)(k - dropped) < own * (double)dropped) {
         for (int64_t j = 0; j < k; j++) keep[j] = 1;
         return 0;
     }
@@ -651,7 +652,7 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  *                             order), and score[oi] its ranking: the sum over the scales
  *                             in order of min(o / l, 1) / nscales (RelativeRule's);
  *   noise[oi]                 robust.noise_scale_factor's ratio over the noise_k nearest;
- *   sheet_gap > 0             robust.sheet_mask first (normal: the weighted PCA normal
+ *   sheet_gap > 0             robust.sheet_mask (sheet_gap, sheet_min, sheet_own) first (normal: the weighted PCA normal
  *                             of the kmax nearest): every scale's neighbourhood, and the
  *                             noise's, is then the kept points among its neighbours;
  *   near[oi]                  the nearest other point (column 1 of the kNN table);
@@ -666,6 +667,7 @@ typedef struct {
     int64_t *kth_idx;
     double sheet_gap;
     int64_t sheet_min;
+    double sheet_own;
 } cloud_out_t;
 
 /* kNN of tree positions [begin, end) at k = max(ks), then what out asks for (see
@@ -771,7 +773,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             }
             double mean[3] = {sx / (double)kmax, sy / (double)kmax, sz / (double)kmax};
             neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, nrm, mu);
-            if (sheet_keep(q, d2, kmax, nrm, out->sheet_gap, out->sheet_min, hs, keep) > 0) {
+            if (sheet_keep(q, d2, kmax, nrm, out->sheet_gap, out->sheet_min, out->sheet_own, hs,
+                           keep) > 0) {
                 int64_t t = 0, s = 0;
                 for (int64_t j = 0; j < kmax; j++) {
                     while (s < nscales && ks[s] == j) mk[s++] = t;

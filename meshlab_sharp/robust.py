@@ -69,6 +69,7 @@ __all__ = [
     "R_MIN",
     "SHEET_GAP",
     "SHEET_MIN",
+    "SHEET_OWN",
     "SUPPORT_KNN",
     "SUPPORT_MIN",
     "THIN_CONE_COS",
@@ -142,6 +143,13 @@ SHEET_GAP = 0.4
 #: SHEET_MIN: another sheet, not the sparse points of a face seen at a grazing angle (a
 #: scan) or the tail of the noise.
 SHEET_MIN = 6
+#: ... and only when the kept points are at least SHEET_OWN times as many as those
+#: left out: at an edge or a corner every neighbour lies to one side of the point, and
+#: on a regular grid the face turning away comes in rows (a row of the 40 nearest
+#: beyond the first gap leaves 1-7 kept against 33-39 left out; a wall 1 spacing thick
+#: holds about as many points on either sheet). Measured (quick size, thin1): 1.0:
+#: 0.55, 0.5 / 0.33: 0.70; 0.2 loses two thirds of a regular grid cube's edges.
+SHEET_OWN = 0.5
 
 
 def isolated_points(indices: np.ndarray) -> np.ndarray:
@@ -248,6 +256,7 @@ def sheet_mask(
     normals: np.ndarray,
     gap: float = SHEET_GAP,
     minimum: int = SHEET_MIN,
+    own: float = SHEET_OWN,
 ) -> np.ndarray:
     """The neighbours on each point's own sheet.
 
@@ -260,6 +269,7 @@ def sheet_mask(
         Unit normal of each list (the weighted PCA normal of its ``k`` points).
     gap : float, default SHEET_GAP (0.5)
     minimum : int, default SHEET_MIN (6)
+    own : float, default SHEET_OWN (0.5)
 
     Returns
     -------
@@ -271,9 +281,9 @@ def sheet_mask(
         points beyond the first gap are dropped when there is exactly one gap above 0
         (they form one sheet; several gaps: rows of a lattice, as on a face of a
         regular grid that turns away, are kept); likewise below 0. A row that would
-        drop fewer than ``minimum`` points, or more than it keeps (the point's own sheet
-        is at least half of its list; the points of an edge or a corner have all
-        their neighbours to one side), keeps them all.
+        drop fewer than ``minimum`` points, or keep fewer than ``own`` times as many
+        as it drops (the points of an edge or a corner have all their neighbours to
+        one side), keeps them all.
     """
     idx = np.asarray(indices, np.int64)
     n, k = idx.shape
@@ -303,7 +313,7 @@ def sheet_mask(
         lo = np.where(down.sum(axis=1) == 1, hs[r, last], -np.inf)
         kept = (h >= lo[:, None]) & (h <= hi[:, None])
         dropped = (~kept).sum(axis=1)
-        kept[(dropped < minimum) | (dropped > k - dropped)] = True
+        kept[(dropped < minimum) | ((k - dropped) < own * dropped)] = True
         keep[rows] = kept
     return keep
 
@@ -337,7 +347,7 @@ class SheetNeighbourhoods:
         self.workers = base.workers
         self._idx = np.asarray(base.indices, np.int64)
         _, normals = projected_distances(points, base.at(base.k_max), weighting=weighting)
-        self.keep = sheet_mask(points, self._idx, normals, SHEET_GAP, SHEET_MIN)
+        self.keep = sheet_mask(points, self._idx, normals, SHEET_GAP, SHEET_MIN, SHEET_OWN)
 
     def at(self, k: int) -> Neighbourhood:
         """The kept points among each point's ``k`` nearest (CSR, ``k <= k_max``)."""
@@ -487,15 +497,15 @@ class RelativeRule:
         ``lists(scale) -> Neighbourhood``, the neighbourhoods of that scale (called in
         increasing order of scale).
     n_scales : int
-    sheet : (float, int) or None
-        ``(SHEET_GAP, SHEET_MIN)`` when ``lists`` leave out the other sheets
+    sheet : (float, int, float) or None
+        ``(SHEET_GAP, SHEET_MIN, SHEET_OWN)`` when ``lists`` leave out the other sheets
         (:class:`SheetNeighbourhoods`): the compiled pass over a cloud then does too.
     """
 
     points: np.ndarray
     lists: object
     n_scales: int
-    sheet: tuple[float, int] | None = None
+    sheet: tuple[float, int, float] | None = None
 
     def __post_init__(self) -> None:
         self.score = np.zeros(len(self.points))
@@ -722,7 +732,7 @@ class RobustSetup:
         sheet = None
         if faces is None:
             assert isinstance(neighbourhoods, KnnNeighbourhoods)
-            sheet = (SHEET_GAP, SHEET_MIN)
+            sheet = (SHEET_GAP, SHEET_MIN, SHEET_OWN)
             top = max(self.scales)
             k0 = min(NOISE_KNN, top)
             compiled = neighbourhoods.tree is not None
@@ -764,7 +774,7 @@ class RobustSetup:
         assert isinstance(self.neighbourhoods, KnnNeighbourhoods)
         return SheetNeighbourhoods(self.points, self.neighbourhoods, self.weighting)
 
-    def _pass(self, noise_k: int, sheet: tuple[float, int]) -> _kernels.ScalePass:
+    def _pass(self, noise_k: int, sheet: tuple[float, int, float]) -> _kernels.ScalePass:
         """The compiled pass at ``scales`` over ``points`` (whose kd-tree
         ``neighbourhoods`` holds): projected distances, local scales, and the isolated
         points' and the noise's statistics from the same search. It is the pass

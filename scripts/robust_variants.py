@@ -39,6 +39,8 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "sheet gap 0.7": ((robust, "SHEET_GAP", 0.7),),
     "sheet filter drops >= 1": ((robust, "SHEET_MIN", 1),),
     "sheet filter drops >= 12": ((robust, "SHEET_MIN", 12),),
+    "sheet filter: kept >= dropped": ((robust, "SHEET_OWN", 1.0),),
+    "sheet filter: kept >= dropped / 3": ((robust, "SHEET_OWN", 0.33),),
     "no support": ((robust, "SUPPORT_MIN", 0),),
     "support >= 1": ((robust, "SUPPORT_MIN", 1),),
     "support >= 3": ((robust, "SUPPORT_MIN", 3),),

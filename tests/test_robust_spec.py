@@ -35,7 +35,7 @@ R_MIN = (2 / math.pi) * math.sin(math.pi / 18)
 #: Step 1b.
 NOISE_KNN, NOISE_TOLERATED, NOISE_MAX_FACTOR = 7, 0.15, 3.0
 #: Step 1a: a gap of 0.4 spacings, at least 6 points beyond it.
-SHEET_GAP, SHEET_MIN = 0.4, 6
+SHEET_GAP, SHEET_MIN, SHEET_OWN = 0.4, 6, 0.5
 #: Steps 7 and 8.
 SUPPORT_KNN, SUPPORT_MIN, THIN_KNN, MESH_RING, CONE_COS = 16, 2, 12, 2, 0.5
 #: Step 9: 20 degrees, 4 / 0.3186 lower quartiles.
@@ -198,7 +198,7 @@ def _own_sheet(points: np.ndarray, i: int, hood: np.ndarray) -> np.ndarray:
     from 0 (``i``'s own height) up and down through the sorted heights until a step
     wider than SHEET_GAP times the mean distance to the 6 nearest; what lies beyond is
     dropped when it is one sheet (no second such gap on that side), at least SHEET_MIN
-    points and no more than are kept."""
+    points, and at most 1 / SHEET_OWN times as many as are kept."""
     q = points[hood] - points[i]
     h = q @ spec_pca_normal(points, i, hood, "gaussian")
     a = np.sqrt((q[1:7] ** 2).sum(axis=1)).mean()
@@ -216,7 +216,7 @@ def _own_sheet(points: np.ndarray, i: int, hood: np.ndarray) -> np.ndarray:
     if lo > 0 and not any(steps[j] - steps[j - 1] > SHEET_GAP * a for j in range(1, lo)):
         below = steps[lo]
     own = (h >= below) & (h <= above)
-    if (~own).sum() < SHEET_MIN or (~own).sum() > own.sum():
+    if (~own).sum() < SHEET_MIN or own.sum() < SHEET_OWN * (~own).sum():
         return np.ones(len(hood), bool)
     return own
 

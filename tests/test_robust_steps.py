@@ -126,10 +126,11 @@ def test_sheet_mask_keeps_what_is_not_one_separate_sheet():
     # two gaps: rows of a face turning away (a regular grid), not a sheet
     points, lists = _two_sheets(12, [1.0, 2.0], per_level=6)
     assert _mask(points, lists).all()
-    # more beyond the gap than kept: the point is an edge or a corner of the surface
-    points, lists = _two_sheets(6, [1.0], per_level=8)
+    # more than 1 / SHEET_OWN (2) times as many beyond the gap as kept: the point is an
+    # edge or a corner of the surface
+    points, lists = _two_sheets(3, [1.0], per_level=9)
     assert _mask(points, lists).all()
-    points, lists = _two_sheets(7, [1.0], per_level=8)
+    points, lists = _two_sheets(4, [1.0], per_level=9)
     np.testing.assert_array_equal(_mask(points, lists), points[:, 2] == 0.0)
 
 
