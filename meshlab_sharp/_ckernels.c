@@ -765,16 +765,20 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             d2[j] = h.c[j].d2;
         }
         for (int s = 0; s < nscales; s++) mk[s] = ks[s];
+        int reuse = 0; /* the largest scale's normal and pdis: the sheet filter's */
+        double top_pd = 0.0, top_nrm[3] = {0, 0, 0};
         if (out->sheet_gap > 0.0) {
-            double sx = 0, sy = 0, sz = 0, h2 = 0, nrm[3];
+            double sx = 0, sy = 0, sz = 0, h2 = 0, *nrm = top_nrm;
             for (int64_t j = 0; j < kmax; j++) {
                 sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
                 if (d2[j] > h2) h2 = d2[j];
             }
             double mean[3] = {sx / (double)kmax, sy / (double)kmax, sz / (double)kmax};
-            neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, nrm, mu);
+            top_pd = neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, nrm, mu);
+            reuse = 1;
             if (sheet_keep(q, d2, kmax, nrm, out->sheet_gap, out->sheet_min, out->sheet_own, hs,
                            keep) > 0) {
+                reuse = 0;
                 int64_t t = 0, s = 0;
                 for (int64_t j = 0; j < kmax; j++) {
                     while (s < nscales && ks[s] == j) mk[s++] = t;
@@ -811,7 +815,13 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             }
             double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
             double *nrm = out->normals ? out->normals + 3 * (s * n + oi) : NULL;
-            double pd = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
+            double pd;
+            if (reuse && s == nscales - 1) { /* the same sums over the same list */
+                pd = top_pd;
+                if (nrm != NULL) { nrm[0] = top_nrm[0]; nrm[1] = top_nrm[1]; nrm[2] = top_nrm[2]; }
+            } else {
+                pd = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
+            }
             if (out->pdis != NULL) out->pdis[s * n + oi] = pd;
             if (out->relative != NULL) { /* min(x / l, 1) keeps a NaN, as np.minimum */
                 double l = ell[s], r = l > 0 ? pd / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
