@@ -31,9 +31,10 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
    along it, a point lifted by noise has none, or only the line it lies beside.
 5. **Thinning**: a point is dropped when a supported neighbour among its ``THIN_KNN``
-   (12) nearest, lying across the feature line (more than 60 degrees from the line's
-   direction), ranks higher (mean over the scales of the centroid's distance relative
-   to ``l``, which peaks on acute edges where ``r`` does not): non-maximum suppression
+   (12) nearest (grown with the scales on noisy clouds), lying across the feature
+   line (more than 60 degrees from the line's direction), ranks higher (mean over the
+   scales of the centroid's distance relative to ``l``, which peaks on acute edges
+   where ``r`` does not): non-maximum suppression
    across the line, so lines stay one point wide; comparing only within about 1.9
    spacings keeps most of two parallel lines (the rims of a thin wall) apart.
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
@@ -91,6 +92,7 @@ __all__ = [
     "sheet_mask",
     "supported",
     "thin",
+    "thin_knn",
 ]
 
 #: Relative projected distance at a point on a straight edge turning by CREASE_ANGLE,
@@ -242,6 +244,13 @@ def noise_factor(nu: float) -> float:
 def grown_scales(scales: tuple[int, ...], factor: float) -> tuple[int, ...]:
     """The scales times ``factor``, rounded half up."""
     return tuple(math.floor(k * factor + 0.5) for k in scales)
+
+
+def thin_knn(growth: float) -> int:
+    """Thinning's comparison list (clouds): ``THIN_KNN`` grown with the scales
+    (``growth`` the factor the noise grew them by, 1 when it did not), rounded half
+    up: the band of points that noise lifts beside a line widens with the noise."""
+    return grown_scales((THIN_KNN,), growth)[0]
 
 
 def _noise_factor(ratio: np.ndarray) -> float:
@@ -724,6 +733,8 @@ class RobustSetup:
         self.weighting = weighting
         self.keep_normals = keep_normals
         self.fused: _kernels.ScalePass | None = None
+        #: How much the noise grew the scales (1: not at all).
+        self.growth = 1.0
         #: The neighbourhoods the scales use: ``neighbourhoods`` (meshes; clouds with
         #: the compiled pass, which leaves the other sheets out itself), or their
         #: :class:`SheetNeighbourhoods` (clouds, numpy).
@@ -760,6 +771,7 @@ class RobustSetup:
                 )
             factor = min(noise, len(self.points) / top)
             if factor > 1.0:
+                self.growth = factor
                 self.scales = grown_scales(self.scales, factor)
                 self.neighbourhoods = build_neighbourhoods(
                     self.points, None, self.scales, workers=workers
@@ -838,7 +850,7 @@ class RobustSetup:
         if mask.any():
             top = max(self.scales)
             if self.faces is None:
-                ks = (min(SUPPORT_KNN, top), min(THIN_KNN, top), top)
+                ks = (min(SUPPORT_KNN, top), min(thin_knn(self.growth), top), top)
                 around, compare, direction = self._candidate_lists(np.flatnonzero(mask), ks)
             else:
                 rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")

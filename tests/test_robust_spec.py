@@ -55,10 +55,11 @@ class Reading:
         n = len(points)
         if faces is None:
             scales = meshlab_sharp.DEFAULT_KNN_SCALES
-            keep, points, hoods, own, scales = self._cloud(points, scales)
+            keep, points, hoods, own, scales, growth = self._cloud(points, scales)
             normals = None
             around = [h[: min(SUPPORT_KNN, len(h))] for h in hoods]
-            compare = [h[: min(THIN_KNN, len(h))] for h in hoods]
+            thin_k = math.floor(THIN_KNN * growth + 0.5)  # grown with the scales
+            compare = [h[: min(thin_k, len(h))] for h in hoods]
             direction = hoods
             hood_at = lambda k: [h[:k][o[:k]] for h, o in zip(hoods, own, strict=True)]  # noqa: E731
         else:
@@ -159,9 +160,10 @@ class Reading:
     @staticmethod
     def _cloud(
         points: np.ndarray, scales: tuple[int, ...]
-    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray], tuple[int, ...]]:
+    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray], tuple[int, ...], float]:
         """Steps 1, 1a and 1b: (kept indices, kept points, their kNN lists at the
-        largest scale, which of those are on the point's own sheet, the scales)."""
+        largest scale, which of those are on the point's own sheet, the scales, their
+        growth f (1 if none))."""
         k_max = max(scales)
         hoods = spec_knn(points, k_max)
         isolated = np.array([i not in hoods[h[1]] for i, h in enumerate(hoods)])
@@ -189,7 +191,7 @@ class Reading:
             scales = tuple(math.floor(k * f + 0.5) for k in scales)
             hoods = spec_knn(points, max(scales))
             own = [_own_sheet(points, i, h) for i, h in enumerate(hoods)]
-        return keep, points, hoods, own, scales
+        return keep, points, hoods, own, scales, max(f, 1.0)
 
 
 def _own_sheet(points: np.ndarray, i: int, hood: np.ndarray) -> np.ndarray:

@@ -152,3 +152,10 @@ def test_sheet_neighbourhoods_keep_the_prefixes_of_the_kept_points():
     first = sheets.first(7)
     got = first.indices[first.indptr[centre] : first.indptr[centre + 1]].tolist()
     assert got == [j for j in row if j in mine][:7]
+
+
+def test_thinning_list_grows_with_the_scales():
+    assert robust.thin_knn(1.0) == robust.THIN_KNN == 12
+    assert robust.thin_knn(1.8) == 22  # 21.6, rounded half up as the scales are
+    assert robust.thin_knn(3.0) == 36
+    assert robust.thin_knn(1.125) == 14  # 13.5 exactly: half up

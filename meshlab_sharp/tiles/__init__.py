@@ -371,7 +371,7 @@ def _robust(
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
     runner.step(Step("support", robust_support, Query(top, "kept", "mask"), support))
-    compare = min(robust.THIN_KNN, top)
+    compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     runner.step(Step("thin", robust_thin, Query(compare, "kept", "mask1"), {"compare": compare}))
     return thresholds, decided["counts"], "final", "kept", scales
 
