@@ -46,6 +46,7 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "support >= 3": ((robust, "SUPPORT_MIN", 3),),
     "thinning compares 16 nearest": ((robust, "THIN_KNN", 16),),
     "thinning compares 8 nearest": ((robust, "THIN_KNN", 8),),
+    "thinning list not grown with the scales": ((robust, "thin_knn", lambda growth: 12),),
     "thinning cone 45 deg": ((robust, "THIN_CONE_COS", math.cos(math.radians(45))),),
     "no sharp mesh edges": ((creases, "CREASE_ANGLE", 180.0),),
     "mesh edges: no noise factor": ((creases, "NOISE_FACTOR", 0.0),),
