@@ -137,8 +137,8 @@ NOISE_MAX_FACTOR = 3.0
 #: ``a`` (the mean distance to its 6 nearest). The other side of a wall 1-3 spacings
 #: thick lies beyond a gap of 1-3 spacings (``a`` is about 1.1-1.3 spacings); a
 #: surface that bends at an edge, however sharply, or curves, has no gap.
-#: Measured (quick size, thin1 / thin2 / thin3 F1): 0.25: 0.58 / 0.59 / 0.87, 0.35:
-#: 0.72 / 0.68 / 0.88, 0.4: 0.71 / 0.71 / 0.88, 0.5: 0.63 / 0.71 / 0.88, 0.7: 0.50 /
+#: Measured (quick size, thin1 / thin2 / thin3 F1): 0.25: 0.61 / 0.60 / 0.88, 0.35:
+#: 0.71 / 0.65 / 0.88, 0.4: 0.70 / 0.69 / 0.88, 0.5: 0.62 / 0.70 / 0.88, 0.7: 0.59 /
 #: 0.64 / 0.88 (docs/robust-mode.md).
 SHEET_GAP = 0.4
 #: ... and the points beyond the gaps are left out only when they are at least
