@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,6 +13,9 @@ from .neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods
 from .normals import Weighting
 from .projected_distance import projected_distances
 from .threshold import FLAT_TOLERANCE, normalise, otsu_threshold
+
+if TYPE_CHECKING:
+    from .robust import SheetNeighbourhoods
 
 #: Default scales of a point cloud: k nearest neighbours.
 DEFAULT_KNN_SCALES: tuple[int, ...] = (12, 16, 20, 24, 28, 32, 36, 40)
@@ -48,7 +52,7 @@ class ScaleResults:
 
 def run_scales(
     points: np.ndarray,
-    neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods,
+    neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods | SheetNeighbourhoods,
     scales: Sequence[int],
     *,
     normals: np.ndarray | None = None,
@@ -65,7 +69,8 @@ def run_scales(
     ----------
     points : (m, 3) float64
         Cleaned points.
-    neighbourhoods : KnnNeighbourhoods or RingNeighbourhoods
+    neighbourhoods : KnnNeighbourhoods, RingNeighbourhoods or SheetNeighbourhoods
+        (robust mode on a cloud with the numpy backend: the lists less other sheets)
     scales : sequence of int
         Increasing scales.
     normals : (m, 3) float64, optional

@@ -9,8 +9,10 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 1a. **Neighbourhoods stay on their own sheet** (point clouds): the neighbours lying on
    a parallel sheet (the other side of a thin wall), separated from the point's own
    sheet along the normal (of the ``k_max`` nearest) by a gap wider than ``SHEET_GAP``
-   times the spacing, are left out of every neighbourhood below (when at least
-   ``SHEET_MIN`` are).
+   times the spacing, are left out of every neighbourhood below when they are one
+   sheet (a single gap on that side), at least ``SHEET_MIN`` points, and no more than
+   ``1 / SHEET_OWN`` times the points kept (at an edge or a corner every neighbour
+   lies to one side).
 1b. **Scales from the noise** (point clouds): the median over the points of
    ``|d . n| / |d|`` (``d`` the offset to the nearest neighbour, ``n`` the normal of the
    point and its 6 nearest, both on its own sheet) measures the noise; above
