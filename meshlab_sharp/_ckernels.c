@@ -283,6 +283,50 @@ static double noise_ratio(const double *q, int64_t k) {
     return length > 0 ? across / length : 0.0;
 }
 
+/* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
+ * squared lengths d2 (k), the list's normal nrm; hs (k) scratch. Writes keep[j] (1:
+ * kept) and returns the number of neighbours dropped (0 when fewer than minimum would
+ * be, or it would keep fewer than own times as many as it drops: then every keep[j]
+ * is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m =
+ * min(6, k - 1), summed in order; a gap is a step > gap * a between consecutive sorted
+ * h. Above 0 (the point's own h), the points beyond the gap are dropped when there is
+ * exactly one gap above 0; likewise below. */
+static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const double *nrm,
+                          double gap, int64_t minimum, double own, double *hs, char *keep) {
+    for (int64_t j = 0; j < k; j++) keep[j] = 1;
+    int64_t m = k - 1 < 6 ? k - 1 : 6;
+    if (m < 1) return 0;
+    double a = sqrt(d2[1]);
+    for (int64_t j = 2; j <= m; j++) a += sqrt(d2[j]);
+    a /= (double)m;
+    double g = gap * a;
+    int64_t z = 0;
+    for (int64_t j = 0; j < k; j++) { /* insertion sort */
+        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
+        z += v < 0;
+        int64_t u = j;
+        while (u > 0 && hs[u - 1] > v) { hs[u] = hs[u - 1]; u--; }
+        hs[u] = v;
+    }
+    int64_t up = z, down = z, gaps_up = 0, gaps_down = 0;
+    for (int64_t j = z; j + 1 < k; j++) gaps_up += hs[j + 1] - hs[j] > g;
+    for (int64_t j = z; j > 0; j--) gaps_down += hs[j] - hs[j - 1] > g;
+    while (up + 1 < k && !(hs[up + 1] - hs[up] > g)) up++;
+    while (down > 0 && !(hs[down] - hs[down - 1] > g)) down--;
+    double hi = gaps_up == 1 ? hs[up] : INFINITY, lo = gaps_down == 1 ? hs[down] : -INFINITY;
+    int64_t dropped = 0;
+    for (int64_t j = 0; j < k; j++) {
+        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
+        keep[j] = v >= lo && v <= hi;
+        dropped += !keep[j];
+    }
+    if (dropped < minimum || (double)(k - dropped) < own * (double)dropped) {
+        for (int64_t j = 0; j < k; j++) keep[j] = 1;
+        return 0;
+    }
+    return dropped;
+}
+
 /* ------------------------------------------------------------------ kd-tree */
 
 /* A balanced kd-tree stored implicitly: node 0 is the root, the children of node t are
@@ -608,6 +652,9 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  *                             order), and score[oi] its ranking: the sum over the scales
  *                             in order of min(o / l, 1) / nscales (RelativeRule's);
  *   noise[oi]                 robust.noise_scale_factor's ratio over the noise_k nearest;
+ *   sheet_gap > 0             robust.sheet_mask (sheet_gap, sheet_min, sheet_own) first (normal: the weighted PCA normal
+ *                             of the kmax nearest): every scale's neighbourhood, and the
+ *                             noise's, is then the kept points among its neighbours;
  *   near[oi]                  the nearest other point (column 1 of the kNN table);
  *   kth_d2[oi], kth_idx[oi]   squared distance and index of the kmax-th neighbour. */
 typedef struct {
@@ -618,6 +665,9 @@ typedef struct {
     int64_t *near;
     double *kth_d2;
     int64_t *kth_idx;
+    double sheet_gap;
+    int64_t sheet_min;
+    double sheet_own;
 } cloud_out_t;
 
 /* kNN of tree positions [begin, end) at k = max(ks), then what out asks for (see
@@ -644,11 +694,14 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *mu = (double *)malloc((size_t)kmax * sizeof(double));
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
+    double *hs = (double *)malloc((size_t)kmax * sizeof(double));
+    char *keep = (char *)malloc((size_t)kmax);
+    int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     int rc = 0, have_block = 0;
     int64_t leaf_s = 0, leaf_e = 0;
     double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !soa || !ell) { rc = -1; goto done; }
+    if (!h.c || !q || !d2 || !mu || !soa || !ell || !hs || !keep || !mk) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         double tau = INFINITY;
@@ -711,31 +764,64 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             q[3 * j + 2] = pj[2] - pi[2];
             d2[j] = h.c[j].d2;
         }
+        for (int s = 0; s < nscales; s++) mk[s] = ks[s];
+        int reuse = 0; /* the largest scale's normal and pdis: the sheet filter's */
+        double top_pd = 0.0, top_nrm[3] = {0, 0, 0};
+        if (out->sheet_gap > 0.0) {
+            double sx = 0, sy = 0, sz = 0, h2 = 0, *nrm = top_nrm;
+            for (int64_t j = 0; j < kmax; j++) {
+                sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
+                if (d2[j] > h2) h2 = d2[j];
+            }
+            double mean[3] = {sx / (double)kmax, sy / (double)kmax, sz / (double)kmax};
+            top_pd = neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, nrm, mu);
+            reuse = 1;
+            if (sheet_keep(q, d2, kmax, nrm, out->sheet_gap, out->sheet_min, out->sheet_own, hs,
+                           keep) > 0) {
+                reuse = 0;
+                int64_t t = 0, s = 0;
+                for (int64_t j = 0; j < kmax; j++) {
+                    while (s < nscales && ks[s] == j) mk[s++] = t;
+                    if (!keep[j]) continue;
+                    q[3 * t] = q[3 * j]; q[3 * t + 1] = q[3 * j + 1]; q[3 * t + 2] = q[3 * j + 2];
+                    d2[t] = d2[j];
+                    t++;
+                }
+                while (s < nscales) mk[s++] = t;
+            }
+        }
+        int64_t kk = mk[nscales - 1]; /* the list's length after the sheet filter */
         if (out->noise != NULL) {
-            int64_t k0 = out->noise_k < kmax ? out->noise_k : kmax;
+            int64_t k0 = out->noise_k < kk ? out->noise_k : kk;
             out->noise[oi] = k0 >= 2 ? noise_ratio(q, k0) : 0.0;
         }
         if (out->relative != NULL) {
-            for (int64_t j = 0; j < kmax; j++) {
+            for (int64_t j = 0; j < kk; j++) {
                 soa[j] = sqrt(d2[j]);
                 soa[kmax + j] = q[3 * j];
                 soa[2 * kmax + j] = q[3 * j + 1];
                 soa[3 * kmax + j] = q[3 * j + 2];
             }
-            local_scale_prefixes(soa, kmax, ks, nscales, ell, ell + nscales);
+            local_scale_prefixes(soa, kmax, mk, nscales, ell, ell + nscales);
         }
         if (out->pdis == NULL && out->relative == NULL) continue;
         double score = 0.0, sx = 0, sy = 0, sz = 0, h2 = 0;
         int64_t j = 0;
         for (int s = 0; s < nscales; s++) {
-            int64_t m = ks[s];
+            int64_t m = mk[s];
             for (; j < m; j++) {
                 sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
                 if (d2[j] > h2) h2 = d2[j];
             }
             double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
             double *nrm = out->normals ? out->normals + 3 * (s * n + oi) : NULL;
-            double pd = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
+            double pd;
+            if (reuse && s == nscales - 1) { /* the same sums over the same list */
+                pd = top_pd;
+                if (nrm != NULL) { nrm[0] = top_nrm[0]; nrm[1] = top_nrm[1]; nrm[2] = top_nrm[2]; }
+            } else {
+                pd = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
+            }
             if (out->pdis != NULL) out->pdis[s * n + oi] = pd;
             if (out->relative != NULL) { /* min(x / l, 1) keeps a NaN, as np.minimum */
                 double l = ell[s], r = l > 0 ? pd / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
@@ -753,6 +839,9 @@ done:
     free(mu);
     free(soa);
     free(ell);
+    free(hs);
+    free(keep);
+    free(mk);
     return rc;
 }
 

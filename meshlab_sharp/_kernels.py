@@ -219,19 +219,27 @@ class _CloudOut(ctypes.Structure):
         ("near", _c_void_p),
         ("kth_d2", _c_void_p),
         ("kth_idx", _c_void_p),
+        ("sheet_gap", ctypes.c_double),
+        ("sheet_min", _i64),
+        ("sheet_own", ctypes.c_double),
     ]
+
+
+#: The fields of :class:`_CloudOut` that are numbers, not arrays.
+_NUMBERS = ("noise_k", "sheet_gap", "sheet_min", "sheet_own")
 
 
 def _cloud_call(
     tree: KdTree, ks: np.ndarray, gaussian: bool, workers: int, **out: np.ndarray | int | None
 ) -> None:
     """One pass of ``ms_cloud_pdis`` over the tree's points at the scales ``ks``; ``out``
-    names the arrays (fields of :class:`_CloudOut`) to fill, ``noise_k`` an int."""
+    names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
+    ``noise_k``, ``sheet_gap``, ``sheet_min`` and ``sheet_own``."""
     lib = _LIB
     assert lib is not None
     t = tree
     fields = {
-        name: value if name == "noise_k" else _ptr(value)  # type: ignore[arg-type]
+        name: value if name in _NUMBERS else _ptr(value)  # type: ignore[arg-type]
         for name, value in out.items()
         if value is not None
     }
@@ -300,14 +308,17 @@ def cloud_projected_distances(
     relative: bool = False,
     keep_pdis: bool | None = None,
     noise_k: int = 0,
+    sheet: tuple[float, int, float] | None = None,
     workers: int = -1,
 ) -> ScalePass:
     """Projected distances (s, n) at every kNN scale (cleaned order), the normals
     (s, n, 3) when ``keep_normals``; with ``relative`` robust mode's relative distances
     and score (:class:`ScalePass`), and then the projected distances only when
     ``keep_pdis`` (default: not ``relative``); with ``noise_k > 0`` the
-    :class:`CloudStats` (noise ratio over the ``noise_k`` nearest). One neighbour
-    search at the largest scale."""
+    :class:`CloudStats` (noise ratio over the ``noise_k`` nearest). With ``sheet =
+    (gap, minimum, own)``, robust mode's :func:`meshlab_sharp.robust.sheet_mask` first: every
+    neighbourhood (the scales', the noise's) is then the kept neighbours among its
+    points. One neighbour search at the largest scale."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
     n, s = tree.n, len(ks)
     keep = not relative if keep_pdis is None else keep_pdis
@@ -326,6 +337,8 @@ def cloud_projected_distances(
         fields.update(
             near=st.near, kth_d2=st.kth_d2, kth_idx=st.kth_idx, noise=st.noise, noise_k=noise_k
         )
+    if sheet is not None:
+        fields.update(sheet_gap=float(sheet[0]), sheet_min=int(sheet[1]), sheet_own=float(sheet[2]))
     _cloud_call(tree, ks, weighting == "gaussian", workers, **fields)
     return out
 

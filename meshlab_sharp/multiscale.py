@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,6 +13,9 @@ from .neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods
 from .normals import Weighting
 from .projected_distance import projected_distances
 from .threshold import FLAT_TOLERANCE, normalise, otsu_threshold
+
+if TYPE_CHECKING:
+    from .robust import SheetNeighbourhoods
 
 #: Default scales of a point cloud: k nearest neighbours.
 DEFAULT_KNN_SCALES: tuple[int, ...] = (12, 16, 20, 24, 28, 32, 36, 40)
@@ -48,7 +52,7 @@ class ScaleResults:
 
 def run_scales(
     points: np.ndarray,
-    neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods,
+    neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods | SheetNeighbourhoods,
     scales: Sequence[int],
     *,
     normals: np.ndarray | None = None,
@@ -65,7 +69,8 @@ def run_scales(
     ----------
     points : (m, 3) float64
         Cleaned points.
-    neighbourhoods : KnnNeighbourhoods or RingNeighbourhoods
+    neighbourhoods : KnnNeighbourhoods, RingNeighbourhoods or SheetNeighbourhoods
+        (robust mode on a cloud with the numpy backend: the lists less other sheets)
     scales : sequence of int
         Increasing scales.
     normals : (m, 3) float64, optional
@@ -83,7 +88,8 @@ def run_scales(
         Robust mode (``rule`` a :class:`meshlab_sharp.robust.RelativeRule`): where the
         compiled pass over a cloud computes the projected distances it also computes
         what the rule computes from them, bit for bit (the relative distances and the
-        score), and ``rule.from_pass`` takes them; elsewhere the rule is called.
+        score, on the neighbourhoods less ``rule.sheet``'s other sheets), and
+        ``rule.from_pass`` takes them; elsewhere the rule is called.
     fused : ScalePass, optional
         The compiled pass over these points at these scales, already run
         (:class:`meshlab_sharp.robust.RobustSetup` runs it to read the isolated points
@@ -96,8 +102,9 @@ def run_scales(
     """
     m, s = len(points), len(scales)
     if fused is None:
+        sheet = getattr(rule, "sheet", None) if relative else None
         fused = _compiled_projected_distances(
-            points, neighbourhoods, scales, normals, weighting, keep_details, relative
+            points, neighbourhoods, scales, normals, weighting, keep_details, relative, sheet
         )
     flat_span = FLAT_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
     thresholds = np.empty(s)
@@ -170,11 +177,12 @@ def _compiled_projected_distances(
     weighting: Weighting,
     keep_normals: bool,
     relative: bool,
+    sheet: tuple[float, int, float] | None = None,
 ) -> _kernels.ScalePass | None:
     """Projected distances (s, m) and normals (s, m, 3) or None, or (clouds, when
     ``relative``) robust mode's relative distances and score instead of the distances,
     of every scale at once with the compiled kernels; None when the neighbourhoods are
-    the numpy ones."""
+    the numpy ones. ``sheet``: robust mode's sheet filter (``RelativeRule.sheet``)."""
     if not scales:
         return None
     if list(scales) != sorted(set(scales)):
@@ -188,6 +196,7 @@ def _compiled_projected_distances(
             weighting,
             keep_normals=keep_normals,
             relative=relative,
+            sheet=sheet,
             workers=neighbourhoods.workers,
         )
     if isinstance(neighbourhoods, RingNeighbourhoods) and neighbourhoods.adjacency is not None:

@@ -370,7 +370,7 @@ def _detect(
             weighting=weighting,
             keep_normals=return_details,
         )
-        work, work_neighbourhoods = robust.points, robust.neighbourhoods
+        work, work_neighbourhoods = robust.points, robust.scale_neighbourhoods
         scales_t = robust.scales
     timings["neighbourhoods"] = time.perf_counter() - t
     bar.step("neighbourhoods")

@@ -6,11 +6,18 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 1. **Isolated points are left out** (point clouds): point ``i`` is isolated when it is
    not among the ``k_max`` nearest neighbours of its own nearest neighbour. Detection
    runs on the other points; isolated points are never features.
+1a. **Neighbourhoods stay on their own sheet** (point clouds): the neighbours lying on
+   a parallel sheet (the other side of a thin wall), separated from the point's own
+   sheet along the normal (of the ``k_max`` nearest) by a gap wider than ``SHEET_GAP``
+   times the spacing, are left out of every neighbourhood below when they are one
+   sheet (a single gap on that side), at least ``SHEET_MIN`` points, and no more than
+   ``1 / SHEET_OWN`` times the points kept (at an edge or a corner every neighbour
+   lies to one side).
 1b. **Scales from the noise** (point clouds): the median over the points of
    ``|d . n| / |d|`` (``d`` the offset to the nearest neighbour, ``n`` the normal of the
-   point and its 6 nearest) measures the noise; above ``NOISE_TOLERATED`` the scales
-   grow as its square, at most ``NOISE_MAX_FACTOR``-fold (the noise of ``r`` falls as
-   ``1 / sqrt(k)``).
+   point and its 6 nearest, both on its own sheet) measures the noise; above
+   ``NOISE_TOLERATED`` the scales grow as its square, at most ``NOISE_MAX_FACTOR``-fold
+   (the noise of ``r`` falls as ``1 / sqrt(k)``).
 2. **Relative projected distance** instead of min-max normalisation: per scale,
    ``r_i = pdis_i / l_i`` with ``l_i`` the mean distance from ``p_i`` to the members of
    its neighbourhood (itself included). ``0 <= r_i <= 1`` always (``pdis_i`` is the
@@ -26,9 +33,10 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
    along it, a point lifted by noise has none, or only the line it lies beside.
 5. **Thinning**: a point is dropped when a supported neighbour among its ``THIN_KNN``
-   (12) nearest, lying across the feature line (more than 60 degrees from the line's
-   direction), ranks higher (mean over the scales of the centroid's distance relative
-   to ``l``, which peaks on acute edges where ``r`` does not): non-maximum suppression
+   (12) nearest (grown with the scales on noisy clouds), lying across the feature
+   line (more than 60 degrees from the line's direction), ranks higher (mean over the
+   scales of the centroid's distance relative to ``l``, which peaks on acute edges
+   where ``r`` does not): non-maximum suppression
    across the line, so lines stay one point wide; comparing only within about 1.9
    spacings keeps most of two parallel lines (the rims of a thin wall) apart.
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
@@ -55,6 +63,7 @@ from .neighbourhoods import (
     squared_distances,
 )
 from .normals import Weighting
+from .projected_distance import projected_distances
 from .threshold import otsu_threshold
 
 __all__ = [
@@ -63,6 +72,9 @@ __all__ = [
     "NOISE_MAX_FACTOR",
     "NOISE_TOLERATED",
     "R_MIN",
+    "SHEET_GAP",
+    "SHEET_MIN",
+    "SHEET_OWN",
     "SUPPORT_KNN",
     "SUPPORT_MIN",
     "THIN_CONE_COS",
@@ -70,17 +82,21 @@ __all__ = [
     "THIN_RING",
     "RelativeRule",
     "RobustSetup",
+    "SheetNeighbourhoods",
     "grown_scales",
     "isolated_points",
     "line_directions",
     "local_scale",
     "noise_factor",
     "noise_ratios",
+    "noise_ratios_lists",
     "noise_scale_factor",
     "relative_distances",
     "robust_threshold",
+    "sheet_mask",
     "supported",
     "thin",
+    "thin_knn",
 ]
 
 #: Relative projected distance at a point on a straight edge turning by CREASE_ANGLE,
@@ -118,6 +134,28 @@ NOISE_TOLERATED = 0.15
 #: of a million points stays below 0.5 GB); measured at 50 % noise, quick size: x2 0.64,
 #: x3 0.66.
 NOISE_MAX_FACTOR = 3.0
+#: Sheet filter: along the normal ``n`` of its ``k_max`` nearest (the weighted PCA
+#: normal, which sees the two sheets of a thin wall as one plane), a point's neighbours
+#: ``j`` have heights ``h_j = (p_j - p_i) . n``; its own sheet is the run of sorted
+#: heights reached from 0 (its own) by steps of at most SHEET_GAP times its spacing
+#: ``a`` (the mean distance to its 6 nearest). The other side of a wall 1-3 spacings
+#: thick lies beyond a gap of 1-3 spacings (``a`` is about 1.1-1.3 spacings); a
+#: surface that bends at an edge, however sharply, or curves, has no gap.
+#: Measured (quick size, thin1 / thin2 / thin3 F1): 0.25: 0.61 / 0.60 / 0.88, 0.35:
+#: 0.71 / 0.65 / 0.88, 0.4: 0.70 / 0.69 / 0.88, 0.5: 0.62 / 0.70 / 0.88, 0.7: 0.59 /
+#: 0.64 / 0.88 (docs/robust-mode.md).
+SHEET_GAP = 0.4
+#: ... and the points beyond the gaps are left out only when they are at least
+#: SHEET_MIN: another sheet, not the sparse points of a face seen at a grazing angle (a
+#: scan) or the tail of the noise.
+SHEET_MIN = 6
+#: ... and only when the kept points are at least SHEET_OWN times as many as those
+#: left out: at an edge or a corner every neighbour lies to one side of the point, and
+#: on a regular grid the face turning away comes in rows (a row of the 40 nearest
+#: beyond the first gap leaves 1-7 kept against 33-39 left out; a wall 1 spacing thick
+#: holds about as many points on either sheet). Measured (quick size, thin1): 1.0:
+#: 0.55, 0.5 / 0.33: 0.70; 0.2 loses two thirds of a regular grid cube's edges.
+SHEET_OWN = 0.5
 
 
 def isolated_points(indices: np.ndarray) -> np.ndarray:
@@ -171,7 +209,11 @@ def noise_ratios(points: np.ndarray, indices: np.ndarray, k: int) -> np.ndarray:
     0 when ``d = 0``). ``points`` (n, 3), ``indices`` (n, >= k) as
     :func:`noise_scale_factor`; returns (n,) float64."""
     idx = np.asarray(indices)[:, :k]
-    q = points[idx] - points[:, None, :]
+    return _plane_ratios(points[idx] - points[:, None, :])
+
+
+def _plane_ratios(q: np.ndarray) -> np.ndarray:
+    """:func:`noise_ratios` from the offsets q (n, k, 3) of each point's list."""
     c = q.mean(axis=1)
     r = q - c[:, None, :]
     cov = np.einsum("nka,nkb->nab", r, r)
@@ -180,6 +222,21 @@ def noise_ratios(points: np.ndarray, indices: np.ndarray, k: int) -> np.ndarray:
     length = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
     across = np.abs(d[:, 0] * normal[:, 0] + d[:, 1] * normal[:, 1] + d[:, 2] * normal[:, 2])
     return np.where(length > 0, across / np.where(length > 0, length, 1.0), 0.0)
+
+
+def noise_ratios_lists(points: np.ndarray, lists: Neighbourhood) -> np.ndarray:
+    """:func:`noise_ratios` of lists of any length: point ``i``'s plane is that of
+    ``lists[i]`` (``i`` first, its nearest next; 0 for lists shorter than 2).
+    ``points`` (n, 3); returns (n,) float64."""
+    indptr = np.asarray(lists.indptr, np.int64)
+    indices = np.asarray(lists.indices, np.int64)
+    size = np.diff(indptr)
+    out = np.zeros(len(points))
+    for m in np.unique(size[size >= 2]):
+        rows = np.flatnonzero(size == m)
+        table = indices[indptr[rows][:, None] + np.arange(m)]
+        out[rows] = _plane_ratios(points[table] - points[rows][:, None, :])
+    return out
 
 
 def noise_factor(nu: float) -> float:
@@ -193,10 +250,131 @@ def grown_scales(scales: tuple[int, ...], factor: float) -> tuple[int, ...]:
     return tuple(math.floor(k * factor + 0.5) for k in scales)
 
 
+def thin_knn(growth: float) -> int:
+    """Thinning's comparison list (clouds): ``THIN_KNN`` grown with the scales
+    (``growth`` the factor the noise grew them by, 1 when it did not), rounded half
+    up: the band of points that noise lifts beside a line widens with the noise."""
+    return grown_scales((THIN_KNN,), growth)[0]
+
+
 def _noise_factor(ratio: np.ndarray) -> float:
     """:func:`noise_factor` of the lower median of the per-point ratios (n,)."""
     at = (len(ratio) - 1) // 2
     return noise_factor(float(np.partition(ratio, at)[at]))
+
+
+def sheet_mask(
+    points: np.ndarray,
+    indices: np.ndarray,
+    normals: np.ndarray,
+    gap: float = SHEET_GAP,
+    minimum: int = SHEET_MIN,
+    own: float = SHEET_OWN,
+) -> np.ndarray:
+    """The neighbours on each point's own sheet.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    indices : (n, k) int
+        kNN lists sorted by distance, the point itself first.
+    normals : (n, 3) float64
+        Unit normal of each list (the weighted PCA normal of its ``k`` points).
+    gap : float, default SHEET_GAP (0.5)
+    minimum : int, default SHEET_MIN (6)
+    own : float, default SHEET_OWN (0.5)
+
+    Returns
+    -------
+    (n, k) bool
+        ``keep[i, j]``: with ``q_j = p_{indices[i, j]} - p_i``, ``h_j = q_j . n_i``
+        (``x*x' + y*y' + z*z'``), ``a_i`` the mean of ``|q_1| .. |q_m|`` (``m = min(6,
+        k - 1)``, added in order) and the ``h`` sorted increasingly, a gap is a step
+        ``> gap * a_i`` between consecutive ``h``. Above 0 (``i``'s own height) the
+        points beyond the first gap are dropped when there is exactly one gap above 0
+        (they form one sheet; several gaps: rows of a lattice, as on a face of a
+        regular grid that turns away, are kept); likewise below 0. A row that would
+        drop fewer than ``minimum`` points, or keep fewer than ``own`` times as many
+        as it drops (the points of an edge or a corner have all their neighbours to
+        one side), keeps them all.
+    """
+    idx = np.asarray(indices, np.int64)
+    n, k = idx.shape
+    keep = np.ones((n, k), bool)
+    m = min(6, k - 1)
+    if m < 1:
+        return keep
+    for start in range(0, n, _SHEET_BLOCK):
+        rows = np.arange(start, min(start + _SHEET_BLOCK, n))
+        q = points[idx[rows]] - points[rows][:, None, :]
+        nrm = normals[rows]
+        h = q[..., 0] * nrm[:, 0:1] + q[..., 1] * nrm[:, 1:2] + q[..., 2] * nrm[:, 2:3]
+        dist = np.sqrt(q[..., 0] * q[..., 0] + q[..., 1] * q[..., 1] + q[..., 2] * q[..., 2])
+        a = dist[:, 1].copy()
+        for j in range(2, m + 1):
+            a = a + dist[:, j]
+        g = gap * (a / m)
+        hs = np.sort(h, axis=1)
+        z = (hs < 0).sum(axis=1)
+        step = (hs[:, 1:] - hs[:, :-1]) > g[:, None]
+        col = np.arange(k - 1)[None, :]
+        up = step & (col >= z[:, None])
+        down = step & (col < z[:, None])
+        r = np.arange(len(rows))
+        hi = np.where(up.sum(axis=1) == 1, hs[r, up.argmax(axis=1)], np.inf)
+        last = (k - 1) - down[:, ::-1].argmax(axis=1)
+        lo = np.where(down.sum(axis=1) == 1, hs[r, last], -np.inf)
+        kept = (h >= lo[:, None]) & (h <= hi[:, None])
+        dropped = (~kept).sum(axis=1)
+        kept[(dropped < minimum) | ((k - dropped) < own * dropped)] = True
+        keep[rows] = kept
+    return keep
+
+
+#: Rows per block of :func:`sheet_mask` (bounds its (rows, k, 3) temporaries).
+_SHEET_BLOCK = 32768
+
+
+class SheetNeighbourhoods:
+    """kNN neighbourhoods less the neighbours on other sheets (:func:`sheet_mask`).
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    base : KnnNeighbourhoods
+        The lists at the largest scale ``k_max``.
+    weighting : {"gaussian", "none"}
+        Weighting of the PCA normal of each ``k_max``-list (paper mode's normal at the
+        largest scale).
+
+    Attributes
+    ----------
+    keep : (n, k_max) bool
+        :func:`sheet_mask` of ``base``'s lists.
+    """
+
+    def __init__(self, points: np.ndarray, base: KnnNeighbourhoods, weighting: Weighting) -> None:
+        self.base = base
+        self.k_max = base.k_max
+        self.tree = None
+        self.workers = base.workers
+        self._idx = np.asarray(base.indices, np.int64)
+        _, normals = projected_distances(points, base.at(base.k_max), weighting=weighting)
+        self.keep = sheet_mask(points, self._idx, normals, SHEET_GAP, SHEET_MIN, SHEET_OWN)
+
+    def at(self, k: int) -> Neighbourhood:
+        """The kept points among each point's ``k`` nearest (CSR, ``k <= k_max``)."""
+        return self._csr(self.keep[:, :k], self._idx[:, :k])
+
+    def first(self, k: int) -> Neighbourhood:
+        """The first ``k`` kept points of each list (fewer when fewer are kept)."""
+        keep = self.keep & (np.cumsum(self.keep, axis=1) <= k)
+        return self._csr(keep, self._idx)
+
+    @staticmethod
+    def _csr(keep: np.ndarray, idx: np.ndarray) -> Neighbourhood:
+        indptr = np.concatenate([[0], np.cumsum(keep.sum(axis=1))]).astype(np.int64)
+        return Neighbourhood(indptr, idx[keep])
 
 
 def _isolated_from_stats(points: np.ndarray, stats: _kernels.CloudStats) -> np.ndarray:
@@ -332,6 +510,9 @@ class RelativeRule:
         ``lists(scale) -> Neighbourhood``, the neighbourhoods of that scale (called in
         increasing order of scale).
     n_scales : int
+    sheet : (float, int, float) or None
+        ``(SHEET_GAP, SHEET_MIN, SHEET_OWN)`` when ``lists`` leave out the other sheets
+        (:class:`SheetNeighbourhoods`): the compiled pass over a cloud then does too.
     local : callable, optional
         ``local(i, scale) -> (l, o)``, :func:`local_scale` of the i-th scale computed
         without the lists (the compiled ring pass); default: from ``lists``.
@@ -340,6 +521,7 @@ class RelativeRule:
     points: np.ndarray
     lists: object
     n_scales: int
+    sheet: tuple[float, int, float] | None = None
     local: Callable[[int, int], tuple[np.ndarray, np.ndarray]] | None = None
 
     def __post_init__(self) -> None:
@@ -562,13 +744,22 @@ class RobustSetup:
         self.weighting = weighting
         self.keep_normals = keep_normals
         self.fused: _kernels.ScalePass | None = None
+        #: How much the noise grew the scales (1: not at all).
+        self.growth = 1.0
+        #: The neighbourhoods the scales use: ``neighbourhoods`` (meshes; clouds with
+        #: the compiled pass, which leaves the other sheets out itself), or their
+        #: :class:`SheetNeighbourhoods` (clouds, numpy).
+        self.scale_neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods | SheetNeighbourhoods
+        self.scale_neighbourhoods = neighbourhoods
+        sheet = None
         if faces is None:
             assert isinstance(neighbourhoods, KnnNeighbourhoods)
+            sheet = (SHEET_GAP, SHEET_MIN, SHEET_OWN)
             top = max(self.scales)
             k0 = min(NOISE_KNN, top)
             compiled = neighbourhoods.tree is not None
             if compiled:
-                self.fused = self._pass(k0)
+                self.fused = self._pass(k0, sheet)
                 assert self.fused.stats is not None
                 isolated = _isolated_from_stats(points, self.fused.stats)
             else:
@@ -580,18 +771,24 @@ class RobustSetup:
                     self.points, None, self.scales, workers=workers
                 )
                 if compiled:
-                    self.fused = self._pass(k0)
+                    self.fused = self._pass(k0, sheet)
             if self.fused is not None and self.fused.stats is not None:
                 noise = _noise_factor(self.fused.stats.noise)
+                self.scale_neighbourhoods = self.neighbourhoods
             else:
-                noise = noise_scale_factor(self.points, self.neighbourhoods.indices, k0)
+                self.scale_neighbourhoods = self._sheets()
+                noise = _noise_factor(
+                    noise_ratios_lists(self.points, self.scale_neighbourhoods.first(k0))
+                )
             factor = min(noise, len(self.points) / top)
             if factor > 1.0:
+                self.growth = factor
                 self.scales = grown_scales(self.scales, factor)
                 self.neighbourhoods = build_neighbourhoods(
                     self.points, None, self.scales, workers=workers
                 )
                 self.fused = None
+                self.scale_neighbourhoods = self.neighbourhoods if compiled else self._sheets()
         self._rings: RingNeighbourhoods | None = None
         self._one_ring: sp.csr_matrix | None = None
         self._ring_scales: tuple[np.ndarray, np.ndarray] | None = None
@@ -599,9 +796,14 @@ class RobustSetup:
             neighbourhoods.adjacency is not None
         )
         local = self._ring_local_scale if compiled_rings else None
-        self.rule = RelativeRule(self.points, self._lists, len(self.scales), local)
+        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, local)
 
-    def _pass(self, noise_k: int) -> _kernels.ScalePass:
+    def _sheets(self) -> SheetNeighbourhoods:
+        """:class:`SheetNeighbourhoods` of ``neighbourhoods`` (numpy kNN lists)."""
+        assert isinstance(self.neighbourhoods, KnnNeighbourhoods)
+        return SheetNeighbourhoods(self.points, self.neighbourhoods, self.weighting)
+
+    def _pass(self, noise_k: int, sheet: tuple[float, int, float]) -> _kernels.ScalePass:
         """The compiled pass at ``scales`` over ``points`` (whose kd-tree
         ``neighbourhoods`` holds): projected distances, local scales, and the isolated
         points' and the noise's statistics from the same search. It is the pass
@@ -616,6 +818,7 @@ class RobustSetup:
             keep_normals=self.keep_normals,
             relative=True,
             noise_k=noise_k,
+            sheet=sheet,
             workers=self.neighbourhoods.workers,
         )
 
@@ -675,7 +878,7 @@ class RobustSetup:
 
     def _lists(self, scale: int) -> Neighbourhood:
         if self.faces is None:
-            return self.neighbourhoods.at(scale)
+            return self.scale_neighbourhoods.at(scale)
         if self._rings is None:
             self._rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
         return self._rings.at(scale)
@@ -700,7 +903,7 @@ class RobustSetup:
         if mask.any():
             top = max(self.scales)
             if self.faces is None:
-                ks = (min(SUPPORT_KNN, top), min(THIN_KNN, top), top)
+                ks = (min(SUPPORT_KNN, top), min(thin_knn(self.growth), top), top)
                 around, compare, direction = self._candidate_lists(np.flatnonzero(mask), ks)
             else:
                 ks = (min(THIN_RING, top), top)

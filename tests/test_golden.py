@@ -62,6 +62,12 @@ NUDGES: dict[str, tuple[ModuleType, str, Callable[[float], float]]] = {
     "noise cap x1.15": (robust, "NOISE_MAX_FACTOR", lambda v: v * 1.15),
     "quartile factor x0.9": (creases, "NOISE_FACTOR", lambda v: v * 0.9),
     "quartile factor x1.1": (creases, "NOISE_FACTOR", lambda v: v * 1.1),
+    "sheet gap x0.85": (robust, "SHEET_GAP", lambda v: v * 0.85),
+    "sheet gap x1.15": (robust, "SHEET_GAP", lambda v: v * 1.15),
+    "sheet min -1": (robust, "SHEET_MIN", lambda v: v - 1),
+    "sheet min +1": (robust, "SHEET_MIN", lambda v: v + 1),
+    "sheet own x0.8": (robust, "SHEET_OWN", lambda v: v * 0.8),
+    "sheet own x1.25": (robust, "SHEET_OWN", lambda v: v * 1.25),
 }
 
 

@@ -34,6 +34,8 @@ EPS = 1e-10
 R_MIN = (2 / math.pi) * math.sin(math.pi / 18)
 #: Step 1b.
 NOISE_KNN, NOISE_TOLERATED, NOISE_MAX_FACTOR = 7, 0.15, 3.0
+#: Step 1a: a gap of 0.4 spacings, at least 6 points beyond it.
+SHEET_GAP, SHEET_MIN, SHEET_OWN = 0.4, 6, 0.5
 #: Steps 7 and 8.
 SUPPORT_KNN, SUPPORT_MIN, THIN_KNN, MESH_RING, CONE_COS = 16, 2, 12, 2, 0.5
 #: Step 9: 20 degrees, 4 / 0.3186 lower quartiles.
@@ -53,12 +55,13 @@ class Reading:
         n = len(points)
         if faces is None:
             scales = meshlab_sharp.DEFAULT_KNN_SCALES
-            keep, points, hoods, scales = self._cloud(points, scales)
+            keep, points, hoods, own, scales, growth = self._cloud(points, scales)
             normals = None
             around = [h[: min(SUPPORT_KNN, len(h))] for h in hoods]
-            compare = [h[: min(THIN_KNN, len(h))] for h in hoods]
+            thin_k = math.floor(THIN_KNN * growth + 0.5)  # grown with the scales
+            compare = [h[: min(thin_k, len(h))] for h in hoods]
             direction = hoods
-            hood_at = lambda k: [h[:k] for h in hoods]  # noqa: E731
+            hood_at = lambda k: [h[:k][o[:k]] for h, o in zip(hoods, own, strict=True)]  # noqa: E731
         else:
             scales = meshlab_sharp.DEFAULT_RING_SCALES
             keep = np.arange(n)
@@ -157,9 +160,10 @@ class Reading:
     @staticmethod
     def _cloud(
         points: np.ndarray, scales: tuple[int, ...]
-    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], tuple[int, ...]]:
-        """Steps 1 and 1b: (kept indices, kept points, their kNN lists at the largest
-        scale, the scales)."""
+    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray], tuple[int, ...], float]:
+        """Steps 1, 1a and 1b: (kept indices, kept points, their kNN lists at the
+        largest scale, which of those are on the point's own sheet, the scales, their
+        growth f (1 if none))."""
         k_max = max(scales)
         hoods = spec_knn(points, k_max)
         isolated = np.array([i not in hoods[h[1]] for i, h in enumerate(hoods)])
@@ -167,11 +171,16 @@ class Reading:
         if isolated.any():
             points = points[keep]
             hoods = spec_knn(points, k_max)
+        own = [_own_sheet(points, i, h) for i, h in enumerate(hoods)]
         k0 = min(NOISE_KNN, k_max)
         ratios = []
-        for i, h in enumerate(hoods):
-            q = points[h[:k0]] - points[i]
-            c = q.sum(axis=0) / k0
+        for i, (h, o) in enumerate(zip(hoods, own, strict=True)):
+            first = h[o][:k0]
+            if len(first) < 2:  # nothing but i on its sheet among the k_max nearest
+                ratios.append(0.0)
+                continue
+            q = points[first] - points[i]
+            c = q.sum(axis=0) / len(first)
             cov = (q - c).T @ (q - c)
             normal = np.linalg.eigh(cov)[1][:, 0]
             d = q[1]
@@ -181,7 +190,37 @@ class Reading:
         if f > 1:
             scales = tuple(math.floor(k * f + 0.5) for k in scales)
             hoods = spec_knn(points, max(scales))
-        return keep, points, hoods, scales
+            own = [_own_sheet(points, i, h) for i, h in enumerate(hoods)]
+        return keep, points, hoods, own, scales, max(f, 1.0)
+
+
+def _own_sheet(points: np.ndarray, i: int, hood: np.ndarray) -> np.ndarray:
+    """Step 1a for point ``i`` and its kNN list ``hood``: which neighbours are on its
+    own sheet, (len(hood),) bool. Heights along the weighted PCA normal of the list;
+    from 0 (``i``'s own height) up and down through the sorted heights until a step
+    wider than SHEET_GAP times the mean distance to the 6 nearest; what lies beyond is
+    dropped when it is one sheet (no second such gap on that side), at least SHEET_MIN
+    points, and at most 1 / SHEET_OWN times as many as are kept."""
+    q = points[hood] - points[i]
+    h = q @ spec_pca_normal(points, i, hood, "gaussian")
+    a = np.sqrt((q[1:7] ** 2).sum(axis=1)).mean()
+    steps = sorted(h)
+    lo = hi = steps.index(0.0)  # i's own height (its offset is 0)
+    while hi + 1 < len(steps) and steps[hi + 1] - steps[hi] <= SHEET_GAP * a:
+        hi += 1
+    while lo > 0 and steps[lo] - steps[lo - 1] <= SHEET_GAP * a:
+        lo -= 1
+    below, above = -math.inf, math.inf
+    if hi + 1 < len(steps) and not any(
+        steps[j + 1] - steps[j] > SHEET_GAP * a for j in range(hi + 1, len(steps) - 1)
+    ):
+        above = steps[hi]
+    if lo > 0 and not any(steps[j] - steps[j - 1] > SHEET_GAP * a for j in range(1, lo)):
+        below = steps[lo]
+    own = (h >= below) & (h <= above)
+    if (~own).sum() < SHEET_MIN or own.sum() < SHEET_OWN * (~own).sum():
+        return np.ones(len(hood), bool)
+    return own
 
 
 def _expand(mask: np.ndarray, keep: np.ndarray, n: int) -> np.ndarray:

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from meshlab_sharp import robust
-from meshlab_sharp.neighbourhoods import Neighbourhood
+from meshlab_sharp.neighbourhoods import KnnNeighbourhoods, Neighbourhood
 
 
 def _csr(lists: list[list[int]]) -> Neighbourhood:
@@ -81,3 +81,81 @@ def test_score_is_the_mean_centroid_distance_over_the_scales():
     np.testing.assert_array_equal(
         rule.score, np.minimum(o2 / ell2, 1) / 2 + np.minimum(o4 / ell4, 1) / 2
     )
+
+
+def _two_sheets(own: int, other: list[float], per_level: int = 9) -> tuple[np.ndarray, np.ndarray]:
+    """Point 0 at the origin, ``own`` more points of its sheet (z = 0) on a unit grid,
+    ``per_level`` points at each height of ``other``: (points, one list (1, n))."""
+    grid = [(x, y) for r in range(4) for x in range(-r, r + 1) for y in range(-r, r + 1)]
+    grid = sorted(set(grid), key=lambda p: (p[0] ** 2 + p[1] ** 2, p))
+    pts = [(0.0, 0.0, 0.0)] + [(float(x), float(y), 0.0) for x, y in grid[1 : own + 1]]
+    for z in other:
+        pts += [(float(x) + 0.5, float(y) + 0.5, z) for x, y in grid[:per_level]]
+    points = np.array(pts)
+    return points, np.arange(len(points))[None, :]
+
+
+def _mask(points: np.ndarray, lists: np.ndarray) -> np.ndarray:
+    return robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]))[0]
+
+
+def test_sheet_mask_drops_the_other_side_of_a_thin_wall():
+    # 12 points on the own sheet, 9 one spacing above: a = (4 * 1 + 2 * sqrt 2) / 6
+    points, lists = _two_sheets(12, [1.0])
+    keep = _mask(points, lists)
+    np.testing.assert_array_equal(keep, points[:, 2] == 0.0)
+    # below the point as well, and with a normal of either sign
+    points[13:, 2] = -1.0
+    np.testing.assert_array_equal(_mask(points, lists), points[:, 2] == 0.0)
+    flipped = robust.sheet_mask(points, lists, np.array([[0.0, 0.0, -1.0]]))[0]
+    np.testing.assert_array_equal(flipped, points[:, 2] == 0.0)
+
+
+def test_sheet_mask_keeps_what_is_not_one_separate_sheet():
+    a = (4 + 2 * math.sqrt(2)) / 6  # the spacing read from the 6 nearest of the grid
+    # a step of exactly SHEET_GAP * a is no gap (a gap is wider)
+    points, lists = _two_sheets(12, [robust.SHEET_GAP * a])
+    assert _mask(points, lists).all()
+    points, lists = _two_sheets(12, [robust.SHEET_GAP * a * 1.001])
+    assert not _mask(points, lists).all()
+    # fewer than SHEET_MIN (6) points beyond the gap: the tail of the noise
+    points, lists = _two_sheets(12, [1.0], per_level=robust.SHEET_MIN - 1)
+    assert _mask(points, lists).all()
+    points, lists = _two_sheets(12, [1.0], per_level=robust.SHEET_MIN)
+    assert not _mask(points, lists).all()
+    # two gaps: rows of a face turning away (a regular grid), not a sheet
+    points, lists = _two_sheets(12, [1.0, 2.0], per_level=6)
+    assert _mask(points, lists).all()
+    # more than 1 / SHEET_OWN (2) times as many beyond the gap as kept: the point is an
+    # edge or a corner of the surface
+    points, lists = _two_sheets(3, [1.0], per_level=9)
+    assert _mask(points, lists).all()
+    points, lists = _two_sheets(4, [1.0], per_level=9)
+    np.testing.assert_array_equal(_mask(points, lists), points[:, 2] == 0.0)
+
+
+def test_sheet_neighbourhoods_keep_the_prefixes_of_the_kept_points():
+    # a 5 x 5 grid and, one spacing above, a 4 x 4 grid centred on the same axis: the
+    # PCA normal of all 41 points is the z axis
+    own = [(float(x), float(y), 0.0) for x in range(-2, 3) for y in range(-2, 3)]
+    other = [(x + 0.5, y + 0.5, 1.0) for x in range(-2, 2) for y in range(-2, 2)]
+    points = np.array(own + other)
+    base = KnnNeighbourhoods(points, len(points), backend="numpy")
+    sheets = robust.SheetNeighbourhoods(points, base, "gaussian")
+    centre = 12  # the point (0, 0, 0)
+    mine = set(np.flatnonzero(points[:, 2] == 0.0))
+    row = base.indices[centre]
+    assert not sheets.keep[centre].all()
+    at = sheets.at(10)
+    got = at.indices[at.indptr[centre] : at.indptr[centre + 1]].tolist()
+    assert got == [j for j in row[:10] if j in mine]
+    first = sheets.first(7)
+    got = first.indices[first.indptr[centre] : first.indptr[centre + 1]].tolist()
+    assert got == [j for j in row if j in mine][:7]
+
+
+def test_thinning_list_grows_with_the_scales():
+    assert robust.thin_knn(1.0) == robust.THIN_KNN == 12
+    assert robust.thin_knn(1.8) == 22  # 21.6, rounded half up as the scales are
+    assert robust.thin_knn(3.0) == 36
+    assert robust.thin_knn(1.125) == 14  # 13.5 exactly: half up

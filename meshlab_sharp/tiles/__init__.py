@@ -356,21 +356,23 @@ def _robust(
         raise InputError(
             f"{n_kept} points are not isolated, fewer than the largest scale k = {max(scales)}"
         )
-    k = min(robust.NOISE_KNN, max(scales))
-    runner.step(Step("noise", robust_noise, Query(k, kept="kept"), {"k": k}))
+    k, top = min(robust.NOISE_KNN, max(scales)), max(scales)
+    noise = {"k": k, "top": top, "weighting": weighting}
+    runner.step(Step("noise", robust_noise, Query(top, kept="kept"), noise))
     nu = order_statistic(runner, "ratio", "kept", (n_kept - 1) // 2)
     factor = min(robust.noise_factor(nu), n_kept / max(scales))
     if factor > 1.0:
         scales = robust.grown_scales(scales, factor)
     s, top = len(scales), max(scales)
     store.create("r", (n, s), np.float64)
-    query = Query(top, kept="kept", scales=scales, weighting=weighting)
-    hist = runner.step(Step("relative", robust_relative, query, {"scales": scales}))["hist"]
+    query = Query(top, kept="kept")
+    relative = {"scales": scales, "weighting": weighting}
+    hist = runner.step(Step("relative", robust_relative, query, relative))["hist"]
     thresholds = np.array([max(otsu_from_histogram(h), robust.R_MIN) for h in hist])
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
     runner.step(Step("support", robust_support, Query(top, "kept", "mask"), support))
-    compare = min(robust.THIN_KNN, top)
+    compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     runner.step(Step("thin", robust_thin, Query(compare, "kept", "mask1"), {"compare": compare}))
     return thresholds, decided["counts"], "final", "kept", scales
 

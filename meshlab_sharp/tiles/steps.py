@@ -16,20 +16,17 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import partial
 from typing import Any
 
 import numpy as np
 
-from .. import robust
+from .. import _kernels, robust
 from ..neighbourhoods import squared_distances
 from ..threshold import BINS, histogram
 from .neighbours import Context, Query
 from .store import Store
 
 Partial = dict[str, np.ndarray]
-#: Neighbour entries (rows * k) per block of the local scale's computation.
-ENTRIES_PER_BLOCK = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -151,31 +148,35 @@ def robust_isolated(span: Span) -> Partial:
     return {"isolated": np.array(int((~inside).sum()))}
 
 
-def robust_noise(ctx: Context, *, k: int) -> Partial:
-    """:func:`meshlab_sharp.robust.noise_ratios` of the rows (to ``ratio``)."""
-    lists = np.repeat(np.arange(len(ctx.points))[:, None], k, axis=1)
-    lists[ctx.rows] = ctx.idx[:, :k]
-    ratio = robust.noise_ratios(ctx.points, lists, k)
-    ctx.store.write_at("ratio", ctx.own, ratio[ctx.rows])
+def _robust_pass(ctx: Context, scales: tuple[int, ...], weighting: str, noise_k: int = 0) -> Any:
+    """The compiled pass of robust mode (the sheet filter, the noise ratio over the
+    ``noise_k`` nearest, the relative distances and score) over the context's set, whose
+    rows' lists it finds exactly as the in-memory pass does."""
+    return _kernels.cloud_projected_distances(
+        _kernels.build_tree(ctx.points),
+        scales,
+        weighting,
+        relative=noise_k == 0,
+        keep_pdis=False,
+        noise_k=noise_k,
+        sheet=(robust.SHEET_GAP, robust.SHEET_MIN, robust.SHEET_OWN),
+    )
+
+
+def robust_noise(ctx: Context, *, k: int, top: int, weighting: str) -> Partial:
+    """:func:`meshlab_sharp.robust.noise_ratios` of the rows (to ``ratio``), on the
+    lists less the other sheets (:func:`meshlab_sharp.robust.sheet_mask` at ``top``)."""
+    stats = _robust_pass(ctx, (top,), weighting, noise_k=k).stats
+    ctx.store.write_at("ratio", ctx.own, stats.noise[ctx.rows])
     return {}
 
 
-def robust_relative(ctx: Context, *, scales: tuple[int, ...]) -> Partial:
-    """:class:`meshlab_sharp.robust.RelativeRule` on the rows: relative distances
-    ``r`` (r, s), the score, and the histograms of ``r``."""
-    assert ctx.pdis is not None
-    r = np.empty_like(ctx.pdis)
-    score = np.empty(len(ctx.rows))
-    pdis = np.zeros(len(ctx.points))
-    block = max(1, ENTRIES_PER_BLOCK // max(scales))  # bounds the (rows * k, 3) temporaries
-    for start in range(0, len(ctx.rows), block):
-        part = slice(start, start + block)
-        rows = ctx.rows[part]
-        rule = robust.RelativeRule(ctx.points, partial(ctx.lists, part=part), len(scales))
-        for i, k in enumerate(scales):
-            pdis[rows] = ctx.pdis[part, i]
-            r[part, i] = rule(i, k, pdis)[0][rows]
-        score[part] = rule.score[rows]
+def robust_relative(ctx: Context, *, scales: tuple[int, ...], weighting: str) -> Partial:
+    """:class:`meshlab_sharp.robust.RelativeRule` on the rows (less the other sheets):
+    relative distances ``r`` (r, s), the score, and the histograms of ``r``."""
+    out = _robust_pass(ctx, scales, weighting)
+    r = np.ascontiguousarray(out.relative[:, ctx.rows].T)
+    score = out.score[ctx.rows]
     ctx.store.write_at("r", ctx.own, r)
     ctx.store.write_at("score", ctx.own, score)
     return {"hist": np.stack([histogram(r[:, i], BINS) for i in range(len(scales))])}
