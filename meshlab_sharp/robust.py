@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _kernels
+from . import _header, _kernels
 from .creases import CREASE_ANGLE, sharp_vertices
 from .neighbourhoods import (
     KnnNeighbourhoods,
@@ -86,36 +86,36 @@ __all__ = [
 R_MIN = (2.0 / math.pi) * math.sin(math.radians(CREASE_ANGLE / 2.0))
 #: Thinning compares a point with candidate neighbours whose offset makes more than
 #: 60 degrees with the line direction: ``|d . e| < THIN_CONE_COS * |d|``.
-THIN_CONE_COS = 0.5
+THIN_CONE_COS = _header.real("THIN_CONE_COS")
 #: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
 #: about 1.9 spacings: across the band of candidates (1.3-1.5 spacings) and the points
 #: that noise lifts beside it, mostly short of a second line 2-3 spacings away, such as
 #: the other rim of a thin wall) ...
-THIN_KNN = 12
+THIN_KNN = _header.integer("THIN_KNN")
 #: ... or the 2-ring (meshes; about 19 vertices on a regular mesh). The 2-ring is also
 #: the support neighbourhood on meshes.
-THIN_RING = 2
+THIN_RING = _header.integer("THIN_RING")
 #: Support: a feature needs at least SUPPORT_MIN other features among its SUPPORT_KNN
 #: nearest points (clouds), the neighbourhood that thinning used to compare with: a
 #: line one point wide has two neighbours along it within 16 points, a point lifted
 #: alone by noise has none.
-SUPPORT_KNN = 16
-SUPPORT_MIN = 2
+SUPPORT_KNN = _header.integer("SUPPORT_KNN")
+SUPPORT_MIN = _header.integer("SUPPORT_MIN")
 #: The plane of the noise estimate: the point and its 6 nearest (the 1-ring of a
 #: regular triangulation of the samples); the smallest scale (12) takes in the other
 #: sheet of a wall 2 spacings thick and reads it as noise.
-NOISE_KNN = 7
+NOISE_KNN = _header.integer("NOISE_KNN")
 #: Noise the default scales tolerate, as the median of ``|d . n| / |d|`` between nearest
 #: neighbours (``d``) across the plane (normal ``n``) of the ``NOISE_KNN`` nearest.
 #: Measured on Poisson-disk samples: 0 clean, 0.20 with normal noise of 25 % of the
 #: spacing, 0.30 at 50 %, 0.01-0.02 on walls 2-3 spacings thick, 0.03 at most on the
 #: smooth controls, 0.08-0.13 on the simulated scans. Above it the scales grow as the
 #: square of the ratio (the noise of ``r`` at scale k goes as ``sigma / sqrt(k)``).
-NOISE_TOLERATED = 0.15
+NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
 #: The scales grow at most 3-fold (``k_max`` 120 with the default scales: the kNN table
 #: of a million points stays below 0.5 GB); measured at 50 % noise, quick size: x2 0.64,
 #: x3 0.66.
-NOISE_MAX_FACTOR = 3.0
+NOISE_MAX_FACTOR = _header.real("NOISE_MAX_FACTOR")
 
 
 def isolated_points(indices: np.ndarray) -> np.ndarray:

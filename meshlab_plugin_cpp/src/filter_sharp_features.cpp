@@ -66,10 +66,13 @@ int FilterSharpFeaturesPlugin::postCondition(QAction *) const
 
 void FilterSharpFeaturesPlugin::initParameterSet(QAction *, MeshModel &, RichParameterList &par)
 {
-	par.addParam(RichString("knnScales", "12 16 20 24 28 32 36 40", "Point-cloud scales (k)",
+	const sharp::Options defaults;
+	par.addParam(RichString("knnScales", QString::fromStdString(sharp::formatScales(defaults.knnScales)),
+	                        "Point-cloud scales (k)",
 	                        "Neighbourhood sizes k (k nearest neighbours, the point included) used "
 	                        "on point clouds: a list like '12 16 20' or a range 'start:stop:step'."));
-	par.addParam(RichString("ringScales", "1 2 3 4", "Mesh scales (rings)",
+	par.addParam(RichString("ringScales", QString::fromStdString(sharp::formatScales(defaults.ringScales)),
+	                        "Mesh scales (rings)",
 	                        "k-ring sizes used on meshes: a list like '1 2 3 4' or a range '1:4'."));
 	par.addParam(RichEnum("weighting", 0, QStringList() << "Gaussian" << "None", "Normal weighting",
 	                      "Weights of the PCA normals: Gaussian exp(-d^2/h^2), h the farthest "
