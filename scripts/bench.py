@@ -569,6 +569,7 @@ def bench_compare(n: int, repeat: int, meshlab_root: str | None, out_json: str) 
     result["pgeof"] = time_pgeof(points, DEFAULT_KNN_SCALES, repeat)
     result["load_after"] = os.getloadavg()[0]
     _print_compare(result)
+    print(markdown_compare(result))
     Path(out_json).parent.mkdir(parents=True, exist_ok=True)
     Path(out_json).write_text(json.dumps(result, indent=1))
     print(f"wrote {out_json}")
@@ -598,6 +599,44 @@ def _print_compare(r: dict) -> None:
         print(f"  pgeof: kNN k=40 {pg['knn_s']:.2f} s, 8-scale features {pg['features_s']:.2f} s")
     for name, seconds in r["this"]["kernels_s"].items():
         print(f"  kernel: {name} {seconds:.2f} s")
+
+
+def markdown_compare(r: dict) -> str:
+    """The side-by-side run as the tables of docs/benchmark.md."""
+    pg = r["pgeof"]
+    rows = [
+        ("CLI `meshlab-sharp detect` on the PLY, end to end", lambda m: r["cli"][m]["wall_s"]),
+        ("plugin under meshlabserver on the PLY, end to end", lambda m: r["plugin"][m]["wall_s"]),
+        ("**plugin / CLI**", lambda m: r["plugin"][m]["wall_s"] / r["cli"][m]["wall_s"]),
+        ("  the filter alone (its log)", lambda m: r["plugin"][m]["filter_s"]),
+        ("  meshlabserver load + save alone", lambda m: r["plugin"][m]["load_save_only_s"]),
+        ("`detect` on the points in memory", lambda m: r["this"]["detect"][m]["wall_s"]),
+    ]
+    if pg is not None:
+        rows.append(("pgeof kNN k=40 + 8-scale features", lambda m: pg["total_s"]))
+        rows.append(
+            ("**detect / pgeof**", lambda m: r["this"]["detect"][m]["wall_s"] / pg["total_s"])
+        )
+    lines = ["| 1M-point cloud | paper | robust (default) |", "|---|---:|---:|"]
+    for name, value in rows:
+        ratio = name.startswith("**")
+        cells = [f"{value(m):.2f}" if ratio else f"{value(m):.2f} s" for m in ("paper", "robust")]
+        lines.append(f"| {name} | {cells[0]} | {cells[1]} |")
+    features = [
+        f"{r['cli'][m]['features']} / {r['plugin'][m]['features']}" for m in ("paper", "robust")
+    ]
+    lines.append(f"| features: CLI / plugin | {features[0]} | {features[1]} |")
+    lines += ["", "| stage (`detect` in memory) | paper | robust |", "|---|---:|---:|"]
+    stages = r["this"]["detect"]
+    for stage in stages["paper"]["stages_s"]:
+        cells = [f"{stages[m]['stages_s'].get(stage, 0.0):.2f} s" for m in ("paper", "robust")]
+        lines.append(f"| {stage} | {cells[0]} | {cells[1]} |")
+    lines += ["", "| compiled kernel, alone | time |", "|---|---:|"]
+    lines += [f"| {name} | {seconds:.2f} s |" for name, seconds in r["this"]["kernels_s"].items()]
+    if pg is not None:
+        lines.append(f"| pgeof kNN k=40 | {pg['knn_s']:.2f} s |")
+        lines.append(f"| pgeof 8-scale features | {pg['features_s']:.2f} s |")
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
