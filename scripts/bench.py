@@ -467,8 +467,17 @@ def time_plugin(root: Path, path: Path, work: Path, mode: str, repeat: int, env:
             count = re.search(r"(\d+) of \d+ vertices are features", log)
             best = {"wall_s": seconds, "filter_s": float(took.group(1)) if took else None}
             best["features"] = int(count.group(1)) if count else None
+            stages = re.search(r"detection took [0-9.]+ s \(([^)]*)\)", log)
+            best["stages_s"] = (
+                {
+                    name: float(seconds)
+                    for name, seconds in re.findall(r"([a-z -]+) ([0-9.]+) s", stages.group(1))
+                }
+                if stages
+                else {}
+            )
             # meshlabserver prints each new progress message of the filter
-            best["progress"] = [int(p) for p in re.findall(r"Sharp features: [a-z ]+ (\d+)%", log)]
+            best["progress"] = [int(p) for p in re.findall(r"Sharp features: [a-z -]+ (\d+)%", log)]
     best["load_save_only_s"] = min(_timed_run(server("ml_io.ply"), env)[0] for _ in range(repeat))
     return best
 
@@ -631,6 +640,11 @@ def markdown_compare(r: dict) -> str:
     for stage in stages["paper"]["stages_s"]:
         cells = [f"{stages[m]['stages_s'].get(stage, 0.0):.2f} s" for m in ("paper", "robust")]
         lines.append(f"| {stage} | {cells[0]} | {cells[1]} |")
+    lines += ["", "| stage (the plugin's filter, its log) | paper | robust |", "|---|---:|---:|"]
+    plugin = {m: r["plugin"][m]["stages_s"] for m in ("paper", "robust")}
+    for stage in dict.fromkeys([*plugin["paper"], *plugin["robust"]]):
+        cells = [f"{plugin[m][stage]:.2f} s" if stage in plugin[m] else "" for m in plugin]
+        lines.append(f"| {stage.strip()} | {cells[0]} | {cells[1]} |")
     lines += ["", "| compiled kernel, alone | time |", "|---|---:|"]
     lines += [f"| {name} | {seconds:.2f} s |" for name, seconds in r["this"]["kernels_s"].items()]
     if pg is not None:

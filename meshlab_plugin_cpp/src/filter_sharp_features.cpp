@@ -181,7 +181,10 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *, MeshDocument &md, const R
 	    int(live.size()), qUtf8Printable(scales));
 	if (r.allFlat)
 		Log("Sharp features: no features: all points lie on one plane.");
-	Log("Sharp features: detection took %.3f s", seconds);
+	QString stages;
+	for (const auto &t : r.timings)
+		stages += QString("%1%2 %3 s").arg(stages.isEmpty() ? "" : ", ").arg(t.first.c_str()).arg(t.second, 0, 'f', 3);
+	Log("Sharp features: detection took %.3f s (%s)", seconds, qUtf8Printable(stages));
 	return true;
 }
 

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -31,19 +32,43 @@ void check(int status) {
 	if (status != 0) throw std::bad_alloc();
 }
 
-// Progress over the stages of a run: a stage covers [from, to) percent of the bar.
+// Progress over the stages of a run, and the time spent in each: reported by the calling
+// thread only. A stage's time runs from its first report to the next stage's.
 class Bar {
 public:
-	explicit Bar(Progress cb) : cb_(cb) {}
-	void report(int percent, const char *stage) const {
+	using Clock = std::chrono::steady_clock;
+	explicit Bar(Progress cb) : cb_(cb), since_(Clock::now()) {}
+	void report(int percent, const char *stage) {
+		if (stage_ != stage) {
+			close();
+			stage_ = stage;
+		}
 		if (!cb_) return;
 		char text[160];
 		std::snprintf(text, sizeof text, "Sharp features: %s %d%%", stage, percent);
 		cb_(percent, text);
 	}
+	// Seconds per stage in order of first entry (a stage entered twice adds up).
+	std::vector<std::pair<std::string, double>> times() {
+		close();
+		return times_;
+	}
 
 private:
+	void close() {
+		const auto now = Clock::now();
+		if (!stage_.empty()) {
+			const double seconds = std::chrono::duration<double>(now - since_).count();
+			auto it = std::find_if(times_.begin(), times_.end(), [&](const auto &t) { return t.first == stage_; });
+			if (it == times_.end()) times_.emplace_back(stage_, seconds);
+			else it->second += seconds;
+		}
+		since_ = now;
+	}
 	Progress cb_;
+	std::string stage_;
+	Clock::time_point since_;
+	std::vector<std::pair<std::string, double>> times_;
 };
 
 // task(worker, begin, end) -> kernel status, over [0, n) in chunks of MS_CHUNK on every
@@ -52,7 +77,7 @@ private:
 unsigned workers() { return std::max(1u, std::thread::hardware_concurrency()); }
 
 template <class Task>
-void chunks(Index n, Task task, const Bar &bar, int from, int to, const char *stage) {
+void chunks(Index n, Task task, Bar &bar, int from, int to, const char *stage) {
 	const Index count = (n + MS_CHUNK - 1) / MS_CHUNK;
 	std::atomic<Index> next{0}, done{0};
 	std::atomic<int> status{0};
@@ -63,6 +88,7 @@ void chunks(Index n, Task task, const Bar &bar, int from, int to, const char *st
 			if (report) bar.report(from + int((to - from) * finished / count), stage);
 		}
 	};
+	bar.report(from, stage);
 	std::vector<std::thread> pool;
 	const unsigned w = unsigned(std::min<Index>(workers(), std::max<Index>(count, 1)));
 	for (unsigned t = 1; t < w; ++t) pool.emplace_back(work, t, false);
@@ -187,7 +213,7 @@ struct CloudPass {
 // relative distances and score (robust), and with noiseK > 0 the isolation and noise
 // statistics (_kernels.cloud_projected_distances).
 CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian, bool relative,
-                    int noiseK, const Bar &bar, int from, int to) {
+                    int noiseK, Bar &bar, int from, int to) {
 	const std::vector<Index> ks(scales.begin(), scales.end());
 	const size_t S = ks.size();
 	CloudPass c;
@@ -417,7 +443,7 @@ void decide(const std::vector<int> &votes, size_t S, Decision &d) {
 
 // The mesh's projected distances (S, n) at every ring by the kernel's breadth-first search,
 // face-average normals fixed (zero rows: PCA), as _kernels.ring_projected_distances.
-std::vector<double> ringPdis(const Clean &c, const std::vector<int> &scales, bool gaussian, const Bar &bar,
+std::vector<double> ringPdis(const Clean &c, const std::vector<int> &scales, bool gaussian, Bar &bar,
                              int from, int to) {
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
 	std::vector<double> normals(3 * n, 0.0);
@@ -438,7 +464,7 @@ std::vector<double> ringPdis(const Clean &c, const std::vector<int> &scales, boo
 
 // The paper's method (ALGORITHM.md): min-max normalisation with the flat-scale rule,
 // Otsu, candidates at every scale.
-Decision paperMode(const Clean &c, const Options &options, Result &r, const Bar &bar) {
+Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = c.size();
 	const size_t S = r.scales.size();
 	std::vector<double> pdis;
@@ -457,6 +483,7 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, const Bar 
 		}
 	const double dx = hi[0] - lo[0], dy = hi[1] - lo[1], dz = hi[2] - lo[2];
 	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(dx * dx + dy * dy + dz * dz);
+	bar.report(90, "thresholds");
 	std::vector<int> votes(n, 0);
 	std::vector<double> v(n);
 	r.allFlat = true;
@@ -487,7 +514,7 @@ inline double relative(double x, double l) { return l > 0.0 ? std::min(x / l, 1.
 // grown with the noise, then the pass at the final scales; relative distances and score
 // from the kernel (RelativeRule.from_pass); support and thinning on the candidates' kNN
 // rows (_candidate_lists).
-Decision robustCloud(const Clean &c, const Options &options, Result &r, const Bar &bar) {
+Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar) {
 	Decision d;
 	d.toClean.resize(c.size());
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
@@ -527,6 +554,7 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, const Ba
 			                 std::to_string(r.scales.back()) + " points, got " + std::to_string(n));
 		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85);
 	}
+	bar.report(85, "thresholds");
 	const size_t S = r.scales.size();
 	std::vector<int> votes(n, 0);
 	for (size_t s = 0; s < S; ++s) {
@@ -562,7 +590,7 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, const Ba
 // Robust mode on a mesh: pdis from the kernel's rings, the local scales over the rings in
 // the Python package's sparse order (RelativeRule.__call__ with local_scale), support and
 // thinning over the 2-ring, and the vertices of the mesh's sharp edges (creases.py).
-Decision robustMesh(const Clean &c, const Options &options, Result &r, const Bar &bar) {
+Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = c.size();
 	const size_t S = r.scales.size();
 	const int top = r.scales.back();
@@ -605,6 +633,7 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, const Bar
 		}
 		return 0;
 	}, bar, 45, 85, "local scales");
+	bar.report(85, "thresholds");
 	std::vector<int> votes(n, 0);
 	std::vector<double> v(n), score(n, 0.0);
 	for (size_t s = 0; s < S; ++s) {
@@ -692,6 +721,8 @@ std::string formatScales(const std::vector<int> &scales) {
 
 Result detect(const std::vector<Point> &vertices, const std::vector<std::array<int, 3>> &faces,
               const Options &options, Progress progress) {
+	Bar bar(progress);
+	bar.report(0, "cleaning");
 	const Index nIn = Index(vertices.size());
 	if (nIn == 0) throw InputError("the layer has no vertices");
 	std::vector<double> xyz(3 * nIn);
@@ -723,10 +754,11 @@ Result detect(const std::vector<Point> &vertices, const std::vector<std::array<i
 	}
 	r.nClean = long(c.size());
 
-	const Bar bar(progress);
 	const Decision d = !options.robust ? paperMode(c, options, r, bar)
 	                   : r.mesh        ? robustMesh(c, options, r, bar)
 	                                   : robustCloud(c, options, r, bar);
+
+	r.timings = bar.times();
 
 	// Back to the input's order.
 	std::vector<Index> processed(c.size(), -1);

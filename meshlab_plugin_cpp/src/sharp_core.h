@@ -13,6 +13,7 @@
 #include <array>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace sharp {
@@ -38,6 +39,7 @@ struct Result {
 	long nClean = 0;
 	long nFeatures = 0;
 	bool allFlat = false;              // every scale flat: all points on one plane
+	std::vector<std::pair<std::string, double>> timings;  // seconds per stage, in order
 };
 
 // Bad input: the message is meant for the user.
