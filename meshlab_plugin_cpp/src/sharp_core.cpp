@@ -71,11 +71,13 @@ private:
 	std::vector<std::pair<std::string, double>> times_;
 };
 
+// Threads of a run: one per core.
+unsigned workers() { return std::max(1u, std::thread::hardware_concurrency()); }
+
 // task(worker, begin, end) -> kernel status, over [0, n) in chunks of MS_CHUNK on every
 // core (as _kernels._run_chunks); worker < workers() names the thread (its scratch). The
 // calling thread works too and moves the bar from `from` to `to` as chunks finish.
-unsigned workers() { return std::max(1u, std::thread::hardware_concurrency()); }
-
+// Throws std::bad_alloc when a task ran out of memory.
 template <class Task>
 void chunks(Index n, Task task, Bar &bar, int from, int to, const char *stage) {
 	const Index count = (n + MS_CHUNK - 1) / MS_CHUNK;
@@ -83,7 +85,12 @@ void chunks(Index n, Task task, Bar &bar, int from, int to, const char *stage) {
 	std::atomic<int> status{0};
 	auto work = [&](unsigned w, bool report) {
 		for (Index c; (c = next++) < count;) {
-			if (const int rc = task(w, c * MS_CHUNK, std::min(n, (c + 1) * MS_CHUNK))) status = rc;
+			int rc = -1;
+			try {  // an exception must not leave a thread
+				rc = task(w, c * MS_CHUNK, std::min(n, (c + 1) * MS_CHUNK));
+			} catch (const std::bad_alloc &) {
+			}
+			if (rc != 0) status = rc;
 			const Index finished = ++done;
 			if (report) bar.report(from + int((to - from) * finished / count), stage);
 		}
