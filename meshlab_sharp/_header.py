@@ -52,22 +52,23 @@ def parse(text: str) -> dict[str, int | float | tuple[int, ...]]:
 CONSTANTS = parse(HEADER.read_text())
 
 
+def _typed(name: str, kind: type) -> int | float | tuple[int, ...]:
+    value = CONSTANTS[name]
+    if type(value) is not kind:
+        raise TypeError(f"{HEADER.name}: MS_{name} is {value!r}, not {kind.__name__}")
+    return value
+
+
 def integer(name: str) -> int:
     """The integer constant ``MS_<name>``."""
-    value = CONSTANTS[name]
-    assert type(value) is int, name
-    return value
+    return int(_typed(name, int))  # type: ignore[arg-type]
 
 
 def real(name: str) -> float:
     """The floating-point constant ``MS_<name>``."""
-    value = CONSTANTS[name]
-    assert isinstance(value, float), name
-    return value
+    return float(_typed(name, float))  # type: ignore[arg-type]
 
 
 def integers(name: str) -> tuple[int, ...]:
     """The integer list ``MS_<name>``."""
-    value = CONSTANTS[name]
-    assert isinstance(value, tuple), name
-    return value
+    return tuple(_typed(name, tuple))  # type: ignore[arg-type]

@@ -215,3 +215,5 @@ def test_the_header_parser_reads_only_its_forms():
     }
     with pytest.raises(ValueError, match="unsupported constant"):
         _header.parse("#define MS_A sqrt(2.0)\n")
+    with pytest.raises(TypeError, match="MS_BINS is 256, not float"):
+        _header.real("BINS")
