@@ -217,3 +217,26 @@ def test_the_header_parser_reads_only_its_forms():
         _header.parse("#define MS_A sqrt(2.0)\n")
     with pytest.raises(TypeError, match="MS_BINS is 256, not float"):
         _header.real("BINS")
+
+
+def test_the_ctypes_signatures_are_the_headers():
+    """Every function Python binds is declared in _ckernels.h with the argument and
+    return types its ctypes signature gives (one ABI for both faces)."""
+    import ctypes
+
+    from meshlab_sharp._kernels import _SIGNATURES
+
+    text = re.sub(r"/\*.*?\*/", "", _header.HEADER.read_text(), flags=re.DOTALL)
+    declared = {
+        name: (ret, [a.strip() for a in args.split(",")])
+        for ret, name, args in re.findall(r"(\w+) (ms_\w+)\(([^)]*)\);", text)
+    }
+    ctype = {"int": ctypes.c_int, "int64_t": ctypes.c_int64, "double": ctypes.c_double}
+    for name, (restype, argtypes) in _SIGNATURES.items():
+        ret, args = declared[name]
+        assert restype is (None if ret == "void" else ctype[ret]), name
+        assert len(args) == len(argtypes), name
+        for arg, given in zip(args, argtypes, strict=True):
+            base = arg.rsplit(" ", 1)[0].replace("const ", "")
+            expected = ctypes.c_void_p if "*" in arg else ctype[base]
+            assert given is expected, (name, arg)
