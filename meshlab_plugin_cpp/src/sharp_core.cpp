@@ -18,6 +18,10 @@
 #include <sstream>
 #include <thread>
 
+#ifdef __linux__
+#include <sched.h>
+#endif
+
 namespace sharp {
 namespace {
 
@@ -71,8 +75,14 @@ private:
 	std::vector<std::pair<std::string, double>> times_;
 };
 
-// Threads of a run: one per core.
-unsigned workers() { return std::max(1u, std::thread::hardware_concurrency()); }
+// Threads of a run: one per core this process may use (as _kernels._workers).
+unsigned workers() {
+#ifdef __linux__
+	cpu_set_t set;
+	if (sched_getaffinity(0, sizeof set, &set) == 0) return unsigned(std::max(1, CPU_COUNT(&set)));
+#endif
+	return std::max(1u, std::thread::hardware_concurrency());
+}
 
 // task(worker, begin, end) -> kernel status, over [0, n) in chunks of MS_CHUNK on every
 // core (as _kernels._run_chunks); worker < workers() names the thread (its scratch). The
