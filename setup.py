@@ -17,6 +17,7 @@ setup(
         Extension(
             "meshlab_sharp._ckernels",
             sources=["meshlab_sharp/_ckernels.c"],
+            depends=["meshlab_sharp/_ckernels.h"],
             # No fused multiply-add and no fast-math: products and sums rounded as numpy
             # rounds them (docs/implementation-notes.md).
             extra_compile_args=["-O3", "-ffp-contract=off", "-fno-math-errno", "-std=c99"],

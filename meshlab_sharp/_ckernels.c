@@ -1,12 +1,16 @@
 /* Compiled kernels of meshlab-sharp: kd-tree kNN, k-rings, weighted PCA normals and
  * projected distances, face-average normals, duplicate merging.
  *
- * A plain C library loaded with ctypes (meshlab_sharp/_kernels.py): no Python headers
- * are needed to build it, and ctypes releases the GIL during a call, so Python threads
- * run chunks of points on every core. Built by setuptools (setup.py) with
+ * A plain C library, its ABI and the method's constants declared in _ckernels.h: loaded
+ * with ctypes by the Python package (meshlab_sharp/_kernels.py; no Python headers are
+ * needed to build it, and ctypes releases the GIL during a call, so Python threads run
+ * chunks of points on every core) and compiled into the MeshLab plugin
+ * (meshlab_plugin_cpp/src/sharp_core.cpp, std::thread over the same chunks). Built by setuptools (setup.py) with
  * -ffp-contract=off: no fused multiply-add, every product and sum rounded as numpy
  * rounds it, in the order docs/implementation-notes.md pins down.
  */
+#include "_ckernels.h"
+
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -643,32 +647,7 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  * the previous leaf (radius x 1.25). */
 #define BLOCK_GROW 1.5625
 
-/* What one pass over the points writes (each pointer may be NULL), per cleaned index
- * oi = orig[i], s the scale's position in ks:
- *   pdis[s * n + oi]          projected distance; normals[(s * n + oi) * 3] its normal;
- *   idx[oi * kmax + j]        the neighbour indices (kNN table);
- *   relative[s * n + oi]      robust mode's relative distance r = min(pdis / l, 1) (0
- *                             if l = 0; l = robust.local_scale in numpy's summation
- *                             order), and score[oi] its ranking: the sum over the scales
- *                             in order of min(o / l, 1) / nscales (RelativeRule's);
- *   noise[oi]                 robust.noise_scale_factor's ratio over the noise_k nearest;
- *   sheet_gap > 0             robust.sheet_mask (sheet_gap, sheet_min, sheet_own) first (normal: the weighted PCA normal
- *                             of the kmax nearest): every scale's neighbourhood, and the
- *                             noise's, is then the kept points among its neighbours;
- *   near[oi]                  the nearest other point (column 1 of the kNN table);
- *   kth_d2[oi], kth_idx[oi]   squared distance and index of the kmax-th neighbour. */
-typedef struct {
-    double *pdis, *normals;
-    int64_t *idx;
-    double *relative, *score, *noise;
-    int64_t noise_k;
-    int64_t *near;
-    double *kth_d2;
-    int64_t *kth_idx;
-    double sheet_gap;
-    int64_t sheet_min;
-    double sheet_own;
-} cloud_out_t;
+/* cloud_out_t: what one pass over the points writes (_ckernels.h). */
 
 /* kNN of tree positions [begin, end) at k = max(ks), then what out asks for (see
  * cloud_out_t). Returns 0, or -1 out of memory.
@@ -1223,4 +1202,10 @@ int64_t ms_two_face_edges(const int64_t *faces, int64_t m, int64_t n, const doub
     free(ptr);
     free(item);
     return e;
+}
+
+/* segment_sum, for callers outside this file (the plugin's line directions sum as numpy's
+ * add.reduceat does). */
+double ms_segment_sum(const double *a, int64_t n, int64_t stride) {
+    return segment_sum(a, n, stride);
 }

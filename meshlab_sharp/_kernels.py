@@ -23,14 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
+from . import _header
 from .errors import InputError
 
 #: Backends: "compiled" (the C kernels) and "numpy" (the reference implementation).
 BACKENDS: tuple[str, ...] = ("compiled", "numpy")
 #: Points per task handed to a thread.
-CHUNK = 8192
+CHUNK = _header.integer("CHUNK")
 #: Most points in a leaf of the kd-tree.
-KD_LEAF = 16
+KD_LEAF = _header.integer("KD_LEAF")
 
 _c_void_p, _i64, _f64, _int = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
 _SIGNATURES = {

@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from . import _kernels
+from . import _header, _kernels
 
 __all__ = [
     "CREASE_ANGLE",
@@ -32,7 +32,7 @@ __all__ = [
 
 #: Degrees: the smallest turn of the surface that counts as a sharp edge (the ground
 #: truth's crease angle, ``meshlab_sharp.parts.CREASE_ANGLE``).
-CREASE_ANGLE = 20.0
+CREASE_ANGLE = _header.real("CREASE_ANGLE")
 #: On a noisy mesh the dihedral angles of flat regions are close to half-normal
 #: (measured: median / lower quartile = 2.1, half-normal 2.11): their lower quartile is
 #: ``0.3186 sigma`` (``Phi^-1(0.625)``), and 4 sigma (one false alarm per 16,000 edges)
@@ -40,7 +40,7 @@ CREASE_ANGLE = 20.0
 #: ``NOISE_FACTOR * lower quartile`` as well as by more than ``CREASE_ANGLE``. The
 #: quartile, not the median: on a small CAD mesh (a box: 24 edges) half the edges can
 #: be creases, a quarter cannot (the triangulation's diagonals turn by 0).
-NOISE_FACTOR = 4.0 / 0.3186
+NOISE_FACTOR = _header.real("NOISE_FACTOR")
 
 
 def dihedral_angles(

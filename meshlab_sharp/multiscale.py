@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import _kernels
+from . import _header, _kernels
 from .neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods
 from .normals import Weighting
 from .projected_distance import projected_distances
@@ -18,9 +18,9 @@ if TYPE_CHECKING:
     from .robust import SheetNeighbourhoods
 
 #: Default scales of a point cloud: k nearest neighbours.
-DEFAULT_KNN_SCALES: tuple[int, ...] = (12, 16, 20, 24, 28, 32, 36, 40)
+DEFAULT_KNN_SCALES: tuple[int, ...] = _header.integers("DEFAULT_KNN_SCALES")
 #: Default scales of a mesh: k-rings.
-DEFAULT_RING_SCALES: tuple[int, ...] = (1, 2, 3, 4)
+DEFAULT_RING_SCALES: tuple[int, ...] = _header.integers("DEFAULT_RING_SCALES")
 
 
 @dataclass

@@ -23,14 +23,14 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from . import _kernels
+from . import _header, _kernels
 from .errors import InputError
 
 #: Rows per block of kNN queries (bounds the temporary memory).
 QUERY_BLOCK = 131072
 #: Coordinates up to 2**UNIT_RANGE in absolute value, and at least 2**-UNIT_RANGE for
 #: the largest, are used as they are; others are scaled (:func:`unit_scale`).
-UNIT_RANGE = 100
+UNIT_RANGE = _header.integer("UNIT_RANGE")
 
 
 @dataclass(frozen=True)

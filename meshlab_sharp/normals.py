@@ -9,14 +9,14 @@ from typing import Literal
 
 import numpy as np
 
-from . import _kernels
+from . import _header, _kernels
 from .neighbourhoods import squared_distances
 
 Weighting = Literal["gaussian", "none"]
 WEIGHTINGS: tuple[str, ...] = ("gaussian", "none")
 
 #: A vertex whose summed face normals are shorter than this is treated as a point.
-ZERO_NORMAL = 1e-12
+ZERO_NORMAL = _header.real("ZERO_NORMAL")
 
 
 def face_average_normals(

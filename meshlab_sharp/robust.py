@@ -53,7 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from . import _kernels
+from . import _header, _kernels
 from .creases import CREASE_ANGLE, sharp_vertices
 from .neighbourhoods import (
     KnnNeighbourhoods,
@@ -104,36 +104,36 @@ __all__ = [
 R_MIN = (2.0 / math.pi) * math.sin(math.radians(CREASE_ANGLE / 2.0))
 #: Thinning compares a point with candidate neighbours whose offset makes more than
 #: 60 degrees with the line direction: ``|d . e| < THIN_CONE_COS * |d|``.
-THIN_CONE_COS = 0.5
+THIN_CONE_COS = _header.real("THIN_CONE_COS")
 #: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
 #: about 1.9 spacings: across the band of candidates (1.3-1.5 spacings) and the points
 #: that noise lifts beside it, mostly short of a second line 2-3 spacings away, such as
 #: the other rim of a thin wall) ...
-THIN_KNN = 12
+THIN_KNN = _header.integer("THIN_KNN")
 #: ... or the 2-ring (meshes; about 19 vertices on a regular mesh). The 2-ring is also
 #: the support neighbourhood on meshes.
-THIN_RING = 2
+THIN_RING = _header.integer("THIN_RING")
 #: Support: a feature needs at least SUPPORT_MIN other features among its SUPPORT_KNN
 #: nearest points (clouds), the neighbourhood that thinning used to compare with: a
 #: line one point wide has two neighbours along it within 16 points, a point lifted
 #: alone by noise has none.
-SUPPORT_KNN = 16
-SUPPORT_MIN = 2
+SUPPORT_KNN = _header.integer("SUPPORT_KNN")
+SUPPORT_MIN = _header.integer("SUPPORT_MIN")
 #: The plane of the noise estimate: the point and its 6 nearest (the 1-ring of a
 #: regular triangulation of the samples); the smallest scale (12) takes in the other
 #: sheet of a wall 2 spacings thick and reads it as noise.
-NOISE_KNN = 7
+NOISE_KNN = _header.integer("NOISE_KNN")
 #: Noise the default scales tolerate, as the median of ``|d . n| / |d|`` between nearest
 #: neighbours (``d``) across the plane (normal ``n``) of the ``NOISE_KNN`` nearest.
 #: Measured on Poisson-disk samples: 0 clean, 0.20 with normal noise of 25 % of the
 #: spacing, 0.30 at 50 %, 0.01-0.02 on walls 2-3 spacings thick, 0.03 at most on the
 #: smooth controls, 0.08-0.13 on the simulated scans. Above it the scales grow as the
 #: square of the ratio (the noise of ``r`` at scale k goes as ``sigma / sqrt(k)``).
-NOISE_TOLERATED = 0.15
+NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
 #: The scales grow at most 3-fold (``k_max`` 120 with the default scales: the kNN table
 #: of a million points stays below 0.5 GB); measured at 50 % noise, quick size: x2 0.64,
 #: x3 0.66.
-NOISE_MAX_FACTOR = 3.0
+NOISE_MAX_FACTOR = _header.real("NOISE_MAX_FACTOR")
 #: Sheet filter: along the normal ``n`` of its ``k_max`` nearest (the weighted PCA
 #: normal, which sees the two sheets of a thin wall as one plane), a point's neighbours
 #: ``j`` have heights ``h_j = (p_j - p_i) . n``; its own sheet is the run of sorted
@@ -144,18 +144,18 @@ NOISE_MAX_FACTOR = 3.0
 #: Measured (quick size, thin1 / thin2 / thin3 F1): 0.25: 0.61 / 0.60 / 0.88, 0.35:
 #: 0.71 / 0.65 / 0.88, 0.4: 0.70 / 0.69 / 0.88, 0.5: 0.62 / 0.70 / 0.88, 0.7: 0.59 /
 #: 0.64 / 0.88 (docs/robust-mode.md).
-SHEET_GAP = 0.4
+SHEET_GAP = _header.real("SHEET_GAP")
 #: ... and the points beyond the gaps are left out only when they are at least
 #: SHEET_MIN: another sheet, not the sparse points of a face seen at a grazing angle (a
 #: scan) or the tail of the noise.
-SHEET_MIN = 6
+SHEET_MIN = _header.integer("SHEET_MIN")
 #: ... and only when the kept points are at least SHEET_OWN times as many as those
 #: left out: at an edge or a corner every neighbour lies to one side of the point, and
 #: on a regular grid the face turning away comes in rows (a row of the 40 nearest
 #: beyond the first gap leaves 1-7 kept against 33-39 left out; a wall 1 spacing thick
 #: holds about as many points on either sheet). Measured (quick size, thin1): 1.0:
 #: 0.55, 0.5 / 0.33: 0.70; 0.2 loses two thirds of a regular grid cube's edges.
-SHEET_OWN = 0.5
+SHEET_OWN = _header.real("SHEET_OWN")
 
 
 def isolated_points(indices: np.ndarray) -> np.ndarray:

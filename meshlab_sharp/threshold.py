@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _header
+
 #: Histogram bins, ALGORITHM.md's B.
-BINS = 256
+BINS = _header.integer("BINS")
 #: A scale whose projected distances span at most this fraction of the bounding-box
 #: diagonal is flat (round-off only): no point is a candidate there.
-FLAT_TOLERANCE = 1e-6
+FLAT_TOLERANCE = _header.real("FLAT_TOLERANCE")
 
 
 def normalise(pdis: np.ndarray, *, flat_span: float = 0.0) -> np.ndarray:

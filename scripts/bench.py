@@ -20,6 +20,14 @@ every thread: steadier than wall time on a shared machine). The stages are paper
     python3 scripts/bench.py --sizes 100k,1M --repeat 3 --json out/bench.json
     python3 scripts/bench.py --sizes 1M --kind mesh --backend numpy
     python3 scripts/bench.py --sizes 1M --kind points --mode both --repeat 2
+
+``--compare`` runs one size side by side instead (issue 13): the CLI and the MeshLab
+plugin under meshlabserver on the same float PLY, in both modes, with the plugin/CLI
+ratio; ``detect`` on the same points in memory against pgeof's kNN (k = 40) plus its
+multiscale features at the same 8 scales (``pip install 'meshlab-sharp[bench]'``),
+with the ratio; and the compiled kernels' pieces of the cloud path timed alone:
+
+    python3 scripts/bench.py --compare --sizes 1M --repeat 2 --json out/compare.json
 """
 
 from __future__ import annotations
@@ -27,11 +35,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import resource
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -377,6 +388,271 @@ def bench_tiled(sizes: list[int], modes: list[str], hows: list[str], out_json: s
     return 0
 
 
+# ------------------------------------------- side by side: CLI, MeshLab plugin, pgeof
+
+
+def write_float_ply(path: Path, points: np.ndarray) -> None:
+    """A binary PLY of float x, y, z: what MeshLab and the CLI both read."""
+    header = (
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(points)}\n"
+        "property float x\nproperty float y\nproperty float z\nend_header\n"
+    )
+    path.write_bytes(header.encode("ascii") + np.ascontiguousarray(points, "<f4").tobytes())
+
+
+@contextmanager
+def xvfb_display() -> Iterator[dict[str, str]]:
+    """One Xvfb server for every meshlabserver run (which needs an X display even for a
+    filter without GL), so that no run pays its start: the environment to run them in."""
+    display = next(d for d in range(90, 400) if not Path(f"/tmp/.X{d}-lock").exists())
+    command = ["Xvfb", f":{display}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 20
+        while not Path(f"/tmp/.X11-unix/X{display}").exists():
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise RuntimeError("Xvfb did not start")
+            time.sleep(0.1)
+        yield dict(os.environ, DISPLAY=f":{display}")
+    finally:
+        proc.terminate()
+        proc.wait()
+
+
+def _timed_run(command: list[str], env: dict[str, str] | None = None) -> tuple[float, str]:
+    """Wall seconds of a command and its output; raises when it fails."""
+    t = time.perf_counter()
+    proc = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
+    seconds = time.perf_counter() - t
+    if proc.returncode != 0:
+        raise RuntimeError(f"{command[0]} failed:\n{proc.stdout}\n{proc.stderr}")
+    return seconds, proc.stdout + proc.stderr
+
+
+def time_cli(path: Path, work: Path, mode: str, repeat: int) -> dict:
+    """``meshlab-sharp detect`` on the PLY, end to end (interpreter start included); the
+    stages of the best run from its --report."""
+    best: dict = {"wall_s": float("inf")}
+    for _ in range(repeat):
+        report = work / "cli_report.json"
+        command = [sys.executable, "-m", "meshlab_sharp", "detect", str(path), "-q", "--force"]
+        command += ["-o", str(work / "cli_out.ply"), "--mode", mode, "--report", str(report)]
+        seconds, _ = _timed_run(command, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+        if seconds < best["wall_s"]:
+            summary = json.loads(report.read_text())
+            best = {"wall_s": seconds, "stages_s": summary["timings_s"]}
+            best["features"] = summary["n_features"]
+    return best
+
+
+def time_plugin(root: Path, path: Path, work: Path, mode: str, repeat: int, env: dict) -> dict:
+    """The filter under the private MeshLab ``root``'s meshlabserver on the PLY, end to
+    end (load, filter, save of quality, flags and colour), and meshlabserver loading and
+    saving the same file without the filter; the filter's own time from its log."""
+    script = (ROOT / "meshlab_plugin_cpp" / "examples" / "sharp_features_default.mlx").read_text()
+    value = "0" if mode == "paper" else "1"
+    script = re.sub(r'value="[^"]*" name="mode"', f'value="{value}" name="mode"', script)
+    mlx = work / f"{mode}.mlx"
+    mlx.write_text(script)
+
+    def server(out: str, *script: str) -> list[str]:
+        command = [str(root / "bin" / "meshlabserver"), "-i", str(path), "-o", str(work / out)]
+        return [*command, "-m", "vq", "vf", "vc", *script]
+
+    best: dict = {"wall_s": float("inf")}
+    for _ in range(repeat):
+        seconds, log = _timed_run(server("ml_out.ply", "-s", str(mlx)), env)
+        if seconds < best["wall_s"]:
+            took = re.search(r"detection took ([0-9.]+) s", log)
+            count = re.search(r"(\d+) of \d+ vertices are features", log)
+            best = {"wall_s": seconds, "filter_s": float(took.group(1)) if took else None}
+            best["features"] = int(count.group(1)) if count else None
+            stages = re.search(r"detection took [0-9.]+ s \(([^)]*)\)", log)
+            best["stages_s"] = (
+                {
+                    name: float(seconds)
+                    for name, seconds in re.findall(r"([a-z -]+) ([0-9.]+) s", stages.group(1))
+                }
+                if stages
+                else {}
+            )
+            # meshlabserver prints each new progress message of the filter
+            best["progress"] = [int(p) for p in re.findall(r"Sharp features: [a-z -]+ (\d+)%", log)]
+    best["load_save_only_s"] = min(_timed_run(server("ml_io.ply"), env)[0] for _ in range(repeat))
+    return best
+
+
+def time_pgeof(points: np.ndarray, scales: tuple[int, ...], repeat: int) -> dict | None:
+    """pgeof (PyPI, the ``bench`` extra): its kNN at k = max(scales) and its multiscale
+    features at every scale on the same points; None when it is not installed."""
+    try:
+        import pgeof
+    except ImportError:
+        return None
+    xyz = np.ascontiguousarray(points, np.float32)
+    k = max(scales)
+    best = {"knn_s": float("inf"), "features_s": float("inf")}
+    for _ in range(repeat):
+        t = time.perf_counter()
+        nn, _ = pgeof.knn_search(xyz, xyz, k)
+        knn_s = time.perf_counter() - t
+        ptr = np.arange(len(xyz) + 1, dtype=np.uint32) * k
+        t = time.perf_counter()
+        pgeof.compute_features_multiscale(xyz, nn.reshape(-1), ptr, list(scales))
+        best["knn_s"] = min(best["knn_s"], knn_s)
+        best["features_s"] = min(best["features_s"], time.perf_counter() - t)
+        del nn
+    best["total_s"] = best["knn_s"] + best["features_s"]
+    return best
+
+
+def profile_detect(points: np.ndarray, modes: tuple[str, ...], repeat: int) -> dict:
+    """``detect`` on the in-memory points per mode (best of ``repeat`` after a warm-up),
+    its stage timings, and the compiled kernels' pieces of the cloud path timed alone."""
+    from meshlab_sharp import _kernels
+    from meshlab_sharp.multiscale import DEFAULT_KNN_SCALES
+    from meshlab_sharp.pipeline import detect
+    from meshlab_sharp.robust import NOISE_KNN
+
+    out: dict = {"detect": {}}
+    detect(points[:20000])  # warm-up: library, thread pool
+    for mode in modes:
+        best: dict = {"wall_s": float("inf")}
+        for _ in range(repeat):
+            t = time.perf_counter()
+            result = detect(points, mode=mode)
+            seconds = time.perf_counter() - t
+            if seconds < best["wall_s"]:
+                best = {"wall_s": seconds, "stages_s": dict(result.timings)}
+        out["detect"][mode] = best
+    pieces: dict[str, list[float]] = {}
+
+    def timed(name, fn):
+        t = time.perf_counter()
+        value = fn()
+        pieces.setdefault(name, []).append(time.perf_counter() - t)
+        return value
+
+    for _ in range(repeat):
+        tree = timed("kd-tree build", lambda: _kernels.build_tree(points))
+        timed("kNN k=40 alone", lambda tree=tree: _kernels.cloud_knn(tree, 40))
+        timed(
+            "kNN + 8 scales PCA + pdis (paper pass)",
+            lambda tree=tree: _kernels.cloud_projected_distances(tree, DEFAULT_KNN_SCALES),
+        )
+        timed(
+            "same + local scales, noise, isolation stats (robust pass)",
+            lambda tree=tree: _kernels.cloud_projected_distances(
+                tree, DEFAULT_KNN_SCALES, relative=True, noise_k=NOISE_KNN
+            ),
+        )
+    out["kernels_s"] = {k: min(v) for k, v in pieces.items()}
+    return out
+
+
+def bench_compare(n: int, repeat: int, meshlab_root: str | None, out_json: str) -> int:
+    """One run, side by side on the same ``n``-point cloud: the CLI and the MeshLab plugin
+    on one PLY (both modes), this package's detect and pgeof on the same points."""
+    from meshlab_sharp.cli import main as cli_main
+    from meshlab_sharp.multiscale import DEFAULT_KNN_SCALES
+
+    modes = ("paper", "robust")
+    points = cad_cloud(n).astype(np.float32).astype(np.float64)  # what the PLY holds
+    result: dict = {"n": n, "cpus": os.cpu_count(), "load_before": os.getloadavg()[0]}
+    result["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    with tempfile.TemporaryDirectory(prefix="meshlab_sharp_compare_") as tmp:
+        work = Path(tmp)
+        path = work / "cloud.ply"
+        write_float_ply(path, points)
+        root = Path(meshlab_root) if meshlab_root else work / "meshlab"
+        if not meshlab_root:
+            code = cli_main(["plugin", "install", "--root", str(root / "root"), "--no-apt"]
+                            + ["--build-dir", str(root / "build")])  # fmt: skip
+            if code != 0:
+                return code
+            root = root / "root"
+        result["cli"] = {m: time_cli(path, work, m, repeat) for m in modes}
+        with xvfb_display() as env:
+            result["plugin"] = {m: time_plugin(root, path, work, m, repeat, env) for m in modes}
+    result["this"] = profile_detect(points, modes, repeat)
+    result["pgeof"] = time_pgeof(points, DEFAULT_KNN_SCALES, repeat)
+    result["load_after"] = os.getloadavg()[0]
+    _print_compare(result)
+    print(markdown_compare(result))
+    Path(out_json).parent.mkdir(parents=True, exist_ok=True)
+    Path(out_json).write_text(json.dumps(result, indent=1))
+    print(f"wrote {out_json}")
+    return 0
+
+
+def _print_compare(r: dict) -> None:
+    print(f"{r['n']:,d} points, {r['cpus']} CPUs, {r['date']}, load {r['load_before']:.1f}")
+    pg = r["pgeof"]
+    for mode in ("paper", "robust"):
+        cli, plug = r["cli"][mode], r["plugin"][mode]
+        this = r["this"]["detect"][mode]["wall_s"]
+        print(
+            f"  {mode:6s} CLI {cli['wall_s']:.2f} s ({cli['features']} features), plugin "
+            f"{plug['wall_s']:.2f} s (filter {plug['filter_s']:.2f} s, {plug['features']} "
+            f"features; meshlabserver load + save alone {plug['load_save_only_s']:.2f} s): "
+            f"plugin / CLI {plug['wall_s'] / cli['wall_s']:.2f}; "
+            f"{len(plug['progress'])} progress updates"
+        )
+        line = f"         detect in memory {this:.2f} s"
+        if pg is not None:
+            line += (
+                f", pgeof kNN + features {pg['total_s']:.2f} s: ratio {this / pg['total_s']:.2f}"
+            )
+        print(line)
+    if pg is not None:
+        print(f"  pgeof: kNN k=40 {pg['knn_s']:.2f} s, 8-scale features {pg['features_s']:.2f} s")
+    for name, seconds in r["this"]["kernels_s"].items():
+        print(f"  kernel: {name} {seconds:.2f} s")
+
+
+def markdown_compare(r: dict) -> str:
+    """The side-by-side run as the tables of docs/benchmark.md."""
+    pg = r["pgeof"]
+    rows = [
+        ("CLI `meshlab-sharp detect` on the PLY, end to end", lambda m: r["cli"][m]["wall_s"]),
+        ("plugin under meshlabserver on the PLY, end to end", lambda m: r["plugin"][m]["wall_s"]),
+        ("**plugin / CLI**", lambda m: r["plugin"][m]["wall_s"] / r["cli"][m]["wall_s"]),
+        ("  the filter alone (its log)", lambda m: r["plugin"][m]["filter_s"]),
+        ("  meshlabserver load + save alone", lambda m: r["plugin"][m]["load_save_only_s"]),
+        ("`detect` on the points in memory", lambda m: r["this"]["detect"][m]["wall_s"]),
+    ]
+    if pg is not None:
+        rows.append(("pgeof kNN k=40 + 8-scale features", lambda m: pg["total_s"]))
+        rows.append(
+            ("**detect / pgeof**", lambda m: r["this"]["detect"][m]["wall_s"] / pg["total_s"])
+        )
+    lines = ["| 1M-point cloud | paper | robust (default) |", "|---|---:|---:|"]
+    for name, value in rows:
+        ratio = name.startswith("**")
+        cells = [f"{value(m):.2f}" if ratio else f"{value(m):.2f} s" for m in ("paper", "robust")]
+        lines.append(f"| {name} | {cells[0]} | {cells[1]} |")
+    features = [
+        f"{r['cli'][m]['features']} / {r['plugin'][m]['features']}" for m in ("paper", "robust")
+    ]
+    lines.append(f"| features: CLI / plugin | {features[0]} | {features[1]} |")
+    lines += ["", "| stage (`detect` in memory) | paper | robust |", "|---|---:|---:|"]
+    stages = r["this"]["detect"]
+    for stage in stages["paper"]["stages_s"]:
+        cells = [f"{stages[m]['stages_s'].get(stage, 0.0):.2f} s" for m in ("paper", "robust")]
+        lines.append(f"| {stage} | {cells[0]} | {cells[1]} |")
+    lines += ["", "| stage (the plugin's filter, its log) | paper | robust |", "|---|---:|---:|"]
+    plugin = {m: r["plugin"][m]["stages_s"] for m in ("paper", "robust")}
+    for stage in dict.fromkeys([*plugin["paper"], *plugin["robust"]]):
+        cells = [f"{plugin[m][stage]:.2f} s" if stage in plugin[m] else "" for m in plugin]
+        lines.append(f"| {stage.strip()} | {cells[0]} | {cells[1]} |")
+    lines += ["", "| compiled kernel, alone | time |", "|---|---:|"]
+    lines += [f"| {name} | {seconds:.2f} s |" for name, seconds in r["this"]["kernels_s"].items()]
+    if pg is not None:
+        lines.append(f"| pgeof kNN k=40 | {pg['knn_s']:.2f} s |")
+        lines.append(f"| pgeof 8-scale features | {pg['features_s']:.2f} s |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", default="100k,1M", help="comma-separated, e.g. 100k,1M,5M,20M")
@@ -394,7 +670,22 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--modes", default="paper,robust", help="modes of the --tiled runs")
     ap.add_argument("--tiled-one", nargs=4, help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--compare",
+        action="store_true",
+        help="side by side on the first size instead: the CLI and the MeshLab plugin on one "
+        "PLY, detect and pgeof (if installed) on the same points",
+    )
+    ap.add_argument(
+        "--meshlab-root",
+        help="private MeshLab root with the plugin (meshlab-sharp plugin install --root); "
+        "default: build one for the run",
+    )
     args = ap.parse_args(argv)
+
+    if args.compare:
+        size = parse_size(args.sizes.split(",")[0])
+        return bench_compare(size, args.repeat, args.meshlab_root, args.json)
 
     if args.tiled_one:
         path, mode, how, out = args.tiled_one

@@ -151,6 +151,19 @@ def test_flat_square_has_no_features(meshlab_root, tmp_path, mode):
     assert not quality.any()
 
 
+def test_the_progress_bar_moves(meshlab_root, tmp_path):
+    """MeshLab's progress callback is called as chunks of points finish, from the filter's
+    thread, never backwards: meshlabserver prints each new message ("Sharp features:
+    neighbours and projected distances 45%"), the GUI moves its bar."""
+    src = write_ply(tmp_path / "box.ply", shapes.random_box_points(100000, seed=2), binary=True)
+    code, log = run_meshlabserver(meshlab_root, src, tmp_path / "out.ply")
+    assert code == 0, log
+    percents = [int(p) for p in re.findall(r"Sharp features: [a-z -]+ (\d+)%", log)]
+    assert percents == sorted(percents), percents
+    assert percents[-1] == 100 and len(set(percents)) >= 8, percents
+    assert re.search(r"Sharp features: detection took [0-9.]+ s", log)
+
+
 def _condition(part: str, condition: str, n_points: int):
     sample = groundtruth.make_condition(part, condition, n_points=n_points)
     return sample.vertices, sample.faces

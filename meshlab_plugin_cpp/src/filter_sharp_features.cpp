@@ -9,6 +9,8 @@
 #include <vcg/complex/algorithms/update/bounding.h>
 #include <vcg/complex/algorithms/update/selection.h>
 
+#include <chrono>
+
 namespace {
 const char *NAME = "Select Sharp Features (Projected Distance)";
 const char *CURVES_NAME = "Extract Sharp Feature Curves";
@@ -119,10 +121,13 @@ int FilterSharpFeaturesPlugin::postCondition(QAction *a) const
 
 void FilterSharpFeaturesPlugin::initParameterSet(QAction *a, MeshModel &, RichParameterList &par)
 {
-	par.addParam(RichString("knnScales", "12 16 20 24 28 32 36 40", "Point-cloud scales (k)",
+	const sharp::Options defaults;
+	par.addParam(RichString("knnScales", QString::fromStdString(sharp::formatScales(defaults.knnScales)),
+	                        "Point-cloud scales (k)",
 	                        "Neighbourhood sizes k (k nearest neighbours, the point included) used "
 	                        "on point clouds: a list like '12 16 20' or a range 'start:stop:step'."));
-	par.addParam(RichString("ringScales", "1 2 3 4", "Mesh scales (rings)",
+	par.addParam(RichString("ringScales", QString::fromStdString(sharp::formatScales(defaults.ringScales)),
+	                        "Mesh scales (rings)",
 	                        "k-ring sizes used on meshes: a list like '1 2 3 4' or a range '1:4'."));
 	par.addParam(RichEnum("weighting", 0, QStringList() << "Gaussian" << "None", "Normal weighting",
 	                      "Weights of the PCA normals: Gaussian exp(-d^2/h^2), h the farthest "
@@ -195,6 +200,7 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 	}
 
 	sharp::Result r;
+	const auto start = std::chrono::steady_clock::now();
 	try {
 		r = sharp::detect(pts, faces, options, cb);
 	} catch (const sharp::InputError &e) {
@@ -202,6 +208,8 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 	} catch (const std::exception &e) {
 		return fail(QString("internal error: ") + e.what());
 	}
+
+	const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
 	if (ID(action) == FP_SHARP_CURVES) {
 		sharp::Curves c;
@@ -247,6 +255,10 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 	    int(live.size()), qUtf8Printable(scales));
 	if (r.allFlat)
 		Log("Sharp features: no features: all points lie on one plane.");
+	QString stages;
+	for (const auto &t : r.timings)
+		stages += QString("%1%2 %3 s").arg(stages.isEmpty() ? "" : ", ").arg(t.first.c_str()).arg(t.second, 0, 'f', 3);
+	Log("Sharp features: detection took %.3f s (%s)", seconds, qUtf8Printable(stages));
 	return true;
 }
 

@@ -1,167 +1,193 @@
-// See sharp_core.h. Every step mirrors a module of the Python package:
-// cleaning.py, neighbourhoods.py, normals.py, projected_distance.py, threshold.py,
-// multiscale.py; robust mode robust.py and creases.py. docs/implementation-notes.md and
-// docs/robust-mode.md ("The arithmetic, pinned down for the plugin") are the contract.
+// See sharp_core.h. The per-point work is the Python package's compiled kernel
+// (meshlab_sharp/_ckernels.c), called with the same arguments as meshlab_sharp/_kernels.py
+// calls it, in chunks of MS_CHUNK points on every core; what remains here mirrors the
+// Python modules' global steps: cleaning.py (the compiled path), threshold.py,
+// multiscale.py, robust.py (RobustSetup, line_directions, supported, thin) and
+// creases.py. docs/implementation-notes.md and docs/robust-mode.md ("The arithmetic,
+// pinned down for the plugin") are the contract.
 #include "sharp_core.h"
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <memory>
+#include <new>
 #include <numeric>
 #include <sstream>
+#include <thread>
 
-#include <Eigen/Dense>
-#include <vcg/space/index/kdtree/kdtree.h>
+#ifdef __linux__
+#include <sched.h>
+#endif
 
 namespace sharp {
 namespace {
 
-// Every constant of the Python package the plugin uses, named once.
-const int BINS = 256;                      // threshold.BINS
-const double FLAT_TOLERANCE = 1e-6;        // threshold.FLAT_TOLERANCE
-const double ZERO_NORMAL = 1e-12;          // normals.ZERO_NORMAL
-// robust.R_MIN: r on a straight edge turning by CREASE_ANGLE, (2 / pi) sin(10 deg).
-const double R_MIN = 0.11054786333836651;
-const double CREASE_ANGLE = 20.0;          // creases.CREASE_ANGLE (degrees)
-const double NOISE_FACTOR = 4.0 / 0.3186;  // creases.NOISE_FACTOR (lower quartiles)
-const int NOISE_KNN = 7;                   // robust.NOISE_KNN
-const double NOISE_TOLERATED = 0.15;       // robust.NOISE_TOLERATED
-const double NOISE_MAX_FACTOR = 3.0;       // robust.NOISE_MAX_FACTOR
-const double THIN_CONE_COS = 0.5;          // robust.THIN_CONE_COS (60 degrees)
-const int THIN_KNN = 12;                   // robust.THIN_KNN
-const int THIN_RING = 2;                   // robust.THIN_RING
-const int SUPPORT_KNN = 16;                // robust.SUPPORT_KNN
-const int SUPPORT_MIN = 2;                 // robust.SUPPORT_MIN
-const long PAIRWISE_BLOCK = 128;           // numpy's PW_BLOCKSIZE (pairwise summation)
+// robust.R_MIN: r on a straight edge turning by CREASE_ANGLE, (2 / pi) sin(CREASE_ANGLE / 2),
+// with math.radians's arithmetic.
+const double R_MIN = (2.0 / M_PI) * std::sin((MS_CREASE_ANGLE / 2.0) * (M_PI / 180.0));
 
-inline double sq(const Point &a, const Point &c) {
-	const double dx = a.x - c.x, dy = a.y - c.y, dz = a.z - c.z;
-	return dx * dx + dy * dy + dz * dz;
+using Index = int64_t;
+
+// Throws std::bad_alloc when a kernel ran out of memory (a non-zero status).
+void check(int status) {
+	if (status != 0) throw std::bad_alloc();
 }
 
-// Multiply every coordinate by one power of two, 2^-e with 2^(e-1) <= max |coordinate| < 2^e,
-// so that the largest is in [0.5, 1). Exact in binary floating point: every distance ratio,
-// normal, threshold and selection is what it was, but squared distances can no longer
-// overflow or underflow, whatever the unit (1e-100 or 1e100), here nor in vcg's kd-tree,
-// which compares squared offsets in float.
-void scaleToUnit(std::vector<Point> &pts) {
+// Progress over the stages of a run, and the time spent in each: reported by the calling
+// thread only. A stage's time runs from its first report to the next stage's.
+class Bar {
+public:
+	using Clock = std::chrono::steady_clock;
+	explicit Bar(Progress cb) : cb_(cb), since_(Clock::now()) {}
+	void report(int percent, const char *stage) {
+		if (stage_ != stage) {
+			close();
+			stage_ = stage;
+		}
+		if (!cb_) return;
+		char text[160];
+		std::snprintf(text, sizeof text, "Sharp features: %s %d%%", stage, percent);
+		cb_(percent, text);
+	}
+	// Seconds per stage in order of first entry (a stage entered twice adds up).
+	std::vector<std::pair<std::string, double>> times() {
+		close();
+		return times_;
+	}
+
+private:
+	void close() {
+		const auto now = Clock::now();
+		if (!stage_.empty()) {
+			const double seconds = std::chrono::duration<double>(now - since_).count();
+			auto it = std::find_if(times_.begin(), times_.end(), [&](const auto &t) { return t.first == stage_; });
+			if (it == times_.end()) times_.emplace_back(stage_, seconds);
+			else it->second += seconds;
+		}
+		since_ = now;
+	}
+	Progress cb_;
+	std::string stage_;
+	Clock::time_point since_;
+	std::vector<std::pair<std::string, double>> times_;
+};
+
+// Threads of a run: one per core this process may use (as _kernels._workers).
+unsigned workers() {
+#ifdef __linux__
+	cpu_set_t set;
+	if (sched_getaffinity(0, sizeof set, &set) == 0) return unsigned(std::max(1, CPU_COUNT(&set)));
+#endif
+	return std::max(1u, std::thread::hardware_concurrency());
+}
+
+// task(worker, begin, end) -> kernel status, over [0, n) in chunks of MS_CHUNK on every
+// core (as _kernels._run_chunks); worker < workers() names the thread (its scratch). The
+// calling thread works too and moves the bar from `from` to `to` as chunks finish.
+// Throws std::bad_alloc when a task ran out of memory.
+template <class Task>
+void chunks(Index n, Task task, Bar &bar, int from, int to, const char *stage) {
+	const Index count = (n + MS_CHUNK - 1) / MS_CHUNK;
+	std::atomic<Index> next{0}, done{0};
+	std::atomic<int> status{0};
+	auto work = [&](unsigned w, bool report) {
+		for (Index c; (c = next++) < count;) {
+			int rc = -1;
+			try {  // an exception must not leave a thread
+				rc = task(w, c * MS_CHUNK, std::min(n, (c + 1) * MS_CHUNK));
+			} catch (const std::bad_alloc &) {
+			}
+			if (rc != 0) status = rc;
+			const Index finished = ++done;
+			if (report) bar.report(from + int((to - from) * finished / count), stage);
+		}
+	};
+	bar.report(from, stage);
+	std::vector<std::thread> pool;
+	const unsigned w = unsigned(std::min<Index>(workers(), std::max<Index>(count, 1)));
+	for (unsigned t = 1; t < w; ++t) pool.emplace_back(work, t, false);
+	work(0, true);
+	for (auto &t : pool) t.join();
+	check(status);
+	bar.report(to, stage);
+}
+
+// neighbourhoods.unit_scale: multiply by 2^-e, 2^(e-1) <= max |coordinate| < 2^e, when e is
+// outside (-MS_UNIT_RANGE, MS_UNIT_RANGE]: exact, and no squared distance can then
+// overflow or underflow whatever the unit.
+void unitScale(std::vector<double> &xyz) {
 	double big = 0.0;
-	for (const Point &p : pts) big = std::max({big, std::fabs(p.x), std::fabs(p.y), std::fabs(p.z)});
-	if (big == 0.0) return;
+	for (double c : xyz) big = std::max(big, std::fabs(c));
 	int e = 0;
 	std::frexp(big, &e);
-	for (Point &p : pts) {
-		p.x = std::ldexp(p.x, -e);
-		p.y = std::ldexp(p.y, -e);
-		p.z = std::ldexp(p.z, -e);
-	}
+	if (big == 0.0 || (-MS_UNIT_RANGE < e && e <= MS_UNIT_RANGE)) return;
+	for (double &c : xyz) c = std::ldexp(c, -e);
 }
 
 struct Clean {
-	std::vector<Point> pts;                   // cleaned vertices, input order
-	std::vector<std::array<int, 3>> faces;    // cleaned triangles
-	std::vector<long> fromInput;              // cleaned index of each input vertex or -1
+	std::vector<double> pts;     // cleaned vertices (m, 3), input order
+	std::vector<Index> faces;    // cleaned triangles (f, 3)
+	std::vector<Index> fromInput;  // cleaned index of each input vertex or -1
+	Index size() const { return Index(pts.size() / 3); }
 };
 
-// Exact duplicates merged into their first occurrence; for meshes, zero-area faces
-// and then unreferenced vertices dropped (cleaning.py).
-Clean clean(const std::vector<Point> &v, const std::vector<std::array<int, 3>> &faces, bool mesh) {
-	const long n = long(v.size());
-	std::vector<long> order(n);
-	std::iota(order.begin(), order.end(), 0L);
-	std::stable_sort(order.begin(), order.end(), [&](long a, long b) {
-		if (v[a].x != v[b].x) return v[a].x < v[b].x;
-		if (v[a].y != v[b].y) return v[a].y < v[b].y;
-		return v[a].z < v[b].z;
-	});
-	std::vector<long> survivor(n);
-	for (long i = 0; i < n;) {
-		long j = i;
-		while (j < n && v[order[j]].x == v[order[i]].x && v[order[j]].y == v[order[i]].y &&
-		       v[order[j]].z == v[order[i]].z)
-			++j;
-		for (long t = i; t < j; ++t) survivor[order[t]] = order[i];  // stable: first occurrence
-		i = j;
-	}
-	std::vector<char> used(n, mesh ? 0 : 1);
-	std::vector<std::array<int, 3>> kept;
-	if (mesh) {
-		for (const auto &f : faces) {
-			std::array<int, 3> g{int(survivor[f[0]]), int(survivor[f[1]]), int(survivor[f[2]])};
-			const Point &p0 = v[g[0]], &p1 = v[g[1]], &p2 = v[g[2]];
-			const double ax = p1.x - p0.x, ay = p1.y - p0.y, az = p1.z - p0.z;
-			const double bx = p2.x - p0.x, by = p2.y - p0.y, bz = p2.z - p0.z;
-			const double cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
-			if (cx == 0.0 && cy == 0.0 && cz == 0.0) continue;  // zero area
-			kept.push_back(g);
-			used[g[0]] = used[g[1]] = used[g[2]] = 1;
-		}
-	}
+// cleaning._clean_compiled: exact duplicates merged into their first occurrence; for
+// meshes, faces of zero double area dropped, then unreferenced vertices.
+Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool mesh) {
+	const Index n = Index(v.size() / 3);
+	Index size = 2;
+	while (size < 2 * n) size *= 2;
+	std::vector<Index> table(size, -1), toInput(n), fromInput(n);
+	const Index m = ms_dedup(v.data(), n, table.data(), size - 1, fromInput.data(), toInput.data());
+	toInput.resize(m);
 	Clean c;
-	std::vector<long> index(n, -1);
-	for (long i = 0; i < n; ++i)
-		if (survivor[i] == i && used[i]) {
-			index[i] = long(c.pts.size());
-			c.pts.push_back(v[i]);
+	c.pts.resize(3 * m);
+	for (Index i = 0; i < m; ++i)
+		for (int a = 0; a < 3; ++a) c.pts[3 * i + a] = v[3 * toInput[i] + a];
+	c.fromInput = fromInput;
+	if (!mesh) return c;
+	std::vector<Index> merged(faces.size());
+	for (size_t f = 0; f < faces.size(); ++f) merged[f] = fromInput[faces[f]];
+	std::vector<double> area(faces.size() / 3);
+	ms_face_double_areas(c.pts.data(), merged.data(), Index(area.size()), area.data());
+	std::vector<char> used(m, 0);
+	for (size_t f = 0; f < area.size(); ++f) {
+		if (!(area[f] > 0.0)) continue;
+		for (int a = 0; a < 3; ++a) {
+			c.faces.push_back(merged[3 * f + a]);
+			used[merged[3 * f + a]] = 1;
 		}
-	c.fromInput.resize(n);
-	for (long i = 0; i < n; ++i) c.fromInput[i] = index[survivor[i]];
-	for (auto &f : kept) c.faces.push_back({int(index[f[0]]), int(index[f[1]]), int(index[f[2]])});
+	}
+	if (c.faces.empty()) throw InputError("every face has zero area: nothing is left of the mesh");
+	std::vector<Index> renumber(m, -1);
+	Index kept = 0;
+	for (Index i = 0; i < m; ++i)
+		if (used[i]) {
+			for (int a = 0; a < 3; ++a) c.pts[3 * kept + a] = c.pts[3 * i + a];
+			renumber[i] = kept++;
+		}
+	c.pts.resize(3 * kept);
+	for (Index &f : c.faces) f = renumber[f];
+	for (Index &i : c.fromInput) i = renumber[i];
 	return c;
 }
 
-// Weighted PCA normal of the offsets q (neighbour minus centre point) with mean m.
-Eigen::Vector3d pcaNormal(const std::vector<Point> &q, const Point &m, bool gaussian) {
-	double h2 = 0.0;
-	if (gaussian)
-		for (const Point &o : q) h2 = std::max(h2, o.x * o.x + o.y * o.y + o.z * o.z);
-	Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-	for (const Point &o : q) {
-		const double d2 = o.x * o.x + o.y * o.y + o.z * o.z;
-		const double mu = (gaussian && h2 > 0.0) ? std::exp(-d2 / h2) : 1.0;
-		const double r[3] = {o.x - m.x, o.y - m.y, o.z - m.z};
-		for (int a = 0; a < 3; ++a)
-			for (int b = a; b < 3; ++b) cov(a, b) += mu * r[a] * r[b];
-	}
-	for (int a = 0; a < 3; ++a)
-		for (int b = 0; b < a; ++b) cov(a, b) = cov(b, a);
-	Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(cov);
-	return solver.eigenvectors().col(0);  // eigenvalues ascending
-}
-
-// pdis = |mean . n| for the neighbourhood nb of point i (projected_distance.py).
-double projectedDistance(const std::vector<Point> &pts, long i, const std::vector<long> &nb,
-                         const Eigen::Vector3d *fixedNormal, bool gaussian,
-                         std::vector<Point> &scratch) {
-	scratch.resize(nb.size());
-	Point m{0.0, 0.0, 0.0};
-	for (size_t j = 0; j < nb.size(); ++j) {
-		const Point &p = pts[nb[j]];
-		scratch[j] = {p.x - pts[i].x, p.y - pts[i].y, p.z - pts[i].z};
-		m.x += scratch[j].x;
-		m.y += scratch[j].y;
-		m.z += scratch[j].z;
-	}
-	const double s = double(nb.size());
-	m.x /= s;
-	m.y /= s;
-	m.z /= s;
-	const Eigen::Vector3d n = fixedNormal ? *fixedNormal : pcaNormal(scratch, m, gaussian);
-	return std::fabs(m.x * n[0] + m.y * n[1] + m.z * n[2]);
-}
-
-// Otsu's split in the integer form of docs/implementation-notes.md: T = t / 256.
+// Otsu's split in the integer form of docs/implementation-notes.md: T = t / MS_BINS.
 double otsu(const std::vector<double> &v) {
-	std::vector<long long> count(BINS, 0);
-	for (double x : v) count[std::min(int(std::floor(x * BINS)), BINS - 1)]++;
+	std::vector<long long> count(MS_BINS, 0);
+	for (double x : v) count[std::min(int(std::floor(x * MS_BINS)), MS_BINS - 1)]++;
 	long long total = 0, weightedTotal = 0;
-	for (int b = 0; b < BINS; ++b) {
+	for (int b = 0; b < MS_BINS; ++b) {
 		total += count[b];
 		weightedTotal += count[b] * (2LL * b + 1);
 	}
 	long long n0 = 0, s0 = 0;
 	double best = -1.0;
 	int bestT = -1;
-	for (int t = 1; t < BINS; ++t) {
+	for (int t = 1; t < MS_BINS; ++t) {
 		n0 += count[t - 1];
 		s0 += count[t - 1] * (2LL * (t - 1) + 1);
 		const long long n1 = total - n0;
@@ -175,78 +201,501 @@ double otsu(const std::vector<double> &v) {
 			bestT = t;
 		}
 	}
-	return bestT < 0 ? 1.0 : double(bestT) / BINS;
+	return bestT < 0 ? 1.0 : double(bestT) / MS_BINS;
 }
 
-// kNN of every point in the exact (squared distance, index) order, k = kMax.
-std::vector<std::vector<long>> knn(const std::vector<Point> &pts, int kMax,
-                                   bool (*progress)(const int, const char *)) {
-	const long n = long(pts.size());
-	std::vector<vcg::Point3d> vp(n);
-	for (long i = 0; i < n; ++i) vp[i] = vcg::Point3d(pts[i].x, pts[i].y, pts[i].z);
-	vcg::ConstDataWrapper<vcg::Point3d> wrapper(&vp[0], n, sizeof(vcg::Point3d));
-	vcg::KdTree<double> tree(wrapper);
-	vcg::KdTree<double>::PriorityQueue queue;
-	std::vector<std::vector<long>> out(n);
-	std::vector<std::pair<double, long>> cand;
-	for (long i = 0; i < n; ++i) {
-		if (progress && i % 20000 == 0) progress(int(40 * i / n), "Sharp features: neighbours");
-		long kq = std::min<long>(kMax + 1, n);
-		while (true) {
-			tree.doQueryK(vp[i], int(kq), queue);
-			cand.clear();
-			for (int j = 0; j < queue.getNofElements(); ++j) {
-				const long idx = queue.getIndex(j);
-				cand.emplace_back(sq(pts[idx], pts[i]), idx);
-			}
-			std::sort(cand.begin(), cand.end());
-			// A tie across the k-th place may involve points the query left out: widen.
-			if (kq == n || long(cand.size()) <= kMax || cand[kMax].first > cand[kMax - 1].first)
-				break;
-			kq = std::min(2 * kq + 1, n);
-		}
-		out[i].resize(kMax);
-		for (int j = 0; j < kMax; ++j) out[i][j] = cand[j].second;
+// The kd-tree of the kernel (_kernels.KdTree).
+struct Tree {
+	std::vector<double> pts;   // (n, 3) in tree order
+	std::vector<Index> orig;   // cleaned index of each
+	std::vector<double> box;   // node boxes
+	int depth = 0;
+	Index n = 0;
+
+	explicit Tree(const std::vector<double> &p) : pts(p.size()), orig(p.size() / 3), n(Index(p.size() / 3)) {
+		depth = std::max(0, int(std::ceil(std::log2(double(std::max<Index>(n, 1)) / MS_KD_LEAF))));
+		box.resize(6 * ((Index(2) << depth) - 1));
+		ms_kdtree_build(p.data(), n, depth, pts.data(), orig.data(), box.data());
 	}
+};
+
+// What one pass of ms_cloud_pdis computed (_kernels.ScalePass, CloudStats): per scale s
+// and cleaned point i at [s * n + i].
+struct CloudPass {
+	std::vector<double> pdis, relative, score, noise, kthD2;
+	std::vector<Index> near, kthIdx;
+};
+
+// One pass over the tree's points at the scales ks: projected distances (paper mode) or
+// relative distances and score (robust), and with noiseK > 0 the isolation and noise
+// statistics (_kernels.cloud_projected_distances).
+CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian, bool relative,
+                    int noiseK, Bar &bar, int from, int to) {
+	const std::vector<Index> ks(scales.begin(), scales.end());
+	const size_t S = ks.size();
+	CloudPass c;
+	cloud_out_t out{};
+	if (relative) {
+		c.relative.resize(S * t.n);
+		c.score.resize(t.n);
+		out.relative = c.relative.data();
+		out.score = c.score.data();
+		// robust mode's sheet filter (robust.sheet_mask): every scale's neighbourhood, and
+		// the noise's, without the points on another sheet
+		out.sheet_gap = MS_SHEET_GAP;
+		out.sheet_min = MS_SHEET_MIN;
+		out.sheet_own = MS_SHEET_OWN;
+	} else {
+		c.pdis.resize(S * t.n);
+		out.pdis = c.pdis.data();
+	}
+	if (noiseK > 0) {
+		c.noise.resize(t.n);
+		c.kthD2.resize(t.n);
+		c.near.resize(t.n);
+		c.kthIdx.resize(t.n);
+		out.noise = c.noise.data();
+		out.noise_k = noiseK;
+		out.near = c.near.data();
+		out.kth_d2 = c.kthD2.data();
+		out.kth_idx = c.kthIdx.data();
+	}
+	chunks(t.n, [&](unsigned, Index a, Index b) {
+		return ms_cloud_pdis(t.pts.data(), t.orig.data(), t.n, t.box.data(), t.depth, ks.data(), int(S),
+		                     int(gaussian), a, b, &out);
+	}, bar, from, to, "neighbours and projected distances");
+	return c;
+}
+
+// Lists per candidate point (CSR by candidate slot): the neighbourhoods robust mode's
+// support and thinning read.
+struct Lists {
+	std::vector<Index> ptr{0}, idx;
+	void add(const Index *first, const Index *last) {
+		idx.insert(idx.end(), first, last);
+		ptr.push_back(Index(idx.size()));
+	}
+	const Index *begin(size_t slot) const { return idx.data() + ptr[slot]; }
+	const Index *end(size_t slot) const { return idx.data() + ptr[slot + 1]; }
+};
+
+// The k-rings of a mesh in the order of the Python package's RingNeighbourhoods
+// (backend "numpy", scipy's sparse product), which robust mode's local scales and support
+// lists use: ring k + 1 lists the vertices met first when walking ring k's list and, for
+// each member, its sorted 1-ring (itself included), in reverse order. The order fixes
+// the rounding of the sums.
+class SparseRings {
+public:
+	// The sorted 1-ring and self of each vertex, shared by every walker.
+	static std::vector<std::vector<Index>> adjacency(Index n, const std::vector<Index> &faces) {
+		std::vector<std::vector<Index>> adj(n);
+		for (size_t f = 0; f < faces.size(); f += 3)
+			for (int a = 0; a < 3; ++a)
+				for (int b = 0; b < 3; ++b)
+					if (a != b) adj[faces[f + a]].push_back(faces[f + b]);
+		for (Index i = 0; i < n; ++i) {
+			auto &l = adj[i];
+			l.push_back(i);
+			std::sort(l.begin(), l.end());
+			l.erase(std::unique(l.begin(), l.end()), l.end());
+		}
+		return adj;
+	}
+	explicit SparseRings(const std::vector<std::vector<Index>> &adj) : adj_(adj), mark_(adj.size(), -1) {}
+	// Start at vertex i: the 0-ring {i}.
+	void start(Index i) { current_.assign(1, i); }
+	// The next ring, from the current one.
+	const std::vector<Index> &grow() {
+		++generation_;
+		next_.clear();
+		for (Index j : current_)
+			for (Index k : adj_[j])
+				if (mark_[k] != generation_) {
+					mark_[k] = generation_;
+					next_.push_back(k);
+				}
+		std::reverse(next_.begin(), next_.end());
+		current_.swap(next_);
+		return current_;
+	}
+
+private:
+	const std::vector<std::vector<Index>> &adj_;
+	std::vector<Index> mark_;
+	Index generation_ = 0;
+	std::vector<Index> current_, next_;
+};
+
+// robust.line_directions for a feature point i: the unit eigenvector of the largest
+// eigenvalue of the covariance of p_j - p_i over the features j of D (i included), sums in
+// np.add.reduceat's order; the kernel's 3x3 solver on the negated matrix.
+void lineDirection(const std::vector<double> &p, Index i, const Index *first, const Index *last,
+                   const std::vector<char> &feature, std::vector<double> &col, double e[3]) {
+	col.clear();
+	for (const Index *j = first; j != last; ++j) {
+		if (!feature[*j]) continue;
+		double q[3];
+		for (int a = 0; a < 3; ++a) q[a] = p[3 * *j + a] - p[3 * i + a];
+		col.insert(col.end(), {q[0], q[1], q[2], q[0] * q[0], q[0] * q[1], q[0] * q[2],
+		                       q[1] * q[1], q[1] * q[2], q[2] * q[2]});
+	}
+	const Index m = Index(col.size() / 9);
+	const double count = double(std::max<Index>(m, 1));
+	double qbar[3], sum[6];
+	for (int a = 0; a < 3; ++a) qbar[a] = ms_segment_sum(col.data() + a, m, 9) / count;
+	for (int t = 0; t < 6; ++t) sum[t] = ms_segment_sum(col.data() + 3 + t, m, 9);
+	const int row[6] = {0, 0, 0, 1, 1, 2}, column[6] = {0, 1, 2, 1, 2, 2};
+	double negated[6];
+	for (int t = 0; t < 6; ++t)  // numpy's eigh reads the lower triangle: entry (column, row)
+		negated[t] = -(sum[t] - count * qbar[column[t]] * qbar[row[t]]);
+	ms_eigvecs(negated, 1, e);
+}
+
+// Whether d = p_j - p_i lies across the line through i: |d . e| < THIN_CONE_COS |d|.
+inline bool across(const std::vector<double> &p, Index i, Index j, const double e[3]) {
+	const double dx = p[3 * j] - p[3 * i], dy = p[3 * j + 1] - p[3 * i + 1], dz = p[3 * j + 2] - p[3 * i + 2];
+	return std::fabs(dx * e[0] + dy * e[1] + dz * e[2]) < MS_THIN_CONE_COS * std::sqrt(dx * dx + dy * dy + dz * dz);
+}
+
+// robust.supported then robust.thin for the candidates rows (increasing), with the line
+// directions of f0 computed once; D, S, K: direction, support and comparison lists by
+// candidate slot. F1 = features with at least SUPPORT_MIN other features along their line
+// in S(i); F2 = F1 less the points beaten, across the line, by a higher score in K(i).
+std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector<char> &f0,
+                                 const std::vector<double> &score, const std::vector<Index> &rows,
+                                 const Lists &D, const Lists &S, const Lists &K) {
+	std::vector<double> e(3 * rows.size()), col;
+	std::vector<char> f1(f0.size(), 0);
+	for (size_t c = 0; c < rows.size(); ++c) {
+		const Index i = rows[c];
+		lineDirection(p, i, D.begin(c), D.end(c), f0, col, &e[3 * c]);
+		int along = 0;
+		for (const Index *j = S.begin(c); j != S.end(c); ++j)
+			if (*j != i && f0[*j] && !across(p, i, *j, &e[3 * c])) ++along;
+		f1[i] = along >= MS_SUPPORT_MIN;
+	}
+	std::vector<char> f2 = f1;
+	for (size_t c = 0; c < rows.size(); ++c) {
+		const Index i = rows[c];
+		if (!f1[i]) continue;
+		for (const Index *j = K.begin(c); j != K.end(c); ++j)
+			if (*j != i && f1[*j] && across(p, i, *j, &e[3 * c]) && score[*j] > score[i]) {
+				f2[i] = 0;
+				break;
+			}
+	}
+	return f2;
+}
+
+// creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
+// normals turn by more than max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles).
+std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<Index> &faces) {
+	const size_t F = faces.size() / 3;
+	std::vector<std::array<double, 3>> u(F);
+	std::vector<std::array<Index, 3>> edges;  // (a, b, face), a < b
+	for (size_t f = 0; f < F; ++f) {
+		const double *p0 = &p[3 * faces[3 * f]], *p1 = &p[3 * faces[3 * f + 1]], *p2 = &p[3 * faces[3 * f + 2]];
+		const double x1 = p1[0] - p0[0], y1 = p1[1] - p0[1], z1 = p1[2] - p0[2];
+		const double x2 = p2[0] - p0[0], y2 = p2[1] - p0[1], z2 = p2[2] - p0[2];
+		const double c[3] = {y1 * z2 - z1 * y2, z1 * x2 - x1 * z2, x1 * y2 - y1 * x2};
+		const double len = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+		const double div = len > 0.0 ? len : 1.0;
+		u[f] = {c[0] / div, c[1] / div, c[2] / div};
+		for (int a = 0; a < 3; ++a) {
+			const Index v0 = faces[3 * f + a], v1 = faces[3 * f + (a + 1) % 3];
+			edges.push_back({std::min(v0, v1), std::max(v0, v1), Index(f)});
+		}
+	}
+	std::sort(edges.begin(), edges.end());
+	std::vector<std::array<Index, 2>> pairs;
+	std::vector<double> angles;
+	for (size_t s = 0; s < edges.size();) {
+		size_t t = s;
+		while (t < edges.size() && edges[t][0] == edges[s][0] && edges[t][1] == edges[s][1]) ++t;
+		if (t - s == 2) {
+			const auto &a = u[edges[s][2]], &b = u[edges[s + 1][2]];
+			const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+			pairs.push_back({edges[s][0], edges[s][1]});
+			angles.push_back(std::acos(std::min(1.0, std::max(-1.0, dot))));
+		}
+		s = t;
+	}
+	double theta = MS_CREASE_ANGLE * (M_PI / 180.0);
+	if (!angles.empty()) {
+		std::vector<double> sorted = angles;
+		const size_t at = (sorted.size() - 1) / 4;
+		std::nth_element(sorted.begin(), sorted.begin() + at, sorted.end());
+		theta = std::max(theta, MS_NOISE_FACTOR * sorted[at]);
+	}
+	std::vector<char> out(p.size() / 3, 0);
+	for (size_t e = 0; e < pairs.size(); ++e)
+		if (angles[e] > theta) out[pairs[e][0]] = out[pairs[e][1]] = 1;
 	return out;
 }
 
-std::vector<std::vector<long>> oneRing(long n, const std::vector<std::array<int, 3>> &faces) {
-	std::vector<std::vector<long>> adj(n);
-	for (const auto &f : faces)
-		for (int a = 0; a < 3; ++a)
-			for (int b = 0; b < 3; ++b)
-				if (a != b) adj[f[a]].push_back(f[b]);
-	for (auto &l : adj) {
-		std::sort(l.begin(), l.end());
-		l.erase(std::unique(l.begin(), l.end()), l.end());
-	}
-	return adj;
+// What one mode leaves per processed point.
+struct Decision {
+	std::vector<Index> toClean;    // cleaned index of each processed point
+	std::vector<double> strength;  // fraction of scales (1 on robust mode's sharp mesh edges)
+	std::vector<char> feature;
+};
+
+// Candidates v >= T at one scale (none unless active): votes, threshold and count.
+void vote(const std::vector<double> &v, double T, bool active, std::vector<int> &votes, Result &r) {
+	long count = 0;
+	if (active)
+		for (size_t i = 0; i < v.size(); ++i)
+			if (v[i] >= T) {
+				votes[i]++;
+				count++;
+			}
+	r.thresholds.push_back(T);
+	r.candidates.push_back(count);
 }
 
-std::vector<Eigen::Vector3d> faceAverageNormals(const std::vector<Point> &pts,
-                                                const std::vector<std::array<int, 3>> &faces,
-                                                std::vector<char> &valid) {
-	std::vector<Eigen::Vector3d> acc(pts.size(), Eigen::Vector3d::Zero());
-	for (const auto &f : faces) {
-		const Point &p0 = pts[f[0]], &p1 = pts[f[1]], &p2 = pts[f[2]];
-		const double ax = p1.x - p0.x, ay = p1.y - p0.y, az = p1.z - p0.z;
-		const double bx = p2.x - p0.x, by = p2.y - p0.y, bz = p2.z - p0.z;
-		Eigen::Vector3d c(ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx);
-		const double len = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-		if (len > 0.0) c /= len;
-		for (int a = 0; a < 3; ++a) acc[f[a]] += c;
+// Features are candidates at every scale; strength is the fraction of scales.
+void decide(const std::vector<int> &votes, size_t S, Decision &d) {
+	d.strength.resize(votes.size());
+	d.feature.resize(votes.size());
+	for (size_t i = 0; i < votes.size(); ++i) {
+		d.strength[i] = double(votes[i]) / double(S);
+		d.feature[i] = votes[i] == int(S);
 	}
-	valid.assign(pts.size(), 0);
-	for (size_t i = 0; i < acc.size(); ++i) {
-		const Eigen::Vector3d &s = acc[i];
-		const double norm = std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
-		if (norm > ZERO_NORMAL) {
-			acc[i] = s / norm;
-			valid[i] = 1;
+}
+
+// The mesh's projected distances (S, n) at every ring by the kernel's breadth-first search,
+// face-average normals fixed (zero rows: PCA), as _kernels.ring_projected_distances.
+std::vector<double> ringPdis(const Clean &c, const std::vector<int> &scales, bool gaussian, Bar &bar,
+                             int from, int to) {
+	const Index n = c.size(), F = Index(c.faces.size() / 3);
+	std::vector<double> normals(3 * n, 0.0);
+	ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data());
+	std::vector<Index> ptr(n + 1);
+	std::vector<int32_t> adj(6 * F);
+	check(ms_adjacency(c.faces.data(), F, n, ptr.data(), adj.data()));
+	const std::vector<Index> rings(scales.begin(), scales.end());
+	std::vector<double> pdis(rings.size() * n);
+	std::vector<std::vector<int32_t>> stamps(workers());
+	chunks(n, [&](unsigned w, Index a, Index b) {
+		if (stamps[w].empty()) stamps[w].assign(n, -1);
+		return ms_ring_pdis(c.pts.data(), n, ptr.data(), adj.data(), normals.data(), rings.data(),
+		                    int(rings.size()), int(gaussian), a, b, stamps[w].data(), pdis.data(), nullptr);
+	}, bar, from, to, "rings and projected distances");
+	return pdis;
+}
+
+// The paper's method (ALGORITHM.md): min-max normalisation with the flat-scale rule,
+// Otsu, candidates at every scale.
+Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) {
+	const Index n = c.size();
+	const size_t S = r.scales.size();
+	std::vector<double> pdis;
+	if (r.mesh) {
+		pdis = ringPdis(c, r.scales, options.gaussian, bar, 0, 90);
+	} else {
+		bar.report(0, "kd-tree");
+		pdis = cloudPass(Tree(c.pts), r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
+	}
+	double lo[3], hi[3];
+	for (int a = 0; a < 3; ++a) lo[a] = hi[a] = c.pts[a];
+	for (Index i = 0; i < n; ++i)
+		for (int a = 0; a < 3; ++a) {
+			lo[a] = std::min(lo[a], c.pts[3 * i + a]);
+			hi[a] = std::max(hi[a], c.pts[3 * i + a]);
 		}
+	const double dx = hi[0] - lo[0], dy = hi[1] - lo[1], dz = hi[2] - lo[2];
+	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(dx * dx + dy * dy + dz * dz);
+	bar.report(90, "thresholds");
+	std::vector<int> votes(n, 0);
+	std::vector<double> v(n);
+	r.allFlat = true;
+	for (size_t s = 0; s < S; ++s) {
+		const double *ps = &pdis[s * n];
+		double T = 1.0;
+		const auto mm = std::minmax_element(ps, ps + n);
+		const double pmin = *mm.first, pmax = *mm.second;
+		const bool active = pmax - pmin > flatSpan;
+		if (active) {
+			r.allFlat = false;
+			for (Index i = 0; i < n; ++i) v[i] = (ps[i] - pmin) / (pmax - pmin);
+			T = otsu(v);
+		}
+		vote(v, T, active, votes, r);
 	}
-	return acc;
+	Decision d;
+	d.toClean.resize(n);
+	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
+	decide(votes, S, d);
+	return d;
+}
+
+// robust.relative_distances: min(x / l, 1), 0 where l is 0.
+inline double relative(double x, double l) { return l > 0.0 ? std::min(x / l, 1.0) : 0.0; }
+
+// robust.RobustSetup on a cloud: isolated points left out (_isolated_from_stats), scales
+// grown with the noise, then the pass at the final scales; relative distances and score
+// from the kernel (RelativeRule.from_pass); support and thinning on the candidates' kNN
+// rows (_candidate_lists).
+Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar) {
+	Decision d;
+	d.toClean.resize(c.size());
+	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
+	std::vector<double> pts = c.pts;
+	const int top0 = r.scales.back();
+	const int k0 = std::min(MS_NOISE_KNN, top0);
+	bar.report(0, "kd-tree");
+	auto tree = std::make_unique<Tree>(pts);
+	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
+	std::vector<Index> keep;
+	for (Index i = 0; i < tree->n; ++i) {
+		const Index j = pass.near[i];
+		const double dx = pts[3 * i] - pts[3 * j], dy = pts[3 * i + 1] - pts[3 * j + 1], dz = pts[3 * i + 2] - pts[3 * j + 2];
+		const double d2 = dx * dx + dy * dy + dz * dz, kth = pass.kthD2[j];
+		if (d2 < kth || (d2 == kth && i <= pass.kthIdx[j])) keep.push_back(i);  // not isolated
+	}
+	if (Index(keep.size()) < tree->n) {
+		if (Index(keep.size()) < top0) throw InputError("too few points are left once isolated points are removed");
+		std::vector<double> kept(3 * keep.size());
+		for (size_t i = 0; i < keep.size(); ++i)
+			for (int a = 0; a < 3; ++a) kept[3 * i + a] = pts[3 * keep[i] + a];
+		pts.swap(kept);
+		d.toClean.swap(keep);
+		tree = std::make_unique<Tree>(pts);
+		pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 45, 65);
+	}
+	const Index n = tree->n;
+	std::vector<double> ratio = pass.noise;
+	const Index at = (n - 1) / 2;
+	std::nth_element(ratio.begin(), ratio.begin() + at, ratio.end());
+	const double noise = std::min(std::max(1.0, std::pow(ratio[at] / MS_NOISE_TOLERATED, 2.0)), MS_NOISE_MAX_FACTOR);
+	const double factor = std::min(noise, double(n) / double(top0));
+	int thinKnn = MS_THIN_KNN;  // robust.thin_knn: grows with the scales
+	if (factor > 1.0) {
+		thinKnn = int(std::floor(MS_THIN_KNN * factor + 0.5));
+		for (int &k : r.scales) k = int(std::floor(k * factor + 0.5));
+		if (r.scales.back() > n)
+			throw InputError("k = " + std::to_string(r.scales.back()) + " nearest neighbours needs at least " +
+			                 std::to_string(r.scales.back()) + " points, got " + std::to_string(n));
+		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85);
+	}
+	bar.report(85, "thresholds");
+	const size_t S = r.scales.size();
+	std::vector<int> votes(n, 0);
+	for (size_t s = 0; s < S; ++s) {
+		const std::vector<double> v(pass.relative.begin() + s * n, pass.relative.begin() + (s + 1) * n);
+		vote(v, std::max(otsu(v), R_MIN), true, votes, r);
+	}
+	decide(votes, S, d);
+	std::vector<Index> rows;
+	for (Index i = 0; i < n; ++i)
+		if (d.feature[i]) rows.push_back(i);
+	if (rows.empty()) return d;
+	bar.report(85, "support and thinning");
+	const int top = r.scales.back();
+	std::vector<Index> where(n), pos(rows.size()), table(rows.size() * top);
+	for (Index t = 0; t < n; ++t) where[tree->orig[t]] = t;
+	for (size_t c2 = 0; c2 < rows.size(); ++c2) pos[c2] = where[rows[c2]];
+	const Tree &t = *tree;
+	chunks(Index(rows.size()), [&](unsigned, Index a, Index b) {
+		return ms_knn_rows(t.pts.data(), t.orig.data(), t.n, t.box.data(), t.depth, pos.data(), top, a, b,
+		                   table.data());
+	}, bar, 85, 95, "support and thinning");
+	Lists D, Sup, K;
+	for (size_t c2 = 0; c2 < rows.size(); ++c2) {
+		const Index *row = &table[c2 * top];
+		D.add(row, row + top);
+		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
+		K.add(row, row + std::min(thinKnn, top));
+	}
+	d.feature = supportAndThin(pts, d.feature, pass.score, rows, D, Sup, K);
+	return d;
+}
+
+// Robust mode on a mesh: pdis from the kernel's rings, the local scales over the rings in
+// the Python package's sparse order (RelativeRule.__call__ with local_scale), support and
+// thinning over the 2-ring, and the vertices of the mesh's sharp edges (creases.py).
+Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar) {
+	const Index n = c.size();
+	const size_t S = r.scales.size();
+	const int top = r.scales.back();
+	const std::vector<double> pdis = ringPdis(c, r.scales, options.gaussian, bar, 0, 45);
+	const auto adj = SparseRings::adjacency(n, c.faces);
+	std::vector<double> ell(S * n), off(S * n);
+	struct Scratch {
+		std::unique_ptr<SparseRings> rings;
+		std::vector<Index> indptr;
+		std::vector<std::vector<Index>> lists;
+	};
+	std::vector<Scratch> scratch(workers());
+	chunks(n, [&](unsigned w, Index a, Index b) {
+		Scratch &sc = scratch[w];
+		if (!sc.rings) {
+			sc.rings = std::make_unique<SparseRings>(adj);
+			sc.indptr.assign(n + 1, 0);
+			sc.lists.resize(S);
+		}
+		std::vector<std::vector<Index>> starts(S);
+		for (auto &l : sc.lists) l.clear();
+		for (Index i = a; i < b; ++i) {
+			sc.rings->start(i);
+			size_t s = 0;
+			for (int ring = 1; ring <= top; ++ring) {
+				const std::vector<Index> &nb = sc.rings->grow();
+				if (ring == r.scales[s]) {
+					starts[s].push_back(Index(sc.lists[s].size()));
+					sc.lists[s].insert(sc.lists[s].end(), nb.begin(), nb.end());
+					++s;
+				}
+			}
+		}
+		for (size_t s = 0; s < S; ++s) {
+			for (Index i = a; i < b; ++i) sc.indptr[i] = starts[s][i - a];
+			sc.indptr[b] = Index(sc.lists[s].size());
+			const int rc = ms_local_scale_csr(c.pts.data(), sc.indptr.data(), sc.lists[s].data(), 1, a, b,
+			                                  &ell[s * n], &off[s * n]);
+			if (rc != 0) return rc;
+		}
+		return 0;
+	}, bar, 45, 85, "local scales");
+	bar.report(85, "thresholds");
+	std::vector<int> votes(n, 0);
+	std::vector<double> v(n), score(n, 0.0);
+	for (size_t s = 0; s < S; ++s) {
+		for (Index i = 0; i < n; ++i) {
+			v[i] = relative(pdis[s * n + i], ell[s * n + i]);
+			score[i] += relative(off[s * n + i], ell[s * n + i]) / double(S);
+		}
+		vote(v, std::max(otsu(v), R_MIN), true, votes, r);
+	}
+	Decision d;
+	d.toClean.resize(n);
+	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
+	decide(votes, S, d);
+	bar.report(85, "support and thinning");
+	std::vector<Index> rows;
+	for (Index i = 0; i < n; ++i)
+		if (d.feature[i]) rows.push_back(i);
+	if (!rows.empty()) {
+		const int compareRing = std::min(MS_THIN_RING, top);
+		SparseRings rings(adj);
+		Lists D, Sup;
+		for (Index i : rows) {
+			rings.start(i);
+			for (int ring = 1; ring <= top; ++ring) {
+				const std::vector<Index> &nb = rings.grow();
+				if (ring == compareRing) Sup.add(nb.data(), nb.data() + nb.size());
+				if (ring == top) D.add(nb.data(), nb.data() + nb.size());
+			}
+		}
+		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup);
+	}
+	const auto edges = sharpVertices(c.pts, c.faces);
+	for (Index i = 0; i < n; ++i)
+		if (edges[i]) {
+			d.feature[i] = 1;
+			d.strength[i] = 1.0;
+		}
+	return d;
 }
 
 }  // namespace
@@ -288,531 +737,69 @@ std::vector<int> parseScales(const std::string &text, int minimum) {
 	return out;
 }
 
-namespace {
-
-// ---- Robust mode (robust.py, creases.py) ----
-
-// numpy's pairwise summation of a[0..n) (8 accumulators, blocks of PAIRWISE_BLOCK).
-double pairwiseSum(const double *a, long n) {
-	if (n < 8) {
-		double res = -0.0;
-		for (long i = 0; i < n; ++i) res += a[i];
-		return res;
-	}
-	if (n <= PAIRWISE_BLOCK) {
-		double acc[8];
-		for (int j = 0; j < 8; ++j) acc[j] = a[j];
-		long i = 8;
-		for (; i < n - (n % 8); i += 8)
-			for (int j = 0; j < 8; ++j) acc[j] += a[i + j];
-		double res = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
-		for (; i < n; ++i) res += a[i];
-		return res;
-	}
-	long n2 = n / 2;
-	n2 -= n2 % 8;
-	return pairwiseSum(a, n2) + pairwiseSum(a + n2, n - n2);
-}
-
-// One segment of np.add.reduceat (robust._segment_sums): the first element plus the
-// pairwise sum of the others. Bit for bit what the Python package computes.
-double segmentSum(const std::vector<double> &a) {
-	if (a.empty()) return 0.0;
-	return a[0] + pairwiseSum(a.data() + 1, long(a.size()) - 1);
-}
-
-// Scratch columns for segment sums.
-struct Columns {
-	std::vector<double> c[9];
-	void clear() {
-		for (auto &v : c) v.clear();
-	}
-};
-
-// robust.local_scale for the list nb of point i: l = mean |p_j - p_i|, o = |mean of
-// p_j - p_i|.
-void localScale(const std::vector<Point> &pts, long i, const std::vector<long> &nb, Columns &col,
-                double &l, double &o) {
-	col.clear();
-	for (long j : nb) {
-		const double qx = pts[j].x - pts[i].x, qy = pts[j].y - pts[i].y, qz = pts[j].z - pts[i].z;
-		col.c[0].push_back(std::sqrt(qx * qx + qy * qy + qz * qz));
-		col.c[1].push_back(qx);
-		col.c[2].push_back(qy);
-		col.c[3].push_back(qz);
-	}
-	const double count = double(std::max<size_t>(nb.size(), 1));
-	l = nb.empty() ? 0.0 : segmentSum(col.c[0]) / count;
-	const double cx = segmentSum(col.c[1]) / count, cy = segmentSum(col.c[2]) / count,
-	             cz = segmentSum(col.c[3]) / count;
-	o = std::sqrt(cx * cx + cy * cy + cz * cz);
-}
-
-// robust.relative_distances: min(x / l, 1), 0 where l is 0.
-inline double relative(double x, double l) { return l > 0.0 ? std::min(x / l, 1.0) : 0.0; }
-
-// robust.line_directions for a feature point i: the unit eigenvector of the largest
-// eigenvalue of the covariance of p_j - p_i over the features j of D (i included).
-Eigen::Vector3d lineDirection(const std::vector<Point> &pts, long i, const std::vector<long> &D,
-                              const std::vector<char> &feature, Columns &col) {
-	col.clear();
-	for (long j : D) {
-		if (!feature[j]) continue;
-		const double q[3] = {pts[j].x - pts[i].x, pts[j].y - pts[i].y, pts[j].z - pts[i].z};
-		for (int a = 0; a < 3; ++a) {
-			col.c[a].push_back(q[a]);
-			for (int b = 0; b <= a; ++b) col.c[3 + a * (a + 1) / 2 + b].push_back(q[a] * q[b]);
-		}
-	}
-	const double count = double(std::max<size_t>(col.c[0].size(), 1));
-	double qbar[3];
-	for (int a = 0; a < 3; ++a) qbar[a] = segmentSum(col.c[a]) / count;
-	Eigen::Matrix3d cov;
-	for (int a = 0; a < 3; ++a)
-		for (int b = 0; b <= a; ++b) {  // the lower triangle, as numpy's eigh reads it
-			cov(a, b) = segmentSum(col.c[3 + a * (a + 1) / 2 + b]) - count * qbar[a] * qbar[b];
-			cov(b, a) = cov(a, b);
-		}
-	Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(cov);
-	return solver.eigenvectors().col(2);  // eigenvalues ascending
-}
-
-// Whether d = p_j - p_i lies across the line through i: |d . e| < THIN_CONE_COS |d|.
-inline bool across(const Point &pi, const Point &pj, const Eigen::Vector3d &e) {
-	const double dx = pj.x - pi.x, dy = pj.y - pi.y, dz = pj.z - pi.z;
-	return std::fabs(dx * e[0] + dy * e[1] + dz * e[2]) < THIN_CONE_COS * std::sqrt(dx * dx + dy * dy + dz * dz);
-}
-
-// robust.supported then robust.thin, with the line directions of F0 computed once:
-// F1 = features with at least SUPPORT_MIN other features along their line in S(i);
-// F2 = F1 less the points beaten, across the line, by a higher score in K(i).
-std::vector<char> supportAndThin(const std::vector<Point> &pts, const std::vector<char> &f0,
-                                 const std::vector<double> &score,
-                                 const std::vector<std::vector<long>> &D,
-                                 const std::vector<std::vector<long>> &S,
-                                 const std::vector<std::vector<long>> &K) {
-	const long n = long(pts.size());
-	std::vector<Eigen::Vector3d> e(n, Eigen::Vector3d::Zero());
-	std::vector<char> f1(n, 0);
-	Columns col;
-	for (long i = 0; i < n; ++i) {
-		if (!f0[i]) continue;
-		e[i] = lineDirection(pts, i, D[i], f0, col);
-		int along = 0;
-		for (long j : S[i])
-			if (j != i && f0[j] && !across(pts[i], pts[j], e[i])) ++along;
-		f1[i] = along >= SUPPORT_MIN;
-	}
-	std::vector<char> f2 = f1;
-	for (long i = 0; i < n; ++i) {
-		if (!f1[i]) continue;
-		for (long j : K[i])
-			if (j != i && f1[j] && across(pts[i], pts[j], e[i]) && score[j] > score[i]) {
-				f2[i] = 0;
-				break;
-			}
-	}
-	return f2;
-}
-
-// robust.noise_scale_factor: min(max(1, (nu / NOISE_TOLERATED)^2), NOISE_MAX_FACTOR), nu
-// the lower median of |d . n| / |d|, n the plain PCA normal of the k nearest, d the
-// offset of the nearest.
-double noiseScaleFactor(const std::vector<Point> &pts, const std::vector<std::vector<long>> &hoods, int k) {
-	const long n = long(pts.size());
-	std::vector<double> ratio(n, 0.0);
-	std::vector<Point> q(k);
-	for (long i = 0; i < n; ++i) {
-		Point c{0.0, 0.0, 0.0};
-		for (int j = 0; j < k; ++j) {
-			const Point &p = pts[hoods[i][j]];
-			q[j] = {p.x - pts[i].x, p.y - pts[i].y, p.z - pts[i].z};
-			c.x += q[j].x;
-			c.y += q[j].y;
-			c.z += q[j].z;
-		}
-		c.x /= k;
-		c.y /= k;
-		c.z /= k;
-		Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-		for (const Point &o : q) {
-			const double r[3] = {o.x - c.x, o.y - c.y, o.z - c.z};
-			for (int a = 0; a < 3; ++a)
-				for (int b = 0; b <= a; ++b) cov(a, b) += r[a] * r[b];
-		}
-		for (int a = 0; a < 3; ++a)
-			for (int b = a + 1; b < 3; ++b) cov(a, b) = cov(b, a);
-		Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(cov);
-		const Eigen::Vector3d nrm = solver.eigenvectors().col(0);
-		const Point &d = q[1];
-		const double length = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
-		const double off = std::fabs(d.x * nrm[0] + d.y * nrm[1] + d.z * nrm[2]);
-		ratio[i] = length > 0.0 ? off / length : 0.0;
-	}
-	const long at = (n - 1) / 2;
-	std::nth_element(ratio.begin(), ratio.begin() + at, ratio.end());
-	return std::min(std::max(1.0, std::pow(ratio[at] / NOISE_TOLERATED, 2.0)), NOISE_MAX_FACTOR);
-}
-
-// creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
-// normals turn by more than max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles).
-std::vector<char> sharpVertices(const std::vector<Point> &pts, const std::vector<std::array<int, 3>> &faces) {
-	std::vector<std::array<double, 3>> u(faces.size());
-	std::vector<std::array<long, 3>> edges;  // (a, b, face), a < b
-	for (size_t f = 0; f < faces.size(); ++f) {
-		const Point &p0 = pts[faces[f][0]], &p1 = pts[faces[f][1]], &p2 = pts[faces[f][2]];
-		const double x1 = p1.x - p0.x, y1 = p1.y - p0.y, z1 = p1.z - p0.z;
-		const double x2 = p2.x - p0.x, y2 = p2.y - p0.y, z2 = p2.z - p0.z;
-		const double c[3] = {y1 * z2 - z1 * y2, z1 * x2 - x1 * z2, x1 * y2 - y1 * x2};
-		const double len = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-		const double div = len > 0.0 ? len : 1.0;
-		u[f] = {c[0] / div, c[1] / div, c[2] / div};
-		for (int a = 0; a < 3; ++a) {
-			const long v0 = faces[f][a], v1 = faces[f][(a + 1) % 3];
-			edges.push_back({std::min(v0, v1), std::max(v0, v1), long(f)});
-		}
-	}
-	std::sort(edges.begin(), edges.end());
-	std::vector<std::array<long, 2>> pairs;
-	std::vector<double> angles;
-	for (size_t s = 0; s < edges.size();) {
-		size_t t = s;
-		while (t < edges.size() && edges[t][0] == edges[s][0] && edges[t][1] == edges[s][1]) ++t;
-		if (t - s == 2) {
-			const auto &a = u[edges[s][2]], &b = u[edges[s + 1][2]];
-			const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-			pairs.push_back({edges[s][0], edges[s][1]});
-			angles.push_back(std::acos(std::min(1.0, std::max(-1.0, dot))));
-		}
-		s = t;
-	}
-	double theta = CREASE_ANGLE * (M_PI / 180.0);
-	if (!angles.empty()) {
-		std::vector<double> sorted = angles;
-		const size_t at = (sorted.size() - 1) / 4;
-		std::nth_element(sorted.begin(), sorted.begin() + at, sorted.end());
-		theta = std::max(theta, NOISE_FACTOR * sorted[at]);
-	}
-	std::vector<char> out(pts.size(), 0);
-	for (size_t e = 0; e < pairs.size(); ++e)
-		if (angles[e] > theta) out[pairs[e][0]] = out[pairs[e][1]] = 1;
+std::string formatScales(const std::vector<int> &scales) {
+	std::string out;
+	for (int s : scales) out += (out.empty() ? "" : " ") + std::to_string(s);
 	return out;
 }
 
-// What one mode leaves per processed point.
-struct Decision {
-	std::vector<long> toClean;     // cleaned index of each processed point
-	std::vector<double> strength;  // fraction of scales (1 on robust mode's sharp mesh edges)
-	std::vector<char> feature;
-};
-
-// Otsu per scale on the values v, the votes, thresholds and candidate counts.
-void vote(const std::vector<double> &v, double T, bool active, std::vector<int> &votes, Result &r) {
-	long count = 0;
-	if (active)
-		for (size_t i = 0; i < v.size(); ++i)
-			if (v[i] >= T) {
-				votes[i]++;
-				count++;
-			}
-	r.thresholds.push_back(T);
-	r.candidates.push_back(count);
-}
-
-// The paper's method (ALGORITHM.md): kNN or BFS k-rings, min-max normalisation with the
-// flat-scale rule, Otsu, candidates at every scale.
-Decision paperMode(const std::vector<Point> &pts, const Clean &c, const Options &options, Result &r,
-                   bool (*progress)(const int, const char *)) {
-	const long n = long(pts.size());
-	const size_t S = r.scales.size();
-	const int sMax = r.scales.back();
-	std::vector<std::vector<double>> pdis(S, std::vector<double>(n, 0.0));
-	std::vector<Point> scratch;
-	std::vector<long> nb;
-	if (!r.mesh) {
-		const auto hoods = knn(pts, sMax, progress);
-		for (long i = 0; i < n; ++i) {
-			if (progress && i % 20000 == 0) progress(40 + int(50 * i / n), "Sharp features: projected distances");
-			for (size_t s = 0; s < S; ++s) {
-				nb.assign(hoods[i].begin(), hoods[i].begin() + r.scales[s]);
-				pdis[s][i] = projectedDistance(pts, i, nb, nullptr, options.gaussian, scratch);
-			}
-		}
-	} else {
-		std::vector<char> valid;
-		const auto normals = faceAverageNormals(pts, c.faces, valid);
-		const auto adj = oneRing(n, c.faces);
-		std::vector<long> stamp(n, -1), frontier, next;
-		for (long i = 0; i < n; ++i) {
-			if (progress && i % 20000 == 0) progress(int(90 * i / n), "Sharp features: rings");
-			nb.assign(1, i);
-			frontier.assign(1, i);
-			stamp[i] = i;
-			int ring = 0;
-			for (size_t s = 0; s < S; ++s) {
-				while (ring < r.scales[s]) {  // grow one ring
-					next.clear();
-					for (long u : frontier)
-						for (long w : adj[u])
-							if (stamp[w] != i) {
-								stamp[w] = i;
-								next.push_back(w);
-								nb.push_back(w);
-							}
-					frontier.swap(next);
-					++ring;
-				}
-				pdis[s][i] = projectedDistance(pts, i, nb, valid[i] ? &normals[i] : nullptr,
-				                               options.gaussian, scratch);
-			}
-		}
-	}
-
-	// Normalise, threshold, vote (threshold.py, multiscale.py).
-	double lo[3] = {pts[0].x, pts[0].y, pts[0].z}, hi[3] = {lo[0], lo[1], lo[2]};
-	for (const Point &p : pts) {
-		lo[0] = std::min(lo[0], p.x), hi[0] = std::max(hi[0], p.x);
-		lo[1] = std::min(lo[1], p.y), hi[1] = std::max(hi[1], p.y);
-		lo[2] = std::min(lo[2], p.z), hi[2] = std::max(hi[2], p.z);
-	}
-	const double dx = hi[0] - lo[0], dy = hi[1] - lo[1], dz = hi[2] - lo[2];
-	const double flatSpan = FLAT_TOLERANCE * std::sqrt(dx * dx + dy * dy + dz * dz);
-	std::vector<int> votes(n, 0);
-	std::vector<double> v(n);
-	r.allFlat = true;
-	for (size_t s = 0; s < S; ++s) {
-		double T = 1.0;
-		const auto mm = std::minmax_element(pdis[s].begin(), pdis[s].end());
-		const double pmin = *mm.first, pmax = *mm.second;
-		const bool active = pmax - pmin > flatSpan;
-		if (active) {
-			r.allFlat = false;
-			for (long i = 0; i < n; ++i) v[i] = (pdis[s][i] - pmin) / (pmax - pmin);
-			T = otsu(v);
-		}
-		vote(v, T, active, votes, r);
-	}
-	Decision d;
-	d.toClean.resize(n);
-	std::iota(d.toClean.begin(), d.toClean.end(), 0L);
-	d.strength.resize(n);
-	d.feature.resize(n);
-	for (long i = 0; i < n; ++i) {
-		d.strength[i] = double(votes[i]) / double(S);
-		d.feature[i] = votes[i] == int(S);
-	}
-	return d;
-}
-
-// The k-rings of a mesh in the order of the Python package's RingNeighbourhoods
-// (backend "numpy", scipy's sparse product): ring k + 1 lists the vertices met first
-// when walking ring k's list and, for each member, its sorted 1-ring (itself included),
-// in reverse order. The order fixes the rounding of the sums in robust mode.
-class SparseRings {
-public:
-	SparseRings(long n, const std::vector<std::array<int, 3>> &faces) : adj_(oneRing(n, faces)), mark_(n, -1) {
-		for (long i = 0; i < n; ++i) {
-			adj_[i].insert(std::lower_bound(adj_[i].begin(), adj_[i].end(), i), i);
-		}
-	}
-	// Start at vertex i: the 0-ring {i}.
-	const std::vector<long> &start(long i) {
-		current_.assign(1, i);
-		return current_;
-	}
-	// The next ring, from the current one.
-	const std::vector<long> &grow() {
-		++generation_;
-		next_.clear();
-		for (long j : current_)
-			for (long k : adj_[j])
-				if (mark_[k] != generation_) {
-					mark_[k] = generation_;
-					next_.push_back(k);
-				}
-		std::reverse(next_.begin(), next_.end());
-		current_.swap(next_);
-		return current_;
-	}
-
-private:
-	std::vector<std::vector<long>> adj_;
-	std::vector<long> mark_;
-	long generation_ = 0;
-	std::vector<long> current_, next_;
-};
-
-// Robust mode (docs/robust-mode.md, robust.RobustSetup): isolated points left out and
-// scales grown with the noise (clouds), r = pdis / l with Otsu's threshold floored at
-// R_MIN, candidates at every scale, support along the line, thinning across it by the
-// mean of o / l; on meshes also the vertices of sharp mesh edges (creases.py).
-Decision robustMode(std::vector<Point> pts, const Clean &c, const Options &options, Result &r,
-                    bool (*progress)(const int, const char *)) {
-	Decision d;
-	d.toClean.resize(pts.size());
-	std::iota(d.toClean.begin(), d.toClean.end(), 0L);
-	const size_t S = r.scales.size();
-	std::vector<std::vector<long>> D, Sup, K;  // direction, support and comparison lists
-	std::vector<Point> scratch;
-	Columns col;
-	std::vector<std::vector<double>> pdis(S), ell(S), off(S);
-
-	if (!r.mesh) {
-		auto hoods = knn(pts, r.scales.back(), progress);
-		std::vector<Point> kept;
-		std::vector<long> keptIdx;
-		for (size_t i = 0; i < pts.size(); ++i) {
-			const auto &nj = hoods[hoods[i][1]];
-			if (std::find(nj.begin(), nj.end(), long(i)) != nj.end()) {
-				kept.push_back(pts[i]);
-				keptIdx.push_back(long(i));
-			}
-		}
-		if (kept.size() < pts.size()) {
-			if (long(kept.size()) < r.scales.back())
-				throw InputError("too few points are left once isolated points are removed");
-			pts.swap(kept);
-			d.toClean.swap(keptIdx);
-			hoods = knn(pts, r.scales.back(), progress);
-		}
-		const long n = long(pts.size());
-		const double factor =
-		    std::min(noiseScaleFactor(pts, hoods, std::min(NOISE_KNN, r.scales.back())),
-		             double(n) / double(r.scales.back()));
-		if (factor > 1.0) {
-			for (int &k : r.scales) k = int(std::floor(k * factor + 0.5));
-			hoods = knn(pts, r.scales.back(), progress);
-		}
-		const int top = r.scales.back();
-		std::vector<long> nb;
-		for (size_t s = 0; s < S; ++s) {
-			pdis[s].resize(n);
-			ell[s].resize(n);
-			off[s].resize(n);
-		}
-		Sup.resize(n);
-		K.resize(n);
-		for (long i = 0; i < n; ++i) {
-			if (progress && i % 20000 == 0) progress(40 + int(50 * i / n), "Sharp features: projected distances");
-			for (size_t s = 0; s < S; ++s) {
-				nb.assign(hoods[i].begin(), hoods[i].begin() + r.scales[s]);
-				pdis[s][i] = projectedDistance(pts, i, nb, nullptr, options.gaussian, scratch);
-				localScale(pts, i, nb, col, ell[s][i], off[s][i]);
-			}
-			Sup[i].assign(hoods[i].begin(), hoods[i].begin() + std::min(SUPPORT_KNN, top));
-			K[i].assign(hoods[i].begin(), hoods[i].begin() + std::min(THIN_KNN, top));
-		}
-		D.swap(hoods);
-	} else {
-		const long n = long(pts.size());
-		std::vector<char> valid;
-		const auto normals = faceAverageNormals(pts, c.faces, valid);
-		SparseRings rings(n, c.faces);
-		const int top = r.scales.back();
-		const int compareRing = std::min(THIN_RING, top);
-		for (size_t s = 0; s < S; ++s) {
-			pdis[s].resize(n);
-			ell[s].resize(n);
-			off[s].resize(n);
-		}
-		D.resize(n);
-		Sup.resize(n);
-		for (long i = 0; i < n; ++i) {
-			if (progress && i % 20000 == 0) progress(int(90 * i / n), "Sharp features: rings");
-			rings.start(i);
-			size_t s = 0;
-			for (int ring = 1; ring <= top; ++ring) {
-				const std::vector<long> &nb = rings.grow();
-				if (ring == compareRing) Sup[i] = nb;
-				if (ring == top) D[i] = nb;
-				if (ring == r.scales[s]) {
-					pdis[s][i] = projectedDistance(pts, i, nb, valid[i] ? &normals[i] : nullptr,
-					                               options.gaussian, scratch);
-					localScale(pts, i, nb, col, ell[s][i], off[s][i]);
-					++s;
-				}
-			}
-		}
-		K = Sup;
-	}
-
-	const long n = long(pts.size());
-	std::vector<int> votes(n, 0);
-	std::vector<double> v(n), score(n, 0.0);
-	for (size_t s = 0; s < S; ++s) {
-		for (long i = 0; i < n; ++i) {
-			v[i] = relative(pdis[s][i], ell[s][i]);
-			score[i] += relative(off[s][i], ell[s][i]) / double(S);
-		}
-		vote(v, std::max(otsu(v), R_MIN), true, votes, r);
-	}
-	std::vector<char> f0(n);
-	d.strength.resize(n);
-	for (long i = 0; i < n; ++i) {
-		f0[i] = votes[i] == int(S);
-		d.strength[i] = double(votes[i]) / double(S);
-	}
-	d.feature = supportAndThin(pts, f0, score, D, Sup, K);
-	if (r.mesh) {
-		const auto edges = sharpVertices(pts, c.faces);
-		for (long i = 0; i < n; ++i)
-			if (edges[i]) {
-				d.feature[i] = 1;
-				d.strength[i] = 1.0;
-			}
-	}
-	return d;
-}
-
-}  // namespace
-
 Result detect(const std::vector<Point> &vertices, const std::vector<std::array<int, 3>> &faces,
-              const Options &options, bool (*progress)(const int, const char *)) {
-	const long nIn = long(vertices.size());
+              const Options &options, Progress progress) {
+	Bar bar(progress);
+	bar.report(0, "cleaning");
+	const Index nIn = Index(vertices.size());
 	if (nIn == 0) throw InputError("the layer has no vertices");
-	for (long i = 0; i < nIn; ++i) {
+	std::vector<double> xyz(3 * nIn);
+	for (Index i = 0; i < nIn; ++i) {
 		const Point &p = vertices[i];
 		if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
 			throw InputError("vertex " + std::to_string(i) + " has a non-finite coordinate (NaN or inf)");
+		xyz[3 * i] = p.x;
+		xyz[3 * i + 1] = p.y;
+		xyz[3 * i + 2] = p.z;
 	}
 	Result r;
 	r.mesh = !faces.empty() && !options.asPoints;
 	for (const auto &f : faces)
 		for (int a = 0; a < 3; ++a)
 			if (f[a] < 0 || f[a] >= nIn) throw InputError("a face index is out of range");
-	const Clean c = clean(vertices, r.mesh ? faces : std::vector<std::array<int, 3>>{}, r.mesh);
-	if (r.mesh && c.faces.empty()) throw InputError("every face has zero area: nothing is left of the mesh");
+	std::vector<Index> tri;
+	if (r.mesh)
+		for (const auto &f : faces) tri.insert(tri.end(), f.begin(), f.end());
+	unitScale(xyz);
+	const Clean c = clean(xyz, tri, r.mesh);
 	r.scales = r.mesh ? options.ringScales : options.knnScales;
 	if (!r.mesh) {
-		const long n = long(c.pts.size());
+		const Index n = c.size();
 		if (n == 1 && nIn > 1) throw InputError("all " + std::to_string(nIn) + " points are identical");
 		if (n < r.scales.back())
 			throw InputError(std::to_string(n) + " distinct points, fewer than the largest scale k = " +
 			                 std::to_string(r.scales.back()));
 	}
-	r.nClean = long(c.pts.size());
+	r.nClean = long(c.size());
 
-	std::vector<Point> pts = c.pts;
-	scaleToUnit(pts);
-	const Decision d = options.robust ? robustMode(pts, c, options, r, progress)
-	                                  : paperMode(pts, c, options, r, progress);
+	const Decision d = !options.robust ? paperMode(c, options, r, bar)
+	                   : r.mesh        ? robustMesh(c, options, r, bar)
+	                                   : robustCloud(c, options, r, bar);
+
+	r.timings = bar.times();
 
 	// Back to the input's order.
-	std::vector<long> processed(c.pts.size(), -1);
-	for (size_t i = 0; i < d.toClean.size(); ++i) processed[d.toClean[i]] = long(i);
+	std::vector<Index> processed(c.size(), -1);
+	for (size_t i = 0; i < d.toClean.size(); ++i) processed[d.toClean[i]] = Index(i);
 	r.strength.assign(nIn, 0.0);
 	r.feature.assign(nIn, 0);
 	r.kept.assign(nIn, 0);
-	for (long i = 0; i < nIn; ++i) {
-		const long ci = c.fromInput[i];
+	for (Index i = 0; i < nIn; ++i) {
+		const Index ci = c.fromInput[i];
 		if (ci < 0 || processed[ci] < 0) continue;
-		const long pi = processed[ci];
+		const Index pi = processed[ci];
 		r.kept[i] = 1;
 		r.strength[i] = d.strength[pi];
 		r.feature[i] = d.feature[pi];
 		r.nFeatures += r.feature[i];
 	}
-	if (progress) progress(100, "Sharp features: done");
+	bar.report(100, "done");
 	return r;
 }
 

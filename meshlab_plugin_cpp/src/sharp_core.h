@@ -1,13 +1,19 @@
 // meshlab-sharp: the projected-distance sharp feature detector (Tran et al. 2014),
-// independent of MeshLab's types. It follows ../shared/ALGORITHM.md and the arithmetic
-// pinned down in docs/implementation-notes.md and docs/robust-mode.md, as the Python
-// package does, in double.
+// independent of MeshLab's types: the filter glue around the package's C kernel
+// (meshlab_sharp/_ckernels.c, declared with the method's constants in _ckernels.h). The
+// kernel does the per-point work (kd-tree, neighbours, normals, projected distances,
+// local scales, noise and isolation statistics) on every core; this core does the small
+// global steps, as the Python package does: cleaning map, normalisation, Otsu, the
+// multiscale vote, robust mode's support and thinning, the mesh's sharp edges.
 #ifndef MESHLAB_SHARP_CORE_H
 #define MESHLAB_SHARP_CORE_H
+
+#include "_ckernels.h"
 
 #include <array>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace sharp {
@@ -15,8 +21,8 @@ namespace sharp {
 struct Point { double x, y, z; };
 
 struct Options {
-	std::vector<int> knnScales{12, 16, 20, 24, 28, 32, 36, 40};  // point clouds
-	std::vector<int> ringScales{1, 2, 3, 4};                       // meshes
+	std::vector<int> knnScales MS_DEFAULT_KNN_SCALES;    // point clouds
+	std::vector<int> ringScales MS_DEFAULT_RING_SCALES;  // meshes
 	bool gaussian = true;   // Gaussian-weighted PCA normals; false: plain PCA
 	bool asPoints = false;  // ignore the faces
 	bool robust = false;    // robust mode (docs/robust-mode.md); false: the paper's method
@@ -33,6 +39,7 @@ struct Result {
 	long nClean = 0;
 	long nFeatures = 0;
 	bool allFlat = false;              // every scale flat: all points on one plane
+	std::vector<std::pair<std::string, double>> timings;  // seconds per stage, in order
 };
 
 // Bad input: the message is meant for the user.
@@ -40,15 +47,22 @@ struct InputError : std::runtime_error {
 	explicit InputError(const std::string &what) : std::runtime_error(what) {}
 };
 
-// Detect the sharp features of vertices (and triangles, unless empty or asPoints).
-// Throws InputError on unusable input; never aborts.
+// Progress report, MeshLab's vcg::CallBackPos: percent done and a message such as
+// "Sharp features: projected distances 45%". Called by the calling thread only.
+using Progress = bool (*)(const int percent, const char *message);
+
+// Detect the sharp features of vertices (and triangles, unless empty or asPoints), on
+// every core. Throws InputError on unusable input, std::bad_alloc out of memory.
 Result detect(const std::vector<Point> &vertices,
               const std::vector<std::array<int, 3>> &faces,
               const Options &options,
-              bool (*progress)(const int percent, const char *stage) = nullptr);
+              Progress progress = nullptr);
 
 // Parse "12 16 20" or "12,16,20" or a range "12:40:4"; throws InputError.
 std::vector<int> parseScales(const std::string &text, int minimum);
+
+// The scales as parseScales reads them back: "12 16 20".
+std::string formatScales(const std::vector<int> &scales);
 
 }  // namespace sharp
 

@@ -1,0 +1,177 @@
+/* The C ABI of meshlab-sharp's compiled kernels (_ckernels.c), and the constants of the
+ * method, defined here once.
+ *
+ * Three users: the kernels themselves; the Python package, which loads the library with
+ * ctypes (meshlab_sharp/_kernels.py) and reads the MS_ constants below from this file
+ * (meshlab_sharp/_header.py); and the MeshLab plugin, whose core
+ * (meshlab_plugin_cpp/src/sharp_core.cpp) compiles _ckernels.c and calls the same
+ * functions. Plain C99: no Python, MeshLab or vcg types.
+ *
+ * Conventions: points are (n, 3) row-major doubles; "tree positions" index the points
+ * in kd-tree order (ms_kdtree_build), "cleaned indices" the points as given; every
+ * function that takes [begin, end) works on that chunk only, so that callers run chunks
+ * on threads (nothing is shared but read-only input and disjoint output rows).
+ */
+#ifndef MESHLAB_SHARP_CKERNELS_H
+#define MESHLAB_SHARP_CKERNELS_H
+
+#include <stdint.h>
+
+/* ---------------------------------------------------------------- constants
+ * One `#define MS_NAME value` a line: a number, a quotient of two numbers in
+ * parentheses, or a brace list of integers. meshlab_sharp/_header.py parses exactly
+ * these forms; the Python names drop the MS_ prefix. */
+
+/* Default scales: k nearest neighbours on a point cloud, k-rings on a mesh. */
+#define MS_DEFAULT_KNN_SCALES {12, 16, 20, 24, 28, 32, 36, 40}
+#define MS_DEFAULT_RING_SCALES {1, 2, 3, 4}
+/* Histogram bins of Otsu's threshold (threshold.BINS). */
+#define MS_BINS 256
+/* A scale whose projected distances span at most this fraction of the bounding-box
+ * diagonal is flat (threshold.FLAT_TOLERANCE). */
+#define MS_FLAT_TOLERANCE 1e-6
+/* A face-average normal shorter than this is no normal (normals.ZERO_NORMAL). */
+#define MS_ZERO_NORMAL 1e-12
+/* Coordinates whose largest magnitude lies outside [2^-100, 2^100) are scaled by a
+ * power of two first (neighbourhoods.UNIT_RANGE). */
+#define MS_UNIT_RANGE 100
+/* Robust mode (robust.py, creases.py; docs/robust-mode.md). */
+#define MS_CREASE_ANGLE 20.0
+#define MS_NOISE_FACTOR (4.0 / 0.3186)
+#define MS_NOISE_KNN 7
+#define MS_NOISE_TOLERATED 0.15
+#define MS_NOISE_MAX_FACTOR 3.0
+/* The sheet filter (robust.sheet_mask): gap in spacings, fewest points and kept share. */
+#define MS_SHEET_GAP 0.4
+#define MS_SHEET_MIN 6
+#define MS_SHEET_OWN 0.5
+#define MS_THIN_CONE_COS 0.5
+#define MS_THIN_KNN 12
+#define MS_THIN_RING 2
+#define MS_SUPPORT_KNN 16
+#define MS_SUPPORT_MIN 2
+/* Points per chunk handed to a thread (_kernels.CHUNK). */
+#define MS_CHUNK 8192
+/* Most points in a leaf of the kd-tree (_kernels.KD_LEAF). */
+#define MS_KD_LEAF 16
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* What one pass of ms_cloud_pdis writes (each pointer may be NULL), per cleaned index
+ * oi = orig[i], s the scale's position in ks:
+ *   pdis[s * n + oi]          projected distance; normals[(s * n + oi) * 3] its normal;
+ *   idx[oi * kmax + j]        the neighbour indices (kNN table);
+ *   relative[s * n + oi]      robust mode's relative distance r = min(pdis / l, 1) (0
+ *                             if l = 0; l = robust.local_scale in numpy's summation
+ *                             order), and score[oi] its ranking: the sum over the scales
+ *                             in order of min(o / l, 1) / nscales (RelativeRule's);
+ *   noise[oi]                 robust.noise_scale_factor's ratio over the noise_k nearest;
+ *   sheet_gap > 0             robust.sheet_mask (sheet_gap, sheet_min, sheet_own) first
+ *                             (normal: the weighted PCA normal of the kmax nearest):
+ *                             every scale's neighbourhood, and the noise's, is then the
+ *                             kept points among its neighbours;
+ *   near[oi]                  the nearest other point (column 1 of the kNN table);
+ *   kth_d2[oi], kth_idx[oi]   squared distance and index of the kmax-th neighbour. */
+typedef struct {
+    double *pdis, *normals;
+    int64_t *idx;
+    double *relative, *score, *noise;
+    int64_t noise_k;
+    int64_t *near;
+    double *kth_d2;
+    int64_t *kth_idx;
+    double sheet_gap;
+    int64_t sheet_min;
+    double sheet_own;
+} cloud_out_t;
+
+/* The balanced kd-tree of p (n, 3), leaves at `depth` (ceil(log2(n / MS_KD_LEAF)), at
+ * least 0): the points in tree order into tp (n, 3), their cleaned indices into torig
+ * (n), the tight boxes (lo xyz, hi xyz) of the 2^(depth + 1) - 1 nodes into box. */
+void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                     double *box);
+
+/* Unit eigenvector of the smallest eigenvalue of each symmetric matrix cov (c, 6) given
+ * as a00 a01 a02 a11 a12 a22, into out (c, 3). */
+void ms_eigvecs(const double *cov, int64_t c, double *out);
+
+/* kNN of tree positions [begin, end) at k = max(ks) (ks: nscales increasing scales),
+ * then what out asks for (cloud_out_t). p, orig, box, depth: the tree. Returns 0, or
+ * -1 out of memory. */
+int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
+                  const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
+                  const cloud_out_t *out);
+
+/* For r in [begin, end): the k nearest of the point at tree position pos[r] into
+ * out_idx[r * k ...], cleaned indices sorted by (squared distance, index). Returns 0, or
+ * -1 out of memory. */
+int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
+                const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx);
+
+/* robust.local_scale over CSR lists (indptr, indices int32, or int64 when wide) of the
+ * points [begin, end): mean distance out_ell[i] and centroid distance out_off[i], in
+ * numpy's summation order. Returns 0, or -1 out of memory. */
+int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indices, int wide,
+                       int64_t begin, int64_t end, double *out_ell, double *out_off);
+
+/* The sum of a[0], a[stride], ... (n terms) as numpy's add.reduceat sums a segment: the
+ * first term plus numpy's pairwise sum of the others (0 when n = 0). */
+double ms_segment_sum(const double *a, int64_t n, int64_t stride);
+
+/* 1-ring adjacency of a triangle mesh, CSR with repeats: ptr (n + 1), idx (6 m). Returns
+ * 0, -1 out of memory, or -2 when a face index lies outside [0, n). */
+int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx);
+
+/* k-rings by breadth-first search over (ptr, adj) for the vertices [begin, end) and the
+ * projected distance at every ring of rings (nscales increasing) into
+ * out_pdis[s * n + i], normals into out_normals when not NULL. fixed: (n, 3) normals, a
+ * zero row meaning PCA, or NULL. stamp: (n,) int32 scratch of the calling thread, all -1
+ * before its first call. Returns 0, or -1 out of memory. */
+int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
+                 const double *fixed, const int64_t *rings, int nscales, int gaussian,
+                 int64_t begin, int64_t end, int32_t *stamp, double *out_pdis,
+                 double *out_normals);
+
+/* Face-average vertex normals (unit, or zero when shorter than `zero`) into acc (n, 3),
+ * zero on entry; faces (m, 3). */
+void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
+                             double zero, double *acc);
+
+/* Each vertex's 1-ring and itself, sorted, without repeats (RingNeighbourhoods.one_ring),
+ * from ms_adjacency's lists (ptr, adj): out_ptr (n + 1), out_idx (room for ptr[n] + n). */
+void ms_sorted_one_ring(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t *out_ptr,
+                        int32_t *out_idx);
+
+/* robust.local_scale of the vertices [begin, end) over their k-rings, k = rings[s]
+ * (nscales increasing), the rings listed in the order of RingNeighbourhoods.at (scipy's
+ * sparse product) from ms_sorted_one_ring's lists (ptr1, one), into out_ell and out_off
+ * (nscales, n). mark: (n,) int64 scratch of the calling thread, all -1 before its first
+ * call. Returns 0, or -1 out of memory. */
+int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const int32_t *one,
+                        const int64_t *rings, int nscales, int64_t begin, int64_t end,
+                        int64_t *mark, double *out_ell, double *out_off);
+
+/* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for 3 m
+ * rows), and the dot products of their faces' unit normals fn (m, 3), the lower face
+ * first, into out_dot (creases.dihedral_angles). Returns the count, or -1 out of memory. */
+int64_t ms_two_face_edges(const int64_t *faces, int64_t m, int64_t n, const double *fn,
+                          int64_t *out_edges, double *out_dot);
+
+/* Merge exactly equal points into their first occurrence. table: (tmask + 1) int64
+ * scratch, all -1, tmask + 1 a power of two >= 2 n. from_input (n): cleaned index of
+ * each input point; to_input (n, first m used): input index of each cleaned point.
+ * Returns m. */
+int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
+                 int64_t *from_input, int64_t *to_input);
+
+/* Double area |(p1 - p0) x (p2 - p0)| of each face (m, 3) into out (m), as vcg's
+ * DoubleArea. */
+void ms_face_double_areas(const double *p, const int64_t *faces, int64_t m, double *out);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

@@ -1,0 +1,242 @@
+"""The MeshLab plugin's core without MeshLab: ``meshlab_plugin_cpp/src/sharp_core.cpp`` and
+the package's C kernel ``meshlab_sharp/_ckernels.c``, built with g++ alone into a small
+driver (``tests/sharp_core_driver.cpp``), against :func:`meshlab_sharp.detect` on the same
+float64 arrays: the same scales, thresholds, candidate counts, features and strengths.
+Runs wherever g++ is (no MeshLab sources, no Qt)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+import shapes
+
+import meshlab_sharp
+from meshlab_sharp import _header, groundtruth
+from meshlab_sharp.errors import InputError
+from meshlab_sharp.sample import sample_part
+
+ROOT = Path(__file__).resolve().parent.parent
+DRIVER = Path(__file__).resolve().parent / "sharp_core_driver.cpp"
+CORE = ROOT / "meshlab_plugin_cpp" / "src" / "sharp_core.cpp"
+KERNEL = ROOT / "meshlab_sharp" / "_ckernels.c"
+
+pytestmark = pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++")
+
+
+@pytest.fixture(scope="module")
+def driver(tmp_path_factory) -> Path:
+    """The driver, compiled with the flags the plugin's CMakeLists.txt gives each file."""
+    out = tmp_path_factory.mktemp("core")
+    kernel = out / "ckernels.o"
+    flags = ["-O3", "-ffp-contract=off", "-fno-math-errno", "-DMS_LIBMVEC=1", "-fPIC"]
+    subprocess.run(["gcc", "-c", "-std=c99", *flags, KERNEL, "-o", kernel], check=True)
+    exe = out / "driver"
+    command = ["g++", "-O3", "-std=c++14", "-ffp-contract=off", "-Wall", "-Werror"]
+    command += ["-Wno-unused-parameter", f"-I{KERNEL.parent}", f"-I{CORE.parent}"]
+    command += [DRIVER, CORE, kernel, "-o", exe, "-lmvec", "-lm", "-pthread"]
+    subprocess.run(command, check=True)
+    return exe
+
+
+def run_core(
+    driver: Path,
+    tmp: Path,
+    vertices: np.ndarray,
+    faces: np.ndarray | None,
+    *,
+    mode: str,
+    knn: str = "12 16 20 24 28 32 36 40",
+    rings: str = "1 2 3 4",
+    weighting: str = "gaussian",
+    as_points: bool = False,
+) -> tuple[dict[str, list[float]], np.ndarray, np.ndarray]:
+    """The core's summary lines (scales, thresholds, candidates, progress), strengths
+    (n,) float64 and features (n,) bool; raises InputError with the core's message."""
+    f = np.zeros((0, 3), np.int32) if faces is None else np.asarray(faces, np.int32)
+    v = np.ascontiguousarray(vertices, np.float64)
+    src, out = tmp / "in.bin", tmp / "out.bin"
+    header = np.array([len(v), len(f)], np.int64).tobytes()
+    src.write_bytes(header + v.tobytes() + np.ascontiguousarray(f).tobytes())
+    args = [driver, src, out, mode, knn, rings, weighting, "1" if as_points else "0"]
+    proc = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
+    if proc.returncode == 2:
+        raise InputError(proc.stderr.removeprefix("error: ").strip())
+    assert proc.returncode == 0, proc.stderr
+    lines = {}
+    for line in proc.stdout.splitlines():
+        name, *values = line.split()
+        lines[name] = [float(x) for x in values]
+    data = out.read_bytes()
+    n = len(v)
+    strength = np.frombuffer(data[: 8 * n], np.float64)
+    return lines, strength, np.frombuffer(data[8 * n :], np.uint8).astype(bool)
+
+
+def _with_outliers(points: np.ndarray) -> np.ndarray:
+    rng = np.random.default_rng(21)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    pad = 0.2 * np.linalg.norm(hi - lo)
+    return np.concatenate([points, rng.uniform(lo - pad, hi + pad, (len(points) // 100, 3))])
+
+
+def _case(name: str) -> tuple[np.ndarray, np.ndarray | None, dict[str, object]]:
+    if name == "cube-points":
+        return shapes.cube_grid_points(15), None, {}
+    if name == "sample-points":
+        return sample_part("points", n_points=6000).vertices, None, {}
+    if name == "sample-mesh":
+        part = sample_part("mesh")
+        return part.vertices, part.faces, {}
+    if name == "sample-mesh-as-points":
+        part = sample_part("mesh")
+        return part.vertices, part.faces, {"as_points": True}
+    if name == "box-cylinder-unweighted":
+        return shapes.box_cylinder_points(4000, seed=3), None, {"weighting": "none"}
+    if name == "box-other-scales":
+        return shapes.random_box_points(3000, seed=8), None, {"scales": (8, 14, 20, 26, 32)}
+    if name == "outliers":
+        return _with_outliers(sample_part("points", n_points=6000).vertices), None, {}
+    if name == "noise50":  # robust mode grows the scales
+        s = groundtruth.make_condition("fandisk", "noise50", n_points=6000)
+        return s.vertices, None, {}
+    if name == "fandisk-mesh":
+        v, f, _ = groundtruth.reference_surface("fandisk")
+        return v, f, {}
+    if name == "cube-mesh-rings-1-6":
+        v, f = shapes.cube_grid_mesh(3)
+        return v, f, {"scales": (1, 2, 3, 4, 5, 6)}
+    raise AssertionError(name)
+
+
+CASES = [
+    "cube-points",
+    "sample-points",
+    "sample-mesh",
+    "sample-mesh-as-points",
+    "box-cylinder-unweighted",
+    "box-other-scales",
+    "outliers",
+    "noise50",
+    "fandisk-mesh",
+    "cube-mesh-rings-1-6",
+]
+
+
+@pytest.mark.parametrize("mode", ["paper", "robust"])
+@pytest.mark.parametrize("case", CASES)
+def test_the_core_agrees_with_python(driver, tmp_path, case, mode):
+    vertices, faces, options = _case(case)
+    scales = options.get("scales")
+    mesh = faces is not None and not options.get("as_points", False)
+    text = " ".join(map(str, scales)) if scales else None
+    lines, strength, feature = run_core(
+        driver,
+        tmp_path,
+        vertices,
+        faces,
+        mode=mode,
+        knn=text if text and not mesh else "12 16 20 24 28 32 36 40",
+        rings=text if text and mesh else "1 2 3 4",
+        weighting=str(options.get("weighting", "gaussian")),
+        as_points=bool(options.get("as_points", False)),
+    )
+    expected = meshlab_sharp.detect(
+        vertices,
+        faces,
+        mode=mode,
+        scales=scales,
+        weighting=options.get("weighting", "gaussian"),
+        as_points=bool(options.get("as_points", False)),
+    )
+    assert tuple(int(s) for s in lines["scales"]) == expected.scales
+    np.testing.assert_array_equal(lines["thresholds"], expected.thresholds)
+    np.testing.assert_array_equal(lines["candidates"], expected.candidate_counts)
+    assert int((feature != expected.mask).sum()) == 0, "points differ"
+    np.testing.assert_array_equal(strength, expected.strength)
+    assert expected.n_features > 0
+    if case == "noise50" and mode == "robust":
+        assert expected.scales[0] > 12
+
+
+def test_the_progress_bar_moves(driver, tmp_path):
+    """The callback is called per chunk of points, from 0 to 100, never backwards."""
+    points = shapes.random_box_points(200000, seed=1)  # 25 chunks
+    lines, _, _ = run_core(driver, tmp_path, points, None, mode="robust")
+    progress = lines["progress"]
+    assert progress[0] == 0 and progress[-1] == 100
+    assert np.all(np.diff(progress) >= 0)
+    assert len(set(progress)) >= 10
+
+
+@pytest.mark.parametrize(
+    ("vertices", "message"),
+    [
+        (np.zeros((0, 3)), "no vertices"),
+        (np.tile([[1.0, 2.0, 3.0]], (60, 1)), "identical"),
+        (shapes.cube_grid_points(9)[:25], "fewer than the largest scale"),
+        (np.array([[0.0, 0.0, np.nan]] * 50), "non-finite"),
+    ],
+)
+def test_bad_input_is_refused_with_a_message(driver, tmp_path, vertices, message):
+    with pytest.raises(InputError, match=message):
+        run_core(driver, tmp_path, vertices, None, mode="robust")
+
+
+def test_the_constants_are_the_headers():
+    """Python's names take the header's values (a few spot checks of the parsed numbers);
+    the plugin's example script lists the header's default scales (a .mlx names every
+    parameter, so it cannot take them from the header)."""
+    from meshlab_sharp import creases, multiscale, robust, threshold
+
+    c = _header.CONSTANTS
+    assert multiscale.DEFAULT_KNN_SCALES == (12, 16, 20, 24, 28, 32, 36, 40)
+    assert (threshold.BINS, creases.NOISE_FACTOR) == (256, 4.0 / 0.3186)
+    assert robust.R_MIN == 0.11054786333836651  # from CREASE_ANGLE = 20.0
+    for name in ("NOISE_KNN", "NOISE_TOLERATED", "NOISE_MAX_FACTOR", "THIN_CONE_COS"):
+        assert getattr(robust, name) == c[name]
+    script = (ROOT / "meshlab_plugin_cpp" / "examples" / "sharp_features_default.mlx").read_text()
+    for name in ("knnScales", "ringScales"):
+        found = re.search(rf'value="([^"]*)" name="{name}"', script)
+        assert found, name
+        key = "DEFAULT_KNN_SCALES" if name == "knnScales" else "DEFAULT_RING_SCALES"
+        assert tuple(map(int, found.group(1).split())) == c[key]
+
+
+def test_the_header_parser_reads_only_its_forms():
+    assert _header.parse("#define MS_A (1.0 / 4.0)\n#define MS_B {1, 2}\n#define MS_C 7\n") == {
+        "A": 0.25,
+        "B": (1, 2),
+        "C": 7,
+    }
+    with pytest.raises(ValueError, match="unsupported constant"):
+        _header.parse("#define MS_A sqrt(2.0)\n")
+    with pytest.raises(TypeError, match="MS_BINS is 256, not float"):
+        _header.real("BINS")
+
+
+def test_the_ctypes_signatures_are_the_headers():
+    """Every function Python binds is declared in _ckernels.h with the argument and
+    return types its ctypes signature gives (one ABI for both faces)."""
+    import ctypes
+
+    from meshlab_sharp._kernels import _SIGNATURES
+
+    text = re.sub(r"/\*.*?\*/", "", _header.HEADER.read_text(), flags=re.DOTALL)
+    declared = {
+        name: (ret, [a.strip() for a in args.split(",")])
+        for ret, name, args in re.findall(r"(\w+) (ms_\w+)\(([^)]*)\);", text)
+    }
+    ctype = {"int": ctypes.c_int, "int64_t": ctypes.c_int64, "double": ctypes.c_double}
+    for name, (restype, argtypes) in _SIGNATURES.items():
+        ret, args = declared[name]
+        assert restype is (None if ret == "void" else ctype[ret]), name
+        assert len(args) == len(argtypes), name
+        for arg, given in zip(args, argtypes, strict=True):
+            base = arg.rsplit(" ", 1)[0].replace("const ", "")
+            expected = ctypes.c_void_p if "*" in arg else ctype[base]
+            assert given is expected, (name, arg)
