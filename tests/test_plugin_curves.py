@@ -25,7 +25,8 @@ from test_plugin import read_back, run_meshlabserver
 from test_plugin_fuzz import CASES, CRASH_WORDS, FILTER_FAILED, KNOWN_DISAGREEMENTS
 
 import meshlab_sharp
-from meshlab_sharp import DetectionResult, groundtruth, plugin
+from evaluation import groundtruth
+from meshlab_sharp import DetectionResult, plugin
 from meshlab_sharp.errors import InputError
 from meshlab_sharp.io.curves import curve_arrays
 from meshlab_sharp.sample import sample_part

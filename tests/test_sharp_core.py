@@ -16,7 +16,8 @@ import pytest
 import shapes
 
 import meshlab_sharp
-from meshlab_sharp import _header, groundtruth
+from evaluation import groundtruth
+from meshlab_sharp import _header
 from meshlab_sharp.errors import InputError
 from meshlab_sharp.sample import sample_part
 
