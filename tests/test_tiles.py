@@ -226,15 +226,16 @@ def test_order_statistic_is_exact(tmp_path, monkeypatch, collect: int) -> None:
         assert select.order_statistic(runner, "v", "keep", rank) == want
 
 
-@pytest.mark.xfail(
-    reason="issue 12 (open): under 300 MB in the developers' virtualenv, but 653-672 MB in "
-    "a fresh CI virtualenv, in both modes; not understood yet",
-    strict=False,
-)
-def test_peak_memory_stays_under_the_limit(tmp_path) -> None:
+@pytest.mark.parametrize("mode", ["robust", "paper"])
+def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
     """A fresh process reading a 400k-point binary PLY with --max-memory 300MB peaks
-    below 300 MB (ru_maxrss: interpreter, imports, tiles and result included), in paper
-    mode. Robust mode overshoots this limit (653 MB measured): see docs/out-of-core.md."""
+    below 300 MB (interpreter, imports, tiles and result included), in both modes.
+
+    The peak is the child's ``VmHWM`` (``tiles.run.peak_rss``), not ``ru_maxrss``: a
+    child started by ``subprocess`` (vfork + exec) inherits its parent's peak in
+    ``ru_maxrss``, which made this test report pytest's own memory (653-672 MB after a
+    long session). This test holds 400 MB itself while the child runs, so an inherited
+    peak would fail it."""
     import subprocess
     import sys
     from pathlib import Path
@@ -248,16 +249,19 @@ def test_peak_memory_stays_under_the_limit(tmp_path) -> None:
     )
     path.write_bytes(header.encode() + pts.astype("<f8").tobytes())
     code = (
-        "import resource, sys, meshlab_sharp\n"
-        f"r = meshlab_sharp.detect({str(path)!r}, max_memory='300MB', mode='paper')\n"
-        "print(r.tiling['tiles'], r.n_features,"
-        " resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)\n"
+        "import meshlab_sharp\n"
+        "from meshlab_sharp.tiles.run import peak_rss\n"
+        f"r = meshlab_sharp.detect({str(path)!r}, max_memory='300MB', mode={mode!r})\n"
+        "print(r.tiling['tiles'], r.n_features, peak_rss(), r.tiling['peak_bytes'])\n"
     )
     root = str(Path(__file__).resolve().parent.parent)
     env = {"PYTHONPATH": root, "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    ballast = np.ones(400 << 17)  # 400 MB resident in this process during the run
     proc = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
     )
-    tiles, features, peak = map(int, proc.stdout.split())
+    assert ballast.sum() == 400 << 17
+    tiles, features, peak, reported = map(int, proc.stdout.split())
     assert tiles >= 2 and features > 0
-    assert peak < 300 * 2**20
+    assert 50 * 2**20 < peak < 300 * 2**20
+    assert reported <= peak  # the summary's peak is the same measure, taken earlier

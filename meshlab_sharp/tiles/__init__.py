@@ -130,7 +130,9 @@ def detect_tiled(
     -------
     dict
         ``mask`` (n,) bool, ``strength`` (n,) float64, ``kept`` (n,) bool in input
-        order; ``thresholds`` (s,), ``candidate_counts`` (s,), ``n_clean``, ``timings``,
+        order; ``thresholds`` (s,), ``candidate_counts`` (s,), ``n_clean``, ``timings``
+        (seconds: ``tiles``, ``cluster`` (Dask start-up), ``detect`` and within it
+        ``step_<label>`` per step, ``finish``, ``total``),
         and ``tiling`` (tiles, steps, tasks, halo, peak memory of this process and of
         the workers).
     """
@@ -161,8 +163,11 @@ def detect_tiled(
         root = tempfile.mkdtemp(prefix="meshlab-sharp-tiles-", dir=scratch)
         stack.callback(shutil.rmtree, root, True)
         store = Store(root)
-        client = _client(dask, stack)
         timings: dict[str, float] = {}
+        t = time.perf_counter()
+        client = _client(dask, stack)
+        if client is not None:
+            timings["cluster"] = time.perf_counter() - t
         t = time.perf_counter()
         layout = build_layout(
             source.n,
@@ -189,6 +194,7 @@ def detect_tiled(
         run = _paper if mode == "paper" else _robust
         thresholds, counts, mask, kept, used = run(runner, store, layout, scales, weighting)
         timings["detect"] = time.perf_counter() - t
+        timings.update({f"step_{label}": v for label, v in runner.seconds.items()})
         t = time.perf_counter()
         out = runner.finish(source.n, mask, kept)
         timings["finish"] = time.perf_counter() - t

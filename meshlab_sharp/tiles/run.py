@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import resource
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -24,7 +25,21 @@ from .store import Store
 
 
 def peak_rss() -> int:
-    """Peak resident memory of this process so far, bytes."""
+    """Peak resident memory of this process so far, bytes.
+
+    On Linux the high-water mark of the process's address space (``VmHWM``), not
+    ``ru_maxrss``: a process started by ``vfork`` + ``exec`` (Python's ``subprocess``,
+    Dask's worker processes) inherits its parent's peak in ``ru_maxrss``, so a small
+    child of a large process (a test in a long pytest session) would report the
+    parent's memory as its own.
+    """
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return int(peak) * (1 if sys.platform == "darwin" else 1024)
 
@@ -107,12 +122,14 @@ class Runner:
         self.tasks = 0
         self.gathered = 0
         self.streamed = 0
+        self.seconds: dict[str, float] = {}
         self.backend = _kernels.default_backend()
 
     def step(self, step: Step) -> Partial:
         """Run ``step`` on every tile; the reduced partial."""
         n = self.layout.n_tiles
         args = (self.most_points, self.workers, self.backend)
+        started = time.perf_counter()
         if self.client is None:
             outcomes = []
             guess = float(self.halos.max(initial=0.0))
@@ -146,6 +163,9 @@ class Runner:
             self.gathered = max(self.gathered, o.gathered)
             self.streamed += o.streamed
         self.tasks += n
+        self.seconds[step.label] = self.seconds.get(step.label, 0.0) + (
+            time.perf_counter() - started
+        )
         return reduced
 
     def finish(self, n: int, mask: str, kept: str | None) -> dict[str, np.ndarray]:
