@@ -226,6 +226,56 @@ def test_order_statistic_is_exact(tmp_path, monkeypatch, collect: int) -> None:
         assert select.order_statistic(runner, "v", "keep", rank) == want
 
 
+def assert_same_curves(
+    got: meshlab_sharp.DetectionResult, ref: meshlab_sharp.DetectionResult
+) -> None:
+    assert got.curves is not None and ref.curves is not None
+    assert got.corners is not None and ref.corners is not None
+    assert len(got.curves) == len(ref.curves)
+    for a, b in zip(got.curves, ref.curves, strict=True):
+        assert np.array_equal(a.points, b.points) and np.array_equal(a.indices, b.indices)
+        assert (a.kind, a.closed, repr(a.params)) == (b.kind, b.closed, repr(b.params))
+    assert np.array_equal(got.corners.points, ref.corners.points)
+    assert np.array_equal(got.corners.indices, ref.corners.indices)
+
+
+@pytest.mark.parametrize("mode", ["robust", "paper"])
+def test_curves_out_of_core_equal_in_memory(monkeypatch, mode: str) -> None:
+    """Curves after a tiled run, from the points near the features gathered in blocks
+    (many small blocks here), are the in-memory curves and corners, input indices
+    included; a cloud without features has none."""
+    from meshlab_sharp.io.stream import PointSource
+    from meshlab_sharp.tiles import curves as tiled_curves
+
+    monkeypatch.setattr(tiled_curves, "BLOCK", 777)
+    pts = hostile_cloud(4000, seed=3)
+    ref = meshlab_sharp.detect(pts, mode=mode, curves=True)
+    got = meshlab_sharp.detect(
+        PointSource.from_array(pts), mode=mode, curves=True, max_memory="1GB"
+    )
+    assert ref.curves is not None and len(ref.curves) >= 12  # a box's edges, at least
+    assert_same_curves(got, ref)
+    assert "curves" in got.timings
+    flat = np.column_stack([np.random.default_rng(0).random((500, 2)), np.zeros(500)])
+    none = meshlab_sharp.detect(flat, mode=mode, curves=True, max_memory="1GB")
+    assert none.curves == [] and none.corners is not None and len(none.corners) == 0
+
+
+def test_curves_out_of_core_cli(tmp_path) -> None:
+    """detect --curves with --max-memory writes the in-memory run's curves file."""
+    from meshlab_sharp.cli import main
+    from meshlab_sharp.io import save_features_ply
+
+    pts = hostile_cloud(3000, seed=5)
+    src = tmp_path / "cloud.ply"
+    save_features_ply(src, pts, None, np.zeros(len(pts)), np.zeros(len(pts), bool))
+    for name, extra in (("a", []), ("b", ["--max-memory", "1GB"])):
+        args = ["detect", str(src), "-o", str(tmp_path / f"{name}.ply"), "-q"]
+        assert main([*args, "--curves", str(tmp_path / f"{name}.obj"), *extra]) == 0
+    assert (tmp_path / "a.obj").read_bytes() == (tmp_path / "b.obj").read_bytes()
+    assert b"\nl " in (tmp_path / "a.obj").read_bytes()
+
+
 @pytest.mark.parametrize("mode", ["robust", "paper"])
 def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
     """A fresh process reading a 400k-point binary PLY with --max-memory 300MB peaks

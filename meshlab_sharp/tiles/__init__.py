@@ -35,6 +35,7 @@ from ..normals import WEIGHTINGS
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
 from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
+from .curves import curves_out_of_core
 from .layout import build_layout
 from .neighbours import Query
 from .run import Runner, peak_rss
@@ -238,9 +239,11 @@ def detect_out_of_core(
     max_memory: str | int | None,
     dask: Any,
     scratch: str | os.PathLike[str] | None,
+    curves: bool = False,
 ) -> DetectionResult:
     """:func:`meshlab_sharp.detect` with ``max_memory`` or ``dask``: checks what the
-    tiled run supports and returns its :class:`~meshlab_sharp.DetectionResult`."""
+    tiled run supports and returns its :class:`~meshlab_sharp.DetectionResult` (with
+    ``curves``, the feature curves: :func:`meshlab_sharp.tiles.curves.curves_out_of_core`)."""
     from ..pipeline import MODES, DetectionResult, _as_input, _check_scales
 
     if weighting not in WEIGHTINGS:
@@ -299,6 +302,11 @@ def detect_out_of_core(
     if not isinstance(progress, Progress):
         bar.close()
     timings = {"load": 0.0, **out["timings"]}
+    found = None
+    if curves:
+        t = time.perf_counter()
+        found = curves_out_of_core(points, out["mask"], out["kept"])
+        timings["curves"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return DetectionResult(
         mask=out["mask"],
@@ -313,6 +321,8 @@ def detect_out_of_core(
         timings=timings,
         mode=mode,
         tiling=out["tiling"],
+        curves=None if found is None else found[0],
+        corners=None if found is None else found[1],
     )
 
 
