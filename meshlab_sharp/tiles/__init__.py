@@ -133,7 +133,8 @@ def detect_tiled(
         ``mask`` (n,) bool, ``strength`` (n,) float64, ``kept`` (n,) bool in input
         order; ``thresholds`` (s,), ``candidate_counts`` (s,), ``n_clean``, ``timings``
         (seconds: ``tiles``, ``cluster`` (Dask start-up), ``detect`` and within it
-        ``step_<label>`` per step, ``finish``, ``total``),
+        ``step_<label>`` per step (wall) and ``tasks_<label>`` (its tile tasks' own
+        seconds, summed), ``finish``, ``total``),
         and ``tiling`` (tiles, steps, tasks, halo, peak memory of this process and of
         the workers).
     """
@@ -196,6 +197,7 @@ def detect_tiled(
         thresholds, counts, mask, kept, used = run(runner, store, layout, scales, weighting)
         timings["detect"] = time.perf_counter() - t
         timings.update({f"step_{label}": v for label, v in runner.seconds.items()})
+        timings.update({f"tasks_{label}": v for label, v in runner.task_seconds.items()})
         t = time.perf_counter()
         out = runner.finish(source.n, mask, kept)
         timings["finish"] = time.perf_counter() - t

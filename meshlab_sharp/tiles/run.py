@@ -47,13 +47,14 @@ def peak_rss() -> int:
 @dataclass(frozen=True)
 class Outcome:
     """What a tile task returns: the partial, the halo that held, points searched, rows
-    that took the streaming route, the process's peak memory."""
+    that took the streaming route, the process's peak memory, the task's own seconds."""
 
     partial: Partial
     halo: float
     gathered: int
     streamed: int
     peak: int
+    seconds: float
 
 
 def tile_task(
@@ -67,16 +68,18 @@ def tile_task(
     backend: str,
 ) -> Outcome:
     """Run ``step`` on one tile."""
+    started = time.perf_counter()
     with _kernels.use_backend(backend):
         if step.query is None:
             a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
             partial = step.fn(Span(store, a, b), **step.params)
-            return Outcome(partial, halo, b - a, 0, peak_rss())
-        contexts, used, gathered, streamed = neighbours(
-            store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
-        )
-        partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
-        return Outcome(partial, used, gathered, streamed, peak_rss())
+            used, gathered, streamed = halo, b - a, 0
+        else:
+            contexts, used, gathered, streamed = neighbours(
+                store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
+            )
+            partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
+    return Outcome(partial, used, gathered, streamed, peak_rss(), time.perf_counter() - started)
 
 
 def finish_task(store: Store, layout: Layout, tile: int, mask: str, kept: str | None) -> dict:
@@ -123,6 +126,7 @@ class Runner:
         self.gathered = 0
         self.streamed = 0
         self.seconds: dict[str, float] = {}
+        self.task_seconds: dict[str, float] = {}
         self.backend = _kernels.default_backend()
 
     def step(self, step: Step) -> Partial:
@@ -163,9 +167,10 @@ class Runner:
             self.gathered = max(self.gathered, o.gathered)
             self.streamed += o.streamed
         self.tasks += n
-        self.seconds[step.label] = self.seconds.get(step.label, 0.0) + (
-            time.perf_counter() - started
-        )
+        label = step.label
+        self.seconds[label] = self.seconds.get(label, 0.0) + time.perf_counter() - started
+        busy = sum(o.seconds for o in outcomes)
+        self.task_seconds[label] = self.task_seconds.get(label, 0.0) + busy
         return reduced
 
     def finish(self, n: int, mask: str, kept: str | None) -> dict[str, np.ndarray]:
