@@ -242,6 +242,19 @@ def cloud_knn(tree: KdTree, k: int, workers: int = -1) -> np.ndarray:
     return out
 
 
+def cloud_knn_relative(
+    tree: KdTree, scales: Sequence[int], weighting: str = "gaussian", workers: int = -1
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The k = max(scales) nearest neighbours (n, k) int64, robust mode's relative
+    distances (s, n) and RelativeRule's score (n,) of every point (cleaned order), from
+    one neighbour search (:func:`cloud_projected_distances` with ``relative``)."""
+    ks = np.ascontiguousarray(scales, dtype=np.int64)
+    idx = np.empty((tree.n, int(ks[-1])), dtype=np.int64)
+    relative, score = np.empty((len(ks), tree.n)), np.empty(tree.n)
+    _cloud_call(tree, ks, weighting == "gaussian", workers, idx=idx, relative=relative, score=score)
+    return idx, relative, score
+
+
 def cloud_knn_rows(tree: KdTree, rows: np.ndarray, k: int, workers: int = -1) -> np.ndarray:
     """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64, each by a
     search of the tree (for a few rows: the table of every point is not built)."""

@@ -381,8 +381,8 @@ def _robust(
         scales = robust.grown_scales(scales, factor)
     s, top = len(scales), max(scales)
     store.create("r", (n, s), np.float64)
-    query = Query(top, kept="kept", scales=scales, weighting=weighting)
-    hist = runner.step(Step("relative", robust_relative, query, {"scales": scales}))["hist"]
+    query = Query(top, kept="kept", scales=scales, weighting=weighting, relative=True)
+    hist = runner.step(Step("relative", robust_relative, query))["hist"]
     thresholds = np.array([max(otsu_from_histogram(h), robust.R_MIN) for h in hist])
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}

@@ -50,6 +50,10 @@ class Query:
     scales : tuple of int or None
         Also the projected distances at these kNN scales (``k == max(scales)``).
     weighting : str
+    relative : bool
+        With ``scales``: robust mode's relative distances and score
+        (:class:`meshlab_sharp.robust.RelativeRule`, computed by the compiled pass)
+        instead of the projected distances.
     """
 
     k: int
@@ -57,6 +61,7 @@ class Query:
     rows: str | None = None
     scales: tuple[int, ...] | None = None
     weighting: str = "gaussian"
+    relative: bool = False
 
 
 @dataclass
@@ -75,7 +80,10 @@ class Context:
     idx : (r, k) int64
         Local indices of their k nearest, sorted by (squared distance, input index).
     pdis : (r, s) float64 or None
-        Their projected distances at the query's scales.
+        Their projected distances at the query's scales (``query.relative``: their
+        relative distances).
+    score : (r,) float64 or None
+        With ``query.relative``: RelativeRule's score.
     """
 
     store: Store
@@ -84,6 +92,7 @@ class Context:
     rows: np.ndarray
     idx: np.ndarray
     pdis: np.ndarray | None = None
+    score: np.ndarray | None = None
 
     def gather(self, name: str) -> np.ndarray:
         """Store array ``name`` at the set's points, (L, ...)."""
@@ -139,19 +148,25 @@ def gather(
 
 def _search(
     points: np.ndarray, rows: np.ndarray, query: Query, all_rows: bool, workers: int
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """k nearest (and projected distances) of ``rows`` within ``points``."""
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """k nearest of ``rows`` within ``points``, (r, k); their projected (or relative)
+    distances (r, s) and score (r,) where the query asks."""
     k = query.k
     if query.scales is not None or all_rows:
         tree = _kernels.build_tree(points)
+        if query.scales is not None and query.relative:
+            idx, rel, score = _kernels.cloud_knn_relative(
+                tree, query.scales, query.weighting, workers
+            )
+            return idx[rows], np.ascontiguousarray(rel[:, rows].T), score[rows]
         if query.scales is not None:
             idx, pdis = _kernels.cloud_knn_projected_distances(
                 tree, query.scales, query.weighting, workers
             )
-            return idx[rows], np.ascontiguousarray(pdis[:, rows].T)
-        return _kernels.cloud_knn(tree, k, workers)[rows], None
+            return idx[rows], np.ascontiguousarray(pdis[:, rows].T), None
+        return _kernels.cloud_knn(tree, k, workers)[rows], None, None
     tree = cKDTree(points)
-    return _knn_block(tree, points, rows, k, workers).astype(np.int64), None
+    return _knn_block(tree, points, rows, k, workers).astype(np.int64), None, None
 
 
 def neighbours(
@@ -211,7 +226,7 @@ def neighbours(
             h = max(2.0 * h, float(np.linalg.norm(hi0 - lo0)), 1e-3 * diag)
             continue
         biggest = max(biggest, len(points))
-        idx, pdis = _search(points, rows, query, query.rows is None, workers)
+        idx, pdis, score = _search(points, rows, query, query.rows is None, workers)
         r = np.sqrt(squared_distances(points[idx[:, -1]], points[rows]))
         need = r * (1.0 + MARGIN) + 1e-300
         if full:
@@ -219,9 +234,9 @@ def neighbours(
         else:
             p = points[rows]
             ok = need < np.minimum(p - blo, bhi - p).min(axis=1)
-        last = (pos, points, rows, idx, pdis, ok, r, h)
+        last = (pos, points, rows, idx, pdis, score, ok, r, h)
         if ok.all():
-            return [Context(store, points, pos, rows, idx, pdis)], h, biggest, 0
+            return [Context(store, points, pos, rows, idx, pdis, score)], h, biggest, 0
         p, nd = points[rows[~ok]], need[~ok][:, None]
         want = float(np.max(np.maximum(lo0 - (p - nd), (p + nd) - hi0)))
         h = max(want * (1.0 + 1e-6), h * 1.01 + 1e-12 * diag)
@@ -232,11 +247,12 @@ def neighbours(
         rows = _rows(store, pos, a, b, query)
         upper = np.full(len(rows), np.inf)
     else:
-        pos, points, rows, idx, pdis, ok, r, _ = last
+        pos, points, rows, idx, pdis, score, ok, r, _ = last
         keep = np.flatnonzero(ok)
         if len(keep):
             sub = None if pdis is None else pdis[keep]
-            contexts.append(Context(store, points, pos, rows[keep], idx[keep], sub))
+            sub_score = None if score is None else score[keep]
+            contexts.append(Context(store, points, pos, rows[keep], idx[keep], sub, sub_score))
         rows, upper = rows[~ok], r[~ok]
     contexts.extend(streamed(store, layout, pos[rows], points[rows], upper, query, workers))
     return contexts, h, biggest, len(rows)
@@ -322,8 +338,8 @@ def streamed(
         mpos = best_pos[i][order]
         mpts = store.read_at("coords", mpos)
         row = np.flatnonzero(mpos == pos[i])
-        idx, pdis = _search(mpts, row, query, True, workers)
-        out.append(Context(store, mpts, mpos, row, idx, pdis))
+        idx, pdis, score = _search(mpts, row, query, True, workers)
+        out.append(Context(store, mpts, mpos, row, idx, pdis, score))
     return out
 
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import partial
 from typing import Any
 
 import numpy as np
@@ -28,8 +27,6 @@ from .neighbours import Context, Query
 from .store import Store
 
 Partial = dict[str, np.ndarray]
-#: Neighbour entries (rows * k) per block of the local scale's computation.
-ENTRIES_PER_BLOCK = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -160,25 +157,14 @@ def robust_noise(ctx: Context, *, k: int) -> Partial:
     return {}
 
 
-def robust_relative(ctx: Context, *, scales: tuple[int, ...]) -> Partial:
-    """:class:`meshlab_sharp.robust.RelativeRule` on the rows: relative distances
-    ``r`` (r, s), the score, and the histograms of ``r``."""
-    assert ctx.pdis is not None
-    r = np.empty_like(ctx.pdis)
-    score = np.empty(len(ctx.rows))
-    pdis = np.zeros(len(ctx.points))
-    block = max(1, ENTRIES_PER_BLOCK // max(scales))  # bounds the (rows * k, 3) temporaries
-    for start in range(0, len(ctx.rows), block):
-        part = slice(start, start + block)
-        rows = ctx.rows[part]
-        rule = robust.RelativeRule(ctx.points, partial(ctx.lists, part=part), len(scales))
-        for i, k in enumerate(scales):
-            pdis[rows] = ctx.pdis[part, i]
-            r[part, i] = rule(i, k, pdis)[0][rows]
-        score[part] = rule.score[rows]
-    ctx.store.write_at("r", ctx.own, r)
-    ctx.store.write_at("score", ctx.own, score)
-    return {"hist": np.stack([histogram(r[:, i], BINS) for i in range(len(scales))])}
+def robust_relative(ctx: Context) -> Partial:
+    """:class:`meshlab_sharp.robust.RelativeRule` on the rows, as the compiled pass
+    computes it (``Query(relative=True)``): relative distances ``r`` (r, s), the score,
+    and the histograms of ``r``."""
+    assert ctx.pdis is not None and ctx.score is not None
+    ctx.store.write_at("r", ctx.own, ctx.pdis)
+    ctx.store.write_at("score", ctx.own, ctx.score)
+    return {"hist": np.stack([histogram(ctx.pdis[:, i], BINS) for i in range(ctx.pdis.shape[1])])}
 
 
 def robust_decide(span: Span, *, thresholds: np.ndarray) -> Partial:
