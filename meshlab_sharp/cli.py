@@ -401,17 +401,21 @@ def _detect_tiled(
         max_memory=args.max_memory,
         dask=args.dask,
         scratch=args.scratch,
+        curves=args.curves is not None,
     )
     t = time.perf_counter()
     write_features_ply(output, points, result.strength, result.mask, into=outputs)
     if args.indices:
         save_indices(args.indices, result.mask, into=outputs)
+    if args.curves:
+        assert result.curves is not None
+        save_curves(args.curves, result.curves, into=outputs)
     result.timings["save"] = time.perf_counter() - t
     result.timings["total"] = time.perf_counter() - start
     if args.report:
         report = result.summary()
         report["input"] = points.name
-        report["outputs"] = {"ply": str(output), "indices": args.indices}
+        report["outputs"] = {"ply": str(output), "indices": args.indices, "curves": args.curves}
         save_json(args.report, report, into=outputs)
     _pause_for_tests()
     outputs.commit()

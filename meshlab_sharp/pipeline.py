@@ -220,6 +220,8 @@ def detect(
         Also extract the feature curves and corners (``result.curves``,
         ``result.corners``; :mod:`meshlab_sharp.curves`): mesh edge chains on meshes,
         refined polylines on clouds. Off by default, so detection's time is unchanged.
+        With ``max_memory``/``dask`` they are extracted after the tiled detection from
+        the features and the points near them only (the same curves).
     max_memory : str or int, optional
         Out of core ("1GB"): a point cloud is processed in spatial tiles with halos
         (:mod:`meshlab_sharp.tiles`), keeping the peak memory under this; the result is
@@ -249,9 +251,6 @@ def detect(
     if max_memory is not None or dask is not None:
         from .tiles import detect_out_of_core
 
-        if curves:
-            raise InputError("curves are not extracted out of core (max_memory, dask) yet")
-
         options = dict(scales=scales, weighting=weighting, as_points=as_points, mode=mode)
         return detect_out_of_core(
             source,
@@ -265,6 +264,7 @@ def detect(
             max_memory=max_memory,
             dask=dask,
             scratch=scratch,
+            curves=curves,
         )
     with _kernels.use_backend(_kernels.resolve(backend)):
         return _detect(

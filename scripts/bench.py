@@ -5,7 +5,8 @@ Inputs (seeded): a point cloud sampled uniformly on the surface of a union of bo
 cylinders (a machined part: planes, cylinders, convex and concave edges), and a mesh,
 a box whose faces are regular grids (welded by cleaning) with a few steps on top.
 Each size runs in a fresh subprocess, so that its peak resident memory
-(``ru_maxrss``, which sees C allocations, unlike tracemalloc) is its own; the baseline
+(``VmHWM``, which sees C allocations, unlike tracemalloc, and unlike ``ru_maxrss`` is
+not inherited from the parent: ``meshlab_sharp.tiles.run.peak_rss``) is its own; the baseline
 (interpreter, imports, the input arrays) is measured in the same process before
 detection and subtracted.
 
@@ -167,7 +168,9 @@ def parse_size(text: str) -> int:
 
 
 def _rss_bytes() -> int:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    from meshlab_sharp.tiles.run import peak_rss
+
+    return peak_rss()
 
 
 def _cpu_seconds() -> float:
@@ -303,23 +306,43 @@ def run_one(
 # ----------------------------------------------------------------- out of core, Dask
 
 
-def write_cloud_ply(path: Path, points: np.ndarray) -> None:
-    """A binary PLY of double x, y, z (what the tiled runs memory-map)."""
+#: Points per block of the benchmark clouds above this size (each block a seeded
+#: cad_cloud of its own), so that a 100M-point cloud is never whole in memory.
+BLOCK = 10_000_000
+
+
+def cloud_blocks(n: int) -> Iterator[np.ndarray]:
+    """The benchmark cloud of ``n`` points: cad_cloud(n) up to BLOCK points, above
+    that cad_cloud(BLOCK, seed=i) blocks (the last one shorter), (c, 3) float64."""
+    for i, start in enumerate(range(0, n, BLOCK)):
+        yield cad_cloud(min(BLOCK, n - start), seed=i)
+
+
+def write_cloud_ply(path: Path, n: int) -> None:
+    """A binary PLY of double x, y, z of the benchmark cloud of ``n`` points (what the
+    tiled runs memory-map), written block by block."""
     header = (
-        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(points)}\n"
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n"
         "property double x\nproperty double y\nproperty double z\nend_header\n"
     )
     with open(path, "wb") as fh:
         fh.write(header.encode("ascii"))
-        for s in range(0, len(points), 1 << 20):
-            fh.write(np.ascontiguousarray(points[s : s + (1 << 20)], "<f8").tobytes())
+        for points in cloud_blocks(n):
+            for s in range(0, len(points), 1 << 20):
+                fh.write(np.ascontiguousarray(points[s : s + (1 << 20)], "<f8").tobytes())
+            del points
 
 
-def run_tiled_one(path: Path, mode: str, how: str, out: Path) -> dict:
+def run_tiled_one(path: Path, mode: str, how: str, out: Path, tile_points: int) -> dict:
     """One detection of the cloud at ``path`` in this process (call in a fresh
-    subprocess): ``how`` is "memory", "tiled:SIZE" or "dask:SIZE:CLUSTER". The mask,
-    strength and thresholds go to ``out`` (.npz) for the comparison."""
+    subprocess): ``how`` is "memory", "tiled:SIZE", "dask:SIZE:CLUSTER" or
+    "dask-same:CLUSTER" (Dask with ``tile_points`` per tile: the tiles of the previous
+    out-of-core run, for a fair comparison). The mask, strength and thresholds go to
+    ``out`` (.npz) for the comparison."""
     import meshlab_sharp
+    from meshlab_sharp.io.stream import open_points
+    from meshlab_sharp.multiscale import DEFAULT_KNN_SCALES
+    from meshlab_sharp.tiles import detect_tiled
 
     kwargs: dict = {}
     if how.startswith("tiled:"):
@@ -327,24 +350,38 @@ def run_tiled_one(path: Path, mode: str, how: str, out: Path) -> dict:
     elif how.startswith("dask:"):
         _, size, cluster = how.split(":", 2)
         kwargs.update(max_memory=size, dask=cluster)
-    t = time.perf_counter()
-    result = meshlab_sharp.detect(str(path), mode=mode, **kwargs)
+    t, cpu = time.perf_counter(), _cpu_seconds()
+    if how.startswith("dask-same:"):
+        got = detect_tiled(
+            open_points(path),
+            scales=DEFAULT_KNN_SCALES,
+            mode=mode,
+            tile_points=tile_points,
+            dask=how.split(":", 1)[1],
+        )
+        mask, strength, thresholds = got["mask"], got["strength"], got["thresholds"]
+        tiling, timings = got["tiling"], got["timings"]
+    else:
+        result = meshlab_sharp.detect(str(path), mode=mode, **kwargs)
+        mask, strength, thresholds = result.mask, result.strength, result.thresholds
+        tiling, timings = result.tiling or {}, result.timings
     seconds = time.perf_counter() - t
-    np.savez(out, mask=result.mask, strength=result.strength, thresholds=result.thresholds)
-    tiling = result.tiling or {}
-    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    np.savez(out, mask=mask, strength=strength, thresholds=thresholds)
     return {
-        "n": len(result.mask),
+        "n": len(mask),
         "mode": mode,
         "how": how,
         "seconds": seconds,
-        "points_per_s": len(result.mask) / seconds,
+        "cpu_s": _cpu_seconds() - cpu,
+        "children_cpu_s": children.ru_utime + children.ru_stime,
+        "points_per_s": len(mask) / seconds,
         "peak_bytes": _rss_bytes(),
-        "worker_peak_bytes": max(
-            int(tiling.get("worker_peak_bytes", 0)), children if "dask" in how else 0
-        ),
+        "worker_peak_bytes": int(tiling.get("worker_peak_bytes", 0)),
         "tiles": tiling.get("tiles"),
-        "features": result.n_features,
+        "tile_points": tiling.get("tile_points"),
+        "features": int(mask.sum()),
+        "timings": {k: float(v) for k, v in timings.items()},
     }
 
 
@@ -354,17 +391,19 @@ def bench_tiled(sizes: list[int], modes: list[str], hows: list[str], out_json: s
     with tempfile.TemporaryDirectory(prefix="meshlab_sharp_bench_") as tmp:
         for size in sizes:
             path = Path(tmp) / f"cloud_{size}.ply"
-            write_cloud_ply(path, cad_cloud(size))
+            write_cloud_ply(path, size)
             for mode in modes:
-                first = None
+                first, tile_points = None, 0
                 for how in hows:
                     npz = Path(tmp) / f"r_{size}_{mode}_{len(results)}.npz"
                     cmd = [sys.executable, __file__, "--tiled-one", str(path), mode, how, str(npz)]
+                    cmd.append(str(tile_points))
                     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
                     if proc.returncode != 0:
                         print(proc.stderr, file=sys.stderr)
                         return proc.returncode
                     r = json.loads(proc.stdout.strip().splitlines()[-1])
+                    tile_points = r["tile_points"] or tile_points
                     got = np.load(npz)
                     if first is None:
                         first = got
@@ -381,6 +420,10 @@ def bench_tiled(sizes: list[int], modes: list[str], hows: list[str], out_json: s
                         f"identical {r['identical_to_first']} load {r['load_average']:.1f}",
                         flush=True,
                     )
+                    steps = {k: round(v, 1) for k, v in r["timings"].items()}
+                    print(f"       cpu {r['cpu_s']:.0f} s, timings {steps}", flush=True)
+                    Path(out_json).parent.mkdir(parents=True, exist_ok=True)
+                    Path(out_json).write_text(json.dumps({"results": results}, indent=1))
             path.unlink()
     Path(out_json).parent.mkdir(parents=True, exist_ok=True)
     Path(out_json).write_text(json.dumps({"results": results, "cpus": os.cpu_count()}, indent=1))
@@ -666,10 +709,11 @@ def main(argv: list[str] | None = None) -> int:
         "--tiled",
         metavar="RUNS",
         help="out-of-core benchmark instead: comma-separated runs among memory, "
-        "tiled:SIZE, dask:SIZE:CLUSTER (e.g. memory,tiled:1GB,dask:1GB:local:2)",
+        "tiled:SIZE, dask:SIZE:CLUSTER, dask-same:CLUSTER (the previous run's tiles) "
+        "(e.g. memory,tiled:1GB,dask-same:local:2)",
     )
     ap.add_argument("--modes", default="paper,robust", help="modes of the --tiled runs")
-    ap.add_argument("--tiled-one", nargs=4, help=argparse.SUPPRESS)
+    ap.add_argument("--tiled-one", nargs=5, help=argparse.SUPPRESS)
     ap.add_argument(
         "--compare",
         action="store_true",
@@ -688,8 +732,8 @@ def main(argv: list[str] | None = None) -> int:
         return bench_compare(size, args.repeat, args.meshlab_root, args.json)
 
     if args.tiled_one:
-        path, mode, how, out = args.tiled_one
-        print(json.dumps(run_tiled_one(Path(path), mode, how, Path(out))))
+        path, mode, how, out, tile_points = args.tiled_one
+        print(json.dumps(run_tiled_one(Path(path), mode, how, Path(out), int(tile_points))))
         return 0
     if args.tiled:
         sizes = [parse_size(s) for s in args.sizes.split(",")]

@@ -40,7 +40,7 @@ from .trace import (
     trace_paths,
 )
 
-__all__ = ["MIN_CURVE_LENGTH", "Corners", "Curve", "extract_curves"]
+__all__ = ["MIN_CURVE_LENGTH", "Corners", "Curve", "extract_curves", "support_radius"]
 
 #: An open curve shorter than this, in spacings, is dropped: what is left of a spur
 #: between two junctions, or a blob of false detections.
@@ -139,6 +139,7 @@ def extract_curves(
     mask: np.ndarray,
     faces: np.ndarray | None = None,
     valid: np.ndarray | None = None,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[list[Curve], Corners]:
     """Feature curves and corners of a detection.
 
@@ -153,6 +154,11 @@ def extract_curves(
     valid : (n,) bool, optional
         Points that took part in detection (``DetectionResult.kept``); the others are
         not used to refine positions.
+    bounds : ((3,), (3,)) float64, optional
+        Clouds: bounding box of the whole input when ``vertices`` is only the part of
+        it that the curves read: the features and the valid points in the cells of side
+        :func:`support_radius` around them (out of core,
+        :func:`meshlab_sharp.tiles.curves.curves_out_of_core`). Default: the vertices'.
 
     Returns
     -------
@@ -177,7 +183,7 @@ def extract_curves(
         return [], empty
     paths: MeshPaths | None = None
     if faces is None:
-        pieces, spacing = _cloud_pieces(pts, feat_mask, ok, feat, fp)
+        pieces, spacing = _cloud_pieces(pts, feat_mask, ok, feat, fp, bounds)
     else:
         pieces, spacing = _mesh_pieces(pts, np.asarray(faces), feat_mask & ok, feat, fp)
         paths = MeshPaths(pts, np.asarray(faces), feat_mask & ok)
@@ -205,13 +211,30 @@ def _skeleton_pieces(
     return trace_paths(n, forest)
 
 
+def support_radius(features: np.ndarray) -> float:
+    """Side of the grid cells around the features whose valid points the refinement of
+    a cloud's curves reads: CELL_SPACINGS times the median distance from a feature to
+    the nearest other one.
+
+    Parameters
+    ----------
+    features : (f, 3) float64
+        The distinct feature positions, any order, f >= 2.
+    """
+    d, _ = cKDTree(features).query(features, k=2)
+    return CELL_SPACINGS * float(np.median(d[:, 1]))
+
+
 def _cloud_pieces(
-    pts: np.ndarray, mask: np.ndarray, ok: np.ndarray, feat: np.ndarray, fp: np.ndarray
+    pts: np.ndarray,
+    mask: np.ndarray,
+    ok: np.ndarray,
+    feat: np.ndarray,
+    fp: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray] | None,
 ) -> tuple[list[Piece], float]:
     """Skeleton polylines of a cloud's features, refined; and the spacing."""
-    d, _ = cKDTree(fp).query(fp, k=2)
-    feature_spacing = float(np.median(d[:, 1]))
-    near = cell_neighbourhood(pts, ok, fp, CELL_SPACINGS * feature_spacing)
+    near = cell_neighbourhood(pts, ok, fp, support_radius(fp), bounds)
     near_pts = pts[near]
     order = np.lexsort((near_pts[:, 2], near_pts[:, 1], near_pts[:, 0]))
     near, near_pts = near[order], near_pts[order]

@@ -22,6 +22,7 @@ __all__ = [
     "MAX_SHIFT",
     "MIN_ARM_POINTS",
     "REFINE_NEIGHBOURS",
+    "CellGrid",
     "cell_neighbourhood",
     "line_fit_positions",
     "plane_intersection_positions",
@@ -53,8 +54,43 @@ MIN_ARM_ANGLE = 20.0
 MAX_ARM_RMS = 0.5
 
 
+class CellGrid:
+    """Cubic cells of side ``radius`` over the box ``[lo, hi]``, with one cell of margin
+    on every side; cells are numbered by a flat key.
+
+    Parameters
+    ----------
+    lo, hi : (3,) float64
+        The box (the bounding box of all the points).
+    radius : float > 0
+    """
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, radius: float) -> None:
+        self.lo = np.asarray(lo, np.float64)
+        self.radius = radius
+        self.dims = np.floor((np.asarray(hi, np.float64) - self.lo) / radius).astype(np.int64) + 3
+
+    def _key(self, cells: np.ndarray) -> np.ndarray:
+        return (cells[..., 0] * self.dims[1] + cells[..., 1]) * self.dims[2] + cells[..., 2]
+
+    def keys(self, points: np.ndarray) -> np.ndarray:
+        """Key of each point's cell, (n,) int64 for points (n, 3)."""
+        return self._key(np.floor((points - self.lo) / self.radius).astype(np.int64) + 1)
+
+    def around(self, centres: np.ndarray) -> np.ndarray:
+        """Keys of the 3x3x3 cells around each of the centres (f, 3): (w,) int64, sorted,
+        distinct."""
+        cells = np.floor((centres - self.lo) / self.radius).astype(np.int64) + 1
+        offsets = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+        return np.unique(self._key(cells[:, None, :] + offsets[None, :, :]))
+
+
 def cell_neighbourhood(
-    points: np.ndarray, valid: np.ndarray, centres: np.ndarray, radius: float
+    points: np.ndarray,
+    valid: np.ndarray,
+    centres: np.ndarray,
+    radius: float,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Indices of the valid points in the grid cells (side ``radius``) around the centres.
 
@@ -67,22 +103,18 @@ def cell_neighbourhood(
     valid : (n,) bool
     centres : (f, 3) float64
     radius : float > 0
+    bounds : ((3,), (3,)) float64, optional
+        The box the grid is laid over; default the points' bounding box. Given when
+        ``points`` is the part of a larger cloud near the centres (out of core): the
+        larger cloud's box gives the same cells.
 
     Returns
     -------
     (s,) int64, ascending.
     """
-    lo = points.min(axis=0)
-    dims = np.floor((points.max(axis=0) - lo) / radius).astype(np.int64) + 3
-
-    def key(cells: np.ndarray) -> np.ndarray:
-        return (cells[..., 0] * dims[1] + cells[..., 1]) * dims[2] + cells[..., 2]
-
-    cells = np.floor((centres - lo) / radius).astype(np.int64) + 1
-    offsets = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    wanted = np.unique(key(cells[:, None, :] + offsets[None, :, :]))
-    all_keys = key(np.floor((points - lo) / radius).astype(np.int64) + 1)
-    return np.flatnonzero(np.isin(all_keys, wanted) & valid)
+    lo, hi = (points.min(axis=0), points.max(axis=0)) if bounds is None else bounds
+    grid = CellGrid(lo, hi, radius)
+    return np.flatnonzero(np.isin(grid.keys(points), grid.around(centres)) & valid)
 
 
 def refine_neighbours(tree: cKDTree, vertices: np.ndarray) -> np.ndarray:

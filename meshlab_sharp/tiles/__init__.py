@@ -36,6 +36,7 @@ from ..normals import WEIGHTINGS
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
 from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
+from .curves import curves_out_of_core
 from .layout import build_layout
 from .neighbours import Query
 from .run import Runner, peak_rss
@@ -131,7 +132,10 @@ def detect_tiled(
     -------
     dict
         ``mask`` (n,) bool, ``strength`` (n,) float64, ``kept`` (n,) bool in input
-        order; ``thresholds`` (s,), ``candidate_counts`` (s,), ``n_clean``, ``timings``,
+        order; ``thresholds`` (s,), ``candidate_counts`` (s,), ``n_clean``, ``timings``
+        (seconds: ``tiles``, ``cluster`` (Dask start-up), ``detect`` and within it
+        ``step_<label>`` per step (wall) and ``tasks_<label>`` (its tile tasks' own
+        seconds, summed), ``finish``, ``total``),
         and ``tiling`` (tiles, steps, tasks, halo, peak memory of this process and of
         the workers).
     """
@@ -162,8 +166,11 @@ def detect_tiled(
         root = tempfile.mkdtemp(prefix="meshlab-sharp-tiles-", dir=scratch)
         stack.callback(shutil.rmtree, root, True)
         store = Store(root)
-        client = _client(dask, stack)
         timings: dict[str, float] = {}
+        t = time.perf_counter()
+        client = _client(dask, stack)
+        if client is not None:
+            timings["cluster"] = time.perf_counter() - t
         t = time.perf_counter()
         layout = build_layout(
             source.n,
@@ -190,6 +197,8 @@ def detect_tiled(
         run = _paper if mode == "paper" else _robust
         thresholds, counts, mask, kept, used = run(runner, store, layout, scales, weighting)
         timings["detect"] = time.perf_counter() - t
+        timings.update({f"step_{label}": v for label, v in runner.seconds.items()})
+        timings.update({f"tasks_{label}": v for label, v in runner.task_seconds.items()})
         t = time.perf_counter()
         out = runner.finish(source.n, mask, kept)
         timings["finish"] = time.perf_counter() - t
@@ -233,9 +242,11 @@ def detect_out_of_core(
     max_memory: str | int | None,
     dask: Any,
     scratch: str | os.PathLike[str] | None,
+    curves: bool = False,
 ) -> DetectionResult:
     """:func:`meshlab_sharp.detect` with ``max_memory`` or ``dask``: checks what the
-    tiled run supports and returns its :class:`~meshlab_sharp.DetectionResult`."""
+    tiled run supports and returns its :class:`~meshlab_sharp.DetectionResult` (with
+    ``curves``, the feature curves: :func:`meshlab_sharp.tiles.curves.curves_out_of_core`)."""
     from ..pipeline import MODES, DetectionResult, _as_input, _check_scales
 
     if weighting not in WEIGHTINGS:
@@ -294,6 +305,11 @@ def detect_out_of_core(
     if not isinstance(progress, Progress):
         bar.close()
     timings = {"load": 0.0, **out["timings"]}
+    found = None
+    if curves:
+        t = time.perf_counter()
+        found = curves_out_of_core(points, out["mask"], out["kept"])
+        timings["curves"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return DetectionResult(
         mask=out["mask"],
@@ -308,6 +324,8 @@ def detect_out_of_core(
         timings=timings,
         mode=mode,
         tiling=out["tiling"],
+        curves=None if found is None else found[0],
+        corners=None if found is None else found[1],
     )
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import resource
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -24,7 +25,21 @@ from .store import Store
 
 
 def peak_rss() -> int:
-    """Peak resident memory of this process so far, bytes."""
+    """Peak resident memory of this process so far, bytes.
+
+    On Linux the high-water mark of the process's address space (``VmHWM``), not
+    ``ru_maxrss``: a process started by ``vfork`` + ``exec`` (Python's ``subprocess``,
+    Dask's worker processes) inherits its parent's peak in ``ru_maxrss``, so a small
+    child of a large process (a test in a long pytest session) would report the
+    parent's memory as its own.
+    """
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return int(peak) * (1 if sys.platform == "darwin" else 1024)
 
@@ -32,13 +47,14 @@ def peak_rss() -> int:
 @dataclass(frozen=True)
 class Outcome:
     """What a tile task returns: the partial, the halo that held, points searched, rows
-    that took the streaming route, the process's peak memory."""
+    that took the streaming route, the process's peak memory, the task's own seconds."""
 
     partial: Partial
     halo: float
     gathered: int
     streamed: int
     peak: int
+    seconds: float
 
 
 def tile_task(
@@ -52,16 +68,18 @@ def tile_task(
     backend: str,
 ) -> Outcome:
     """Run ``step`` on one tile."""
+    started = time.perf_counter()
     with _kernels.use_backend(backend):
         if step.query is None:
             a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
             partial = step.fn(Span(store, a, b), **step.params)
-            return Outcome(partial, halo, b - a, 0, peak_rss())
-        contexts, used, gathered, streamed = neighbours(
-            store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
-        )
-        partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
-        return Outcome(partial, used, gathered, streamed, peak_rss())
+            used, gathered, streamed = halo, b - a, 0
+        else:
+            contexts, used, gathered, streamed = neighbours(
+                store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
+            )
+            partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
+    return Outcome(partial, used, gathered, streamed, peak_rss(), time.perf_counter() - started)
 
 
 def finish_task(store: Store, layout: Layout, tile: int, mask: str, kept: str | None) -> dict:
@@ -107,12 +125,15 @@ class Runner:
         self.tasks = 0
         self.gathered = 0
         self.streamed = 0
+        self.seconds: dict[str, float] = {}
+        self.task_seconds: dict[str, float] = {}
         self.backend = _kernels.default_backend()
 
     def step(self, step: Step) -> Partial:
         """Run ``step`` on every tile; the reduced partial."""
         n = self.layout.n_tiles
         args = (self.most_points, self.workers, self.backend)
+        started = time.perf_counter()
         if self.client is None:
             outcomes = []
             guess = float(self.halos.max(initial=0.0))
@@ -146,6 +167,10 @@ class Runner:
             self.gathered = max(self.gathered, o.gathered)
             self.streamed += o.streamed
         self.tasks += n
+        label = step.label
+        self.seconds[label] = self.seconds.get(label, 0.0) + time.perf_counter() - started
+        busy = sum(o.seconds for o in outcomes)
+        self.task_seconds[label] = self.task_seconds.get(label, 0.0) + busy
         return reduced
 
     def finish(self, n: int, mask: str, kept: str | None) -> dict[str, np.ndarray]:

@@ -1,0 +1,81 @@
+"""Feature curves of a tiled detection, from the few points near the features.
+
+:func:`meshlab_sharp.curves.extract_curves` on a cloud reads the feature points and
+the valid points in the grid cells of side
+:func:`~meshlab_sharp.curves.extract.support_radius` around them (for the refinement),
+nothing else. Two streaming passes over the input gather exactly those points (the
+features' coordinates and the cloud's bounding box; then the valid points in the
+features' cells), and ``extract_curves`` runs on them with the whole cloud's bounding
+box, so that its grid is the in-memory run's: the curves and corners are the in-memory
+ones, their indices mapped back to the input's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..curves import Corners, Curve, extract_curves
+from ..curves.extract import support_radius
+from ..curves.refine import CellGrid
+from ..io.stream import PointSource
+
+#: Points per block of the streaming passes.
+BLOCK = 1 << 20
+
+
+def curves_out_of_core(
+    source: PointSource, mask: np.ndarray, kept: np.ndarray
+) -> tuple[list[Curve], Corners]:
+    """The feature curves and corners of a cloud read in blocks.
+
+    Parameters
+    ----------
+    source : PointSource
+        The cloud, n points.
+    mask, kept : (n,) bool
+        The detection's features and the points that took part (input order).
+
+    Returns
+    -------
+    curves : list of Curve
+    corners : Corners
+        As :func:`meshlab_sharp.curves.extract_curves` on the whole cloud; ``indices``
+        index the input's points.
+    """
+    valid = np.flatnonzero(mask & kept)
+    lo, hi, found = _bounds_and_rows(source, valid)
+    features = np.unique(found, axis=0)
+    if len(features) < 2:  # extract_curves finds no curve in fewer than 2 features
+        part, points = valid, found
+    else:
+        grid = CellGrid(lo, hi, support_radius(features))
+        wanted = grid.around(features)
+        parts, coords, start = [], [], 0
+        for block in source.blocks(BLOCK):
+            near = np.flatnonzero(
+                np.isin(grid.keys(block), wanted) & kept[start : start + len(block)]
+            )
+            parts.append(start + near)
+            coords.append(block[near])
+            start += len(block)
+        part, points = np.concatenate(parts), np.concatenate(coords)  # every valid feature too
+    curves, corners = extract_curves(points, mask[part], None, kept[part], bounds=(lo, hi))
+    curves = [dataclasses.replace(c, indices=part[c.indices]) for c in curves]
+    return curves, dataclasses.replace(corners, indices=part[corners.indices])
+
+
+def _bounds_and_rows(
+    source: PointSource, rows: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One pass: the bounding box of the source's points, (3,) and (3,), and the
+    coordinates of the given ascending rows, (r, 3) float64."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    out, start = [np.zeros((0, 3))], 0
+    for block in source.blocks(BLOCK):
+        lo, hi = np.minimum(lo, block.min(axis=0)), np.maximum(hi, block.max(axis=0))
+        a, b = np.searchsorted(rows, [start, start + len(block)])
+        out.append(block[rows[a:b] - start])
+        start += len(block)
+    return lo, hi, np.concatenate(out)
