@@ -92,6 +92,7 @@ def read_back(path: Path):
 
 
 def test_meshlabserver_lists_the_filter(meshlab_root, tmp_path):
+    """Both filters: the detection and the curves."""
     dump = tmp_path / "filters.txt"
     subprocess.run(
         ["xvfb-run", "-a", str(meshlab_root / "bin" / "meshlabserver"), "-d", str(dump)],
@@ -99,7 +100,9 @@ def test_meshlabserver_lists_the_filter(meshlab_root, tmp_path):
         timeout=120,
         check=False,
     )
-    assert plugin.FILTER_NAME in dump.read_text(errors="replace")
+    listed = dump.read_text(errors="replace")
+    assert plugin.FILTER_NAME in listed
+    assert plugin.CURVES_FILTER_NAME in listed
 
 
 def test_the_example_script_runs_robust_mode_by_default():

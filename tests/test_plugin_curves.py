@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import re
 import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,7 @@ from test_plugin_fuzz import CASES, CRASH_WORDS, FILTER_FAILED, KNOWN_DISAGREEME
 
 import meshlab_sharp
 from evaluation import groundtruth
-from meshlab_sharp import DetectionResult, plugin
+from meshlab_sharp import DetectionResult
 from meshlab_sharp.errors import InputError
 from meshlab_sharp.io.curves import curve_arrays
 from meshlab_sharp.sample import sample_part
@@ -67,17 +66,6 @@ def read_obj_edges(path: Path) -> np.ndarray:
     lines = path.read_text().splitlines()
     edges = [[int(x) - 1 for x in ln.split()[1:3]] for ln in lines if ln.startswith("l ")]
     return np.array(edges, np.int64).reshape(-1, 2)
-
-
-def test_meshlabserver_lists_the_curves_filter(meshlab_root, tmp_path):
-    dump = tmp_path / "filters.txt"
-    subprocess.run(
-        ["xvfb-run", "-a", str(meshlab_root / "bin" / "meshlabserver"), "-d", str(dump)],
-        capture_output=True,
-        timeout=120,
-        check=False,
-    )
-    assert plugin.CURVES_FILTER_NAME in dump.read_text(errors="replace")
 
 
 @pytest.mark.parametrize(
