@@ -138,6 +138,31 @@ def _f(x: float, digits: int = 3) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
 
 
+#: The section on the curves in MeshLab (screenshots), kept when the page is rewritten.
+IN_MESHLAB = """\
+## In MeshLab
+
+`meshlab-sharp detect --sample --curves sample_curves.ply` writes the curves as a PLY
+edge mesh (a vertex element and an `edge` element), which Debian's MeshLab 2020.09 opens
+as a layer of edges. Below, `meshlab out/sample_part_sharp.ply sample_curves.ply`: the
+sample cloud with its features in red and the 28 curves, drawn in yellow and wide (the
+layer's wire colour and edge width set in the layer dialog):
+
+![The sample's curves, written by meshlab-sharp, opened in MeshLab](meshlab-curves.png)
+
+The MeshLab plugin (`meshlab_plugin_cpp/`) has the same extraction as a filter,
+**Filters > Remeshing, Simplification and Reconstruction > Extract Sharp Feature
+Curves**: it adds a layer `sharp_curves` of vertices and edges (vertex quality: the
+curve's number), like `detect_meshset(ms, curves=True)`. Its C++ (`curves_core.cpp`) is
+a port of `meshlab_sharp/curves` with numpy's order of summation, so the layer holds
+the same vertices and edges as `result.curves` (`tests/test_plugin_curves.py`). The
+sample mesh's 37 curves, drawn by MeshLab with the part hidden
+(`tests/test_plugin_gui.py`):
+
+![The plugin's curves of the sample mesh in MeshLab](meshlab-plugin-curves.png)
+"""
+
+
 def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None) -> str:
     """docs/curves.md."""
     lines = [
@@ -186,7 +211,9 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
         "spacing, max 2 spacings) of the principal axis, circular arc if within it of the "
         "fitted plane and circle, free-form otherwise.",
         "",
-        "## Summary against the targets (means over the 8 parts)",
+        *IN_MESHLAB.splitlines(),
+        "",
+        f"## Summary against the targets (means over the {len({r['part'] for r in rows})} parts)",
         "",
         "| condition | mode | precision | coverage | RMS (spacings) | count (min-max) "
         "| corners | time |",
@@ -203,7 +230,7 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
                 f"{_f(s['count_ratio_max'], 2)}) | {_f(s['corners_found'])} "
                 f"| {100 * s['time_share']:.0f} % |"
             )
-    lines += ["", "Targets (default mode; robust is the default-to-be):", ""]
+    lines += ["", "Targets (the default, robust mode):", ""]
     lines += ["| measure | target | condition | robust | met |", "|---|---|---|---:|---|"]
     for k in MEASURES:
         label, ok = TARGETS[k]
