@@ -155,6 +155,20 @@ def _workers(workers: int) -> int:
     return int(workers)
 
 
+def _thread_scratch(n: int, dtype: type) -> Callable[[], np.ndarray]:
+    """A getter of the calling thread's own (n,) scratch array, all -1 when first made
+    (the ring kernels' visit marks, which a thread reuses across its chunks)."""
+    arrays: dict[int, np.ndarray] = {}
+
+    def get() -> np.ndarray:
+        tid = threading.get_ident()
+        if tid not in arrays:
+            arrays[tid] = np.full(n, -1, dtype=dtype)
+        return arrays[tid]
+
+    return get
+
+
 def _run_chunks(n: int, workers: int, task: Callable[[int, int], int]) -> None:
     """task(begin, end) over [0, n) in chunks, on ``workers`` threads."""
     ranges = [(s, min(s + CHUNK, n)) for s in range(0, n, CHUNK)]
@@ -417,16 +431,12 @@ def ring_projected_distances(
     pdis = np.empty((len(rs), n))
     out_normals = np.empty((len(rs), n, 3)) if keep_normals else None
     w = _workers(workers)
-    stamps: dict[int, np.ndarray] = {}
+    stamp = _thread_scratch(n, np.int32)
 
     def task(a: int, b: int) -> int:
-        tid = threading.get_ident()
-        stamp = stamps.get(tid)
-        if stamp is None:
-            stamp = stamps[tid] = np.full(n, -1, dtype=np.int32)
         return lib.ms_ring_pdis(
             _ptr(points), n, _ptr(indptr), _ptr(indices), _ptr(fixed), _ptr(rs), len(rs),
-            int(weighting == "gaussian"), a, b, _ptr(stamp), _ptr(pdis), _ptr(out_normals),
+            int(weighting == "gaussian"), a, b, _ptr(stamp()), _ptr(pdis), _ptr(out_normals),
         )  # fmt: skip
 
     _run_chunks(n, w, task)
@@ -494,14 +504,11 @@ def ring_local_scale(
     rs = np.ascontiguousarray(rings, dtype=np.int64)
     ptr, idx = (np.ascontiguousarray(a) for a in one_ring)
     ell, off = np.empty((len(rs), n)), np.empty((len(rs), n))
-    marks: dict[int, np.ndarray] = {}
+    mark = _thread_scratch(n, np.int64)
 
     def task(a: int, b: int) -> int:
-        mark = marks.get(threading.get_ident())
-        if mark is None:
-            mark = marks[threading.get_ident()] = np.full(n, -1, dtype=np.int64)
         return lib.ms_ring_local_scale(
-            _ptr(points), n, _ptr(ptr), _ptr(idx), _ptr(rs), len(rs), a, b, _ptr(mark),
+            _ptr(points), n, _ptr(ptr), _ptr(idx), _ptr(rs), len(rs), a, b, _ptr(mark()),
             _ptr(ell), _ptr(off),
         )  # fmt: skip
 

@@ -348,15 +348,7 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
         from .plot import save_report
 
         save_report(args.plot, result, geometry, into=outputs)
-    result.timings["save"] = time.perf_counter() - t
-    result.timings["total"] = time.perf_counter() - start
-    if args.report:
-        report = result.summary()
-        report["input"] = geometry.source
-        report["outputs"] = {"ply": str(output), "indices": args.indices, "curves": args.curves}
-        save_json(args.report, report, into=outputs)
-    _pause_for_tests()
-    outputs.commit()
+    _commit(args, result, geometry.source, output, outputs, start=start, saving=t)
     progress.step("saved")
     progress.close()
     if not args.quiet:
@@ -410,19 +402,34 @@ def _detect_tiled(
     if args.curves:
         assert result.curves is not None
         save_curves(args.curves, result.curves, into=outputs)
-    result.timings["save"] = time.perf_counter() - t
-    result.timings["total"] = time.perf_counter() - start
-    if args.report:
-        report = result.summary()
-        report["input"] = points.name
-        report["outputs"] = {"ply": str(output), "indices": args.indices, "curves": args.curves}
-        save_json(args.report, report, into=outputs)
-    _pause_for_tests()
-    outputs.commit()
+    _commit(args, result, points.name, output, outputs, start=start, saving=t)
     progress.close()
     if not args.quiet:
         _print_summary(points.name, output, result)
     return 0
+
+
+def _commit(
+    args: argparse.Namespace,
+    result: DetectionResult,
+    source: str,
+    output: Path,
+    outputs: OutputSet,
+    *,
+    start: float,
+    saving: float,
+) -> None:
+    """Close the timings (``start``: the run's, ``saving``: the writers'), stage the JSON
+    report if asked for, then rename every staged output at once."""
+    result.timings["save"] = time.perf_counter() - saving
+    result.timings["total"] = time.perf_counter() - start
+    if args.report:
+        report = result.summary()
+        report["input"] = source
+        report["outputs"] = {"ply": str(output), "indices": args.indices, "curves": args.curves}
+        save_json(args.report, report, into=outputs)
+    _pause_for_tests()
+    outputs.commit()
 
 
 def _pause_for_tests() -> None:

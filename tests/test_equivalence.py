@@ -205,6 +205,23 @@ SPREADS = {
     "plane": _plane,
 }
 
+
+def _run_on_points(script: str, points: np.ndarray, result: Path, *, timeout: float):
+    """Run ``script`` (argv: a .npy of ``points``, then ``result``) in a subprocess with a
+    time limit against a hang, from the repository root; ``np.load(result)``."""
+    source = result.with_name("points.npy")
+    np.save(source, points)
+    root = Path(__file__).resolve().parent.parent
+    subprocess.run(
+        [sys.executable, "-c", script, source, result],
+        check=True,
+        timeout=timeout,
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )
+    return np.load(result)
+
+
 _COMPILED_KNN = """
 import sys
 import numpy as np
@@ -220,16 +237,7 @@ def test_knn_any_spatial_distribution(name, tmp_path):
     search runs in a subprocess with a generous time limit. Both backends give the same table,
     which agrees with brute force on sampled rows (the far point among them)."""
     points = np.unique(SPREADS[name](100_000), axis=0)
-    np.save(tmp_path / "points.npy", points)
-    root = Path(__file__).resolve().parent.parent
-    subprocess.run(
-        [sys.executable, "-c", _COMPILED_KNN, tmp_path / "points.npy", tmp_path / "knn.npy"],
-        check=True,
-        timeout=60,
-        cwd=root,
-        env={**os.environ, "PYTHONPATH": str(root)},
-    )
-    compiled = np.load(tmp_path / "knn.npy")
+    compiled = _run_on_points(_COMPILED_KNN, points, tmp_path / "knn.npy", timeout=60)
     np.testing.assert_array_equal(compiled, knn(points, 40))
     rows = np.random.default_rng(0).choice(len(points), 100, replace=False)
     rows[0] = np.argmax(np.abs(points).max(axis=1))
@@ -254,16 +262,7 @@ def test_detect_with_a_far_outlier_both_modes(tmp_path):
     answer, in a subprocess with a time limit against a hang (the former grid search
     was quadratic here; test_knn_any_spatial_distribution measures that at 100k)."""
     points = _far_outlier(20_000)
-    np.save(tmp_path / "points.npy", points)
-    root = Path(__file__).resolve().parent.parent
-    subprocess.run(
-        [sys.executable, "-c", _COMPILED_DETECT, tmp_path / "points.npy", tmp_path / "masks.npz"],
-        check=True,
-        timeout=150,
-        cwd=root,
-        env={**os.environ, "PYTHONPATH": str(root)},
-    )
-    masks = np.load(tmp_path / "masks.npz")
+    masks = _run_on_points(_COMPILED_DETECT, points, tmp_path / "masks.npz", timeout=150)
     for mode in ("paper", "robust"):
         reference = detect(points, mode=mode, backend="numpy").mask
         np.testing.assert_array_equal(masks[mode], reference, err_msg=mode)
