@@ -169,9 +169,16 @@ def _thread_scratch(n: int, dtype: type) -> Callable[[], np.ndarray]:
     return get
 
 
-def _run_chunks(n: int, workers: int, task: Callable[[int, int], int]) -> None:
-    """task(begin, end) over [0, n) in chunks, on ``workers`` threads."""
-    ranges = [(s, min(s + CHUNK, n)) for s in range(0, n, CHUNK)]
+def _run_chunks(
+    n: int,
+    workers: int,
+    task: Callable[[int, int], int],
+    spans: Sequence[tuple[int, int]] | None = None,
+) -> None:
+    """task(begin, end) over [0, n) (or over each ``[begin, end)`` of ``spans``) in
+    chunks, on ``workers`` threads."""
+    spans = [(0, n)] if spans is None else spans
+    ranges = [(s, min(s + CHUNK, e)) for a, e in spans for s in range(a, e, CHUNK)]
     w = _workers(workers)
     if w == 1 or len(ranges) == 1:
         codes = [task(a, b) for a, b in ranges]
@@ -244,11 +251,30 @@ class _CloudOut(ctypes.Structure):
 _NUMBERS = ("noise_k", "sheet_gap", "sheet_min", "sheet_own")
 
 
+def _tree_spans(tree: KdTree, rows: np.ndarray) -> list[tuple[int, int]]:
+    """Ranges ``[begin, end)`` of tree positions that hold the points ``rows`` (cleaned
+    indices), runs less than a leaf apart merged (a few other points come with them)."""
+    where = np.empty(tree.n, dtype=np.int64)
+    where[tree.orig] = np.arange(tree.n, dtype=np.int64)
+    at = np.sort(where[np.asarray(rows, dtype=np.int64)])
+    if len(at) == 0:
+        return []
+    cut = np.flatnonzero(np.diff(at) > KD_LEAF) + 1
+    starts, ends = np.r_[0, cut], np.r_[cut, len(at)]
+    return [(int(at[a]), int(at[b - 1]) + 1) for a, b in zip(starts, ends, strict=True)]
+
+
 def _cloud_call(
-    tree: KdTree, ks: np.ndarray, gaussian: bool, workers: int, **out: np.ndarray | int | None
+    tree: KdTree,
+    ks: np.ndarray,
+    gaussian: bool,
+    workers: int,
+    rows: np.ndarray | None = None,
+    **out: np.ndarray | int | None,
 ) -> None:
-    """One pass of ``ms_cloud_pdis`` over the tree's points at the scales ``ks``; ``out``
-    names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
+    """One pass of ``ms_cloud_pdis`` over the tree's points (only the points ``rows``,
+    cleaned indices, and a few near them in the tree, when given) at the scales ``ks``;
+    ``out`` names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
     ``noise_k``, ``sheet_gap``, ``sheet_min`` and ``sheet_own``."""
     lib = _LIB
     assert lib is not None
@@ -261,15 +287,21 @@ def _cloud_call(
     spec = _CloudOut(**fields)
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(ks), len(ks))
     _run_chunks(
-        t.n, workers, lambda a, b: lib.ms_cloud_pdis(*args, int(gaussian), a, b, ctypes.byref(spec))
+        t.n,
+        workers,
+        lambda a, b: lib.ms_cloud_pdis(*args, int(gaussian), a, b, ctypes.byref(spec)),
+        None if rows is None else _tree_spans(t, rows),
     )
 
 
-def cloud_knn(tree: KdTree, k: int, workers: int = -1) -> np.ndarray:
+def cloud_knn(
+    tree: KdTree, k: int, workers: int = -1, rows: np.ndarray | None = None
+) -> np.ndarray:
     """The k nearest neighbours of every point (cleaned order), (n, k) int64, rows
-    sorted by (squared distance, index)."""
+    sorted by (squared distance, index); with ``rows`` (cleaned indices) only those
+    points' (and a few others'), the rest undefined."""
     out = np.empty((tree.n, k), dtype=np.int64)
-    _cloud_call(tree, np.array([k], dtype=np.int64), False, workers, idx=out)
+    _cloud_call(tree, np.array([k], dtype=np.int64), False, workers, rows, idx=out)
     return out
 
 
@@ -325,6 +357,7 @@ def cloud_projected_distances(
     noise_k: int = 0,
     sheet: tuple[float, int, float] | None = None,
     workers: int = -1,
+    rows: np.ndarray | None = None,
 ) -> ScalePass:
     """Projected distances (s, n) at every kNN scale (cleaned order), the normals
     (s, n, 3) when ``keep_normals``; with ``relative`` robust mode's relative distances
@@ -333,7 +366,8 @@ def cloud_projected_distances(
     :class:`CloudStats` (noise ratio over the ``noise_k`` nearest). With ``sheet =
     (gap, minimum, own)``, robust mode's :func:`meshlab_sharp.robust.sheet_mask` first: every
     neighbourhood (the scales', the noise's) is then the kept neighbours among its
-    points. One neighbour search at the largest scale."""
+    points. One neighbour search at the largest scale. With ``rows`` (cleaned indices),
+    only those points' values are computed (and a few others'); the rest are undefined."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
     n, s = tree.n, len(ks)
     keep = not relative if keep_pdis is None else keep_pdis
@@ -354,7 +388,7 @@ def cloud_projected_distances(
         )
     if sheet is not None:
         fields.update(sheet_gap=float(sheet[0]), sheet_min=int(sheet[1]), sheet_own=float(sheet[2]))
-    _cloud_call(tree, ks, weighting == "gaussian", workers, **fields)
+    _cloud_call(tree, ks, weighting == "gaussian", workers, rows, **fields)
     return out
 
 
@@ -376,15 +410,21 @@ def local_scale_csr(
 
 
 def cloud_knn_projected_distances(
-    tree: KdTree, scales: Sequence[int], weighting: str = "gaussian", workers: int = -1
+    tree: KdTree,
+    scales: Sequence[int],
+    weighting: str = "gaussian",
+    workers: int = -1,
+    rows: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The k = max(scales) nearest neighbours (n, k) int64 and the projected distances
-    (s, n) of every point (cleaned order) from one neighbour search."""
+    (s, n) of every point (cleaned order) from one neighbour search; with ``rows``
+    (cleaned indices) only those points' (and a few others'), the rest undefined."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
     idx = np.empty((tree.n, int(ks[-1])), dtype=np.int64)
     pdis = np.full((len(ks), tree.n), np.nan)
-    _cloud_call(tree, ks, weighting == "gaussian", workers, pdis=pdis, idx=idx)
-    if tree.n and np.isnan(pdis[:, 0]).any():  # a library built before this function
+    _cloud_call(tree, ks, weighting == "gaussian", workers, rows, pdis=pdis, idx=idx)
+    check = pdis[:, 0] if rows is None or len(rows) == 0 else pdis[:, int(rows[0])]
+    if tree.n and np.isnan(check).any():  # a library built before this function
         raise RuntimeError("the compiled kernels are out of date: rebuild (pip install -e .)")
     return idx, pdis
 

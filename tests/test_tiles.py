@@ -57,6 +57,30 @@ def test_tiled_equals_in_memory(mode: str, tile_points: int) -> None:
     assert_same(out, ref)
 
 
+def test_robust_passes_as_in_memory() -> None:
+    """Robust mode runs the in-memory run's compiled passes per tile: one over every
+    point on a clean cloud (no isolated points, no noise to grow the scales for); with
+    isolated points, a second one only over the kept points whose k nearest held one:
+    here a point beside a tight clump on a face (isolated: its nearest is in the clump,
+    whose lists are the clump) lies in the lists of the face's points beyond it."""
+    clean = random_box_points(4000, seed=4)
+    ref = meshlab_sharp.detect(clean, scales=SCALES, mode="robust")
+    out = detect_tiled(clean, scales=SCALES, mode="robust", tile_points=600)
+    assert ref.kept.all() and ref.scales == SCALES and ref.n_features > 50
+    assert_same(out, ref)
+    assert [k for k in out["timings"] if k.startswith("step_pass")] == ["step_pass"]
+    c = clean[0]  # on the face z = 0.5
+    clump = c + np.random.default_rng(2).normal(scale=3e-4, size=(30, 3)) * [1, 1, 0]
+    pts = np.concatenate([clean, clump, [c + [0.01, 0.0, 0.0]]])
+    ref = meshlab_sharp.detect(pts, scales=SCALES, mode="robust")
+    assert not ref.kept[-1] and ref.scales == SCALES
+    out = detect_tiled(pts, scales=SCALES, mode="robust", tile_points=600)
+    passes = [k for k in out["timings"] if k.startswith("step_pass")]
+    assert passes == ["step_pass", "step_pass kept"]
+    assert 0 < out["tiling"]["redone"] < 100
+    assert_same(out, ref)
+
+
 def test_default_scales_and_far_outliers_only_tiles() -> None:
     """Default scales (k up to 40), tiles that hold nothing but far points (and, in
     robust mode, nothing but isolated points)."""

@@ -46,11 +46,11 @@ from .steps import (
     paper_decide,
     paper_distances,
     paper_histograms,
+    robust_affected,
     robust_decide,
+    robust_histograms,
     robust_isolated,
-    robust_nearest,
-    robust_noise,
-    robust_relative,
+    robust_pass,
     robust_support,
     robust_thin,
 )
@@ -72,7 +72,7 @@ DASK_TILE_MEMORY = 1 << 30
 #: Memory of a Dask worker before its first tile (interpreter, numpy, scipy, dask).
 WORKER_BASELINE = 200 << 20
 #: Tile steps of each mode (progress bar).
-STEPS = {"paper": 3, "robust": 11}
+STEPS = {"paper": 3, "robust": 8}
 
 _UNITS = {"": 1, "B": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
@@ -136,8 +136,9 @@ def detect_tiled(
         (seconds: ``tiles``, ``cluster`` (Dask start-up), ``detect`` and within it
         ``step_<label>`` per step (wall) and ``tasks_<label>`` (its tile tasks' own
         seconds, summed), ``finish``, ``total``),
-        and ``tiling`` (tiles, steps, tasks, halo, peak memory of this process and of
-        the workers).
+        and ``tiling`` (tiles, steps, tasks, halo, points that took the streaming route,
+        robust mode's points whose pass ran again (``redone``), peak memory of this
+        process and of the workers).
     """
     if isinstance(source, Geometry):
         source = PointSource.from_array(source.vertices, source.source)
@@ -216,6 +217,7 @@ def detect_tiled(
             "tasks": runner.tasks,
             "largest_search": runner.gathered,
             "streamed": runner.streamed,
+            "redone": runner.notes.get("redone", 0),
             "halo_max": float(runner.halos.max(initial=0.0)),
             "peak_bytes": peak_rss(),
             "worker_peak_bytes": worker_peak,
@@ -351,7 +353,11 @@ def _robust(
     runner: Runner, store: Store, layout: Any, scales: tuple[int, ...], weighting: str
 ) -> tuple[np.ndarray, np.ndarray, str, str | None, tuple[int, ...]]:
     """Robust mode (:mod:`meshlab_sharp.robust`, :class:`~meshlab_sharp.robust.RobustSetup`)
-    on a cloud, step by step."""
+    on a cloud, step by step, with the in-memory run's compiled passes: one over every
+    point, which finds the isolated points and, when there are none and the noise does
+    not grow the scales, everything else too; then, if there are isolated points, again
+    over the kept points whose k nearest held one (the others' lists are unchanged); and
+    if the noise grows the scales, over the kept points at the grown scales."""
     n = layout.n
     for name, shape, dtype in (
         ("nn1", (n,), np.int64),
@@ -359,6 +365,7 @@ def _robust(
         ("kid", (n,), np.int64),
         ("kept", (n,), bool),
         ("ratio", (n,), np.float64),
+        ("r", (n, len(scales)), np.float64),
         ("score", (n,), np.float64),
         ("mask", (n,), bool),
         ("strength", (n,), np.float64),
@@ -367,25 +374,34 @@ def _robust(
         ("final", (n,), bool),
     ):
         store.create(name, shape, dtype)
-    runner.step(Step("nearest", robust_nearest, Query(max(scales))))
-    isolated = int(runner.step(Step("isolated", robust_isolated))["isolated"])
+    top = max(scales)
+    passes = {"weighting": weighting, "robust": True}
+    query = Query(top, scales=scales, **passes)
+    hist = runner.step(Step("pass", robust_pass, query, {"first": True}))["hist"]
+    found = runner.step(Step("isolated", robust_isolated))
+    isolated = int(found["isolated"])
     n_kept = layout.n_clean - isolated
-    if n_kept < max(scales):
+    if n_kept < top:
         raise InputError(
-            f"{n_kept} points are not isolated, fewer than the largest scale k = {max(scales)}"
+            f"{n_kept} points are not isolated, fewer than the largest scale k = {top}"
         )
-    k, top = min(robust.NOISE_KNN, max(scales)), max(scales)
-    noise = {"k": k, "top": top, "weighting": weighting}
-    runner.step(Step("noise", robust_noise, Query(top, kept="kept"), noise))
+    if isolated:
+        store.create("redo", (n,), bool)
+        lone = {"lone": found["lone_cat"]}
+        redone = int(runner.step(Step("affected", robust_affected, None, lone))["redo"])
+        runner.notes["redone"] = redone
+        if redone:
+            again = Query(top, "kept", "redo", scales, **passes)
+            runner.step(Step("pass kept", robust_pass, again, {"first": False}))
+        hist = runner.step(Step("histograms", robust_histograms))["hist"]
     nu = order_statistic(runner, "ratio", "kept", (n_kept - 1) // 2)
-    factor = min(robust.noise_factor(nu), n_kept / max(scales))
+    factor = min(robust.noise_factor(nu), n_kept / top)
     if factor > 1.0:
         scales = robust.grown_scales(scales, factor)
-    s, top = len(scales), max(scales)
-    store.create("r", (n, s), np.float64)
-    query = Query(top, kept="kept")
-    relative = {"scales": scales, "weighting": weighting}
-    hist = runner.step(Step("relative", robust_relative, query, relative))["hist"]
+        top = max(scales)
+        store.create("r", (n, len(scales)), np.float64)
+        grown = Query(top, "kept", None, scales, **passes)
+        hist = runner.step(Step("pass grown", robust_pass, grown, {"first": False}))["hist"]
     thresholds = np.array([max(otsu_from_histogram(h), robust.R_MIN) for h in hist])
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}

@@ -17,12 +17,12 @@ distances and everything computed from them are then bit for bit the same.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .. import _kernels
+from .. import _kernels, robust
 from ..errors import InputError
 from ..neighbourhoods import Neighbourhood, _knn_block, squared_distances
 from .layout import Layout
@@ -50,6 +50,11 @@ class Query:
     scales : tuple of int or None
         Also the projected distances at these kNN scales (``k == max(scales)``).
     weighting : str
+    robust : bool
+        Robust mode's compiled pass at ``scales`` instead of the projected distances:
+        the relative distances, the score, the noise ratio and the nearest and k-th
+        neighbours (:func:`meshlab_sharp._kernels.cloud_projected_distances`), from the
+        search itself (no kNN table).
     """
 
     k: int
@@ -57,6 +62,7 @@ class Query:
     rows: str | None = None
     scales: tuple[int, ...] | None = None
     weighting: str = "gaussian"
+    robust: bool = False
 
 
 @dataclass
@@ -72,18 +78,21 @@ class Context:
         Store positions of the set's points.
     rows : (r,) int64
         Increasing local indices of the points whose neighbourhoods are exact.
-    idx : (r, k) int64
-        Local indices of their k nearest, sorted by (squared distance, input index).
-    pdis : (r, s) float64 or None
-        Their projected distances at the query's scales.
+    idx : (r, k) int64 or None
+        Local indices of their k nearest, sorted by (squared distance, input index)
+        (None after a robust pass).
+    found : dict of str to array
+        What the query's pass computed for the rows (first axis r): ``pdis`` (r, s)
+        (paper); ``near``, ``kth_d2``, ``kth_idx``, ``noise`` (r,), ``relative``
+        (r, s), ``score`` (r,) (robust pass; ``near`` and ``kth_idx`` local indices).
     """
 
     store: Store
     points: np.ndarray
     pos: np.ndarray
     rows: np.ndarray
-    idx: np.ndarray
-    pdis: np.ndarray | None = None
+    idx: np.ndarray | None
+    found: dict[str, np.ndarray] = field(default_factory=dict)
 
     def gather(self, name: str) -> np.ndarray:
         """Store array ``name`` at the set's points, (L, ...)."""
@@ -92,6 +101,7 @@ class Context:
     def lists(self, k: int, part: slice = slice(None)) -> Neighbourhood:
         """CSR lists over the whole set: the k nearest of the rows (of ``rows[part]``),
         empty lists for the other points."""
+        assert self.idx is not None
         sizes = np.zeros(len(self.points), np.int64)
         sizes[self.rows[part]] = k
         indptr = np.concatenate([[0], np.cumsum(sizes)])
@@ -139,19 +149,49 @@ def gather(
 
 def _search(
     points: np.ndarray, rows: np.ndarray, query: Query, all_rows: bool, workers: int
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """k nearest (and projected distances) of ``rows`` within ``points``."""
+) -> tuple[np.ndarray | None, dict[str, np.ndarray], np.ndarray]:
+    """k nearest (or the query's pass) of ``rows`` within ``points``: the kNN lists
+    (None after a robust pass), what the pass found (:class:`Context`), and the rows'
+    squared k-th neighbour distances (r,). The compiled passes compute the rows only
+    (and a few points near them), not the halo."""
     k = query.k
+    if query.robust:
+        assert query.scales is not None
+        got = _kernels.cloud_projected_distances(
+            _kernels.build_tree(points),
+            query.scales,
+            query.weighting,
+            relative=True,
+            noise_k=min(robust.NOISE_KNN, k),
+            sheet=(robust.SHEET_GAP, robust.SHEET_MIN, robust.SHEET_OWN),
+            workers=workers,
+            rows=rows,
+        )
+        assert got.stats is not None and got.relative is not None and got.score is not None
+        st = got.stats
+        found = {
+            "near": st.near[rows],
+            "kth_d2": st.kth_d2[rows],
+            "kth_idx": st.kth_idx[rows],
+            "noise": st.noise[rows],
+            "relative": np.ascontiguousarray(got.relative[:, rows].T),
+            "score": got.score[rows],
+        }
+        return None, found, found["kth_d2"]
+    found = {}
     if query.scales is not None or all_rows:
         tree = _kernels.build_tree(points)
         if query.scales is not None:
             idx, pdis = _kernels.cloud_knn_projected_distances(
-                tree, query.scales, query.weighting, workers
+                tree, query.scales, query.weighting, workers, rows
             )
-            return idx[rows], np.ascontiguousarray(pdis[:, rows].T)
-        return _kernels.cloud_knn(tree, k, workers)[rows], None
-    tree = cKDTree(points)
-    return _knn_block(tree, points, rows, k, workers).astype(np.int64), None
+            found["pdis"] = np.ascontiguousarray(pdis[:, rows].T)
+        else:
+            idx = _kernels.cloud_knn(tree, k, workers, rows)
+        idx = idx[rows]
+    else:
+        idx = _knn_block(cKDTree(points), points, rows, k, workers).astype(np.int64)
+    return idx, found, squared_distances(points[idx[:, -1]], points[rows])
 
 
 def neighbours(
@@ -211,17 +251,17 @@ def neighbours(
             h = max(2.0 * h, float(np.linalg.norm(hi0 - lo0)), 1e-3 * diag)
             continue
         biggest = max(biggest, len(points))
-        idx, pdis = _search(points, rows, query, query.rows is None, workers)
-        r = np.sqrt(squared_distances(points[idx[:, -1]], points[rows]))
+        idx, found, kth_d2 = _search(points, rows, query, query.rows is None, workers)
+        r = np.sqrt(kth_d2)
         need = r * (1.0 + MARGIN) + 1e-300
         if full:
             ok = np.ones(len(rows), bool)
         else:
             p = points[rows]
             ok = need < np.minimum(p - blo, bhi - p).min(axis=1)
-        last = (pos, points, rows, idx, pdis, ok, r, h)
+        last = (pos, points, rows, idx, found, ok, r, h)
         if ok.all():
-            return [Context(store, points, pos, rows, idx, pdis)], h, biggest, 0
+            return [Context(store, points, pos, rows, idx, found)], h, biggest, 0
         p, nd = points[rows[~ok]], need[~ok][:, None]
         want = float(np.max(np.maximum(lo0 - (p - nd), (p + nd) - hi0)))
         h = max(want * (1.0 + 1e-6), h * 1.01 + 1e-12 * diag)
@@ -232,11 +272,12 @@ def neighbours(
         rows = _rows(store, pos, a, b, query)
         upper = np.full(len(rows), np.inf)
     else:
-        pos, points, rows, idx, pdis, ok, r, _ = last
+        pos, points, rows, idx, found, ok, r, _ = last
         keep = np.flatnonzero(ok)
         if len(keep):
-            sub = None if pdis is None else pdis[keep]
-            contexts.append(Context(store, points, pos, rows[keep], idx[keep], sub))
+            sub = {key: value[keep] for key, value in found.items()}
+            kidx = None if idx is None else idx[keep]
+            contexts.append(Context(store, points, pos, rows[keep], kidx, sub))
         rows, upper = rows[~ok], r[~ok]
     contexts.extend(streamed(store, layout, pos[rows], points[rows], upper, query, workers))
     return contexts, h, biggest, len(rows)
@@ -322,8 +363,8 @@ def streamed(
         mpos = best_pos[i][order]
         mpts = store.read_at("coords", mpos)
         row = np.flatnonzero(mpos == pos[i])
-        idx, pdis = _search(mpts, row, query, True, workers)
-        out.append(Context(store, mpts, mpos, row, idx, pdis))
+        idx, found, _ = _search(mpts, row, query, True, workers)
+        out.append(Context(store, mpts, mpos, row, idx, found))
     return out
 
 

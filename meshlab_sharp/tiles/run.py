@@ -127,6 +127,8 @@ class Runner:
         self.streamed = 0
         self.seconds: dict[str, float] = {}
         self.task_seconds: dict[str, float] = {}
+        #: Counts a mode reports in the summary (robust mode: ``redone``).
+        self.notes: dict[str, int] = {}
         self.backend = _kernels.default_backend()
 
     def step(self, step: Step) -> Partial:

@@ -19,8 +19,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-from .. import _kernels, robust
+from .. import robust
 from ..neighbourhoods import squared_distances
 from ..threshold import BINS, histogram
 from .neighbours import Context, Query
@@ -81,9 +82,9 @@ def combine(parts: list[Partial]) -> Partial:
 
 def paper_distances(ctx: Context, *, s: int) -> Partial:
     """Projected distances (r, s) of the rows to ``pdis``; their per-scale min and max."""
-    assert ctx.pdis is not None
-    ctx.store.write_at("pdis", ctx.own, ctx.pdis)
-    return {"pdis_min": ctx.pdis.min(axis=0), "pdis_max": ctx.pdis.max(axis=0)}
+    pdis = ctx.found["pdis"]
+    ctx.store.write_at("pdis", ctx.own, pdis)
+    return {"pdis_min": pdis.min(axis=0), "pdis_max": pdis.max(axis=0)}
 
 
 def _normalised(pdis: np.ndarray, lo: np.ndarray, hi: np.ndarray, flat: float) -> np.ndarray:
@@ -123,63 +124,69 @@ def _decided(span: Span, d: np.ndarray, candidate: np.ndarray) -> Partial:
 # ---------------------------------------------------------------------------- robust
 
 
-def robust_nearest(ctx: Context) -> Partial:
-    """Each row's nearest neighbour (position), k-th neighbour distance and index."""
-    store = ctx.store
-    far = ctx.idx[:, -1]
-    store.write_at("nn1", ctx.own, ctx.pos[ctx.idx[:, 1]])
-    store.write_at("kd2", ctx.own, squared_distances(ctx.points[far], ctx.points[ctx.rows]))
-    store.write_at("kid", ctx.own, store.read_at("ids", ctx.pos[far]))
-    return {}
+def robust_pass(ctx: Context, *, first: bool) -> Partial:
+    """The compiled pass of robust mode on the rows (the query's ``robust`` pass: the
+    sheet filter, the noise ratio, :class:`meshlab_sharp.robust.RelativeRule`'s relative
+    distances and score, as the in-memory :class:`~meshlab_sharp.robust.RobustSetup`
+    computes them): ``ratio``, ``r`` (r, s), ``score``; on the ``first`` pass (every
+    distinct point) also each row's nearest neighbour (``nn1``, a position), k-th
+    neighbour squared distance (``kd2``) and input index (``kid``). The histograms of
+    ``r``."""
+    found, store = ctx.found, ctx.store
+    if first:
+        store.write_at("nn1", ctx.own, ctx.pos[found["near"]])
+        store.write_at("kd2", ctx.own, found["kth_d2"])
+        store.write_at("kid", ctx.own, store.read_at("ids", ctx.pos[found["kth_idx"]]))
+    r = found["relative"]
+    store.write_at("ratio", ctx.own, found["noise"])
+    store.write_at("r", ctx.own, r)
+    store.write_at("score", ctx.own, found["score"])
+    return {"hist": _histograms(r)}
+
+
+def _histograms(r: np.ndarray) -> np.ndarray:
+    """256-bin histograms (s, B) of the columns of ``r`` (m, s)."""
+    return np.stack([histogram(r[:, i], BINS) for i in range(r.shape[1])])
 
 
 def robust_isolated(span: Span) -> Partial:
     """:func:`meshlab_sharp.robust.isolated_points`: ``i`` is isolated when it is not
     among the k nearest of its nearest ``j``, i.e. when ``(d2(j, i), i)`` comes after
-    ``j``'s k-th neighbour in the (squared distance, index) order. Writes ``kept``."""
+    ``j``'s k-th neighbour in the (squared distance, index) order. Writes ``kept``; the
+    isolated points' coordinates (``lone_cat``)."""
     d = span.distinct
     pos = span.a + d
     store = span.store
     nn = store.read("nn1", span.a, span.b)[d]
-    d2 = squared_distances(span.read("coords")[d], store.read_at("coords", nn))
+    coords = span.read("coords")[d]
+    d2 = squared_distances(coords, store.read_at("coords", nn))
     kd2, kid = store.read_at("kd2", nn), store.read_at("kid", nn)
     inside = (d2 < kd2) | ((d2 == kd2) & (span.read("ids")[d] <= kid))
     store.write_at("kept", pos, inside)
-    return {"isolated": np.array(int((~inside).sum()))}
+    return {"isolated": np.array(int((~inside).sum())), "lone_cat": coords[~inside]}
 
 
-def _robust_pass(ctx: Context, scales: tuple[int, ...], weighting: str, noise_k: int = 0) -> Any:
-    """The compiled pass of robust mode (the sheet filter, the noise ratio over the
-    ``noise_k`` nearest, the relative distances and score) over the context's set, whose
-    rows' lists it finds exactly as the in-memory pass does."""
-    return _kernels.cloud_projected_distances(
-        _kernels.build_tree(ctx.points),
-        scales,
-        weighting,
-        relative=noise_k == 0,
-        keep_pdis=False,
-        noise_k=noise_k,
-        sheet=(robust.SHEET_GAP, robust.SHEET_MIN, robust.SHEET_OWN),
-    )
+def robust_affected(span: Span, *, lone: np.ndarray) -> Partial:
+    """The kept points whose k nearest (the first pass's: within the k-th neighbour
+    distance ``kd2``) may hold an isolated point of ``lone`` (m, 3): their lists among
+    the kept points differ, so the pass is run again on them (``redo``); every other
+    kept point's list, and so its values, stays the same. A margin keeps the test on
+    the safe side (recomputing a point gives its value again)."""
+    d = span.distinct
+    d = d[span.read("kept")[d]]
+    if len(d) == 0:
+        return {"redo": np.array(0)}
+    reach = np.sqrt(span.read("kd2")[d]) * (1.0 + 1e-6) + 1e-300
+    dist, _ = cKDTree(lone).query(span.read("coords")[d], 1)
+    redo = d[dist <= reach]
+    span.store.write_at("redo", span.a + redo, np.ones(len(redo), bool))
+    return {"redo": np.array(len(redo))}
 
 
-def robust_noise(ctx: Context, *, k: int, top: int, weighting: str) -> Partial:
-    """:func:`meshlab_sharp.robust.noise_ratios` of the rows (to ``ratio``), on the
-    lists less the other sheets (:func:`meshlab_sharp.robust.sheet_mask` at ``top``)."""
-    stats = _robust_pass(ctx, (top,), weighting, noise_k=k).stats
-    ctx.store.write_at("ratio", ctx.own, stats.noise[ctx.rows])
-    return {}
-
-
-def robust_relative(ctx: Context, *, scales: tuple[int, ...], weighting: str) -> Partial:
-    """:class:`meshlab_sharp.robust.RelativeRule` on the rows (less the other sheets):
-    relative distances ``r`` (r, s), the score, and the histograms of ``r``."""
-    out = _robust_pass(ctx, scales, weighting)
-    r = np.ascontiguousarray(out.relative[:, ctx.rows].T)
-    score = out.score[ctx.rows]
-    ctx.store.write_at("r", ctx.own, r)
-    ctx.store.write_at("score", ctx.own, score)
-    return {"hist": np.stack([histogram(r[:, i], BINS) for i in range(len(scales))])}
+def robust_histograms(span: Span) -> Partial:
+    """The histograms of ``r`` over the kept distinct points."""
+    d = span.distinct
+    return {"hist": _histograms(span.read("r")[d[span.read("kept")[d]]])}
 
 
 def robust_decide(span: Span, *, thresholds: np.ndarray) -> Partial:
