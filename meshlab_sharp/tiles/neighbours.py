@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 
 from .. import _kernels, robust
 from ..errors import InputError
-from ..neighbourhoods import Neighbourhood, _knn_block, squared_distances
+from ..neighbourhoods import Neighbourhood, squared_distances
 from .layout import Layout
 from .store import Store
 
@@ -179,18 +179,17 @@ def _search(
         }
         return None, found, found["kth_d2"]
     found = {}
-    if query.scales is not None or all_rows:
-        tree = _kernels.build_tree(points)
-        if query.scales is not None:
-            idx, pdis = _kernels.cloud_knn_projected_distances(
-                tree, query.scales, query.weighting, workers, rows
-            )
-            found["pdis"] = np.ascontiguousarray(pdis[:, rows].T)
-        else:
-            idx = _kernels.cloud_knn(tree, k, workers, rows)
+    tree = _kernels.build_tree(points)
+    if query.scales is not None:
+        idx, pdis = _kernels.cloud_knn_projected_distances(
+            tree, query.scales, query.weighting, workers, rows
+        )
+        found["pdis"] = np.ascontiguousarray(pdis[:, rows].T)
         idx = idx[rows]
-    else:
-        idx = _knn_block(cKDTree(points), points, rows, k, workers).astype(np.int64)
+    elif all_rows:
+        idx = _kernels.cloud_knn(tree, k, workers, rows)[rows]
+    else:  # a few rows: no table of the set
+        idx = _kernels.cloud_knn_rows(tree, rows, k, workers)
     return idx, found, squared_distances(points[idx[:, -1]], points[rows])
 
 

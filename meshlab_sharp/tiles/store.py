@@ -1,9 +1,10 @@
 """Per-point arrays on disk, shared by the tiles (and by Dask workers on other machines).
 
 Every array is a raw file ``<root>/<name>.bin`` whose first axis runs over the points in
-tile order. Each access maps the file, copies what it needs and unmaps it again, so
-that a long run never keeps file pages in the process's resident memory: the peak
-memory of a tiled run is that of one tile, not of the whole cloud.
+tile order. A range of rows is read from the file; any other access maps the file,
+copies what it needs and unmaps it again, so that a long run never keeps file pages in
+the process's resident memory: the peak memory of a tiled run is that of one tile, not
+of the whole cloud.
 """
 
 from __future__ import annotations
@@ -47,11 +48,16 @@ class Store:
         return np.memmap(self.path(name), dtype=np.dtype(dtype), mode=mode, shape=shape)
 
     def read(self, name: str, start: int, stop: int) -> np.ndarray:
-        """A copy of rows ``start:stop``."""
-        m = self._map(name, "r")
-        out = np.array(m[start:stop])
-        del m
-        return out
+        """A copy of rows ``start:stop`` (read from the file, not mapped)."""
+        shape, dtype = self.arrays[name]
+        dt = np.dtype(dtype)
+        stop = min(stop, shape[0])
+        count = max(stop - start, 0)
+        row = int(np.prod(shape[1:], dtype=np.int64))
+        if count == 0:
+            return np.zeros((0, *shape[1:]), dt)
+        out = np.fromfile(self.path(name), dt, count * row, offset=start * row * dt.itemsize)
+        return out.reshape((count, *shape[1:]))
 
     def read_at(self, name: str, rows: np.ndarray) -> np.ndarray:
         """A copy of the given rows (any order)."""
