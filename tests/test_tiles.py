@@ -81,6 +81,33 @@ def test_robust_passes_as_in_memory() -> None:
     assert_same(out, ref)
 
 
+def test_compiled_passes_of_some_rows_equal_the_whole_pass() -> None:
+    """The compiled passes restricted to some points (``rows=``: a tile's own points,
+    not its halo) give those points' values of the pass over every point, bit for bit."""
+    from meshlab_sharp import robust
+
+    pts = hostile_cloud(3000, seed=2)
+    pts = pts[_kernels.merge_duplicates(pts)[0]]
+    rows = np.flatnonzero(pts[:, 0] < 0.1)  # a slab: runs of the tree, and stray points
+    rows = np.union1d(rows, [5, 17, len(pts) - 1])
+    tree = _kernels.build_tree(pts)
+    sheet = (robust.SHEET_GAP, robust.SHEET_MIN, robust.SHEET_OWN)
+    kw = {"relative": True, "noise_k": 7, "sheet": sheet}
+    whole = _kernels.cloud_projected_distances(tree, SCALES, **kw)
+    some = _kernels.cloud_projected_distances(tree, SCALES, rows=rows, **kw)
+    assert whole.relative is not None and some.relative is not None
+    assert np.array_equal(whole.relative[:, rows], some.relative[:, rows])
+    assert np.array_equal(whole.score[rows], some.score[rows])
+    for name in ("near", "kth_d2", "kth_idx", "noise"):
+        assert np.array_equal(getattr(whole.stats, name)[rows], getattr(some.stats, name)[rows])
+    idx, pdis = _kernels.cloud_knn_projected_distances(tree, SCALES)
+    idx_r, pdis_r = _kernels.cloud_knn_projected_distances(tree, SCALES, rows=rows)
+    assert np.array_equal(idx[rows], idx_r[rows]) and np.array_equal(pdis[:, rows], pdis_r[:, rows])
+    assert np.array_equal(
+        _kernels.cloud_knn(tree, 9)[rows], _kernels.cloud_knn(tree, 9, rows=rows)[rows]
+    )
+
+
 def test_default_scales_and_far_outliers_only_tiles() -> None:
     """Default scales (k up to 40), tiles that hold nothing but far points (and, in
     robust mode, nothing but isolated points)."""
