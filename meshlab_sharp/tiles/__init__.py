@@ -405,9 +405,11 @@ def _robust(
     thresholds = np.array([max(otsu_from_histogram(h), robust.R_MIN) for h in hist])
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
-    runner.step(Step("support", robust_support, Query(top, "kept", "mask"), support))
+    near = Query(top, "kept", "mask", save="lists")
+    runner.step(Step("support", robust_support, near, support))
     compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
-    runner.step(Step("thin", robust_thin, Query(compare, "kept", "mask1"), {"compare": compare}))
+    reuse = Query(compare, "kept", "mask1", reuse="lists")  # mask1: a subset of mask
+    runner.step(Step("thin", robust_thin, reuse, {"compare": compare}))
     return thresholds, decided["counts"], "final", "kept", scales
 
 

@@ -55,6 +55,13 @@ class Query:
         the relative distances, the score, the noise ratio and the nearest and k-th
         neighbours (:func:`meshlab_sharp._kernels.cloud_projected_distances`), from the
         search itself (no kNN table).
+    save : str or None
+        Keep the rows' lists (store positions) under this name, per tile
+        (:meth:`Store.put`), for a later query to reuse.
+    reuse : str or None
+        No search: the first ``k`` of the lists an earlier query saved under this name,
+        of its rows that are this query's rows (a subset of them, ``k`` at most the
+        earlier ``k``: the k nearest are a prefix of the earlier k nearest).
     """
 
     k: int
@@ -63,6 +70,8 @@ class Query:
     scales: tuple[int, ...] | None = None
     weighting: str = "gaussian"
     robust: bool = False
+    save: str | None = None
+    reuse: str | None = None
 
 
 @dataclass
@@ -227,6 +236,47 @@ def neighbours(
     streamed : int
         Rows that took the streaming route.
     """
+    if query.reuse is not None:
+        ctx = _reused(store, tile, query)
+        return ([ctx] if len(ctx.rows) else []), float(halo), 0, 0
+    contexts, h, biggest, far = _searched(store, layout, tile, query, halo, most_points, workers)
+    if query.save is not None:
+        kept = [np.column_stack([c.own, c.pos[c.idx]]) for c in contexts if c.idx is not None]
+        lists = np.concatenate(kept) if kept else np.zeros((0, query.k + 1), np.int64)
+        store.put(query.save, tile, lists)
+    return contexts, h, biggest, far
+
+
+def _reused(store: Store, tile: int, query: Query) -> Context:
+    """The context of :attr:`Query.reuse`: the tile's rows among those whose lists were
+    saved, their first ``k`` neighbours, on the set of the points met, in increasing
+    input index."""
+    saved = store.get(str(query.reuse), tile)
+    assert saved.shape[1] > query.k
+    if query.rows is not None and len(saved):
+        saved = saved[store.read_at(query.rows, saved[:, 0]).astype(bool)]
+    own, near = saved[:, 0], saved[:, 1 : query.k + 1]
+    met = np.unique(np.concatenate([own, near.reshape(-1)]))
+    order = np.argsort(store.read_at("ids", met), kind="stable")
+    pos = met[order]
+    local = np.empty(len(met), np.int64)
+    local[order] = np.arange(len(met))
+    rows = local[np.searchsorted(met, own)]
+    idx = local[np.searchsorted(met, near)]
+    first = np.argsort(rows, kind="stable")
+    return Context(store, store.read_at("coords", pos), pos, rows[first], idx[first])
+
+
+def _searched(
+    store: Store,
+    layout: Layout,
+    tile: int,
+    query: Query,
+    halo: float,
+    most_points: int,
+    workers: int,
+) -> tuple[list[Context], float, int, int]:
+    """:func:`neighbours` by a search of the tile's box (and the streaming route)."""
     a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
     lo0, hi0 = layout.boxes[tile]
     diag = float(np.linalg.norm(layout.hi - layout.lo)) or 1.0

@@ -62,18 +62,20 @@ def combine(parts: list[Partial]) -> Partial:
     """Reduce partials: ``*_min`` by minimum, ``*_max`` by maximum, ``*_cat`` by
     concatenation, others by sum."""
     out: Partial = {}
+    cat: dict[str, list[np.ndarray]] = {}
     for part in parts:
         for key, value in part.items():
-            if key not in out:
+            if key.endswith("_cat"):
+                cat.setdefault(key, []).append(value)
+            elif key not in out:
                 out[key] = np.array(value)
-            elif key.endswith("_cat"):
-                out[key] = np.concatenate([out[key], value])
             elif key.endswith("_min"):
                 out[key] = np.minimum(out[key], value)
             elif key.endswith("_max"):
                 out[key] = np.maximum(out[key], value)
             else:
                 out[key] = out[key] + value
+    out.update({key: np.concatenate(values) for key, values in cat.items()})
     return out
 
 

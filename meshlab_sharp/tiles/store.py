@@ -83,3 +83,11 @@ class Store:
         m[np.asarray(rows, np.int64)] = values
         m.flush()
         del m
+
+    def put(self, name: str, key: int, values: np.ndarray) -> None:
+        """A per-tile array (not per point): ``values`` under ``name`` and ``key``."""
+        np.save(Path(self.root) / f"{name}-{key}.npy", values, allow_pickle=False)
+
+    def get(self, name: str, key: int) -> np.ndarray:
+        """The array :meth:`put` saved under ``name`` and ``key``."""
+        return np.load(Path(self.root) / f"{name}-{key}.npy", allow_pickle=False)
