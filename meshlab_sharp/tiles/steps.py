@@ -102,8 +102,12 @@ def _normalised(pdis: np.ndarray, lo: np.ndarray, hi: np.ndarray, flat: float) -
 
 def paper_histograms(span: Span, *, lo: np.ndarray, hi: np.ndarray, flat: float) -> Partial:
     """256-bin histograms (s, B) of the normalised distances."""
-    v = _normalised(span.read("pdis")[span.distinct], lo, hi, flat)
-    return {"hist": np.stack([histogram(v[:, i], BINS) for i in range(v.shape[1])])}
+    return {"hist": _histograms(_normalised(span.read("pdis")[span.distinct], lo, hi, flat))}
+
+
+def _histograms(values: np.ndarray) -> np.ndarray:
+    """256-bin histograms (s, B) of the columns of ``values`` (m, s)."""
+    return np.stack([histogram(values[:, i], BINS) for i in range(values.shape[1])])
 
 
 def paper_decide(
@@ -144,11 +148,6 @@ def robust_pass(ctx: Context, *, first: bool) -> Partial:
     store.write_at("r", ctx.own, r)
     store.write_at("score", ctx.own, found["score"])
     return {"hist": _histograms(r)}
-
-
-def _histograms(r: np.ndarray) -> np.ndarray:
-    """256-bin histograms (s, B) of the columns of ``r`` (m, s)."""
-    return np.stack([histogram(r[:, i], BINS) for i in range(r.shape[1])])
 
 
 def robust_isolated(span: Span) -> Partial:
