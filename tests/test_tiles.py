@@ -254,7 +254,8 @@ def test_noise_grown_scales_equal_in_memory() -> None:
 @pytest.mark.parametrize("collect", [1, 7, 1 << 21])
 def test_order_statistic_is_exact(tmp_path, monkeypatch, collect: int) -> None:
     """The k-th smallest by counting passes equals np.partition's, with many equal
-    values and values gathered from a tiny bin."""
+    values and values gathered from a tiny bin; a rank among many equal values is
+    found without gathering them."""
     from meshlab_sharp.tiles import select
     from meshlab_sharp.tiles.run import Runner
 
@@ -275,6 +276,9 @@ def test_order_statistic_is_exact(tmp_path, monkeypatch, collect: int) -> None:
     for rank in (0, 1, len(kept) // 3, (len(kept) - 1) // 2, len(kept) - 1):
         want = np.partition(kept, rank)[rank]
         assert select.order_statistic(runner, "v", "keep", rank) == want
+    runner = Runner(store, layout, most_points=1000, workers=1)
+    assert select.order_statistic(runner, "v", "keep", 5) == 0.0  # one of the 900 zeros
+    assert ("noise pick" in runner.seconds) == (collect > 900)  # fewer: narrowed to the 0s
 
 
 def assert_same_curves(

@@ -2,10 +2,14 @@
 
 The k-th smallest value (the lower median, for robust mode's noise estimate) is found
 by counting: each pass counts the values in ``BINS`` equal bins of a range (and those
-below it), which reduces exactly as integer sums; the bin holding the wanted rank
-becomes the next range, until it holds at most ``COLLECT`` values, which are then
-gathered and the rank picked among them. The bin of a value is computed by one
-expression in every pass, so the counts and the gathered values always agree.
+below it), which reduces exactly as integer sums, and takes each bin's smallest and
+largest value (reduced by min and max); the values of the bin holding the wanted rank,
+from its smallest to its largest, become the next range, until they are all equal (the
+answer, gathered from no tile: a cloud with many points of the same ratio, such as
+exact planes, would otherwise gather them all) or at most ``COLLECT`` values, which are
+then gathered and the rank picked among them. The bin of a value is computed by one
+expression in every pass, so the counts, the ranges and the gathered values always
+agree.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ if TYPE_CHECKING:
 BINS = 4096
 #: Values gathered at most for the final pick ...
 COLLECT = 1 << 21
-#: ... unless the bins cannot split them any more (all equal): after this many passes.
+#: ... or after this many passes (values too close together for the bins to split).
 PASSES = 6
 
 
@@ -47,12 +51,19 @@ def value_range(span: Span, *, name: str, kept: str) -> Partial:
 
 
 def value_counts(span: Span, *, name: str, kept: str, lo: float, hi: float) -> Partial:
-    """Values below ``lo`` and per bin of [lo, hi]."""
+    """Values below ``lo``, and per bin of [lo, hi] their number, smallest and largest
+    (inf and -inf in an empty bin)."""
     v = _values(span, name, kept)
     b = _bins(v, lo, hi)
+    inside = b >= 0
+    first, last = np.full(BINS, np.inf), np.full(BINS, -np.inf)
+    np.minimum.at(first, b[inside], v[inside])
+    np.maximum.at(last, b[inside], v[inside])
     return {
         "below": np.array(int((v < lo).sum())),
-        "counts": np.bincount(b[b >= 0], minlength=BINS),
+        "counts": np.bincount(b[inside], minlength=BINS),
+        "bin_min": first,
+        "bin_max": last,
     }
 
 
@@ -75,13 +86,14 @@ def order_statistic(runner: Runner, name: str, kept: str, rank: int) -> float:
         target = rank - int(counted["below"])
         cum = np.cumsum(counted["counts"])
         b = int(np.searchsorted(cum, target, side="right"))
-        inside = int(counted["counts"][b])
-        if inside <= COLLECT or hi - lo <= 0 or passes == PASSES:
+        first, last = float(counted["bin_min"][b]), float(counted["bin_max"][b])
+        if first == last:  # every value of the bin, the rank's among them, is this one
+            return first
+        if int(counted["counts"][b]) <= COLLECT or passes == PASSES:
             got = runner.step(
                 Step("noise pick", value_collect, None, {**where, "lo": lo, "hi": hi, "bin": b})
             )["values_cat"]
             at = target - (int(cum[b - 1]) if b > 0 else 0)
             return float(np.partition(got, at)[at])
-        width = (hi - lo) / BINS
-        lo, hi = lo + b * width - width * 1e-6, lo + (b + 1) * width + width * 1e-6
+        lo, hi = first, last  # exactly the bin's values lie in [first, last]
     raise AssertionError("unreachable: the last pass picks")
