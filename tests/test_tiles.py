@@ -278,7 +278,14 @@ def test_order_statistic_is_exact(tmp_path, monkeypatch, collect: int) -> None:
         assert select.order_statistic(runner, "v", "keep", rank) == want
     runner = Runner(store, layout, most_points=1000, workers=1)
     assert select.order_statistic(runner, "v", "keep", 5) == 0.0  # one of the 900 zeros
-    assert ("noise pick" in runner.seconds) == (collect > 900)  # fewer: narrowed to the 0s
+    assert "noise pick" not in runner.seconds  # a bin of zeros alone: not gathered
+    # values over 600 orders of magnitude, negative ones and -0.0 among them
+    spread = 10.0 ** rng.uniform(-300, 300, 3000) * rng.choice([-1.0, 1.0], 3000)
+    spread[:50] = -0.0
+    store.write("v", 0, spread[ids])
+    kept = spread[keep]
+    for rank in (0, 7, len(kept) // 2, len(kept) - 1):
+        assert select.order_statistic(runner, "v", "keep", rank) == np.partition(kept, rank)[rank]
 
 
 def assert_same_curves(
