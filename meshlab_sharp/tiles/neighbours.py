@@ -276,22 +276,25 @@ def _searched(
     most_points: int,
     workers: int,
 ) -> tuple[list[Context], float, int, int]:
-    """:func:`neighbours` by a search of the tile's box (and the streaming route)."""
+    """:func:`neighbours` by a search of the tile's box (and the streaming route). The
+    rows whose balls fit are done; a wider box searches (and computes) only the others."""
     a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
     lo0, hi0 = layout.boxes[tile]
     diag = float(np.linalg.norm(layout.hi - layout.lo)) or 1.0
     h = float(halo)
     biggest = 0
     last = None
+    done: list[Context] = []
+    pending: np.ndarray | None = None  # store positions of the rows not done yet
     for _ in range(ROUNDS):
         blo, bhi = lo0 - h, hi0 + h
         full = bool(np.all(blo <= layout.lo) and np.all(bhi >= layout.hi))
         pos, points, _ = gather(store, layout, layout.tiles_meeting(blo, bhi), blo, bhi, query.kept)
         if last is not None and len(points) > most_points:
             break
-        rows = _rows(store, pos, a, b, query)
+        rows = _rows(store, pos, a, b, query, pending)
         if len(rows) == 0:
-            return [], h, biggest, 0
+            return done, h, biggest, 0
         if len(points) < query.k:
             if full:
                 raise InputError(
@@ -308,33 +311,36 @@ def _searched(
         else:
             p = points[rows]
             ok = need < np.minimum(p - blo, bhi - p).min(axis=1)
-        last = (pos, points, rows, idx, found, ok, r, h)
+        last = (pos, points, rows, ok, r, h)
+        if ok.any():
+            sub = {key: value[ok] for key, value in found.items()}
+            kidx = None if idx is None else idx[ok]
+            done.append(Context(store, points, pos, rows[ok], kidx, sub))
         if ok.all():
-            return [Context(store, points, pos, rows, idx, found)], h, biggest, 0
+            return done, h, biggest, 0
+        pending = pos[rows[~ok]]
         p, nd = points[rows[~ok]], need[~ok][:, None]
         want = float(np.max(np.maximum(lo0 - (p - nd), (p + nd) - hi0)))
         h = max(want * (1.0 + 1e-6), h * 1.01 + 1e-12 * diag)
-    contexts: list[Context] = []
-    h = h if last is None else last[-1]
     if last is None:  # too few points near the tile: all its rows take the streaming route
         pos, points, _ = gather(store, layout, np.array([tile]), lo0, hi0, query.kept)
-        rows = _rows(store, pos, a, b, query)
+        rows = _rows(store, pos, a, b, query, pending)
         upper = np.full(len(rows), np.inf)
     else:
-        pos, points, rows, idx, found, ok, r, _ = last
-        keep = np.flatnonzero(ok)
-        if len(keep):
-            sub = {key: value[keep] for key, value in found.items()}
-            kidx = None if idx is None else idx[keep]
-            contexts.append(Context(store, points, pos, rows[keep], kidx, sub))
+        pos, points, rows, ok, r, h = last
         rows, upper = rows[~ok], r[~ok]
-    contexts.extend(streamed(store, layout, pos[rows], points[rows], upper, query, workers))
-    return contexts, h, biggest, len(rows)
+    done.extend(streamed(store, layout, pos[rows], points[rows], upper, query, workers))
+    return done, h, biggest, len(rows)
 
 
-def _rows(store: Store, pos: np.ndarray, a: int, b: int, query: Query) -> np.ndarray:
-    """Local indices of the points at ``pos`` that are the tile's (positions a..b) rows."""
+def _rows(
+    store: Store, pos: np.ndarray, a: int, b: int, query: Query, pending: np.ndarray | None
+) -> np.ndarray:
+    """Local indices of the points at ``pos`` that are the tile's (positions a..b) rows
+    (among the store positions ``pending``, when given)."""
     own = (pos >= a) & (pos < b)
+    if pending is not None:
+        own &= np.isin(pos, pending)
     if query.rows is not None:
         own &= store.read_at(query.rows, pos).astype(bool)
     return np.flatnonzero(own)
