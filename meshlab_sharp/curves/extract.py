@@ -28,6 +28,7 @@ from .refine import (
 )
 from .trace import (
     GAP_LENGTH,
+    LONG_GAP,
     LOOP_LENGTH,
     TANGENT_WINDOW,
     Bridge,
@@ -36,6 +37,7 @@ from .trace import (
     cut_at_turns,
     end_clusters,
     join_pieces,
+    meeting_clusters,
     split_at_touches,
     trace_paths,
 )
@@ -367,6 +369,8 @@ def _corners(
     on a mesh, the mesh vertex nearest it, reached from each end along mesh edges
     (``paths``)."""
     ends, clusters = end_clusters(pieces, spacing)
+    if paths is None:
+        clusters = meeting_clusters(ends, clusters, pieces, spacing)
     points, indices = [], []
     pieces = [Piece(pc.nodes.copy(), pc.points.copy(), pc.closed) for pc in pieces]
     for c in clusters:
@@ -380,7 +384,7 @@ def _corners(
         corner = mean
         if np.linalg.cond(a) < 1e6:
             x = np.linalg.solve(a, b)
-            if np.linalg.norm(x - mean) <= GAP_LENGTH * spacing:
+            if np.linalg.norm(ends.point[c] - x, axis=1).max() <= LONG_GAP * spacing:
                 corner = x
         if paths is None:
             nearest = int(c[np.argmin(np.linalg.norm(ends.point[c] - corner, axis=1))])

@@ -26,6 +26,7 @@ __all__ = [
     "cut_at_turns",
     "end_clusters",
     "join_pieces",
+    "meeting_clusters",
     "split_at_touches",
     "tangents",
     "trace_paths",
@@ -66,6 +67,9 @@ LOOP_LENGTH = 3
 #: Two free ends facing each other are joined across up to this many spacings: the
 #: gaps detection leaves along weak edges (a chamfer's 45-degree edges) and in noise.
 LONG_GAP = 12.0
+#: Scale (index into :data:`TURN_SCALES`) of the end chords whose lines place corners:
+#: chords from 1 to 4 spacings before the end (the last vertices bend in noise).
+CORNER_SCALE = 1
 #: Two ends continue one curve only if each lies within this many spacings of the
 #: other's line: the width of a feature band (parallel edges are farther apart).
 LATERAL_OFFSET = 1.5
@@ -300,6 +304,7 @@ class _Ends:
     side: np.ndarray  # (q,) 0: first vertex, 1: last
     point: np.ndarray  # (q, 3)
     out: np.ndarray  # (s, q, 3) unit direction leaving the curve (its end chord), per scale
+    anchor: np.ndarray  # (s, q, 3) the end chord's vertex nearer the end, per scale
 
 
 def _ends(pieces: list[Piece], spacing: float) -> _Ends:
@@ -312,7 +317,7 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
     if len(which) == 0:
         z = np.zeros((0, 3))
         empty = np.zeros((len(TURN_SCALES), 0, 3))
-        return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, empty)
+        return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, empty, empty)
     sizes = np.array([len(pieces[i].points) for i in which])
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     stops = starts + sizes - 1
@@ -343,7 +348,10 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
     out[:, 1::2] = _unit(last)
     ends_points = np.empty((2 * q, 3))
     ends_points[0::2], ends_points[1::2] = points[starts], points[stops]
-    return _Ends(np.repeat(which, 2), np.tile([0, 1], q), ends_points, out)
+    anchor = np.empty((len(TURN_SCALES), 2 * q, 3))
+    anchor[:, 0::2] = np.where((near == far)[..., None], points[starts], points[near])
+    anchor[:, 1::2] = np.where((near_b == far_b)[..., None], points[stops], points[near_b])
+    return _Ends(np.repeat(which, 2), np.tile([0, 1], q), ends_points, out, anchor)
 
 
 def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.ndarray]]:
@@ -378,18 +386,86 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
     return ends, [c for c in clusters if len(c) >= 2]
 
 
+def meeting_clusters(
+    ends: _Ends, clusters: list[np.ndarray], pieces: list[Piece], spacing: float
+) -> list[np.ndarray]:
+    """``clusters`` with the free ends (in no cluster) added to the ends whose lines they
+    meet at a corner: where detection left a gap of more than GAP_LENGTH spacings at a
+    corner. Two ends of different pieces within :data:`LONG_GAP` spacings meet when
+    their lines (the end chords at :data:`CORNER_SCALE`, through the chords' vertices
+    nearer the ends) cross at more than :data:`CORNER_TURN` and pass within
+    :data:`LATERAL_OFFSET` spacings of each other, at most LONG_GAP spacings ahead of
+    each end and not behind it. Nearest pairs first; the result is grouped transitively.
+
+    Returns
+    -------
+    list of (c,) int64
+        Indices into ``ends``, every cluster of two or more ends, deterministic order.
+    """
+    q = len(ends.piece)
+    label = np.arange(q)
+    for c in clusters:
+        label[c] = c[0]
+    free = label == np.arange(q)
+    for c in clusters:
+        free[c] = False
+    if free.sum() == 0 or q < 2:
+        return clusters
+    parent = label.copy()
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = int(parent[i])
+        return i
+
+    pairs = cKDTree(ends.point).query_pairs(LONG_GAP * spacing, output_type="ndarray")
+    pairs = pairs[(free[pairs[:, 0]] | free[pairs[:, 1]])]
+    pairs = pairs[ends.piece[pairs[:, 0]] != ends.piece[pairs[:, 1]]]
+    gaps = np.linalg.norm(ends.point[pairs[:, 0]] - ends.point[pairs[:, 1]], axis=1)
+    out, anchor = ends.out[CORNER_SCALE], ends.anchor[CORNER_SCALE]
+    turn = math.cos(math.radians(CORNER_TURN))
+    for k in np.lexsort((pairs[:, 1], pairs[:, 0], gaps)):
+        a, b = int(pairs[k, 0]), int(pairs[k, 1])
+        cos = float(out[a] @ out[b])
+        if abs(cos) > turn:
+            continue  # (anti)parallel: no corner
+        w = anchor[a] - anchor[b]
+        da, db = float(out[a] @ w), float(out[b] @ w)
+        det = 1.0 - cos * cos
+        sa, sb = (cos * db - da) / det, (db - cos * da) / det
+        xa, xb = anchor[a] + sa * out[a], anchor[b] + sb * out[b]
+        if np.linalg.norm(xa - xb) > LATERAL_OFFSET * spacing:
+            continue
+        meet = 0.5 * (xa + xb)
+        ahead = (
+            float((meet - ends.point[a]) @ out[a]),
+            float((meet - ends.point[b]) @ out[b]),
+        )
+        if min(ahead) < -LATERAL_OFFSET * spacing or max(ahead) > LONG_GAP * spacing:
+            continue
+        ra, rb = root(a), root(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    roots = np.array([root(i) for i in range(q)], np.int64)
+    grouped = [np.flatnonzero(roots == r) for r in np.unique(roots)]
+    return [c for c in grouped if len(c) >= 2]
+
+
 def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
-    """Ends ``a`` and ``b`` belong to one curve: they face each other within
-    :data:`CORNER_TURN`, and each lies within :data:`LATERAL_OFFSET` spacings of the
-    other's line (ends may overlap side by side where a skeleton broke a loop)."""
-    gap = ends.point[b] - ends.point[a]
-    for out in ends.out:  # either scale of the chords (the larger turn is the corner's)
+    """Ends ``a`` and ``b`` belong to one curve: at one scale of the end chords they face
+    each other within :data:`CORNER_TURN`, and each end (or each chord's vertex nearer
+    the end: noise bends the last vertices off the line) lies within
+    :data:`LATERAL_OFFSET` spacings of the other's line (ends may overlap side by side
+    where a skeleton broke a loop)."""
+    for out, anchor in zip(ends.out, ends.anchor, strict=True):
         if -float(out[a] @ out[b]) < math.cos(math.radians(CORNER_TURN)):
             continue
-        off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
-        off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
-        if max(off_a, off_b) <= LATERAL_OFFSET * spacing:
-            return True
+        for gap in (ends.point[b] - ends.point[a], anchor[b] - anchor[a]):
+            off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
+            off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
+            if max(off_a, off_b) <= LATERAL_OFFSET * spacing:
+                return True
     return False
 
 
