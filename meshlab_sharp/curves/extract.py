@@ -27,6 +27,7 @@ from .refine import (
     refine_neighbours,
 )
 from .trace import (
+    CORNER_SCALE,
     GAP_LENGTH,
     LONG_GAP,
     LOOP_LENGTH,
@@ -377,9 +378,10 @@ def _corners(
         a = np.zeros((3, 3))
         b = np.zeros(3)
         for i in c:
-            proj = np.eye(3) - np.outer(ends.out[0, i], ends.out[0, i])
+            o = ends.out[CORNER_SCALE, i]
+            proj = np.eye(3) - np.outer(o, o)
             a += proj
-            b += proj @ ends.point[i]
+            b += proj @ ends.anchor[CORNER_SCALE, i]
         mean = ends.point[c].mean(axis=0)
         corner = mean
         if np.linalg.cond(a) < 1e6:

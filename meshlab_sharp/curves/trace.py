@@ -69,7 +69,7 @@ LOOP_LENGTH = 3
 LONG_GAP = 12.0
 #: Scale (index into :data:`TURN_SCALES`) of the end chords whose lines place corners:
 #: chords from 1 to 4 spacings before the end (the last vertices bend in noise).
-CORNER_SCALE = 1
+CORNER_SCALE = 2
 #: Two ends continue one curve only if each lies within this many spacings of the
 #: other's line: the width of a feature band (parallel edges are farther apart).
 LATERAL_OFFSET = 1.5
