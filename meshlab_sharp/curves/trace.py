@@ -72,7 +72,7 @@ LONG_GAP = 12.0
 CORNER_SCALE = 2
 #: Two ends continue one curve only if each lies within this many spacings of the
 #: other's line: the width of a feature band (parallel edges are farther apart).
-LATERAL_OFFSET = 1.5
+LATERAL_OFFSET = 2.0
 
 
 @dataclass
