@@ -199,6 +199,7 @@ def extract_curves(
     # joining may have run a curve round a corner whose vertex was near a piece's end
     pieces = [q for pc in pieces for q in cut_at_turns(pc, spacing)]
     pieces = split_at_touches(pieces, spacing)
+    pieces = _drop_isolated(pieces, spacing)
     pieces, corners = _corners(pieces, spacing, pts, paths)
     curves = [_curve(pc, spacing) for pc in pieces if len(pc.points) >= 2]
     curves.sort(key=lambda c: (*c.points[0], *c.points[-1], c.length))
@@ -359,6 +360,20 @@ def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
             pc.length >= MIN_CURVE_LENGTH * spacing
             and (i not in spur or pc.length >= SPUR_PIECE * spacing)
         )
+    ]
+
+
+def _drop_isolated(pieces: list[Piece], spacing: float) -> list[Piece]:
+    """Leave out open pieces shorter than SPUR_PIECE spacings whose two ends are free (no
+    other end within GAP_LENGTH spacings): fragments of detections along noisy edges."""
+    ends, clusters = end_clusters(pieces, spacing)
+    joined = np.zeros(len(pieces), bool)
+    for c in clusters:
+        joined[ends.piece[c]] = True
+    return [
+        pc
+        for i, pc in enumerate(pieces)
+        if pc.closed or joined[i] or pc.length >= SPUR_PIECE * spacing
     ]
 
 
