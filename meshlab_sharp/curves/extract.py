@@ -199,7 +199,8 @@ def extract_curves(
     # joining may have run a curve round a corner whose vertex was near a piece's end
     pieces = [q for pc in pieces for q in cut_at_turns(pc, spacing)]
     pieces = split_at_touches(pieces, spacing)
-    pieces = _drop_isolated(pieces, spacing)
+    if paths is None:
+        pieces = _drop_isolated(pieces, spacing)
     pieces, corners = _corners(pieces, spacing, pts, paths)
     curves = [_curve(pc, spacing) for pc in pieces if len(pc.points) >= 2]
     curves.sort(key=lambda c: (*c.points[0], *c.points[-1], c.length))
@@ -365,7 +366,8 @@ def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
 
 def _drop_isolated(pieces: list[Piece], spacing: float) -> list[Piece]:
     """Leave out open pieces shorter than SPUR_PIECE spacings whose two ends are free (no
-    other end within GAP_LENGTH spacings): fragments of detections along noisy edges."""
+    other end within GAP_LENGTH spacings): fragments of detections along noisy edges
+    (clouds)."""
     ends, clusters = end_clusters(pieces, spacing)
     joined = np.zeros(len(pieces), bool)
     for c in clusters:
@@ -381,27 +383,38 @@ def _corners(
     pieces: list[Piece], spacing: float, pts: np.ndarray, paths: MeshPaths | None
 ) -> tuple[list[Piece], Corners]:
     """Corners where curve ends meet (not as one continuing curve), and the ends brought
-    onto them. The corner is the point nearest the lines of the ends (least squares);
-    on a mesh, the mesh vertex nearest it, reached from each end along mesh edges
-    (``paths``)."""
+    onto them. The corner is the point nearest the lines of the ends (least squares).
+    On a cloud the ends whose lines meet across a wider gap join the corner too
+    (:func:`meshlab_sharp.curves.trace.meeting_clusters`), and the lines are the end
+    chords at CORNER_SCALE; on a mesh, the lines of the last edges, and the corner is
+    the mesh vertex nearest their meeting point, reached from each end along mesh
+    edges (``paths``)."""
     ends, clusters = end_clusters(pieces, spacing)
+    # clouds: the end lines 2-8 spacings back (noise bends the last vertices), which
+    # may meet far from the ends; meshes: the lines of the last mesh edges
     if paths is None:
         clusters = meeting_clusters(ends, clusters, pieces, spacing)
+        out, through = ends.out[CORNER_SCALE], ends.anchor[CORNER_SCALE]
+    else:
+        out, through = ends.out[0], ends.point
     points, indices = [], []
     pieces = [Piece(pc.nodes.copy(), pc.points.copy(), pc.closed) for pc in pieces]
     for c in clusters:
         a = np.zeros((3, 3))
         b = np.zeros(3)
         for i in c:
-            o = ends.out[CORNER_SCALE, i]
-            proj = np.eye(3) - np.outer(o, o)
+            proj = np.eye(3) - np.outer(out[i], out[i])
             a += proj
-            b += proj @ ends.anchor[CORNER_SCALE, i]
+            b += proj @ through[i]
         mean = ends.point[c].mean(axis=0)
         corner = mean
         if np.linalg.cond(a) < 1e6:
             x = np.linalg.solve(a, b)
-            if np.linalg.norm(ends.point[c] - x, axis=1).max() <= LONG_GAP * spacing:
+            if paths is None:  # within LONG_GAP spacings of every end
+                near = np.linalg.norm(ends.point[c] - x, axis=1).max() <= LONG_GAP * spacing
+            else:
+                near = np.linalg.norm(x - mean) <= GAP_LENGTH * spacing
+            if near:
                 corner = x
         if paths is None:
             nearest = int(c[np.argmin(np.linalg.norm(ends.point[c] - corner, axis=1))])

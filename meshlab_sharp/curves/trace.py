@@ -68,7 +68,7 @@ LOOP_LENGTH = 3
 #: gaps detection leaves along weak edges (a chamfer's 45-degree edges) and in noise.
 LONG_GAP = 12.0
 #: Scale (index into :data:`TURN_SCALES`) of the end chords whose lines place corners:
-#: chords from 1 to 4 spacings before the end (the last vertices bend in noise).
+#: chords from 2 to 8 spacings before the end (the last vertices bend in noise).
 CORNER_SCALE = 2
 #: Two ends continue one curve only if each lies within this many spacings of the
 #: other's line: the width of a feature band (parallel edges are farther apart).
