@@ -49,6 +49,7 @@ const double CELL_SPACINGS = 4.0;
 const double MIN_ADVANCE = 0.3;
 const int LINE_FIT_HALF = 2;
 const double SNAP = 0.75;
+const double RAW_TANGENT_WINDOW = 2 * TANGENT_WINDOW;
 // refine.py
 const int REFINE_NEIGHBOURS = 40;
 const double SLAB = 1.0;
@@ -1387,28 +1388,19 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	for (size_t i = 0; i < edges.size(); ++i) lengths[i] = norm(sub(fp[edges[i][0]], fp[edges[i][1]]));
 	std::vector<Piece> pieces = skeletonPieces(n, edges, lengths, fp, spacing, {});
 	if (pieces.empty()) return {};
-	// refine every vertex at once, twice (the second time along the first's directions)
+	// refine every vertex at once, across the skeleton's directions over a wide window
 	std::vector<Vec3> raw;
 	for (const Piece &pc : pieces) raw.insert(raw.end(), pc.points.begin(), pc.points.end());
 	const size_t kk = std::min<size_t>(REFINE_NEIGHBOURS, tree.size());
 	std::vector<std::vector<long>> nbrs(raw.size());
 	for (size_t i = 0; i < raw.size(); ++i)
 		for (const auto &hit : tree.query(raw[i], kk)) nbrs[i].push_back(hit.second);
-	std::vector<Vec3> moved = raw, dirs;
+	const std::vector<Vec3> dirs = batchTangents(pieces, RAW_TANGENT_WINDOW * spacing);
+	std::vector<Vec3> moved(raw.size());
 	std::vector<char> fitted(raw.size()), flat(raw.size());
-	for (int round = 0; round < 2; ++round) {
-		std::vector<Piece> current;
-		size_t at = 0;
-		for (const Piece &pc : pieces) {
-			Piece c{pc.nodes, std::vector<Vec3>(moved.begin() + at, moved.begin() + at + pc.points.size()), pc.closed};
-			at += pc.points.size();
-			current.push_back(c);
-		}
-		dirs = batchTangents(current, TANGENT_WINDOW * spacing);
-		for (size_t i = 0; i < raw.size(); ++i) {
-			const Refined r = planeIntersection(raw[i], dirs[i], nbrs[i], nearPts, nearFeature, spacing);
-			moved[i] = r.position, fitted[i] = r.ok, flat[i] = r.flat;
-		}
+	for (size_t i = 0; i < raw.size(); ++i) {
+		const Refined r = planeIntersection(raw[i], dirs[i], nbrs[i], nearPts, nearFeature, spacing);
+		moved[i] = r.position, fitted[i] = r.ok, flat[i] = r.flat;
 	}
 	std::vector<Piece> out;
 	size_t at = 0;

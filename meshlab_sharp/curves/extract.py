@@ -65,6 +65,9 @@ CELL_SPACINGS = 4.0
 MIN_ADVANCE = 0.3
 #: Vertices on each side of a vertex in the fallback line fit (2 spacings or so).
 LINE_FIT_HALF = 2
+#: Half-width, in spacings of arc, of the chord giving the skeleton's direction at a
+#: vertex, across which the vertex is refined (clouds).
+RAW_TANGENT_WINDOW = 2 * TANGENT_WINDOW
 #: A curve end farther than this, in spacings, from its corner gets the corner as an
 #: extra vertex; a nearer one moves onto the corner (clouds).
 SNAP = 0.75
@@ -255,19 +258,14 @@ def _cloud_pieces(
         pieces.append(Piece(nodes, fp[nodes], closed))
     if not pieces:
         return [], spacing
-    # refine every vertex at once, twice: the second time along the directions of the
-    # first refinement, which are steadier than those of the raw skeleton
+    # refine every vertex at once, across the skeleton's directions over a wide window
+    # (the skeleton zigzags across the band of features)
     raw = np.concatenate([pc.points for pc in pieces])
-    moved = raw
     neighbours = refine_neighbours(tree, raw)
-    for _ in range(2):
-        dirs = batch_tangents(
-            [Piece(pc.nodes, p, pc.closed) for pc, p in _split(pieces, moved)],
-            TANGENT_WINDOW * spacing,
-        )
-        moved, fitted, flat = plane_intersection_positions(
-            raw, dirs, neighbours, near_pts, mask[near], spacing
-        )
+    dirs = batch_tangents(pieces, RAW_TANGENT_WINDOW * spacing)
+    moved, fitted, flat = plane_intersection_positions(
+        raw, dirs, neighbours, near_pts, mask[near], spacing
+    )
     out = []
     for (pc, p), (_, d), (_, f), (_, no_edge) in zip(
         _split(pieces, moved),
