@@ -1321,28 +1321,14 @@ std::vector<Vec3> lineFitPositions(const std::vector<Vec3> &points, const std::v
                                    int half, bool closed)
 {
 	const long m = long(points.size());
-	std::vector<Vec3> pad;
-	if (closed) {
-		if (m > half) {
-			pad.insert(pad.end(), points.end() - half, points.end());
-			pad.insert(pad.end(), points.begin(), points.end());
-			pad.insert(pad.end(), points.begin(), points.begin() + half);
-		} else {
-			pad = points;
-		}
-	} else {
-		pad.insert(pad.end(), half, points.front());
-		pad.insert(pad.end(), points.begin(), points.end());
-		pad.insert(pad.end(), half, points.back());
-	}
-	if (long(pad.size()) != m + 2 * half) return points;
-	std::vector<Vec3> cs(pad.size() + 1, Vec3{0.0, 0.0, 0.0});
-	for (size_t i = 0; i < pad.size(); ++i) cs[i + 1] = add(cs[i], pad[i]);
+	if (closed && m <= half) return points;
 	std::vector<Vec3> out(m);
 	const double count = 2 * half + 1;
 	for (long i = 0; i < m; ++i) {
-		const Vec3 diff = sub(cs[i + 2 * half + 1], cs[i]);
-		const Vec3 mean{diff[0] / count, diff[1] / count, diff[2] / count};
+		Vec3 total{0.0, 0.0, 0.0};
+		for (long j = i - half; j <= i + half; ++j)  // in order, like refine.py
+			total = add(total, points[closed ? ((j % m) + m) % m : clip(j, 0, m - 1)]);
+		const Vec3 mean{total[0] / count, total[1] / count, total[2] / count};
 		const double along = edot(sub(points[i], mean), dirs[i]);
 		out[i] = add(mean, mul(along, dirs[i]));
 	}

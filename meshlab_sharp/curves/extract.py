@@ -266,20 +266,20 @@ def _cloud_pieces(
     moved, fitted, flat = plane_intersection_positions(
         raw, dirs, neighbours, near_pts, mask[near], spacing
     )
+    sizes = np.array([len(pc.points) for pc in pieces])
+    closed = np.array([pc.closed for pc in pieces])
+    # where the fit failed, onto the line of the curve's own vertices; then smoothed
+    # along the curve: each vertex onto the line of its neighbours
+    line = line_fit_positions(raw, dirs, sizes, closed, LINE_FIT_HALF)
+    smooth = line_fit_positions(
+        np.where(fitted[:, None], moved, line), dirs, sizes, closed, LINE_FIT_HALF
+    )
     out = []
-    for (pc, p), (_, d), (_, f), (_, no_edge) in zip(
-        _split(pieces, moved),
-        _split(pieces, dirs),
-        _split(pieces, fitted),
-        _split(pieces, flat),
-        strict=True,
+    for (pc, p), (_, d), (_, no_edge) in zip(
+        _split(pieces, smooth), _split(pieces, dirs), _split(pieces, flat), strict=True
     ):
         if no_edge.mean() > MAX_FLAT_SHARE:
             continue  # not an edge between two surfaces: false detections
-        if not f.all():
-            p = np.where(f[:, None], p, line_fit_positions(pc.points, d, LINE_FIT_HALF, pc.closed))
-        # then smoothed along the curve: each vertex onto the line of its neighbours
-        p = line_fit_positions(p, d, LINE_FIT_HALF, pc.closed)
         keep = _advancing(p, d, spacing)
         out.append(Piece(feat[pc.nodes[keep]], p[keep], pc.closed))
     return out, spacing
