@@ -1439,12 +1439,13 @@ std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing)
 	return out;
 }
 
-// clouds: open pieces shorter than SPUR_PIECE spacings whose two ends are free dropped
+// clouds: open pieces shorter than SPUR_PIECE spacings whose two ends are free (not
+// even meeting another's line at a corner) dropped
 std::vector<Piece> dropIsolated(const std::vector<Piece> &pieces, double spacing)
 {
 	const Ends e = ends(pieces, spacing);
 	std::vector<char> joined(pieces.size(), 0);
-	for (const auto &c : endClusters(e, pieces, spacing))
+	for (const auto &c : meetingClusters(e, endClusters(e, pieces, spacing), spacing))
 		for (long i : c) joined[e.piece[i]] = 1;
 	std::vector<Piece> out;
 	for (size_t i = 0; i < pieces.size(); ++i)

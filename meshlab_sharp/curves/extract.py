@@ -364,11 +364,11 @@ def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
 
 def _drop_isolated(pieces: list[Piece], spacing: float) -> list[Piece]:
     """Leave out open pieces shorter than SPUR_PIECE spacings whose two ends are free (no
-    other end within GAP_LENGTH spacings): fragments of detections along noisy edges
-    (clouds)."""
+    other end within GAP_LENGTH spacings, nor one whose line meets theirs at a corner):
+    fragments of detections along noisy edges (clouds)."""
     ends, clusters = end_clusters(pieces, spacing)
     joined = np.zeros(len(pieces), bool)
-    for c in clusters:
+    for c in meeting_clusters(ends, clusters, pieces, spacing):
         joined[ends.piece[c]] = True
     return [
         pc
