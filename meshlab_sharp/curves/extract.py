@@ -368,7 +368,7 @@ def _drop_isolated(pieces: list[Piece], spacing: float) -> list[Piece]:
     fragments of detections along noisy edges (clouds)."""
     ends, clusters = end_clusters(pieces, spacing)
     joined = np.zeros(len(pieces), bool)
-    for c in meeting_clusters(ends, clusters, pieces, spacing):
+    for c in meeting_clusters(ends, clusters, spacing):
         joined[ends.piece[c]] = True
     return [
         pc
@@ -391,7 +391,7 @@ def _corners(
     # clouds: the end lines 2-8 spacings back (noise bends the last vertices), which
     # may meet far from the ends; meshes: the lines of the last mesh edges
     if paths is None:
-        clusters = meeting_clusters(ends, clusters, pieces, spacing)
+        clusters = meeting_clusters(ends, clusters, spacing)
         out, through = ends.out[CORNER_SCALE], ends.anchor[CORNER_SCALE]
     else:
         out, through = ends.out[0], ends.point

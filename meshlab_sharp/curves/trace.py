@@ -386,16 +386,22 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
     return ends, [c for c in clusters if len(c) >= 2]
 
 
-def meeting_clusters(
-    ends: _Ends, clusters: list[np.ndarray], pieces: list[Piece], spacing: float
-) -> list[np.ndarray]:
+def meeting_clusters(ends: _Ends, clusters: list[np.ndarray], spacing: float) -> list[np.ndarray]:
     """``clusters`` with the free ends (in no cluster) added to the ends whose lines they
     meet at a corner: where detection left a gap of more than GAP_LENGTH spacings at a
     corner. Two ends of different pieces within :data:`LONG_GAP` spacings meet when
     their lines (the end chords at :data:`CORNER_SCALE`, through the chords' vertices
     nearer the ends) cross at more than :data:`CORNER_TURN` and pass within
     :data:`LATERAL_OFFSET` spacings of each other, at most LONG_GAP spacings ahead of
-    each end and not behind it. Nearest pairs first; the result is grouped transitively.
+    each end and at most LATERAL_OFFSET spacings behind it. Nearest pairs first; the
+    result is grouped transitively.
+
+    Parameters
+    ----------
+    ends : the curve ends (:func:`end_clusters`)
+    clusters : list of (c,) int64
+        The ends' clusters from :func:`end_clusters`.
+    spacing : float
 
     Returns
     -------
@@ -403,15 +409,12 @@ def meeting_clusters(
         Indices into ``ends``, every cluster of two or more ends, deterministic order.
     """
     q = len(ends.piece)
-    label = np.arange(q)
+    parent = np.arange(q)  # union-find over the ends, each cluster already one set
+    free = np.ones(q, bool)
     for c in clusters:
-        label[c] = c[0]
-    free = label == np.arange(q)
-    for c in clusters:
-        free[c] = False
-    if free.sum() == 0 or q < 2:
+        parent[c], free[c] = c[0], False
+    if not free.any() or q < 2:
         return clusters
-    parent = label.copy()
 
     def root(i: int) -> int:
         while parent[i] != i:
