@@ -145,7 +145,7 @@ IN_MESHLAB = """\
 `meshlab-sharp detect --sample --curves sample_curves.ply` writes the curves as a PLY
 edge mesh (a vertex element and an `edge` element), which Debian's MeshLab 2020.09 opens
 as a layer of edges. Below, `meshlab out/sample_part_sharp.ply sample_curves.ply`: the
-sample cloud with its features in red and the 28 curves, drawn in yellow and wide (the
+sample cloud with its features in red and its curves, drawn in yellow and wide (the
 layer's wire colour and edge width set in the layer dialog):
 
 ![The sample's curves, written by meshlab-sharp, opened in MeshLab](meshlab-curves.png)
