@@ -97,7 +97,8 @@ class Piece:
     def length(self) -> float:
         """Length of the polyline (the closing segment included for loops)."""
         p = np.vstack([self.points, self.points[:1]]) if self.closed else self.points
-        return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+        d = p[1:] - p[:-1]
+        return float(np.sqrt((d * d).sum(axis=1)).sum())  # np.linalg.norm's sums, cheaper
 
 
 def trace_paths(n: int, edges: np.ndarray) -> list[np.ndarray]:
@@ -354,6 +355,14 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
     return _Ends(np.repeat(which, 2), np.tile([0, 1], q), ends_points, out, anchor)
 
 
+def _groups(roots: np.ndarray) -> list[np.ndarray]:
+    """The indices sharing each root (ascending; groups in the order of their roots),
+    the groups of two or more."""
+    order = np.argsort(roots, kind="stable")
+    bounds = np.flatnonzero(np.diff(roots[order])) + 1
+    return [g for g in np.split(order, bounds) if len(g) >= 2]
+
+
 def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.ndarray]]:
     """Curve ends grouped by distance (:data:`GAP_LENGTH` spacings, transitively).
 
@@ -382,8 +391,7 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
             if ra != rb:
                 parent[max(ra, rb)] = min(ra, rb)
     roots = np.array([root(i) for i in range(q)], np.int64)
-    clusters = [np.flatnonzero(roots == r) for r in np.unique(roots)]
-    return ends, [c for c in clusters if len(c) >= 2]
+    return ends, _groups(roots)
 
 
 def meeting_clusters(ends: _Ends, clusters: list[np.ndarray], spacing: float) -> list[np.ndarray]:
@@ -451,8 +459,7 @@ def meeting_clusters(ends: _Ends, clusters: list[np.ndarray], spacing: float) ->
         if ra != rb:
             parent[max(ra, rb)] = min(ra, rb)
     roots = np.array([root(i) for i in range(q)], np.int64)
-    grouped = [np.flatnonzero(roots == r) for r in np.unique(roots)]
-    return [c for c in grouped if len(c) >= 2]
+    return _groups(roots)
 
 
 def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
