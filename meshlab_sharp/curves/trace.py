@@ -70,8 +70,10 @@ LONG_GAP = 12.0
 #: Scale (index into :data:`TURN_SCALES`) of the end chords whose lines place corners:
 #: chords from 2 to 8 spacings before the end (the last vertices bend in noise).
 CORNER_SCALE = 2
-#: Two ends continue one curve only if each lies within this many spacings of the
-#: other's line: the width of a feature band (parallel edges are farther apart).
+#: Two ends continue one curve only if each (or its end chord's inner vertex) lies
+#: within this many spacings of the other's line, and two end lines meet at a corner
+#: only if they pass this close: the width of a feature band in noise (parallel edges
+#: are farther apart).
 LATERAL_OFFSET = 2.0
 
 
