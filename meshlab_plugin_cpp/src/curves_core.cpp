@@ -674,6 +674,44 @@ std::vector<double> turnAngles(const Piece &pc, double spacing)
 	return angle;
 }
 
+// trace._open_turn_angles: turnAngles of many open pieces in one pass over their batch
+// (arc lengths and chords as in ends()), one vector per piece
+std::vector<std::vector<double>> openTurnAngles(const std::vector<const Piece *> &pieces, double spacing)
+{
+	std::vector<std::vector<double>> out;
+	if (pieces.empty()) return out;
+	const Batch b = batch(pieces);
+	const double smax = TURN_SCALES[N_SCALES - 1] * spacing;
+	const double gap = maxOf(b.cum) + 2 * TURN_OUTER * smax + 1.0;
+	const std::vector<double> key = keys(b, gap);
+	const size_t total = key.size();
+	std::vector<double> least(total, INF);
+	std::vector<int> valid(total, 0);
+	for (int s = 0; s < N_SCALES; ++s) {
+		const double scale = TURN_SCALES[s] * spacing;
+		for (size_t i = 0; i < total; ++i) {
+			const long lo = b.starts[b.piece[i]], hi = b.stops[b.piece[i]];
+			const double c = key[i];
+			const long farB = clip(searchRight(key, c + -TURN_OUTER * scale) - 1, lo, hi);
+			const long nearB = clip(searchRight(key, c + -TURN_INNER * scale) - 1, lo, hi);
+			const long farA = clip(searchLeft(key, c + TURN_OUTER * scale), lo, hi);
+			const long nearA = clip(searchLeft(key, c + TURN_INNER * scale), lo, hi);
+			const Vec3 before = unit(sub(b.points[nearB], b.points[farB]));
+			const Vec3 after = unit(sub(b.points[farA], b.points[nearA]));
+			if (!(norm(before) > 0 && norm(after) > 0)) continue;
+			valid[i]++;
+			const double cs = std::max(-1.0, std::min(1.0, edot(before, after)));
+			least[i] = std::min(least[i], degrees(std::acos(cs)));
+		}
+	}
+	for (size_t k = 0; k < pieces.size(); ++k) {
+		std::vector<double> angle;
+		for (long i = b.starts[k]; i <= b.stops[k]; ++i) angle.push_back(valid[i] >= MIN_TURN_SCALES ? least[i] : 0.0);
+		out.push_back(angle);
+	}
+	return out;
+}
+
 // Split a piece at the vertices `at` (sorted): closed pieces start at the first.
 std::vector<Piece> splitAt(const Piece &pc, const std::vector<long> &at)
 {
@@ -698,11 +736,9 @@ std::vector<Piece> splitAt(const Piece &pc, const std::vector<long> &at)
 	return out;
 }
 
-std::vector<Piece> cutAtTurns(const Piece &pc, double spacing)
+std::vector<Piece> cutAtTurns(const Piece &pc, const std::vector<double> &angle, double spacing)
 {
-	if (!pc.closed && pc.length() < SHORTEST_CUT * spacing) return {pc};
 	const double window = TURN_OUTER * spacing;
-	const std::vector<double> angle = turnAngles(pc, spacing);
 	const std::vector<double> cum = arc(pc.points);
 	std::vector<long> order(angle.size());
 	std::iota(order.begin(), order.end(), 0L);
@@ -1453,11 +1489,24 @@ std::vector<Piece> dropIsolated(const std::vector<Piece> &pieces, double spacing
 	return out;
 }
 
+// trace.cut_at_turns: open pieces shorter than SHORTEST_CUT spacings are not cut
 std::vector<Piece> cutAll(const std::vector<Piece> &pieces, double spacing)
 {
+	std::vector<const Piece *> longOpen;
+	std::vector<long> slot(pieces.size(), -1);
+	for (size_t i = 0; i < pieces.size(); ++i)
+		if (!pieces[i].closed && pieces[i].length() >= SHORTEST_CUT * spacing)
+			slot[i] = long(longOpen.size()), longOpen.push_back(&pieces[i]);
+	const std::vector<std::vector<double>> angles = openTurnAngles(longOpen, spacing);
 	std::vector<Piece> out;
-	for (const Piece &pc : pieces)
-		for (Piece &q : cutAtTurns(pc, spacing)) out.push_back(q);
+	for (size_t i = 0; i < pieces.size(); ++i) {
+		if (!pieces[i].closed && slot[i] < 0) {
+			out.push_back(pieces[i]);  // too short to hold two curves
+			continue;
+		}
+		const std::vector<double> angle = pieces[i].closed ? turnAngles(pieces[i], spacing) : angles[slot[i]];
+		for (Piece &q : cutAtTurns(pieces[i], angle, spacing)) out.push_back(q);
+	}
 	return out;
 }
 

@@ -196,11 +196,11 @@ def extract_curves(
     if spacing <= 0:
         return [], empty
     bridge = None if paths is None else _bridge(pts, paths, spacing)
-    pieces = _drop_short([q for pc in pieces for q in cut_at_turns(pc, spacing)], spacing)
+    pieces = _drop_short(cut_at_turns(pieces, spacing), spacing)
     pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
     pieces = join_pieces(pieces, spacing, bridge)
     # joining may have run a curve round a corner whose vertex was near a piece's end
-    pieces = [q for pc in pieces for q in cut_at_turns(pc, spacing)]
+    pieces = cut_at_turns(pieces, spacing)
     pieces = split_at_touches(pieces, spacing)
     if paths is None:
         pieces = _drop_isolated(pieces, spacing)
@@ -407,7 +407,7 @@ def _corners(
         mean = ends.point[c].mean(axis=0)
         corner = mean
         if np.linalg.cond(a) < 1e6:
-            x = np.linalg.solve(a, b)
+            x = _solve3(a, b)
             if paths is None:  # within LONG_GAP spacings of every end
                 near = np.linalg.norm(ends.point[c] - x, axis=1).max() <= LONG_GAP * spacing
             else:
@@ -453,6 +453,31 @@ def _corners(
     p = np.array(points)
     order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
     return pieces, Corners(p[order], np.array(indices, np.int64)[order])
+
+
+def _solve3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """x with a x = b for a (3, 3) non-singular: Gaussian elimination with partial
+    pivoting in plain floats, the plugin's arithmetic (``solve3`` in curves_core.cpp),
+    so that both place a corner on the same bits (on a regular grid, corners tie in
+    a coordinate and their order is decided by the last bits). Shape (3,)."""
+    m = [[float(v) for v in row] for row in a]
+    y = [float(v) for v in b]
+    for c in range(3):
+        piv = max(range(c, 3), key=lambda r: (abs(m[r][c]), -r))  # the first largest
+        m[c], m[piv] = m[piv], m[c]
+        y[c], y[piv] = y[piv], y[c]
+        for r in range(c + 1, 3):
+            f = m[r][c] / m[c][c]
+            for k in range(c, 3):
+                m[r][k] -= f * m[c][k]
+            y[r] -= f * y[c]
+    x = [0.0, 0.0, 0.0]
+    for r in (2, 1, 0):
+        s = y[r]
+        for k in range(r + 1, 3):
+            s -= m[r][k] * x[k]
+        x[r] = s / m[r][r]
+    return np.array(x)
 
 
 def _curve(pc: Piece, spacing: float) -> Curve:

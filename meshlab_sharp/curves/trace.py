@@ -233,14 +233,10 @@ def _chords(piece: Piece, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     return before[:, pad : pad + m], after[:, pad : pad + m]
 
 
-def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
-    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`): the smallest
-    of the turns measured with the chords at the :data:`TURN_SCALES` (a corner turns at
-    all; a vertex off the line sways only the short chords, noise the shorter ones
-    more; a circle turns more at the longer ones), over the scales whose chords fit on
-    the piece; 0 where fewer than MIN_TURN_SCALES fit (near an open piece's ends).
-    Shape (m,)."""
-    before, after = _chords(piece, spacing)
+def _least_turn(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """The turn between the chords (S, m, 3) before and after each vertex: the smallest
+    over the scales whose chords are not empty, 0 where fewer than MIN_TURN_SCALES
+    are. Degrees, shape (m,)."""
     valid = (np.linalg.norm(before, axis=2) > 0) & (np.linalg.norm(after, axis=2) > 0)
     cos = np.einsum("sij,sij->si", before, after)
     stack = np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), np.inf)
@@ -249,35 +245,95 @@ def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
     return np.where(enough, least, 0.0)
 
 
-def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
-    """Split a piece where it turns by more than :data:`CORNER_TURN`.
+def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
+    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`): the smallest
+    of the turns measured with the chords at the :data:`TURN_SCALES` (a corner turns at
+    all; a vertex off the line sways only the short chords, noise the shorter ones
+    more; a circle turns more at the longer ones), over the scales whose chords fit on
+    the piece; 0 where fewer than MIN_TURN_SCALES fit (near an open piece's ends).
+    Shape (m,)."""
+    return _least_turn(*_chords(piece, spacing))
+
+
+def _open_turn_angles(pieces: list[Piece], spacing: float) -> list[np.ndarray]:
+    """:func:`turn_angles` of many open pieces in one vectorised pass (their arc lengths
+    and chords as in :func:`_ends`). One (m,) array per piece."""
+    if not pieces:
+        return []
+    sizes = np.array([len(pc.points) for pc in pieces])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    stops = starts + sizes - 1
+    points = np.concatenate([pc.points for pc in pieces])
+    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    step[starts[1:] - 1] = 0.0
+    cum = np.concatenate([[0.0], np.cumsum(step)])
+    piece = np.repeat(np.arange(len(pieces)), sizes)
+    cum -= cum[starts][piece]
+    scales = np.asarray(TURN_SCALES)[:, None] * spacing  # (S, 1)
+    gap = float(cum.max()) + 2 * TURN_OUTER * float(scales.max()) + 1.0
+    key = cum + piece * gap
+    lo, hi = starts[piece], stops[piece]
+
+    def window(offset: np.ndarray, side: str, shift: int) -> np.ndarray:
+        return np.clip(np.searchsorted(key, key[None, :] + offset, side=side) + shift, lo, hi)
+
+    before = _unit(
+        points[window(-TURN_INNER * scales, "right", -1)]
+        - points[window(-TURN_OUTER * scales, "right", -1)]
+    )
+    after = _unit(
+        points[window(TURN_OUTER * scales, "left", 0)]
+        - points[window(TURN_INNER * scales, "left", 0)]
+    )
+    return np.split(_least_turn(before, after), starts[1:])
+
+
+def cut_at_turns(pieces: list[Piece], spacing: float) -> list[Piece]:
+    """Split pieces where they turn by more than :data:`CORNER_TURN`.
 
     The cut vertex is the sharpest turn within TURN_OUTER spacings of arc; it ends both
-    pieces it separates.
+    pieces it separates. Open pieces shorter than SHORTEST_CUT spacings are not cut.
 
     Parameters
     ----------
-    piece : Piece
+    pieces : list of Piece
     spacing : float
 
     Returns
     -------
     list of Piece
-        The piece itself when it has no sharp turn (or is a loop with only one).
+        In order; a piece itself when it has no sharp turn (or is a loop with only
+        one).
     """
-    if not piece.closed and piece.length < SHORTEST_CUT * spacing:
-        return [piece]  # too short to hold two curves
+    long_open = [
+        i for i, pc in enumerate(pieces) if not pc.closed and pc.length >= SHORTEST_CUT * spacing
+    ]
+    angles = dict(
+        zip(long_open, _open_turn_angles([pieces[i] for i in long_open], spacing), strict=True)
+    )
+    out: list[Piece] = []
+    for i, pc in enumerate(pieces):
+        if pc.closed:
+            out += _cut(pc, turn_angles(pc, spacing), spacing)
+        elif i in angles:
+            out += _cut(pc, angles[i], spacing)
+        else:
+            out.append(pc)  # too short to hold two curves
+    return out
+
+
+def _cut(piece: Piece, angle: np.ndarray, spacing: float) -> list[Piece]:
+    """The piece split at its sharp turns, given its turn angles (m,)."""
     window = TURN_OUTER * spacing
-    angle = turn_angles(piece, spacing)
     m = len(angle)
     cum = _arc(piece.points)
+    total = piece.length if piece.closed else 0.0
     cuts: list[int] = []
     for i in np.argsort(-angle, kind="stable"):
         if angle[i] <= CORNER_TURN:
             break
         near = [c for c in cuts if abs(cum[c] - cum[i]) < window]
         if piece.closed:
-            total = piece.length
             near = [
                 c for c in cuts if min(abs(cum[c] - cum[i]), total - abs(cum[c] - cum[i])) < window
             ]
