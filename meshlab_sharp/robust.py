@@ -27,7 +27,11 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 3. **Threshold with a floor**: ``T = max(otsu(r), R_MIN)`` with ``R_MIN`` the value of
    ``r`` on a straight edge that turns by ``CREASE_ANGLE`` (20) degrees,
    ``(2 / pi) * sin(10 deg)``. On a smooth object Otsu still splits the histogram, but
-   below the floor: "no sharp features" becomes a possible answer.
+   below the floor: "no sharp features" becomes a possible answer. On a cloud whose
+   noise did not grow the scales (step 1b), ``T = R_MIN`` alone: without noise the
+   flat and smooth points have ``r`` near 0 and the floor is the definition of sharp,
+   while Otsu's split, above it on parts with strong edges, drops the weaker ones (the
+   fandisk's, concave edges and the rims of thin walls).
 4. **Support**: a point that is a candidate at every scale is kept only when at least
    ``SUPPORT_MIN`` (2) other such points among its ``SUPPORT_KNN`` (16) nearest (its
    ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
@@ -91,6 +95,7 @@ __all__ = [
     "noise_ratios",
     "noise_ratios_lists",
     "noise_scale_factor",
+    "otsu_splits",
     "relative_distances",
     "robust_threshold",
     "sheet_mask",
@@ -475,20 +480,33 @@ def relative_distances(pdis: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return np.minimum(r, 1.0)
 
 
-def robust_threshold(r: np.ndarray) -> float:
+def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
     """Otsu's threshold of relative distances on [0, 1], never below ``R_MIN``.
 
     Parameters
     ----------
     r : (m,) float64
         Relative projected distances in [0, 1] (isolated points left out).
+    otsu : bool, default True
+        False on a cloud whose noise did not grow the scales (:func:`otsu_splits`):
+        the floor alone.
 
     Returns
     -------
     float
-        ``max(otsu_threshold(r), R_MIN)``; candidates are ``r >= T``.
+        ``max(otsu_threshold(r), R_MIN)``, or ``R_MIN`` when not ``otsu``; candidates
+        are ``r >= T``.
     """
-    return max(otsu_threshold(r), R_MIN)
+    return max(otsu_threshold(r), R_MIN) if otsu else R_MIN
+
+
+def otsu_splits(mesh: bool, growth: float) -> bool:
+    """Whether Otsu's split raises the threshold above ``R_MIN``: on meshes, and on
+    clouds whose noise grew the scales (``growth > 1``). On a cloud without noise the
+    floor alone (measured, docs/robust-mode.md: thin walls 1 / 2 / 3 spacings F1 0.736
+    / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, the scan 0.891 -> 0.903, no condition
+    lower)."""
+    return mesh or growth > 1.0
 
 
 @dataclass
@@ -516,6 +534,8 @@ class RelativeRule:
     local : callable, optional
         ``local(i, scale) -> (l, o)``, :func:`local_scale` of the i-th scale computed
         without the lists (the compiled ring pass); default: from ``lists``.
+    otsu : bool, default True
+        :func:`robust_threshold`'s ``otsu`` (:func:`otsu_splits`).
     """
 
     points: np.ndarray
@@ -523,6 +543,7 @@ class RelativeRule:
     n_scales: int
     sheet: tuple[float, int, float] | None = None
     local: Callable[[int, int], tuple[np.ndarray, np.ndarray]] | None = None
+    otsu: bool = True
 
     def __post_init__(self) -> None:
         self.score = np.zeros(len(self.points))
@@ -535,14 +556,14 @@ class RelativeRule:
             ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
-        return r, robust_threshold(r)
+        return r, robust_threshold(r, self.otsu)
 
     def from_pass(self, relative: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, float]:
         """What ``__call__`` returns, from the compiled pass over a cloud, which computed
         the relative distances (m,) of this scale and the final ``score`` (m,) with
         this rule's arithmetic (:class:`meshlab_sharp._kernels.ScalePass`)."""
         self.score = score
-        return relative, robust_threshold(relative)
+        return relative, robust_threshold(relative, self.otsu)
 
 
 def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourhood) -> np.ndarray:
@@ -796,7 +817,8 @@ class RobustSetup:
             neighbourhoods.adjacency is not None
         )
         local = self._ring_local_scale if compiled_rings else None
-        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, local)
+        otsu = otsu_splits(faces is not None, self.growth)
+        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, local, otsu)
 
     def _sheets(self) -> SheetNeighbourhoods:
         """:class:`SheetNeighbourhoods` of ``neighbourhoods`` (numpy kNN lists)."""
