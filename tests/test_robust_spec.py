@@ -56,6 +56,7 @@ class Reading:
         if faces is None:
             scales = meshlab_sharp.DEFAULT_KNN_SCALES
             keep, points, hoods, own, scales, growth = self._cloud(points, scales)
+            otsu = growth > 1  # step 3: the floor alone on a cloud without noise
             normals = None
             around = [h[: min(SUPPORT_KNN, len(h))] for h in hoods]
             thin_k = math.floor(THIN_KNN * growth + 0.5)  # grown with the scales
@@ -65,6 +66,7 @@ class Reading:
         else:
             scales = meshlab_sharp.DEFAULT_RING_SCALES
             keep = np.arange(n)
+            otsu = True
             normals = spec_face_normals(points, faces)
             ring = min(MESH_RING, max(scales))
             around = compare = spec_rings(faces, n, ring)
@@ -85,7 +87,7 @@ class Reading:
                 ell = np.sqrt((q * q).sum(axis=1)).sum() / len(nb)
                 r[s, i] = min(pdis / ell, 1.0) if ell > 0 else 0.0
                 g[s, i] = min(np.sqrt(mean @ mean) / ell, 1.0) if ell > 0 else 0.0
-            thresholds[s] = max(_otsu(r[s]), R_MIN)
+            thresholds[s] = max(_otsu(r[s]), R_MIN) if otsu else R_MIN
         score = (g / len(scales)).sum(axis=0)
         sure_f0 = (r >= thresholds[:, None] + EPS_R).all(axis=0)
         maybe_f0 = (r >= thresholds[:, None] - EPS_R).all(axis=0)
