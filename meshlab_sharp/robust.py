@@ -28,10 +28,10 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    ``r`` on a straight edge that turns by ``CREASE_ANGLE`` (20) degrees,
    ``(2 / pi) * sin(10 deg)``. On a smooth object Otsu still splits the histogram, but
    below the floor: "no sharp features" becomes a possible answer. On a cloud whose
-   noise did not grow the scales (step 1b), ``T = R_MIN`` alone: without noise the
-   flat and smooth points have ``r`` near 0 and the floor is the definition of sharp,
-   while Otsu's split, above it on parts with strong edges, drops the weaker ones (the
-   fandisk's, concave edges and the rims of thin walls).
+   measured noise (step 1b) is at most ``NOISE_QUIET``, ``T = R_MIN`` alone: without
+   noise the flat and smooth points have ``r`` near 0 and the floor is the definition
+   of sharp, while Otsu's split, above it on parts with strong edges, drops the weaker
+   ones (the fandisk's, concave edges and the rims of thin walls).
 4. **Support**: a point that is a candidate at every scale is kept only when at least
    ``SUPPORT_MIN`` (2) other such points among its ``SUPPORT_KNN`` (16) nearest (its
    ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
@@ -74,6 +74,7 @@ __all__ = [
     "CREASE_ANGLE",
     "NOISE_KNN",
     "NOISE_MAX_FACTOR",
+    "NOISE_QUIET",
     "NOISE_TOLERATED",
     "R_MIN",
     "SHEET_GAP",
@@ -135,6 +136,12 @@ NOISE_KNN = _header.integer("NOISE_KNN")
 #: smooth controls, 0.08-0.13 on the simulated scans. Above it the scales grow as the
 #: square of the ratio (the noise of ``r`` at scale k goes as ``sigma / sqrt(k)``).
 NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
+#: At most this noise ratio (the lower median of :func:`noise_ratios`), a cloud is
+#: thresholded at the floor alone (:func:`otsu_splits`). Measured on the evaluation's
+#: clouds (20,000 points): 0-0.003 clean, 0-0.01 thin walls, 0.004-0.018 smooth
+#: controls, 0.09-0.096 with normal noise of 10 % of the spacing, 0.068-0.115 on the
+#: simulated scans; a third of ``NOISE_TOLERATED`` lies between.
+NOISE_QUIET = _header.real("NOISE_QUIET")
 #: The scales grow at most 3-fold (``k_max`` 120 with the default scales: the kNN table
 #: of a million points stays below 0.5 GB); measured at 50 % noise, quick size: x2 0.64,
 #: x3 0.66.
@@ -264,8 +271,13 @@ def thin_knn(growth: float) -> int:
 
 def _noise_factor(ratio: np.ndarray) -> float:
     """:func:`noise_factor` of the lower median of the per-point ratios (n,)."""
+    return noise_factor(_noise_median(ratio))
+
+
+def _noise_median(ratio: np.ndarray) -> float:
+    """The lower median of the per-point noise ratios (n,)."""
     at = (len(ratio) - 1) // 2
-    return noise_factor(float(np.partition(ratio, at)[at]))
+    return float(np.partition(ratio, at)[at])
 
 
 def sheet_mask(
@@ -488,8 +500,7 @@ def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
     r : (m,) float64
         Relative projected distances in [0, 1] (isolated points left out).
     otsu : bool, default True
-        False on a cloud whose noise did not grow the scales (:func:`otsu_splits`):
-        the floor alone.
+        False on a cloud without noise (:func:`otsu_splits`): the floor alone.
 
     Returns
     -------
@@ -500,13 +511,13 @@ def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
     return max(otsu_threshold(r), R_MIN) if otsu else R_MIN
 
 
-def otsu_splits(mesh: bool, growth: float) -> bool:
+def otsu_splits(mesh: bool, noise: float) -> bool:
     """Whether Otsu's split raises the threshold above ``R_MIN``: on meshes, and on
-    clouds whose noise grew the scales (``growth > 1``). On a cloud without noise the
-    floor alone (measured, docs/robust-mode.md: thin walls 1 / 2 / 3 spacings F1 0.736
-    / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, the scan 0.891 -> 0.903, no condition
-    lower)."""
-    return mesh or growth > 1.0
+    clouds whose noise ratio ``noise`` (the lower median of :func:`noise_ratios`, as
+    :func:`noise_scale_factor` takes it) exceeds ``NOISE_QUIET``. On a cloud without
+    noise the floor alone (measured, docs/robust-mode.md: thin walls 1 / 2 / 3
+    spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)."""
+    return mesh or noise > NOISE_QUIET
 
 
 @dataclass
@@ -767,6 +778,8 @@ class RobustSetup:
         self.fused: _kernels.ScalePass | None = None
         #: How much the noise grew the scales (1: not at all).
         self.growth = 1.0
+        #: The cloud's noise ratio (the lower median of :func:`noise_ratios`; 0 on a mesh).
+        self.noise = 0.0
         #: The neighbourhoods the scales use: ``neighbourhoods`` (meshes; clouds with
         #: the compiled pass, which leaves the other sheets out itself), or their
         #: :class:`SheetNeighbourhoods` (clouds, numpy).
@@ -794,14 +807,14 @@ class RobustSetup:
                 if compiled:
                     self.fused = self._pass(k0, sheet)
             if self.fused is not None and self.fused.stats is not None:
-                noise = _noise_factor(self.fused.stats.noise)
+                self.noise = _noise_median(self.fused.stats.noise)
                 self.scale_neighbourhoods = self.neighbourhoods
             else:
                 self.scale_neighbourhoods = self._sheets()
-                noise = _noise_factor(
+                self.noise = _noise_median(
                     noise_ratios_lists(self.points, self.scale_neighbourhoods.first(k0))
                 )
-            factor = min(noise, len(self.points) / top)
+            factor = min(noise_factor(self.noise), len(self.points) / top)
             if factor > 1.0:
                 self.growth = factor
                 self.scales = grown_scales(self.scales, factor)
@@ -817,7 +830,7 @@ class RobustSetup:
             neighbourhoods.adjacency is not None
         )
         local = self._ring_local_scale if compiled_rings else None
-        otsu = otsu_splits(faces is not None, self.growth)
+        otsu = otsu_splits(faces is not None, self.noise)
         self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, local, otsu)
 
     def _sheets(self) -> SheetNeighbourhoods:

@@ -50,10 +50,10 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "thinning cone 45 deg": ((robust, "THIN_CONE_COS", math.cos(math.radians(45))),),
     "no sharp mesh edges": ((creases, "CREASE_ANGLE", 180.0),),
     "mesh edges: no noise factor": ((creases, "NOISE_FACTOR", 0.0),),
-    "Otsu on clouds without noise too": ((robust, "otsu_splits", lambda mesh, growth: True),),
+    "Otsu on clouds without noise too": ((robust, "otsu_splits", lambda mesh, noise: True),),
     "no threshold floor (Otsu alone)": (
         (robust, "R_MIN", 0.0),
-        (robust, "otsu_splits", lambda mesh, growth: True),
+        (robust, "otsu_splits", lambda mesh, noise: True),
     ),
     "noise-scaled scales off": ((robust, "NOISE_TOLERATED", math.inf),),
     "noise tolerated 0.2": ((robust, "NOISE_TOLERATED", 0.2),),

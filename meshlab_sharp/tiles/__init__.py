@@ -386,7 +386,7 @@ def _robust(
     query = Query(top, kept="kept")
     relative = {"scales": scales, "weighting": weighting}
     hist = runner.step(Step("relative", robust_relative, query, relative))["hist"]
-    otsu = robust.otsu_splits(False, factor)
+    otsu = robust.otsu_splits(False, nu)
     thresholds = np.array(
         [max(otsu_from_histogram(h), robust.R_MIN) if otsu else robust.R_MIN for h in hist]
     )
