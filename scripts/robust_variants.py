@@ -51,6 +51,7 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "no sharp mesh edges": ((creases, "CREASE_ANGLE", 180.0),),
     "mesh edges: no noise factor": ((creases, "NOISE_FACTOR", 0.0),),
     "Otsu on clouds without noise too": ((robust, "otsu_splits", lambda mesh, noise: True),),
+    "floor alone up to noise 0.15 (the scales' growth)": ((robust, "NOISE_QUIET", 0.15),),
     "no threshold floor (Otsu alone)": (
         (robust, "R_MIN", 0.0),
         (robust, "otsu_splits", lambda mesh, noise: True),
