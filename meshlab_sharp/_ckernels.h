@@ -41,6 +41,9 @@
 #define MS_NOISE_KNN 7
 #define MS_NOISE_TOLERATED 0.15
 #define MS_NOISE_MAX_FACTOR 3.0
+/* At most this median noise ratio, a cloud is thresholded at the floor alone
+ * (robust.otsu_splits). */
+#define MS_NOISE_QUIET 0.05
 /* The sheet filter (robust.sheet_mask): gap in spacings, fewest points and kept share. */
 #define MS_SHEET_GAP 0.4
 #define MS_SHEET_MIN 6

@@ -27,7 +27,11 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 3. **Threshold with a floor**: ``T = max(otsu(r), R_MIN)`` with ``R_MIN`` the value of
    ``r`` on a straight edge that turns by ``CREASE_ANGLE`` (20) degrees,
    ``(2 / pi) * sin(10 deg)``. On a smooth object Otsu still splits the histogram, but
-   below the floor: "no sharp features" becomes a possible answer.
+   below the floor: "no sharp features" becomes a possible answer. On a cloud whose
+   measured noise (step 1b) is at most ``NOISE_QUIET``, ``T = R_MIN`` alone: without
+   noise the flat and smooth points have ``r`` near 0 and the floor is the definition
+   of sharp, while Otsu's split, above it on parts with strong edges, drops the weaker
+   ones (the fandisk's, concave edges and the rims of thin walls).
 4. **Support**: a point that is a candidate at every scale is kept only when at least
    ``SUPPORT_MIN`` (2) other such points among its ``SUPPORT_KNN`` (16) nearest (its
    ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
@@ -70,6 +74,7 @@ __all__ = [
     "CREASE_ANGLE",
     "NOISE_KNN",
     "NOISE_MAX_FACTOR",
+    "NOISE_QUIET",
     "NOISE_TOLERATED",
     "R_MIN",
     "SHEET_GAP",
@@ -91,6 +96,7 @@ __all__ = [
     "noise_ratios",
     "noise_ratios_lists",
     "noise_scale_factor",
+    "otsu_splits",
     "relative_distances",
     "robust_threshold",
     "sheet_mask",
@@ -130,6 +136,12 @@ NOISE_KNN = _header.integer("NOISE_KNN")
 #: smooth controls, 0.08-0.13 on the simulated scans. Above it the scales grow as the
 #: square of the ratio (the noise of ``r`` at scale k goes as ``sigma / sqrt(k)``).
 NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
+#: At most this noise ratio (the lower median of :func:`noise_ratios`), a cloud is
+#: thresholded at the floor alone (:func:`otsu_splits`). Measured on the evaluation's
+#: clouds (20,000 points): 0-0.003 clean, 0-0.01 thin walls, 0.004-0.018 smooth
+#: controls, 0.09-0.096 with normal noise of 10 % of the spacing, 0.068-0.115 on the
+#: simulated scans; a third of ``NOISE_TOLERATED`` lies between.
+NOISE_QUIET = _header.real("NOISE_QUIET")
 #: The scales grow at most 3-fold (``k_max`` 120 with the default scales: the kNN table
 #: of a million points stays below 0.5 GB); measured at 50 % noise, quick size: x2 0.64,
 #: x3 0.66.
@@ -259,8 +271,13 @@ def thin_knn(growth: float) -> int:
 
 def _noise_factor(ratio: np.ndarray) -> float:
     """:func:`noise_factor` of the lower median of the per-point ratios (n,)."""
+    return noise_factor(_noise_median(ratio))
+
+
+def _noise_median(ratio: np.ndarray) -> float:
+    """The lower median of the per-point noise ratios (n,)."""
     at = (len(ratio) - 1) // 2
-    return noise_factor(float(np.partition(ratio, at)[at]))
+    return float(np.partition(ratio, at)[at])
 
 
 def sheet_mask(
@@ -475,20 +492,32 @@ def relative_distances(pdis: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return np.minimum(r, 1.0)
 
 
-def robust_threshold(r: np.ndarray) -> float:
+def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
     """Otsu's threshold of relative distances on [0, 1], never below ``R_MIN``.
 
     Parameters
     ----------
     r : (m,) float64
         Relative projected distances in [0, 1] (isolated points left out).
+    otsu : bool, default True
+        False on a cloud without noise (:func:`otsu_splits`): the floor alone.
 
     Returns
     -------
     float
-        ``max(otsu_threshold(r), R_MIN)``; candidates are ``r >= T``.
+        ``max(otsu_threshold(r), R_MIN)``, or ``R_MIN`` when not ``otsu``; candidates
+        are ``r >= T``.
     """
-    return max(otsu_threshold(r), R_MIN)
+    return max(otsu_threshold(r), R_MIN) if otsu else R_MIN
+
+
+def otsu_splits(mesh: bool, noise: float) -> bool:
+    """Whether Otsu's split raises the threshold above ``R_MIN``: on meshes, and on
+    clouds whose noise ratio ``noise`` (the lower median of :func:`noise_ratios`, as
+    :func:`noise_scale_factor` takes it) exceeds ``NOISE_QUIET``. On a cloud without
+    noise the floor alone (measured, docs/robust-mode.md: thin walls 1 / 2 / 3
+    spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)."""
+    return mesh or noise > NOISE_QUIET
 
 
 @dataclass
@@ -516,6 +545,8 @@ class RelativeRule:
     local : callable, optional
         ``local(i, scale) -> (l, o)``, :func:`local_scale` of the i-th scale computed
         without the lists (the compiled ring pass); default: from ``lists``.
+    otsu : bool, default True
+        :func:`robust_threshold`'s ``otsu`` (:func:`otsu_splits`).
     """
 
     points: np.ndarray
@@ -523,6 +554,7 @@ class RelativeRule:
     n_scales: int
     sheet: tuple[float, int, float] | None = None
     local: Callable[[int, int], tuple[np.ndarray, np.ndarray]] | None = None
+    otsu: bool = True
 
     def __post_init__(self) -> None:
         self.score = np.zeros(len(self.points))
@@ -535,14 +567,14 @@ class RelativeRule:
             ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
-        return r, robust_threshold(r)
+        return r, robust_threshold(r, self.otsu)
 
     def from_pass(self, relative: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, float]:
         """What ``__call__`` returns, from the compiled pass over a cloud, which computed
         the relative distances (m,) of this scale and the final ``score`` (m,) with
         this rule's arithmetic (:class:`meshlab_sharp._kernels.ScalePass`)."""
         self.score = score
-        return relative, robust_threshold(relative)
+        return relative, robust_threshold(relative, self.otsu)
 
 
 def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourhood) -> np.ndarray:
@@ -746,6 +778,8 @@ class RobustSetup:
         self.fused: _kernels.ScalePass | None = None
         #: How much the noise grew the scales (1: not at all).
         self.growth = 1.0
+        #: The cloud's noise ratio (the lower median of :func:`noise_ratios`; 0 on a mesh).
+        self.noise = 0.0
         #: The neighbourhoods the scales use: ``neighbourhoods`` (meshes; clouds with
         #: the compiled pass, which leaves the other sheets out itself), or their
         #: :class:`SheetNeighbourhoods` (clouds, numpy).
@@ -773,14 +807,14 @@ class RobustSetup:
                 if compiled:
                     self.fused = self._pass(k0, sheet)
             if self.fused is not None and self.fused.stats is not None:
-                noise = _noise_factor(self.fused.stats.noise)
+                self.noise = _noise_median(self.fused.stats.noise)
                 self.scale_neighbourhoods = self.neighbourhoods
             else:
                 self.scale_neighbourhoods = self._sheets()
-                noise = _noise_factor(
+                self.noise = _noise_median(
                     noise_ratios_lists(self.points, self.scale_neighbourhoods.first(k0))
                 )
-            factor = min(noise, len(self.points) / top)
+            factor = min(noise_factor(self.noise), len(self.points) / top)
             if factor > 1.0:
                 self.growth = factor
                 self.scales = grown_scales(self.scales, factor)
@@ -796,7 +830,8 @@ class RobustSetup:
             neighbourhoods.adjacency is not None
         )
         local = self._ring_local_scale if compiled_rings else None
-        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, local)
+        otsu = otsu_splits(faces is not None, self.noise)
+        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, local, otsu)
 
     def _sheets(self) -> SheetNeighbourhoods:
         """:class:`SheetNeighbourhoods` of ``neighbourhoods`` (numpy kNN lists)."""

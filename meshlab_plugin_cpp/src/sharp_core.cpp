@@ -583,7 +583,8 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	std::vector<int> votes(n, 0);
 	for (size_t s = 0; s < S; ++s) {
 		const std::vector<double> v(pass.relative.begin() + s * n, pass.relative.begin() + (s + 1) * n);
-		vote(v, std::max(otsu(v), R_MIN), true, votes, r);
+		// robust.otsu_splits: without noise the floor alone
+		vote(v, ratio[at] > MS_NOISE_QUIET ? std::max(otsu(v), R_MIN) : R_MIN, true, votes, r);
 	}
 	decide(votes, S, d);
 	std::vector<Index> rows;

@@ -386,7 +386,10 @@ def _robust(
     query = Query(top, kept="kept")
     relative = {"scales": scales, "weighting": weighting}
     hist = runner.step(Step("relative", robust_relative, query, relative))["hist"]
-    thresholds = np.array([max(otsu_from_histogram(h), robust.R_MIN) for h in hist])
+    otsu = robust.otsu_splits(False, nu)
+    thresholds = np.array(
+        [max(otsu_from_histogram(h), robust.R_MIN) if otsu else robust.R_MIN for h in hist]
+    )
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
     runner.step(Step("support", robust_support, Query(top, "kept", "mask"), support))
