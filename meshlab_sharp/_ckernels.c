@@ -1152,20 +1152,18 @@ done:
     return rc;
 }
 
-/* Unit normal of each face (m, 3) into fn (m, 3): cross(p1 - p0, p2 - p0) / |.| (|.| the
- * square root of the sum of squares; a zero cross product stays zero), numpy's
- * arithmetic in creases.dihedral_angles. */
-static void face_normals(const double *p, const int64_t *faces, int64_t m, double *fn) {
-    for (int64_t f = 0; f < m; f++) {
-        const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
-                     *p2 = p + 3 * faces[3 * f + 2];
-        double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
-        double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-        double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
-        double len = sqrt(x * x + y * y + z * z);
-        double dv = len > 0 ? len : 1.0;
-        fn[3 * f] = x / dv; fn[3 * f + 1] = y / dv; fn[3 * f + 2] = z / dv;
-    }
+/* Unit normal of face f into u: cross(p1 - p0, p2 - p0) / |.| (|.| the square root of the
+ * sum of squares; a zero cross product stays zero), numpy's arithmetic in
+ * creases.dihedral_angles. */
+static void face_normal(const double *p, const int64_t *faces, int64_t f, double *u) {
+    const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
+                 *p2 = p + 3 * faces[3 * f + 2];
+    double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
+    double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
+    double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
+    double len = sqrt(x * x + y * y + z * z);
+    double dv = len > 0 ? len : 1.0;
+    u[0] = x / dv; u[1] = y / dv; u[2] = z / dv;
 }
 
 static int cmp_i64(const void *a, const void *b) {
@@ -1175,19 +1173,17 @@ static int cmp_i64(const void *a, const void *b) {
 
 /* creases.dihedral_angles without the angle: the edges (a, b), a < b, with exactly two
  * faces, sorted lexicographically, into out_edges (room for 3 m / 2 rows), and the dot
- * product u . v of the two faces' unit normals (face_normals; face order: the lower
- * index first) into out_dot. n * m must be below 2^63. Returns the number of edges, or -1
- * out of memory. */
+ * product u . v of the two faces' unit normals (face_normal; face order: the lower index
+ * first) into out_dot. n * m must be below 2^63. Returns the number of edges, or -1 out
+ * of memory. */
 int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot) {
     int64_t *ptr = (int64_t *)calloc((size_t)n + 1, sizeof(int64_t));
     /* per lower end, the other end and the face as one key: hi * m + f */
     int64_t *key = (int64_t *)malloc((size_t)(3 * m > 0 ? 3 * m : 1) * sizeof(int64_t));
-    double *fn = (double *)malloc((size_t)(m > 0 ? m : 1) * 3 * sizeof(double));
     int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
     int64_t e = -1;
-    if (!ptr || !key || !fn || !fill) goto done;
-    face_normals(p, faces, m, fn);
+    if (!ptr || !key || !fill) goto done;
     for (int64_t f = 0; f < m; f++)
         for (int c = 0; c < 3; c++) {
             int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
@@ -1217,7 +1213,9 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
             int64_t hi = it[i] / m, j = i + 1;
             while (j < k && it[j] / m == hi) j++;
             if (j - i == 2) {
-                const double *u = fn + 3 * (it[i] % m), *w = fn + 3 * (it[i + 1] % m);
+                double u[3], w[3];
+                face_normal(p, faces, it[i] % m, u);
+                face_normal(p, faces, it[i + 1] % m, w);
                 out_edges[2 * e] = v;
                 out_edges[2 * e + 1] = hi;
                 out_dot[e++] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
@@ -1228,7 +1226,6 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
 done:
     free(ptr);
     free(key);
-    free(fn);
     free(fill);
     return e;
 }

@@ -852,6 +852,8 @@ class RobustSetup:
             )
             self._ring_scales = _kernels.ring_local_scale(self.points, one, self.scales)
         ell, off = self._ring_scales
+        if i == len(self.scales) - 1:
+            self._ring_scales = None  # the last scale: freed when the rule is done with it
         return ell[i], off[i]
 
     def _ring_rows(self, rows: np.ndarray, rings: tuple[int, ...]) -> list[Neighbourhood]:
@@ -909,6 +911,7 @@ class RobustSetup:
                 ks = (min(THIN_RING, top), top)
                 around, direction = self._ring_rows(np.flatnonzero(mask), ks)
                 compare = around
+            self._one_ring = None  # the rings are listed: free the 1-ring before the edges
             e = line_directions(self.points, mask, direction)
             mask = supported(self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS)
             mask = thin(self.points, mask, self.rule.score, e, compare, cone_cos=THIN_CONE_COS)
