@@ -992,6 +992,12 @@ void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, i
 
 /* ------------------------------------------------------------------ cleaning */
 
+#if defined(__GNUC__)
+#define PREFETCH(address) __builtin_prefetch(address)
+#else
+#define PREFETCH(address) ((void)(address))
+#endif
+
 static inline uint64_t hash64(uint64_t k) {
     k ^= k >> 33;
     k *= 0xff51afd7ed558ccdULL;
@@ -1018,10 +1024,22 @@ static inline uint64_t point_hash(const double *x) {
  * Returns m. */
 int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input) {
+    /* the slots of the next DEDUP_AHEAD points are fetched while this one is probed */
+    enum { DEDUP_AHEAD = 16 };
+    uint64_t ahead[DEDUP_AHEAD];
+    for (int64_t i = 0; i < n && i < DEDUP_AHEAD; i++) {
+        ahead[i] = point_hash(p + 3 * i) & (uint64_t)tmask;
+        PREFETCH(table + ahead[i]);
+    }
     int64_t m = 0;
     for (int64_t i = 0; i < n; i++) {
         const double *x = p + 3 * i;
-        uint64_t h = point_hash(x) & (uint64_t)tmask;
+        uint64_t h = ahead[i % DEDUP_AHEAD];
+        if (i + DEDUP_AHEAD < n) {
+            uint64_t later = point_hash(x + 3 * DEDUP_AHEAD) & (uint64_t)tmask;
+            ahead[i % DEDUP_AHEAD] = later;
+            PREFETCH(table + later);
+        }
         while (1) {
             int64_t t = table[h];
             if (t < 0) {
