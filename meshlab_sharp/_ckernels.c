@@ -965,21 +965,32 @@ done:
     return rc;
 }
 
+/* Unit normal of face f into u: cross(p1 - p0, p2 - p0) / |.| (|.| the square root of the
+ * sum of squares; a zero cross product stays zero), numpy's arithmetic in
+ * creases.dihedral_angles and normals.face_average_normals. */
+static void face_normal(const double *p, const int64_t *faces, int64_t f, double *u) {
+    const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
+                 *p2 = p + 3 * faces[3 * f + 2];
+    double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
+    double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
+    double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
+    double len = sqrt(x * x + y * y + z * z);
+    double dv = len > 0 ? len : 1.0;
+    u[0] = x / dv; u[1] = y / dv; u[2] = z / dv;
+}
+
 /* Face-average normals exactly as normals.face_average_normals computes them with
- * numpy (same products, same order of the sums): acc (n, 3) zero on entry. */
+ * numpy (same products, same order of the sums: corner 0 of every face in face order,
+ * then corner 1, then corner 2): acc (n, 3) zero on entry. Each face's normal is computed
+ * again for each corner, which is faster than storing them (no fresh memory). */
 void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                              double zero, double *acc) {
     for (int c = 0; c < 3; c++) {
         for (int64_t f = 0; f < m; f++) {
-            const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
-                         *p2 = p + 3 * faces[3 * f + 2];
-            double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
-            double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-            double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
-            double len = sqrt(x * x + y * y + z * z);
-            double dv = len > 0 ? len : 1.0;
+            double u[3];
+            face_normal(p, faces, f, u);
             double *t = acc + 3 * faces[3 * f + c];
-            t[0] += x / dv; t[1] += y / dv; t[2] += z / dv;
+            t[0] += u[0]; t[1] += u[1]; t[2] += u[2];
         }
     }
     for (int64_t v = 0; v < n; v++) {
@@ -1168,20 +1179,6 @@ int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const i
 done:
     for (int t = 0; t < 4; t++) free(buf[t]);
     return rc;
-}
-
-/* Unit normal of face f into u: cross(p1 - p0, p2 - p0) / |.| (|.| the square root of the
- * sum of squares; a zero cross product stays zero), numpy's arithmetic in
- * creases.dihedral_angles. */
-static void face_normal(const double *p, const int64_t *faces, int64_t f, double *u) {
-    const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
-                 *p2 = p + 3 * faces[3 * f + 2];
-    double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
-    double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-    double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
-    double len = sqrt(x * x + y * y + z * z);
-    double dv = len > 0 ? len : 1.0;
-    u[0] = x / dv; u[1] = y / dv; u[2] = z / dv;
 }
 
 static int cmp_i64(const void *a, const void *b) {
