@@ -842,9 +842,12 @@ int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *b
 
 /* ------------------------------------------------------------------ meshes */
 
-/* 1-ring adjacency of a triangle mesh, CSR with repeats (each face adds both other
- * corners to each corner): ptr (n + 1), idx (6 m). Returns 0, -1 out of memory, or -2
- * when a face index lies outside [0, n) (nothing is written out of bounds). */
+/* 1-ring adjacency of a triangle mesh in CSR form: ptr (n + 1), idx (room for 6 m). Each
+ * face adds both other corners to each of its corners, in face order; only the first
+ * occurrence of a neighbour is kept (a breadth-first search over these lists meets the
+ * vertices in the order it meets them over the lists with repeats, at half the reads).
+ * Returns 0, -1 out of memory, or -2 when a face index lies outside [0, n) (nothing is
+ * written out of bounds). */
 int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx) {
     for (int64_t f = 0; f < 3 * m; f++) {
         if (faces[f] < 0 || faces[f] >= n) return -2;
@@ -861,31 +864,61 @@ int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32
         idx[fill[b]++] = (int32_t)a; idx[fill[b]++] = (int32_t)c;
         idx[fill[c]++] = (int32_t)a; idx[fill[c]++] = (int32_t)b;
     }
+    /* compact in place, first occurrences only (fill: the last vertex listing each) */
+    for (int64_t v = 0; v < n; v++) fill[v] = -1;
+    int64_t w = 0, start = 0;
+    for (int64_t v = 0; v < n; v++) {
+        int64_t stop = ptr[v + 1];
+        for (int64_t t = start; t < stop; t++) {
+            int32_t x = idx[t];
+            idx[w] = x;
+            w += fill[x] != v;
+            fill[x] = v;
+        }
+        start = stop;
+        ptr[v + 1] = w;
+    }
     free(fill);
+    return 0;
+}
+
+/* Room for `need` entries in each of the `count` arrays (entry sizes `size`, capacity
+ * *cap, grown by doubling). Returns 0, or -1 out of memory (the arrays stay valid). */
+static int reserve(void **arrays, const size_t *size, int count, int64_t *cap, int64_t need) {
+    if (need <= *cap) return 0;
+    int64_t nc = *cap;
+    while (nc < need) nc *= 2;
+    for (int t = 0; t < count; t++) {
+        void *grown = realloc(arrays[t], (size_t)nc * size[t]);
+        if (grown == NULL) return -1;
+        arrays[t] = grown;
+    }
+    *cap = nc;
     return 0;
 }
 
 /* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
  * the projected distance into out_pdis[s * n + i] (normals into out_normals when not
  * NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA. stamp: (n,) int32
- * scratch of this thread, all -1 initially (or left by an earlier call). With out_sizes
- * and out_members (not NULL), store ring sizes (nscales, n) instead... (unused). */
+ * scratch of this thread, all -1 initially (or left by an earlier call). The members are
+ * summed in the order the search meets them. */
 int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
                  const double *fixed, const int64_t *rings, int nscales, int gaussian,
                  int64_t begin, int64_t end, int32_t *stamp, double *out_pdis,
                  double *out_normals) {
     int64_t cap = 1024;
-    int32_t *queue = (int32_t *)malloc((size_t)cap * sizeof(int32_t));
-    double *q = (double *)malloc((size_t)cap * 3 * sizeof(double));
-    double *d2 = (double *)malloc((size_t)cap * sizeof(double));
-    double *mu = (double *)malloc((size_t)cap * sizeof(double));
+    /* queue (int32), q (3 doubles), d2, mu */
+    void *buf[4] = {malloc((size_t)cap * 4), malloc((size_t)cap * 24), malloc((size_t)cap * 8),
+                    malloc((size_t)cap * 8)};
+    const size_t size[4] = {4, 24, 8, 8};
     int rc = 0;
     int64_t rmax = rings[nscales - 1];
-    if (!queue || !q || !d2 || !mu) { rc = -1; goto done; }
+    if (!buf[0] || !buf[1] || !buf[2] || !buf[3]) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         const double *fn = fixed ? fixed + 3 * i : NULL;
         if (fn && fn[0] == 0.0 && fn[1] == 0.0 && fn[2] == 0.0) fn = NULL;
+        int32_t *queue = (int32_t *)buf[0];
         int64_t head = 0, tail = 0;
         queue[tail++] = (int32_t)i;
         stamp[i] = (int32_t)i;
@@ -896,31 +929,20 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
             int64_t level_end = tail;
             for (; head < level_end; head++) {
                 int32_t v = queue[head];
-                for (int64_t t = ptr[v]; t < ptr[v + 1]; t++) {
+                int64_t t0 = ptr[v], t1 = ptr[v + 1];
+                if (reserve(buf, size, 4, &cap, tail + (t1 - t0)) != 0) { rc = -1; goto done; }
+                queue = (int32_t *)buf[0];
+                /* branch-free: write every neighbour, keep it when first met */
+                for (int64_t t = t0; t < t1; t++) {
                     int32_t w = adj[t];
-                    if (stamp[w] == (int32_t)i) continue;
+                    queue[tail] = w;
+                    tail += stamp[w] != (int32_t)i;
                     stamp[w] = (int32_t)i;
-                    if (tail == cap) {
-                        int64_t nc = cap * 2;
-                        int32_t *nq = (int32_t *)realloc(queue, (size_t)nc * sizeof(int32_t));
-                        if (!nq) { rc = -1; goto done; }
-                        queue = nq;
-                        double *nq2 = (double *)realloc(q, (size_t)nc * 3 * sizeof(double));
-                        if (!nq2) { rc = -1; goto done; }
-                        q = nq2;
-                        double *nd = (double *)realloc(d2, (size_t)nc * sizeof(double));
-                        if (!nd) { rc = -1; goto done; }
-                        d2 = nd;
-                        double *nm = (double *)realloc(mu, (size_t)nc * sizeof(double));
-                        if (!nm) { rc = -1; goto done; }
-                        mu = nm;
-                        cap = nc;
-                    }
-                    queue[tail++] = w;
                 }
             }
             while (s < nscales && rings[s] == ring) {
                 int64_t m = tail;
+                double *q = (double *)buf[1], *d2 = (double *)buf[2];
                 for (; done_j < m; done_j++) {
                     const double *pj = p + 3 * (int64_t)queue[done_j];
                     double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
@@ -932,34 +954,43 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                 }
                 double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
                 double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
-                out_pdis[s * n + i] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm, mu);
+                out_pdis[s * n + i] =
+                    neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm, (double *)buf[3]);
                 s++;
             }
         }
     }
 done:
-    free(queue);
-    free(q);
-    free(d2);
-    free(mu);
+    for (int t = 0; t < 4; t++) free(buf[t]);
     return rc;
 }
 
+/* Unit normal of face f into u: cross(p1 - p0, p2 - p0) / |.| (|.| the square root of the
+ * sum of squares; a zero cross product stays zero), numpy's arithmetic in
+ * creases.dihedral_angles and normals.face_average_normals. */
+static void face_normal(const double *p, const int64_t *faces, int64_t f, double *u) {
+    const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
+                 *p2 = p + 3 * faces[3 * f + 2];
+    double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
+    double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
+    double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
+    double len = sqrt(x * x + y * y + z * z);
+    double dv = len > 0 ? len : 1.0;
+    u[0] = x / dv; u[1] = y / dv; u[2] = z / dv;
+}
+
 /* Face-average normals exactly as normals.face_average_normals computes them with
- * numpy (same products, same order of the sums): acc (n, 3) zero on entry. */
+ * numpy (same products, same order of the sums: corner 0 of every face in face order,
+ * then corner 1, then corner 2): acc (n, 3) zero on entry. Each face's normal is computed
+ * again for each corner, which is faster than storing them (no fresh memory). */
 void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                              double zero, double *acc) {
     for (int c = 0; c < 3; c++) {
         for (int64_t f = 0; f < m; f++) {
-            const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
-                         *p2 = p + 3 * faces[3 * f + 2];
-            double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
-            double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-            double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
-            double len = sqrt(x * x + y * y + z * z);
-            double dv = len > 0 ? len : 1.0;
+            double u[3];
+            face_normal(p, faces, f, u);
             double *t = acc + 3 * faces[3 * f + c];
-            t[0] += x / dv; t[1] += y / dv; t[2] += z / dv;
+            t[0] += u[0]; t[1] += u[1]; t[2] += u[2];
         }
     }
     for (int64_t v = 0; v < n; v++) {
@@ -971,6 +1002,12 @@ void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, i
 }
 
 /* ------------------------------------------------------------------ cleaning */
+
+#if defined(__GNUC__)
+#define PREFETCH(address) __builtin_prefetch(address)
+#else
+#define PREFETCH(address) ((void)(address))
+#endif
 
 static inline uint64_t hash64(uint64_t k) {
     k ^= k >> 33;
@@ -998,10 +1035,22 @@ static inline uint64_t point_hash(const double *x) {
  * Returns m. */
 int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input) {
+    /* the slots of the next DEDUP_AHEAD points are fetched while this one is probed */
+    enum { DEDUP_AHEAD = 16 };
+    uint64_t ahead[DEDUP_AHEAD];
+    for (int64_t i = 0; i < n && i < DEDUP_AHEAD; i++) {
+        ahead[i] = point_hash(p + 3 * i) & (uint64_t)tmask;
+        PREFETCH(table + ahead[i]);
+    }
     int64_t m = 0;
     for (int64_t i = 0; i < n; i++) {
         const double *x = p + 3 * i;
-        uint64_t h = point_hash(x) & (uint64_t)tmask;
+        uint64_t h = ahead[i % DEDUP_AHEAD];
+        if (i + DEDUP_AHEAD < n) {
+            uint64_t later = point_hash(x + 3 * DEDUP_AHEAD) & (uint64_t)tmask;
+            ahead[i % DEDUP_AHEAD] = later;
+            PREFETCH(table + later);
+        }
         while (1) {
             int64_t t = table[h];
             if (t < 0) {
@@ -1080,127 +1129,119 @@ int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const i
                         const int64_t *rings, int nscales, int64_t begin, int64_t end,
                         int64_t *mark, double *out_ell, double *out_off) {
     int64_t cap = 1024, rmax = rings[nscales - 1];
-    int32_t *cur = (int32_t *)malloc((size_t)cap * sizeof(int32_t));
-    int32_t *next = (int32_t *)malloc((size_t)cap * sizeof(int32_t));
-    double *q = (double *)malloc((size_t)cap * 3 * sizeof(double));
-    double *dist = (double *)malloc((size_t)cap * sizeof(double));
+    /* the last ring listed backwards, the next one, q (3 doubles), dist */
+    void *buf[4] = {malloc((size_t)cap * 4), malloc((size_t)cap * 4), malloc((size_t)cap * 24),
+                    malloc((size_t)cap * 8)};
+    const size_t size[4] = {4, 4, 24, 8};
     int rc = 0;
-    if (!cur || !next || !q || !dist) { rc = -1; goto done; }
+    if (!buf[0] || !buf[1] || !buf[2] || !buf[3]) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         int64_t m = 1;
-        cur[0] = (int32_t)i;
+        ((int32_t *)buf[0])[0] = (int32_t)i;
         int s = 0;
         for (int64_t ring = 1; ring <= rmax && s < nscales; ring++) {
             int64_t gen = i * (rmax + 1) + ring, k = 0;
-            for (int64_t a = 0; a < m; a++) {
-                int32_t v = cur[a];
-                for (int64_t t = ptr1[v]; t < ptr1[v + 1]; t++) {
+            /* walk the last ring in its order (buf[0] holds it backwards) */
+            for (int64_t a = m - 1; a >= 0; a--) {
+                int32_t v = ((int32_t *)buf[0])[a];
+                int64_t t0 = ptr1[v], t1 = ptr1[v + 1];
+                if (reserve(buf, size, 4, &cap, k + (t1 - t0)) != 0) { rc = -1; goto done; }
+                int32_t *next = (int32_t *)buf[1];
+                /* branch-free: write every member, keep it when first met */
+                for (int64_t t = t0; t < t1; t++) {
                     int32_t w = one[t];
-                    if (mark[w] == gen) continue;
+                    next[k] = w;
+                    k += mark[w] != gen;
                     mark[w] = gen;
-                    if (k == cap) {
-                        int64_t nc = 2 * cap;
-                        int32_t *c2 = (int32_t *)realloc(cur, (size_t)nc * sizeof(int32_t));
-                        if (!c2) { rc = -1; goto done; }
-                        cur = c2;
-                        int32_t *n2 = (int32_t *)realloc(next, (size_t)nc * sizeof(int32_t));
-                        if (!n2) { rc = -1; goto done; }
-                        next = n2;
-                        double *q2 = (double *)realloc(q, (size_t)nc * 3 * sizeof(double));
-                        if (!q2) { rc = -1; goto done; }
-                        q = q2;
-                        double *d2 = (double *)realloc(dist, (size_t)nc * sizeof(double));
-                        if (!d2) { rc = -1; goto done; }
-                        dist = d2;
-                        cap = nc;
-                    }
-                    next[k++] = w;
                 }
             }
-            for (int64_t a = 0; a < k; a++) cur[a] = next[k - 1 - a]; /* reversed */
+            /* the new ring is the members met, backwards: buf[1] read from its end */
+            void *last = buf[0];
+            buf[0] = buf[1];
+            buf[1] = last;
             m = k;
             if (ring != rings[s]) continue;
+            const int32_t *back = (const int32_t *)buf[0];
+            double *q = (double *)buf[2], *dist = (double *)buf[3];
             for (int64_t j = 0; j < m; j++) {
-                const double *pj = p + 3 * (int64_t)cur[j];
-                double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
-                q[3 * j] = x; q[3 * j + 1] = y; q[3 * j + 2] = z;
-                dist[j] = sqrt(x * x + y * y + z * z);
+                const double *pj = p + 3 * (int64_t)back[m - 1 - j];
+                q[3 * j] = pj[0] - pi[0]; q[3 * j + 1] = pj[1] - pi[1]; q[3 * j + 2] = pj[2] - pi[2];
+            }
+            for (int64_t j = 0; j < m; j++) {
+                const double *x = q + 3 * j;
+                dist[j] = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
             }
             local_scale_one(q, dist, m, out_ell + s * n + i, out_off + s * n + i);
             s++;
         }
     }
 done:
-    free(cur);
-    free(next);
-    free(q);
-    free(dist);
+    for (int t = 0; t < 4; t++) free(buf[t]);
     return rc;
 }
 
-static int cmp_pair_i64(const void *a, const void *b) {
-    const int64_t *x = (const int64_t *)a, *y = (const int64_t *)b;
-    if (x[0] != y[0]) return (x[0] > y[0]) - (x[0] < y[0]);
-    return (x[1] > y[1]) - (x[1] < y[1]);
+static int cmp_i64(const void *a, const void *b) {
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
 }
 
 /* creases.dihedral_angles without the angle: the edges (a, b), a < b, with exactly two
- * faces, sorted lexicographically, into out_edges (at most 3 m rows), and the dot product
- * u . v of the two faces' unit normals fn (m, 3) (face order: the lower index first) into
- * out_dot. Returns the number of edges, or -1 out of memory. */
-int64_t ms_two_face_edges(const int64_t *faces, int64_t m, int64_t n, const double *fn,
+ * faces, sorted lexicographically, into out_edges (room for 3 m / 2 rows), and the dot
+ * product u . v of the two faces' unit normals (face_normal; face order: the lower index
+ * first) into out_dot. n * m must be below 2^63. Returns the number of edges, or -1 out
+ * of memory. */
+int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot) {
     int64_t *ptr = (int64_t *)calloc((size_t)n + 1, sizeof(int64_t));
-    int64_t *item = (int64_t *)malloc((size_t)(3 * m > 0 ? 3 * m : 1) * 2 * sizeof(int64_t));
-    if (!ptr || !item) { free(ptr); free(item); return -1; }
+    /* per lower end, the other end and the face as one key: hi * m + f */
+    int64_t *key = (int64_t *)malloc((size_t)(3 * m > 0 ? 3 * m : 1) * sizeof(int64_t));
+    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
+    int64_t e = -1;
+    if (!ptr || !key || !fill) goto done;
     for (int64_t f = 0; f < m; f++)
         for (int c = 0; c < 3; c++) {
             int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
             ptr[(a < b ? a : b) + 1]++;
         }
     for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
-    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
-    if (!fill) { free(ptr); free(item); return -1; }
     memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
     for (int64_t f = 0; f < m; f++)
         for (int c = 0; c < 3; c++) {
             int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
-            int64_t lo = a < b ? a : b, hi = a < b ? b : a, t = fill[lo]++;
-            item[2 * t] = hi;
-            item[2 * t + 1] = f;
+            int64_t lo = a < b ? a : b, hi = a < b ? b : a;
+            key[fill[lo]++] = hi * m + f;
         }
-    free(fill);
-    int64_t e = 0;
+    e = 0;
     for (int64_t v = 0; v < n; v++) {
-        int64_t *it = item + 2 * ptr[v];
+        int64_t *it = key + ptr[v];
         int64_t k = ptr[v + 1] - ptr[v];
-        /* sort by the other end, then the face (faces were filled in increasing order):
-         * insertion sort for short lists, qsort for long ones (a fan of many faces) */
-        if (k > 32) qsort(it, (size_t)k, 2 * sizeof(int64_t), cmp_pair_i64);
+        /* sort by the other end, then the face: insertion sort for short lists, qsort
+         * for long ones (a fan of many faces) */
+        if (k > 32) qsort(it, (size_t)k, sizeof(int64_t), cmp_i64);
         else for (int64_t i = 1; i < k; i++) {
-            int64_t hb = it[2 * i], hf = it[2 * i + 1], j = i;
-            for (; j > 0 && it[2 * (j - 1)] > hb; j--) {
-                it[2 * j] = it[2 * (j - 1)];
-                it[2 * j + 1] = it[2 * (j - 1) + 1];
-            }
-            it[2 * j] = hb;
-            it[2 * j + 1] = hf;
+            int64_t x = it[i], j = i;
+            for (; j > 0 && it[j - 1] > x; j--) it[j] = it[j - 1];
+            it[j] = x;
         }
         for (int64_t i = 0; i < k;) {
-            int64_t j = i + 1;
-            while (j < k && it[2 * j] == it[2 * i]) j++;
+            int64_t hi = it[i] / m, j = i + 1;
+            while (j < k && it[j] / m == hi) j++;
             if (j - i == 2) {
-                const double *u = fn + 3 * it[2 * i + 1], *w = fn + 3 * it[2 * i + 3];
+                double u[3], w[3];
+                face_normal(p, faces, it[i] % m, u);
+                face_normal(p, faces, it[i + 1] % m, w);
                 out_edges[2 * e] = v;
-                out_edges[2 * e + 1] = it[2 * i];
+                out_edges[2 * e + 1] = hi;
                 out_dot[e++] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
             }
             i = j;
         }
     }
+done:
     free(ptr);
-    free(item);
+    free(key);
+    free(fill);
     return e;
 }
 

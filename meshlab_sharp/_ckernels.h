@@ -123,8 +123,9 @@ int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indic
  * first term plus numpy's pairwise sum of the others (0 when n = 0). */
 double ms_segment_sum(const double *a, int64_t n, int64_t stride);
 
-/* 1-ring adjacency of a triangle mesh, CSR with repeats: ptr (n + 1), idx (6 m). Returns
- * 0, -1 out of memory, or -2 when a face index lies outside [0, n). */
+/* 1-ring adjacency of a triangle mesh, CSR: ptr (n + 1), idx (room for 6 m; ptr[n] used),
+ * each vertex's neighbours in the order its faces list them, each once. Returns 0, -1 out
+ * of memory, or -2 when a face index lies outside [0, n). */
 int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx);
 
 /* k-rings by breadth-first search over (ptr, adj) for the vertices [begin, end) and the
@@ -142,8 +143,8 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
 void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                              double zero, double *acc);
 
-/* Each vertex's 1-ring and itself, sorted, without repeats (RingNeighbourhoods.one_ring),
- * from ms_adjacency's lists (ptr, adj): out_ptr (n + 1), out_idx (room for ptr[n] + n). */
+/* Each vertex's 1-ring and itself, sorted (RingNeighbourhoods.one_ring), from
+ * ms_adjacency's lists (ptr, adj): out_ptr (n + 1), out_idx (room for ptr[n] + n). */
 void ms_sorted_one_ring(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t *out_ptr,
                         int32_t *out_idx);
 
@@ -156,10 +157,11 @@ int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const i
                         const int64_t *rings, int nscales, int64_t begin, int64_t end,
                         int64_t *mark, double *out_ell, double *out_off);
 
-/* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for 3 m
- * rows), and the dot products of their faces' unit normals fn (m, 3), the lower face
- * first, into out_dot (creases.dihedral_angles). Returns the count, or -1 out of memory. */
-int64_t ms_two_face_edges(const int64_t *faces, int64_t m, int64_t n, const double *fn,
+/* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for
+ * 3 m / 2 rows), and the dot products of their faces' unit normals (cross(p1 - p0,
+ * p2 - p0) / |.| of the points p), the lower face first, into out_dot (creases.dihedral_angles). n * m < 2^63.
+ * Returns the count, or -1 out of memory. */
+int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot);
 
 /* Merge exactly equal points into their first occurrence. table: (tmask + 1) int64

@@ -59,7 +59,7 @@ _SIGNATURES = {
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_face_double_areas": (None, [_c_void_p, _c_void_p, _i64, _c_void_p]),
-    "ms_two_face_edges": (_i64, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_two_face_edges": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_sorted_one_ring": (None, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_ring_local_scale": (
         _int,
@@ -393,7 +393,8 @@ def cloud_knn_projected_distances(
 
 
 def adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """1-ring adjacency in CSR form (repeats allowed): indptr (n + 1,), indices (6 m,)."""
+    """1-ring adjacency in CSR form: indptr (n + 1,) int64, indices int32, each vertex's
+    neighbours in the order of its faces, each once (about 6 per vertex)."""
     lib = _LIB
     assert lib is not None
     if n >= 2**31:
@@ -406,7 +407,7 @@ def adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"a face index lies outside the {n} vertices")
     if rc != 0:
         raise MemoryError("out of memory building the mesh adjacency")
-    return ptr, idx
+    return ptr, idx[: ptr[-1]].copy()
 
 
 def ring_projected_distances(
@@ -443,22 +444,24 @@ def ring_projected_distances(
     return pdis, out_normals
 
 
-def two_face_edges(
-    faces: np.ndarray, n: int, face_normals: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The edges with exactly two faces, (e, 2) int64 ``a < b`` sorted lexicographically,
-    and the dot products (e,) of their faces' unit normals ``face_normals`` (m, 3), as
-    :func:`meshlab_sharp.creases.dihedral_angles` pairs them."""
+    and the dot products (e,) of their faces' unit normals (``faces`` (m, 3) of ``points``
+    (n, 3)), as :func:`meshlab_sharp.creases.dihedral_angles` computes and pairs them."""
     lib = _LIB
     assert lib is not None
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    fn = np.ascontiguousarray(face_normals, dtype=np.float64)
-    edges = np.empty((3 * len(faces), 2), dtype=np.int64)
-    dot = np.empty(3 * len(faces))
-    e = lib.ms_two_face_edges(_ptr(faces), len(faces), n, _ptr(fn), _ptr(edges), _ptr(dot))
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    n, m = len(points), len(faces)
+    if m and n > (2**63 - 1) // m:
+        raise ValueError("too many vertices and faces for the compiled face pairing")
+    room = 3 * m // 2  # each such edge takes two of the 3 m face edges
+    edges = np.empty((room, 2), dtype=np.int64)
+    dot = np.empty(room)
+    e = lib.ms_two_face_edges(_ptr(points), _ptr(faces), m, n, _ptr(edges), _ptr(dot))
     if e < 0:
         raise MemoryError("out of memory pairing the faces of the mesh's edges")
-    return edges[:e].copy(), dot[:e].copy()
+    return edges[:e], dot[:e]
 
 
 def sorted_one_ring(adjacent: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

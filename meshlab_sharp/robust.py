@@ -754,6 +754,10 @@ class RobustSetup:
         The compiled pass over ``points`` at ``scales`` to pass to ``run_scales``, when
         the set-up's search already made it (compiled backend, a cloud whose noise did
         not grow the scales); None otherwise.
+    sharp_edges : (m,) bool or None
+        A mesh's vertices on its own sharp edges
+        (:func:`meshlab_sharp.creases.sharp_vertices`), found first, while little else
+        is in memory; None for a cloud.
     """
 
     def __init__(
@@ -824,6 +828,7 @@ class RobustSetup:
                 self.fused = None
                 self.scale_neighbourhoods = self.neighbourhoods if compiled else self._sheets()
         self._rings: RingNeighbourhoods | None = None
+        self.sharp_edges = None if faces is None else sharp_vertices(points, faces)[0]
         self._one_ring: sp.csr_matrix | None = None
         self._ring_scales: tuple[np.ndarray, np.ndarray] | None = None
         compiled_rings = isinstance(neighbourhoods, RingNeighbourhoods) and (
@@ -887,6 +892,8 @@ class RobustSetup:
             )
             self._ring_scales = _kernels.ring_local_scale(self.points, one, self.scales)
         ell, off = self._ring_scales
+        if i == len(self.scales) - 1:
+            self._ring_scales = None  # the last scale: freed when the rule is done with it
         return ell[i], off[i]
 
     def _ring_rows(self, rows: np.ndarray, rings: tuple[int, ...]) -> list[Neighbourhood]:
@@ -944,13 +951,13 @@ class RobustSetup:
                 ks = (min(THIN_RING, top), top)
                 around, direction = self._ring_rows(np.flatnonzero(mask), ks)
                 compare = around
+            self._one_ring = None  # the rings are listed: the 1-ring is done with
             e = line_directions(self.points, mask, direction)
             mask = supported(self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS)
             mask = thin(self.points, mask, self.rule.score, e, compare, cone_cos=THIN_CONE_COS)
-        if self.faces is not None:
-            edges, _ = sharp_vertices(self.points, self.faces)
-            mask = mask | edges
-            strength = np.where(edges, 1.0, strength)
+        if self.sharp_edges is not None:
+            mask = mask | self.sharp_edges
+            strength = np.where(self.sharp_edges, 1.0, strength)
         return self.expand(mask, False), self.expand(strength, 0.0)
 
     def expand(self, values: np.ndarray, fill: object) -> np.ndarray:
