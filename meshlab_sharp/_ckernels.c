@@ -288,7 +288,7 @@ static double noise_ratio(const double *q, int64_t k) {
 }
 
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
- * squared lengths d2 (k), the list's normal nrm; hs (k) scratch. Writes keep[j] (1:
+ * squared lengths d2 (k), the list's normal nrm; hs (2 k) scratch. Writes keep[j] (1:
  * kept) and returns the number of neighbours dropped (0 when fewer than minimum would
  * be, or it would keep fewer than own times as many as it drops: then every keep[j]
  * is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m =
@@ -304,9 +304,22 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     for (int64_t j = 2; j <= m; j++) a += sqrt(d2[j]);
     a /= (double)m;
     double g = gap * a;
+    /* No step between consecutive sorted heights exceeds (max h) - (min h) as rounded
+     * (rounding is monotone): when that is at most g there is no gap, and every
+     * neighbour is kept (most points: a smooth surface), without sorting. */
+    double *h = hs + k, hmin = INFINITY, hmax = -INFINITY;
+    int nan = 0;
+    for (int64_t j = 0; j < k; j++) {
+        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
+        h[j] = v;
+        nan |= v != v;
+        if (v < hmin) hmin = v;
+        if (v > hmax) hmax = v;
+    }
+    if (!nan && hmax - hmin <= g) return 0;
     int64_t z = 0;
     for (int64_t j = 0; j < k; j++) { /* insertion sort */
-        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
+        double v = h[j];
         z += v < 0;
         int64_t u = j;
         while (u > 0 && hs[u - 1] > v) { hs[u] = hs[u - 1]; u--; }
@@ -320,8 +333,7 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     double hi = gaps_up == 1 ? hs[up] : INFINITY, lo = gaps_down == 1 ? hs[down] : -INFINITY;
     int64_t dropped = 0;
     for (int64_t j = 0; j < k; j++) {
-        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
-        keep[j] = v >= lo && v <= hi;
+        keep[j] = h[j] >= lo && h[j] <= hi;
         dropped += !keep[j];
     }
     if (dropped < minimum || (double)(k - dropped) < own * (double)dropped) {
@@ -630,6 +642,54 @@ static int gather(const tree_t *T, const double *lb, double r2, int64_t t, int64
     return 0;
 }
 
+/* Buckets of nearest_of_block's counting sort. */
+#define NEAR_BUCKETS 64
+
+/* The k nearest of the m candidates sel (block entries whose squared distance bd[sel[t]]
+ * is at most limit2, m >= k) into out[0..k), sorted by (d2, idx); out has room for m,
+ * bucket for m, count for NEAR_BUCKETS + 1. A counting sort on the bucket
+ * floor(d2 * NEAR_BUCKETS / limit2) (nondecreasing in d2: a candidate of a later bucket
+ * is strictly farther), then an insertion sort of the candidates of the buckets up to
+ * the one that reaches k (only the members of one bucket are out of order; on a
+ * surface, d2 is about uniform over [0, limit2]). Many candidates in those buckets (ties,
+ * a crowded bucket): a selection of every candidate instead. */
+static void nearest_of_block(const block_t *b, const double *bd, const int32_t *sel, int64_t m,
+                             int64_t k, double limit2, cand_t *out, uint8_t *bucket,
+                             int32_t *count) {
+    double scale = NEAR_BUCKETS / limit2;
+    int64_t total = m;
+    if (scale > 0.0 && scale < INFINITY) {
+        memset(count, 0, (NEAR_BUCKETS + 1) * sizeof(int32_t));
+        for (int64_t t = 0; t < m; t++) {
+            double x = bd[sel[t]] * scale;
+            int c = x < NEAR_BUCKETS - 1 ? (int)x : NEAR_BUCKETS - 1;
+            bucket[t] = (uint8_t)c;
+            count[c + 1]++;
+        }
+        int last = 0;
+        while (count[last + 1] < k) { /* buckets [0, last] hold at least k */
+            last++;
+            count[last + 1] += count[last];
+        }
+        total = count[last + 1];
+        if (total <= 2 * k + 16) {
+            for (int64_t t = 0; t < m; t++) {
+                if (bucket[t] > last) continue;
+                int32_t j = sel[t];
+                cand_t *c = out + count[bucket[t]]++;
+                c->d2 = bd[j]; c->idx = b->idx[j]; c->pos = b->pos[j];
+            }
+            insertion_sort(out, total);
+            return;
+        }
+    }
+    for (int64_t t = 0; t < m; t++) {
+        int32_t j = sel[t];
+        out[t].d2 = bd[j]; out[t].idx = b->idx[j]; out[t].pos = b->pos[j];
+    }
+    select_sorted(out, m, k);
+}
+
 /* The leaf holding tree position i: its node, and its points [*s, *e). */
 static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
     int64_t t = 0;
@@ -673,14 +733,20 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *mu = (double *)malloc((size_t)kmax * sizeof(double));
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
-    double *hs = (double *)malloc((size_t)kmax * sizeof(double));
+    double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
     char *keep = (char *)malloc((size_t)kmax);
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
+    int32_t *sel = (int32_t *)malloc((size_t)limit * sizeof(int32_t));
+    uint8_t *bucket = (uint8_t *)malloc((size_t)limit);
+    int32_t count[NEAR_BUCKETS + 1];
     int rc = 0, have_block = 0;
     int64_t leaf_s = 0, leaf_e = 0;
     double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !soa || !ell || !hs || !keep || !mk) { rc = -1; goto done; }
+    if (!h.c || !q || !d2 || !mu || !soa || !ell || !hs || !keep || !mk || !sel || !bucket) {
+        rc = -1;
+        goto done;
+    }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         double tau = INFINITY;
@@ -711,12 +777,12 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                 double dx = blk.x[j] - px, dy = blk.y[j] - py, dz = blk.z[j] - pz;
                 bd[j] = dx * dx + dy * dy + dz * dz;
             }
-            for (int64_t j = 0; j < nb; j++) { /* branch-free: h.c holds limit >= nb */
-                h.c[m].d2 = bd[j]; h.c[m].idx = blk.idx[j]; h.c[m].pos = blk.pos[j];
+            for (int64_t j = 0; j < nb; j++) { /* branch-free: sel holds limit >= nb */
+                sel[m] = (int32_t)j;
                 m += bd[j] <= limit2;
             }
             if (m >= kmax) {
-                select_sorted(h.c, m, kmax);
+                nearest_of_block(&blk, bd, sel, m, kmax, limit2, h.c, bucket, count);
                 found = 1;
             }
         }
@@ -821,6 +887,8 @@ done:
     free(hs);
     free(keep);
     free(mk);
+    free(sel);
+    free(bucket);
     return rc;
 }
 
