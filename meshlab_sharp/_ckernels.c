@@ -15,6 +15,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #if defined(__x86_64__) && defined(__GLIBC__) && defined(MS_LIBMVEC)
 #include <emmintrin.h>
@@ -127,6 +130,26 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
         double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
         int w = gaussian && h2 > 0.0;
         if (w) gaussian_weights(d2, m, h2, mu);
+#ifdef __SSE2__
+        /* the same products and sums, two accumulators a lane: (c00, c01), (c02, c11),
+         * (c12, c22) */
+        __m128d a0 = _mm_setzero_pd(), a1 = a0, a2 = a0;
+        __m128d mxy = _mm_loadu_pd(mean), mzz = _mm_set1_pd(mean[2]);
+        for (int64_t j = 0; j < m; j++) {
+            __m128d r = _mm_sub_pd(_mm_loadu_pd(q + 3 * j), mxy);         /* rx ry */
+            __m128d rz = _mm_sub_pd(_mm_set1_pd(q[3 * j + 2]), mzz);      /* rz rz */
+            __m128d wj = _mm_set1_pd(w ? mu[j] : 1.0);
+            __m128d m = _mm_mul_pd(wj, r), mz = _mm_mul_pd(wj, rz);       /* mx my, mz mz */
+            a0 = _mm_add_pd(a0, _mm_mul_pd(_mm_unpacklo_pd(m, m), r));   /* mx rx, mx ry */
+            a1 = _mm_add_pd(a1, _mm_mul_pd(m, _mm_shuffle_pd(rz, r, 2))); /* mx rz, my ry */
+            a2 = _mm_add_pd(a2, _mm_mul_pd(_mm_shuffle_pd(m, mz, 1), rz)); /* my rz, mz rz */
+        }
+        double acc[6];
+        _mm_storeu_pd(acc, a0);
+        _mm_storeu_pd(acc + 2, a1);
+        _mm_storeu_pd(acc + 4, a2);
+        c00 = acc[0]; c01 = acc[1]; c02 = acc[2]; c11 = acc[3]; c12 = acc[4]; c22 = acc[5];
+#else
         for (int64_t j = 0; j < m; j++) {
             double rx = q[3 * j] - mean[0], ry = q[3 * j + 1] - mean[1],
                    rz = q[3 * j + 2] - mean[2];
@@ -135,6 +158,7 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
             c00 += mx * rx; c01 += mx * ry; c02 += mx * rz;
             c11 += my * ry; c12 += my * rz; c22 += mz * rz;
         }
+#endif
         smallest_eigvec(c00, c01, c02, c11, c12, c22, nrm);
     }
     if (normal != NULL) {
@@ -890,6 +914,20 @@ done:
     free(sel);
     free(bucket);
     return rc;
+}
+
+/* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx)
+ * for the points [begin, end) of p (n, 3), cleaned order: out[i] = 1 when i is not among
+ * the kmax nearest of j = near[i], i.e. when (|p_i - p_j|^2, i) comes after (kth_d2[j],
+ * kth_idx[j]) in the lists' order (squared distance, then index). */
+void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
+                 const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out) {
+    for (int64_t i = begin; i < end; i++) {
+        const double *a = p + 3 * i, *b = p + 3 * near[i];
+        double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+        double d2 = dx * dx + dy * dy + dz * dz, kth = kth_d2[near[i]];
+        out[i] = !(d2 < kth || (d2 == kth && i <= kth_idx[near[i]]));
+    }
 }
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into

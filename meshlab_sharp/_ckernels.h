@@ -104,6 +104,13 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
                   const cloud_out_t *out);
 
+/* robust.isolated_points from a pass's statistics near, kth_d2, kth_idx (n, cleaned
+ * order) for the points [begin, end) of p (n, 3): out[i] = 1 when i is not among the
+ * kmax nearest of near[i] ((|p_i - p_near[i]|^2, i) after that point's kmax-th
+ * neighbour in the lists' order). */
+void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
+                 const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
+
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...], cleaned indices sorted by (squared distance, index). Returns 0, or
  * -1 out of memory. */

@@ -46,6 +46,10 @@ _SIGNATURES = {
         _int,
         [_c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _i64, _i64, _i64, _c_void_p],
     ),
+    "ms_isolated": (
+        None,
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
+    ),
     "ms_local_scale_csr": (
         _int,
         [_c_void_p, _c_void_p, _c_void_p, _int, _i64, _i64, _c_void_p, _c_void_p],
@@ -297,6 +301,25 @@ class CloudStats:
     kth_d2: np.ndarray  # (n,) float64 squared distance of the k-th neighbour
     kth_idx: np.ndarray  # (n,) int64 its index
     noise: np.ndarray  # (n,) float64 noise ratio over the noise_k nearest
+
+
+def isolated_from_stats(points: np.ndarray, stats: CloudStats, workers: int = -1) -> np.ndarray:
+    """:func:`meshlab_sharp.robust.isolated_points` from a pass's :class:`CloudStats` at
+    ``k_max`` over ``points`` (n, 3) (no kNN table): ``i`` is isolated when ``(|p_i -
+    p_j|^2, i)``, ``j = near[i]``, comes after ``j``'s k_max-th neighbour in the lists'
+    order (squared distance, then index). (n,) bool."""
+    lib = _LIB
+    assert lib is not None
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.empty(len(points), dtype=np.bool_)
+    args = (_ptr(points), _ptr(stats.near), _ptr(stats.kth_d2), _ptr(stats.kth_idx))
+
+    def task(a: int, b: int) -> int:
+        lib.ms_isolated(*args, a, b, _ptr(out))
+        return 0
+
+    _run_chunks(len(points), workers, task)
+    return out
 
 
 @dataclass

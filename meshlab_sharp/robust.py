@@ -60,7 +60,6 @@ from .neighbourhoods import (
     Neighbourhood,
     RingNeighbourhoods,
     build_neighbourhoods,
-    squared_distances,
 )
 from .normals import Weighting
 from .projected_distance import projected_distances
@@ -377,16 +376,15 @@ class SheetNeighbourhoods:
         return Neighbourhood(indptr, idx[keep])
 
 
-def _isolated_from_stats(points: np.ndarray, stats: _kernels.CloudStats) -> np.ndarray:
+def _isolated_from_stats(
+    points: np.ndarray, stats: _kernels.CloudStats, workers: int = -1
+) -> np.ndarray:
     """:func:`isolated_points` from the pass's :class:`~meshlab_sharp._kernels.CloudStats` at
     ``k_max`` (no kNN table): ``i`` is among the k_max nearest of ``j = near[i]`` when
     ``(|p_i - p_j|^2, i)`` does not come after ``j``'s k_max-th neighbour in the
-    lists' order (squared distance, then index). (n,) bool."""
-    j = stats.near
-    d2 = squared_distances(points, points[j])
-    kth = stats.kth_d2[j]
-    among = (d2 < kth) | ((d2 == kth) & (np.arange(len(points)) <= stats.kth_idx[j]))
-    return ~among
+    lists' order (squared distance, then index). (n,) bool, computed in C
+    (:func:`meshlab_sharp._kernels.isolated_from_stats`)."""
+    return _kernels.isolated_from_stats(points, stats, workers)
 
 
 def _segment_sums(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
@@ -761,10 +759,11 @@ class RobustSetup:
             if compiled:
                 self.fused = self._pass(k0, sheet)
                 assert self.fused.stats is not None
-                isolated = _isolated_from_stats(points, self.fused.stats)
+                isolated = _isolated_from_stats(points, self.fused.stats, workers)
             else:
                 isolated = isolated_points(neighbourhoods.indices)
             if isolated.any():
+                self.fused = None  # freed before the pass over the points kept
                 self.keep = np.flatnonzero(~isolated)
                 self.points = np.ascontiguousarray(points[self.keep])
                 self.neighbourhoods = build_neighbourhoods(
@@ -772,8 +771,10 @@ class RobustSetup:
                 )
                 if compiled:
                     self.fused = self._pass(k0, sheet)
+            del isolated
             if self.fused is not None and self.fused.stats is not None:
                 noise = _noise_factor(self.fused.stats.noise)
+                self.fused.stats = None  # read: its (n,) arrays are not kept
                 self.scale_neighbourhoods = self.neighbourhoods
             else:
                 self.scale_neighbourhoods = self._sheets()

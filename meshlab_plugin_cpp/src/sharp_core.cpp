@@ -546,13 +546,12 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	bar.report(0, "kd-tree");
 	auto tree = std::make_unique<Tree>(pts);
 	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
+	std::vector<uint8_t> isolated(tree->n);
+	ms_isolated(pts.data(), pass.near.data(), pass.kthD2.data(), pass.kthIdx.data(), 0, tree->n,
+	            isolated.data());
 	std::vector<Index> keep;
-	for (Index i = 0; i < tree->n; ++i) {
-		const Index j = pass.near[i];
-		const double dx = pts[3 * i] - pts[3 * j], dy = pts[3 * i + 1] - pts[3 * j + 1], dz = pts[3 * i + 2] - pts[3 * j + 2];
-		const double d2 = dx * dx + dy * dy + dz * dz, kth = pass.kthD2[j];
-		if (d2 < kth || (d2 == kth && i <= pass.kthIdx[j])) keep.push_back(i);  // not isolated
-	}
+	for (Index i = 0; i < tree->n; ++i)
+		if (!isolated[i]) keep.push_back(i);
 	if (Index(keep.size()) < tree->n) {
 		if (Index(keep.size()) < top0) throw InputError("too few points are left once isolated points are removed");
 		std::vector<double> kept(3 * keep.size());
