@@ -62,10 +62,20 @@ static void smallest_eigvec(double a, double b, double c, double d, double e, do
         out[0] = k == 0; out[1] = k == 1; out[2] = k == 2;
         return;
     }
-    /* scale by a power of two (exact) to O(1), for range safety */
-    int ex;
-    frexp(scale, &ex);
-    double s = ldexp(1.0, -ex);
+    /* scale by a power of two (exact) to O(1), for range safety: s = 2^-e with scale =
+     * f 2^e, f in [0.5, 1) (frexp), built from the exponent bits when s is normal */
+    double s;
+    uint64_t bits;
+    memcpy(&bits, &scale, sizeof bits);
+    int64_t biased = (int64_t)(bits >> 52); /* scale > 0: no sign bit */
+    if (biased >= 1 && biased <= 2044) {
+        bits = (uint64_t)(2045 - biased) << 52;
+        memcpy(&s, &bits, sizeof s);
+    } else {
+        int ex;
+        frexp(scale, &ex);
+        s = ldexp(1.0, -ex);
+    }
     a *= s; b *= s; c *= s; d *= s; e *= s; f *= s;
     p1 = b * b + c * c + e * e;
     double q = (a + d + f) / 3.0;
