@@ -719,7 +719,9 @@ class RobustSetup:
     fused : ScalePass or None
         The compiled pass over ``points`` at ``scales`` to pass to ``run_scales``, when
         the set-up's search already made it (compiled backend, a cloud whose noise did
-        not grow the scales); None otherwise.
+        not grow the scales); None otherwise, and once :meth:`finish` starts (its
+        per-scale arrays, read by ``run_scales``, are released before support and
+        thinning).
     """
 
     def __init__(
@@ -901,6 +903,7 @@ class RobustSetup:
             sharp edge (:func:`meshlab_sharp.creases.sharp_vertices`) are features with
             strength 1.
         """
+        self.fused = None
         if mask.any():
             top = max(self.scales)
             if self.faces is None:
