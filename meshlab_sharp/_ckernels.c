@@ -625,6 +625,16 @@ static void knn_search(const tree_t *T, const double *q, int64_t k, double tau, 
     }
 }
 
+/* An upper bound of the squared k-th distance of the point pi, from the k-th distance
+ * prev_r of the point prev_p (triangle inequality, with room for rounding); INFINITY
+ * when prev_r < 0 (no previous point). */
+static inline double kth_bound(const double *pi, const double *prev_p, double prev_r) {
+    if (prev_r < 0.0) return INFINITY;
+    double ex = pi[0] - prev_p[0], ey = pi[1] - prev_p[1], ez = pi[2] - prev_p[2];
+    double t = prev_r + sqrt(ex * ex + ey * ey + ez * ez);
+    return t * t * (1.0 + 1e-9) + 1e-300;
+}
+
 /* The points of a leaf's neighbourhood, as arrays. */
 typedef struct {
     double *x, *y, *z, *d2;
@@ -783,12 +793,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
-        double tau = INFINITY;
-        if (prev_r >= 0.0) {
-            double ex = pi[0] - prev_p[0], ey = pi[1] - prev_p[1], ez = pi[2] - prev_p[2];
-            double t = prev_r + sqrt(ex * ex + ey * ey + ez * ez);
-            tau = t * t * (1.0 + 1e-9) + 1e-300;
-        }
+        double tau = kth_bound(pi, prev_p, prev_r);
         if (i >= leaf_e) {
             int64_t t = leaf_of(&T, i, &leaf_s, &leaf_e);
             if (leaf_max > 0.0) r2 = leaf_max * BLOCK_GROW;
@@ -942,15 +947,22 @@ void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...] (cleaned indices sorted by (squared distance, index), the rows of
- * ms_cloud_pdis's kNN table). Returns 0, or -1 out of memory. */
+ * ms_cloud_pdis's kNN table). Each search is pruned from the start by the bound that
+ * the previous row's k-th distance gives (rows in increasing tree position: near each
+ * other). Returns 0, or -1 out of memory. */
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx) {
     tree_t T = {p, orig, box, n, depth};
     heap_t h = {(cand_t *)malloc((size_t)k * sizeof(cand_t)), 0, k, INFINITY};
     if (!h.c) return -1;
+    double prev_r = -1.0;
+    const double *prev_p = p;
     for (int64_t r = begin; r < end; r++) {
-        knn_search(&T, p + 3 * pos[r], k, INFINITY, &h);
+        const double *pi = p + 3 * pos[r];
+        knn_search(&T, pi, k, kth_bound(pi, prev_p, prev_r), &h);
         for (int64_t j = 0; j < k; j++) out_idx[r * k + j] = h.c[j].idx;
+        prev_r = sqrt(h.c[k - 1].d2);
+        prev_p = pi;
     }
     free(h.c);
     return 0;

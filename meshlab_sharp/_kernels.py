@@ -279,16 +279,22 @@ def cloud_knn(tree: KdTree, k: int, workers: int = -1) -> np.ndarray:
 
 def cloud_knn_rows(tree: KdTree, rows: np.ndarray, k: int, workers: int = -1) -> np.ndarray:
     """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64, each by a
-    search of the tree (for a few rows: the table of every point is not built)."""
+    search of the tree (for a few rows: the table of every point is not built), the
+    rows searched in tree order."""
     lib = _LIB
     assert lib is not None
     t = tree
     where = np.empty(t.n, dtype=np.int64)
     where[t.orig] = np.arange(t.n, dtype=np.int64)
-    pos = np.ascontiguousarray(where[np.asarray(rows, dtype=np.int64)])
-    out = np.empty((len(pos), k), dtype=np.int64)
+    pos = where[np.asarray(rows, dtype=np.int64)]
+    del where
+    order = np.argsort(pos, kind="stable")
+    pos = np.ascontiguousarray(pos[order])
+    found = np.empty((len(pos), k), dtype=np.int64)
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(pos), k)
-    _run_chunks(len(pos), workers, lambda a, b: lib.ms_knn_rows(*args, a, b, _ptr(out)))
+    _run_chunks(len(pos), workers, lambda a, b: lib.ms_knn_rows(*args, a, b, _ptr(found)))
+    out = np.empty_like(found)
+    out[order] = found
     return out
 
 
