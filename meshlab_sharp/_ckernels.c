@@ -225,38 +225,39 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
     *off = sqrt(cx * cx + cy * cy + cz * cz);
 }
 
-/* local_scale_one for the prefixes of one neighbour list at every scale: v holds 4
- * rows of ld values (the lengths |q_j|, then the x, y and z of q_j, j < max(ks)); scale
- * s (ks increasing) writes ell[s] and off[s]. The same sums as segment_sum,
- * but the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by
- * the prefixes (the same numbers, added in the same order): O(max(ks)) per point
- * instead of O(sum of ks) for lists of up to 129 points. */
-static void local_scale_prefixes(const double *v, int64_t ld, const int64_t *ks, int nscales,
-                                 double *ell, double *off) {
-    double r[4][8];
-    int64_t i = 0; /* terms v[t][1..i] in r, a multiple of 8 (0: r not started) */
+/* local_scale_one for the prefixes of one neighbour list at every scale: v holds, for
+ * each neighbour j < max(ks), the 4 values |q_j|, then the x, y and z of q_j (v[4 j + t]);
+ * scale s (ks increasing) writes ell[s] and off[s]. The same sums as segment_sum, but
+ * the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by the
+ * prefixes (the same numbers, added in the same order): O(max(ks)) per point instead
+ * of O(sum of ks) for lists of up to 129 points. The 4 sums go side by side (t
+ * innermost: the compiler pairs them in SIMD lanes, each lane the scalar arithmetic). */
+static void local_scale_prefixes(const double *v, const int64_t *ks, int nscales, double *ell,
+                                 double *off) {
+    double r[8][4] = {{0}};
+    int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
         double sum[4];
         if (nn >= 8 && nn <= 128) {
             if (i == 0) {
-                for (int t = 0; t < 4; t++)
-                    for (int j = 0; j < 8; j++) r[t][j] = v[t * ld + 1 + j];
+                memcpy(r, v + 4, sizeof r);
                 i = 8;
             }
             int64_t nb = nn - nn % 8;
             for (; i < nb; i += 8) {
-                for (int t = 0; t < 4; t++)
-                    for (int j = 0; j < 8; j++) r[t][j] += v[t * ld + 1 + i + j];
+                for (int j = 0; j < 8; j++)
+                    for (int t = 0; t < 4; t++) r[j][t] += v[4 * (1 + i + j) + t];
             }
-            for (int t = 0; t < 4; t++) {
-                const double *a = r[t];
-                double res = ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
-                for (int64_t u = nb; u < nn; u++) res += v[t * ld + 1 + u];
-                sum[t] = v[t * ld] + res;
-            }
+            double res[4];
+            for (int t = 0; t < 4; t++)
+                res[t] = ((r[0][t] + r[1][t]) + (r[2][t] + r[3][t])) +
+                         ((r[4][t] + r[5][t]) + (r[6][t] + r[7][t]));
+            for (int64_t u = nb; u < nn; u++)
+                for (int t = 0; t < 4; t++) res[t] += v[4 * (1 + u) + t];
+            for (int t = 0; t < 4; t++) sum[t] = v[t] + res[t];
         } else {
-            for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t * ld, m, 1);
+            for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t, m, 4);
         }
         if (m == 0) {
             ell[s] = 0.0;
@@ -881,12 +882,12 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         }
         if (out->relative != NULL) {
             for (int64_t j = 0; j < kk; j++) {
-                soa[j] = sqrt(d2[j]);
-                soa[kmax + j] = q[3 * j];
-                soa[2 * kmax + j] = q[3 * j + 1];
-                soa[3 * kmax + j] = q[3 * j + 2];
+                soa[4 * j] = sqrt(d2[j]);
+                soa[4 * j + 1] = q[3 * j];
+                soa[4 * j + 2] = q[3 * j + 1];
+                soa[4 * j + 3] = q[3 * j + 2];
             }
-            local_scale_prefixes(soa, kmax, mk, nscales, ell, ell + nscales);
+            local_scale_prefixes(soa, mk, nscales, ell, ell + nscales);
         }
         if (out->pdis == NULL && out->relative == NULL) continue;
         double score = 0.0, sx = 0, sy = 0, sz = 0, h2 = 0;
