@@ -127,6 +127,40 @@ void ms_eigvecs(const double *cov, int64_t c, double *out) {
 
 /* ------------------------------------------------------------------ per-point arithmetic */
 
+/* The scatter sum_j w_j (q_j - mean)(q_j - mean)^T of the offsets q (m, 3), weights w
+ * (m) or NULL (all 1), into c as c00 c01 c02 c11 c12 c22: each entry summed over j in
+ * order from 0, of the products (w_j r_a) r_b, r = q_j - mean. */
+static inline void scatter(const double *q, int64_t m, const double *mean, const double *w,
+                           double *c) {
+#ifdef __SSE2__
+    /* two entries a lane: (c00, c01), (c02, c11), (c12, c22) */
+    __m128d a0 = _mm_setzero_pd(), a1 = a0, a2 = a0;
+    __m128d mxy = _mm_loadu_pd(mean), mzz = _mm_set1_pd(mean[2]);
+    for (int64_t j = 0; j < m; j++) {
+        __m128d r = _mm_sub_pd(_mm_loadu_pd(q + 3 * j), mxy);         /* rx ry */
+        __m128d rz = _mm_sub_pd(_mm_set1_pd(q[3 * j + 2]), mzz);      /* rz rz */
+        __m128d wj = _mm_set1_pd(w ? w[j] : 1.0);
+        __m128d s = _mm_mul_pd(wj, r), sz = _mm_mul_pd(wj, rz);       /* mx my, mz mz */
+        a0 = _mm_add_pd(a0, _mm_mul_pd(_mm_unpacklo_pd(s, s), r));   /* mx rx, mx ry */
+        a1 = _mm_add_pd(a1, _mm_mul_pd(s, _mm_shuffle_pd(rz, r, 2))); /* mx rz, my ry */
+        a2 = _mm_add_pd(a2, _mm_mul_pd(_mm_shuffle_pd(s, sz, 1), rz)); /* my rz, mz rz */
+    }
+    _mm_storeu_pd(c, a0);
+    _mm_storeu_pd(c + 2, a1);
+    _mm_storeu_pd(c + 4, a2);
+#else
+    double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
+    for (int64_t j = 0; j < m; j++) {
+        double rx = q[3 * j] - mean[0], ry = q[3 * j + 1] - mean[1], rz = q[3 * j + 2] - mean[2];
+        double wj = w ? w[j] : 1.0;
+        double mx = wj * rx, my = wj * ry, mz = wj * rz;
+        c00 += mx * rx; c01 += mx * ry; c02 += mx * rz;
+        c11 += my * ry; c12 += my * rz; c22 += mz * rz;
+    }
+    c[0] = c00; c[1] = c01; c[2] = c02; c[3] = c11; c[4] = c12; c[5] = c22;
+#endif
+}
+
 /* Normal and projected distance of one neighbourhood given as offsets q (m, 3) from
  * the point and their squared lengths d2 (m); see docs/implementation-notes.md.
  * fixed: a fixed unit normal or NULL (PCA). h2 is max d2 (given). */
@@ -137,39 +171,11 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
     if (fixed != NULL) {
         nrm[0] = fixed[0]; nrm[1] = fixed[1]; nrm[2] = fixed[2];
     } else {
-        double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
         int w = gaussian && h2 > 0.0;
         if (w) gaussian_weights(d2, m, h2, mu);
-#ifdef __SSE2__
-        /* the same products and sums, two accumulators a lane: (c00, c01), (c02, c11),
-         * (c12, c22) */
-        __m128d a0 = _mm_setzero_pd(), a1 = a0, a2 = a0;
-        __m128d mxy = _mm_loadu_pd(mean), mzz = _mm_set1_pd(mean[2]);
-        for (int64_t j = 0; j < m; j++) {
-            __m128d r = _mm_sub_pd(_mm_loadu_pd(q + 3 * j), mxy);         /* rx ry */
-            __m128d rz = _mm_sub_pd(_mm_set1_pd(q[3 * j + 2]), mzz);      /* rz rz */
-            __m128d wj = _mm_set1_pd(w ? mu[j] : 1.0);
-            __m128d m = _mm_mul_pd(wj, r), mz = _mm_mul_pd(wj, rz);       /* mx my, mz mz */
-            a0 = _mm_add_pd(a0, _mm_mul_pd(_mm_unpacklo_pd(m, m), r));   /* mx rx, mx ry */
-            a1 = _mm_add_pd(a1, _mm_mul_pd(m, _mm_shuffle_pd(rz, r, 2))); /* mx rz, my ry */
-            a2 = _mm_add_pd(a2, _mm_mul_pd(_mm_shuffle_pd(m, mz, 1), rz)); /* my rz, mz rz */
-        }
-        double acc[6];
-        _mm_storeu_pd(acc, a0);
-        _mm_storeu_pd(acc + 2, a1);
-        _mm_storeu_pd(acc + 4, a2);
-        c00 = acc[0]; c01 = acc[1]; c02 = acc[2]; c11 = acc[3]; c12 = acc[4]; c22 = acc[5];
-#else
-        for (int64_t j = 0; j < m; j++) {
-            double rx = q[3 * j] - mean[0], ry = q[3 * j + 1] - mean[1],
-                   rz = q[3 * j + 2] - mean[2];
-            double wj = w ? mu[j] : 1.0;
-            double mx = wj * rx, my = wj * ry, mz = wj * rz;
-            c00 += mx * rx; c01 += mx * ry; c02 += mx * rz;
-            c11 += my * ry; c12 += my * rz; c22 += mz * rz;
-        }
-#endif
-        smallest_eigvec(c00, c01, c02, c11, c12, c22, nrm);
+        double c[6];
+        scatter(q, m, mean, w ? mu : NULL, c);
+        smallest_eigvec(c[0], c[1], c[2], c[3], c[4], c[5], nrm);
     }
     if (normal != NULL) {
         normal[0] = nrm[0]; normal[1] = nrm[1]; normal[2] = nrm[2];
@@ -307,15 +313,9 @@ int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indic
 static double noise_ratio(const double *q, int64_t k) {
     double sx = 0, sy = 0, sz = 0;
     for (int64_t j = 0; j < k; j++) { sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2]; }
-    double c[3] = {sx / (double)k, sy / (double)k, sz / (double)k};
-    double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
-    for (int64_t j = 0; j < k; j++) {
-        double rx = q[3 * j] - c[0], ry = q[3 * j + 1] - c[1], rz = q[3 * j + 2] - c[2];
-        c00 += rx * rx; c01 += rx * ry; c02 += rx * rz;
-        c11 += ry * ry; c12 += ry * rz; c22 += rz * rz;
-    }
-    double nrm[3];
-    smallest_eigvec(c00, c01, c02, c11, c12, c22, nrm);
+    double mean[3] = {sx / (double)k, sy / (double)k, sz / (double)k}, c[6], nrm[3];
+    scatter(q, k, mean, NULL, c);
+    smallest_eigvec(c[0], c[1], c[2], c[3], c[4], c[5], nrm);
     const double *d = q + 3;
     double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     double across = fabs(d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2]);
