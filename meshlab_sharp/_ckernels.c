@@ -440,9 +440,11 @@ static void select_axis(double *x, int64_t *idx, int64_t n, int64_t m, int a, ui
 /* Split the points [s, e) at their median along the widest side of their bounding box,
  * recursively down to single points, so that the tree order also orders the points
  * inside a leaf (consecutive points are near each other: see ms_cloud_pdis). The boxes
- * of the nodes down to `depth` go into box (node t at depth d). */
+ * of the nodes down to `depth` go into box (node t at depth d). The nodes at depth
+ * `stop` are left as they are (ms_kdtree_build_subtrees; stop < 0: none). */
 static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
-                       int depth, double *box, uint64_t *rng) {
+                       int depth, int stop, double *box, uint64_t *rng) {
+    if (d == stop) return;
     if (e - s < 2 && d > depth) return;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (int64_t j = s; j < e; j++) {
@@ -464,18 +466,40 @@ static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t,
     }
     int64_t m = s + (e - s) / 2;
     select_axis(x + 3 * s, idx + s, e - s, m - s, a, rng);
-    build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, box, rng);
-    build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, box, rng);
+    build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, stop, box, rng);
+    build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, stop, box, rng);
 }
 
-/* Build the tree of p (n, 3): the points in tree order into tp (n, 3), their indices
- * into torig (n), the boxes of the 2^(depth + 1) - 1 nodes into box. */
-void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
-                     double *box) {
+/* The depth at which ms_kdtree_build_top stops: min(depth, MS_KD_TOP). */
+static int top_levels(int depth) { return depth < MS_KD_TOP ? depth : MS_KD_TOP; }
+
+void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                         double *box) {
     memcpy(tp, p, (size_t)n * 3 * sizeof(double));
     for (int64_t i = 0; i < n; i++) torig[i] = i;
     uint64_t rng = 0x9e3779b97f4a7c15ULL;
-    build_node(tp, torig, 0, n, 0, 0, depth, box, &rng);
+    build_node(tp, torig, 0, n, 0, 0, depth, top_levels(depth), box, &rng);
+}
+
+void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, int64_t first,
+                              int64_t last, double *box) {
+    int top = top_levels(depth);
+    for (int64_t u = first; u < last; u++) {
+        int64_t s = 0, e = n; /* the points of node u at depth top: its median halves */
+        for (int d = top - 1; d >= 0; d--) {
+            int64_t m = s + (e - s) / 2;
+            if ((u >> d) & 1) s = m;
+            else e = m;
+        }
+        uint64_t rng = 0x9e3779b97f4a7c15ULL ^ (0xbf58476d1ce4e5b9ULL * (uint64_t)(u + 1));
+        build_node(tp, torig, s, e, ((int64_t)1 << top) - 1 + u, top, depth, -1, box, &rng);
+    }
+}
+
+void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                     double *box) {
+    ms_kdtree_build_top(p, n, depth, tp, torig, box);
+    ms_kdtree_build_subtrees(tp, torig, n, depth, 0, (int64_t)1 << top_levels(depth), box);
 }
 
 typedef struct {

@@ -54,6 +54,9 @@
 #define MS_CHUNK 8192
 /* Most points in a leaf of the kd-tree (_kernels.KD_LEAF). */
 #define MS_KD_LEAF 16
+/* The kd-tree is built in two steps: its top MS_KD_TOP levels, then the 2^MS_KD_TOP
+ * subtrees below them, each on its own (threads). */
+#define MS_KD_TOP 3
 
 #ifdef __cplusplus
 extern "C" {
@@ -92,6 +95,15 @@ typedef struct {
  * (n), the tight boxes (lo xyz, hi xyz) of the 2^(depth + 1) - 1 nodes into box. */
 void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
                      double *box);
+
+/* ms_kdtree_build in two steps, the same tree: the top levels, down to t = min(depth,
+ * MS_KD_TOP) (copies p into tp, fills torig), then the subtrees of the nodes u in
+ * [first, last) of the 2^t at depth t (disjoint ranges of tp, torig and box: callers
+ * run them on threads). */
+void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                         double *box);
+void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, int64_t first,
+                              int64_t last, double *box);
 
 /* Unit eigenvector of the smallest eigenvalue of each symmetric matrix cov (c, 6) given
  * as a00 a01 a02 a11 a12 a22, into out (c, 3). */

@@ -32,10 +32,17 @@ BACKENDS: tuple[str, ...] = ("compiled", "numpy")
 CHUNK = _header.integer("CHUNK")
 #: Most points in a leaf of the kd-tree.
 KD_LEAF = _header.integer("KD_LEAF")
+#: Levels of the kd-tree built before its subtrees (which are built on threads).
+KD_TOP = _header.integer("KD_TOP")
 
 _c_void_p, _i64, _f64, _int = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
 _SIGNATURES = {
     "ms_kdtree_build": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_kdtree_build_top": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_kdtree_build_subtrees": (
+        None,
+        [_c_void_p, _c_void_p, _i64, _int, _i64, _i64, _c_void_p],
+    ),
     "ms_eigvecs": (None, [_c_void_p, _i64, _c_void_p]),
     "ms_cloud_pdis": (
         _int,
@@ -173,9 +180,9 @@ def _thread_scratch(n: int, dtype: type) -> Callable[[], np.ndarray]:
     return get
 
 
-def _run_chunks(n: int, workers: int, task: Callable[[int, int], int]) -> None:
-    """task(begin, end) over [0, n) in chunks, on ``workers`` threads."""
-    ranges = [(s, min(s + CHUNK, n)) for s in range(0, n, CHUNK)]
+def _run_chunks(n: int, workers: int, task: Callable[[int, int], int], chunk: int = CHUNK) -> None:
+    """task(begin, end) over [0, n) in chunks of ``chunk``, on ``workers`` threads."""
+    ranges = [(s, min(s + chunk, n)) for s in range(0, n, chunk)]
     w = _workers(workers)
     if w == 1 or len(ranges) == 1:
         codes = [task(a, b) for a, b in ranges]
@@ -210,8 +217,10 @@ class KdTree:
         return len(self.points)
 
 
-def build_tree(points: np.ndarray) -> KdTree:
-    """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points."""
+def build_tree(points: np.ndarray, workers: int = -1) -> KdTree:
+    """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points: its
+    top :data:`KD_TOP` levels, then the subtrees below them on ``workers`` threads (the
+    same tree as ``ms_kdtree_build``)."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -220,7 +229,14 @@ def build_tree(points: np.ndarray) -> KdTree:
     tree_points = np.empty_like(points)
     orig = np.empty(n, dtype=np.int64)
     boxes = np.empty((2 ** (depth + 1) - 1, 6))
-    lib.ms_kdtree_build(_ptr(points), n, depth, _ptr(tree_points), _ptr(orig), _ptr(boxes))
+    tp, to, tb = _ptr(tree_points), _ptr(orig), _ptr(boxes)
+    lib.ms_kdtree_build_top(_ptr(points), n, depth, tp, to, tb)
+
+    def task(a: int, b: int) -> int:
+        lib.ms_kdtree_build_subtrees(tp, to, n, depth, a, b, tb)
+        return 0
+
+    _run_chunks(2 ** min(depth, KD_TOP), workers, task, chunk=1)
     return KdTree(tree_points, orig, boxes, depth)
 
 
