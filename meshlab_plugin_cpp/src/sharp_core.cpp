@@ -591,9 +591,15 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	if (rows.empty()) return d;
 	bar.report(85, "support and thinning");
 	const int top = r.scales.back();
-	std::vector<Index> where(n), pos(rows.size()), table(rows.size() * top);
+	std::vector<Index> where(n), pos(rows.size()), rank(rows.size()), table(rows.size() * top);
 	for (Index t = 0; t < n; ++t) where[tree->orig[t]] = t;
 	for (size_t c2 = 0; c2 < rows.size(); ++c2) pos[c2] = where[rows[c2]];
+	// searched in tree order (_kernels.cloud_knn_rows): row c2 lands at rank[c2]
+	std::vector<Index> order(rows.size());
+	std::iota(order.begin(), order.end(), Index(0));
+	std::sort(order.begin(), order.end(), [&](Index a, Index b) { return pos[a] < pos[b]; });
+	for (size_t c = 0; c < rows.size(); ++c) rank[order[c]] = Index(c);
+	std::sort(pos.begin(), pos.end());
 	const Tree &t = *tree;
 	chunks(Index(rows.size()), [&](unsigned, Index a, Index b) {
 		return ms_knn_rows(t.pts.data(), t.orig.data(), t.n, t.box.data(), t.depth, pos.data(), top, a, b,
@@ -601,7 +607,7 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	}, bar, 85, 95, "support and thinning");
 	Lists D, Sup, K;
 	for (size_t c2 = 0; c2 < rows.size(); ++c2) {
-		const Index *row = &table[c2 * top];
+		const Index *row = &table[rank[c2] * top];
 		D.add(row, row + top);
 		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
 		K.add(row, row + std::min(thinKnn, top));
