@@ -856,11 +856,11 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         if (r2 < 0.0) r2 = kth * BLOCK_GROW; /* the first point of the chunk */
         prev_r = sqrt(kth);
         prev_p[0] = pi[0]; prev_p[1] = pi[1]; prev_p[2] = pi[2];
-        int64_t oi = orig[i];
+        int64_t ci = orig[i], oi = out->tree_order ? i : ci; /* cleaned index, its row */
         if (out->idx != NULL) {
             for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = h.c[j].idx;
         }
-        if (out->near != NULL) out->near[oi] = kmax > 1 ? h.c[1].idx : oi;
+        if (out->near != NULL) out->near[oi] = kmax > 1 ? h.c[1].idx : ci;
         if (out->kth_d2 != NULL) {
             out->kth_d2[oi] = h.c[kmax - 1].d2;
             out->kth_idx[oi] = h.c[kmax - 1].idx;

@@ -257,11 +257,22 @@ class _CloudOut(ctypes.Structure):
         ("sheet_gap", ctypes.c_double),
         ("sheet_min", _i64),
         ("sheet_own", ctypes.c_double),
+        ("tree_order", _i64),
     ]
 
 
 #: The fields of :class:`_CloudOut` that are numbers, not arrays.
 _NUMBERS = ("noise_k", "sheet_gap", "sheet_min", "sheet_own")
+#: The arrays of :class:`_CloudOut` with a leading scale axis, (s, n, ...).
+_PER_SCALE = ("pdis", "normals", "relative")
+
+
+def _to_cleaned_order(rows: np.ndarray, orig: np.ndarray, scratch: np.ndarray) -> None:
+    """``rows`` (n, ...) written at tree positions, moved in place to cleaned order
+    (``orig``: the cleaned index of each position); ``scratch`` (n, ...) of the same
+    dtype and shape."""
+    np.copyto(scratch, rows)
+    rows[orig] = scratch
 
 
 def _cloud_call(
@@ -269,20 +280,35 @@ def _cloud_call(
 ) -> None:
     """One pass of ``ms_cloud_pdis`` over the tree's points at the scales ``ks``; ``out``
     names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
-    ``noise_k``, ``sheet_gap``, ``sheet_min`` and ``sheet_own``."""
+    ``noise_k``, ``sheet_gap``, ``sheet_min`` and ``sheet_own``. Without the kNN table
+    (``idx``) the pass writes its rows in tree order, moved to cleaned order after."""
     lib = _LIB
     assert lib is not None
     t = tree
+    arrays = {
+        name: value
+        for name, value in out.items()
+        if value is not None and name not in _NUMBERS and name != "idx"
+    }
+    tree_order = out.get("idx") is None
     fields = {
         name: value if name in _NUMBERS else _ptr(value)  # type: ignore[arg-type]
         for name, value in out.items()
         if value is not None
     }
-    spec = _CloudOut(**fields)
+    spec = _CloudOut(**fields, tree_order=int(tree_order))
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(ks), len(ks))
     _run_chunks(
         t.n, workers, lambda a, b: lib.ms_cloud_pdis(*args, int(gaussian), a, b, ctypes.byref(spec))
     )
+    if not tree_order:
+        return
+    for name, a in arrays.items():
+        assert isinstance(a, np.ndarray)
+        per_row = a[0] if name in _PER_SCALE else a
+        scratch = np.empty_like(per_row)
+        for rows in a if name in _PER_SCALE else (a,):
+            _to_cleaned_order(rows, t.orig, scratch)
 
 
 def cloud_knn(tree: KdTree, k: int, workers: int = -1) -> np.ndarray:
