@@ -269,10 +269,11 @@ _PER_SCALE = ("pdis", "normals", "relative")
 
 def _to_cleaned_order(rows: np.ndarray, orig: np.ndarray, scratch: np.ndarray) -> None:
     """``rows`` (n, ...) written at tree positions, moved in place to cleaned order
-    (``orig``: the cleaned index of each position); ``scratch`` (n, ...) of the same
-    dtype and shape."""
-    np.copyto(scratch, rows)
-    rows[orig] = scratch
+    (``orig``: the cleaned index of each position); ``scratch``: bytes, at least
+    ``rows.nbytes`` of them."""
+    copy = scratch[: rows.nbytes].view(rows.dtype).reshape(rows.shape)
+    np.copyto(copy, rows)
+    rows[orig] = copy
 
 
 def _cloud_call(
@@ -303,12 +304,10 @@ def _cloud_call(
     )
     if not tree_order:
         return
-    for name, a in arrays.items():
-        assert isinstance(a, np.ndarray)
-        per_row = a[0] if name in _PER_SCALE else a
-        scratch = np.empty_like(per_row)
-        for rows in a if name in _PER_SCALE else (a,):
-            _to_cleaned_order(rows, t.orig, scratch)
+    rows = [r for name, a in arrays.items() for r in (a if name in _PER_SCALE else (a,))]
+    scratch = np.empty(max((r.nbytes for r in rows), default=0), np.uint8)  # one for all
+    for r in rows:
+        _to_cleaned_order(r, t.orig, scratch)
 
 
 def cloud_knn(tree: KdTree, k: int, workers: int = -1) -> np.ndarray:
