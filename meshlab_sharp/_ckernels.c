@@ -15,6 +15,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #if defined(__x86_64__) && defined(__GLIBC__) && defined(MS_LIBMVEC)
 #include <emmintrin.h>
@@ -59,10 +62,20 @@ static void smallest_eigvec(double a, double b, double c, double d, double e, do
         out[0] = k == 0; out[1] = k == 1; out[2] = k == 2;
         return;
     }
-    /* scale by a power of two (exact) to O(1), for range safety */
-    int ex;
-    frexp(scale, &ex);
-    double s = ldexp(1.0, -ex);
+    /* scale by a power of two (exact) to O(1), for range safety: s = 2^-e with scale =
+     * f 2^e, f in [0.5, 1) (frexp), built from the exponent bits when s is normal */
+    double s;
+    uint64_t bits;
+    memcpy(&bits, &scale, sizeof bits);
+    int64_t biased = (int64_t)(bits >> 52); /* scale > 0: no sign bit */
+    if (biased >= 1 && biased <= 2044) {
+        bits = (uint64_t)(2045 - biased) << 52;
+        memcpy(&s, &bits, sizeof s);
+    } else {
+        int ex;
+        frexp(scale, &ex);
+        s = ldexp(1.0, -ex);
+    }
     a *= s; b *= s; c *= s; d *= s; e *= s; f *= s;
     p1 = b * b + c * c + e * e;
     double q = (a + d + f) / 3.0;
@@ -114,6 +127,40 @@ void ms_eigvecs(const double *cov, int64_t c, double *out) {
 
 /* ------------------------------------------------------------------ per-point arithmetic */
 
+/* The scatter sum_j w_j (q_j - mean)(q_j - mean)^T of the offsets q (m, 3), weights w
+ * (m) or NULL (all 1), into c as c00 c01 c02 c11 c12 c22: each entry summed over j in
+ * order from 0, of the products (w_j r_a) r_b, r = q_j - mean. */
+static inline void scatter(const double *q, int64_t m, const double *mean, const double *w,
+                           double *c) {
+#ifdef __SSE2__
+    /* two entries a lane: (c00, c01), (c02, c11), (c12, c22) */
+    __m128d a0 = _mm_setzero_pd(), a1 = a0, a2 = a0;
+    __m128d mxy = _mm_loadu_pd(mean), mzz = _mm_set1_pd(mean[2]);
+    for (int64_t j = 0; j < m; j++) {
+        __m128d r = _mm_sub_pd(_mm_loadu_pd(q + 3 * j), mxy);         /* rx ry */
+        __m128d rz = _mm_sub_pd(_mm_set1_pd(q[3 * j + 2]), mzz);      /* rz rz */
+        __m128d wj = _mm_set1_pd(w ? w[j] : 1.0);
+        __m128d s = _mm_mul_pd(wj, r), sz = _mm_mul_pd(wj, rz);       /* mx my, mz mz */
+        a0 = _mm_add_pd(a0, _mm_mul_pd(_mm_unpacklo_pd(s, s), r));   /* mx rx, mx ry */
+        a1 = _mm_add_pd(a1, _mm_mul_pd(s, _mm_shuffle_pd(rz, r, 2))); /* mx rz, my ry */
+        a2 = _mm_add_pd(a2, _mm_mul_pd(_mm_shuffle_pd(s, sz, 1), rz)); /* my rz, mz rz */
+    }
+    _mm_storeu_pd(c, a0);
+    _mm_storeu_pd(c + 2, a1);
+    _mm_storeu_pd(c + 4, a2);
+#else
+    double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
+    for (int64_t j = 0; j < m; j++) {
+        double rx = q[3 * j] - mean[0], ry = q[3 * j + 1] - mean[1], rz = q[3 * j + 2] - mean[2];
+        double wj = w ? w[j] : 1.0;
+        double mx = wj * rx, my = wj * ry, mz = wj * rz;
+        c00 += mx * rx; c01 += mx * ry; c02 += mx * rz;
+        c11 += my * ry; c12 += my * rz; c22 += mz * rz;
+    }
+    c[0] = c00; c[1] = c01; c[2] = c02; c[3] = c11; c[4] = c12; c[5] = c22;
+#endif
+}
+
 /* Normal and projected distance of one neighbourhood given as offsets q (m, 3) from
  * the point and their squared lengths d2 (m); see docs/implementation-notes.md.
  * fixed: a fixed unit normal or NULL (PCA). h2 is max d2 (given). */
@@ -124,18 +171,11 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
     if (fixed != NULL) {
         nrm[0] = fixed[0]; nrm[1] = fixed[1]; nrm[2] = fixed[2];
     } else {
-        double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
         int w = gaussian && h2 > 0.0;
         if (w) gaussian_weights(d2, m, h2, mu);
-        for (int64_t j = 0; j < m; j++) {
-            double rx = q[3 * j] - mean[0], ry = q[3 * j + 1] - mean[1],
-                   rz = q[3 * j + 2] - mean[2];
-            double wj = w ? mu[j] : 1.0;
-            double mx = wj * rx, my = wj * ry, mz = wj * rz;
-            c00 += mx * rx; c01 += mx * ry; c02 += mx * rz;
-            c11 += my * ry; c12 += my * rz; c22 += mz * rz;
-        }
-        smallest_eigvec(c00, c01, c02, c11, c12, c22, nrm);
+        double c[6];
+        scatter(q, m, mean, w ? mu : NULL, c);
+        smallest_eigvec(c[0], c[1], c[2], c[3], c[4], c[5], nrm);
     }
     if (normal != NULL) {
         normal[0] = nrm[0]; normal[1] = nrm[1]; normal[2] = nrm[2];
@@ -191,38 +231,39 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
     *off = sqrt(cx * cx + cy * cy + cz * cz);
 }
 
-/* local_scale_one for the prefixes of one neighbour list at every scale: v holds 4
- * rows of ld values (the lengths |q_j|, then the x, y and z of q_j, j < max(ks)); scale
- * s (ks increasing) writes ell[s] and off[s]. The same sums as segment_sum,
- * but the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by
- * the prefixes (the same numbers, added in the same order): O(max(ks)) per point
- * instead of O(sum of ks) for lists of up to 129 points. */
-static void local_scale_prefixes(const double *v, int64_t ld, const int64_t *ks, int nscales,
-                                 double *ell, double *off) {
-    double r[4][8];
-    int64_t i = 0; /* terms v[t][1..i] in r, a multiple of 8 (0: r not started) */
+/* local_scale_one for the prefixes of one neighbour list at every scale: v holds, for
+ * each neighbour j < max(ks), the 4 values |q_j|, then the x, y and z of q_j (v[4 j + t]);
+ * scale s (ks increasing) writes ell[s] and off[s]. The same sums as segment_sum, but
+ * the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by the
+ * prefixes (the same numbers, added in the same order): O(max(ks)) per point instead
+ * of O(sum of ks) for lists of up to 129 points. The 4 sums go side by side (t
+ * innermost: the compiler pairs them in SIMD lanes, each lane the scalar arithmetic). */
+static void local_scale_prefixes(const double *v, const int64_t *ks, int nscales, double *ell,
+                                 double *off) {
+    double r[8][4] = {{0}};
+    int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
         double sum[4];
         if (nn >= 8 && nn <= 128) {
             if (i == 0) {
-                for (int t = 0; t < 4; t++)
-                    for (int j = 0; j < 8; j++) r[t][j] = v[t * ld + 1 + j];
+                memcpy(r, v + 4, sizeof r);
                 i = 8;
             }
             int64_t nb = nn - nn % 8;
             for (; i < nb; i += 8) {
-                for (int t = 0; t < 4; t++)
-                    for (int j = 0; j < 8; j++) r[t][j] += v[t * ld + 1 + i + j];
+                for (int j = 0; j < 8; j++)
+                    for (int t = 0; t < 4; t++) r[j][t] += v[4 * (1 + i + j) + t];
             }
-            for (int t = 0; t < 4; t++) {
-                const double *a = r[t];
-                double res = ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
-                for (int64_t u = nb; u < nn; u++) res += v[t * ld + 1 + u];
-                sum[t] = v[t * ld] + res;
-            }
+            double res[4];
+            for (int t = 0; t < 4; t++)
+                res[t] = ((r[0][t] + r[1][t]) + (r[2][t] + r[3][t])) +
+                         ((r[4][t] + r[5][t]) + (r[6][t] + r[7][t]));
+            for (int64_t u = nb; u < nn; u++)
+                for (int t = 0; t < 4; t++) res[t] += v[4 * (1 + u) + t];
+            for (int t = 0; t < 4; t++) sum[t] = v[t] + res[t];
         } else {
-            for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t * ld, m, 1);
+            for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t, m, 4);
         }
         if (m == 0) {
             ell[s] = 0.0;
@@ -272,15 +313,9 @@ int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indic
 static double noise_ratio(const double *q, int64_t k) {
     double sx = 0, sy = 0, sz = 0;
     for (int64_t j = 0; j < k; j++) { sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2]; }
-    double c[3] = {sx / (double)k, sy / (double)k, sz / (double)k};
-    double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
-    for (int64_t j = 0; j < k; j++) {
-        double rx = q[3 * j] - c[0], ry = q[3 * j + 1] - c[1], rz = q[3 * j + 2] - c[2];
-        c00 += rx * rx; c01 += rx * ry; c02 += rx * rz;
-        c11 += ry * ry; c12 += ry * rz; c22 += rz * rz;
-    }
-    double nrm[3];
-    smallest_eigvec(c00, c01, c02, c11, c12, c22, nrm);
+    double mean[3] = {sx / (double)k, sy / (double)k, sz / (double)k}, c[6], nrm[3];
+    scatter(q, k, mean, NULL, c);
+    smallest_eigvec(c[0], c[1], c[2], c[3], c[4], c[5], nrm);
     const double *d = q + 3;
     double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     double across = fabs(d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2]);
@@ -288,7 +323,7 @@ static double noise_ratio(const double *q, int64_t k) {
 }
 
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
- * squared lengths d2 (k), the list's normal nrm; hs (k) scratch. Writes keep[j] (1:
+ * squared lengths d2 (k), the list's normal nrm; hs (2 k) scratch. Writes keep[j] (1:
  * kept) and returns the number of neighbours dropped (0 when fewer than minimum would
  * be, or it would keep fewer than own times as many as it drops: then every keep[j]
  * is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m =
@@ -304,9 +339,22 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     for (int64_t j = 2; j <= m; j++) a += sqrt(d2[j]);
     a /= (double)m;
     double g = gap * a;
+    /* No step between consecutive sorted heights exceeds (max h) - (min h) as rounded
+     * (rounding is monotone): when that is at most g there is no gap, and every
+     * neighbour is kept (most points: a smooth surface), without sorting. */
+    double *h = hs + k, hmin = INFINITY, hmax = -INFINITY;
+    int nan = 0;
+    for (int64_t j = 0; j < k; j++) {
+        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
+        h[j] = v;
+        nan |= v != v;
+        if (v < hmin) hmin = v;
+        if (v > hmax) hmax = v;
+    }
+    if (!nan && hmax - hmin <= g) return 0;
     int64_t z = 0;
     for (int64_t j = 0; j < k; j++) { /* insertion sort */
-        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
+        double v = h[j];
         z += v < 0;
         int64_t u = j;
         while (u > 0 && hs[u - 1] > v) { hs[u] = hs[u - 1]; u--; }
@@ -320,8 +368,7 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     double hi = gaps_up == 1 ? hs[up] : INFINITY, lo = gaps_down == 1 ? hs[down] : -INFINITY;
     int64_t dropped = 0;
     for (int64_t j = 0; j < k; j++) {
-        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
-        keep[j] = v >= lo && v <= hi;
+        keep[j] = h[j] >= lo && h[j] <= hi;
         dropped += !keep[j];
     }
     if (dropped < minimum || (double)(k - dropped) < own * (double)dropped) {
@@ -393,9 +440,11 @@ static void select_axis(double *x, int64_t *idx, int64_t n, int64_t m, int a, ui
 /* Split the points [s, e) at their median along the widest side of their bounding box,
  * recursively down to single points, so that the tree order also orders the points
  * inside a leaf (consecutive points are near each other: see ms_cloud_pdis). The boxes
- * of the nodes down to `depth` go into box (node t at depth d). */
+ * of the nodes down to `depth` go into box (node t at depth d). The nodes at depth
+ * `stop` are left as they are (ms_kdtree_build_subtrees; stop < 0: none). */
 static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
-                       int depth, double *box, uint64_t *rng) {
+                       int depth, int stop, double *box, uint64_t *rng) {
+    if (d == stop) return;
     if (e - s < 2 && d > depth) return;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (int64_t j = s; j < e; j++) {
@@ -417,18 +466,40 @@ static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t,
     }
     int64_t m = s + (e - s) / 2;
     select_axis(x + 3 * s, idx + s, e - s, m - s, a, rng);
-    build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, box, rng);
-    build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, box, rng);
+    build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, stop, box, rng);
+    build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, stop, box, rng);
 }
 
-/* Build the tree of p (n, 3): the points in tree order into tp (n, 3), their indices
- * into torig (n), the boxes of the 2^(depth + 1) - 1 nodes into box. */
-void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
-                     double *box) {
+/* The depth at which ms_kdtree_build_top stops: min(depth, MS_KD_TOP). */
+static int top_levels(int depth) { return depth < MS_KD_TOP ? depth : MS_KD_TOP; }
+
+void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                         double *box) {
     memcpy(tp, p, (size_t)n * 3 * sizeof(double));
     for (int64_t i = 0; i < n; i++) torig[i] = i;
     uint64_t rng = 0x9e3779b97f4a7c15ULL;
-    build_node(tp, torig, 0, n, 0, 0, depth, box, &rng);
+    build_node(tp, torig, 0, n, 0, 0, depth, top_levels(depth), box, &rng);
+}
+
+void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, int64_t first,
+                              int64_t last, double *box) {
+    int top = top_levels(depth);
+    for (int64_t u = first; u < last; u++) {
+        int64_t s = 0, e = n; /* the points of node u at depth top: its median halves */
+        for (int d = top - 1; d >= 0; d--) {
+            int64_t m = s + (e - s) / 2;
+            if ((u >> d) & 1) s = m;
+            else e = m;
+        }
+        uint64_t rng = 0x9e3779b97f4a7c15ULL ^ (0xbf58476d1ce4e5b9ULL * (uint64_t)(u + 1));
+        build_node(tp, torig, s, e, ((int64_t)1 << top) - 1 + u, top, depth, -1, box, &rng);
+    }
+}
+
+void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                     double *box) {
+    ms_kdtree_build_top(p, n, depth, tp, torig, box);
+    ms_kdtree_build_subtrees(tp, torig, n, depth, 0, (int64_t)1 << top_levels(depth), box);
 }
 
 typedef struct {
@@ -579,6 +650,16 @@ static void knn_search(const tree_t *T, const double *q, int64_t k, double tau, 
     }
 }
 
+/* An upper bound of the squared k-th distance of the point pi, from the k-th distance
+ * prev_r of the point prev_p (triangle inequality, with room for rounding); INFINITY
+ * when prev_r < 0 (no previous point). */
+static inline double kth_bound(const double *pi, const double *prev_p, double prev_r) {
+    if (prev_r < 0.0) return INFINITY;
+    double ex = pi[0] - prev_p[0], ey = pi[1] - prev_p[1], ez = pi[2] - prev_p[2];
+    double t = prev_r + sqrt(ex * ex + ey * ey + ez * ez);
+    return t * t * (1.0 + 1e-9) + 1e-300;
+}
+
 /* The points of a leaf's neighbourhood, as arrays. */
 typedef struct {
     double *x, *y, *z, *d2;
@@ -630,6 +711,54 @@ static int gather(const tree_t *T, const double *lb, double r2, int64_t t, int64
     return 0;
 }
 
+/* Buckets of nearest_of_block's counting sort. */
+#define NEAR_BUCKETS 64
+
+/* The k nearest of the m candidates sel (block entries whose squared distance bd[sel[t]]
+ * is at most limit2, m >= k) into out[0..k), sorted by (d2, idx); out has room for m,
+ * bucket for m, count for NEAR_BUCKETS + 1. A counting sort on the bucket
+ * floor(d2 * NEAR_BUCKETS / limit2) (nondecreasing in d2: a candidate of a later bucket
+ * is strictly farther), then an insertion sort of the candidates of the buckets up to
+ * the one that reaches k (only the members of one bucket are out of order; on a
+ * surface, d2 is about uniform over [0, limit2]). Many candidates in those buckets (ties,
+ * a crowded bucket): a selection of every candidate instead. */
+static void nearest_of_block(const block_t *b, const double *bd, const int32_t *sel, int64_t m,
+                             int64_t k, double limit2, cand_t *out, uint8_t *bucket,
+                             int32_t *count) {
+    double scale = NEAR_BUCKETS / limit2;
+    int64_t total = m;
+    if (scale > 0.0 && scale < INFINITY) {
+        memset(count, 0, (NEAR_BUCKETS + 1) * sizeof(int32_t));
+        for (int64_t t = 0; t < m; t++) {
+            double x = bd[sel[t]] * scale;
+            int c = x < NEAR_BUCKETS - 1 ? (int)x : NEAR_BUCKETS - 1;
+            bucket[t] = (uint8_t)c;
+            count[c + 1]++;
+        }
+        int last = 0;
+        while (count[last + 1] < k) { /* buckets [0, last] hold at least k */
+            last++;
+            count[last + 1] += count[last];
+        }
+        total = count[last + 1];
+        if (total <= 2 * k + 16) {
+            for (int64_t t = 0; t < m; t++) {
+                if (bucket[t] > last) continue;
+                int32_t j = sel[t];
+                cand_t *c = out + count[bucket[t]]++;
+                c->d2 = bd[j]; c->idx = b->idx[j]; c->pos = b->pos[j];
+            }
+            insertion_sort(out, total);
+            return;
+        }
+    }
+    for (int64_t t = 0; t < m; t++) {
+        int32_t j = sel[t];
+        out[t].d2 = bd[j]; out[t].idx = b->idx[j]; out[t].pos = b->pos[j];
+    }
+    select_sorted(out, m, k);
+}
+
 /* The leaf holding tree position i: its node, and its points [*s, *e). */
 static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
     int64_t t = 0;
@@ -673,22 +802,23 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *mu = (double *)malloc((size_t)kmax * sizeof(double));
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
-    double *hs = (double *)malloc((size_t)kmax * sizeof(double));
+    double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
     char *keep = (char *)malloc((size_t)kmax);
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
+    int32_t *sel = (int32_t *)malloc((size_t)limit * sizeof(int32_t));
+    uint8_t *bucket = (uint8_t *)malloc((size_t)limit);
+    int32_t count[NEAR_BUCKETS + 1];
     int rc = 0, have_block = 0;
     int64_t leaf_s = 0, leaf_e = 0;
     double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !soa || !ell || !hs || !keep || !mk) { rc = -1; goto done; }
+    if (!h.c || !q || !d2 || !mu || !soa || !ell || !hs || !keep || !mk || !sel || !bucket) {
+        rc = -1;
+        goto done;
+    }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
-        double tau = INFINITY;
-        if (prev_r >= 0.0) {
-            double ex = pi[0] - prev_p[0], ey = pi[1] - prev_p[1], ez = pi[2] - prev_p[2];
-            double t = prev_r + sqrt(ex * ex + ey * ey + ez * ez);
-            tau = t * t * (1.0 + 1e-9) + 1e-300;
-        }
+        double tau = kth_bound(pi, prev_p, prev_r);
         if (i >= leaf_e) {
             int64_t t = leaf_of(&T, i, &leaf_s, &leaf_e);
             if (leaf_max > 0.0) r2 = leaf_max * BLOCK_GROW;
@@ -711,12 +841,12 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                 double dx = blk.x[j] - px, dy = blk.y[j] - py, dz = blk.z[j] - pz;
                 bd[j] = dx * dx + dy * dy + dz * dz;
             }
-            for (int64_t j = 0; j < nb; j++) { /* branch-free: h.c holds limit >= nb */
-                h.c[m].d2 = bd[j]; h.c[m].idx = blk.idx[j]; h.c[m].pos = blk.pos[j];
+            for (int64_t j = 0; j < nb; j++) { /* branch-free: sel holds limit >= nb */
+                sel[m] = (int32_t)j;
                 m += bd[j] <= limit2;
             }
             if (m >= kmax) {
-                select_sorted(h.c, m, kmax);
+                nearest_of_block(&blk, bd, sel, m, kmax, limit2, h.c, bucket, count);
                 found = 1;
             }
         }
@@ -726,11 +856,11 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         if (r2 < 0.0) r2 = kth * BLOCK_GROW; /* the first point of the chunk */
         prev_r = sqrt(kth);
         prev_p[0] = pi[0]; prev_p[1] = pi[1]; prev_p[2] = pi[2];
-        int64_t oi = orig[i];
+        int64_t ci = orig[i], oi = out->tree_order ? i : ci; /* cleaned index, its row */
         if (out->idx != NULL) {
             for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = h.c[j].idx;
         }
-        if (out->near != NULL) out->near[oi] = kmax > 1 ? h.c[1].idx : oi;
+        if (out->near != NULL) out->near[oi] = kmax > 1 ? h.c[1].idx : ci;
         if (out->kth_d2 != NULL) {
             out->kth_d2[oi] = h.c[kmax - 1].d2;
             out->kth_idx[oi] = h.c[kmax - 1].idx;
@@ -776,12 +906,12 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         }
         if (out->relative != NULL) {
             for (int64_t j = 0; j < kk; j++) {
-                soa[j] = sqrt(d2[j]);
-                soa[kmax + j] = q[3 * j];
-                soa[2 * kmax + j] = q[3 * j + 1];
-                soa[3 * kmax + j] = q[3 * j + 2];
+                soa[4 * j] = sqrt(d2[j]);
+                soa[4 * j + 1] = q[3 * j];
+                soa[4 * j + 2] = q[3 * j + 1];
+                soa[4 * j + 3] = q[3 * j + 2];
             }
-            local_scale_prefixes(soa, kmax, mk, nscales, ell, ell + nscales);
+            local_scale_prefixes(soa, mk, nscales, ell, ell + nscales);
         }
         if (out->pdis == NULL && out->relative == NULL) continue;
         double score = 0.0, sx = 0, sy = 0, sz = 0, h2 = 0;
@@ -821,20 +951,43 @@ done:
     free(hs);
     free(keep);
     free(mk);
+    free(sel);
+    free(bucket);
     return rc;
+}
+
+/* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx)
+ * for the points [begin, end) of p (n, 3), cleaned order: out[i] = 1 when i is not among
+ * the kmax nearest of j = near[i], i.e. when (|p_i - p_j|^2, i) comes after (kth_d2[j],
+ * kth_idx[j]) in the lists' order (squared distance, then index). */
+void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
+                 const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out) {
+    for (int64_t i = begin; i < end; i++) {
+        const double *a = p + 3 * i, *b = p + 3 * near[i];
+        double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+        double d2 = dx * dx + dy * dy + dz * dz, kth = kth_d2[near[i]];
+        out[i] = !(d2 < kth || (d2 == kth && i <= kth_idx[near[i]]));
+    }
 }
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...] (cleaned indices sorted by (squared distance, index), the rows of
- * ms_cloud_pdis's kNN table). Returns 0, or -1 out of memory. */
+ * ms_cloud_pdis's kNN table). Each search is pruned from the start by the bound that
+ * the previous row's k-th distance gives (rows in increasing tree position: near each
+ * other). Returns 0, or -1 out of memory. */
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx) {
     tree_t T = {p, orig, box, n, depth};
     heap_t h = {(cand_t *)malloc((size_t)k * sizeof(cand_t)), 0, k, INFINITY};
     if (!h.c) return -1;
+    double prev_r = -1.0;
+    const double *prev_p = p;
     for (int64_t r = begin; r < end; r++) {
-        knn_search(&T, p + 3 * pos[r], k, INFINITY, &h);
+        const double *pi = p + 3 * pos[r];
+        knn_search(&T, pi, k, kth_bound(pi, prev_p, prev_r), &h);
         for (int64_t j = 0; j < k; j++) out_idx[r * k + j] = h.c[j].idx;
+        prev_r = sqrt(h.c[k - 1].d2);
+        prev_p = pi;
     }
     free(h.c);
     return 0;

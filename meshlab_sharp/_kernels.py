@@ -32,10 +32,17 @@ BACKENDS: tuple[str, ...] = ("compiled", "numpy")
 CHUNK = _header.integer("CHUNK")
 #: Most points in a leaf of the kd-tree.
 KD_LEAF = _header.integer("KD_LEAF")
+#: Levels of the kd-tree built before its subtrees (which are built on threads).
+KD_TOP = _header.integer("KD_TOP")
 
 _c_void_p, _i64, _f64, _int = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
 _SIGNATURES = {
     "ms_kdtree_build": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_kdtree_build_top": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_kdtree_build_subtrees": (
+        None,
+        [_c_void_p, _c_void_p, _i64, _int, _i64, _i64, _c_void_p],
+    ),
     "ms_eigvecs": (None, [_c_void_p, _i64, _c_void_p]),
     "ms_cloud_pdis": (
         _int,
@@ -45,6 +52,10 @@ _SIGNATURES = {
     "ms_knn_rows": (
         _int,
         [_c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _i64, _i64, _i64, _c_void_p],
+    ),
+    "ms_isolated": (
+        None,
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
     "ms_local_scale_csr": (
         _int,
@@ -169,9 +180,9 @@ def _thread_scratch(n: int, dtype: type) -> Callable[[], np.ndarray]:
     return get
 
 
-def _run_chunks(n: int, workers: int, task: Callable[[int, int], int]) -> None:
-    """task(begin, end) over [0, n) in chunks, on ``workers`` threads."""
-    ranges = [(s, min(s + CHUNK, n)) for s in range(0, n, CHUNK)]
+def _run_chunks(n: int, workers: int, task: Callable[[int, int], int], chunk: int = CHUNK) -> None:
+    """task(begin, end) over [0, n) in chunks of ``chunk``, on ``workers`` threads."""
+    ranges = [(s, min(s + chunk, n)) for s in range(0, n, chunk)]
     w = _workers(workers)
     if w == 1 or len(ranges) == 1:
         codes = [task(a, b) for a, b in ranges]
@@ -206,8 +217,10 @@ class KdTree:
         return len(self.points)
 
 
-def build_tree(points: np.ndarray) -> KdTree:
-    """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points."""
+def build_tree(points: np.ndarray, workers: int = -1) -> KdTree:
+    """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points: its
+    top :data:`KD_TOP` levels, then the subtrees below them on ``workers`` threads (the
+    same tree as ``ms_kdtree_build``)."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -216,7 +229,14 @@ def build_tree(points: np.ndarray) -> KdTree:
     tree_points = np.empty_like(points)
     orig = np.empty(n, dtype=np.int64)
     boxes = np.empty((2 ** (depth + 1) - 1, 6))
-    lib.ms_kdtree_build(_ptr(points), n, depth, _ptr(tree_points), _ptr(orig), _ptr(boxes))
+    tp, to, tb = _ptr(tree_points), _ptr(orig), _ptr(boxes)
+    lib.ms_kdtree_build_top(_ptr(points), n, depth, tp, to, tb)
+
+    def task(a: int, b: int) -> int:
+        lib.ms_kdtree_build_subtrees(tp, to, n, depth, a, b, tb)
+        return 0
+
+    _run_chunks(2 ** min(depth, KD_TOP), workers, task, chunk=1)
     return KdTree(tree_points, orig, boxes, depth)
 
 
@@ -237,11 +257,23 @@ class _CloudOut(ctypes.Structure):
         ("sheet_gap", ctypes.c_double),
         ("sheet_min", _i64),
         ("sheet_own", ctypes.c_double),
+        ("tree_order", _i64),
     ]
 
 
 #: The fields of :class:`_CloudOut` that are numbers, not arrays.
 _NUMBERS = ("noise_k", "sheet_gap", "sheet_min", "sheet_own")
+#: The arrays of :class:`_CloudOut` with a leading scale axis, (s, n, ...).
+_PER_SCALE = ("pdis", "normals", "relative")
+
+
+def _to_cleaned_order(rows: np.ndarray, orig: np.ndarray, scratch: np.ndarray) -> None:
+    """``rows`` (n, ...) written at tree positions, moved in place to cleaned order
+    (``orig``: the cleaned index of each position); ``scratch``: bytes, at least
+    ``rows.nbytes`` of them."""
+    copy = scratch[: rows.nbytes].view(rows.dtype).reshape(rows.shape)
+    np.copyto(copy, rows)
+    rows[orig] = copy
 
 
 def _cloud_call(
@@ -249,20 +281,33 @@ def _cloud_call(
 ) -> None:
     """One pass of ``ms_cloud_pdis`` over the tree's points at the scales ``ks``; ``out``
     names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
-    ``noise_k``, ``sheet_gap``, ``sheet_min`` and ``sheet_own``."""
+    ``noise_k``, ``sheet_gap``, ``sheet_min`` and ``sheet_own``. Without the kNN table
+    (``idx``) the pass writes its rows in tree order, moved to cleaned order after."""
     lib = _LIB
     assert lib is not None
     t = tree
+    arrays = {
+        name: value
+        for name, value in out.items()
+        if value is not None and name not in _NUMBERS and name != "idx"
+    }
+    tree_order = out.get("idx") is None
     fields = {
         name: value if name in _NUMBERS else _ptr(value)  # type: ignore[arg-type]
         for name, value in out.items()
         if value is not None
     }
-    spec = _CloudOut(**fields)
+    spec = _CloudOut(**fields, tree_order=int(tree_order))
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(ks), len(ks))
     _run_chunks(
         t.n, workers, lambda a, b: lib.ms_cloud_pdis(*args, int(gaussian), a, b, ctypes.byref(spec))
     )
+    if not tree_order:
+        return
+    rows = [r for name, a in arrays.items() for r in (a if name in _PER_SCALE else (a,))]
+    scratch = np.empty(max((r.nbytes for r in rows), default=0), np.uint8)  # one for all
+    for r in rows:
+        _to_cleaned_order(r, t.orig, scratch)
 
 
 def cloud_knn(tree: KdTree, k: int, workers: int = -1) -> np.ndarray:
@@ -275,16 +320,22 @@ def cloud_knn(tree: KdTree, k: int, workers: int = -1) -> np.ndarray:
 
 def cloud_knn_rows(tree: KdTree, rows: np.ndarray, k: int, workers: int = -1) -> np.ndarray:
     """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64, each by a
-    search of the tree (for a few rows: the table of every point is not built)."""
+    search of the tree (for a few rows: the table of every point is not built), the
+    rows searched in tree order."""
     lib = _LIB
     assert lib is not None
     t = tree
     where = np.empty(t.n, dtype=np.int64)
     where[t.orig] = np.arange(t.n, dtype=np.int64)
-    pos = np.ascontiguousarray(where[np.asarray(rows, dtype=np.int64)])
-    out = np.empty((len(pos), k), dtype=np.int64)
+    pos = where[np.asarray(rows, dtype=np.int64)]
+    del where
+    order = np.argsort(pos, kind="stable")
+    pos = np.ascontiguousarray(pos[order])
+    found = np.empty((len(pos), k), dtype=np.int64)
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(pos), k)
-    _run_chunks(len(pos), workers, lambda a, b: lib.ms_knn_rows(*args, a, b, _ptr(out)))
+    _run_chunks(len(pos), workers, lambda a, b: lib.ms_knn_rows(*args, a, b, _ptr(found)))
+    out = np.empty_like(found)
+    out[order] = found
     return out
 
 
@@ -297,6 +348,25 @@ class CloudStats:
     kth_d2: np.ndarray  # (n,) float64 squared distance of the k-th neighbour
     kth_idx: np.ndarray  # (n,) int64 its index
     noise: np.ndarray  # (n,) float64 noise ratio over the noise_k nearest
+
+
+def isolated_from_stats(points: np.ndarray, stats: CloudStats, workers: int = -1) -> np.ndarray:
+    """:func:`meshlab_sharp.robust.isolated_points` from a pass's :class:`CloudStats` at
+    ``k_max`` over ``points`` (n, 3) (no kNN table): ``i`` is isolated when ``(|p_i -
+    p_j|^2, i)``, ``j = near[i]``, comes after ``j``'s k_max-th neighbour in the lists'
+    order (squared distance, then index). (n,) bool."""
+    lib = _LIB
+    assert lib is not None
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.empty(len(points), dtype=np.bool_)
+    args = (_ptr(points), _ptr(stats.near), _ptr(stats.kth_d2), _ptr(stats.kth_idx))
+
+    def task(a: int, b: int) -> int:
+        lib.ms_isolated(*args, a, b, _ptr(out))
+        return 0
+
+    _run_chunks(len(points), workers, task)
+    return out
 
 
 @dataclass

@@ -196,7 +196,7 @@ class KnnNeighbourhoods:
         #: The kd-tree of the compiled backend (None with numpy).
         self.tree: _kernels.KdTree | None = None
         if self.backend == "compiled":
-            self.tree = _kernels.build_tree(points)
+            self.tree = _kernels.build_tree(points, workers)
         else:
             self._indices = knn(points, k_max, workers=workers)
 

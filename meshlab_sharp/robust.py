@@ -64,7 +64,6 @@ from .neighbourhoods import (
     Neighbourhood,
     RingNeighbourhoods,
     build_neighbourhoods,
-    squared_distances,
 )
 from .normals import Weighting
 from .projected_distance import projected_distances
@@ -270,14 +269,16 @@ def thin_knn(growth: float) -> int:
 
 
 def _noise_factor(ratio: np.ndarray) -> float:
-    """:func:`noise_factor` of the lower median of the per-point ratios (n,)."""
+    """:func:`noise_factor` of the lower median of the per-point ratios (n,), which are
+    reordered in place (no copy of n values)."""
     return noise_factor(_noise_median(ratio))
 
 
 def _noise_median(ratio: np.ndarray) -> float:
-    """The lower median of the per-point noise ratios (n,)."""
+    """The lower median of the per-point noise ratios (n,), reordered in place."""
     at = (len(ratio) - 1) // 2
-    return float(np.partition(ratio, at)[at])
+    ratio.partition(at)
+    return float(ratio[at])
 
 
 def sheet_mask(
@@ -394,16 +395,15 @@ class SheetNeighbourhoods:
         return Neighbourhood(indptr, idx[keep])
 
 
-def _isolated_from_stats(points: np.ndarray, stats: _kernels.CloudStats) -> np.ndarray:
+def _isolated_from_stats(
+    points: np.ndarray, stats: _kernels.CloudStats, workers: int = -1
+) -> np.ndarray:
     """:func:`isolated_points` from the pass's :class:`~meshlab_sharp._kernels.CloudStats` at
     ``k_max`` (no kNN table): ``i`` is among the k_max nearest of ``j = near[i]`` when
     ``(|p_i - p_j|^2, i)`` does not come after ``j``'s k_max-th neighbour in the
-    lists' order (squared distance, then index). (n,) bool."""
-    j = stats.near
-    d2 = squared_distances(points, points[j])
-    kth = stats.kth_d2[j]
-    among = (d2 < kth) | ((d2 == kth) & (np.arange(len(points)) <= stats.kth_idx[j]))
-    return ~among
+    lists' order (squared distance, then index). (n,) bool, computed in C
+    (:func:`meshlab_sharp._kernels.isolated_from_stats`)."""
+    return _kernels.isolated_from_stats(points, stats, workers)
 
 
 def _segment_sums(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
@@ -753,7 +753,9 @@ class RobustSetup:
     fused : ScalePass or None
         The compiled pass over ``points`` at ``scales`` to pass to ``run_scales``, when
         the set-up's search already made it (compiled backend, a cloud whose noise did
-        not grow the scales); None otherwise.
+        not grow the scales); None otherwise, and once :meth:`finish` starts (its
+        per-scale arrays, read by ``run_scales``, are released before support and
+        thinning).
     sharp_edges : (m,) bool or None
         A mesh's vertices on its own sharp edges
         (:func:`meshlab_sharp.creases.sharp_vertices`), found first, while little else
@@ -799,10 +801,11 @@ class RobustSetup:
             if compiled:
                 self.fused = self._pass(k0, sheet)
                 assert self.fused.stats is not None
-                isolated = _isolated_from_stats(points, self.fused.stats)
+                isolated = _isolated_from_stats(points, self.fused.stats, workers)
             else:
                 isolated = isolated_points(neighbourhoods.indices)
             if isolated.any():
+                self.fused = None  # freed before the pass over the points kept
                 self.keep = np.flatnonzero(~isolated)
                 self.points = np.ascontiguousarray(points[self.keep])
                 self.neighbourhoods = build_neighbourhoods(
@@ -810,8 +813,10 @@ class RobustSetup:
                 )
                 if compiled:
                     self.fused = self._pass(k0, sheet)
+            del isolated
             if self.fused is not None and self.fused.stats is not None:
                 self.noise = _noise_median(self.fused.stats.noise)
+                self.fused.stats = None  # read: its (n,) arrays are not kept
                 self.scale_neighbourhoods = self.neighbourhoods
             else:
                 self.scale_neighbourhoods = self._sheets()
@@ -942,6 +947,7 @@ class RobustSetup:
             sharp edge (:func:`meshlab_sharp.creases.sharp_vertices`) are features with
             strength 1.
         """
+        self.fused = None
         if mask.any():
             top = max(self.scales)
             if self.faces is None:

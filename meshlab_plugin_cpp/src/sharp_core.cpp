@@ -536,13 +536,12 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	bar.report(0, "kd-tree");
 	auto tree = std::make_unique<Tree>(pts);
 	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
+	std::vector<uint8_t> isolated(tree->n);
+	ms_isolated(pts.data(), pass.near.data(), pass.kthD2.data(), pass.kthIdx.data(), 0, tree->n,
+	            isolated.data());
 	std::vector<Index> keep;
-	for (Index i = 0; i < tree->n; ++i) {
-		const Index j = pass.near[i];
-		const double dx = pts[3 * i] - pts[3 * j], dy = pts[3 * i + 1] - pts[3 * j + 1], dz = pts[3 * i + 2] - pts[3 * j + 2];
-		const double d2 = dx * dx + dy * dy + dz * dz, kth = pass.kthD2[j];
-		if (d2 < kth || (d2 == kth && i <= pass.kthIdx[j])) keep.push_back(i);  // not isolated
-	}
+	for (Index i = 0; i < tree->n; ++i)
+		if (!isolated[i]) keep.push_back(i);
 	if (Index(keep.size()) < tree->n) {
 		if (Index(keep.size()) < top0) throw InputError("too few points are left once isolated points are removed");
 		std::vector<double> kept(3 * keep.size());
@@ -583,9 +582,15 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	if (rows.empty()) return d;
 	bar.report(85, "support and thinning");
 	const int top = r.scales.back();
-	std::vector<Index> where(n), pos(rows.size()), table(rows.size() * top);
+	std::vector<Index> where(n), pos(rows.size()), rank(rows.size()), table(rows.size() * top);
 	for (Index t = 0; t < n; ++t) where[tree->orig[t]] = t;
 	for (size_t c2 = 0; c2 < rows.size(); ++c2) pos[c2] = where[rows[c2]];
+	// searched in tree order (_kernels.cloud_knn_rows): row c2 lands at rank[c2]
+	std::vector<Index> order(rows.size());
+	std::iota(order.begin(), order.end(), Index(0));
+	std::sort(order.begin(), order.end(), [&](Index a, Index b) { return pos[a] < pos[b]; });
+	for (size_t c = 0; c < rows.size(); ++c) rank[order[c]] = Index(c);
+	std::sort(pos.begin(), pos.end());
 	const Tree &t = *tree;
 	chunks(Index(rows.size()), [&](unsigned, Index a, Index b) {
 		return ms_knn_rows(t.pts.data(), t.orig.data(), t.n, t.box.data(), t.depth, pos.data(), top, a, b,
@@ -593,7 +598,7 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	}, bar, 85, 95, "support and thinning");
 	Lists D, Sup, K;
 	for (size_t c2 = 0; c2 < rows.size(); ++c2) {
-		const Index *row = &table[c2 * top];
+		const Index *row = &table[rank[c2] * top];
 		D.add(row, row + top);
 		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
 		K.add(row, row + std::min(thinKnn, top));
