@@ -15,6 +15,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #if defined(__x86_64__) && defined(__GLIBC__) && defined(MS_LIBMVEC)
 #include <emmintrin.h>
@@ -59,10 +62,20 @@ static void smallest_eigvec(double a, double b, double c, double d, double e, do
         out[0] = k == 0; out[1] = k == 1; out[2] = k == 2;
         return;
     }
-    /* scale by a power of two (exact) to O(1), for range safety */
-    int ex;
-    frexp(scale, &ex);
-    double s = ldexp(1.0, -ex);
+    /* scale by a power of two (exact) to O(1), for range safety: s = 2^-e with scale =
+     * f 2^e, f in [0.5, 1) (frexp), built from the exponent bits when s is normal */
+    double s;
+    uint64_t bits;
+    memcpy(&bits, &scale, sizeof bits);
+    int64_t biased = (int64_t)(bits >> 52); /* scale > 0: no sign bit */
+    if (biased >= 1 && biased <= 2044) {
+        bits = (uint64_t)(2045 - biased) << 52;
+        memcpy(&s, &bits, sizeof s);
+    } else {
+        int ex;
+        frexp(scale, &ex);
+        s = ldexp(1.0, -ex);
+    }
     a *= s; b *= s; c *= s; d *= s; e *= s; f *= s;
     p1 = b * b + c * c + e * e;
     double q = (a + d + f) / 3.0;
@@ -114,6 +127,40 @@ void ms_eigvecs(const double *cov, int64_t c, double *out) {
 
 /* ------------------------------------------------------------------ per-point arithmetic */
 
+/* The scatter sum_j w_j (q_j - mean)(q_j - mean)^T of the offsets q (m, 3), weights w
+ * (m) or NULL (all 1), into c as c00 c01 c02 c11 c12 c22: each entry summed over j in
+ * order from 0, of the products (w_j r_a) r_b, r = q_j - mean. */
+static inline void scatter(const double *q, int64_t m, const double *mean, const double *w,
+                           double *c) {
+#ifdef __SSE2__
+    /* two entries a lane: (c00, c01), (c02, c11), (c12, c22) */
+    __m128d a0 = _mm_setzero_pd(), a1 = a0, a2 = a0;
+    __m128d mxy = _mm_loadu_pd(mean), mzz = _mm_set1_pd(mean[2]);
+    for (int64_t j = 0; j < m; j++) {
+        __m128d r = _mm_sub_pd(_mm_loadu_pd(q + 3 * j), mxy);         /* rx ry */
+        __m128d rz = _mm_sub_pd(_mm_set1_pd(q[3 * j + 2]), mzz);      /* rz rz */
+        __m128d wj = _mm_set1_pd(w ? w[j] : 1.0);
+        __m128d s = _mm_mul_pd(wj, r), sz = _mm_mul_pd(wj, rz);       /* mx my, mz mz */
+        a0 = _mm_add_pd(a0, _mm_mul_pd(_mm_unpacklo_pd(s, s), r));   /* mx rx, mx ry */
+        a1 = _mm_add_pd(a1, _mm_mul_pd(s, _mm_shuffle_pd(rz, r, 2))); /* mx rz, my ry */
+        a2 = _mm_add_pd(a2, _mm_mul_pd(_mm_shuffle_pd(s, sz, 1), rz)); /* my rz, mz rz */
+    }
+    _mm_storeu_pd(c, a0);
+    _mm_storeu_pd(c + 2, a1);
+    _mm_storeu_pd(c + 4, a2);
+#else
+    double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
+    for (int64_t j = 0; j < m; j++) {
+        double rx = q[3 * j] - mean[0], ry = q[3 * j + 1] - mean[1], rz = q[3 * j + 2] - mean[2];
+        double wj = w ? w[j] : 1.0;
+        double mx = wj * rx, my = wj * ry, mz = wj * rz;
+        c00 += mx * rx; c01 += mx * ry; c02 += mx * rz;
+        c11 += my * ry; c12 += my * rz; c22 += mz * rz;
+    }
+    c[0] = c00; c[1] = c01; c[2] = c02; c[3] = c11; c[4] = c12; c[5] = c22;
+#endif
+}
+
 /* Normal and projected distance of one neighbourhood given as offsets q (m, 3) from
  * the point and their squared lengths d2 (m); see docs/implementation-notes.md.
  * fixed: a fixed unit normal or NULL (PCA). h2 is max d2 (given). */
@@ -124,18 +171,11 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
     if (fixed != NULL) {
         nrm[0] = fixed[0]; nrm[1] = fixed[1]; nrm[2] = fixed[2];
     } else {
-        double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
         int w = gaussian && h2 > 0.0;
         if (w) gaussian_weights(d2, m, h2, mu);
-        for (int64_t j = 0; j < m; j++) {
-            double rx = q[3 * j] - mean[0], ry = q[3 * j + 1] - mean[1],
-                   rz = q[3 * j + 2] - mean[2];
-            double wj = w ? mu[j] : 1.0;
-            double mx = wj * rx, my = wj * ry, mz = wj * rz;
-            c00 += mx * rx; c01 += mx * ry; c02 += mx * rz;
-            c11 += my * ry; c12 += my * rz; c22 += mz * rz;
-        }
-        smallest_eigvec(c00, c01, c02, c11, c12, c22, nrm);
+        double c[6];
+        scatter(q, m, mean, w ? mu : NULL, c);
+        smallest_eigvec(c[0], c[1], c[2], c[3], c[4], c[5], nrm);
     }
     if (normal != NULL) {
         normal[0] = nrm[0]; normal[1] = nrm[1]; normal[2] = nrm[2];
@@ -191,38 +231,39 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
     *off = sqrt(cx * cx + cy * cy + cz * cz);
 }
 
-/* local_scale_one for the prefixes of one neighbour list at every scale: v holds 4
- * rows of ld values (the lengths |q_j|, then the x, y and z of q_j, j < max(ks)); scale
- * s (ks increasing) writes ell[s] and off[s]. The same sums as segment_sum,
- * but the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by
- * the prefixes (the same numbers, added in the same order): O(max(ks)) per point
- * instead of O(sum of ks) for lists of up to 129 points. */
-static void local_scale_prefixes(const double *v, int64_t ld, const int64_t *ks, int nscales,
-                                 double *ell, double *off) {
-    double r[4][8];
-    int64_t i = 0; /* terms v[t][1..i] in r, a multiple of 8 (0: r not started) */
+/* local_scale_one for the prefixes of one neighbour list at every scale: v holds, for
+ * each neighbour j < max(ks), the 4 values |q_j|, then the x, y and z of q_j (v[4 j + t]);
+ * scale s (ks increasing) writes ell[s] and off[s]. The same sums as segment_sum, but
+ * the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by the
+ * prefixes (the same numbers, added in the same order): O(max(ks)) per point instead
+ * of O(sum of ks) for lists of up to 129 points. The 4 sums go side by side (t
+ * innermost: the compiler pairs them in SIMD lanes, each lane the scalar arithmetic). */
+static void local_scale_prefixes(const double *v, const int64_t *ks, int nscales, double *ell,
+                                 double *off) {
+    double r[8][4] = {{0}};
+    int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
         double sum[4];
         if (nn >= 8 && nn <= 128) {
             if (i == 0) {
-                for (int t = 0; t < 4; t++)
-                    for (int j = 0; j < 8; j++) r[t][j] = v[t * ld + 1 + j];
+                memcpy(r, v + 4, sizeof r);
                 i = 8;
             }
             int64_t nb = nn - nn % 8;
             for (; i < nb; i += 8) {
-                for (int t = 0; t < 4; t++)
-                    for (int j = 0; j < 8; j++) r[t][j] += v[t * ld + 1 + i + j];
+                for (int j = 0; j < 8; j++)
+                    for (int t = 0; t < 4; t++) r[j][t] += v[4 * (1 + i + j) + t];
             }
-            for (int t = 0; t < 4; t++) {
-                const double *a = r[t];
-                double res = ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
-                for (int64_t u = nb; u < nn; u++) res += v[t * ld + 1 + u];
-                sum[t] = v[t * ld] + res;
-            }
+            double res[4];
+            for (int t = 0; t < 4; t++)
+                res[t] = ((r[0][t] + r[1][t]) + (r[2][t] + r[3][t])) +
+                         ((r[4][t] + r[5][t]) + (r[6][t] + r[7][t]));
+            for (int64_t u = nb; u < nn; u++)
+                for (int t = 0; t < 4; t++) res[t] += v[4 * (1 + u) + t];
+            for (int t = 0; t < 4; t++) sum[t] = v[t] + res[t];
         } else {
-            for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t * ld, m, 1);
+            for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t, m, 4);
         }
         if (m == 0) {
             ell[s] = 0.0;
@@ -272,15 +313,9 @@ int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indic
 static double noise_ratio(const double *q, int64_t k) {
     double sx = 0, sy = 0, sz = 0;
     for (int64_t j = 0; j < k; j++) { sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2]; }
-    double c[3] = {sx / (double)k, sy / (double)k, sz / (double)k};
-    double c00 = 0, c01 = 0, c02 = 0, c11 = 0, c12 = 0, c22 = 0;
-    for (int64_t j = 0; j < k; j++) {
-        double rx = q[3 * j] - c[0], ry = q[3 * j + 1] - c[1], rz = q[3 * j + 2] - c[2];
-        c00 += rx * rx; c01 += rx * ry; c02 += rx * rz;
-        c11 += ry * ry; c12 += ry * rz; c22 += rz * rz;
-    }
-    double nrm[3];
-    smallest_eigvec(c00, c01, c02, c11, c12, c22, nrm);
+    double mean[3] = {sx / (double)k, sy / (double)k, sz / (double)k}, c[6], nrm[3];
+    scatter(q, k, mean, NULL, c);
+    smallest_eigvec(c[0], c[1], c[2], c[3], c[4], c[5], nrm);
     const double *d = q + 3;
     double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     double across = fabs(d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2]);
@@ -288,7 +323,7 @@ static double noise_ratio(const double *q, int64_t k) {
 }
 
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
- * squared lengths d2 (k), the list's normal nrm; hs (k) scratch. Writes keep[j] (1:
+ * squared lengths d2 (k), the list's normal nrm; hs (2 k) scratch. Writes keep[j] (1:
  * kept) and returns the number of neighbours dropped (0 when fewer than minimum would
  * be, or it would keep fewer than own times as many as it drops: then every keep[j]
  * is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m =
@@ -304,9 +339,22 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     for (int64_t j = 2; j <= m; j++) a += sqrt(d2[j]);
     a /= (double)m;
     double g = gap * a;
+    /* No step between consecutive sorted heights exceeds (max h) - (min h) as rounded
+     * (rounding is monotone): when that is at most g there is no gap, and every
+     * neighbour is kept (most points: a smooth surface), without sorting. */
+    double *h = hs + k, hmin = INFINITY, hmax = -INFINITY;
+    int nan = 0;
+    for (int64_t j = 0; j < k; j++) {
+        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
+        h[j] = v;
+        nan |= v != v;
+        if (v < hmin) hmin = v;
+        if (v > hmax) hmax = v;
+    }
+    if (!nan && hmax - hmin <= g) return 0;
     int64_t z = 0;
     for (int64_t j = 0; j < k; j++) { /* insertion sort */
-        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
+        double v = h[j];
         z += v < 0;
         int64_t u = j;
         while (u > 0 && hs[u - 1] > v) { hs[u] = hs[u - 1]; u--; }
@@ -320,8 +368,7 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     double hi = gaps_up == 1 ? hs[up] : INFINITY, lo = gaps_down == 1 ? hs[down] : -INFINITY;
     int64_t dropped = 0;
     for (int64_t j = 0; j < k; j++) {
-        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
-        keep[j] = v >= lo && v <= hi;
+        keep[j] = h[j] >= lo && h[j] <= hi;
         dropped += !keep[j];
     }
     if (dropped < minimum || (double)(k - dropped) < own * (double)dropped) {
@@ -393,9 +440,11 @@ static void select_axis(double *x, int64_t *idx, int64_t n, int64_t m, int a, ui
 /* Split the points [s, e) at their median along the widest side of their bounding box,
  * recursively down to single points, so that the tree order also orders the points
  * inside a leaf (consecutive points are near each other: see ms_cloud_pdis). The boxes
- * of the nodes down to `depth` go into box (node t at depth d). */
+ * of the nodes down to `depth` go into box (node t at depth d). The nodes at depth
+ * `stop` are left as they are (ms_kdtree_build_subtrees; stop < 0: none). */
 static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
-                       int depth, double *box, uint64_t *rng) {
+                       int depth, int stop, double *box, uint64_t *rng) {
+    if (d == stop) return;
     if (e - s < 2 && d > depth) return;
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (int64_t j = s; j < e; j++) {
@@ -417,18 +466,40 @@ static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t,
     }
     int64_t m = s + (e - s) / 2;
     select_axis(x + 3 * s, idx + s, e - s, m - s, a, rng);
-    build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, box, rng);
-    build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, box, rng);
+    build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, stop, box, rng);
+    build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, stop, box, rng);
 }
 
-/* Build the tree of p (n, 3): the points in tree order into tp (n, 3), their indices
- * into torig (n), the boxes of the 2^(depth + 1) - 1 nodes into box. */
-void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
-                     double *box) {
+/* The depth at which ms_kdtree_build_top stops: min(depth, MS_KD_TOP). */
+static int top_levels(int depth) { return depth < MS_KD_TOP ? depth : MS_KD_TOP; }
+
+void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                         double *box) {
     memcpy(tp, p, (size_t)n * 3 * sizeof(double));
     for (int64_t i = 0; i < n; i++) torig[i] = i;
     uint64_t rng = 0x9e3779b97f4a7c15ULL;
-    build_node(tp, torig, 0, n, 0, 0, depth, box, &rng);
+    build_node(tp, torig, 0, n, 0, 0, depth, top_levels(depth), box, &rng);
+}
+
+void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, int64_t first,
+                              int64_t last, double *box) {
+    int top = top_levels(depth);
+    for (int64_t u = first; u < last; u++) {
+        int64_t s = 0, e = n; /* the points of node u at depth top: its median halves */
+        for (int d = top - 1; d >= 0; d--) {
+            int64_t m = s + (e - s) / 2;
+            if ((u >> d) & 1) s = m;
+            else e = m;
+        }
+        uint64_t rng = 0x9e3779b97f4a7c15ULL ^ (0xbf58476d1ce4e5b9ULL * (uint64_t)(u + 1));
+        build_node(tp, torig, s, e, ((int64_t)1 << top) - 1 + u, top, depth, -1, box, &rng);
+    }
+}
+
+void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                     double *box) {
+    ms_kdtree_build_top(p, n, depth, tp, torig, box);
+    ms_kdtree_build_subtrees(tp, torig, n, depth, 0, (int64_t)1 << top_levels(depth), box);
 }
 
 typedef struct {
@@ -579,6 +650,16 @@ static void knn_search(const tree_t *T, const double *q, int64_t k, double tau, 
     }
 }
 
+/* An upper bound of the squared k-th distance of the point pi, from the k-th distance
+ * prev_r of the point prev_p (triangle inequality, with room for rounding); INFINITY
+ * when prev_r < 0 (no previous point). */
+static inline double kth_bound(const double *pi, const double *prev_p, double prev_r) {
+    if (prev_r < 0.0) return INFINITY;
+    double ex = pi[0] - prev_p[0], ey = pi[1] - prev_p[1], ez = pi[2] - prev_p[2];
+    double t = prev_r + sqrt(ex * ex + ey * ey + ez * ez);
+    return t * t * (1.0 + 1e-9) + 1e-300;
+}
+
 /* The points of a leaf's neighbourhood, as arrays. */
 typedef struct {
     double *x, *y, *z, *d2;
@@ -630,6 +711,54 @@ static int gather(const tree_t *T, const double *lb, double r2, int64_t t, int64
     return 0;
 }
 
+/* Buckets of nearest_of_block's counting sort. */
+#define NEAR_BUCKETS 64
+
+/* The k nearest of the m candidates sel (block entries whose squared distance bd[sel[t]]
+ * is at most limit2, m >= k) into out[0..k), sorted by (d2, idx); out has room for m,
+ * bucket for m, count for NEAR_BUCKETS + 1. A counting sort on the bucket
+ * floor(d2 * NEAR_BUCKETS / limit2) (nondecreasing in d2: a candidate of a later bucket
+ * is strictly farther), then an insertion sort of the candidates of the buckets up to
+ * the one that reaches k (only the members of one bucket are out of order; on a
+ * surface, d2 is about uniform over [0, limit2]). Many candidates in those buckets (ties,
+ * a crowded bucket): a selection of every candidate instead. */
+static void nearest_of_block(const block_t *b, const double *bd, const int32_t *sel, int64_t m,
+                             int64_t k, double limit2, cand_t *out, uint8_t *bucket,
+                             int32_t *count) {
+    double scale = NEAR_BUCKETS / limit2;
+    int64_t total = m;
+    if (scale > 0.0 && scale < INFINITY) {
+        memset(count, 0, (NEAR_BUCKETS + 1) * sizeof(int32_t));
+        for (int64_t t = 0; t < m; t++) {
+            double x = bd[sel[t]] * scale;
+            int c = x < NEAR_BUCKETS - 1 ? (int)x : NEAR_BUCKETS - 1;
+            bucket[t] = (uint8_t)c;
+            count[c + 1]++;
+        }
+        int last = 0;
+        while (count[last + 1] < k) { /* buckets [0, last] hold at least k */
+            last++;
+            count[last + 1] += count[last];
+        }
+        total = count[last + 1];
+        if (total <= 2 * k + 16) {
+            for (int64_t t = 0; t < m; t++) {
+                if (bucket[t] > last) continue;
+                int32_t j = sel[t];
+                cand_t *c = out + count[bucket[t]]++;
+                c->d2 = bd[j]; c->idx = b->idx[j]; c->pos = b->pos[j];
+            }
+            insertion_sort(out, total);
+            return;
+        }
+    }
+    for (int64_t t = 0; t < m; t++) {
+        int32_t j = sel[t];
+        out[t].d2 = bd[j]; out[t].idx = b->idx[j]; out[t].pos = b->pos[j];
+    }
+    select_sorted(out, m, k);
+}
+
 /* The leaf holding tree position i: its node, and its points [*s, *e). */
 static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
     int64_t t = 0;
@@ -673,22 +802,23 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *mu = (double *)malloc((size_t)kmax * sizeof(double));
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
-    double *hs = (double *)malloc((size_t)kmax * sizeof(double));
+    double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
     char *keep = (char *)malloc((size_t)kmax);
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
+    int32_t *sel = (int32_t *)malloc((size_t)limit * sizeof(int32_t));
+    uint8_t *bucket = (uint8_t *)malloc((size_t)limit);
+    int32_t count[NEAR_BUCKETS + 1];
     int rc = 0, have_block = 0;
     int64_t leaf_s = 0, leaf_e = 0;
     double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !soa || !ell || !hs || !keep || !mk) { rc = -1; goto done; }
+    if (!h.c || !q || !d2 || !mu || !soa || !ell || !hs || !keep || !mk || !sel || !bucket) {
+        rc = -1;
+        goto done;
+    }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
-        double tau = INFINITY;
-        if (prev_r >= 0.0) {
-            double ex = pi[0] - prev_p[0], ey = pi[1] - prev_p[1], ez = pi[2] - prev_p[2];
-            double t = prev_r + sqrt(ex * ex + ey * ey + ez * ez);
-            tau = t * t * (1.0 + 1e-9) + 1e-300;
-        }
+        double tau = kth_bound(pi, prev_p, prev_r);
         if (i >= leaf_e) {
             int64_t t = leaf_of(&T, i, &leaf_s, &leaf_e);
             if (leaf_max > 0.0) r2 = leaf_max * BLOCK_GROW;
@@ -711,12 +841,12 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                 double dx = blk.x[j] - px, dy = blk.y[j] - py, dz = blk.z[j] - pz;
                 bd[j] = dx * dx + dy * dy + dz * dz;
             }
-            for (int64_t j = 0; j < nb; j++) { /* branch-free: h.c holds limit >= nb */
-                h.c[m].d2 = bd[j]; h.c[m].idx = blk.idx[j]; h.c[m].pos = blk.pos[j];
+            for (int64_t j = 0; j < nb; j++) { /* branch-free: sel holds limit >= nb */
+                sel[m] = (int32_t)j;
                 m += bd[j] <= limit2;
             }
             if (m >= kmax) {
-                select_sorted(h.c, m, kmax);
+                nearest_of_block(&blk, bd, sel, m, kmax, limit2, h.c, bucket, count);
                 found = 1;
             }
         }
@@ -726,11 +856,11 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         if (r2 < 0.0) r2 = kth * BLOCK_GROW; /* the first point of the chunk */
         prev_r = sqrt(kth);
         prev_p[0] = pi[0]; prev_p[1] = pi[1]; prev_p[2] = pi[2];
-        int64_t oi = orig[i];
+        int64_t ci = orig[i], oi = out->tree_order ? i : ci; /* cleaned index, its row */
         if (out->idx != NULL) {
             for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = h.c[j].idx;
         }
-        if (out->near != NULL) out->near[oi] = kmax > 1 ? h.c[1].idx : oi;
+        if (out->near != NULL) out->near[oi] = kmax > 1 ? h.c[1].idx : ci;
         if (out->kth_d2 != NULL) {
             out->kth_d2[oi] = h.c[kmax - 1].d2;
             out->kth_idx[oi] = h.c[kmax - 1].idx;
@@ -776,12 +906,12 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         }
         if (out->relative != NULL) {
             for (int64_t j = 0; j < kk; j++) {
-                soa[j] = sqrt(d2[j]);
-                soa[kmax + j] = q[3 * j];
-                soa[2 * kmax + j] = q[3 * j + 1];
-                soa[3 * kmax + j] = q[3 * j + 2];
+                soa[4 * j] = sqrt(d2[j]);
+                soa[4 * j + 1] = q[3 * j];
+                soa[4 * j + 2] = q[3 * j + 1];
+                soa[4 * j + 3] = q[3 * j + 2];
             }
-            local_scale_prefixes(soa, kmax, mk, nscales, ell, ell + nscales);
+            local_scale_prefixes(soa, mk, nscales, ell, ell + nscales);
         }
         if (out->pdis == NULL && out->relative == NULL) continue;
         double score = 0.0, sx = 0, sy = 0, sz = 0, h2 = 0;
@@ -821,20 +951,43 @@ done:
     free(hs);
     free(keep);
     free(mk);
+    free(sel);
+    free(bucket);
     return rc;
+}
+
+/* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx)
+ * for the points [begin, end) of p (n, 3), cleaned order: out[i] = 1 when i is not among
+ * the kmax nearest of j = near[i], i.e. when (|p_i - p_j|^2, i) comes after (kth_d2[j],
+ * kth_idx[j]) in the lists' order (squared distance, then index). */
+void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
+                 const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out) {
+    for (int64_t i = begin; i < end; i++) {
+        const double *a = p + 3 * i, *b = p + 3 * near[i];
+        double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+        double d2 = dx * dx + dy * dy + dz * dz, kth = kth_d2[near[i]];
+        out[i] = !(d2 < kth || (d2 == kth && i <= kth_idx[near[i]]));
+    }
 }
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...] (cleaned indices sorted by (squared distance, index), the rows of
- * ms_cloud_pdis's kNN table). Returns 0, or -1 out of memory. */
+ * ms_cloud_pdis's kNN table). Each search is pruned from the start by the bound that
+ * the previous row's k-th distance gives (rows in increasing tree position: near each
+ * other). Returns 0, or -1 out of memory. */
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx) {
     tree_t T = {p, orig, box, n, depth};
     heap_t h = {(cand_t *)malloc((size_t)k * sizeof(cand_t)), 0, k, INFINITY};
     if (!h.c) return -1;
+    double prev_r = -1.0;
+    const double *prev_p = p;
     for (int64_t r = begin; r < end; r++) {
-        knn_search(&T, p + 3 * pos[r], k, INFINITY, &h);
+        const double *pi = p + 3 * pos[r];
+        knn_search(&T, pi, k, kth_bound(pi, prev_p, prev_r), &h);
         for (int64_t j = 0; j < k; j++) out_idx[r * k + j] = h.c[j].idx;
+        prev_r = sqrt(h.c[k - 1].d2);
+        prev_p = pi;
     }
     free(h.c);
     return 0;
@@ -842,9 +995,12 @@ int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *b
 
 /* ------------------------------------------------------------------ meshes */
 
-/* 1-ring adjacency of a triangle mesh, CSR with repeats (each face adds both other
- * corners to each corner): ptr (n + 1), idx (6 m). Returns 0, -1 out of memory, or -2
- * when a face index lies outside [0, n) (nothing is written out of bounds). */
+/* 1-ring adjacency of a triangle mesh in CSR form: ptr (n + 1), idx (room for 6 m). Each
+ * face adds both other corners to each of its corners, in face order; only the first
+ * occurrence of a neighbour is kept (a breadth-first search over these lists meets the
+ * vertices in the order it meets them over the lists with repeats, at half the reads).
+ * Returns 0, -1 out of memory, or -2 when a face index lies outside [0, n) (nothing is
+ * written out of bounds). */
 int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx) {
     for (int64_t f = 0; f < 3 * m; f++) {
         if (faces[f] < 0 || faces[f] >= n) return -2;
@@ -861,31 +1017,61 @@ int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32
         idx[fill[b]++] = (int32_t)a; idx[fill[b]++] = (int32_t)c;
         idx[fill[c]++] = (int32_t)a; idx[fill[c]++] = (int32_t)b;
     }
+    /* compact in place, first occurrences only (fill: the last vertex listing each) */
+    for (int64_t v = 0; v < n; v++) fill[v] = -1;
+    int64_t w = 0, start = 0;
+    for (int64_t v = 0; v < n; v++) {
+        int64_t stop = ptr[v + 1];
+        for (int64_t t = start; t < stop; t++) {
+            int32_t x = idx[t];
+            idx[w] = x;
+            w += fill[x] != v;
+            fill[x] = v;
+        }
+        start = stop;
+        ptr[v + 1] = w;
+    }
     free(fill);
+    return 0;
+}
+
+/* Room for `need` entries in each of the `count` arrays (entry sizes `size`, capacity
+ * *cap, grown by doubling). Returns 0, or -1 out of memory (the arrays stay valid). */
+static int reserve(void **arrays, const size_t *size, int count, int64_t *cap, int64_t need) {
+    if (need <= *cap) return 0;
+    int64_t nc = *cap;
+    while (nc < need) nc *= 2;
+    for (int t = 0; t < count; t++) {
+        void *grown = realloc(arrays[t], (size_t)nc * size[t]);
+        if (grown == NULL) return -1;
+        arrays[t] = grown;
+    }
+    *cap = nc;
     return 0;
 }
 
 /* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
  * the projected distance into out_pdis[s * n + i] (normals into out_normals when not
  * NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA. stamp: (n,) int32
- * scratch of this thread, all -1 initially (or left by an earlier call). With out_sizes
- * and out_members (not NULL), store ring sizes (nscales, n) instead... (unused). */
+ * scratch of this thread, all -1 initially (or left by an earlier call). The members are
+ * summed in the order the search meets them. */
 int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
                  const double *fixed, const int64_t *rings, int nscales, int gaussian,
                  int64_t begin, int64_t end, int32_t *stamp, double *out_pdis,
                  double *out_normals) {
     int64_t cap = 1024;
-    int32_t *queue = (int32_t *)malloc((size_t)cap * sizeof(int32_t));
-    double *q = (double *)malloc((size_t)cap * 3 * sizeof(double));
-    double *d2 = (double *)malloc((size_t)cap * sizeof(double));
-    double *mu = (double *)malloc((size_t)cap * sizeof(double));
+    /* queue (int32), q (3 doubles), d2, mu */
+    void *buf[4] = {malloc((size_t)cap * 4), malloc((size_t)cap * 24), malloc((size_t)cap * 8),
+                    malloc((size_t)cap * 8)};
+    const size_t size[4] = {4, 24, 8, 8};
     int rc = 0;
     int64_t rmax = rings[nscales - 1];
-    if (!queue || !q || !d2 || !mu) { rc = -1; goto done; }
+    if (!buf[0] || !buf[1] || !buf[2] || !buf[3]) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         const double *fn = fixed ? fixed + 3 * i : NULL;
         if (fn && fn[0] == 0.0 && fn[1] == 0.0 && fn[2] == 0.0) fn = NULL;
+        int32_t *queue = (int32_t *)buf[0];
         int64_t head = 0, tail = 0;
         queue[tail++] = (int32_t)i;
         stamp[i] = (int32_t)i;
@@ -896,31 +1082,20 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
             int64_t level_end = tail;
             for (; head < level_end; head++) {
                 int32_t v = queue[head];
-                for (int64_t t = ptr[v]; t < ptr[v + 1]; t++) {
+                int64_t t0 = ptr[v], t1 = ptr[v + 1];
+                if (reserve(buf, size, 4, &cap, tail + (t1 - t0)) != 0) { rc = -1; goto done; }
+                queue = (int32_t *)buf[0];
+                /* branch-free: write every neighbour, keep it when first met */
+                for (int64_t t = t0; t < t1; t++) {
                     int32_t w = adj[t];
-                    if (stamp[w] == (int32_t)i) continue;
+                    queue[tail] = w;
+                    tail += stamp[w] != (int32_t)i;
                     stamp[w] = (int32_t)i;
-                    if (tail == cap) {
-                        int64_t nc = cap * 2;
-                        int32_t *nq = (int32_t *)realloc(queue, (size_t)nc * sizeof(int32_t));
-                        if (!nq) { rc = -1; goto done; }
-                        queue = nq;
-                        double *nq2 = (double *)realloc(q, (size_t)nc * 3 * sizeof(double));
-                        if (!nq2) { rc = -1; goto done; }
-                        q = nq2;
-                        double *nd = (double *)realloc(d2, (size_t)nc * sizeof(double));
-                        if (!nd) { rc = -1; goto done; }
-                        d2 = nd;
-                        double *nm = (double *)realloc(mu, (size_t)nc * sizeof(double));
-                        if (!nm) { rc = -1; goto done; }
-                        mu = nm;
-                        cap = nc;
-                    }
-                    queue[tail++] = w;
                 }
             }
             while (s < nscales && rings[s] == ring) {
                 int64_t m = tail;
+                double *q = (double *)buf[1], *d2 = (double *)buf[2];
                 for (; done_j < m; done_j++) {
                     const double *pj = p + 3 * (int64_t)queue[done_j];
                     double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
@@ -932,34 +1107,43 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                 }
                 double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
                 double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
-                out_pdis[s * n + i] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm, mu);
+                out_pdis[s * n + i] =
+                    neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm, (double *)buf[3]);
                 s++;
             }
         }
     }
 done:
-    free(queue);
-    free(q);
-    free(d2);
-    free(mu);
+    for (int t = 0; t < 4; t++) free(buf[t]);
     return rc;
 }
 
+/* Unit normal of face f into u: cross(p1 - p0, p2 - p0) / |.| (|.| the square root of the
+ * sum of squares; a zero cross product stays zero), numpy's arithmetic in
+ * creases.dihedral_angles and normals.face_average_normals. */
+static void face_normal(const double *p, const int64_t *faces, int64_t f, double *u) {
+    const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
+                 *p2 = p + 3 * faces[3 * f + 2];
+    double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
+    double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
+    double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
+    double len = sqrt(x * x + y * y + z * z);
+    double dv = len > 0 ? len : 1.0;
+    u[0] = x / dv; u[1] = y / dv; u[2] = z / dv;
+}
+
 /* Face-average normals exactly as normals.face_average_normals computes them with
- * numpy (same products, same order of the sums): acc (n, 3) zero on entry. */
+ * numpy (same products, same order of the sums: corner 0 of every face in face order,
+ * then corner 1, then corner 2): acc (n, 3) zero on entry. Each face's normal is computed
+ * again for each corner, which is faster than storing them (no fresh memory). */
 void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                              double zero, double *acc) {
     for (int c = 0; c < 3; c++) {
         for (int64_t f = 0; f < m; f++) {
-            const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
-                         *p2 = p + 3 * faces[3 * f + 2];
-            double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
-            double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-            double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
-            double len = sqrt(x * x + y * y + z * z);
-            double dv = len > 0 ? len : 1.0;
+            double u[3];
+            face_normal(p, faces, f, u);
             double *t = acc + 3 * faces[3 * f + c];
-            t[0] += x / dv; t[1] += y / dv; t[2] += z / dv;
+            t[0] += u[0]; t[1] += u[1]; t[2] += u[2];
         }
     }
     for (int64_t v = 0; v < n; v++) {
@@ -971,6 +1155,12 @@ void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, i
 }
 
 /* ------------------------------------------------------------------ cleaning */
+
+#if defined(__GNUC__)
+#define PREFETCH(address) __builtin_prefetch(address)
+#else
+#define PREFETCH(address) ((void)(address))
+#endif
 
 static inline uint64_t hash64(uint64_t k) {
     k ^= k >> 33;
@@ -998,10 +1188,22 @@ static inline uint64_t point_hash(const double *x) {
  * Returns m. */
 int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input) {
+    /* the slots of the next DEDUP_AHEAD points are fetched while this one is probed */
+    enum { DEDUP_AHEAD = 16 };
+    uint64_t ahead[DEDUP_AHEAD];
+    for (int64_t i = 0; i < n && i < DEDUP_AHEAD; i++) {
+        ahead[i] = point_hash(p + 3 * i) & (uint64_t)tmask;
+        PREFETCH(table + ahead[i]);
+    }
     int64_t m = 0;
     for (int64_t i = 0; i < n; i++) {
         const double *x = p + 3 * i;
-        uint64_t h = point_hash(x) & (uint64_t)tmask;
+        uint64_t h = ahead[i % DEDUP_AHEAD];
+        if (i + DEDUP_AHEAD < n) {
+            uint64_t later = point_hash(x + 3 * DEDUP_AHEAD) & (uint64_t)tmask;
+            ahead[i % DEDUP_AHEAD] = later;
+            PREFETCH(table + later);
+        }
         while (1) {
             int64_t t = table[h];
             if (t < 0) {
@@ -1080,127 +1282,119 @@ int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const i
                         const int64_t *rings, int nscales, int64_t begin, int64_t end,
                         int64_t *mark, double *out_ell, double *out_off) {
     int64_t cap = 1024, rmax = rings[nscales - 1];
-    int32_t *cur = (int32_t *)malloc((size_t)cap * sizeof(int32_t));
-    int32_t *next = (int32_t *)malloc((size_t)cap * sizeof(int32_t));
-    double *q = (double *)malloc((size_t)cap * 3 * sizeof(double));
-    double *dist = (double *)malloc((size_t)cap * sizeof(double));
+    /* the last ring listed backwards, the next one, q (3 doubles), dist */
+    void *buf[4] = {malloc((size_t)cap * 4), malloc((size_t)cap * 4), malloc((size_t)cap * 24),
+                    malloc((size_t)cap * 8)};
+    const size_t size[4] = {4, 4, 24, 8};
     int rc = 0;
-    if (!cur || !next || !q || !dist) { rc = -1; goto done; }
+    if (!buf[0] || !buf[1] || !buf[2] || !buf[3]) { rc = -1; goto done; }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         int64_t m = 1;
-        cur[0] = (int32_t)i;
+        ((int32_t *)buf[0])[0] = (int32_t)i;
         int s = 0;
         for (int64_t ring = 1; ring <= rmax && s < nscales; ring++) {
             int64_t gen = i * (rmax + 1) + ring, k = 0;
-            for (int64_t a = 0; a < m; a++) {
-                int32_t v = cur[a];
-                for (int64_t t = ptr1[v]; t < ptr1[v + 1]; t++) {
+            /* walk the last ring in its order (buf[0] holds it backwards) */
+            for (int64_t a = m - 1; a >= 0; a--) {
+                int32_t v = ((int32_t *)buf[0])[a];
+                int64_t t0 = ptr1[v], t1 = ptr1[v + 1];
+                if (reserve(buf, size, 4, &cap, k + (t1 - t0)) != 0) { rc = -1; goto done; }
+                int32_t *next = (int32_t *)buf[1];
+                /* branch-free: write every member, keep it when first met */
+                for (int64_t t = t0; t < t1; t++) {
                     int32_t w = one[t];
-                    if (mark[w] == gen) continue;
+                    next[k] = w;
+                    k += mark[w] != gen;
                     mark[w] = gen;
-                    if (k == cap) {
-                        int64_t nc = 2 * cap;
-                        int32_t *c2 = (int32_t *)realloc(cur, (size_t)nc * sizeof(int32_t));
-                        if (!c2) { rc = -1; goto done; }
-                        cur = c2;
-                        int32_t *n2 = (int32_t *)realloc(next, (size_t)nc * sizeof(int32_t));
-                        if (!n2) { rc = -1; goto done; }
-                        next = n2;
-                        double *q2 = (double *)realloc(q, (size_t)nc * 3 * sizeof(double));
-                        if (!q2) { rc = -1; goto done; }
-                        q = q2;
-                        double *d2 = (double *)realloc(dist, (size_t)nc * sizeof(double));
-                        if (!d2) { rc = -1; goto done; }
-                        dist = d2;
-                        cap = nc;
-                    }
-                    next[k++] = w;
                 }
             }
-            for (int64_t a = 0; a < k; a++) cur[a] = next[k - 1 - a]; /* reversed */
+            /* the new ring is the members met, backwards: buf[1] read from its end */
+            void *last = buf[0];
+            buf[0] = buf[1];
+            buf[1] = last;
             m = k;
             if (ring != rings[s]) continue;
+            const int32_t *back = (const int32_t *)buf[0];
+            double *q = (double *)buf[2], *dist = (double *)buf[3];
             for (int64_t j = 0; j < m; j++) {
-                const double *pj = p + 3 * (int64_t)cur[j];
-                double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
-                q[3 * j] = x; q[3 * j + 1] = y; q[3 * j + 2] = z;
-                dist[j] = sqrt(x * x + y * y + z * z);
+                const double *pj = p + 3 * (int64_t)back[m - 1 - j];
+                q[3 * j] = pj[0] - pi[0]; q[3 * j + 1] = pj[1] - pi[1]; q[3 * j + 2] = pj[2] - pi[2];
+            }
+            for (int64_t j = 0; j < m; j++) {
+                const double *x = q + 3 * j;
+                dist[j] = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
             }
             local_scale_one(q, dist, m, out_ell + s * n + i, out_off + s * n + i);
             s++;
         }
     }
 done:
-    free(cur);
-    free(next);
-    free(q);
-    free(dist);
+    for (int t = 0; t < 4; t++) free(buf[t]);
     return rc;
 }
 
-static int cmp_pair_i64(const void *a, const void *b) {
-    const int64_t *x = (const int64_t *)a, *y = (const int64_t *)b;
-    if (x[0] != y[0]) return (x[0] > y[0]) - (x[0] < y[0]);
-    return (x[1] > y[1]) - (x[1] < y[1]);
+static int cmp_i64(const void *a, const void *b) {
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
 }
 
 /* creases.dihedral_angles without the angle: the edges (a, b), a < b, with exactly two
- * faces, sorted lexicographically, into out_edges (at most 3 m rows), and the dot product
- * u . v of the two faces' unit normals fn (m, 3) (face order: the lower index first) into
- * out_dot. Returns the number of edges, or -1 out of memory. */
-int64_t ms_two_face_edges(const int64_t *faces, int64_t m, int64_t n, const double *fn,
+ * faces, sorted lexicographically, into out_edges (room for 3 m / 2 rows), and the dot
+ * product u . v of the two faces' unit normals (face_normal; face order: the lower index
+ * first) into out_dot. n * m must be below 2^63. Returns the number of edges, or -1 out
+ * of memory. */
+int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot) {
     int64_t *ptr = (int64_t *)calloc((size_t)n + 1, sizeof(int64_t));
-    int64_t *item = (int64_t *)malloc((size_t)(3 * m > 0 ? 3 * m : 1) * 2 * sizeof(int64_t));
-    if (!ptr || !item) { free(ptr); free(item); return -1; }
+    /* per lower end, the other end and the face as one key: hi * m + f */
+    int64_t *key = (int64_t *)malloc((size_t)(3 * m > 0 ? 3 * m : 1) * sizeof(int64_t));
+    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
+    int64_t e = -1;
+    if (!ptr || !key || !fill) goto done;
     for (int64_t f = 0; f < m; f++)
         for (int c = 0; c < 3; c++) {
             int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
             ptr[(a < b ? a : b) + 1]++;
         }
     for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
-    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
-    if (!fill) { free(ptr); free(item); return -1; }
     memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
     for (int64_t f = 0; f < m; f++)
         for (int c = 0; c < 3; c++) {
             int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
-            int64_t lo = a < b ? a : b, hi = a < b ? b : a, t = fill[lo]++;
-            item[2 * t] = hi;
-            item[2 * t + 1] = f;
+            int64_t lo = a < b ? a : b, hi = a < b ? b : a;
+            key[fill[lo]++] = hi * m + f;
         }
-    free(fill);
-    int64_t e = 0;
+    e = 0;
     for (int64_t v = 0; v < n; v++) {
-        int64_t *it = item + 2 * ptr[v];
+        int64_t *it = key + ptr[v];
         int64_t k = ptr[v + 1] - ptr[v];
-        /* sort by the other end, then the face (faces were filled in increasing order):
-         * insertion sort for short lists, qsort for long ones (a fan of many faces) */
-        if (k > 32) qsort(it, (size_t)k, 2 * sizeof(int64_t), cmp_pair_i64);
+        /* sort by the other end, then the face: insertion sort for short lists, qsort
+         * for long ones (a fan of many faces) */
+        if (k > 32) qsort(it, (size_t)k, sizeof(int64_t), cmp_i64);
         else for (int64_t i = 1; i < k; i++) {
-            int64_t hb = it[2 * i], hf = it[2 * i + 1], j = i;
-            for (; j > 0 && it[2 * (j - 1)] > hb; j--) {
-                it[2 * j] = it[2 * (j - 1)];
-                it[2 * j + 1] = it[2 * (j - 1) + 1];
-            }
-            it[2 * j] = hb;
-            it[2 * j + 1] = hf;
+            int64_t x = it[i], j = i;
+            for (; j > 0 && it[j - 1] > x; j--) it[j] = it[j - 1];
+            it[j] = x;
         }
         for (int64_t i = 0; i < k;) {
-            int64_t j = i + 1;
-            while (j < k && it[2 * j] == it[2 * i]) j++;
+            int64_t hi = it[i] / m, j = i + 1;
+            while (j < k && it[j] / m == hi) j++;
             if (j - i == 2) {
-                const double *u = fn + 3 * it[2 * i + 1], *w = fn + 3 * it[2 * i + 3];
+                double u[3], w[3];
+                face_normal(p, faces, it[i] % m, u);
+                face_normal(p, faces, it[i + 1] % m, w);
                 out_edges[2 * e] = v;
-                out_edges[2 * e + 1] = it[2 * i];
+                out_edges[2 * e + 1] = hi;
                 out_dot[e++] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
             }
             i = j;
         }
     }
+done:
     free(ptr);
-    free(item);
+    free(key);
+    free(fill);
     return e;
 }
 

@@ -41,6 +41,9 @@
 #define MS_NOISE_KNN 7
 #define MS_NOISE_TOLERATED 0.15
 #define MS_NOISE_MAX_FACTOR 3.0
+/* At most this median noise ratio, a cloud is thresholded at the floor alone
+ * (robust.otsu_splits). */
+#define MS_NOISE_QUIET 0.05
 /* The sheet filter (robust.sheet_mask): gap in spacings, fewest points and kept share. */
 #define MS_SHEET_GAP 0.4
 #define MS_SHEET_MIN 6
@@ -54,13 +57,19 @@
 #define MS_CHUNK 8192
 /* Most points in a leaf of the kd-tree (_kernels.KD_LEAF). */
 #define MS_KD_LEAF 16
+/* The kd-tree is built in two steps: its top MS_KD_TOP levels, then the 2^MS_KD_TOP
+ * subtrees below them, each on its own (threads). */
+#define MS_KD_TOP 3
 
 #ifdef __cplusplus
 extern "C" {
 #endif
 
 /* What one pass of ms_cloud_pdis writes (each pointer may be NULL), per cleaned index
- * oi = orig[i], s the scale's position in ks:
+ * oi = orig[i] (with tree_order = 1: per tree position oi = i, the caller then moving the
+ * rows to cleaned order: sequential writes, several times faster on a shuffled cloud;
+ * the values, such as near[oi], are cleaned indices either way), s the scale's position
+ * in ks:
  *   pdis[s * n + oi]          projected distance; normals[(s * n + oi) * 3] its normal;
  *   idx[oi * kmax + j]        the neighbour indices (kNN table);
  *   relative[s * n + oi]      robust mode's relative distance r = min(pdis / l, 1) (0
@@ -85,6 +94,7 @@ typedef struct {
     double sheet_gap;
     int64_t sheet_min;
     double sheet_own;
+    int64_t tree_order;
 } cloud_out_t;
 
 /* The balanced kd-tree of p (n, 3), leaves at `depth` (ceil(log2(n / MS_KD_LEAF)), at
@@ -92,6 +102,15 @@ typedef struct {
  * (n), the tight boxes (lo xyz, hi xyz) of the 2^(depth + 1) - 1 nodes into box. */
 void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
                      double *box);
+
+/* ms_kdtree_build in two steps, the same tree: the top levels, down to t = min(depth,
+ * MS_KD_TOP) (copies p into tp, fills torig), then the subtrees of the nodes u in
+ * [first, last) of the 2^t at depth t (disjoint ranges of tp, torig and box: callers
+ * run them on threads). */
+void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                         double *box);
+void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, int64_t first,
+                              int64_t last, double *box);
 
 /* Unit eigenvector of the smallest eigenvalue of each symmetric matrix cov (c, 6) given
  * as a00 a01 a02 a11 a12 a22, into out (c, 3). */
@@ -104,9 +123,17 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
                   const cloud_out_t *out);
 
+/* robust.isolated_points from a pass's statistics near, kth_d2, kth_idx (n, cleaned
+ * order) for the points [begin, end) of p (n, 3): out[i] = 1 when i is not among the
+ * kmax nearest of near[i] ((|p_i - p_near[i]|^2, i) after that point's kmax-th
+ * neighbour in the lists' order). */
+void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
+                 const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
+
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
- * out_idx[r * k ...], cleaned indices sorted by (squared distance, index). Returns 0, or
- * -1 out of memory. */
+ * out_idx[r * k ...], cleaned indices sorted by (squared distance, index). Fastest with
+ * pos increasing (each search is pruned by the previous row's k-th distance). Returns
+ * 0, or -1 out of memory. */
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx);
 
@@ -120,8 +147,9 @@ int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indic
  * first term plus numpy's pairwise sum of the others (0 when n = 0). */
 double ms_segment_sum(const double *a, int64_t n, int64_t stride);
 
-/* 1-ring adjacency of a triangle mesh, CSR with repeats: ptr (n + 1), idx (6 m). Returns
- * 0, -1 out of memory, or -2 when a face index lies outside [0, n). */
+/* 1-ring adjacency of a triangle mesh, CSR: ptr (n + 1), idx (room for 6 m; ptr[n] used),
+ * each vertex's neighbours in the order its faces list them, each once. Returns 0, -1 out
+ * of memory, or -2 when a face index lies outside [0, n). */
 int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx);
 
 /* k-rings by breadth-first search over (ptr, adj) for the vertices [begin, end) and the
@@ -139,8 +167,8 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
 void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                              double zero, double *acc);
 
-/* Each vertex's 1-ring and itself, sorted, without repeats (RingNeighbourhoods.one_ring),
- * from ms_adjacency's lists (ptr, adj): out_ptr (n + 1), out_idx (room for ptr[n] + n). */
+/* Each vertex's 1-ring and itself, sorted (RingNeighbourhoods.one_ring), from
+ * ms_adjacency's lists (ptr, adj): out_ptr (n + 1), out_idx (room for ptr[n] + n). */
 void ms_sorted_one_ring(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t *out_ptr,
                         int32_t *out_idx);
 
@@ -153,10 +181,11 @@ int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const i
                         const int64_t *rings, int nscales, int64_t begin, int64_t end,
                         int64_t *mark, double *out_ell, double *out_off);
 
-/* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for 3 m
- * rows), and the dot products of their faces' unit normals fn (m, 3), the lower face
- * first, into out_dot (creases.dihedral_angles). Returns the count, or -1 out of memory. */
-int64_t ms_two_face_edges(const int64_t *faces, int64_t m, int64_t n, const double *fn,
+/* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for
+ * 3 m / 2 rows), and the dot products of their faces' unit normals (cross(p1 - p0,
+ * p2 - p0) / |.| of the points p), the lower face first, into out_dot (creases.dihedral_angles). n * m < 2^63.
+ * Returns the count, or -1 out of memory. */
+int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot);
 
 /* Merge exactly equal points into their first occurrence. table: (tmask + 1) int64

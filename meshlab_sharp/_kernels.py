@@ -32,10 +32,17 @@ BACKENDS: tuple[str, ...] = ("compiled", "numpy")
 CHUNK = _header.integer("CHUNK")
 #: Most points in a leaf of the kd-tree.
 KD_LEAF = _header.integer("KD_LEAF")
+#: Levels of the kd-tree built before its subtrees (which are built on threads).
+KD_TOP = _header.integer("KD_TOP")
 
 _c_void_p, _i64, _f64, _int = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
 _SIGNATURES = {
     "ms_kdtree_build": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_kdtree_build_top": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_kdtree_build_subtrees": (
+        None,
+        [_c_void_p, _c_void_p, _i64, _int, _i64, _i64, _c_void_p],
+    ),
     "ms_eigvecs": (None, [_c_void_p, _i64, _c_void_p]),
     "ms_cloud_pdis": (
         _int,
@@ -45,6 +52,10 @@ _SIGNATURES = {
     "ms_knn_rows": (
         _int,
         [_c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _i64, _i64, _i64, _c_void_p],
+    ),
+    "ms_isolated": (
+        None,
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
     "ms_local_scale_csr": (
         _int,
@@ -59,7 +70,7 @@ _SIGNATURES = {
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_face_double_areas": (None, [_c_void_p, _c_void_p, _i64, _c_void_p]),
-    "ms_two_face_edges": (_i64, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_two_face_edges": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_sorted_one_ring": (None, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_ring_local_scale": (
         _int,
@@ -173,12 +184,13 @@ def _run_chunks(
     n: int,
     workers: int,
     task: Callable[[int, int], int],
+    chunk: int = CHUNK,
     spans: Sequence[tuple[int, int]] | None = None,
 ) -> None:
     """task(begin, end) over [0, n) (or over each ``[begin, end)`` of ``spans``) in
-    chunks, on ``workers`` threads."""
+    chunks of ``chunk``, on ``workers`` threads."""
     spans = [(0, n)] if spans is None else spans
-    ranges = [(s, min(s + CHUNK, e)) for a, e in spans for s in range(a, e, CHUNK)]
+    ranges = [(s, min(s + chunk, e)) for a, e in spans for s in range(a, e, chunk)]
     w = _workers(workers)
     if w == 1 or len(ranges) == 1:
         codes = [task(a, b) for a, b in ranges]
@@ -213,8 +225,10 @@ class KdTree:
         return len(self.points)
 
 
-def build_tree(points: np.ndarray) -> KdTree:
-    """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points."""
+def build_tree(points: np.ndarray, workers: int = -1) -> KdTree:
+    """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points: its
+    top :data:`KD_TOP` levels, then the subtrees below them on ``workers`` threads (the
+    same tree as ``ms_kdtree_build``)."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -223,7 +237,14 @@ def build_tree(points: np.ndarray) -> KdTree:
     tree_points = np.empty_like(points)
     orig = np.empty(n, dtype=np.int64)
     boxes = np.empty((2 ** (depth + 1) - 1, 6))
-    lib.ms_kdtree_build(_ptr(points), n, depth, _ptr(tree_points), _ptr(orig), _ptr(boxes))
+    tp, to, tb = _ptr(tree_points), _ptr(orig), _ptr(boxes)
+    lib.ms_kdtree_build_top(_ptr(points), n, depth, tp, to, tb)
+
+    def task(a: int, b: int) -> int:
+        lib.ms_kdtree_build_subtrees(tp, to, n, depth, a, b, tb)
+        return 0
+
+    _run_chunks(2 ** min(depth, KD_TOP), workers, task, chunk=1)
     return KdTree(tree_points, orig, boxes, depth)
 
 
@@ -244,11 +265,23 @@ class _CloudOut(ctypes.Structure):
         ("sheet_gap", ctypes.c_double),
         ("sheet_min", _i64),
         ("sheet_own", ctypes.c_double),
+        ("tree_order", _i64),
     ]
 
 
 #: The fields of :class:`_CloudOut` that are numbers, not arrays.
 _NUMBERS = ("noise_k", "sheet_gap", "sheet_min", "sheet_own")
+#: The arrays of :class:`_CloudOut` with a leading scale axis, (s, n, ...).
+_PER_SCALE = ("pdis", "normals", "relative")
+
+
+def _to_cleaned_order(rows: np.ndarray, orig: np.ndarray, scratch: np.ndarray) -> None:
+    """``rows`` (n, ...) written at tree positions, moved in place to cleaned order
+    (``orig``: the cleaned index of each position); ``scratch``: bytes, at least
+    ``rows.nbytes`` of them."""
+    copy = scratch[: rows.nbytes].view(rows.dtype).reshape(rows.shape)
+    np.copyto(copy, rows)
+    rows[orig] = copy
 
 
 def _tree_spans(tree: KdTree, rows: np.ndarray) -> list[tuple[int, int]]:
@@ -275,23 +308,36 @@ def _cloud_call(
     """One pass of ``ms_cloud_pdis`` over the tree's points (only the points ``rows``,
     cleaned indices, and a few near them in the tree, when given) at the scales ``ks``;
     ``out`` names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
-    ``noise_k``, ``sheet_gap``, ``sheet_min`` and ``sheet_own``."""
+    ``noise_k``, ``sheet_gap``, ``sheet_min`` and ``sheet_own``. Without the kNN table
+    (``idx``) the pass writes its rows in tree order, moved to cleaned order after."""
     lib = _LIB
     assert lib is not None
     t = tree
+    arrays = {
+        name: value
+        for name, value in out.items()
+        if value is not None and name not in _NUMBERS and name != "idx"
+    }
+    tree_order = out.get("idx") is None
     fields = {
         name: value if name in _NUMBERS else _ptr(value)  # type: ignore[arg-type]
         for name, value in out.items()
         if value is not None
     }
-    spec = _CloudOut(**fields)
+    spec = _CloudOut(**fields, tree_order=int(tree_order))
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(ks), len(ks))
     _run_chunks(
         t.n,
         workers,
         lambda a, b: lib.ms_cloud_pdis(*args, int(gaussian), a, b, ctypes.byref(spec)),
-        None if rows is None else _tree_spans(t, rows),
+        spans=None if rows is None else _tree_spans(t, rows),
     )
+    if not tree_order:
+        return
+    moved = [r for name, a in arrays.items() for r in (a if name in _PER_SCALE else (a,))]
+    scratch = np.empty(max((r.nbytes for r in moved), default=0), np.uint8)  # one for all
+    for r in moved:
+        _to_cleaned_order(r, t.orig, scratch)
 
 
 def cloud_knn(
@@ -307,16 +353,22 @@ def cloud_knn(
 
 def cloud_knn_rows(tree: KdTree, rows: np.ndarray, k: int, workers: int = -1) -> np.ndarray:
     """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64, each by a
-    search of the tree (for a few rows: the table of every point is not built)."""
+    search of the tree (for a few rows: the table of every point is not built), the
+    rows searched in tree order."""
     lib = _LIB
     assert lib is not None
     t = tree
     where = np.empty(t.n, dtype=np.int64)
     where[t.orig] = np.arange(t.n, dtype=np.int64)
-    pos = np.ascontiguousarray(where[np.asarray(rows, dtype=np.int64)])
-    out = np.empty((len(pos), k), dtype=np.int64)
+    pos = where[np.asarray(rows, dtype=np.int64)]
+    del where
+    order = np.argsort(pos, kind="stable")
+    pos = np.ascontiguousarray(pos[order])
+    found = np.empty((len(pos), k), dtype=np.int64)
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(pos), k)
-    _run_chunks(len(pos), workers, lambda a, b: lib.ms_knn_rows(*args, a, b, _ptr(out)))
+    _run_chunks(len(pos), workers, lambda a, b: lib.ms_knn_rows(*args, a, b, _ptr(found)))
+    out = np.empty_like(found)
+    out[order] = found
     return out
 
 
@@ -329,6 +381,25 @@ class CloudStats:
     kth_d2: np.ndarray  # (n,) float64 squared distance of the k-th neighbour
     kth_idx: np.ndarray  # (n,) int64 its index
     noise: np.ndarray  # (n,) float64 noise ratio over the noise_k nearest
+
+
+def isolated_from_stats(points: np.ndarray, stats: CloudStats, workers: int = -1) -> np.ndarray:
+    """:func:`meshlab_sharp.robust.isolated_points` from a pass's :class:`CloudStats` at
+    ``k_max`` over ``points`` (n, 3) (no kNN table): ``i`` is isolated when ``(|p_i -
+    p_j|^2, i)``, ``j = near[i]``, comes after ``j``'s k_max-th neighbour in the lists'
+    order (squared distance, then index). (n,) bool."""
+    lib = _LIB
+    assert lib is not None
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.empty(len(points), dtype=np.bool_)
+    args = (_ptr(points), _ptr(stats.near), _ptr(stats.kth_d2), _ptr(stats.kth_idx))
+
+    def task(a: int, b: int) -> int:
+        lib.ms_isolated(*args, a, b, _ptr(out))
+        return 0
+
+    _run_chunks(len(points), workers, task)
+    return out
 
 
 @dataclass
@@ -433,7 +504,8 @@ def cloud_knn_projected_distances(
 
 
 def adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """1-ring adjacency in CSR form (repeats allowed): indptr (n + 1,), indices (6 m,)."""
+    """1-ring adjacency in CSR form: indptr (n + 1,) int64, indices int32, each vertex's
+    neighbours in the order of its faces, each once (about 6 per vertex)."""
     lib = _LIB
     assert lib is not None
     if n >= 2**31:
@@ -446,7 +518,7 @@ def adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"a face index lies outside the {n} vertices")
     if rc != 0:
         raise MemoryError("out of memory building the mesh adjacency")
-    return ptr, idx
+    return ptr, idx[: ptr[-1]].copy()
 
 
 def ring_projected_distances(
@@ -483,22 +555,24 @@ def ring_projected_distances(
     return pdis, out_normals
 
 
-def two_face_edges(
-    faces: np.ndarray, n: int, face_normals: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The edges with exactly two faces, (e, 2) int64 ``a < b`` sorted lexicographically,
-    and the dot products (e,) of their faces' unit normals ``face_normals`` (m, 3), as
-    :func:`meshlab_sharp.creases.dihedral_angles` pairs them."""
+    and the dot products (e,) of their faces' unit normals (``faces`` (m, 3) of ``points``
+    (n, 3)), as :func:`meshlab_sharp.creases.dihedral_angles` computes and pairs them."""
     lib = _LIB
     assert lib is not None
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    fn = np.ascontiguousarray(face_normals, dtype=np.float64)
-    edges = np.empty((3 * len(faces), 2), dtype=np.int64)
-    dot = np.empty(3 * len(faces))
-    e = lib.ms_two_face_edges(_ptr(faces), len(faces), n, _ptr(fn), _ptr(edges), _ptr(dot))
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    n, m = len(points), len(faces)
+    if m and n > (2**63 - 1) // m:
+        raise ValueError("too many vertices and faces for the compiled face pairing")
+    room = 3 * m // 2  # each such edge takes two of the 3 m face edges
+    edges = np.empty((room, 2), dtype=np.int64)
+    dot = np.empty(room)
+    e = lib.ms_two_face_edges(_ptr(points), _ptr(faces), m, n, _ptr(edges), _ptr(dot))
     if e < 0:
         raise MemoryError("out of memory pairing the faces of the mesh's edges")
-    return edges[:e].copy(), dot[:e].copy()
+    return edges[:e], dot[:e]
 
 
 def sorted_one_ring(adjacent: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

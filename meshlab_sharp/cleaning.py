@@ -160,9 +160,14 @@ def _clean_compiled(geometry: Geometry) -> CleanGeometry:
         return CleanGeometry(
             vertices=vertices, faces=None, to_input=to_input, from_input=from_input
         )
-    merged = v if len(to_input) == len(v) else v[to_input]
-    faces = from_input[np.asarray(geometry.faces, dtype=np.int64)]
-    faces = faces[_kernels.face_double_areas(merged, faces) > 0]
+    distinct = len(to_input) == len(v)
+    merged = v if distinct else v[to_input]
+    faces = np.asarray(geometry.faces, dtype=np.int64)
+    if not distinct:
+        faces = from_input[faces]
+    nonzero = _kernels.face_double_areas(merged, faces) > 0
+    if not nonzero.all():
+        faces = faces[nonzero]
     if len(faces) == 0:
         raise InputError(
             f"{geometry.source}: every face has zero area; nothing is left of the mesh "

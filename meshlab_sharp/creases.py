@@ -70,13 +70,13 @@ def dihedral_angles(
     faces = np.asarray(faces, np.int64)
     if len(faces) == 0:
         return np.zeros((0, 2), np.int64), np.zeros(0)
+    if _kernels.resolve(backend) == "compiled":
+        edges, dot = _kernels.two_face_edges(faces, points)
+        return edges, np.arccos(np.clip(dot, -1.0, 1.0, out=dot), out=dot)
     p0, p1, p2 = (points[faces[:, c]] for c in range(3))
     fn = np.cross(p1 - p0, p2 - p0)
     length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
     fn = fn / np.where(length > 0, length, 1.0)[:, None]
-    if _kernels.resolve(backend) == "compiled":
-        edges, dot = _kernels.two_face_edges(faces, len(points), fn)
-        return edges, np.arccos(np.clip(dot, -1.0, 1.0))
     # the 3 edges of each face in turn, so that owners never decrease: a stable sort of
     # the edge codes lo * n + hi (< 2**63 for n < 3e9) orders equal edges by owner
     pairs = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
@@ -113,6 +113,11 @@ def crease_threshold(angles: np.ndarray) -> float:
     if len(angles) == 0:
         return floor
     at = (len(angles) - 1) // 4
+    # When more than ``at`` angles a give NOISE_FACTOR * a <= floor, so does the quartile
+    # (rounding is monotonic) and the floor wins: no partial sort (most of a mesh's edges
+    # are flat).
+    if np.count_nonzero(NOISE_FACTOR * angles <= floor) > at:
+        return floor
     quartile = float(np.partition(angles, at)[at])
     return max(floor, NOISE_FACTOR * quartile)
 

@@ -196,7 +196,7 @@ class KnnNeighbourhoods:
         #: The kd-tree of the compiled backend (None with numpy).
         self.tree: _kernels.KdTree | None = None
         if self.backend == "compiled":
-            self.tree = _kernels.build_tree(points)
+            self.tree = _kernels.build_tree(points, workers)
         else:
             self._indices = knn(points, k_max, workers=workers)
 
@@ -244,7 +244,8 @@ class RingNeighbourhoods:
         self.faces = faces
         self.n = n
         self.backend = _kernels.resolve(backend)
-        #: (indptr, indices) 1-ring adjacency with repeats (compiled backend), else None.
+        #: (indptr, indices) 1-ring adjacency, each neighbour once (compiled backend), else
+        #: None.
         self.adjacency: tuple[np.ndarray, np.ndarray] | None = None
         self._one_ring: sp.csr_matrix | None = None
         if self.backend == "compiled" and n < 2**31:

@@ -348,7 +348,9 @@ def _detect(
     # unit (every output is unit-free), no squared distance or area underflows or
     # overflows.
     unit = unit_scale(geometry.vertices)[0]
-    cleaned = clean(Geometry(unit, geometry.faces if is_mesh else None, geometry.source))
+    faces_in = geometry.faces if is_mesh else None
+    same = unit is geometry.vertices and faces_in is geometry.faces
+    cleaned = clean(geometry if same else Geometry(unit, faces_in, geometry.source))
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     points = cleaned.vertices

@@ -27,7 +27,11 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 3. **Threshold with a floor**: ``T = max(otsu(r), R_MIN)`` with ``R_MIN`` the value of
    ``r`` on a straight edge that turns by ``CREASE_ANGLE`` (20) degrees,
    ``(2 / pi) * sin(10 deg)``. On a smooth object Otsu still splits the histogram, but
-   below the floor: "no sharp features" becomes a possible answer.
+   below the floor: "no sharp features" becomes a possible answer. On a cloud whose
+   measured noise (step 1b) is at most ``NOISE_QUIET``, ``T = R_MIN`` alone: without
+   noise the flat and smooth points have ``r`` near 0 and the floor is the definition
+   of sharp, while Otsu's split, above it on parts with strong edges, drops the weaker
+   ones (the fandisk's, concave edges and the rims of thin walls).
 4. **Support**: a point that is a candidate at every scale is kept only when at least
    ``SUPPORT_MIN`` (2) other such points among its ``SUPPORT_KNN`` (16) nearest (its
    ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
@@ -60,7 +64,6 @@ from .neighbourhoods import (
     Neighbourhood,
     RingNeighbourhoods,
     build_neighbourhoods,
-    squared_distances,
 )
 from .normals import Weighting
 from .projected_distance import projected_distances
@@ -70,6 +73,7 @@ __all__ = [
     "CREASE_ANGLE",
     "NOISE_KNN",
     "NOISE_MAX_FACTOR",
+    "NOISE_QUIET",
     "NOISE_TOLERATED",
     "R_MIN",
     "SHEET_GAP",
@@ -91,6 +95,7 @@ __all__ = [
     "noise_ratios",
     "noise_ratios_lists",
     "noise_scale_factor",
+    "otsu_splits",
     "relative_distances",
     "robust_threshold",
     "sheet_mask",
@@ -130,6 +135,12 @@ NOISE_KNN = _header.integer("NOISE_KNN")
 #: smooth controls, 0.08-0.13 on the simulated scans. Above it the scales grow as the
 #: square of the ratio (the noise of ``r`` at scale k goes as ``sigma / sqrt(k)``).
 NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
+#: At most this noise ratio (the lower median of :func:`noise_ratios`), a cloud is
+#: thresholded at the floor alone (:func:`otsu_splits`). Measured on the evaluation's
+#: clouds (20,000 points): 0-0.003 clean, 0-0.01 thin walls, 0.004-0.018 smooth
+#: controls, 0.09-0.096 with normal noise of 10 % of the spacing, 0.068-0.115 on the
+#: simulated scans; a third of ``NOISE_TOLERATED`` lies between.
+NOISE_QUIET = _header.real("NOISE_QUIET")
 #: The scales grow at most 3-fold (``k_max`` 120 with the default scales: the kNN table
 #: of a million points stays below 0.5 GB); measured at 50 % noise, quick size: x2 0.64,
 #: x3 0.66.
@@ -258,9 +269,16 @@ def thin_knn(growth: float) -> int:
 
 
 def _noise_factor(ratio: np.ndarray) -> float:
-    """:func:`noise_factor` of the lower median of the per-point ratios (n,)."""
+    """:func:`noise_factor` of the lower median of the per-point ratios (n,), which are
+    reordered in place (no copy of n values)."""
+    return noise_factor(_noise_median(ratio))
+
+
+def _noise_median(ratio: np.ndarray) -> float:
+    """The lower median of the per-point noise ratios (n,), reordered in place."""
     at = (len(ratio) - 1) // 2
-    return noise_factor(float(np.partition(ratio, at)[at]))
+    ratio.partition(at)
+    return float(ratio[at])
 
 
 def sheet_mask(
@@ -377,16 +395,15 @@ class SheetNeighbourhoods:
         return Neighbourhood(indptr, idx[keep])
 
 
-def _isolated_from_stats(points: np.ndarray, stats: _kernels.CloudStats) -> np.ndarray:
+def _isolated_from_stats(
+    points: np.ndarray, stats: _kernels.CloudStats, workers: int = -1
+) -> np.ndarray:
     """:func:`isolated_points` from the pass's :class:`~meshlab_sharp._kernels.CloudStats` at
     ``k_max`` (no kNN table): ``i`` is among the k_max nearest of ``j = near[i]`` when
     ``(|p_i - p_j|^2, i)`` does not come after ``j``'s k_max-th neighbour in the
-    lists' order (squared distance, then index). (n,) bool."""
-    j = stats.near
-    d2 = squared_distances(points, points[j])
-    kth = stats.kth_d2[j]
-    among = (d2 < kth) | ((d2 == kth) & (np.arange(len(points)) <= stats.kth_idx[j]))
-    return ~among
+    lists' order (squared distance, then index). (n,) bool, computed in C
+    (:func:`meshlab_sharp._kernels.isolated_from_stats`)."""
+    return _kernels.isolated_from_stats(points, stats, workers)
 
 
 def _segment_sums(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
@@ -475,20 +492,32 @@ def relative_distances(pdis: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return np.minimum(r, 1.0)
 
 
-def robust_threshold(r: np.ndarray) -> float:
+def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
     """Otsu's threshold of relative distances on [0, 1], never below ``R_MIN``.
 
     Parameters
     ----------
     r : (m,) float64
         Relative projected distances in [0, 1] (isolated points left out).
+    otsu : bool, default True
+        False on a cloud without noise (:func:`otsu_splits`): the floor alone.
 
     Returns
     -------
     float
-        ``max(otsu_threshold(r), R_MIN)``; candidates are ``r >= T``.
+        ``max(otsu_threshold(r), R_MIN)``, or ``R_MIN`` when not ``otsu``; candidates
+        are ``r >= T``.
     """
-    return max(otsu_threshold(r), R_MIN)
+    return max(otsu_threshold(r), R_MIN) if otsu else R_MIN
+
+
+def otsu_splits(mesh: bool, noise: float) -> bool:
+    """Whether Otsu's split raises the threshold above ``R_MIN``: on meshes, and on
+    clouds whose noise ratio ``noise`` (the lower median of :func:`noise_ratios`, as
+    :func:`noise_scale_factor` takes it) exceeds ``NOISE_QUIET``. On a cloud without
+    noise the floor alone (measured, docs/robust-mode.md: thin walls 1 / 2 / 3
+    spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)."""
+    return mesh or noise > NOISE_QUIET
 
 
 @dataclass
@@ -516,6 +545,8 @@ class RelativeRule:
     local : callable, optional
         ``local(i, scale) -> (l, o)``, :func:`local_scale` of the i-th scale computed
         without the lists (the compiled ring pass); default: from ``lists``.
+    otsu : bool, default True
+        :func:`robust_threshold`'s ``otsu`` (:func:`otsu_splits`).
     """
 
     points: np.ndarray
@@ -523,6 +554,7 @@ class RelativeRule:
     n_scales: int
     sheet: tuple[float, int, float] | None = None
     local: Callable[[int, int], tuple[np.ndarray, np.ndarray]] | None = None
+    otsu: bool = True
 
     def __post_init__(self) -> None:
         self.score = np.zeros(len(self.points))
@@ -535,14 +567,14 @@ class RelativeRule:
             ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
-        return r, robust_threshold(r)
+        return r, robust_threshold(r, self.otsu)
 
     def from_pass(self, relative: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, float]:
         """What ``__call__`` returns, from the compiled pass over a cloud, which computed
         the relative distances (m,) of this scale and the final ``score`` (m,) with
         this rule's arithmetic (:class:`meshlab_sharp._kernels.ScalePass`)."""
         self.score = score
-        return relative, robust_threshold(relative)
+        return relative, robust_threshold(relative, self.otsu)
 
 
 def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourhood) -> np.ndarray:
@@ -721,7 +753,13 @@ class RobustSetup:
     fused : ScalePass or None
         The compiled pass over ``points`` at ``scales`` to pass to ``run_scales``, when
         the set-up's search already made it (compiled backend, a cloud whose noise did
-        not grow the scales); None otherwise.
+        not grow the scales); None otherwise, and once :meth:`finish` starts (its
+        per-scale arrays, read by ``run_scales``, are released before support and
+        thinning).
+    sharp_edges : (m,) bool or None
+        A mesh's vertices on its own sharp edges
+        (:func:`meshlab_sharp.creases.sharp_vertices`), found first, while little else
+        is in memory; None for a cloud.
     """
 
     def __init__(
@@ -746,6 +784,8 @@ class RobustSetup:
         self.fused: _kernels.ScalePass | None = None
         #: How much the noise grew the scales (1: not at all).
         self.growth = 1.0
+        #: The cloud's noise ratio (the lower median of :func:`noise_ratios`; 0 on a mesh).
+        self.noise = 0.0
         #: The neighbourhoods the scales use: ``neighbourhoods`` (meshes; clouds with
         #: the compiled pass, which leaves the other sheets out itself), or their
         #: :class:`SheetNeighbourhoods` (clouds, numpy).
@@ -761,10 +801,11 @@ class RobustSetup:
             if compiled:
                 self.fused = self._pass(k0, sheet)
                 assert self.fused.stats is not None
-                isolated = _isolated_from_stats(points, self.fused.stats)
+                isolated = _isolated_from_stats(points, self.fused.stats, workers)
             else:
                 isolated = isolated_points(neighbourhoods.indices)
             if isolated.any():
+                self.fused = None  # freed before the pass over the points kept
                 self.keep = np.flatnonzero(~isolated)
                 self.points = np.ascontiguousarray(points[self.keep])
                 self.neighbourhoods = build_neighbourhoods(
@@ -772,15 +813,17 @@ class RobustSetup:
                 )
                 if compiled:
                     self.fused = self._pass(k0, sheet)
+            del isolated
             if self.fused is not None and self.fused.stats is not None:
-                noise = _noise_factor(self.fused.stats.noise)
+                self.noise = _noise_median(self.fused.stats.noise)
+                self.fused.stats = None  # read: its (n,) arrays are not kept
                 self.scale_neighbourhoods = self.neighbourhoods
             else:
                 self.scale_neighbourhoods = self._sheets()
-                noise = _noise_factor(
+                self.noise = _noise_median(
                     noise_ratios_lists(self.points, self.scale_neighbourhoods.first(k0))
                 )
-            factor = min(noise, len(self.points) / top)
+            factor = min(noise_factor(self.noise), len(self.points) / top)
             if factor > 1.0:
                 self.growth = factor
                 self.scales = grown_scales(self.scales, factor)
@@ -790,13 +833,15 @@ class RobustSetup:
                 self.fused = None
                 self.scale_neighbourhoods = self.neighbourhoods if compiled else self._sheets()
         self._rings: RingNeighbourhoods | None = None
+        self.sharp_edges = None if faces is None else sharp_vertices(points, faces)[0]
         self._one_ring: sp.csr_matrix | None = None
         self._ring_scales: tuple[np.ndarray, np.ndarray] | None = None
         compiled_rings = isinstance(neighbourhoods, RingNeighbourhoods) and (
             neighbourhoods.adjacency is not None
         )
         local = self._ring_local_scale if compiled_rings else None
-        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, local)
+        otsu = otsu_splits(faces is not None, self.noise)
+        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, local, otsu)
 
     def _sheets(self) -> SheetNeighbourhoods:
         """:class:`SheetNeighbourhoods` of ``neighbourhoods`` (numpy kNN lists)."""
@@ -852,6 +897,8 @@ class RobustSetup:
             )
             self._ring_scales = _kernels.ring_local_scale(self.points, one, self.scales)
         ell, off = self._ring_scales
+        if i == len(self.scales) - 1:
+            self._ring_scales = None  # the last scale: freed when the rule is done with it
         return ell[i], off[i]
 
     def _ring_rows(self, rows: np.ndarray, rings: tuple[int, ...]) -> list[Neighbourhood]:
@@ -900,6 +947,7 @@ class RobustSetup:
             sharp edge (:func:`meshlab_sharp.creases.sharp_vertices`) are features with
             strength 1.
         """
+        self.fused = None
         if mask.any():
             top = max(self.scales)
             if self.faces is None:
@@ -909,13 +957,13 @@ class RobustSetup:
                 ks = (min(THIN_RING, top), top)
                 around, direction = self._ring_rows(np.flatnonzero(mask), ks)
                 compare = around
+            self._one_ring = None  # the rings are listed: the 1-ring is done with
             e = line_directions(self.points, mask, direction)
             mask = supported(self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS)
             mask = thin(self.points, mask, self.rule.score, e, compare, cone_cos=THIN_CONE_COS)
-        if self.faces is not None:
-            edges, _ = sharp_vertices(self.points, self.faces)
-            mask = mask | edges
-            strength = np.where(edges, 1.0, strength)
+        if self.sharp_edges is not None:
+            mask = mask | self.sharp_edges
+            strength = np.where(self.sharp_edges, 1.0, strength)
         return self.expand(mask, False), self.expand(strength, 0.0)
 
     def expand(self, values: np.ndarray, fill: object) -> np.ndarray:

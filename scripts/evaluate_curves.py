@@ -145,7 +145,7 @@ IN_MESHLAB = """\
 `meshlab-sharp detect --sample --curves sample_curves.ply` writes the curves as a PLY
 edge mesh (a vertex element and an `edge` element), which Debian's MeshLab 2020.09 opens
 as a layer of edges. Below, `meshlab out/sample_part_sharp.ply sample_curves.ply`: the
-sample cloud with its features in red and the 28 curves, drawn in yellow and wide (the
+sample cloud with its features in red and its curves, drawn in yellow and wide (the
 layer's wire colour and edge width set in the layer dialog):
 
 ![The sample's curves, written by meshlab-sharp, opened in MeshLab](meshlab-curves.png)
@@ -197,16 +197,23 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
         "loses its two main branches).",
         "3. **Polylines** (`trace.py`): traced between junctions; on clouds each vertex is "
         "moved onto the intersection of the two surfaces on each side (`refine.py`: in the "
-        "plane across the curve the non-feature neighbours form two arms; two lines fitted "
-        "with reassignment, neighbours weighted by their distance along the curve; fallback: "
-        "the line of the curve's own vertices), smoothed over 5 vertices; pieces where the "
-        "two fitted surfaces are mostly flat (false detections) are dropped.",
+        "plane across the skeleton's direction over 4 spacings on each side, the non-feature "
+        "neighbours form two arms; two lines fitted with reassignment, neighbours weighted by "
+        "their distance along the curve; fallback: the line of the curve's own vertices), "
+        "smoothed over 5 vertices; pieces where the two fitted surfaces are mostly flat "
+        "(false detections) are dropped.",
         "4. **Corners and joins**: cut where the curve turns by more than 35 degrees at every "
         "chord scale that fits (chords 0.5-2 spacings from the vertex, times 1, 2, 4, 8); "
         "ends within 4 spacings that face each other are joined (a loop closes), free ends "
-        "facing each other across up to 12 spacings too; other groups of ends are corners "
-        "(least-squares meeting point of the end lines; on meshes the nearest mesh vertex, "
-        "reached along mesh edges).",
+        "facing each other across up to 12 spacings too (facing: the end chords within 35 "
+        "degrees, and the ends, or the chords' inner vertices, within 2 spacings of each "
+        "other's line); other groups of ends are corners. On clouds a free end joins the "
+        "corner its line meets (crossing another end's line at more than 35 degrees, within "
+        "2 spacings, at most 12 spacings ahead: detection leaves gaps at corners), the corner "
+        "is the least-squares meeting point of the end chords 2-8 spacings back, and the "
+        "ends are extended to it; fragments shorter than 8 spacings with two free ends are "
+        "dropped. On meshes the corner is the mesh vertex nearest the meeting point of the "
+        "last edges' lines, reached along mesh edges.",
         "5. **Kinds** (`fit.py`): line if every vertex is within the tolerance (RMS 0.5 "
         "spacing, max 2 spacings) of the principal axis, circular arc if within it of the "
         "fitted plane and circle, free-form otherwise.",

@@ -50,7 +50,12 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "thinning cone 45 deg": ((robust, "THIN_CONE_COS", math.cos(math.radians(45))),),
     "no sharp mesh edges": ((creases, "CREASE_ANGLE", 180.0),),
     "mesh edges: no noise factor": ((creases, "NOISE_FACTOR", 0.0),),
-    "no threshold floor": ((robust, "R_MIN", 0.0),),
+    "Otsu on clouds without noise too": ((robust, "otsu_splits", lambda mesh, noise: True),),
+    "floor alone up to noise 0.15 (the scales' growth)": ((robust, "NOISE_QUIET", 0.15),),
+    "no threshold floor (Otsu alone)": (
+        (robust, "R_MIN", 0.0),
+        (robust, "otsu_splits", lambda mesh, noise: True),
+    ),
     "noise-scaled scales off": ((robust, "NOISE_TOLERATED", math.inf),),
     "noise tolerated 0.2": ((robust, "NOISE_TOLERATED", 0.2),),
     "noise tolerated 0.1": ((robust, "NOISE_TOLERATED", 0.1),),

@@ -31,6 +31,10 @@ SHAPES: dict[str, Shape] = {
     # normal noise of 12 % of the spacing on uniform samples: the scales grow x2.76,
     # below the cap (the noise constants)
     "noisy_box_points": lambda: (shapes.noisy_box_points(1500, 0.12), None),
+    # noise of 1.6 % / 1.7 %: noise ratios 0.0486 / 0.0511, either side of NOISE_QUIET
+    # (0.05): thresholds at the floor / by Otsu
+    "quiet_box_points": lambda: (shapes.noisy_box_points(1500, 0.016), None),
+    "faintly_noisy_box_points": lambda: (shapes.noisy_box_points(1500, 0.017), None),
     # noise of 25 %: the growth is capped (x3)
     "noisier_box_points": lambda: (shapes.noisy_box_points(1500, 0.25), None),
     # a plate 1.7 spacings thick: thinning between the two rims

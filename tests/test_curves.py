@@ -19,6 +19,8 @@ from evaluation.scoring import evaluate_curves, truth_curves
 from meshlab_sharp.cli import main
 from meshlab_sharp.curves import classify, extract_curves
 from meshlab_sharp.curves.graph import nearest
+from meshlab_sharp.curves.refine import line_fit_positions
+from meshlab_sharp.curves.trace import Piece, join_pieces
 from meshlab_sharp.errors import InputError, MeshlabSharpError
 from meshlab_sharp.io import curve_arrays, require_ezdxf, save_curves
 
@@ -109,6 +111,77 @@ def test_curves_do_not_depend_on_the_order_of_the_points(mode):
         np.testing.assert_array_equal(ca.indices, order[cb.indices])
         assert (ca.kind, ca.closed) == (cb.kind, cb.closed)
     np.testing.assert_allclose(a.corners.points, b.corners.points, atol=1e-9)
+
+
+def test_curves_reach_the_corners_across_a_gap_in_the_detection():
+    """Features missing within 6 spacings of every corner (the three ends 8.5 spacings
+    apart): the ends' lines meet at the corner, which is found, and the curves run on
+    to it."""
+    points = shapes.cube_grid_points(21)  # spacing 0.1
+    mask = meshlab_sharp.detect(points, mode="robust").mask
+    gap = np.linalg.norm(points[:, None] - CUBE_CORNERS[None], axis=2).min(axis=1) < 0.6
+    curves, corners = extract_curves(points, mask & ~gap)
+    assert len(curves) == 12 and len(corners) == 8
+    d = np.linalg.norm(corners.points[:, None] - CUBE_CORNERS[None], axis=2)
+    assert sorted(d.argmin(axis=1)) == list(range(8))
+    assert d.min(axis=1).max() < 0.05  # half a spacing
+    for c in curves:
+        assert abs(c.length - 2.0) < 0.1
+        for end in (c.points[0], c.points[-1]):
+            assert np.linalg.norm(CUBE_CORNERS - end, axis=1).min() < 0.05
+
+
+def test_a_short_fragment_with_two_free_ends_is_dropped():
+    """One edge of a cube (spacing 0.05, edges 40 spacings long) detected only over 6
+    spacings in its middle, 17 spacings from the corners: that fragment is left out;
+    the other 11 edges and the 8 corners stay."""
+    points = shapes.cube_grid_points(41)
+    mask = meshlab_sharp.detect(points, mode="robust").mask
+    near_edge = (np.abs(points[:, 0] - 1) <= 0.125) & (np.abs(points[:, 1] - 1) <= 0.125)
+    fragment = near_edge & (np.abs(points[:, 2]) <= 0.15)
+    assert (mask & fragment).sum() >= 6
+    curves, corners = extract_curves(points, mask & (~near_edge | fragment))
+    assert len(curves) == 11 and len(corners) == 8
+    assert min(c.length for c in curves) > 1.9
+
+
+def test_collinear_pieces_with_bent_ends_are_joined():
+    """Two pieces of one line whose last vertices bend 1.5 spacings off it, to opposite
+    sides (3 spacings apart): their chords line up, so they are one curve; two parallel
+    pieces 3 spacings apart stay two."""
+    x = np.arange(0.0, 10.01, 0.5)
+
+    def piece(xs: np.ndarray, y: float) -> Piece:
+        p = np.stack([xs, np.full(len(xs), y), np.zeros(len(xs))], axis=1)
+        return Piece(np.arange(len(p)), p)
+
+    a, b = piece(x, 0.0), piece(x + 10.75, 0.0)
+    a.points[-1, 1], b.points[0, 1] = 0.75, -0.75
+    joined = join_pieces([a, b], 0.5)
+    assert len(joined) == 1
+    assert len(joined[0].points) == len(a.points) + len(b.points)
+    assert len(join_pieces([piece(x, 0.0), piece(x + 10.75, 1.5)], 0.5)) == 2
+
+
+def test_line_fits_of_many_curves_at_once():
+    """Vertices on a straight line stay on it; each curve is fitted on its own vertices
+    only (the same as alone); a loop of no more than ``half`` vertices is unchanged."""
+    rng = np.random.default_rng(2)
+    t = np.array([1.0, 2.0, 2.0]) / 3.0
+    line = np.arange(12.0)[:, None] * t + np.array([0.5, -1.0, 2.0])
+    wavy = rng.normal(size=(9, 3))
+    tiny = rng.normal(size=(2, 3))
+    points = np.concatenate([line, wavy, tiny])
+    dirs = np.tile(t, (len(points), 1))
+    sizes, closed = np.array([12, 9, 2]), np.array([False, True, True])
+    out = line_fit_positions(points, dirs, sizes, closed, 2)
+    np.testing.assert_allclose(out[:12], line, atol=1e-12)
+    np.testing.assert_array_equal(out[21:], tiny)
+    alone = line_fit_positions(wavy, dirs[:9], np.array([9]), np.array([True]), 2)
+    np.testing.assert_array_equal(out[12:21], alone)
+    # a loop's vertex 0: the mean of vertices 7, 8, 0, 1, 2, then onto the line along t
+    mean = wavy[[7, 8, 0, 1, 2]].mean(axis=0)
+    np.testing.assert_allclose(out[12], mean + ((wavy[0] - mean) @ t) * t, atol=1e-12)
 
 
 def test_curves_are_opt_in_and_reported_in_the_summary():

@@ -453,6 +453,38 @@ def test_compiled_ring_local_scales_identical_to_the_ring_lists():
         assert np.array_equal(off[s], ref_off)
 
 
+def _adjacency_with_repeats(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's neighbours as its faces list them, repeats kept (both other corners
+    of each face in face order): the lists the search read before they were deduplicated."""
+    lists: list[list[int]] = [[] for _ in range(n)]
+    for a, b, c in faces.tolist():
+        lists[a] += [b, c]
+        lists[b] += [a, c]
+        lists[c] += [a, b]
+    indptr = np.cumsum([0] + [len(x) for x in lists]).astype(np.int64)
+    return indptr, np.array([w for x in lists for w in x], dtype=np.int32)
+
+
+def test_adjacency_keeps_the_first_occurrence_and_the_search_order():
+    """ms_adjacency lists each neighbour once, where its faces first list it; the
+    breadth-first search over these lists meets the vertices in the order it meets them
+    over the lists with repeats, so every ring's projected distance is the same, bit for
+    bit, with face normals and with PCA (the fan's valence-60 apex included)."""
+    vertices, faces = _fan_and_grid_mesh()
+    n = len(vertices)
+    indptr, indices = _kernels.adjacency(faces, n)
+    full_ptr, full = _adjacency_with_repeats(faces, n)
+    for v in range(n):
+        row = full[full_ptr[v] : full_ptr[v + 1]].tolist()
+        first = [w for t, w in enumerate(row) if w not in row[:t]]
+        assert indices[indptr[v] : indptr[v + 1]].tolist() == first
+    normals = face_average_normals(vertices, faces, backend="compiled")
+    for fixed in (normals, None):
+        got = _kernels.ring_projected_distances(vertices, indptr, indices, (1, 2, 3, 5), fixed)
+        ref = _kernels.ring_projected_distances(vertices, full_ptr, full, (1, 2, 3, 5), fixed)
+        assert np.array_equal(got[0], ref[0])
+
+
 def test_robust_mesh_with_a_high_valence_vertex_same_answers():
     vertices, faces = _fan_and_grid_mesh()
     ref, fast = _both(vertices, faces, mode="robust")

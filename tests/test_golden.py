@@ -58,6 +58,8 @@ NUDGES: dict[str, tuple[ModuleType, str, Callable[[float], float]]] = {
     "noise kNN +1": (robust, "NOISE_KNN", lambda v: v + 1),
     "noise tolerated x0.93": (robust, "NOISE_TOLERATED", lambda v: v * 0.93),
     "noise tolerated x1.07": (robust, "NOISE_TOLERATED", lambda v: v * 1.07),
+    "noise quiet x0.85": (robust, "NOISE_QUIET", lambda v: v * 0.85),
+    "noise quiet x1.15": (robust, "NOISE_QUIET", lambda v: v * 1.15),
     "noise cap x0.85": (robust, "NOISE_MAX_FACTOR", lambda v: v * 0.85),
     "noise cap x1.15": (robust, "NOISE_MAX_FACTOR", lambda v: v * 1.15),
     "quartile factor x0.9": (creases, "NOISE_FACTOR", lambda v: v * 0.9),

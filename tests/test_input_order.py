@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import shapes
 
 import meshlab_sharp
@@ -62,3 +63,27 @@ def test_collinear_faces_are_dropped():
     c = clean(as_geometry(v, f))
     assert len(c.faces) == 1
     np.testing.assert_array_equal(c.from_input, [0, 1, -1, 2])
+
+
+@pytest.mark.parametrize("mode", ["paper", "robust"])
+@pytest.mark.parametrize("kind", ["cloud", "mesh", "mesh with duplicates"])
+def test_the_callers_arrays_are_never_written(kind: str, mode: str) -> None:
+    """``detect`` shares float64 / int64 input arrays without copying them (no copy of
+    n x 3 values): no step may write to them, also when cleaning merges duplicates and
+    drops unreferenced vertices. Read-only arrays prove it: a write would raise."""
+    if kind == "cloud":
+        vertices, faces = shapes.noisy_box_points(3000, 0.1), None
+    else:
+        vertices, faces = shapes.cube_grid_mesh(3)
+        if kind == "mesh with duplicates":
+            vertices = np.concatenate([vertices[:5], vertices, [[9.0, 9.0, 9.0]]])
+            faces = faces + 5
+    before = (vertices.copy(), None if faces is None else faces.copy())
+    vertices.flags.writeable = False
+    if faces is not None:
+        faces.flags.writeable = False
+    result = meshlab_sharp.detect(vertices, faces, mode=mode, curves=True)
+    assert result.mask.any()
+    np.testing.assert_array_equal(vertices, before[0])
+    if faces is not None:
+        np.testing.assert_array_equal(faces, before[1])

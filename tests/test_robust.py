@@ -202,6 +202,20 @@ def test_crease_threshold_rises_with_the_lower_quartile():
     assert creases.NOISE_FACTOR == 4.0 / 0.3186
 
 
+@pytest.mark.parametrize("below", [0, 1, 2, 3, 4])
+def test_crease_threshold_is_the_quartile_rule_when_the_floor_wins_early(below):
+    """The shortcut (the floor wins when more than ``(e - 1) // 4`` angles a give
+    ``NOISE_FACTOR * a <= floor``) returns what the sorted quartile gives, on either side
+    of the count and with angles exactly at ``floor / NOISE_FACTOR``."""
+    floor = math.radians(creases.CREASE_ANGLE)
+    edge = floor / creases.NOISE_FACTOR
+    rng = np.random.default_rng(below)
+    angles = np.r_[np.full(below, edge), np.nextafter(edge, 1.0) + rng.random(9 - below) * 0.5]
+    rng.shuffle(angles)
+    quartile = np.sort(angles)[(len(angles) - 1) // 4]
+    assert creases.crease_threshold(angles) == max(floor, creases.NOISE_FACTOR * quartile)
+
+
 def test_noisy_mesh_raises_the_threshold_and_still_finds_the_edges():
     part = gt.make_part("box", "mesh", n_points=1500)
     rng = np.random.default_rng(4)

@@ -34,6 +34,8 @@ EPS = 1e-10
 R_MIN = (2 / math.pi) * math.sin(math.pi / 18)
 #: Step 1b.
 NOISE_KNN, NOISE_TOLERATED, NOISE_MAX_FACTOR = 7, 0.15, 3.0
+#: Step 3: the floor alone on a cloud whose nu is at most 0.05.
+NOISE_QUIET = 0.05
 #: Step 1a: a gap of 0.4 spacings, at least 6 points beyond it.
 SHEET_GAP, SHEET_MIN, SHEET_OWN = 0.4, 6, 0.5
 #: Steps 7 and 8.
@@ -55,7 +57,8 @@ class Reading:
         n = len(points)
         if faces is None:
             scales = meshlab_sharp.DEFAULT_KNN_SCALES
-            keep, points, hoods, own, scales, growth = self._cloud(points, scales)
+            keep, points, hoods, own, scales, growth, nu = self._cloud(points, scales)
+            otsu = nu > NOISE_QUIET  # step 3: the floor alone on a cloud without noise
             normals = None
             around = [h[: min(SUPPORT_KNN, len(h))] for h in hoods]
             thin_k = math.floor(THIN_KNN * growth + 0.5)  # grown with the scales
@@ -65,6 +68,7 @@ class Reading:
         else:
             scales = meshlab_sharp.DEFAULT_RING_SCALES
             keep = np.arange(n)
+            otsu = True
             normals = spec_face_normals(points, faces)
             ring = min(MESH_RING, max(scales))
             around = compare = spec_rings(faces, n, ring)
@@ -85,7 +89,7 @@ class Reading:
                 ell = np.sqrt((q * q).sum(axis=1)).sum() / len(nb)
                 r[s, i] = min(pdis / ell, 1.0) if ell > 0 else 0.0
                 g[s, i] = min(np.sqrt(mean @ mean) / ell, 1.0) if ell > 0 else 0.0
-            thresholds[s] = max(_otsu(r[s]), R_MIN)
+            thresholds[s] = max(_otsu(r[s]), R_MIN) if otsu else R_MIN
         score = (g / len(scales)).sum(axis=0)
         sure_f0 = (r >= thresholds[:, None] + EPS_R).all(axis=0)
         maybe_f0 = (r >= thresholds[:, None] - EPS_R).all(axis=0)
@@ -160,10 +164,12 @@ class Reading:
     @staticmethod
     def _cloud(
         points: np.ndarray, scales: tuple[int, ...]
-    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray], tuple[int, ...], float]:
+    ) -> tuple[
+        np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray], tuple[int, ...], float, float
+    ]:
         """Steps 1, 1a and 1b: (kept indices, kept points, their kNN lists at the
         largest scale, which of those are on the point's own sheet, the scales, their
-        growth f (1 if none))."""
+        growth f (1 if none), the noise ratio nu)."""
         k_max = max(scales)
         hoods = spec_knn(points, k_max)
         isolated = np.array([i not in hoods[h[1]] for i, h in enumerate(hoods)])
@@ -191,7 +197,7 @@ class Reading:
             scales = tuple(math.floor(k * f + 0.5) for k in scales)
             hoods = spec_knn(points, max(scales))
             own = [_own_sheet(points, i, h) for i, h in enumerate(hoods)]
-        return keep, points, hoods, own, scales, max(f, 1.0)
+        return keep, points, hoods, own, scales, max(f, 1.0), nu
 
 
 def _own_sheet(points: np.ndarray, i: int, hood: np.ndarray) -> np.ndarray:

@@ -7,7 +7,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import shapes
 
+import meshlab_sharp
 from meshlab_sharp import robust
 from meshlab_sharp.neighbourhoods import KnnNeighbourhoods, Neighbourhood
 
@@ -67,6 +69,29 @@ def test_threshold_is_otsu_with_a_floor():
     split = np.r_[np.full(50, 0.5), np.full(50, 0.9)]  # bins 128 and 230
     assert robust.robust_threshold(split) == 129 / 256
     assert robust.robust_threshold(np.full(10, 0.3)) == 1.0  # nothing to split
+    # the floor alone (a cloud without noise): Otsu's split and its "nothing to split"
+    # do not raise it
+    assert robust.robust_threshold(split, otsu=False) == robust.R_MIN
+    assert robust.robust_threshold(np.full(10, 0.3), otsu=False) == robust.R_MIN
+
+
+def test_otsu_splits_on_meshes_and_on_clouds_with_noise():
+    assert robust.NOISE_QUIET == 0.05
+    assert robust.otsu_splits(True, 0.0) and robust.otsu_splits(True, 0.3)
+    assert not robust.otsu_splits(False, 0.0)
+    assert not robust.otsu_splits(False, 0.05)
+    assert robust.otsu_splits(False, 0.05 + 1e-12)
+
+
+def test_a_cloud_without_noise_is_thresholded_at_the_floor_a_noisy_one_by_otsu():
+    clean = meshlab_sharp.detect(shapes.random_box_points(800, seed=2), mode="robust")
+    assert (clean.thresholds == robust.R_MIN).all()
+    # noise of 1 % of the spacing (uniform samples): nu 0.03, the floor; 3 %: nu 0.09,
+    # Otsu, the scales not grown (nu below NOISE_TOLERATED)
+    for sigma, quiet in ((0.01, True), (0.03, False)):
+        noisy = meshlab_sharp.detect(shapes.noisy_box_points(800, sigma), mode="robust")
+        assert noisy.scales == meshlab_sharp.DEFAULT_KNN_SCALES
+        assert (noisy.thresholds == robust.R_MIN).all() == quiet, sigma
 
 
 def test_score_is_the_mean_centroid_distance_over_the_scales():

@@ -198,7 +198,13 @@ def test_the_constants_are_the_headers():
     assert multiscale.DEFAULT_KNN_SCALES == (12, 16, 20, 24, 28, 32, 36, 40)
     assert (threshold.BINS, creases.NOISE_FACTOR) == (256, 4.0 / 0.3186)
     assert robust.R_MIN == 0.11054786333836651  # from CREASE_ANGLE = 20.0
-    for name in ("NOISE_KNN", "NOISE_TOLERATED", "NOISE_MAX_FACTOR", "THIN_CONE_COS"):
+    for name in (
+        "NOISE_KNN",
+        "NOISE_QUIET",
+        "NOISE_TOLERATED",
+        "NOISE_MAX_FACTOR",
+        "THIN_CONE_COS",
+    ):
         assert getattr(robust, name) == c[name]
     script = (ROOT / "meshlab_plugin_cpp" / "examples" / "sharp_features_default.mlx").read_text()
     for name in ("knnScales", "ringScales"):

@@ -39,7 +39,8 @@ const double GAP_LENGTH = 4.0;
 const double SHORTEST_CUT = 2 * GAP_LENGTH;
 const double LOOP_LENGTH = 3;
 const double LONG_GAP = 12.0;
-const double LATERAL_OFFSET = 1.5;
+const double LATERAL_OFFSET = 2.0;
+const int CORNER_SCALE = 2;
 // extract.py
 const double MIN_CURVE_LENGTH = GAP_LENGTH;
 const double SPUR_PIECE = 2 * GAP_LENGTH;
@@ -48,6 +49,7 @@ const double CELL_SPACINGS = 4.0;
 const double MIN_ADVANCE = 0.3;
 const int LINE_FIT_HALF = 2;
 const double SNAP = 0.75;
+const double RAW_TANGENT_WINDOW = 2 * TANGENT_WINDOW;
 // refine.py
 const int REFINE_NEIGHBOURS = 40;
 const double SLAB = 1.0;
@@ -672,6 +674,44 @@ std::vector<double> turnAngles(const Piece &pc, double spacing)
 	return angle;
 }
 
+// trace._open_turn_angles: turnAngles of many open pieces in one pass over their batch
+// (arc lengths and chords as in ends()), one vector per piece
+std::vector<std::vector<double>> openTurnAngles(const std::vector<const Piece *> &pieces, double spacing)
+{
+	std::vector<std::vector<double>> out;
+	if (pieces.empty()) return out;
+	const Batch b = batch(pieces);
+	const double smax = TURN_SCALES[N_SCALES - 1] * spacing;
+	const double gap = maxOf(b.cum) + 2 * TURN_OUTER * smax + 1.0;
+	const std::vector<double> key = keys(b, gap);
+	const size_t total = key.size();
+	std::vector<double> least(total, INF);
+	std::vector<int> valid(total, 0);
+	for (int s = 0; s < N_SCALES; ++s) {
+		const double scale = TURN_SCALES[s] * spacing;
+		for (size_t i = 0; i < total; ++i) {
+			const long lo = b.starts[b.piece[i]], hi = b.stops[b.piece[i]];
+			const double c = key[i];
+			const long farB = clip(searchRight(key, c + -TURN_OUTER * scale) - 1, lo, hi);
+			const long nearB = clip(searchRight(key, c + -TURN_INNER * scale) - 1, lo, hi);
+			const long farA = clip(searchLeft(key, c + TURN_OUTER * scale), lo, hi);
+			const long nearA = clip(searchLeft(key, c + TURN_INNER * scale), lo, hi);
+			const Vec3 before = unit(sub(b.points[nearB], b.points[farB]));
+			const Vec3 after = unit(sub(b.points[farA], b.points[nearA]));
+			if (!(norm(before) > 0 && norm(after) > 0)) continue;
+			valid[i]++;
+			const double cs = std::max(-1.0, std::min(1.0, edot(before, after)));
+			least[i] = std::min(least[i], degrees(std::acos(cs)));
+		}
+	}
+	for (size_t k = 0; k < pieces.size(); ++k) {
+		std::vector<double> angle;
+		for (long i = b.starts[k]; i <= b.stops[k]; ++i) angle.push_back(valid[i] >= MIN_TURN_SCALES ? least[i] : 0.0);
+		out.push_back(angle);
+	}
+	return out;
+}
+
 // Split a piece at the vertices `at` (sorted): closed pieces start at the first.
 std::vector<Piece> splitAt(const Piece &pc, const std::vector<long> &at)
 {
@@ -696,11 +736,9 @@ std::vector<Piece> splitAt(const Piece &pc, const std::vector<long> &at)
 	return out;
 }
 
-std::vector<Piece> cutAtTurns(const Piece &pc, double spacing)
+std::vector<Piece> cutAtTurns(const Piece &pc, const std::vector<double> &angle, double spacing)
 {
-	if (!pc.closed && pc.length() < SHORTEST_CUT * spacing) return {pc};
 	const double window = TURN_OUTER * spacing;
-	const std::vector<double> angle = turnAngles(pc, spacing);
 	const std::vector<double> cum = arc(pc.points);
 	std::vector<long> order(angle.size());
 	std::iota(order.begin(), order.end(), 0L);
@@ -725,6 +763,7 @@ struct Ends {
 	std::vector<long> piece, side;
 	std::vector<Vec3> point;
 	std::vector<Vec3> out[N_SCALES];
+	std::vector<Vec3> anchor[N_SCALES];  // the end chord's vertex nearer the end
 };
 
 Ends ends(const std::vector<Piece> &pieces, double spacing)
@@ -756,6 +795,8 @@ Ends ends(const std::vector<Piece> &pieces, double spacing)
 			const Vec3 lastv = nearL == farL ? chord : sub(b.points[nearL], b.points[farL]);
 			e.out[s].push_back(neg(unit(first)));
 			e.out[s].push_back(unit(lastv));
+			e.anchor[s].push_back(nearF == farF ? b.points[start] : b.points[nearF]);
+			e.anchor[s].push_back(nearL == farL ? b.points[stop] : b.points[nearL]);
 		}
 	}
 	return e;
@@ -797,15 +838,67 @@ std::vector<std::vector<long>> endClusters(const Ends &e, const std::vector<Piec
 
 bool continues(const Ends &e, long a, long b, double spacing)
 {
-	const Vec3 gap = sub(e.point[b], e.point[a]);
 	for (int s = 0; s < N_SCALES; ++s) {
 		const Vec3 &oa = e.out[s][a], &ob = e.out[s][b];
 		if (-dot(oa, ob) < std::cos(radians(CORNER_TURN))) continue;
-		const double offA = norm(sub(gap, mul(dot(gap, oa), oa)));
-		const double offB = norm(sub(gap, mul(dot(gap, ob), ob)));
-		if (std::max(offA, offB) <= LATERAL_OFFSET * spacing) return true;
+		for (const Vec3 &gap : {sub(e.point[b], e.point[a]), sub(e.anchor[s][b], e.anchor[s][a])}) {
+			const double offA = norm(sub(gap, mul(dot(gap, oa), oa)));
+			const double offB = norm(sub(gap, mul(dot(gap, ob), ob)));
+			if (std::max(offA, offB) <= LATERAL_OFFSET * spacing) return true;
+		}
 	}
 	return false;
+}
+
+// trace.meeting_clusters: the free ends added to the ends whose lines they meet at a
+// corner across up to LONG_GAP spacings
+std::vector<std::vector<long>> meetingClusters(const Ends &e, const std::vector<std::vector<long>> &clusters,
+                                               double spacing)
+{
+	const long q = long(e.piece.size());
+	std::vector<long> parent(q);
+	std::iota(parent.begin(), parent.end(), 0L);
+	std::vector<char> freeEnd(q, 1);
+	for (const auto &c : clusters)
+		for (long i : c) parent[i] = c[0], freeEnd[i] = 0;
+	if (q < 2 || std::find(freeEnd.begin(), freeEnd.end(), 1) == freeEnd.end()) return clusters;
+	auto root = [&](long i) {
+		while (parent[i] != i) i = parent[i] = parent[parent[i]];
+		return i;
+	};
+	struct Pair { double gap; long a, b; };
+	std::vector<Pair> pairs;
+	for (const Edge &p : pairsWithin(e.point, LONG_GAP * spacing))
+		if ((freeEnd[p[0]] || freeEnd[p[1]]) && e.piece[p[0]] != e.piece[p[1]])
+			pairs.push_back({norm(sub(e.point[p[0]], e.point[p[1]])), p[0], p[1]});
+	std::stable_sort(pairs.begin(), pairs.end(), [](const Pair &x, const Pair &y) {
+		return std::tie(x.gap, x.a, x.b) < std::tie(y.gap, y.a, y.b);
+	});
+	const std::vector<Vec3> &out = e.out[CORNER_SCALE], &anchor = e.anchor[CORNER_SCALE];
+	const double turn = std::cos(radians(CORNER_TURN));
+	for (const Pair &p : pairs) {
+		const long a = p.a, b = p.b;
+		const double c = dot(out[a], out[b]);
+		if (std::abs(c) > turn) continue;
+		const Vec3 w = sub(anchor[a], anchor[b]);
+		const double da = dot(out[a], w), db = dot(out[b], w);
+		const double det = 1.0 - c * c;
+		const double sa = (c * db - da) / det, sb = (db - c * da) / det;
+		const Vec3 xa = add(anchor[a], mul(sa, out[a])), xb = add(anchor[b], mul(sb, out[b]));
+		if (norm(sub(xa, xb)) > LATERAL_OFFSET * spacing) continue;
+		const Vec3 meet = mul(0.5, add(xa, xb));
+		const double aheadA = dot(sub(meet, e.point[a]), out[a]), aheadB = dot(sub(meet, e.point[b]), out[b]);
+		if (std::min(aheadA, aheadB) < -LATERAL_OFFSET * spacing || std::max(aheadA, aheadB) > LONG_GAP * spacing)
+			continue;
+		const long ra = root(a), rb = root(b);
+		if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+	}
+	std::map<long, std::vector<long>> groups;
+	for (long i = 0; i < q; ++i) groups[root(i)].push_back(i);
+	std::vector<std::vector<long>> grouped;
+	for (auto &g : groups)
+		if (g.second.size() >= 2) grouped.push_back(g.second);
+	return grouped;
 }
 
 bool facesGap(const Ends &e, long a, long b)
@@ -1264,28 +1357,14 @@ std::vector<Vec3> lineFitPositions(const std::vector<Vec3> &points, const std::v
                                    int half, bool closed)
 {
 	const long m = long(points.size());
-	std::vector<Vec3> pad;
-	if (closed) {
-		if (m > half) {
-			pad.insert(pad.end(), points.end() - half, points.end());
-			pad.insert(pad.end(), points.begin(), points.end());
-			pad.insert(pad.end(), points.begin(), points.begin() + half);
-		} else {
-			pad = points;
-		}
-	} else {
-		pad.insert(pad.end(), half, points.front());
-		pad.insert(pad.end(), points.begin(), points.end());
-		pad.insert(pad.end(), half, points.back());
-	}
-	if (long(pad.size()) != m + 2 * half) return points;
-	std::vector<Vec3> cs(pad.size() + 1, Vec3{0.0, 0.0, 0.0});
-	for (size_t i = 0; i < pad.size(); ++i) cs[i + 1] = add(cs[i], pad[i]);
+	if (closed && m <= half) return points;
 	std::vector<Vec3> out(m);
 	const double count = 2 * half + 1;
 	for (long i = 0; i < m; ++i) {
-		const Vec3 diff = sub(cs[i + 2 * half + 1], cs[i]);
-		const Vec3 mean{diff[0] / count, diff[1] / count, diff[2] / count};
+		Vec3 total{0.0, 0.0, 0.0};
+		for (long j = i - half; j <= i + half; ++j)  // in order, like refine.py
+			total = add(total, points[closed ? ((j % m) + m) % m : clip(j, 0, m - 1)]);
+		const Vec3 mean{total[0] / count, total[1] / count, total[2] / count};
 		const double along = edot(sub(points[i], mean), dirs[i]);
 		out[i] = add(mean, mul(along, dirs[i]));
 	}
@@ -1331,28 +1410,19 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	for (size_t i = 0; i < edges.size(); ++i) lengths[i] = norm(sub(fp[edges[i][0]], fp[edges[i][1]]));
 	std::vector<Piece> pieces = skeletonPieces(n, edges, lengths, fp, spacing, {});
 	if (pieces.empty()) return {};
-	// refine every vertex at once, twice (the second time along the first's directions)
+	// refine every vertex at once, across the skeleton's directions over a wide window
 	std::vector<Vec3> raw;
 	for (const Piece &pc : pieces) raw.insert(raw.end(), pc.points.begin(), pc.points.end());
 	const size_t kk = std::min<size_t>(REFINE_NEIGHBOURS, tree.size());
 	std::vector<std::vector<long>> nbrs(raw.size());
 	for (size_t i = 0; i < raw.size(); ++i)
 		for (const auto &hit : tree.query(raw[i], kk)) nbrs[i].push_back(hit.second);
-	std::vector<Vec3> moved = raw, dirs;
+	const std::vector<Vec3> dirs = batchTangents(pieces, RAW_TANGENT_WINDOW * spacing);
+	std::vector<Vec3> moved(raw.size());
 	std::vector<char> fitted(raw.size()), flat(raw.size());
-	for (int round = 0; round < 2; ++round) {
-		std::vector<Piece> current;
-		size_t at = 0;
-		for (const Piece &pc : pieces) {
-			Piece c{pc.nodes, std::vector<Vec3>(moved.begin() + at, moved.begin() + at + pc.points.size()), pc.closed};
-			at += pc.points.size();
-			current.push_back(c);
-		}
-		dirs = batchTangents(current, TANGENT_WINDOW * spacing);
-		for (size_t i = 0; i < raw.size(); ++i) {
-			const Refined r = planeIntersection(raw[i], dirs[i], nbrs[i], nearPts, nearFeature, spacing);
-			moved[i] = r.position, fitted[i] = r.ok, flat[i] = r.flat;
-		}
+	for (size_t i = 0; i < raw.size(); ++i) {
+		const Refined r = planeIntersection(raw[i], dirs[i], nbrs[i], nearPts, nearFeature, spacing);
+		moved[i] = r.position, fitted[i] = r.ok, flat[i] = r.flat;
 	}
 	std::vector<Piece> out;
 	size_t at = 0;
@@ -1405,11 +1475,38 @@ std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing)
 	return out;
 }
 
+// clouds: open pieces shorter than SPUR_PIECE spacings whose two ends are free (not
+// even meeting another's line at a corner) dropped
+std::vector<Piece> dropIsolated(const std::vector<Piece> &pieces, double spacing)
+{
+	const Ends e = ends(pieces, spacing);
+	std::vector<char> joined(pieces.size(), 0);
+	for (const auto &c : meetingClusters(e, endClusters(e, pieces, spacing), spacing))
+		for (long i : c) joined[e.piece[i]] = 1;
+	std::vector<Piece> out;
+	for (size_t i = 0; i < pieces.size(); ++i)
+		if (pieces[i].closed || joined[i] || pieces[i].length() >= SPUR_PIECE * spacing) out.push_back(pieces[i]);
+	return out;
+}
+
+// trace.cut_at_turns: open pieces shorter than SHORTEST_CUT spacings are not cut
 std::vector<Piece> cutAll(const std::vector<Piece> &pieces, double spacing)
 {
+	std::vector<const Piece *> longOpen;
+	std::vector<long> slot(pieces.size(), -1);
+	for (size_t i = 0; i < pieces.size(); ++i)
+		if (!pieces[i].closed && pieces[i].length() >= SHORTEST_CUT * spacing)
+			slot[i] = long(longOpen.size()), longOpen.push_back(&pieces[i]);
+	const std::vector<std::vector<double>> angles = openTurnAngles(longOpen, spacing);
 	std::vector<Piece> out;
-	for (const Piece &pc : pieces)
-		for (Piece &q : cutAtTurns(pc, spacing)) out.push_back(q);
+	for (size_t i = 0; i < pieces.size(); ++i) {
+		if (!pieces[i].closed && slot[i] < 0) {
+			out.push_back(pieces[i]);  // too short to hold two curves
+			continue;
+		}
+		const std::vector<double> angle = pieces[i].closed ? turnAngles(pieces[i], spacing) : angles[slot[i]];
+		for (Piece &q : cutAtTurns(pieces[i], angle, spacing)) out.push_back(q);
+	}
 	return out;
 }
 
@@ -1417,20 +1514,26 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
                            const MeshPaths *paths, Curves &result)
 {
 	const Ends e = ends(pieces, spacing);
-	const auto clusters = endClusters(e, pieces, spacing);
+	auto clusters = endClusters(e, pieces, spacing);
+	// clouds: the end lines 2-8 spacings back, which may meet far from the ends;
+	// meshes: the lines of the last mesh edges
+	const bool cloud = paths == nullptr;
+	if (cloud) clusters = meetingClusters(e, clusters, spacing);
+	const std::vector<Vec3> &outs = cloud ? e.out[CORNER_SCALE] : e.out[0];
+	const std::vector<Vec3> &through = cloud ? e.anchor[CORNER_SCALE] : e.point;
 	std::vector<Vec3> points;
 	std::vector<long> indices;
 	for (const auto &c : clusters) {
 		std::array<std::array<double, 3>, 3> a{};
 		Vec3 b{0.0, 0.0, 0.0};
 		for (long i : c) {
-			const Vec3 &o = e.out[0][i];
+			const Vec3 &o = outs[i];
 			std::array<std::array<double, 3>, 3> proj{};
 			for (int r = 0; r < 3; ++r)
 				for (int k = 0; k < 3; ++k) proj[r][k] = (r == k ? 1.0 : 0.0) - o[r] * o[k];
 			for (int r = 0; r < 3; ++r)
 				for (int k = 0; k < 3; ++k) a[r][k] += proj[r][k];
-			for (int r = 0; r < 3; ++r) b[r] += dot(proj[r], e.point[i]);
+			for (int r = 0; r < 3; ++r) b[r] += dot(proj[r], through[i]);
 		}
 		Vec3 sum = e.point[c[0]];
 		for (size_t j = 1; j < c.size(); ++j) sum = add(sum, e.point[c[j]]);
@@ -1439,7 +1542,13 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 		Vec3 corner = mean;
 		if (condition(a) < 1e6) {
 			const Vec3 x = solve3(a, b);
-			if (norm(sub(x, mean)) <= GAP_LENGTH * spacing) corner = x;
+			bool near = true;
+			if (cloud) {  // within LONG_GAP spacings of every end
+				for (long i : c) near = near && norm(sub(e.point[i], x)) <= LONG_GAP * spacing;
+			} else {
+				near = norm(sub(x, mean)) <= GAP_LENGTH * spacing;
+			}
+			if (near) corner = x;
 		}
 		long index;
 		if (paths == nullptr) {
@@ -1567,6 +1676,7 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	pieces = joinPieces(pieces, spacing, bridge);
 	pieces = cutAll(pieces, spacing);
 	pieces = splitAtTouches(pieces, spacing);
+	if (!paths) pieces = dropIsolated(pieces, spacing);
 	pieces = corners(pieces, spacing, pts, paths.get(), result);
 	for (const Piece &pc : pieces)
 		if (pc.points.size() >= 2) result.curves.push_back(finalCurve(pc));

@@ -279,29 +279,42 @@ struct Lists {
 	const Index *end(size_t slot) const { return idx.data() + ptr[slot + 1]; }
 };
 
+// A mesh's 1-ring lists in CSR form: ms_adjacency's (each vertex's neighbours in the order
+// of its faces) or ms_sorted_one_ring's (sorted, the vertex itself included).
+struct Rings {
+	std::vector<Index> ptr;
+	std::vector<int32_t> idx;
+};
+
+// ms_adjacency of the cleaned mesh, as _kernels.adjacency.
+Rings adjacency(const Clean &c) {
+	const Index n = c.size(), F = Index(c.faces.size() / 3);
+	Rings a;
+	a.ptr.resize(n + 1);
+	a.idx.resize(6 * F);
+	check(ms_adjacency(c.faces.data(), F, n, a.ptr.data(), a.idx.data()));
+	a.idx.resize(a.ptr[n]);
+	return a;
+}
+
+// ms_sorted_one_ring of ms_adjacency's lists, as _kernels.sorted_one_ring.
+Rings sortedOneRing(const Rings &adj) {
+	const Index n = Index(adj.ptr.size()) - 1;
+	Rings one;
+	one.ptr.resize(n + 1);
+	one.idx.resize(adj.idx.size() + n);
+	ms_sorted_one_ring(adj.ptr.data(), adj.idx.data(), n, one.ptr.data(), one.idx.data());
+	one.idx.resize(one.ptr[n]);
+	return one;
+}
+
 // The k-rings of a mesh in the order of the Python package's RingNeighbourhoods
-// (backend "numpy", scipy's sparse product), which robust mode's local scales and support
-// lists use: ring k + 1 lists the vertices met first when walking ring k's list and, for
-// each member, its sorted 1-ring (itself included), in reverse order. The order fixes
-// the rounding of the sums.
+// (backend "numpy", scipy's sparse product), which robust mode's support lists use (and
+// ms_ring_local_scale follows): ring k + 1 lists the vertices met first when walking ring
+// k's list and, for each member, its sorted 1-ring (itself included), in reverse order.
 class SparseRings {
 public:
-	// The sorted 1-ring and self of each vertex, shared by every walker.
-	static std::vector<std::vector<Index>> adjacency(Index n, const std::vector<Index> &faces) {
-		std::vector<std::vector<Index>> adj(n);
-		for (size_t f = 0; f < faces.size(); f += 3)
-			for (int a = 0; a < 3; ++a)
-				for (int b = 0; b < 3; ++b)
-					if (a != b) adj[faces[f + a]].push_back(faces[f + b]);
-		for (Index i = 0; i < n; ++i) {
-			auto &l = adj[i];
-			l.push_back(i);
-			std::sort(l.begin(), l.end());
-			l.erase(std::unique(l.begin(), l.end()), l.end());
-		}
-		return adj;
-	}
-	explicit SparseRings(const std::vector<std::vector<Index>> &adj) : adj_(adj), mark_(adj.size(), -1) {}
+	explicit SparseRings(const Rings &one) : one_(one), mark_(one.ptr.size() - 1, -1) {}
 	// Start at vertex i: the 0-ring {i}.
 	void start(Index i) { current_.assign(1, i); }
 	// The next ring, from the current one.
@@ -309,18 +322,20 @@ public:
 		++generation_;
 		next_.clear();
 		for (Index j : current_)
-			for (Index k : adj_[j])
+			for (Index t = one_.ptr[j]; t < one_.ptr[j + 1]; ++t) {
+				const Index k = one_.idx[t];
 				if (mark_[k] != generation_) {
 					mark_[k] = generation_;
 					next_.push_back(k);
 				}
+			}
 		std::reverse(next_.begin(), next_.end());
 		current_.swap(next_);
 		return current_;
 	}
 
 private:
-	const std::vector<std::vector<Index>> &adj_;
+	const Rings &one_;
 	std::vector<Index> mark_;
 	Index generation_ = 0;
 	std::vector<Index> current_, next_;
@@ -388,38 +403,16 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 }
 
 // creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
-// normals turn by more than max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles).
+// normals turn by more than max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles);
+// the edges and their normals' dot products from the kernel (_kernels.two_face_edges).
 std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<Index> &faces) {
-	const size_t F = faces.size() / 3;
-	std::vector<std::array<double, 3>> u(F);
-	std::vector<std::array<Index, 3>> edges;  // (a, b, face), a < b
-	for (size_t f = 0; f < F; ++f) {
-		const double *p0 = &p[3 * faces[3 * f]], *p1 = &p[3 * faces[3 * f + 1]], *p2 = &p[3 * faces[3 * f + 2]];
-		const double x1 = p1[0] - p0[0], y1 = p1[1] - p0[1], z1 = p1[2] - p0[2];
-		const double x2 = p2[0] - p0[0], y2 = p2[1] - p0[1], z2 = p2[2] - p0[2];
-		const double c[3] = {y1 * z2 - z1 * y2, z1 * x2 - x1 * z2, x1 * y2 - y1 * x2};
-		const double len = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-		const double div = len > 0.0 ? len : 1.0;
-		u[f] = {c[0] / div, c[1] / div, c[2] / div};
-		for (int a = 0; a < 3; ++a) {
-			const Index v0 = faces[3 * f + a], v1 = faces[3 * f + (a + 1) % 3];
-			edges.push_back({std::min(v0, v1), std::max(v0, v1), Index(f)});
-		}
-	}
-	std::sort(edges.begin(), edges.end());
-	std::vector<std::array<Index, 2>> pairs;
-	std::vector<double> angles;
-	for (size_t s = 0; s < edges.size();) {
-		size_t t = s;
-		while (t < edges.size() && edges[t][0] == edges[s][0] && edges[t][1] == edges[s][1]) ++t;
-		if (t - s == 2) {
-			const auto &a = u[edges[s][2]], &b = u[edges[s + 1][2]];
-			const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-			pairs.push_back({edges[s][0], edges[s][1]});
-			angles.push_back(std::acos(std::min(1.0, std::max(-1.0, dot))));
-		}
-		s = t;
-	}
+	const Index F = Index(faces.size() / 3), n = Index(p.size() / 3);
+	std::vector<Index> pairs(2 * (3 * F / 2));
+	std::vector<double> angles(3 * F / 2);
+	const Index e = ms_two_face_edges(p.data(), faces.data(), F, n, pairs.data(), angles.data());
+	check(e < 0 ? -1 : 0);
+	angles.resize(e);
+	for (double &a : angles) a = std::acos(std::min(1.0, std::max(-1.0, a)));
 	double theta = MS_CREASE_ANGLE * (M_PI / 180.0);
 	if (!angles.empty()) {
 		std::vector<double> sorted = angles;
@@ -427,9 +420,9 @@ std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<
 		std::nth_element(sorted.begin(), sorted.begin() + at, sorted.end());
 		theta = std::max(theta, MS_NOISE_FACTOR * sorted[at]);
 	}
-	std::vector<char> out(p.size() / 3, 0);
-	for (size_t e = 0; e < pairs.size(); ++e)
-		if (angles[e] > theta) out[pairs[e][0]] = out[pairs[e][1]] = 1;
+	std::vector<char> out(n, 0);
+	for (Index k = 0; k < e; ++k)
+		if (angles[k] > theta) out[pairs[2 * k]] = out[pairs[2 * k + 1]] = 1;
 	return out;
 }
 
@@ -465,20 +458,17 @@ void decide(const std::vector<int> &votes, size_t S, Decision &d) {
 
 // The mesh's projected distances (S, n) at every ring by the kernel's breadth-first search,
 // face-average normals fixed (zero rows: PCA), as _kernels.ring_projected_distances.
-std::vector<double> ringPdis(const Clean &c, const std::vector<int> &scales, bool gaussian, Bar &bar,
-                             int from, int to) {
+std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector<int> &scales, bool gaussian,
+                             Bar &bar, int from, int to) {
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
 	std::vector<double> normals(3 * n, 0.0);
 	ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data());
-	std::vector<Index> ptr(n + 1);
-	std::vector<int32_t> adj(6 * F);
-	check(ms_adjacency(c.faces.data(), F, n, ptr.data(), adj.data()));
 	const std::vector<Index> rings(scales.begin(), scales.end());
 	std::vector<double> pdis(rings.size() * n);
 	std::vector<std::vector<int32_t>> stamps(workers());
 	chunks(n, [&](unsigned w, Index a, Index b) {
 		if (stamps[w].empty()) stamps[w].assign(n, -1);
-		return ms_ring_pdis(c.pts.data(), n, ptr.data(), adj.data(), normals.data(), rings.data(),
+		return ms_ring_pdis(c.pts.data(), n, adj.ptr.data(), adj.idx.data(), normals.data(), rings.data(),
 		                    int(rings.size()), int(gaussian), a, b, stamps[w].data(), pdis.data(), nullptr);
 	}, bar, from, to, "rings and projected distances");
 	return pdis;
@@ -491,7 +481,7 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 	const size_t S = r.scales.size();
 	std::vector<double> pdis;
 	if (r.mesh) {
-		pdis = ringPdis(c, r.scales, options.gaussian, bar, 0, 90);
+		pdis = ringPdis(c, adjacency(c), r.scales, options.gaussian, bar, 0, 90);
 	} else {
 		bar.report(0, "kd-tree");
 		pdis = cloudPass(Tree(c.pts), r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
@@ -546,13 +536,12 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	bar.report(0, "kd-tree");
 	auto tree = std::make_unique<Tree>(pts);
 	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
+	std::vector<uint8_t> isolated(tree->n);
+	ms_isolated(pts.data(), pass.near.data(), pass.kthD2.data(), pass.kthIdx.data(), 0, tree->n,
+	            isolated.data());
 	std::vector<Index> keep;
-	for (Index i = 0; i < tree->n; ++i) {
-		const Index j = pass.near[i];
-		const double dx = pts[3 * i] - pts[3 * j], dy = pts[3 * i + 1] - pts[3 * j + 1], dz = pts[3 * i + 2] - pts[3 * j + 2];
-		const double d2 = dx * dx + dy * dy + dz * dz, kth = pass.kthD2[j];
-		if (d2 < kth || (d2 == kth && i <= pass.kthIdx[j])) keep.push_back(i);  // not isolated
-	}
+	for (Index i = 0; i < tree->n; ++i)
+		if (!isolated[i]) keep.push_back(i);
 	if (Index(keep.size()) < tree->n) {
 		if (Index(keep.size()) < top0) throw InputError("too few points are left once isolated points are removed");
 		std::vector<double> kept(3 * keep.size());
@@ -583,7 +572,8 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	std::vector<int> votes(n, 0);
 	for (size_t s = 0; s < S; ++s) {
 		const std::vector<double> v(pass.relative.begin() + s * n, pass.relative.begin() + (s + 1) * n);
-		vote(v, std::max(otsu(v), R_MIN), true, votes, r);
+		// robust.otsu_splits: without noise the floor alone
+		vote(v, ratio[at] > MS_NOISE_QUIET ? std::max(otsu(v), R_MIN) : R_MIN, true, votes, r);
 	}
 	decide(votes, S, d);
 	std::vector<Index> rows;
@@ -592,9 +582,15 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	if (rows.empty()) return d;
 	bar.report(85, "support and thinning");
 	const int top = r.scales.back();
-	std::vector<Index> where(n), pos(rows.size()), table(rows.size() * top);
+	std::vector<Index> where(n), pos(rows.size()), rank(rows.size()), table(rows.size() * top);
 	for (Index t = 0; t < n; ++t) where[tree->orig[t]] = t;
 	for (size_t c2 = 0; c2 < rows.size(); ++c2) pos[c2] = where[rows[c2]];
+	// searched in tree order (_kernels.cloud_knn_rows): row c2 lands at rank[c2]
+	std::vector<Index> order(rows.size());
+	std::iota(order.begin(), order.end(), Index(0));
+	std::sort(order.begin(), order.end(), [&](Index a, Index b) { return pos[a] < pos[b]; });
+	for (size_t c = 0; c < rows.size(); ++c) rank[order[c]] = Index(c);
+	std::sort(pos.begin(), pos.end());
 	const Tree &t = *tree;
 	chunks(Index(rows.size()), [&](unsigned, Index a, Index b) {
 		return ms_knn_rows(t.pts.data(), t.orig.data(), t.n, t.box.data(), t.depth, pos.data(), top, a, b,
@@ -602,7 +598,7 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	}, bar, 85, 95, "support and thinning");
 	Lists D, Sup, K;
 	for (size_t c2 = 0; c2 < rows.size(); ++c2) {
-		const Index *row = &table[c2 * top];
+		const Index *row = &table[rank[c2] * top];
 		D.add(row, row + top);
 		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
 		K.add(row, row + std::min(thinKnn, top));
@@ -612,50 +608,22 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 }
 
 // Robust mode on a mesh: pdis from the kernel's rings, the local scales over the rings in
-// the Python package's sparse order (RelativeRule.__call__ with local_scale), support and
+// the Python package's sparse order (ms_ring_local_scale, as RobustSetup), support and
 // thinning over the 2-ring, and the vertices of the mesh's sharp edges (creases.py).
 Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = c.size();
 	const size_t S = r.scales.size();
 	const int top = r.scales.back();
-	const std::vector<double> pdis = ringPdis(c, r.scales, options.gaussian, bar, 0, 45);
-	const auto adj = SparseRings::adjacency(n, c.faces);
+	const Rings adj = adjacency(c);
+	const std::vector<double> pdis = ringPdis(c, adj, r.scales, options.gaussian, bar, 0, 45);
+	const Rings one = sortedOneRing(adj);
+	const std::vector<Index> rings(r.scales.begin(), r.scales.end());
 	std::vector<double> ell(S * n), off(S * n);
-	struct Scratch {
-		std::unique_ptr<SparseRings> rings;
-		std::vector<Index> indptr;
-		std::vector<std::vector<Index>> lists;
-	};
-	std::vector<Scratch> scratch(workers());
+	std::vector<std::vector<Index>> marks(workers());
 	chunks(n, [&](unsigned w, Index a, Index b) {
-		Scratch &sc = scratch[w];
-		if (!sc.rings) {
-			sc.rings = std::make_unique<SparseRings>(adj);
-			sc.indptr.assign(n + 1, 0);
-			sc.lists.resize(S);
-		}
-		std::vector<std::vector<Index>> starts(S);
-		for (auto &l : sc.lists) l.clear();
-		for (Index i = a; i < b; ++i) {
-			sc.rings->start(i);
-			size_t s = 0;
-			for (int ring = 1; ring <= top; ++ring) {
-				const std::vector<Index> &nb = sc.rings->grow();
-				if (ring == r.scales[s]) {
-					starts[s].push_back(Index(sc.lists[s].size()));
-					sc.lists[s].insert(sc.lists[s].end(), nb.begin(), nb.end());
-					++s;
-				}
-			}
-		}
-		for (size_t s = 0; s < S; ++s) {
-			for (Index i = a; i < b; ++i) sc.indptr[i] = starts[s][i - a];
-			sc.indptr[b] = Index(sc.lists[s].size());
-			const int rc = ms_local_scale_csr(c.pts.data(), sc.indptr.data(), sc.lists[s].data(), 1, a, b,
-			                                  &ell[s * n], &off[s * n]);
-			if (rc != 0) return rc;
-		}
-		return 0;
+		if (marks[w].empty()) marks[w].assign(n, -1);
+		return ms_ring_local_scale(c.pts.data(), n, one.ptr.data(), one.idx.data(), rings.data(), int(S), a, b,
+		                           marks[w].data(), ell.data(), off.data());
 	}, bar, 45, 85, "local scales");
 	bar.report(85, "thresholds");
 	std::vector<int> votes(n, 0);
@@ -677,12 +645,12 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 		if (d.feature[i]) rows.push_back(i);
 	if (!rows.empty()) {
 		const int compareRing = std::min(MS_THIN_RING, top);
-		SparseRings rings(adj);
+		SparseRings walk(one);
 		Lists D, Sup;
 		for (Index i : rows) {
-			rings.start(i);
+			walk.start(i);
 			for (int ring = 1; ring <= top; ++ring) {
-				const std::vector<Index> &nb = rings.grow();
+				const std::vector<Index> &nb = walk.grow();
 				if (ring == compareRing) Sup.add(nb.data(), nb.data() + nb.size());
 				if (ring == top) D.add(nb.data(), nb.data() + nb.size());
 			}

@@ -27,7 +27,9 @@ from .refine import (
     refine_neighbours,
 )
 from .trace import (
+    CORNER_SCALE,
     GAP_LENGTH,
+    LONG_GAP,
     LOOP_LENGTH,
     TANGENT_WINDOW,
     Bridge,
@@ -36,6 +38,7 @@ from .trace import (
     cut_at_turns,
     end_clusters,
     join_pieces,
+    meeting_clusters,
     split_at_touches,
     trace_paths,
 )
@@ -62,6 +65,9 @@ CELL_SPACINGS = 4.0
 MIN_ADVANCE = 0.3
 #: Vertices on each side of a vertex in the fallback line fit (2 spacings or so).
 LINE_FIT_HALF = 2
+#: Half-width, in spacings of arc, of the chord giving the skeleton's direction at a
+#: vertex, across which the vertex is refined (clouds).
+RAW_TANGENT_WINDOW = 2 * TANGENT_WINDOW
 #: A curve end farther than this, in spacings, from its corner gets the corner as an
 #: extra vertex; a nearer one moves onto the corner (clouds).
 SNAP = 0.75
@@ -190,12 +196,14 @@ def extract_curves(
     if spacing <= 0:
         return [], empty
     bridge = None if paths is None else _bridge(pts, paths, spacing)
-    pieces = _drop_short([q for pc in pieces for q in cut_at_turns(pc, spacing)], spacing)
+    pieces = _drop_short(cut_at_turns(pieces, spacing), spacing)
     pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
     pieces = join_pieces(pieces, spacing, bridge)
     # joining may have run a curve round a corner whose vertex was near a piece's end
-    pieces = [q for pc in pieces for q in cut_at_turns(pc, spacing)]
+    pieces = cut_at_turns(pieces, spacing)
     pieces = split_at_touches(pieces, spacing)
+    if paths is None:
+        pieces = _drop_isolated(pieces, spacing)
     pieces, corners = _corners(pieces, spacing, pts, paths)
     curves = [_curve(pc, spacing) for pc in pieces if len(pc.points) >= 2]
     curves.sort(key=lambda c: (*c.points[0], *c.points[-1], c.length))
@@ -250,33 +258,28 @@ def _cloud_pieces(
         pieces.append(Piece(nodes, fp[nodes], closed))
     if not pieces:
         return [], spacing
-    # refine every vertex at once, twice: the second time along the directions of the
-    # first refinement, which are steadier than those of the raw skeleton
+    # refine every vertex at once, across the skeleton's directions over a wide window
+    # (the skeleton zigzags across the band of features)
     raw = np.concatenate([pc.points for pc in pieces])
-    moved = raw
     neighbours = refine_neighbours(tree, raw)
-    for _ in range(2):
-        dirs = batch_tangents(
-            [Piece(pc.nodes, p, pc.closed) for pc, p in _split(pieces, moved)],
-            TANGENT_WINDOW * spacing,
-        )
-        moved, fitted, flat = plane_intersection_positions(
-            raw, dirs, neighbours, near_pts, mask[near], spacing
-        )
+    dirs = batch_tangents(pieces, RAW_TANGENT_WINDOW * spacing)
+    moved, fitted, flat = plane_intersection_positions(
+        raw, dirs, neighbours, near_pts, mask[near], spacing
+    )
+    sizes = np.array([len(pc.points) for pc in pieces])
+    closed = np.array([pc.closed for pc in pieces])
+    # where the fit failed, onto the line of the curve's own vertices; then smoothed
+    # along the curve: each vertex onto the line of its neighbours
+    line = line_fit_positions(raw, dirs, sizes, closed, LINE_FIT_HALF)
+    smooth = line_fit_positions(
+        np.where(fitted[:, None], moved, line), dirs, sizes, closed, LINE_FIT_HALF
+    )
     out = []
-    for (pc, p), (_, d), (_, f), (_, no_edge) in zip(
-        _split(pieces, moved),
-        _split(pieces, dirs),
-        _split(pieces, fitted),
-        _split(pieces, flat),
-        strict=True,
+    for (pc, p), (_, d), (_, no_edge) in zip(
+        _split(pieces, smooth), _split(pieces, dirs), _split(pieces, flat), strict=True
     ):
         if no_edge.mean() > MAX_FLAT_SHARE:
             continue  # not an edge between two surfaces: false detections
-        if not f.all():
-            p = np.where(f[:, None], p, line_fit_positions(pc.points, d, LINE_FIT_HALF, pc.closed))
-        # then smoothed along the curve: each vertex onto the line of its neighbours
-        p = line_fit_positions(p, d, LINE_FIT_HALF, pc.closed)
         keep = _advancing(p, d, spacing)
         out.append(Piece(feat[pc.nodes[keep]], p[keep], pc.closed))
     return out, spacing
@@ -359,28 +362,57 @@ def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
     ]
 
 
+def _drop_isolated(pieces: list[Piece], spacing: float) -> list[Piece]:
+    """Leave out open pieces shorter than SPUR_PIECE spacings whose two ends are free (no
+    other end within GAP_LENGTH spacings, nor one whose line meets theirs at a corner):
+    fragments of detections along noisy edges (clouds)."""
+    ends, clusters = end_clusters(pieces, spacing)
+    joined = np.zeros(len(pieces), bool)
+    for c in meeting_clusters(ends, clusters, spacing):
+        joined[ends.piece[c]] = True
+    return [
+        pc
+        for i, pc in enumerate(pieces)
+        if pc.closed or joined[i] or pc.length >= SPUR_PIECE * spacing
+    ]
+
+
 def _corners(
     pieces: list[Piece], spacing: float, pts: np.ndarray, paths: MeshPaths | None
 ) -> tuple[list[Piece], Corners]:
     """Corners where curve ends meet (not as one continuing curve), and the ends brought
-    onto them. The corner is the point nearest the lines of the ends (least squares);
-    on a mesh, the mesh vertex nearest it, reached from each end along mesh edges
-    (``paths``)."""
+    onto them. The corner is the point nearest the lines of the ends (least squares).
+    On a cloud the ends whose lines meet across a wider gap join the corner too
+    (:func:`meshlab_sharp.curves.trace.meeting_clusters`), and the lines are the end
+    chords at CORNER_SCALE; on a mesh, the lines of the last edges, and the corner is
+    the mesh vertex nearest their meeting point, reached from each end along mesh
+    edges (``paths``)."""
     ends, clusters = end_clusters(pieces, spacing)
+    # clouds: the end lines 2-8 spacings back (noise bends the last vertices), which
+    # may meet far from the ends; meshes: the lines of the last mesh edges
+    if paths is None:
+        clusters = meeting_clusters(ends, clusters, spacing)
+        out, through = ends.out[CORNER_SCALE], ends.anchor[CORNER_SCALE]
+    else:
+        out, through = ends.out[0], ends.point
     points, indices = [], []
     pieces = [Piece(pc.nodes.copy(), pc.points.copy(), pc.closed) for pc in pieces]
     for c in clusters:
         a = np.zeros((3, 3))
         b = np.zeros(3)
         for i in c:
-            proj = np.eye(3) - np.outer(ends.out[0, i], ends.out[0, i])
+            proj = np.eye(3) - np.outer(out[i], out[i])
             a += proj
-            b += proj @ ends.point[i]
+            b += proj @ through[i]
         mean = ends.point[c].mean(axis=0)
         corner = mean
         if np.linalg.cond(a) < 1e6:
-            x = np.linalg.solve(a, b)
-            if np.linalg.norm(x - mean) <= GAP_LENGTH * spacing:
+            x = _solve3(a, b)
+            if paths is None:  # within LONG_GAP spacings of every end
+                near = np.linalg.norm(ends.point[c] - x, axis=1).max() <= LONG_GAP * spacing
+            else:
+                near = np.linalg.norm(x - mean) <= GAP_LENGTH * spacing
+            if near:
                 corner = x
         if paths is None:
             nearest = int(c[np.argmin(np.linalg.norm(ends.point[c] - corner, axis=1))])
@@ -421,6 +453,31 @@ def _corners(
     p = np.array(points)
     order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
     return pieces, Corners(p[order], np.array(indices, np.int64)[order])
+
+
+def _solve3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """x with a x = b for a (3, 3) non-singular: Gaussian elimination with partial
+    pivoting in plain floats, the plugin's arithmetic (``solve3`` in curves_core.cpp),
+    so that both place a corner on the same bits (on a regular grid, corners tie in
+    a coordinate and their order is decided by the last bits). Shape (3,)."""
+    m = [[float(v) for v in row] for row in a]
+    y = [float(v) for v in b]
+    for c in range(3):
+        piv = max(range(c, 3), key=lambda r: (abs(m[r][c]), -r))  # the first largest
+        m[c], m[piv] = m[piv], m[c]
+        y[c], y[piv] = y[piv], y[c]
+        for r in range(c + 1, 3):
+            f = m[r][c] / m[c][c]
+            for k in range(c, 3):
+                m[r][k] -= f * m[c][k]
+            y[r] -= f * y[c]
+    x = [0.0, 0.0, 0.0]
+    for r in (2, 1, 0):
+        s = y[r]
+        for k in range(r + 1, 3):
+            s -= m[r][k] * x[k]
+        x[r] = s / m[r][r]
+    return np.array(x)
 
 
 def _curve(pc: Piece, spacing: float) -> Curve:

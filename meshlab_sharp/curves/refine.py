@@ -232,35 +232,41 @@ def plane_intersection_positions(
 
 
 def line_fit_positions(
-    points: np.ndarray, directions: np.ndarray, half: int, closed: bool
+    points: np.ndarray, directions: np.ndarray, sizes: np.ndarray, closed: np.ndarray, half: int
 ) -> np.ndarray:
     """Project each vertex onto the line through the mean of its ``2 half + 1``
-    neighbours along the curve, in the curve's direction there.
+    neighbours along its curve, in the curve's direction there; many curves at once.
+
+    An open curve's ends count their end vertex in place of the missing neighbours; a
+    loop wraps round (a loop of ``half`` vertices or fewer is left as it is).
 
     Parameters
     ----------
-    points : (m, 3) float64
-    directions : (m, 3) float64
+    points : (v, 3) float64
+        The curves' vertices, one curve after the other.
+    directions : (v, 3) float64
         Unit directions.
+    sizes : (c,) int
+        Vertices of each curve (summing to v).
+    closed : (c,) bool
+        Which curves are loops.
     half : int
         Vertices on each side.
-    closed : bool
-        The curve is a loop.
 
     Returns
     -------
-    (m, 3) float64
+    (v, 3) float64
     """
-    m = len(points)
-    if closed:
-        padded = np.concatenate([points[-half:], points, points[:half]]) if m > half else points
-    else:
-        padded = np.concatenate(
-            [np.repeat(points[:1], half, 0), points, np.repeat(points[-1:], half, 0)]
-        )
-    if len(padded) != m + 2 * half:
-        return points.copy()
-    cs = np.concatenate([np.zeros((1, 3)), np.cumsum(padded, axis=0)])
-    mean = (cs[2 * half + 1 :] - cs[:m]) / (2 * half + 1)
+    sizes = np.asarray(sizes, np.int64)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    piece = np.repeat(np.arange(len(sizes)), sizes)
+    local = np.arange(len(points)) - starts[piece]
+    m, loop = sizes[piece], np.asarray(closed, bool)[piece]
+    total = np.zeros_like(points)
+    for j in range(-half, half + 1):
+        k = np.where(loop, (local + j) % m, np.clip(local + j, 0, m - 1))
+        total = total + points[starts[piece] + k]  # in order, like the plugin
+    mean = total / (2 * half + 1)
     rel = points - mean
-    return mean + np.einsum("ij,ij->i", rel, directions)[:, None] * directions
+    out = mean + np.einsum("ij,ij->i", rel, directions)[:, None] * directions
+    return np.where((loop & (m <= half))[:, None], points, out)

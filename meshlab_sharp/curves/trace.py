@@ -26,6 +26,7 @@ __all__ = [
     "cut_at_turns",
     "end_clusters",
     "join_pieces",
+    "meeting_clusters",
     "split_at_touches",
     "tangents",
     "trace_paths",
@@ -66,9 +67,14 @@ LOOP_LENGTH = 3
 #: Two free ends facing each other are joined across up to this many spacings: the
 #: gaps detection leaves along weak edges (a chamfer's 45-degree edges) and in noise.
 LONG_GAP = 12.0
-#: Two ends continue one curve only if each lies within this many spacings of the
-#: other's line: the width of a feature band (parallel edges are farther apart).
-LATERAL_OFFSET = 1.5
+#: Scale (index into :data:`TURN_SCALES`) of the end chords whose lines place corners:
+#: chords from 2 to 8 spacings before the end (the last vertices bend in noise).
+CORNER_SCALE = 2
+#: Two ends continue one curve only if each (or its end chord's inner vertex) lies
+#: within this many spacings of the other's line, and two end lines meet at a corner
+#: only if they pass this close: the width of a feature band in noise (parallel edges
+#: are farther apart).
+LATERAL_OFFSET = 2.0
 
 
 @dataclass
@@ -93,7 +99,8 @@ class Piece:
     def length(self) -> float:
         """Length of the polyline (the closing segment included for loops)."""
         p = np.vstack([self.points, self.points[:1]]) if self.closed else self.points
-        return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+        d = p[1:] - p[:-1]
+        return float(np.sqrt((d * d).sum(axis=1)).sum())  # np.linalg.norm's sums, cheaper
 
 
 def trace_paths(n: int, edges: np.ndarray) -> list[np.ndarray]:
@@ -226,14 +233,10 @@ def _chords(piece: Piece, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     return before[:, pad : pad + m], after[:, pad : pad + m]
 
 
-def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
-    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`): the smallest
-    of the turns measured with the chords at the :data:`TURN_SCALES` (a corner turns at
-    all; a vertex off the line sways only the short chords, noise the shorter ones
-    more; a circle turns more at the longer ones), over the scales whose chords fit on
-    the piece; 0 where fewer than MIN_TURN_SCALES fit (near an open piece's ends).
-    Shape (m,)."""
-    before, after = _chords(piece, spacing)
+def _least_turn(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """The turn between the chords (S, m, 3) before and after each vertex: the smallest
+    over the scales whose chords are not empty, 0 where fewer than MIN_TURN_SCALES
+    are. Degrees, shape (m,)."""
     valid = (np.linalg.norm(before, axis=2) > 0) & (np.linalg.norm(after, axis=2) > 0)
     cos = np.einsum("sij,sij->si", before, after)
     stack = np.where(valid, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), np.inf)
@@ -242,35 +245,95 @@ def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
     return np.where(enough, least, 0.0)
 
 
-def cut_at_turns(piece: Piece, spacing: float) -> list[Piece]:
-    """Split a piece where it turns by more than :data:`CORNER_TURN`.
+def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
+    """Degrees the piece turns at each vertex (see :data:`CORNER_TURN`): the smallest
+    of the turns measured with the chords at the :data:`TURN_SCALES` (a corner turns at
+    all; a vertex off the line sways only the short chords, noise the shorter ones
+    more; a circle turns more at the longer ones), over the scales whose chords fit on
+    the piece; 0 where fewer than MIN_TURN_SCALES fit (near an open piece's ends).
+    Shape (m,)."""
+    return _least_turn(*_chords(piece, spacing))
+
+
+def _open_turn_angles(pieces: list[Piece], spacing: float) -> list[np.ndarray]:
+    """:func:`turn_angles` of many open pieces in one vectorised pass (their arc lengths
+    and chords as in :func:`_ends`). One (m,) array per piece."""
+    if not pieces:
+        return []
+    sizes = np.array([len(pc.points) for pc in pieces])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    stops = starts + sizes - 1
+    points = np.concatenate([pc.points for pc in pieces])
+    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    step[starts[1:] - 1] = 0.0
+    cum = np.concatenate([[0.0], np.cumsum(step)])
+    piece = np.repeat(np.arange(len(pieces)), sizes)
+    cum -= cum[starts][piece]
+    scales = np.asarray(TURN_SCALES)[:, None] * spacing  # (S, 1)
+    gap = float(cum.max()) + 2 * TURN_OUTER * float(scales.max()) + 1.0
+    key = cum + piece * gap
+    lo, hi = starts[piece], stops[piece]
+
+    def window(offset: np.ndarray, side: str, shift: int) -> np.ndarray:
+        return np.clip(np.searchsorted(key, key[None, :] + offset, side=side) + shift, lo, hi)
+
+    before = _unit(
+        points[window(-TURN_INNER * scales, "right", -1)]
+        - points[window(-TURN_OUTER * scales, "right", -1)]
+    )
+    after = _unit(
+        points[window(TURN_OUTER * scales, "left", 0)]
+        - points[window(TURN_INNER * scales, "left", 0)]
+    )
+    return np.split(_least_turn(before, after), starts[1:])
+
+
+def cut_at_turns(pieces: list[Piece], spacing: float) -> list[Piece]:
+    """Split pieces where they turn by more than :data:`CORNER_TURN`.
 
     The cut vertex is the sharpest turn within TURN_OUTER spacings of arc; it ends both
-    pieces it separates.
+    pieces it separates. Open pieces shorter than SHORTEST_CUT spacings are not cut.
 
     Parameters
     ----------
-    piece : Piece
+    pieces : list of Piece
     spacing : float
 
     Returns
     -------
     list of Piece
-        The piece itself when it has no sharp turn (or is a loop with only one).
+        In order; a piece itself when it has no sharp turn (or is a loop with only
+        one).
     """
-    if not piece.closed and piece.length < SHORTEST_CUT * spacing:
-        return [piece]  # too short to hold two curves
+    long_open = [
+        i for i, pc in enumerate(pieces) if not pc.closed and pc.length >= SHORTEST_CUT * spacing
+    ]
+    angles = dict(
+        zip(long_open, _open_turn_angles([pieces[i] for i in long_open], spacing), strict=True)
+    )
+    out: list[Piece] = []
+    for i, pc in enumerate(pieces):
+        if pc.closed:
+            out += _cut(pc, turn_angles(pc, spacing), spacing)
+        elif i in angles:
+            out += _cut(pc, angles[i], spacing)
+        else:
+            out.append(pc)  # too short to hold two curves
+    return out
+
+
+def _cut(piece: Piece, angle: np.ndarray, spacing: float) -> list[Piece]:
+    """The piece split at its sharp turns, given its turn angles (m,)."""
     window = TURN_OUTER * spacing
-    angle = turn_angles(piece, spacing)
     m = len(angle)
     cum = _arc(piece.points)
+    total = piece.length if piece.closed else 0.0
     cuts: list[int] = []
     for i in np.argsort(-angle, kind="stable"):
         if angle[i] <= CORNER_TURN:
             break
         near = [c for c in cuts if abs(cum[c] - cum[i]) < window]
         if piece.closed:
-            total = piece.length
             near = [
                 c for c in cuts if min(abs(cum[c] - cum[i]), total - abs(cum[c] - cum[i])) < window
             ]
@@ -300,6 +363,7 @@ class _Ends:
     side: np.ndarray  # (q,) 0: first vertex, 1: last
     point: np.ndarray  # (q, 3)
     out: np.ndarray  # (s, q, 3) unit direction leaving the curve (its end chord), per scale
+    anchor: np.ndarray  # (s, q, 3) the end chord's vertex nearer the end, per scale
 
 
 def _ends(pieces: list[Piece], spacing: float) -> _Ends:
@@ -312,7 +376,7 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
     if len(which) == 0:
         z = np.zeros((0, 3))
         empty = np.zeros((len(TURN_SCALES), 0, 3))
-        return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, empty)
+        return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, empty, empty)
     sizes = np.array([len(pieces[i].points) for i in which])
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     stops = starts + sizes - 1
@@ -343,7 +407,18 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
     out[:, 1::2] = _unit(last)
     ends_points = np.empty((2 * q, 3))
     ends_points[0::2], ends_points[1::2] = points[starts], points[stops]
-    return _Ends(np.repeat(which, 2), np.tile([0, 1], q), ends_points, out)
+    anchor = np.empty((len(TURN_SCALES), 2 * q, 3))
+    anchor[:, 0::2] = np.where((near == far)[..., None], points[starts], points[near])
+    anchor[:, 1::2] = np.where((near_b == far_b)[..., None], points[stops], points[near_b])
+    return _Ends(np.repeat(which, 2), np.tile([0, 1], q), ends_points, out, anchor)
+
+
+def _groups(roots: np.ndarray) -> list[np.ndarray]:
+    """The indices sharing each root (ascending; groups in the order of their roots),
+    the groups of two or more."""
+    order = np.argsort(roots, kind="stable")
+    bounds = np.flatnonzero(np.diff(roots[order])) + 1
+    return [g for g in np.split(order, bounds) if len(g) >= 2]
 
 
 def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.ndarray]]:
@@ -374,22 +449,91 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
             if ra != rb:
                 parent[max(ra, rb)] = min(ra, rb)
     roots = np.array([root(i) for i in range(q)], np.int64)
-    clusters = [np.flatnonzero(roots == r) for r in np.unique(roots)]
-    return ends, [c for c in clusters if len(c) >= 2]
+    return ends, _groups(roots)
+
+
+def meeting_clusters(ends: _Ends, clusters: list[np.ndarray], spacing: float) -> list[np.ndarray]:
+    """``clusters`` with the free ends (in no cluster) added to the ends whose lines they
+    meet at a corner: where detection left a gap of more than GAP_LENGTH spacings at a
+    corner. Two ends of different pieces within :data:`LONG_GAP` spacings meet when
+    their lines (the end chords at :data:`CORNER_SCALE`, through the chords' vertices
+    nearer the ends) cross at more than :data:`CORNER_TURN` and pass within
+    :data:`LATERAL_OFFSET` spacings of each other, at most LONG_GAP spacings ahead of
+    each end and at most LATERAL_OFFSET spacings behind it. Nearest pairs first; the
+    result is grouped transitively.
+
+    Parameters
+    ----------
+    ends : the curve ends (:func:`end_clusters`)
+    clusters : list of (c,) int64
+        The ends' clusters from :func:`end_clusters`.
+    spacing : float
+
+    Returns
+    -------
+    list of (c,) int64
+        Indices into ``ends``, every cluster of two or more ends, deterministic order.
+    """
+    q = len(ends.piece)
+    parent = np.arange(q)  # union-find over the ends, each cluster already one set
+    free = np.ones(q, bool)
+    for c in clusters:
+        parent[c], free[c] = c[0], False
+    if not free.any() or q < 2:
+        return clusters
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = int(parent[i])
+        return i
+
+    pairs = cKDTree(ends.point).query_pairs(LONG_GAP * spacing, output_type="ndarray")
+    pairs = pairs[(free[pairs[:, 0]] | free[pairs[:, 1]])]
+    pairs = pairs[ends.piece[pairs[:, 0]] != ends.piece[pairs[:, 1]]]
+    gaps = np.linalg.norm(ends.point[pairs[:, 0]] - ends.point[pairs[:, 1]], axis=1)
+    out, anchor = ends.out[CORNER_SCALE], ends.anchor[CORNER_SCALE]
+    turn = math.cos(math.radians(CORNER_TURN))
+    for k in np.lexsort((pairs[:, 1], pairs[:, 0], gaps)):
+        a, b = int(pairs[k, 0]), int(pairs[k, 1])
+        cos = float(out[a] @ out[b])
+        if abs(cos) > turn:
+            continue  # (anti)parallel: no corner
+        w = anchor[a] - anchor[b]
+        da, db = float(out[a] @ w), float(out[b] @ w)
+        det = 1.0 - cos * cos
+        sa, sb = (cos * db - da) / det, (db - cos * da) / det
+        xa, xb = anchor[a] + sa * out[a], anchor[b] + sb * out[b]
+        if np.linalg.norm(xa - xb) > LATERAL_OFFSET * spacing:
+            continue
+        meet = 0.5 * (xa + xb)
+        ahead = (
+            float((meet - ends.point[a]) @ out[a]),
+            float((meet - ends.point[b]) @ out[b]),
+        )
+        if min(ahead) < -LATERAL_OFFSET * spacing or max(ahead) > LONG_GAP * spacing:
+            continue
+        ra, rb = root(a), root(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    roots = np.array([root(i) for i in range(q)], np.int64)
+    return _groups(roots)
 
 
 def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
-    """Ends ``a`` and ``b`` belong to one curve: they face each other within
-    :data:`CORNER_TURN`, and each lies within :data:`LATERAL_OFFSET` spacings of the
-    other's line (ends may overlap side by side where a skeleton broke a loop)."""
-    gap = ends.point[b] - ends.point[a]
-    for out in ends.out:  # either scale of the chords (the larger turn is the corner's)
+    """Ends ``a`` and ``b`` belong to one curve: at one scale of the end chords they face
+    each other within :data:`CORNER_TURN`, and each end (or each chord's vertex nearer
+    the end: noise bends the last vertices off the line) lies within
+    :data:`LATERAL_OFFSET` spacings of the other's line (ends may overlap side by side
+    where a skeleton broke a loop)."""
+    for out, anchor in zip(ends.out, ends.anchor, strict=True):
         if -float(out[a] @ out[b]) < math.cos(math.radians(CORNER_TURN)):
             continue
-        off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
-        off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
-        if max(off_a, off_b) <= LATERAL_OFFSET * spacing:
-            return True
+        for gap in (ends.point[b] - ends.point[a], anchor[b] - anchor[a]):
+            off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
+            off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
+            if max(off_a, off_b) <= LATERAL_OFFSET * spacing:
+                return True
     return False
 
 

@@ -15,8 +15,9 @@ from ..errors import InputError
 class Geometry:
     """Vertices and, for a mesh, triangles, as read from a file or given by the caller.
 
-    Construction validates and normalises the arrays, so every Geometry is sound
-    whichever way it was made (see :func:`as_geometry`).
+    Construction validates and normalises the arrays (float64 vertices, int64 faces;
+    arrays that already have these types are used as they are, not copied), so every
+    Geometry is sound whichever way it was made (see :func:`as_geometry`).
 
     Attributes
     ----------
@@ -43,7 +44,7 @@ class Geometry:
             raw = np.asarray(self.vertices)
             if raw.dtype.kind not in "biufO":
                 raise TypeError(f"dtype {raw.dtype}")
-            v = raw.astype(np.float64)
+            v = raw.astype(np.float64, copy=False)
         except (TypeError, ValueError, OverflowError) as exc:
             raise InputError(f"{source}: vertices are not real numbers: {exc}") from None
         if v.ndim != 2 or v.shape[1] != 3:
@@ -82,7 +83,7 @@ def _valid_faces(faces: Any, n_vertices: int, source: str) -> np.ndarray | None:
         raise InputError(
             f"{source}: face indices must lie in [0, {n_vertices - 1}], found {lo}..{hi}"
         )
-    return f_arr.astype(np.int64)
+    return f_arr.astype(np.int64, copy=False)
 
 
 def as_geometry(vertices: Any, faces: Any = None, source: str = "array") -> Geometry:

@@ -402,7 +402,10 @@ def _robust(
         store.create("r", (n, len(scales)), np.float64)
         grown = Query(top, "kept", None, scales, **passes)
         hist = runner.step(Step("pass grown", robust_pass, grown, {"first": False}))["hist"]
-    thresholds = np.array([max(otsu_from_histogram(h), robust.R_MIN) for h in hist])
+    otsu = robust.otsu_splits(False, nu)
+    thresholds = np.array(
+        [max(otsu_from_histogram(h), robust.R_MIN) if otsu else robust.R_MIN for h in hist]
+    )
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
     near = Query(top, "kept", "mask", save="lists")
