@@ -274,21 +274,16 @@ def _cloud_pieces(
     smooth = line_fit_positions(
         np.where(fitted[:, None], moved, line), dirs, sizes, closed, LINE_FIT_HALF
     )
+    ends = np.cumsum(sizes).tolist()
+    n_flat = np.add.reduceat(flat.astype(np.int64), [0, *ends[:-1]]).tolist()
     out = []
-    for (pc, p), (_, d), (_, no_edge) in zip(
-        _split(pieces, smooth), _split(pieces, dirs), _split(pieces, flat), strict=True
-    ):
-        if no_edge.mean() > MAX_FLAT_SHARE:
+    for pc, stop, size, n_no_edge in zip(pieces, ends, sizes.tolist(), n_flat, strict=True):
+        if n_no_edge / size > MAX_FLAT_SHARE:
             continue  # not an edge between two surfaces: false detections
+        p, d = smooth[stop - size : stop], dirs[stop - size : stop]
         keep = _advancing(p, d, spacing)
         out.append(Piece(feat[pc.nodes[keep]], p[keep], pc.closed))
     return out, spacing
-
-
-def _split(pieces: list[Piece], values: np.ndarray) -> list[tuple[Piece, np.ndarray]]:
-    """Each piece with its rows of ``values`` (the pieces' vertices concatenated)."""
-    cuts = np.cumsum([len(pc.points) for pc in pieces])[:-1]
-    return list(zip(pieces, np.split(values, cuts), strict=True))
 
 
 def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:

@@ -238,9 +238,9 @@ def close_loops(
         The forest and the links added back.
     """
     degree = np.bincount(forest.ravel(), minlength=n)
-    tree = {(int(a), int(b)) for a, b in forest}
+    tree = set(map(tuple, forest.tolist()))
     free = (degree[edges[:, 0]] == 1) | (degree[edges[:, 1]] == 1)
-    cand = [(int(a), int(b)) for a, b in edges[free] if (int(a), int(b)) not in tree]
+    cand = [ab for ab in map(tuple, edges[free].tolist()) if ab not in tree]
     if not cand:
         return forest
     pairs = np.array(cand, np.int64)
@@ -251,8 +251,8 @@ def close_loops(
         adj.setdefault(a, []).append((b, d))
         adj.setdefault(b, []).append((a, d))
     added = []
-    for k in np.lexsort((pairs[:, 1], pairs[:, 0], cand_length)):
-        a, b, d = int(pairs[k, 0]), int(pairs[k, 1]), float(cand_length[k])
+    order = np.lexsort((pairs[:, 1], pairs[:, 0], cand_length))
+    for (a, b), d in zip(pairs[order].tolist(), cand_length[order].tolist(), strict=True):
         if len(adj.get(a, [])) != 1 and len(adj.get(b, [])) != 1:
             continue
         if _path_shorter(adj, a, b, min_length):
@@ -333,20 +333,24 @@ def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: fl
     """
     keep = np.ones(len(edges), bool)
     edge_length = np.linalg.norm(positions[edges[:, 0]] - positions[edges[:, 1]], axis=1)
+    lengths = edge_length.tolist()
     for _ in range(PRUNE_ROUNDS):
         current = np.flatnonzero(keep)
-        indptr, nbr, eid = adjacency(n, edges[current])
-        degree = np.diff(indptr)
+        indptr_a, nbr_a, eid_a = adjacency(n, edges[current])
+        degree_a = np.diff(indptr_a)
+        # Python lists: the walks below index them one element at a time
+        indptr, nbr, degree = indptr_a.tolist(), nbr_a.tolist(), degree_a.tolist()
+        edge_of = current[eid_a].tolist()
         spurs: dict[int, list[tuple[float, int, list[int]]]] = {}
-        for leaf in np.flatnonzero(degree == 1):
-            prev, node, length, path = -1, int(leaf), 0.0, []
+        for leaf in np.flatnonzero(degree_a == 1).tolist():
+            prev, node, length, path = -1, leaf, 0.0, []
             while True:
                 row = range(indptr[node], indptr[node + 1])
                 step = next(j for j in row if nbr[j] != prev)
-                edge = int(current[eid[step]])
+                edge = edge_of[step]
                 path.append(edge)
-                nxt = int(nbr[step])
-                length += float(edge_length[edge])
+                nxt = nbr[step]
+                length += lengths[edge]
                 prev, node = node, nxt
                 if degree[node] != 2 or length >= min_length:
                     break
@@ -355,7 +359,7 @@ def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: fl
         removed = False
         for junction, found in spurs.items():
             found.sort()
-            for _, _, path in found[: max(0, int(degree[junction]) - 2)]:
+            for _, _, path in found[: max(0, degree[junction] - 2)]:
                 keep[path] = False
                 removed = True
         if not removed:

@@ -117,16 +117,18 @@ def trace_paths(n: int, edges: np.ndarray) -> list[np.ndarray]:
     list of (m,) int64
         Node sequences; a cycle is returned with its first node repeated at the end.
     """
-    indptr, nbr, eid = adjacency(n, edges)
-    degree = np.diff(indptr)
-    used = np.zeros(len(edges), bool)
+    indptr_a, nbr_a, eid_a = adjacency(n, edges)
+    degree_a = np.diff(indptr_a)
+    # Python lists: the walks index them one element at a time
+    indptr, nbr, eid, degree = indptr_a.tolist(), nbr_a.tolist(), eid_a.tolist(), degree_a.tolist()
+    used = [False] * len(edges)
     paths: list[np.ndarray] = []
 
     def walk(start: int, j: int) -> np.ndarray:
         path = [start]
         while True:
             used[eid[j]] = True
-            node = int(nbr[j])
+            node = nbr[j]
             path.append(node)
             if degree[node] != 2:
                 return np.array(path, np.int64)
@@ -134,14 +136,14 @@ def trace_paths(n: int, edges: np.ndarray) -> list[np.ndarray]:
             if j < 0:  # back at the start of a cycle
                 return np.array(path, np.int64)
 
-    for node in np.flatnonzero((degree != 2) & (degree > 0)):
+    for node in np.flatnonzero((degree_a != 2) & (degree_a > 0)).tolist():
         for j in range(indptr[node], indptr[node + 1]):
             if not used[eid[j]]:
-                paths.append(walk(int(node), j))
-    for node in np.flatnonzero(degree == 2):
+                paths.append(walk(node, j))
+    for node in np.flatnonzero(degree_a == 2).tolist():
         j = indptr[node]
         if not used[eid[j]]:
-            paths.append(walk(int(node), int(j)))
+            paths.append(walk(node, j))
     return paths
 
 
