@@ -104,28 +104,31 @@ def nearest(tree: cKDTree, queries: np.ndarray, k: int, bound: float = math.inf)
     """
     n = tree.n
     kq = min(k + 1, n)
-    idx = _sorted_query(tree, queries, kq, bound)
+    idx, d2 = _sorted_query(tree, queries, kq, bound)
     if kq > k:
-        d2 = _d2(tree, queries, idx)
         # a tie across the k-th place may involve points the query left out: widen
         for r in np.flatnonzero((d2[:, k - 1] == d2[:, k]) & np.isfinite(d2[:, k])):
             wider = kq
             while True:
                 wider = min(2 * wider, n)
-                row = _sorted_query(tree, queries[r : r + 1], wider, bound)
-                d2r = _d2(tree, queries[r : r + 1], row)[0]
+                row, d2r = _sorted_query(tree, queries[r : r + 1], wider, bound)
+                d2r = d2r[0]
                 if wider == n or d2r[-1] != d2r[k - 1]:
                     idx[r, :k] = row[0, :k]
                     break
     return idx[:, :k]
 
 
-def _sorted_query(tree: cKDTree, queries: np.ndarray, kq: int, bound: float) -> np.ndarray:
-    """kd-tree query, each row re-ordered by (squared distance, index); (q, kq) int64."""
+def _sorted_query(
+    tree: cKDTree, queries: np.ndarray, kq: int, bound: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """kd-tree query, each row re-ordered by (squared distance, index): indices (q, kq)
+    int64 and their squared distances (q, kq) float64 (:func:`_d2`)."""
     _, idx = tree.query(queries, k=kq, distance_upper_bound=bound)
     idx = np.asarray(idx, np.int64).reshape(len(queries), kq)
-    order = np.lexsort((idx, _d2(tree, queries, idx)), axis=-1)
-    return np.take_along_axis(idx, order, axis=-1)
+    d2 = _d2(tree, queries, idx)
+    order = np.lexsort((idx, d2), axis=-1)
+    return np.take_along_axis(idx, order, axis=-1), np.take_along_axis(d2, order, axis=-1)
 
 
 def _d2(tree: cKDTree, queries: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -345,8 +348,9 @@ def prune_spurs(n: int, edges: np.ndarray, positions: np.ndarray, min_length: fl
         for leaf in np.flatnonzero(degree_a == 1).tolist():
             prev, node, length, path = -1, leaf, 0.0, []
             while True:
-                row = range(indptr[node], indptr[node + 1])
-                step = next(j for j in row if nbr[j] != prev)
+                step = indptr[node]  # the first neighbour but the one we came from
+                while nbr[step] == prev:
+                    step += 1
                 edge = edge_of[step]
                 path.append(edge)
                 nxt = nbr[step]

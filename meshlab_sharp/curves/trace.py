@@ -287,7 +287,7 @@ def _open_turn_angles(pieces: list[Piece], spacing: float) -> list[np.ndarray]:
         points[window(TURN_OUTER * scales, "left", 0)]
         - points[window(TURN_INNER * scales, "left", 0)]
     )
-    return np.split(_least_turn(before, after), starts[1:])
+    return _split_rows(_least_turn(before, after), starts[1:])
 
 
 def cut_at_turns(pieces: list[Piece], spacing: float) -> list[Piece]:
@@ -415,12 +415,19 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
     return _Ends(np.repeat(which, 2), np.tile([0, 1], q), ends_points, out, anchor)
 
 
+def _split_rows(values: np.ndarray, bounds: np.ndarray) -> list[np.ndarray]:
+    """``np.split(values, bounds)`` (views of the rows between the ascending ``bounds``,
+    (p,) int), without its per-part overhead."""
+    cuts = [0, *bounds.tolist(), len(values)]
+    return [values[a:b] for a, b in itertools.pairwise(cuts)]
+
+
 def _groups(roots: np.ndarray) -> list[np.ndarray]:
     """The indices sharing each root (ascending; groups in the order of their roots),
     the groups of two or more."""
     order = np.argsort(roots, kind="stable")
     bounds = np.flatnonzero(np.diff(roots[order])) + 1
-    return [g for g in np.split(order, bounds) if len(g) >= 2]
+    return [g for g in _split_rows(order, bounds) if len(g) >= 2]
 
 
 def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.ndarray]]:
