@@ -39,6 +39,7 @@ from .trace import (
     end_clusters,
     join_pieces,
     meeting_clusters,
+    piece_lengths,
     split_at_touches,
     trace_paths,
 )
@@ -346,13 +347,14 @@ def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
     for i in range(0, len(ends.piece), 2):  # the two ends of one piece are consecutive
         if sorted((size[i], size[i + 1]))[0] == 1 and max(size[i], size[i + 1]) >= 3:
             spur.add(int(ends.piece[i]))
+    lengths = piece_lengths(pieces).tolist()
     return [
         pc
-        for i, pc in enumerate(pieces)
+        for i, (pc, length) in enumerate(zip(pieces, lengths, strict=True))
         if pc.closed
         or (
-            pc.length >= MIN_CURVE_LENGTH * spacing
-            and (i not in spur or pc.length >= SPUR_PIECE * spacing)
+            length >= MIN_CURVE_LENGTH * spacing
+            and (i not in spur or length >= SPUR_PIECE * spacing)
         )
     ]
 
@@ -365,10 +367,11 @@ def _drop_isolated(pieces: list[Piece], spacing: float) -> list[Piece]:
     joined = np.zeros(len(pieces), bool)
     for c in meeting_clusters(ends, clusters, spacing):
         joined[ends.piece[c]] = True
+    lengths = piece_lengths(pieces)
     return [
         pc
         for i, pc in enumerate(pieces)
-        if pc.closed or joined[i] or pc.length >= SPUR_PIECE * spacing
+        if pc.closed or joined[i] or lengths[i] >= SPUR_PIECE * spacing
     ]
 
 

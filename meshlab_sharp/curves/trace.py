@@ -98,9 +98,21 @@ class Piece:
     @property
     def length(self) -> float:
         """Length of the polyline (the closing segment included for loops)."""
-        p = np.vstack([self.points, self.points[:1]]) if self.closed else self.points
-        d = p[1:] - p[:-1]
-        return float(np.sqrt((d * d).sum(axis=1)).sum())  # np.linalg.norm's sums, cheaper
+        return float(piece_lengths([self])[0])
+
+
+def piece_lengths(pieces: list[Piece]) -> np.ndarray:
+    """:attr:`Piece.length` of many pieces, (p,) float64: the segments' lengths in one
+    pass, each piece's sum of its own (the same bits as one piece at a time)."""
+    rings = [np.vstack([pc.points, pc.points[:1]]) if pc.closed else pc.points for pc in pieces]
+    if not rings:
+        return np.zeros(0)
+    p = np.concatenate(rings)
+    d = p[1:] - p[:-1]
+    seg = np.sqrt((d * d).sum(axis=1))  # np.linalg.norm's sums, cheaper
+    stops = np.cumsum([len(r) for r in rings]).tolist()
+    starts = [0, *stops[:-1]]
+    return np.array([seg[a : max(a, b - 1)].sum() for a, b in zip(starts, stops, strict=True)])
 
 
 def trace_paths(n: int, edges: np.ndarray) -> list[np.ndarray]:
@@ -307,9 +319,10 @@ def cut_at_turns(pieces: list[Piece], spacing: float) -> list[Piece]:
         In order; a piece itself when it has no sharp turn (or is a loop with only
         one).
     """
-    long_open = [
-        i for i, pc in enumerate(pieces) if not pc.closed and pc.length >= SHORTEST_CUT * spacing
-    ]
+    long_open = np.flatnonzero(
+        (piece_lengths(pieces) >= SHORTEST_CUT * spacing)
+        & ~np.array([pc.closed for pc in pieces], bool)
+    ).tolist()
     angles = dict(
         zip(long_open, _open_turn_angles([pieces[i] for i in long_open], spacing), strict=True)
     )
@@ -450,9 +463,10 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
         return i
 
     if q:
+        short = (piece_lengths(pieces) < LOOP_LENGTH * GAP_LENGTH * spacing).tolist()
+        of = ends.piece.tolist()
         for a, b in sorted(cKDTree(ends.point).query_pairs(GAP_LENGTH * spacing)):
-            same = ends.piece[a] == ends.piece[b]
-            if same and pieces[ends.piece[a]].length < LOOP_LENGTH * GAP_LENGTH * spacing:
+            if of[a] == of[b] and short[of[a]]:
                 continue  # the two ends of a short piece: no loop
             ra, rb = root(a), root(b)
             if ra != rb:
