@@ -454,12 +454,12 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
     """
     ends = _ends(pieces, spacing)
     q = len(ends.piece)
-    parent = np.arange(q)
+    parent = list(range(q))
 
     def root(i: int) -> int:
         while parent[i] != i:
             parent[i] = parent[parent[i]]
-            i = int(parent[i])
+            i = parent[i]
         return i
 
     if q:
@@ -498,17 +498,20 @@ def meeting_clusters(ends: _Ends, clusters: list[np.ndarray], spacing: float) ->
         Indices into ``ends``, every cluster of two or more ends, deterministic order.
     """
     q = len(ends.piece)
-    parent = np.arange(q)  # union-find over the ends, each cluster already one set
     free = np.ones(q, bool)
     for c in clusters:
-        parent[c], free[c] = c[0], False
+        free[c] = False
     if not free.any() or q < 2:
         return clusters
+    parent = list(range(q))  # union-find over the ends, each cluster already one set
+    for c in clusters:
+        for i in c.tolist():
+            parent[i] = int(c[0])
 
     def root(i: int) -> int:
         while parent[i] != i:
             parent[i] = parent[parent[i]]
-            i = int(parent[i])
+            i = parent[i]
         return i
 
     pairs = cKDTree(ends.point).query_pairs(LONG_GAP * spacing, output_type="ndarray")
@@ -549,13 +552,16 @@ def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
     the end: noise bends the last vertices off the line) lies within
     :data:`LATERAL_OFFSET` spacings of the other's line (ends may overlap side by side
     where a skeleton broke a loop)."""
+    limit = LATERAL_OFFSET * spacing
     for out, anchor in zip(ends.out, ends.anchor, strict=True):
         if -float(out[a] @ out[b]) < math.cos(math.radians(CORNER_TURN)):
             continue
         for gap in (ends.point[b] - ends.point[a], anchor[b] - anchor[a]):
             off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
+            if not off_a <= limit:
+                continue  # then max(off_a, off_b) <= limit fails too, NaN or not
             off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
-            if max(off_a, off_b) <= LATERAL_OFFSET * spacing:
+            if max(off_a, off_b) <= limit:
                 return True
     return False
 
