@@ -112,7 +112,13 @@ def cell_neighbourhood(
     -------
     (s,) int64, ascending.
     """
-    lo, hi = (points.min(axis=0), points.max(axis=0)) if bounds is None else bounds
+    if bounds is None:
+        # column by column: a strided reduction over axis 0 is several times slower
+        # (the same values; min and max do not round)
+        lo = np.array([points[:, j].min() for j in range(3)])
+        hi = np.array([points[:, j].max() for j in range(3)])
+    else:
+        lo, hi = bounds
     grid = CellGrid(lo, hi, radius)
     return np.flatnonzero(np.isin(grid.keys(points), grid.around(centres)) & valid)
 
