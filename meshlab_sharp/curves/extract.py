@@ -230,7 +230,7 @@ def support_radius(features: np.ndarray) -> float:
     features : (f, 3) float64
         The distinct feature positions, any order, f >= 2.
     """
-    d, _ = cKDTree(features).query(features, k=2)
+    d, _ = cKDTree(features).query(features, k=2, workers=-1)
     return CELL_SPACINGS * float(np.median(d[:, 1]))
 
 
@@ -248,7 +248,7 @@ def _cloud_pieces(
     order = np.lexsort((near_pts[:, 2], near_pts[:, 1], near_pts[:, 0]))
     near, near_pts = near[order], near_pts[order]
     tree = cKDTree(near_pts)
-    d, _ = tree.query(fp, k=2)
+    d, _ = tree.query(fp, k=2, workers=-1)
     spacing = float(np.median(d[:, 1]))
     edges, lengths = cloud_graph(fp, spacing)
     paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)

@@ -122,9 +122,9 @@ def nearest(tree: cKDTree, queries: np.ndarray, k: int, bound: float = math.inf)
 def _sorted_query(
     tree: cKDTree, queries: np.ndarray, kq: int, bound: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """kd-tree query, each row re-ordered by (squared distance, index): indices (q, kq)
-    int64 and their squared distances (q, kq) float64 (:func:`_d2`)."""
-    _, idx = tree.query(queries, k=kq, distance_upper_bound=bound)
+    """kd-tree query on all cores, each row re-ordered by (squared distance, index):
+    indices (q, kq) int64 and their squared distances (q, kq) float64 (:func:`_d2`)."""
+    _, idx = tree.query(queries, k=kq, distance_upper_bound=bound, workers=-1)
     idx = np.asarray(idx, np.int64).reshape(len(queries), kq)
     d2 = _d2(tree, queries, idx)
     order = np.lexsort((idx, d2), axis=-1)
