@@ -112,7 +112,8 @@ def piece_lengths(pieces: list[Piece]) -> np.ndarray:
     seg = np.sqrt((d * d).sum(axis=1))  # np.linalg.norm's sums, cheaper
     stops = np.cumsum([len(r) for r in rings]).tolist()
     starts = [0, *stops[:-1]]
-    return np.array([seg[a : max(a, b - 1)].sum() for a, b in zip(starts, stops, strict=True)])
+    total = np.add.reduce  # ndarray.sum without its Python wrapper
+    return np.array([total(seg[a : max(a, b - 1)]) for a, b in zip(starts, stops, strict=True)])
 
 
 def trace_paths(n: int, edges: np.ndarray) -> list[np.ndarray]:
@@ -463,10 +464,15 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
         return i
 
     if q:
-        short = (piece_lengths(pieces) < LOOP_LENGTH * GAP_LENGTH * spacing).tolist()
         of = ends.piece.tolist()
-        for a, b in sorted(cKDTree(ends.point).query_pairs(GAP_LENGTH * spacing)):
-            if of[a] == of[b] and short[of[a]]:
+        pairs = sorted(cKDTree(ends.point).query_pairs(GAP_LENGTH * spacing))
+        both = sorted({of[a] for a, b in pairs if of[a] == of[b]})
+        lengths = piece_lengths([pieces[i] for i in both]).tolist()
+        short = {
+            i for i, x in zip(both, lengths, strict=True) if x < LOOP_LENGTH * GAP_LENGTH * spacing
+        }
+        for a, b in pairs:
+            if of[a] == of[b] and of[a] in short:
                 continue  # the two ends of a short piece: no loop
             ra, rb = root(a), root(b)
             if ra != rb:
