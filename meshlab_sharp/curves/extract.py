@@ -290,12 +290,13 @@ def _cloud_pieces(
 def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
     """Indices of the vertices that advance by at least MIN_ADVANCE spacings along the
     curve's direction from the previous one kept (the last vertex always kept)."""
-    keep, last = [0], p[0]
+    rows, dirs = list(p), list(t)  # row views made at once
+    keep, last = [0], rows[0]
     step = MIN_ADVANCE * spacing
     for i in range(1, len(p) - 1):
-        if float((p[i] - last) @ t[i]) >= step:
+        if float((rows[i] - last) @ dirs[i]) >= step:
             keep.append(i)
-            last = p[i]
+            last = rows[i]
     if len(p) > 1:
         keep.append(len(p) - 1)
     return np.array(keep, np.int64)

@@ -173,6 +173,12 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(norm > 0, norm, 1.0)
 
 
+def _norm(v: np.ndarray) -> float:
+    """``np.linalg.norm`` of a (3,) float64 vector, the same bits (its ``sqrt(v.dot(v))``)
+    without its Python overhead."""
+    return math.sqrt(v.dot(v))
+
+
 def _arc(points: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
 
@@ -536,7 +542,7 @@ def meeting_clusters(ends: _Ends, clusters: list[np.ndarray], spacing: float) ->
         det = 1.0 - cos * cos
         sa, sb = (cos * db - da) / det, (db - cos * da) / det
         xa, xb = anchor[a] + sa * out[a], anchor[b] + sb * out[b]
-        if np.linalg.norm(xa - xb) > LATERAL_OFFSET * spacing:
+        if _norm(xa - xb) > LATERAL_OFFSET * spacing:
             continue
         meet = 0.5 * (xa + xb)
         ahead = (
@@ -563,10 +569,10 @@ def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
         if -float(out[a] @ out[b]) < math.cos(math.radians(CORNER_TURN)):
             continue
         for gap in (ends.point[b] - ends.point[a], anchor[b] - anchor[a]):
-            off_a = np.linalg.norm(gap - (gap @ out[a]) * out[a])
+            off_a = _norm(gap - (gap @ out[a]) * out[a])
             if not off_a <= limit:
                 continue  # then max(off_a, off_b) <= limit fails too, NaN or not
-            off_b = np.linalg.norm(gap - (gap @ out[b]) * out[b])
+            off_b = _norm(gap - (gap @ out[b]) * out[b])
             if max(off_a, off_b) <= limit:
                 return True
     return False
@@ -581,7 +587,7 @@ def _faces_gap(ends: _Ends, a: int, b: int) -> bool:
     """The gap from end ``a`` to end ``b`` leaves each end forwards (within
     :data:`CORNER_TURN`), at the widest chord scale."""
     gap = ends.point[b] - ends.point[a]
-    length = float(np.linalg.norm(gap))
+    length = _norm(gap)
     limit = math.cos(math.radians(CORNER_TURN)) * length
     return bool(gap @ ends.out[-1, a] >= limit and -gap @ ends.out[-1, b] >= limit)
 
@@ -724,7 +730,7 @@ def split_at_touches(pieces: list[Piece], spacing: float) -> list[Piece]:
         near = [j for j in near if owner[j] != ends.piece[e]]
         if not near:
             continue
-        j = min(near, key=lambda j: (float(np.linalg.norm(tree.data[j] - ends.point[e])), j))
+        j = min(near, key=lambda j: (_norm(tree.data[j] - ends.point[e]), j))
         pc, v = pieces[owner[j]], int(local[j])
         cum = _arc(pc.points)
         if pc.closed or (cum[v] > reach and cum[-1] - cum[v] > reach):
