@@ -75,7 +75,12 @@ class CellGrid:
 
     def keys(self, points: np.ndarray) -> np.ndarray:
         """Key of each point's cell, (n,) int64 for points (n, 3)."""
-        return self._key(np.floor((points - self.lo) / self.radius).astype(np.int64) + 1)
+        q = points - self.lo  # floor((points - lo) / radius) + 1, in place (n can be large)
+        q /= self.radius
+        np.floor(q, out=q)
+        cells = q.astype(np.int64)
+        cells += 1
+        return self._key(cells)
 
     def around(self, centres: np.ndarray) -> np.ndarray:
         """Keys of the 3x3x3 cells around each of the centres (f, 3): (w,) int64, sorted,
