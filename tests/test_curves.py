@@ -20,7 +20,7 @@ from meshlab_sharp.cli import main
 from meshlab_sharp.curves import classify, extract_curves
 from meshlab_sharp.curves.graph import nearest
 from meshlab_sharp.curves.refine import line_fit_positions
-from meshlab_sharp.curves.trace import Piece, join_pieces
+from meshlab_sharp.curves.trace import Piece, join_pieces, piece_lengths
 from meshlab_sharp.errors import InputError, MeshlabSharpError
 from meshlab_sharp.io import curve_arrays, require_ezdxf, save_curves
 
@@ -400,3 +400,26 @@ def test_report_picture_draws_the_curves(tmp_path):
     result = meshlab_sharp.detect(points, curves=True, return_details=True)
     path = save_report(tmp_path / "r.png", result, Geometry(points, None, "cube"), size=(400, 300))
     assert path.read_bytes().startswith(b"\x89PNG")
+
+
+def test_piece_lengths_in_one_pass_match_each_piece() -> None:
+    """Known lengths (a closed unit square counts its closing side, a lone vertex is 0),
+    and the batch gives every piece exactly its own length, whatever its neighbours."""
+    square = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    pieces = [
+        Piece(np.arange(4), square, closed=True),
+        Piece(np.arange(4), square),
+        Piece(np.arange(1), square[:1]),
+    ]
+    assert piece_lengths(pieces).tolist() == [4.0, 3.0, 0.0]
+    assert piece_lengths([]).shape == (0,)
+    rng = np.random.default_rng(3)
+    many = [
+        Piece(np.arange(m), rng.normal(size=(m, 3)) * 10.0 ** rng.uniform(-3, 3), bool(m % 2))
+        for m in rng.integers(1, 40, size=200)
+    ]
+    batch = piece_lengths(many)
+    for pc, length in zip(many, batch, strict=True):
+        p = np.vstack([pc.points, pc.points[:1]]) if pc.closed else pc.points
+        assert length == pytest.approx(np.linalg.norm(np.diff(p, axis=0), axis=1).sum(), 1e-14)
+        assert length == piece_lengths([pc])[0] == pc.length
