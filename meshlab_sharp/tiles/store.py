@@ -9,6 +9,7 @@ of the whole cloud.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -67,13 +68,21 @@ class Store:
         return out
 
     def write(self, name: str, start: int, values: np.ndarray) -> None:
-        """Rows ``start:start + len(values)`` := ``values``."""
-        if len(values) == 0:
-            return
-        m = self._map(name, "r+")
-        m[start : start + len(values)] = values
-        m.flush()
-        del m
+        """Rows ``start:start + len(values)`` := ``values`` (written to the file, not
+        mapped: no page of it stays in this process)."""
+        shape, dtype = self.arrays[name]
+        data = np.ascontiguousarray(values, np.dtype(dtype))
+        if data.shape[1:] != shape[1:] or not 0 <= start <= shape[0] - len(data):
+            raise ValueError(
+                f"{name}: rows {start}:{start + len(data)} of shape {data.shape[1:]} "
+                f"do not fit an array of shape {shape}"
+            )
+        view = memoryview(data.reshape(-1)).cast("B")
+        at = start * (data.itemsize * int(np.prod(shape[1:], dtype=np.int64)))
+        with open(self.path(name), "r+b") as f:
+            while len(view):
+                done = os.pwrite(f.fileno(), view, at)
+                view, at = view[done:], at + done
 
     def write_at(self, name: str, rows: np.ndarray, values: np.ndarray) -> None:
         """The given rows := ``values``."""
@@ -83,6 +92,11 @@ class Store:
         m[np.asarray(rows, np.int64)] = values
         m.flush()
         del m
+
+    def remove(self, name: str) -> None:
+        """Delete array ``name`` and its file."""
+        self.path(name).unlink()
+        del self.arrays[name]
 
     def put(self, name: str, key: int, values: np.ndarray) -> None:
         """A per-tile array (not per point): ``values`` under ``name`` and ``key``."""
