@@ -15,6 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+#: :meth:`Store.write_at` writes fewer runs of consecutive rows than this one by one.
+RUNS = 64
+
 
 @dataclass
 class Store:
@@ -85,8 +88,21 @@ class Store:
                 view, at = view[done:], at + done
 
     def write_at(self, name: str, rows: np.ndarray, values: np.ndarray) -> None:
-        """The given rows := ``values``."""
+        """The given rows (distinct) := ``values``. Rows that form a few runs of
+        consecutive rows (a tile's own points) are written run by run; others through a
+        map of the file, flushed."""
         if len(rows) == 0:
+            return
+        rows = np.asarray(rows, np.int64)
+        if len(rows) > 1 and not (rows[1:] > rows[:-1]).all():
+            order = np.argsort(rows, kind="stable")
+            rows = rows[order]
+            values = np.asarray(values)[order]
+        cuts = np.flatnonzero(rows[1:] != rows[:-1] + 1) + 1
+        if len(cuts) < RUNS:
+            values = np.broadcast_to(values, (len(rows), *self.arrays[name][0][1:]))
+            for a, b in zip([0, *cuts], [*cuts, len(rows)], strict=True):
+                self.write(name, int(rows[a]), values[a:b])
             return
         m = self._map(name, "r+")
         m[np.asarray(rows, np.int64)] = values
