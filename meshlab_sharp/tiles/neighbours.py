@@ -149,8 +149,11 @@ def gather(
     for t in tiles:
         a, b = int(layout.offsets[t]), int(layout.offsets[t + 1])
         pts = store.read("coords", a, b)
-        use = np.all((pts >= blo) & (pts <= bhi), axis=1)
-        use &= store.read("rep", a, b) == np.arange(a, b)
+        use = store.read("rep", a, b) == np.arange(a, b)
+        tlo, thi = layout.boxes[t]
+        if not (np.all(tlo >= blo) and np.all(thi <= bhi)):  # the tile's box sticks out
+            inside = (pts >= blo) & (pts <= bhi)
+            use &= inside[:, 0] & inside[:, 1] & inside[:, 2]
         if kept is not None:
             use &= store.read(kept, a, b)
         where = np.flatnonzero(use)
