@@ -101,7 +101,7 @@ def build_layout(
     seen = 0
     for block in chunks():
         # a NaN or an infinity shows in the block's minimum or maximum
-        blo, bhi = block.min(axis=0), block.max(axis=0)
+        blo, bhi = bounds(block)
         if not (np.isfinite(blo).all() and np.isfinite(bhi).all()):
             bad = seen + int(np.flatnonzero(~np.isfinite(block).all(axis=1))[0])
             raise InputError(f"{source}: point {bad} has a non-finite coordinate")
@@ -154,11 +154,20 @@ def build_layout(
     for t in range(len(sizes)):
         a, b = int(offsets[t]), int(offsets[t + 1])
         pts = store.read("coords", a, b)
-        boxes[t, 0], boxes[t, 1] = pts.min(axis=0), pts.max(axis=0)
+        boxes[t] = bounds(pts)
         to_first, from_first = _kernels.merge_duplicates(pts)
         store.write("rep", a, a + to_first[from_first])
         n_clean += len(to_first)
     return Layout(n, lo, hi, offsets, boxes, n_clean)
+
+
+def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Minimum and maximum (3,) of ``points`` (c, 3), column by column (a reduce over
+    the first axis of a (c, 3) array is many times slower); NaN where a column has one."""
+    return (
+        np.array([points[:, i].min() for i in range(3)]),
+        np.array([points[:, i].max() for i in range(3)]),
+    )
 
 
 def _cells(block: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
