@@ -387,7 +387,8 @@ def _searched(
             ok = np.ones(len(rows), bool)
         else:
             p = points[rows]
-            ok = need < np.minimum(p - blo, bhi - p).min(axis=1)
+            room = np.minimum(p - blo, bhi - p)  # per axis; their minimum, column-wise
+            ok = need < np.minimum(np.minimum(room[:, 0], room[:, 1]), room[:, 2])
         last = (pos, points, rows, ok, r, h)
         if ok.any():
             sub = {key: value[ok] for key, value in found.items()}

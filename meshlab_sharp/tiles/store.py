@@ -35,13 +35,17 @@ class Store:
 
     def path(self, name: str) -> Path:
         """The file of array ``name``."""
-        return Path(self.root) / f"{name}.bin"
+        return Path(self._file(name))
+
+    def _file(self, name: str) -> str:
+        """:meth:`path` as a string (many calls: no Path object)."""
+        return os.path.join(self.root, f"{name}.bin")
 
     def create(self, name: str, shape: tuple[int, ...], dtype: np.dtype | str) -> None:
         """A new array of zeros (a sparse file)."""
         dt = np.dtype(dtype)
         size = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
-        with open(self.path(name), "wb") as f:
+        with open(self._file(name), "wb") as f:
             f.truncate(size)
         self.arrays[name] = (tuple(int(s) for s in shape), dt.str)
 
@@ -49,7 +53,7 @@ class Store:
         shape, dtype = self.arrays[name]
         if shape[0] == 0:
             return np.zeros(shape, dtype)
-        return np.memmap(self.path(name), dtype=np.dtype(dtype), mode=mode, shape=shape)
+        return np.memmap(self._file(name), dtype=np.dtype(dtype), mode=mode, shape=shape)
 
     def read(self, name: str, start: int, stop: int) -> np.ndarray:
         """A copy of rows ``start:stop`` (read from the file, not mapped)."""
@@ -60,7 +64,7 @@ class Store:
         row = int(np.prod(shape[1:], dtype=np.int64))
         if count == 0:
             return np.zeros((0, *shape[1:]), dt)
-        out = np.fromfile(self.path(name), dt, count * row, offset=start * row * dt.itemsize)
+        out = np.fromfile(self._file(name), dt, count * row, offset=start * row * dt.itemsize)
         return out.reshape((count, *shape[1:]))
 
     def read_at(self, name: str, rows: np.ndarray) -> np.ndarray:
@@ -82,7 +86,7 @@ class Store:
             )
         view = memoryview(data.reshape(-1)).cast("B")
         at = start * (data.itemsize * int(np.prod(shape[1:], dtype=np.int64)))
-        with open(self.path(name), "r+b") as f:
+        with open(self._file(name), "r+b") as f:
             while len(view):
                 done = os.pwrite(f.fileno(), view, at)
                 view, at = view[done:], at + done
