@@ -379,24 +379,36 @@ def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
     assert reported <= peak  # the summary's peak is the same measure, taken earlier
 
 
-def test_store_writes_rows_in_runs_and_scattered(tmp_path) -> None:
-    """write_at gives the same array whether the rows form a few runs (written by
-    pwrite) or many (through a map), in any order; a block that does not fit is refused."""
+def test_store_writes_rows_in_runs_and_scattered(tmp_path, monkeypatch) -> None:
+    """write_at gives the same array whether the rows form a few runs or many short
+    ones with gaps (written by pwrite) or are scattered (through a map), in any order;
+    a block that does not fit is refused."""
     from meshlab_sharp.tiles import store as store_module
 
+    mapped: list[str] = []
+    real_map = Store._map
+
+    def recorded(self: Store, name: str, mode: str) -> np.ndarray:
+        mapped.append(name)
+        return real_map(self, name, mode)
+
+    monkeypatch.setattr(Store, "_map", recorded)
     rng = np.random.default_rng(3)
-    want = np.zeros((500, 2))
+    n = 2000
+    want = np.zeros((n, 2))
     store = Store(str(tmp_path))
-    store.create("a", (500, 2), np.float64)
+    store.create("a", (n, 2), np.float64)
     runs = np.concatenate([np.arange(10, 60), np.arange(100, 180), np.arange(400, 401)])
-    scattered = rng.choice(np.setdiff1d(np.arange(500), runs), store_module.RUNS * 2, False)
-    for rows in (runs[::-1], scattered):
+    gaps = np.setdiff1d(np.arange(n), np.arange(0, n, 20))  # 100 gaps, runs of 19
+    scattered = rng.choice(np.setdiff1d(np.arange(n), runs), store_module.RUNS * 2, False)
+    for rows, through_map in ((runs[::-1], False), (gaps, False), (scattered, True)):
         values = rng.random((len(rows), 2))
         want[rows] = values
         store.write_at("a", rows, values)
-        assert np.array_equal(store.read("a", 0, 500), want)
+        assert np.array_equal(store.read("a", 0, n), want)
+        assert bool(mapped) == through_map
     with pytest.raises(ValueError, match="do not fit"):
-        store.write("a", 499, np.zeros((2, 2)))
+        store.write("a", n - 1, np.zeros((2, 2)))
     store.remove("a")
     assert not store.path("a").exists() and "a" not in store.arrays
 

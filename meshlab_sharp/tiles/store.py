@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-#: :meth:`Store.write_at` writes fewer runs of consecutive rows than this one by one.
+#: :meth:`Store.write_at` writes fewer runs of consecutive rows than this (or than an
+#: eighth of the rows) one by one.
 RUNS = 64
 
 
@@ -84,34 +85,38 @@ class Store:
                 f"{name}: rows {start}:{start + len(data)} of shape {data.shape[1:]} "
                 f"do not fit an array of shape {shape}"
             )
-        view = memoryview(data.reshape(-1)).cast("B")
-        at = start * (data.itemsize * int(np.prod(shape[1:], dtype=np.int64)))
         with open(self._file(name), "r+b") as f:
-            while len(view):
-                done = os.pwrite(f.fileno(), view, at)
-                view, at = view[done:], at + done
+            _pwrite(f.fileno(), start * self._row_bytes(name), _bytes(data))
 
     def write_at(self, name: str, rows: np.ndarray, values: np.ndarray) -> None:
-        """The given rows (distinct) := ``values``. Rows that form a few runs of
-        consecutive rows (a tile's own points) are written run by run; others through a
-        map of the file, flushed."""
+        """The given rows (distinct) := ``values``. Rows that form runs of consecutive
+        rows (a tile's own points, gaps at its duplicates) are written run by run; others
+        through a map of the file, flushed."""
         if len(rows) == 0:
             return
+        shape, dtype = self.arrays[name]
         rows = np.asarray(rows, np.int64)
+        values = np.broadcast_to(values, (len(rows), *shape[1:]))
         if len(rows) > 1 and not (rows[1:] > rows[:-1]).all():
             order = np.argsort(rows, kind="stable")
-            rows = rows[order]
-            values = np.asarray(values)[order]
+            rows, values = rows[order], values[order]
         cuts = np.flatnonzero(rows[1:] != rows[:-1] + 1) + 1
-        if len(cuts) < RUNS:
-            values = np.broadcast_to(values, (len(rows), *self.arrays[name][0][1:]))
-            for a, b in zip([0, *cuts], [*cuts, len(rows)], strict=True):
-                self.write(name, int(rows[a]), values[a:b])
+        if len(cuts) < max(RUNS, len(rows) // 8) and rows[0] >= 0 and rows[-1] < shape[0]:
+            data = _bytes(np.ascontiguousarray(values, np.dtype(dtype)))
+            row = self._row_bytes(name)
+            with open(self._file(name), "r+b") as f:
+                for a, b in zip([0, *cuts], [*cuts, len(rows)], strict=True):
+                    _pwrite(f.fileno(), int(rows[a]) * row, data[a * row : b * row])
             return
         m = self._map(name, "r+")
-        m[np.asarray(rows, np.int64)] = values
+        m[rows] = values
         m.flush()
         del m
+
+    def _row_bytes(self, name: str) -> int:
+        """Bytes of one row of array ``name``."""
+        shape, dtype = self.arrays[name]
+        return np.dtype(dtype).itemsize * int(np.prod(shape[1:], dtype=np.int64))
 
     def remove(self, name: str) -> None:
         """Delete array ``name`` and its file."""
@@ -125,3 +130,15 @@ class Store:
     def get(self, name: str, key: int) -> np.ndarray:
         """The array :meth:`put` saved under ``name`` and ``key``."""
         return np.load(Path(self.root) / f"{name}-{key}.npy", allow_pickle=False)
+
+
+def _bytes(data: np.ndarray) -> memoryview:
+    """The bytes of a C-contiguous array, flat."""
+    return memoryview(data.reshape(-1)).cast("B")
+
+
+def _pwrite(fd: int, at: int, view: memoryview) -> None:
+    """All of ``view`` to file ``fd`` at byte ``at``."""
+    while len(view):
+        done = os.pwrite(fd, view, at)
+        view, at = view[done:], at + done
