@@ -377,3 +377,67 @@ def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
     assert tiles >= 2 and features > 0
     assert 50 * 2**20 < peak < 300 * 2**20
     assert reported <= peak  # the summary's peak is the same measure, taken earlier
+
+
+def test_store_writes_rows_in_runs_and_scattered(tmp_path, monkeypatch) -> None:
+    """write_at gives the same array whether the rows form a few runs or many short
+    ones with gaps (written by pwrite) or are scattered (through a map), in any order;
+    a block that does not fit is refused."""
+    from meshlab_sharp.tiles import store as store_module
+
+    mapped: list[str] = []
+    real_map = Store._map
+
+    def recorded(self: Store, name: str, mode: str) -> np.ndarray:
+        mapped.append(name)
+        return real_map(self, name, mode)
+
+    monkeypatch.setattr(Store, "_map", recorded)
+    rng = np.random.default_rng(3)
+    n = 2000
+    want = np.zeros((n, 2))
+    store = Store(str(tmp_path))
+    store.create("a", (n, 2), np.float64)
+    runs = np.concatenate([np.arange(10, 60), np.arange(100, 180), np.arange(400, 401)])
+    gaps = np.setdiff1d(np.arange(n), np.arange(0, n, 20))  # 100 gaps, runs of 19
+    scattered = rng.choice(np.setdiff1d(np.arange(n), runs), store_module.RUNS * 2, False)
+    for rows, through_map in ((runs[::-1], False), (gaps, False), (scattered, True)):
+        values = rng.random((len(rows), 2))
+        want[rows] = values
+        store.write_at("a", rows, values)
+        assert np.array_equal(store.read("a", 0, n), want)
+        assert bool(mapped) == through_map
+    with pytest.raises(ValueError, match="do not fit"):
+        store.write("a", n - 1, np.zeros((2, 2)))
+    store.remove("a")
+    assert not store.path("a").exists() and "a" not in store.arrays
+
+
+@pytest.mark.parametrize("scale", [1e-6, 1e-2, 1.0, 1e6])
+def test_knn_near_equals_the_search_of_all_points(scale: float, monkeypatch) -> None:
+    """The k nearest of a few rows searched among the points near them equal those
+    searched among all points, ties (integer grid) broken the same, with hints far too
+    small (all points after the widenings), too small (widened), right and too large
+    (all points)."""
+    from meshlab_sharp.tiles import neighbours as nb
+
+    rng = np.random.default_rng(5)
+    xy = np.stack(np.meshgrid(np.arange(200.0), np.arange(200.0)), -1).reshape(-1, 2)
+    xy = xy[rng.random(len(xy)) < 0.7]
+    points = np.column_stack([xy, np.zeros(len(xy))])[rng.permutation(len(xy))]
+    rows = np.sort(rng.choice(len(points), 40, replace=False))
+    k = 16
+    want = _kernels.cloud_knn_rows(_kernels.build_tree(points), rows, k, 1)
+    kth = ((points[want[:, -1]] - points[rows]) ** 2).sum(axis=1)
+    sizes: list[int] = []
+    near = nb._points_near
+
+    def recorded(*args):
+        got = near(*args)
+        sizes.append(len(got))
+        return got
+
+    monkeypatch.setattr(nb, "_points_near", recorded)
+    assert np.array_equal(nb._knn_near(points, rows, k, 1, kth * scale), want)
+    if scale in (1e-2, 1.0):  # the search ran on a part of the points
+        assert 0 < min(sizes) < len(points) // 2

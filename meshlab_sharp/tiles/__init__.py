@@ -408,7 +408,7 @@ def _robust(
     )
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
-    near = Query(top, "kept", "mask", save="lists")
+    near = Query(top, "kept", "mask", save="lists", hint="kd2")
     runner.step(Step("support", robust_support, near, support))
     compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     reuse = Query(compare, "kept", "mask1", reuse="lists")  # mask1: a subset of mask

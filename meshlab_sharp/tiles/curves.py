@@ -20,6 +20,7 @@ from ..curves import Corners, Curve, extract_curves
 from ..curves.extract import support_radius
 from ..curves.refine import CellGrid
 from ..io.stream import PointSource
+from .layout import bounds
 
 #: Points per block of the streaming passes.
 BLOCK = 1 << 20
@@ -74,7 +75,8 @@ def _bounds_and_rows(
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     out, start = [np.zeros((0, 3))], 0
     for block in source.blocks(BLOCK):
-        lo, hi = np.minimum(lo, block.min(axis=0)), np.maximum(hi, block.max(axis=0))
+        blo, bhi = bounds(block)
+        lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
         a, b = np.searchsorted(rows, [start, start + len(block)])
         out.append(block[rows[a:b] - start])
         start += len(block)

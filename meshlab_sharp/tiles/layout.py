@@ -2,12 +2,13 @@
 
 Built in three streaming passes over the input, ``chunk`` points at a time:
 
-1. copy the coordinates (input order) to the store, checking that they are finite, and
-   take the bounding box;
-2. count the points in the cells of a ``GRID**3`` grid over the box;
+1. take the bounding box, checking that the coordinates are finite;
+2. count the points in the cells of a ``GRID**3`` grid over the box, keeping every
+   point's cell in a scratch array of the store;
 3. split the grid's cells into boxes of at most ``tile_points`` points (k-d splits at
    the weighted median), then write every point's coordinates and input index to its
-   tile's range of positions, in increasing input index within a tile.
+   tile's range of positions, in increasing input index within a tile (a stable
+   counting sort of each chunk by tile, written as one run per tile).
 
 Exact duplicates share their coordinates, hence their cell and tile: each tile merges
 its own duplicates into their first occurrence, which is the first occurrence in the
@@ -99,19 +100,29 @@ def build_layout(
     hi = np.full(3, -np.inf)
     seen = 0
     for block in chunks():
-        if not np.isfinite(block).all():
+        # a NaN or an infinity shows in the block's minimum or maximum
+        blo, bhi = bounds(block)
+        if not (np.isfinite(blo).all() and np.isfinite(bhi).all()):
             bad = seen + int(np.flatnonzero(~np.isfinite(block).all(axis=1))[0])
             raise InputError(f"{source}: point {bad} has a non-finite coordinate")
-        lo = np.minimum(lo, block.min(axis=0))
-        hi = np.maximum(hi, block.max(axis=0))
+        lo = np.minimum(lo, blo)
+        hi = np.maximum(hi, bhi)
         seen += len(block)
     if seen != n:
         raise InputError(f"{source}: {seen} points read, the header says {n}")
     cells = np.zeros(GRID**3, np.int64)
+    store.create("cell", (n,), np.uint32)
+    start = 0
     for block in chunks():
-        cells += np.bincount(_cells(block, lo, hi), minlength=GRID**3)
+        cell = _cells(block, lo, hi)
+        cells += np.bincount(cell, minlength=GRID**3)
+        store.write("cell", start, cell.astype(np.uint32))
+        start += len(block)
     leaves = _split(cells.reshape(GRID, GRID, GRID), tile_points)
-    table = np.full((GRID, GRID, GRID), -1, np.int64)
+    # uint16 tiles sort by radix (numpy's stable sort of 16-bit integers); empty cells
+    # (in no tile) keep the dtype's largest value
+    kind = np.dtype(np.uint16 if len(leaves) < (1 << 16) - 1 else np.int64)
+    table = np.full((GRID, GRID, GRID), np.iinfo(kind).max, kind)
     grid_counts = cells.reshape(GRID, GRID, GRID)
     sizes = []
     for t, (clo, chi) in enumerate(leaves):
@@ -126,25 +137,37 @@ def build_layout(
     cursor = offsets[:-1].copy()
     start = 0
     for block in chunks():
-        tile = table[_cells(block, lo, hi)]
+        tile = table[store.read("cell", start, start + len(block))]
         order = np.argsort(tile, kind="stable")
-        ts = tile[order]
-        first = np.searchsorted(ts, ts, side="left")
-        pos = cursor[ts] + (np.arange(len(ts)) - first)
-        cursor += np.bincount(tile, minlength=len(sizes))
-        store.write_at("coords", pos, block[order])
-        store.write_at("ids", pos, start + order)
+        per = np.bincount(tile, minlength=len(sizes))
+        runs = np.concatenate([[0], np.cumsum(per)])
+        xyz, ids = block[order], start + order
+        for t in np.flatnonzero(per):
+            a, b = runs[t], runs[t + 1]
+            store.write("coords", int(cursor[t]), xyz[a:b])
+            store.write("ids", int(cursor[t]), ids[a:b])
+        cursor += per
         start += len(block)
+    store.remove("cell")
     boxes = np.empty((len(sizes), 2, 3))
     n_clean = 0
     for t in range(len(sizes)):
         a, b = int(offsets[t]), int(offsets[t + 1])
         pts = store.read("coords", a, b)
-        boxes[t, 0], boxes[t, 1] = pts.min(axis=0), pts.max(axis=0)
+        boxes[t] = bounds(pts)
         to_first, from_first = _kernels.merge_duplicates(pts)
         store.write("rep", a, a + to_first[from_first])
         n_clean += len(to_first)
     return Layout(n, lo, hi, offsets, boxes, n_clean)
+
+
+def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Minimum and maximum (3,) of ``points`` (c, 3), column by column (a reduce over
+    the first axis of a (c, 3) array is many times slower); NaN where a column has one."""
+    return (
+        np.array([points[:, i].min() for i in range(3)]),
+        np.array([points[:, i].max() for i in range(3)]),
+    )
 
 
 def _cells(block: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -32,6 +32,9 @@ from .store import Store
 MARGIN = 1e-9
 #: Widenings of a tile's halo before its failing points take the streaming route.
 ROUNDS = 4
+#: A search for rows fewer than this share of the points builds its tree over the
+#: points near them only (:func:`_knn_near`).
+NEAR_SHARE = 0.125
 
 
 @dataclass(frozen=True)
@@ -62,6 +65,10 @@ class Query:
         No search: the first ``k`` of the lists an earlier query saved under this name,
         of its rows that are this query's rows (a subset of them, ``k`` at most the
         earlier ``k``: the k nearest are a prefix of the earlier k nearest).
+    hint : str or None
+        Store array of estimates of the points' squared k-th neighbour distances: a
+        search for a few rows then builds its tree over the points near them only
+        (:func:`_knn_near`; the estimates set the first reach, never the answer).
     """
 
     k: int
@@ -72,6 +79,7 @@ class Query:
     robust: bool = False
     save: str | None = None
     reuse: str | None = None
+    hint: str | None = None
 
 
 @dataclass
@@ -141,8 +149,11 @@ def gather(
     for t in tiles:
         a, b = int(layout.offsets[t]), int(layout.offsets[t + 1])
         pts = store.read("coords", a, b)
-        use = np.all((pts >= blo) & (pts <= bhi), axis=1)
-        use &= store.read("rep", a, b) == np.arange(a, b)
+        use = store.read("rep", a, b) == np.arange(a, b)
+        tlo, thi = layout.boxes[t]
+        if not (np.all(tlo >= blo) and np.all(thi <= bhi)):  # the tile's box sticks out
+            inside = (pts >= blo) & (pts <= bhi)
+            use &= inside[:, 0] & inside[:, 1] & inside[:, 2]
         if kept is not None:
             use &= store.read(kept, a, b)
         where = np.flatnonzero(use)
@@ -157,12 +168,18 @@ def gather(
 
 
 def _search(
-    points: np.ndarray, rows: np.ndarray, query: Query, all_rows: bool, workers: int
+    points: np.ndarray,
+    rows: np.ndarray,
+    query: Query,
+    all_rows: bool,
+    workers: int,
+    hint: np.ndarray | None = None,
 ) -> tuple[np.ndarray | None, dict[str, np.ndarray], np.ndarray]:
     """k nearest (or the query's pass) of ``rows`` within ``points``: the kNN lists
     (None after a robust pass), what the pass found (:class:`Context`), and the rows'
     squared k-th neighbour distances (r,). The compiled passes compute the rows only
-    (and a few points near them), not the halo."""
+    (and a few points near them), not the halo. ``hint`` (r,): estimates of the rows'
+    squared k-th neighbour distances (:attr:`Query.hint`)."""
     k = query.k
     if query.robust:
         assert query.scales is not None
@@ -188,18 +205,77 @@ def _search(
         }
         return None, found, found["kth_d2"]
     found = {}
-    tree = _kernels.build_tree(points)
     if query.scales is not None:
         idx, pdis = _kernels.cloud_knn_projected_distances(
-            tree, query.scales, query.weighting, workers, rows
+            _kernels.build_tree(points), query.scales, query.weighting, workers, rows
         )
         found["pdis"] = np.ascontiguousarray(pdis[:, rows].T)
         idx = idx[rows]
     elif all_rows:
-        idx = _kernels.cloud_knn(tree, k, workers, rows)[rows]
+        idx = _kernels.cloud_knn(_kernels.build_tree(points), k, workers, rows)[rows]
     else:  # a few rows: no table of the set
-        idx = _kernels.cloud_knn_rows(tree, rows, k, workers)
+        idx = _knn_near(points, rows, k, workers, hint)
     return idx, found, squared_distances(points[idx[:, -1]], points[rows])
+
+
+def _knn_near(
+    points: np.ndarray, rows: np.ndarray, k: int, workers: int, hint: np.ndarray | None
+) -> np.ndarray:
+    """:func:`meshlab_sharp._kernels.cloud_knn_rows` of ``rows`` (r,) within ``points``
+    (L, 3), (r, k) local indices, searching only the points near the rows when they are
+    few and ``hint`` (r,) (squared distance estimates) is given.
+
+    The points near are those of the cells, ``g`` wide, at or next to a row's cell: every
+    point closer to a row than ``g``. A row whose k-th neighbour among them is closer
+    than ``g`` (with a margin) has its exact k nearest, with the same ties (the subset
+    keeps the order of the points); the others are searched again with ``g`` doubled,
+    and after ``ROUNDS`` tries among all the points."""
+    idx = np.empty((len(rows), k), np.int64)
+    todo = np.arange(len(rows))
+    if hint is not None and len(rows) < NEAR_SHARE * len(points) and len(hint):
+        g = 2.0 * float(np.sqrt(np.max(hint)))
+        for _ in range(ROUNDS):
+            if not (np.isfinite(g) and g > 0.0):
+                break
+            near = _points_near(points, points[rows[todo]], g)
+            if near is None or len(near) > 0.5 * len(points):
+                break
+            if len(near) >= k:
+                sub = np.searchsorted(near, rows[todo])
+                tree = _kernels.build_tree(points[near])
+                got = near[_kernels.cloud_knn_rows(tree, sub, k, workers)]
+                d2 = squared_distances(points[got[:, -1]], points[rows[todo]])
+                ok = np.sqrt(d2) < g * (1.0 - 1e-6)
+                idx[todo[ok]] = got[ok]
+                todo = todo[~ok]
+                if len(todo) == 0:
+                    return idx
+            g *= 2.0
+    tree = _kernels.build_tree(points)
+    idx[todo] = _kernels.cloud_knn_rows(tree, rows[todo], k, workers)
+    return idx
+
+
+def _points_near(points: np.ndarray, centres: np.ndarray, g: float) -> np.ndarray | None:
+    """Increasing indices of ``points`` (L, 3) in the cells ``g`` wide at or next to
+    the cells of ``centres`` (c, 3): a superset of the points closer than ``g`` to a
+    centre. None when the grid over the centres has too many cells."""
+    base = centres.min(axis=0)
+    dims = np.floor((centres.max(axis=0) - base) / g).astype(np.int64) + 5
+    if dims.max() >= 1 << 24 or float(np.prod(dims.astype(np.float64))) >= 2.0**62:
+        return None
+    # cells 2..dims-3 hold centres, their neighbours 1..dims-2; farther points are
+    # clipped to the border cells 0 and dims-1, never near
+    cell = np.floor((points - base) / g)
+    np.clip(cell + 2.0, 0.0, (dims - 1).astype(np.float64), out=cell)
+    cell = cell.astype(np.int64)
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    mine = np.floor((centres - base) / g).astype(np.int64) + 2
+    step = np.array([-1, 0, 1])
+    around = np.stack(np.meshgrid(step, step, step, indexing="ij"), -1).reshape(-1, 3)
+    cells = (mine[:, None, :] + around).reshape(-1, 3)
+    keys = np.unique((cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2])
+    return np.flatnonzero(np.isin(key, keys))
 
 
 def neighbours(
@@ -303,14 +379,16 @@ def _searched(
             h = max(2.0 * h, float(np.linalg.norm(hi0 - lo0)), 1e-3 * diag)
             continue
         biggest = max(biggest, len(points))
-        idx, found, kth_d2 = _search(points, rows, query, query.rows is None, workers)
+        hint = None if query.hint is None else store.read_at(query.hint, pos[rows])
+        idx, found, kth_d2 = _search(points, rows, query, query.rows is None, workers, hint)
         r = np.sqrt(kth_d2)
         need = r * (1.0 + MARGIN) + 1e-300
         if full:
             ok = np.ones(len(rows), bool)
         else:
             p = points[rows]
-            ok = need < np.minimum(p - blo, bhi - p).min(axis=1)
+            room = np.minimum(p - blo, bhi - p)  # per axis; their minimum, column-wise
+            ok = need < np.minimum(np.minimum(room[:, 0], room[:, 1]), room[:, 2])
         last = (pos, points, rows, ok, r, h)
         if ok.any():
             sub = {key: value[ok] for key, value in found.items()}

@@ -9,10 +9,15 @@ of the whole cloud.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+#: :meth:`Store.write_at` writes fewer runs of consecutive rows than this (or than an
+#: eighth of the rows) one by one.
+RUNS = 64
 
 
 @dataclass
@@ -31,13 +36,17 @@ class Store:
 
     def path(self, name: str) -> Path:
         """The file of array ``name``."""
-        return Path(self.root) / f"{name}.bin"
+        return Path(self._file(name))
+
+    def _file(self, name: str) -> str:
+        """:meth:`path` as a string (many calls: no Path object)."""
+        return os.path.join(self.root, f"{name}.bin")
 
     def create(self, name: str, shape: tuple[int, ...], dtype: np.dtype | str) -> None:
         """A new array of zeros (a sparse file)."""
         dt = np.dtype(dtype)
         size = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
-        with open(self.path(name), "wb") as f:
+        with open(self._file(name), "wb") as f:
             f.truncate(size)
         self.arrays[name] = (tuple(int(s) for s in shape), dt.str)
 
@@ -45,7 +54,7 @@ class Store:
         shape, dtype = self.arrays[name]
         if shape[0] == 0:
             return np.zeros(shape, dtype)
-        return np.memmap(self.path(name), dtype=np.dtype(dtype), mode=mode, shape=shape)
+        return np.memmap(self._file(name), dtype=np.dtype(dtype), mode=mode, shape=shape)
 
     def read(self, name: str, start: int, stop: int) -> np.ndarray:
         """A copy of rows ``start:stop`` (read from the file, not mapped)."""
@@ -56,7 +65,7 @@ class Store:
         row = int(np.prod(shape[1:], dtype=np.int64))
         if count == 0:
             return np.zeros((0, *shape[1:]), dt)
-        out = np.fromfile(self.path(name), dt, count * row, offset=start * row * dt.itemsize)
+        out = np.fromfile(self._file(name), dt, count * row, offset=start * row * dt.itemsize)
         return out.reshape((count, *shape[1:]))
 
     def read_at(self, name: str, rows: np.ndarray) -> np.ndarray:
@@ -67,22 +76,52 @@ class Store:
         return out
 
     def write(self, name: str, start: int, values: np.ndarray) -> None:
-        """Rows ``start:start + len(values)`` := ``values``."""
-        if len(values) == 0:
+        """Rows ``start:start + len(values)`` := ``values`` (written to the file, not
+        mapped: no page of it stays in this process)."""
+        shape, dtype = self.arrays[name]
+        data = np.ascontiguousarray(values, np.dtype(dtype))
+        if data.shape[1:] != shape[1:] or not 0 <= start <= shape[0] - len(data):
+            raise ValueError(
+                f"{name}: rows {start}:{start + len(data)} of shape {data.shape[1:]} "
+                f"do not fit an array of shape {shape}"
+            )
+        with open(self._file(name), "r+b") as f:
+            _pwrite(f.fileno(), start * self._row_bytes(name), _bytes(data))
+
+    def write_at(self, name: str, rows: np.ndarray, values: np.ndarray) -> None:
+        """The given rows (distinct) := ``values``. Rows that form runs of consecutive
+        rows (a tile's own points, gaps at its duplicates) are written run by run; others
+        through a map of the file, flushed."""
+        if len(rows) == 0:
+            return
+        shape, dtype = self.arrays[name]
+        rows = np.asarray(rows, np.int64)
+        values = np.broadcast_to(values, (len(rows), *shape[1:]))
+        if len(rows) > 1 and not (rows[1:] > rows[:-1]).all():
+            order = np.argsort(rows, kind="stable")
+            rows, values = rows[order], values[order]
+        cuts = np.flatnonzero(rows[1:] != rows[:-1] + 1) + 1
+        if len(cuts) < max(RUNS, len(rows) // 8) and rows[0] >= 0 and rows[-1] < shape[0]:
+            data = _bytes(np.ascontiguousarray(values, np.dtype(dtype)))
+            row = self._row_bytes(name)
+            with open(self._file(name), "r+b") as f:
+                for a, b in zip([0, *cuts], [*cuts, len(rows)], strict=True):
+                    _pwrite(f.fileno(), int(rows[a]) * row, data[a * row : b * row])
             return
         m = self._map(name, "r+")
-        m[start : start + len(values)] = values
+        m[rows] = values
         m.flush()
         del m
 
-    def write_at(self, name: str, rows: np.ndarray, values: np.ndarray) -> None:
-        """The given rows := ``values``."""
-        if len(rows) == 0:
-            return
-        m = self._map(name, "r+")
-        m[np.asarray(rows, np.int64)] = values
-        m.flush()
-        del m
+    def _row_bytes(self, name: str) -> int:
+        """Bytes of one row of array ``name``."""
+        shape, dtype = self.arrays[name]
+        return np.dtype(dtype).itemsize * int(np.prod(shape[1:], dtype=np.int64))
+
+    def remove(self, name: str) -> None:
+        """Delete array ``name`` and its file."""
+        self.path(name).unlink()
+        del self.arrays[name]
 
     def put(self, name: str, key: int, values: np.ndarray) -> None:
         """A per-tile array (not per point): ``values`` under ``name`` and ``key``."""
@@ -91,3 +130,15 @@ class Store:
     def get(self, name: str, key: int) -> np.ndarray:
         """The array :meth:`put` saved under ``name`` and ``key``."""
         return np.load(Path(self.root) / f"{name}-{key}.npy", allow_pickle=False)
+
+
+def _bytes(data: np.ndarray) -> memoryview:
+    """The bytes of a C-contiguous array, flat."""
+    return memoryview(data.reshape(-1)).cast("B")
+
+
+def _pwrite(fd: int, at: int, view: memoryview) -> None:
+    """All of ``view`` to file ``fd`` at byte ``at``."""
+    while len(view):
+        done = os.pwrite(fd, view, at)
+        view, at = view[done:], at + done
