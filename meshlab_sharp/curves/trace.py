@@ -276,24 +276,47 @@ def turn_angles(piece: Piece, spacing: float) -> np.ndarray:
     return _least_turn(*_chords(piece, spacing))
 
 
+@dataclass
+class _ArcKeys:
+    """Many polylines laid end to end for vectorised searches along their arcs.
+
+    ``key`` is each vertex's arc length from its own polyline's start plus a per-polyline
+    offset wider than any chord window, so that ``np.searchsorted(key, ...)`` finds
+    positions along one polyline without reaching into the next.
+    """
+
+    points: np.ndarray  # (v, 3) the polylines' vertices, concatenated
+    starts: np.ndarray  # (p,) first vertex of each polyline
+    stops: np.ndarray  # (p,) last vertex of each polyline
+    piece: np.ndarray  # (v,) polyline of each vertex
+    scales: np.ndarray  # (S, 1) the TURN_SCALES in model units
+    key: np.ndarray  # (v,) ascending
+
+    @classmethod
+    def of(cls, polylines: list[np.ndarray], spacing: float) -> _ArcKeys:
+        """Of polylines of at least one vertex each ((m_i, 3) arrays)."""
+        sizes = np.array([len(p) for p in polylines])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        stops = starts + sizes - 1
+        points = np.concatenate(polylines)
+        step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+        step[starts[1:] - 1] = 0.0
+        cum = np.concatenate([[0.0], np.cumsum(step)])
+        piece = np.repeat(np.arange(len(polylines)), sizes)
+        cum -= cum[starts][piece]
+        scales = np.asarray(TURN_SCALES)[:, None] * spacing
+        gap = float(cum.max()) + 2 * TURN_OUTER * float(scales.max()) + 1.0
+        return cls(points, starts, stops, piece, scales, cum + piece * gap)
+
+
 def _open_turn_angles(pieces: list[Piece], spacing: float) -> list[np.ndarray]:
     """:func:`turn_angles` of many open pieces in one vectorised pass (their arc lengths
     and chords as in :func:`_ends`). One (m,) array per piece."""
     if not pieces:
         return []
-    sizes = np.array([len(pc.points) for pc in pieces])
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    stops = starts + sizes - 1
-    points = np.concatenate([pc.points for pc in pieces])
-    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    step[starts[1:] - 1] = 0.0
-    cum = np.concatenate([[0.0], np.cumsum(step)])
-    piece = np.repeat(np.arange(len(pieces)), sizes)
-    cum -= cum[starts][piece]
-    scales = np.asarray(TURN_SCALES)[:, None] * spacing  # (S, 1)
-    gap = float(cum.max()) + 2 * TURN_OUTER * float(scales.max()) + 1.0
-    key = cum + piece * gap
-    lo, hi = starts[piece], stops[piece]
+    arc = _ArcKeys.of([pc.points for pc in pieces], spacing)
+    points, starts, stops, scales, key = arc.points, arc.starts, arc.stops, arc.scales, arc.key
+    lo, hi = starts[arc.piece], stops[arc.piece]
 
     def window(offset: np.ndarray, side: str, shift: int) -> np.ndarray:
         return np.clip(np.searchsorted(key, key[None, :] + offset, side=side) + shift, lo, hi)
@@ -399,18 +422,8 @@ def _ends(pieces: list[Piece], spacing: float) -> _Ends:
         z = np.zeros((0, 3))
         empty = np.zeros((len(TURN_SCALES), 0, 3))
         return _Ends(np.zeros(0, np.int64), np.zeros(0, np.int64), z, empty, empty)
-    sizes = np.array([len(pieces[i].points) for i in which])
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    stops = starts + sizes - 1
-    points = np.concatenate([pieces[i].points for i in which])
-    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    step[starts[1:] - 1] = 0.0
-    cum = np.concatenate([[0.0], np.cumsum(step)])
-    piece = np.repeat(np.arange(len(which)), sizes)
-    cum -= cum[starts][piece]
-    scales = np.asarray(TURN_SCALES)[:, None] * spacing  # (S, 1)
-    gap = float(cum.max()) + 2 * TURN_OUTER * float(scales.max()) + 1.0
-    key = cum + piece * gap
+    arc = _ArcKeys.of([pieces[i].points for i in which], spacing)
+    points, starts, stops, scales, key = arc.points, arc.starts, arc.stops, arc.scales, arc.key
     first_key, last_key = key[starts], key[stops]
 
     def index(target: np.ndarray, side: str, shift: int) -> np.ndarray:
