@@ -67,7 +67,7 @@ from .neighbourhoods import (
 )
 from .normals import Weighting
 from .projected_distance import projected_distances
-from .threshold import otsu_threshold
+from .threshold import histogram, otsu_from_histogram
 
 __all__ = [
     "CREASE_ANGLE",
@@ -98,6 +98,7 @@ __all__ = [
     "otsu_splits",
     "relative_distances",
     "robust_threshold",
+    "robust_threshold_from_histogram",
     "sheet_mask",
     "supported",
     "thin",
@@ -505,10 +506,17 @@ def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
     Returns
     -------
     float
-        ``max(otsu_threshold(r), R_MIN)``, or ``R_MIN`` when not ``otsu``; candidates
-        are ``r >= T``.
+        ``max(otsu_threshold(r), R_MIN)``, or ``R_MIN`` when not ``otsu`` (then no
+        histogram is made); candidates are ``r >= T``.
     """
-    return max(otsu_threshold(r), R_MIN) if otsu else R_MIN
+    return robust_threshold_from_histogram(histogram(r)) if otsu else R_MIN
+
+
+def robust_threshold_from_histogram(counts: np.ndarray, otsu: bool = True) -> float:
+    """:func:`robust_threshold` from the 256-bin histogram (B,) int of the relative
+    distances (:func:`meshlab_sharp.threshold.histogram`): histograms summed over parts of
+    the points give the whole's threshold (the out-of-core tiles)."""
+    return max(otsu_from_histogram(counts), R_MIN) if otsu else R_MIN
 
 
 def otsu_splits(mesh: bool, noise: float) -> bool:

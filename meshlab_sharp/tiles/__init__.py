@@ -403,9 +403,7 @@ def _robust(
         grown = Query(top, "kept", None, scales, **passes)
         hist = runner.step(Step("pass grown", robust_pass, grown, {"first": False}))["hist"]
     otsu = robust.otsu_splits(False, nu)
-    thresholds = np.array(
-        [max(otsu_from_histogram(h), robust.R_MIN) if otsu else robust.R_MIN for h in hist]
-    )
+    thresholds = np.array([robust.robust_threshold_from_histogram(h, otsu) for h in hist])
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
     near = Query(top, "kept", "mask", save="lists", hint="kd2")
