@@ -60,12 +60,11 @@ class Store:
         """A copy of rows ``start:stop`` (read from the file, not mapped)."""
         shape, dtype = self.arrays[name]
         dt = np.dtype(dtype)
-        stop = min(stop, shape[0])
-        count = max(stop - start, 0)
-        row = int(np.prod(shape[1:], dtype=np.int64))
+        count = max(min(stop, shape[0]) - start, 0)
         if count == 0:
             return np.zeros((0, *shape[1:]), dt)
-        out = np.fromfile(self._file(name), dt, count * row, offset=start * row * dt.itemsize)
+        row = self._row_bytes(name)
+        out = np.fromfile(self._file(name), dt, count * row // dt.itemsize, offset=start * row)
         return out.reshape((count, *shape[1:]))
 
     def read_at(self, name: str, rows: np.ndarray) -> np.ndarray:
