@@ -1,9 +1,11 @@
-"""The method's constants, read from the C header ``_ckernels.h`` where they are defined.
+"""The method's constants, read from the C headers where they are defined.
 
-The compiled kernels, the MeshLab plugin (which compiles the same C file) and this
-package share one definition of every constant and default option: each
-``#define MS_NAME value`` line of the header's constants block is ``NAME`` here. Reading
-the header needs no compiler, so the numpy reference path (no compiled library) has the
+The compiled kernels, the MeshLab plugin (which compiles the same C files) and this
+package share one definition of every constant and default option. Two headers hold
+them: ``_ckernels.h`` (detection: each ``#define MS_NAME value`` line of its constants
+block is ``NAME`` here, see :data:`KERNELS`) and ``curves/_curves.h`` (the feature
+curves: ``#define MS_CURVE_NAME value`` is ``NAME``, see :data:`CURVES`). Reading a
+header needs no compiler, so the numpy reference path (no compiled library) has the
 same constants.
 """
 
@@ -13,62 +15,102 @@ import ast
 import re
 from pathlib import Path
 
-#: The header, shipped beside this module.
-HEADER = Path(__file__).with_name("_ckernels.h")
+#: A constant's value: an integer, a floating-point number, or a list of either.
+Value = int | float | tuple[int, ...] | tuple[float, ...]
 
-_DEFINE = re.compile(r"^#define MS_([A-Z0-9_]+) (.+)$", re.MULTILINE)
 _OPERATORS = {ast.Div: float.__truediv__, ast.Mult: float.__mul__}
 
 
-def _value(node: ast.expr) -> int | float | tuple[int, ...]:
-    """A number, a quotient or product of two numbers, or a tuple of integers."""
+def _value(node: ast.expr, known: dict[str, Value], where: str) -> Value:
+    """A number, an earlier constant's full name, a quotient or product of two
+    floating-point numbers or names, or a tuple of integers or of floating-point numbers."""
     if isinstance(node, ast.Constant) and type(node.value) in (int, float):
         return node.value
+    if isinstance(node, ast.Name) and node.id in known:
+        return known[node.id]
     if isinstance(node, ast.BinOp) and type(node.op) in _OPERATORS:
-        left, right = _value(node.left), _value(node.right)
+        left, right = _value(node.left, known, where), _value(node.right, known, where)
         if isinstance(left, float) and isinstance(right, float):
             return _OPERATORS[type(node.op)](left, right)
-    if isinstance(node, ast.Tuple) and all(
-        isinstance(e, ast.Constant) and type(e.value) is int for e in node.elts
-    ):
-        return tuple(e.value for e in node.elts)  # type: ignore[attr-defined]
-    raise ValueError(f"{HEADER.name}: unsupported constant {ast.unparse(node)!r}")
+    if isinstance(node, ast.Tuple) and all(isinstance(e, ast.Constant) for e in node.elts):
+        items = tuple(e.value for e in node.elts)  # type: ignore[attr-defined]
+        if {type(v) for v in items} in ({int}, {float}):
+            return items
+    raise ValueError(f"{where}: unsupported constant {ast.unparse(node)!r}")
 
 
-def parse(text: str) -> dict[str, int | float | tuple[int, ...]]:
-    """The ``MS_`` constants of a header's text, by name without the prefix.
+def parse(text: str, prefix: str = "MS_", where: str = "_ckernels.h") -> dict[str, Value]:
+    """The constants ``<prefix>NAME`` of a header's text, by name without the prefix.
 
-    A value is a C number, ``(a / b)`` or ``(a * b)`` of two floating-point numbers
-    (evaluated as C folds it: one correctly rounded operation), or ``{i, j, ...}`` of
-    integers (a tuple).
+    A value is a C number, an earlier constant (its full name, prefix included),
+    ``(a / b)`` or ``(a * b)`` of two floating-point numbers or earlier constants
+    (evaluated as C folds it: one correctly rounded operation), or ``{a, b, ...}`` of
+    integers or of floating-point numbers (a tuple). ``where`` names the header in
+    errors.
     """
-    out: dict[str, int | float | tuple[int, ...]] = {}
-    for name, expr in _DEFINE.findall(text):
+    define = re.compile(rf"^#define ({re.escape(prefix)}([A-Z0-9_]+)) (.+)$", re.MULTILINE)
+    known: dict[str, Value] = {}
+    out: dict[str, Value] = {}
+    for full, name, expr in define.findall(text):
         source = expr.strip().replace("{", "(").replace("}", ",)")
-        out[name] = _value(ast.parse(source, mode="eval").body)
+        try:
+            tree = ast.parse(source, mode="eval")
+        except SyntaxError:
+            raise ValueError(f"{where}: unsupported constant {expr.strip()!r}") from None
+        known[full] = out[name] = _value(tree.body, known, where)
     return out
 
 
-CONSTANTS = parse(HEADER.read_text())
+class Header:
+    """The constants ``<prefix>NAME`` of the C header ``path``, by ``NAME``.
+
+    Parameters
+    ----------
+    path : Path
+        The header.
+    prefix : str
+        The prefix of its constants' C names.
+    """
+
+    def __init__(self, path: Path, prefix: str) -> None:
+        self.path = path
+        self.prefix = prefix
+        self.constants = parse(path.read_text(), prefix, path.name)
+
+    def _typed(self, name: str, kind: type, item: type | None = None) -> Value:
+        value = self.constants[name]
+        if type(value) is not kind or (
+            item is not None and not all(type(v) is item for v in value)  # type: ignore[union-attr]
+        ):
+            what = kind.__name__ if item is None else f"{kind.__name__} of {item.__name__}"
+            raise TypeError(f"{self.path.name}: {self.prefix}{name} is {value!r}, not {what}")
+        return value
+
+    def integer(self, name: str) -> int:
+        """The integer constant ``<prefix><name>``."""
+        return int(self._typed(name, int))  # type: ignore[arg-type]
+
+    def real(self, name: str) -> float:
+        """The floating-point constant ``<prefix><name>``."""
+        return float(self._typed(name, float))  # type: ignore[arg-type]
+
+    def integers(self, name: str) -> tuple[int, ...]:
+        """The integer list ``<prefix><name>``."""
+        return tuple(self._typed(name, tuple, int))  # type: ignore[arg-type]
+
+    def reals(self, name: str) -> tuple[float, ...]:
+        """The floating-point list ``<prefix><name>``."""
+        return tuple(self._typed(name, tuple, float))  # type: ignore[arg-type]
 
 
-def _typed(name: str, kind: type) -> int | float | tuple[int, ...]:
-    value = CONSTANTS[name]
-    if type(value) is not kind:
-        raise TypeError(f"{HEADER.name}: MS_{name} is {value!r}, not {kind.__name__}")
-    return value
+#: Detection: the constants block of ``_ckernels.h``, shipped beside this module.
+KERNELS = Header(Path(__file__).with_name("_ckernels.h"), "MS_")
+#: The feature curves: ``curves/_curves.h`` (the plugin's curves_core.cpp includes it).
+CURVES = Header(Path(__file__).parent / "curves" / "_curves.h", "MS_CURVE_")
 
-
-def integer(name: str) -> int:
-    """The integer constant ``MS_<name>``."""
-    return int(_typed(name, int))  # type: ignore[arg-type]
-
-
-def real(name: str) -> float:
-    """The floating-point constant ``MS_<name>``."""
-    return float(_typed(name, float))  # type: ignore[arg-type]
-
-
-def integers(name: str) -> tuple[int, ...]:
-    """The integer list ``MS_<name>``."""
-    return tuple(_typed(name, tuple))  # type: ignore[arg-type]
+#: The kernels' header and its constants, by name without the ``MS_`` prefix.
+HEADER = KERNELS.path
+CONSTANTS = KERNELS.constants
+integer = KERNELS.integer
+real = KERNELS.real
+integers = KERNELS.integers

@@ -4,7 +4,13 @@ command line, and the curve scores."""
 
 from __future__ import annotations
 
+import ast
+import re
+import shutil
+import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pymeshlab
@@ -16,6 +22,7 @@ from scipy.spatial import cKDTree
 import meshlab_sharp
 from evaluation import groundtruth as gt
 from evaluation.scoring import evaluate_curves, truth_curves
+from meshlab_sharp import _header
 from meshlab_sharp.cli import main
 from meshlab_sharp.curves import classify, extract_curves
 from meshlab_sharp.curves.graph import nearest
@@ -423,3 +430,132 @@ def test_piece_lengths_in_one_pass_match_each_piece() -> None:
         p = np.vstack([pc.points, pc.points[:1]]) if pc.closed else pc.points
         assert length == pytest.approx(np.linalg.norm(np.diff(p, axis=0), axis=1).sum(), 1e-14)
         assert length == piece_lengths([pc])[0] == pc.length
+
+
+CURVE_MODULES = ("graph", "trace", "extract", "refine", "fit")
+CURVES_CORE = (
+    Path(__file__).resolve().parent.parent / "meshlab_plugin_cpp" / "src" / "curves_core.cpp"
+)
+#: The constants the plugin has no use for: it does not classify the curves (fit.py).
+PYTHON_ONLY = {"FIT_TOLERANCE", "FIT_MAX", "MAX_RADIUS_RATIO"}
+
+
+def test_the_curves_constants_are_typed_only_in_their_header():
+    """Every upper-case name the curves modules assign is read from curves/_curves.h
+    (``NAME = CURVES.<kind>("NAME")``) unless it holds no number (fit.KINDS), and every
+    header constant is read by one of them; curves_core.cpp uses the header's
+    ``MS_CURVE_`` macros and gives no upper-case constant a number of its own (only
+    pi and infinity, which are no tuning)."""
+    read: dict[str, str] = {}
+    for name in CURVE_MODULES:
+        path = Path(meshlab_sharp.curves.__file__).with_name(f"{name}.py")
+        for node in ast.parse(path.read_text()).body:
+            if not isinstance(node, ast.Assign | ast.AnnAssign) or node.value is None:
+                continue
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            for target in targets:
+                if not (isinstance(target, ast.Name) and target.id.isupper()):
+                    continue
+                value, where = node.value, f"{name}.py: {target.id}"
+                if isinstance(value, ast.Call) and ast.unparse(value.func).startswith("CURVES."):
+                    assert [ast.unparse(a) for a in value.args] == [repr(target.id)], where
+                    assert target.id not in read, where
+                else:  # no number of its own
+                    numbers = [
+                        n
+                        for n in ast.walk(value)
+                        if isinstance(n, ast.Constant) and type(n.value) in (int, float)
+                    ]
+                    assert not numbers, f"{where} = {ast.unparse(value)}"
+                    continue
+                read[target.id] = name
+    assert set(read) == set(_header.CURVES.constants)
+
+    text = CURVES_CORE.read_text()
+    typed = re.findall(
+        r"^\s*(?:static\s+)?(?:constexpr|const)\s+[\w:<> ]+?\s"  # a type
+        r"([A-Z][A-Z0-9_]*)(?:\[\])?\s*=\s*(.+);",
+        text,
+        re.MULTILINE,
+    )
+    for name, value in typed:
+        assert name in ("PI", "INF") or "MS_CURVE_" in value or "sizeof" in value, (name, value)
+    assert not re.search(r"^\s*#\s*define\s", text, re.MULTILINE)
+    used = set(re.findall(r"\bMS_CURVE_([A-Z0-9_]+)", text))
+    header = _header.CURVES.path.read_text()
+    via = {  # the constants the header's derived ones are made of
+        part
+        for name in used
+        for part in re.findall(rf"^#define MS_CURVE_{name} .*?MS_CURVE_(\w+)", header, re.M)
+    }
+    assert used | via == set(_header.CURVES.constants) - PYTHON_ONLY
+    for name in used - {"TURN_SCALES"}:  # the C++ spells no header name without its prefix
+        assert not re.search(rf"(?<![\w]){name}(?!\w)", re.sub(r"//.*", "", text)), name
+
+
+def test_the_curves_use_the_headers_values():
+    """Known values (the curves' results were tuned with them), the derived ones as their
+    definitions say, the same numbers in every module that names them, and in C++ (the
+    header compiled with g++) the same values and the same integer or floating types as
+    the Python parser reads."""
+    from meshlab_sharp.curves import extract, fit, graph, refine, trace
+
+    c = _header.CURVES.constants
+    assert (graph.LINK_NEIGHBOURS, graph.LINK_RADIUS, graph.PRUNE_ROUNDS) == (8, 2.5, 4)
+    assert trace.TURN_SCALES == (1.0, 2.0, 4.0, 8.0)
+    assert (trace.CORNER_TURN, trace.GAP_LENGTH, trace.LOOP_LENGTH) == (35.0, 4.0, 3.0)
+    assert (refine.REFINE_NEIGHBOURS, refine.MIN_ARM_ANGLE, fit.FIT_TOLERANCE) == (40, 20.0, 0.5)
+    assert extract.MIN_CURVE_LENGTH == trace.GAP_LENGTH == 4.0
+    assert extract.SPUR_PIECE == trace.SHORTEST_CUT == 2 * trace.GAP_LENGTH == 8.0
+    assert extract.RAW_TANGENT_WINDOW == 2 * trace.TANGENT_WINDOW == 4.0
+    for module in (extract, fit, graph, refine, trace):
+        for name, value in vars(module).items():
+            if name in c:
+                assert value == c[name] and type(value) is type(c[name]), (module, name)
+
+    if shutil.which("g++") is None:
+        pytest.skip("needs g++")
+    lines = ["#include <cstdio>", "#include <initializer_list>", "#include <type_traits>"]
+    lines += ['#include "curves/_curves.h"', "int main() {"]
+    for name, value in c.items():
+        if isinstance(value, tuple):
+            lines.append(f"{{ for (auto x : MS_CURVE_{name})")
+            lines.append(
+                f'printf("{name} %d %.17g\\n", int(std::is_integral<decltype(x)>()), double(x)); }}'
+            )
+        else:
+            lines.append(f"{{ const auto x = MS_CURVE_{name};")
+            lines.append(
+                f'printf("{name} %d %.17g\\n", int(std::is_integral<decltype(x)>()), double(x)); }}'
+            )
+    lines.append("}")
+    with tempfile.TemporaryDirectory() as tmp:
+        source, exe = Path(tmp) / "curves.cpp", Path(tmp) / "curves"
+        source.write_text("\n".join(lines))
+        package = Path(meshlab_sharp.__file__).parent
+        subprocess.run(["g++", "-std=c++14", f"-I{package}", source, "-o", exe], check=True)
+        out = subprocess.run([exe], capture_output=True, text=True, check=True).stdout
+    seen: dict[str, list] = {}
+    for line in out.splitlines():
+        name, integral, number = line.split()
+        seen.setdefault(name, []).append((integral == "1", float(number)))
+    for name, value in c.items():
+        items = value if isinstance(value, tuple) else (value,)
+        assert seen[name] == [(type(v) is int, float(v)) for v in items], name
+
+
+def test_the_header_parser_reads_names_and_lists_of_reals():
+    text = (
+        "#define MS_CURVE_A 4.0\n#define MS_CURVE_B (2.0 * MS_CURVE_A)\n"
+        "#define MS_CURVE_C MS_CURVE_A\n#define MS_CURVE_D {1.0, 0.5}\n#define MS_E 1\n"
+    )
+    assert _header.parse(text, "MS_CURVE_") == {"A": 4.0, "B": 8.0, "C": 4.0, "D": (1.0, 0.5)}
+    for bad in ("(2.0 * MS_CURVE_Z)", "{1, 2.0}", "{}", "MS_E", "(2 * MS_CURVE_A)"):
+        with pytest.raises(ValueError, match=r"_curves\.h: unsupported constant"):
+            _header.parse(
+                f"#define MS_CURVE_A 4.0\n#define MS_CURVE_X {bad}\n", "MS_CURVE_", "_curves.h"
+            )
+    with pytest.raises(TypeError, match=r"MS_CURVE_TURN_SCALES is .*, not tuple of int"):
+        _header.CURVES.integers("TURN_SCALES")
+    with pytest.raises(TypeError, match=r"MS_CURVE_LINK_NEIGHBOURS is 8, not float"):
+        _header.CURVES.real("LINK_NEIGHBOURS")

@@ -5,6 +5,8 @@
 // exactly and cloud curves to rounding where LAPACK/BLAS are involved.
 #include "curves_core.h"
 
+#include "curves/_curves.h"
+
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -21,43 +23,9 @@
 namespace sharp {
 namespace {
 
-// graph.py
-const int LINK_NEIGHBOURS = 8;
-const double LINK_RADIUS = 2.5;
-const double SPUR_LENGTH = 4.0;
-const double MESH_FLAT_WEIGHT = 0.05;
-const int PRUNE_ROUNDS = 4;
-// trace.py
-const double CORNER_TURN = 35.0;
-const double TURN_INNER = 0.5;
-const double TURN_OUTER = 2.0;
-const double TURN_SCALES[] = {1.0, 2.0, 4.0, 8.0};
-const int N_SCALES = 4;
-const int MIN_TURN_SCALES = 2;
-const double TANGENT_WINDOW = 2.0;
-const double GAP_LENGTH = 4.0;
-const double SHORTEST_CUT = 2 * GAP_LENGTH;
-const double LOOP_LENGTH = 3;
-const double LONG_GAP = 12.0;
-const double LATERAL_OFFSET = 2.0;
-const int CORNER_SCALE = 2;
-// extract.py
-const double MIN_CURVE_LENGTH = GAP_LENGTH;
-const double SPUR_PIECE = 2 * GAP_LENGTH;
-const double MAX_FLAT_SHARE = 0.5;
-const double CELL_SPACINGS = 4.0;
-const double MIN_ADVANCE = 0.3;
-const int LINE_FIT_HALF = 2;
-const double SNAP = 0.75;
-const double RAW_TANGENT_WINDOW = 2 * TANGENT_WINDOW;
-// refine.py
-const int REFINE_NEIGHBOURS = 40;
-const double SLAB = 1.0;
-const int ARM_ITERATIONS = 3;
-const double MIN_ARM_POINTS = 3;
-const double MAX_SHIFT = 3.0;
-const double MIN_ARM_ANGLE = 20.0;
-const double MAX_ARM_RMS = 0.5;
+// The constants: MS_CURVE_ in curves/_curves.h, shared with the Python modules.
+const double TURN_SCALES[] = MS_CURVE_TURN_SCALES;
+constexpr int N_SCALES = int(sizeof TURN_SCALES / sizeof TURN_SCALES[0]);
 
 const double PI = 3.141592653589793238462643383279502884;
 const double INF = std::numeric_limits<double>::infinity();
@@ -434,7 +402,7 @@ std::vector<Edge> pruneSpurs(long n, const std::vector<Edge> &edges, const std::
 	std::vector<char> keep(edges.size(), 1);
 	std::vector<double> edgeLength(edges.size());
 	for (size_t i = 0; i < edges.size(); ++i) edgeLength[i] = norm(sub(pos[edges[i][0]], pos[edges[i][1]]));
-	for (int round = 0; round < PRUNE_ROUNDS; ++round) {
+	for (int round = 0; round < MS_CURVE_PRUNE_ROUNDS; ++round) {
 		std::vector<long> current;
 		std::vector<Edge> sub_;
 		for (size_t i = 0; i < edges.size(); ++i)
@@ -657,10 +625,10 @@ std::vector<double> turnAngles(const Piece &pc, double spacing)
 		const double scale = TURN_SCALES[s] * spacing;
 		for (long i = 0; i < m; ++i) {
 			const double c = cum[i + pad];
-			const long farB = clip(searchRight(cum, c + -TURN_OUTER * scale) - 1, 0, last);
-			const long nearB = clip(searchRight(cum, c + -TURN_INNER * scale) - 1, 0, last);
-			const long farA = clip(searchLeft(cum, c + TURN_OUTER * scale), 0, last);
-			const long nearA = clip(searchLeft(cum, c + TURN_INNER * scale), 0, last);
+			const long farB = clip(searchRight(cum, c + -MS_CURVE_TURN_OUTER * scale) - 1, 0, last);
+			const long nearB = clip(searchRight(cum, c + -MS_CURVE_TURN_INNER * scale) - 1, 0, last);
+			const long farA = clip(searchLeft(cum, c + MS_CURVE_TURN_OUTER * scale), 0, last);
+			const long nearA = clip(searchLeft(cum, c + MS_CURVE_TURN_INNER * scale), 0, last);
 			const Vec3 before = unit(sub(p[nearB], p[farB]));
 			const Vec3 after = unit(sub(p[farA], p[nearA]));
 			if (!(norm(before) > 0 && norm(after) > 0)) continue;
@@ -670,7 +638,7 @@ std::vector<double> turnAngles(const Piece &pc, double spacing)
 		}
 	}
 	std::vector<double> angle(m);
-	for (long i = 0; i < m; ++i) angle[i] = valid[i] >= MIN_TURN_SCALES ? least[i] : 0.0;
+	for (long i = 0; i < m; ++i) angle[i] = valid[i] >= MS_CURVE_MIN_TURN_SCALES ? least[i] : 0.0;
 	return angle;
 }
 
@@ -682,7 +650,7 @@ std::vector<std::vector<double>> openTurnAngles(const std::vector<const Piece *>
 	if (pieces.empty()) return out;
 	const Batch b = batch(pieces);
 	const double smax = TURN_SCALES[N_SCALES - 1] * spacing;
-	const double gap = maxOf(b.cum) + 2 * TURN_OUTER * smax + 1.0;
+	const double gap = maxOf(b.cum) + 2 * MS_CURVE_TURN_OUTER * smax + 1.0;
 	const std::vector<double> key = keys(b, gap);
 	const size_t total = key.size();
 	std::vector<double> least(total, INF);
@@ -692,10 +660,10 @@ std::vector<std::vector<double>> openTurnAngles(const std::vector<const Piece *>
 		for (size_t i = 0; i < total; ++i) {
 			const long lo = b.starts[b.piece[i]], hi = b.stops[b.piece[i]];
 			const double c = key[i];
-			const long farB = clip(searchRight(key, c + -TURN_OUTER * scale) - 1, lo, hi);
-			const long nearB = clip(searchRight(key, c + -TURN_INNER * scale) - 1, lo, hi);
-			const long farA = clip(searchLeft(key, c + TURN_OUTER * scale), lo, hi);
-			const long nearA = clip(searchLeft(key, c + TURN_INNER * scale), lo, hi);
+			const long farB = clip(searchRight(key, c + -MS_CURVE_TURN_OUTER * scale) - 1, lo, hi);
+			const long nearB = clip(searchRight(key, c + -MS_CURVE_TURN_INNER * scale) - 1, lo, hi);
+			const long farA = clip(searchLeft(key, c + MS_CURVE_TURN_OUTER * scale), lo, hi);
+			const long nearA = clip(searchLeft(key, c + MS_CURVE_TURN_INNER * scale), lo, hi);
 			const Vec3 before = unit(sub(b.points[nearB], b.points[farB]));
 			const Vec3 after = unit(sub(b.points[farA], b.points[nearA]));
 			if (!(norm(before) > 0 && norm(after) > 0)) continue;
@@ -706,7 +674,7 @@ std::vector<std::vector<double>> openTurnAngles(const std::vector<const Piece *>
 	}
 	for (size_t k = 0; k < pieces.size(); ++k) {
 		std::vector<double> angle;
-		for (long i = b.starts[k]; i <= b.stops[k]; ++i) angle.push_back(valid[i] >= MIN_TURN_SCALES ? least[i] : 0.0);
+		for (long i = b.starts[k]; i <= b.stops[k]; ++i) angle.push_back(valid[i] >= MS_CURVE_MIN_TURN_SCALES ? least[i] : 0.0);
 		out.push_back(angle);
 	}
 	return out;
@@ -738,7 +706,7 @@ std::vector<Piece> splitAt(const Piece &pc, const std::vector<long> &at)
 
 std::vector<Piece> cutAtTurns(const Piece &pc, const std::vector<double> &angle, double spacing)
 {
-	const double window = TURN_OUTER * spacing;
+	const double window = MS_CURVE_TURN_OUTER * spacing;
 	const std::vector<double> cum = arc(pc.points);
 	std::vector<long> order(angle.size());
 	std::iota(order.begin(), order.end(), 0L);
@@ -746,7 +714,7 @@ std::vector<Piece> cutAtTurns(const Piece &pc, const std::vector<double> &angle,
 	const double total = pc.closed ? pc.length() : 0.0;
 	std::vector<long> cuts;
 	for (long i : order) {
-		if (angle[i] <= CORNER_TURN) break;
+		if (angle[i] <= MS_CURVE_CORNER_TURN) break;
 		bool near = false;
 		for (long c : cuts) {
 			const double d = std::fabs(cum[c] - cum[i]);
@@ -776,7 +744,7 @@ Ends ends(const std::vector<Piece> &pieces, double spacing)
 	if (which.empty()) return e;
 	const Batch b = batch(ptrs);
 	const double smax = TURN_SCALES[N_SCALES - 1] * spacing;
-	const double gap = maxOf(b.cum) + 2 * TURN_OUTER * smax + 1.0;
+	const double gap = maxOf(b.cum) + 2 * MS_CURVE_TURN_OUTER * smax + 1.0;
 	const std::vector<double> key = keys(b, gap);
 	const size_t q = which.size();
 	for (size_t i = 0; i < q; ++i) {
@@ -787,10 +755,10 @@ Ends ends(const std::vector<Piece> &pieces, double spacing)
 		const Vec3 chord = sub(b.points[stop], b.points[start]);
 		for (int s = 0; s < N_SCALES; ++s) {
 			const double scale = TURN_SCALES[s] * spacing;
-			const long nearF = clip(searchLeft(key, key[start] + TURN_INNER * scale), start, stop);
-			const long farF = clip(searchLeft(key, key[start] + TURN_OUTER * scale), start, stop);
-			const long nearL = clip(searchRight(key, key[stop] - TURN_INNER * scale) - 1, start, stop);
-			const long farL = clip(searchRight(key, key[stop] - TURN_OUTER * scale) - 1, start, stop);
+			const long nearF = clip(searchLeft(key, key[start] + MS_CURVE_TURN_INNER * scale), start, stop);
+			const long farF = clip(searchLeft(key, key[start] + MS_CURVE_TURN_OUTER * scale), start, stop);
+			const long nearL = clip(searchRight(key, key[stop] - MS_CURVE_TURN_INNER * scale) - 1, start, stop);
+			const long farL = clip(searchRight(key, key[stop] - MS_CURVE_TURN_OUTER * scale) - 1, start, stop);
 			const Vec3 first = nearF == farF ? chord : sub(b.points[farF], b.points[nearF]);
 			const Vec3 lastv = nearL == farL ? chord : sub(b.points[nearL], b.points[farL]);
 			e.out[s].push_back(neg(unit(first)));
@@ -822,8 +790,8 @@ std::vector<std::vector<long>> endClusters(const Ends &e, const std::vector<Piec
 		while (parent[i] != i) i = parent[i] = parent[parent[i]];
 		return i;
 	};
-	for (const Edge &p : pairsWithin(e.point, GAP_LENGTH * spacing)) {
-		if (e.piece[p[0]] == e.piece[p[1]] && pieces[e.piece[p[0]]].length() < LOOP_LENGTH * GAP_LENGTH * spacing)
+	for (const Edge &p : pairsWithin(e.point, MS_CURVE_GAP_LENGTH * spacing)) {
+		if (e.piece[p[0]] == e.piece[p[1]] && pieces[e.piece[p[0]]].length() < MS_CURVE_LOOP_LENGTH * MS_CURVE_GAP_LENGTH * spacing)
 			continue;
 		const long ra = root(p[0]), rb = root(p[1]);
 		if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
@@ -840,18 +808,18 @@ bool continues(const Ends &e, long a, long b, double spacing)
 {
 	for (int s = 0; s < N_SCALES; ++s) {
 		const Vec3 &oa = e.out[s][a], &ob = e.out[s][b];
-		if (-dot(oa, ob) < std::cos(radians(CORNER_TURN))) continue;
+		if (-dot(oa, ob) < std::cos(radians(MS_CURVE_CORNER_TURN))) continue;
 		for (const Vec3 &gap : {sub(e.point[b], e.point[a]), sub(e.anchor[s][b], e.anchor[s][a])}) {
 			const double offA = norm(sub(gap, mul(dot(gap, oa), oa)));
 			const double offB = norm(sub(gap, mul(dot(gap, ob), ob)));
-			if (std::max(offA, offB) <= LATERAL_OFFSET * spacing) return true;
+			if (std::max(offA, offB) <= MS_CURVE_LATERAL_OFFSET * spacing) return true;
 		}
 	}
 	return false;
 }
 
 // trace.meeting_clusters: the free ends added to the ends whose lines they meet at a
-// corner across up to LONG_GAP spacings
+// corner across up to MS_CURVE_LONG_GAP spacings
 std::vector<std::vector<long>> meetingClusters(const Ends &e, const std::vector<std::vector<long>> &clusters,
                                                double spacing)
 {
@@ -868,14 +836,14 @@ std::vector<std::vector<long>> meetingClusters(const Ends &e, const std::vector<
 	};
 	struct Pair { double gap; long a, b; };
 	std::vector<Pair> pairs;
-	for (const Edge &p : pairsWithin(e.point, LONG_GAP * spacing))
+	for (const Edge &p : pairsWithin(e.point, MS_CURVE_LONG_GAP * spacing))
 		if ((freeEnd[p[0]] || freeEnd[p[1]]) && e.piece[p[0]] != e.piece[p[1]])
 			pairs.push_back({norm(sub(e.point[p[0]], e.point[p[1]])), p[0], p[1]});
 	std::stable_sort(pairs.begin(), pairs.end(), [](const Pair &x, const Pair &y) {
 		return std::tie(x.gap, x.a, x.b) < std::tie(y.gap, y.a, y.b);
 	});
-	const std::vector<Vec3> &out = e.out[CORNER_SCALE], &anchor = e.anchor[CORNER_SCALE];
-	const double turn = std::cos(radians(CORNER_TURN));
+	const std::vector<Vec3> &out = e.out[MS_CURVE_CORNER_SCALE], &anchor = e.anchor[MS_CURVE_CORNER_SCALE];
+	const double turn = std::cos(radians(MS_CURVE_CORNER_TURN));
 	for (const Pair &p : pairs) {
 		const long a = p.a, b = p.b;
 		const double c = dot(out[a], out[b]);
@@ -885,10 +853,10 @@ std::vector<std::vector<long>> meetingClusters(const Ends &e, const std::vector<
 		const double det = 1.0 - c * c;
 		const double sa = (c * db - da) / det, sb = (db - c * da) / det;
 		const Vec3 xa = add(anchor[a], mul(sa, out[a])), xb = add(anchor[b], mul(sb, out[b]));
-		if (norm(sub(xa, xb)) > LATERAL_OFFSET * spacing) continue;
+		if (norm(sub(xa, xb)) > MS_CURVE_LATERAL_OFFSET * spacing) continue;
 		const Vec3 meet = mul(0.5, add(xa, xb));
 		const double aheadA = dot(sub(meet, e.point[a]), out[a]), aheadB = dot(sub(meet, e.point[b]), out[b]);
-		if (std::min(aheadA, aheadB) < -LATERAL_OFFSET * spacing || std::max(aheadA, aheadB) > LONG_GAP * spacing)
+		if (std::min(aheadA, aheadB) < -MS_CURVE_LATERAL_OFFSET * spacing || std::max(aheadA, aheadB) > MS_CURVE_LONG_GAP * spacing)
 			continue;
 		const long ra = root(a), rb = root(b);
 		if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
@@ -904,7 +872,7 @@ std::vector<std::vector<long>> meetingClusters(const Ends &e, const std::vector<
 bool facesGap(const Ends &e, long a, long b)
 {
 	const Vec3 gap = sub(e.point[b], e.point[a]);
-	const double limit = std::cos(radians(CORNER_TURN)) * norm(gap);
+	const double limit = std::cos(radians(MS_CURVE_CORNER_TURN)) * norm(gap);
 	return dot(gap, e.out[N_SCALES - 1][a]) >= limit && dot(neg(gap), e.out[N_SCALES - 1][b]) >= limit;
 }
 
@@ -935,7 +903,7 @@ std::vector<Piece> joinPieces(const std::vector<Piece> &pieces, double spacing, 
 	auto connect = [&](long i, long j) {
 		const long a = e.piece[i], b = e.piece[j], sa = e.side[i], sb = e.side[j];
 		if (link.count({a, sa}) || link.count({b, sb})) return;
-		if (a == b && pieces[a].length() < LOOP_LENGTH * GAP_LENGTH * spacing) return;
+		if (a == b && pieces[a].length() < MS_CURVE_LOOP_LENGTH * MS_CURVE_GAP_LENGTH * spacing) return;
 		link[{a, sa}] = {b, sb};
 		link[{b, sb}] = {a, sa};
 	};
@@ -951,7 +919,7 @@ std::vector<Piece> joinPieces(const std::vector<Piece> &pieces, double spacing, 
 		std::vector<Vec3> pts;
 		for (long i : alone) pts.push_back(e.point[i]);
 		std::vector<Edge> pairs;
-		for (const Edge &p : pairsWithin(pts, LONG_GAP * spacing)) pairs.push_back({alone[p[0]], alone[p[1]]});
+		for (const Edge &p : pairsWithin(pts, MS_CURVE_LONG_GAP * spacing)) pairs.push_back({alone[p[0]], alone[p[1]]});
 		std::vector<double> gaps(pairs.size());
 		for (size_t k = 0; k < pairs.size(); ++k) gaps[k] = norm(sub(e.point[pairs[k][0]], e.point[pairs[k][1]]));
 		std::vector<long> order(pairs.size());
@@ -1023,7 +991,7 @@ std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spaci
 	for (size_t i = 0; i < pieces.size(); ++i)
 		for (size_t k = 0; k < pieces[i].points.size(); ++k)
 			owner.push_back(long(i)), local.push_back(long(k)), data.push_back(pieces[i].points[k]);
-	const double reach = GAP_LENGTH * spacing;
+	const double reach = MS_CURVE_GAP_LENGTH * spacing;
 	const KdTree tree(data);
 	std::map<long, std::set<long>> cuts;
 	for (size_t q = 0; q < isFree.size(); ++q) {
@@ -1157,8 +1125,8 @@ std::vector<Piece> skeletonPieces(long n, const std::vector<Edge> &edges, const 
                                   const std::vector<long> &feat)
 {
 	std::vector<Edge> forest = spanningForest(n, edges, w);
-	forest = closeLoops(n, forest, edges, pos, LOOP_LENGTH * GAP_LENGTH * spacing);
-	forest = pruneSpurs(n, forest, pos, SPUR_LENGTH * spacing);
+	forest = closeLoops(n, forest, edges, pos, MS_CURVE_LOOP_LENGTH * MS_CURVE_GAP_LENGTH * spacing);
+	forest = pruneSpurs(n, forest, pos, MS_CURVE_SPUR_LENGTH * spacing);
 	std::vector<Piece> pieces;
 	for (std::vector<long> path : tracePaths(n, forest)) {
 		const bool closed = path.size() > 2 && path.front() == path.back();
@@ -1214,7 +1182,7 @@ std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<st
 			if (t - s == 2) cosTurn = edot(normal[face[order[s]]], normal[face[order[s + 1]]]);
 			const double sinHalf = std::sqrt(std::max(0.0, std::min(1.0, (1.0 - cosTurn) / 2.0)));
 			edges.push_back(ed);
-			weights.push_back(length / (sinHalf + MESH_FLAT_WEIGHT));
+			weights.push_back(length / (sinHalf + MS_CURVE_MESH_FLAT_WEIGHT));
 		}
 		s = t;
 	}
@@ -1313,7 +1281,7 @@ Refined planeIntersection(const Vec3 &vertex, const Vec3 &t, const std::vector<l
 	for (size_t i = 0; i < k; ++i) {
 		const Vec3 d = sub(treePts[nbrs[i]], vertex);
 		xy[i] = {edot(d, u), edot(d, w)};
-		const double along = edot(d, t) / (SLAB * spacing);
+		const double along = edot(d, t) / (MS_CURVE_SLAB * spacing);
 		weight[i] = std::exp(-0.5 * (along * along));
 		const double r = std::sqrt(xy[i][0] * xy[i][0] + xy[i][1] * xy[i][1]);
 		use[i] = !treeFeature[nbrs[i]] && r > 1e-12 * spacing;
@@ -1330,7 +1298,7 @@ Refined planeIntersection(const Vec3 &vertex, const Vec3 &t, const std::vector<l
 	for (size_t i = 0; i < k; ++i) side[i] = (bis[0] * unitv[i][1] - bis[1] * unitv[i][0]) > 0;
 	ArmLine l1{}, l2{};
 	std::vector<double> w1(k), w2(k);
-	for (int it = 0; it < ARM_ITERATIONS; ++it) {
+	for (int it = 0; it < MS_CURVE_ARM_ITERATIONS; ++it) {
 		for (size_t i = 0; i < k; ++i) {
 			w1[i] = (use[i] && side[i]) ? weight[i] : 0.0;
 			w2[i] = (use[i] && !side[i]) ? weight[i] : 0.0;
@@ -1344,11 +1312,11 @@ Refined planeIntersection(const Vec3 &vertex, const Vec3 &t, const std::vector<l
 	const double diff0 = l2.c[0] - l1.c[0], diff1 = l2.c[1] - l1.c[1];
 	const double s = (diff0 * l2.a[1] - diff1 * l2.a[0]) / safe;
 	const double hit0 = l1.c[0] + s * l1.a[0], hit1 = l1.c[1] + s * l1.a[1];
-	const bool fitted = l1.total >= MIN_ARM_POINTS && l2.total >= MIN_ARM_POINTS &&
-	                    std::max(l1.rms, l2.rms) <= MAX_ARM_RMS * spacing;
-	const bool crease = std::fabs(crossA) >= std::sin(radians(MIN_ARM_ANGLE));
+	const bool fitted = l1.total >= MS_CURVE_MIN_ARM_POINTS && l2.total >= MS_CURVE_MIN_ARM_POINTS &&
+	                    std::max(l1.rms, l2.rms) <= MS_CURVE_MAX_ARM_RMS * spacing;
+	const bool crease = std::fabs(crossA) >= std::sin(radians(MS_CURVE_MIN_ARM_ANGLE));
 	const bool ok = fitted && crease && std::sqrt(bis[0] * bis[0] + bis[1] * bis[1]) > 0 &&
-	                std::sqrt(hit0 * hit0 + hit1 * hit1) <= MAX_SHIFT * spacing;
+	                std::sqrt(hit0 * hit0 + hit1 * hit1) <= MS_CURVE_MAX_SHIFT * spacing;
 	const Vec3 moved = add(add(vertex, mul(hit0, u)), mul(hit1, w));
 	return {ok ? moved : vertex, ok, fitted && !crease};
 }
@@ -1375,7 +1343,7 @@ std::vector<long> advancing(const std::vector<Vec3> &p, const std::vector<Vec3> 
 {
 	std::vector<long> keep{0};
 	Vec3 last = p[0];
-	const double step = MIN_ADVANCE * spacing;
+	const double step = MS_CURVE_MIN_ADVANCE * spacing;
 	for (size_t i = 1; i + 1 < p.size(); ++i)
 		if (dot(sub(p[i], last), t[i]) >= step) keep.push_back(long(i)), last = p[i];
 	if (p.size() > 1) keep.push_back(long(p.size()) - 1);
@@ -1390,7 +1358,7 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	std::vector<double> d1(fp.size());
 	for (size_t i = 0; i < fp.size(); ++i) d1[i] = std::sqrt(fpTree.query(fp[i], 2)[1].first);
 	const double featureSpacing = median(d1);
-	std::vector<long> near = cellNeighbourhood(pts, ok, fp, CELL_SPACINGS * featureSpacing);
+	std::vector<long> near = cellNeighbourhood(pts, ok, fp, MS_CURVE_CELL_SPACINGS * featureSpacing);
 	std::stable_sort(near.begin(), near.end(), [&](long a, long b) { return lexLess(pts[a], pts[b]); });
 	std::vector<Vec3> nearPts;
 	std::vector<char> nearFeature;
@@ -1400,10 +1368,10 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	spacing = median(d1);
 	// cloud_graph
 	const long n = long(fp.size());
-	const size_t k = std::min<size_t>(LINK_NEIGHBOURS + 1, fp.size());
+	const size_t k = std::min<size_t>(MS_CURVE_LINK_NEIGHBOURS + 1, fp.size());
 	std::set<Edge> pairSet;
 	for (long i = 0; i < n; ++i)
-		for (const auto &hit : fpTree.query(fp[i], k, LINK_RADIUS * spacing))
+		for (const auto &hit : fpTree.query(fp[i], k, MS_CURVE_LINK_RADIUS * spacing))
 			if (hit.second != i) pairSet.insert({std::min(i, hit.second), std::max(i, hit.second)});
 	const std::vector<Edge> edges(pairSet.begin(), pairSet.end());
 	std::vector<double> lengths(edges.size());
@@ -1413,11 +1381,11 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	// refine every vertex at once, across the skeleton's directions over a wide window
 	std::vector<Vec3> raw;
 	for (const Piece &pc : pieces) raw.insert(raw.end(), pc.points.begin(), pc.points.end());
-	const size_t kk = std::min<size_t>(REFINE_NEIGHBOURS, tree.size());
+	const size_t kk = std::min<size_t>(MS_CURVE_REFINE_NEIGHBOURS, tree.size());
 	std::vector<std::vector<long>> nbrs(raw.size());
 	for (size_t i = 0; i < raw.size(); ++i)
 		for (const auto &hit : tree.query(raw[i], kk)) nbrs[i].push_back(hit.second);
-	const std::vector<Vec3> dirs = batchTangents(pieces, RAW_TANGENT_WINDOW * spacing);
+	const std::vector<Vec3> dirs = batchTangents(pieces, MS_CURVE_RAW_TANGENT_WINDOW * spacing);
 	std::vector<Vec3> moved(raw.size());
 	std::vector<char> fitted(raw.size()), flat(raw.size());
 	for (size_t i = 0; i < raw.size(); ++i) {
@@ -1435,13 +1403,13 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 		for (size_t i = 0; i < m; ++i) nFlat += flat[at + i], all = all && fitted[at + i];
 		const size_t first = at;
 		at += m;
-		if (double(nFlat) / double(m) > MAX_FLAT_SHARE) continue;  // false detections
+		if (double(nFlat) / double(m) > MS_CURVE_MAX_FLAT_SHARE) continue;  // false detections
 		if (!all) {
-			const std::vector<Vec3> line = lineFitPositions(pc.points, d, LINE_FIT_HALF, pc.closed);
+			const std::vector<Vec3> line = lineFitPositions(pc.points, d, MS_CURVE_LINE_FIT_HALF, pc.closed);
 			for (size_t i = 0; i < m; ++i)
 				if (!fitted[first + i]) p[i] = line[i];
 		}
-		p = lineFitPositions(p, d, LINE_FIT_HALF, pc.closed);
+		p = lineFitPositions(p, d, MS_CURVE_LINE_FIT_HALF, pc.closed);
 		Piece q;
 		q.closed = pc.closed;
 		for (long i : advancing(p, d, spacing)) q.nodes.push_back(feat[pc.nodes[i]]), q.points.push_back(p[i]);
@@ -1469,13 +1437,13 @@ std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing)
 			continue;
 		}
 		const double length = pieces[i].length();
-		if (length >= MIN_CURVE_LENGTH * spacing && (!spur.count(long(i)) || length >= SPUR_PIECE * spacing))
+		if (length >= MS_CURVE_MIN_CURVE_LENGTH * spacing && (!spur.count(long(i)) || length >= MS_CURVE_SPUR_PIECE * spacing))
 			out.push_back(pieces[i]);
 	}
 	return out;
 }
 
-// clouds: open pieces shorter than SPUR_PIECE spacings whose two ends are free (not
+// clouds: open pieces shorter than MS_CURVE_SPUR_PIECE spacings whose two ends are free (not
 // even meeting another's line at a corner) dropped
 std::vector<Piece> dropIsolated(const std::vector<Piece> &pieces, double spacing)
 {
@@ -1485,17 +1453,17 @@ std::vector<Piece> dropIsolated(const std::vector<Piece> &pieces, double spacing
 		for (long i : c) joined[e.piece[i]] = 1;
 	std::vector<Piece> out;
 	for (size_t i = 0; i < pieces.size(); ++i)
-		if (pieces[i].closed || joined[i] || pieces[i].length() >= SPUR_PIECE * spacing) out.push_back(pieces[i]);
+		if (pieces[i].closed || joined[i] || pieces[i].length() >= MS_CURVE_SPUR_PIECE * spacing) out.push_back(pieces[i]);
 	return out;
 }
 
-// trace.cut_at_turns: open pieces shorter than SHORTEST_CUT spacings are not cut
+// trace.cut_at_turns: open pieces shorter than MS_CURVE_SHORTEST_CUT spacings are not cut
 std::vector<Piece> cutAll(const std::vector<Piece> &pieces, double spacing)
 {
 	std::vector<const Piece *> longOpen;
 	std::vector<long> slot(pieces.size(), -1);
 	for (size_t i = 0; i < pieces.size(); ++i)
-		if (!pieces[i].closed && pieces[i].length() >= SHORTEST_CUT * spacing)
+		if (!pieces[i].closed && pieces[i].length() >= MS_CURVE_SHORTEST_CUT * spacing)
 			slot[i] = long(longOpen.size()), longOpen.push_back(&pieces[i]);
 	const std::vector<std::vector<double>> angles = openTurnAngles(longOpen, spacing);
 	std::vector<Piece> out;
@@ -1519,8 +1487,8 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 	// meshes: the lines of the last mesh edges
 	const bool cloud = paths == nullptr;
 	if (cloud) clusters = meetingClusters(e, clusters, spacing);
-	const std::vector<Vec3> &outs = cloud ? e.out[CORNER_SCALE] : e.out[0];
-	const std::vector<Vec3> &through = cloud ? e.anchor[CORNER_SCALE] : e.point;
+	const std::vector<Vec3> &outs = cloud ? e.out[MS_CURVE_CORNER_SCALE] : e.out[0];
+	const std::vector<Vec3> &through = cloud ? e.anchor[MS_CURVE_CORNER_SCALE] : e.point;
 	std::vector<Vec3> points;
 	std::vector<long> indices;
 	for (const auto &c : clusters) {
@@ -1543,10 +1511,10 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 		if (condition(a) < 1e6) {
 			const Vec3 x = solve3(a, b);
 			bool near = true;
-			if (cloud) {  // within LONG_GAP spacings of every end
-				for (long i : c) near = near && norm(sub(e.point[i], x)) <= LONG_GAP * spacing;
+			if (cloud) {  // within MS_CURVE_LONG_GAP spacings of every end
+				for (long i : c) near = near && norm(sub(e.point[i], x)) <= MS_CURVE_LONG_GAP * spacing;
 			} else {
-				near = norm(sub(x, mean)) <= GAP_LENGTH * spacing;
+				near = norm(sub(x, mean)) <= MS_CURVE_GAP_LENGTH * spacing;
 			}
 			if (near) corner = x;
 		}
@@ -1570,13 +1538,13 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 			Piece &pc = pieces[e.piece[i]];
 			const size_t at = e.side[i] == 0 ? 0 : pc.nodes.size() - 1;
 			const long here = pc.nodes[at];
-			if (here == index || (paths == nullptr && norm(sub(pc.points[at], corner)) <= SNAP * spacing)) {
+			if (here == index || (paths == nullptr && norm(sub(pc.points[at], corner)) <= MS_CURVE_SNAP * spacing)) {
 				pc.points[at] = corner;
 				continue;
 			}
 			bool found = false;
 			std::vector<long> add_;
-			if (paths != nullptr) add_ = paths->path(here, index, 2 * GAP_LENGTH * spacing, found);
+			if (paths != nullptr) add_ = paths->path(here, index, 2 * MS_CURVE_GAP_LENGTH * spacing, found);
 			std::vector<Vec3> addPoints;
 			for (long v : add_) addPoints.push_back(pts[v]);
 			add_.push_back(index);
@@ -1590,7 +1558,7 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 			}
 		}
 	}
-	const double shortest = LOOP_LENGTH * GAP_LENGTH * spacing;
+	const double shortest = MS_CURVE_LOOP_LENGTH * MS_CURVE_GAP_LENGTH * spacing;
 	std::vector<Piece> out;
 	for (const Piece &pc : pieces)
 		if (pc.closed || pc.points.front() != pc.points.back() || pc.length() >= shortest) out.push_back(pc);
@@ -1666,7 +1634,7 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	Bridge bridgeFn = [&](long a, long b) {
 		bool found = false;
 		Piece mid;
-		mid.nodes = paths->path(a, b, 2 * GAP_LENGTH * spacing, found);
+		mid.nodes = paths->path(a, b, 2 * MS_CURVE_GAP_LENGTH * spacing, found);
 		for (long v : mid.nodes) mid.points.push_back(pts[v]);
 		return mid;
 	};

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .._header import CURVES
 from .fit import classify
 from .graph import (
     SPUR_LENGTH,
@@ -31,7 +32,6 @@ from .trace import (
     GAP_LENGTH,
     LONG_GAP,
     LOOP_LENGTH,
-    TANGENT_WINDOW,
     Bridge,
     Piece,
     batch_tangents,
@@ -46,32 +46,33 @@ from .trace import (
 
 __all__ = ["MIN_CURVE_LENGTH", "Corners", "Curve", "extract_curves", "support_radius"]
 
-#: An open curve shorter than this, in spacings, is dropped: what is left of a spur
+# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
+#: An open curve shorter than this, in spacings (GAP_LENGTH), is dropped: what is left of a spur
 #: between two junctions, or a blob of false detections.
-MIN_CURVE_LENGTH = GAP_LENGTH
-#: A piece shorter than this, in spacings, from a junction of three or more curve ends
-#: to a free end is a spur (noise beside a line) and is dropped.
-SPUR_PIECE = 2 * GAP_LENGTH
+MIN_CURVE_LENGTH = CURVES.real("MIN_CURVE_LENGTH")
+#: A piece shorter than this, in spacings (twice GAP_LENGTH), from a junction of three
+#: or more curve ends to a free end is a spur (noise beside a line) and is dropped.
+SPUR_PIECE = CURVES.real("SPUR_PIECE")
 #: A skeleton piece of a cloud is dropped when at more than this share of its vertices
 #: the two surfaces fitted around it meet at less than the crease angle: false
 #: detections on a smooth or noisy surface (near corners the fit fails otherwise and
 #: does not count).
-MAX_FLAT_SHARE = 0.5
+MAX_FLAT_SHARE = CURVES.real("MAX_FLAT_SHARE")
 #: Side of the grid cells, in feature spacings, that select the points near the curves
 #: for the refinement (3x3x3 cells around each feature hold its REFINE_NEIGHBOURS).
-CELL_SPACINGS = 4.0
+CELL_SPACINGS = CURVES.real("CELL_SPACINGS")
 #: Cloud vertices closer than this along the curve's direction to the previous vertex
 #: kept, in spacings, are dropped after refinement (a skeleton that zigzags across a
 #: wide band of features leaves vertices that double back once refined).
-MIN_ADVANCE = 0.3
+MIN_ADVANCE = CURVES.real("MIN_ADVANCE")
 #: Vertices on each side of a vertex in the fallback line fit (2 spacings or so).
-LINE_FIT_HALF = 2
+LINE_FIT_HALF = CURVES.integer("LINE_FIT_HALF")
 #: Half-width, in spacings of arc, of the chord giving the skeleton's direction at a
-#: vertex, across which the vertex is refined (clouds).
-RAW_TANGENT_WINDOW = 2 * TANGENT_WINDOW
+#: vertex, across which the vertex is refined (clouds): twice TANGENT_WINDOW.
+RAW_TANGENT_WINDOW = CURVES.real("RAW_TANGENT_WINDOW")
 #: A curve end farther than this, in spacings, from its corner gets the corner as an
 #: extra vertex; a nearer one moves onto the corner (clouds).
-SNAP = 0.75
+SNAP = CURVES.real("SNAP")
 
 
 @dataclass

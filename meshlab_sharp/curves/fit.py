@@ -14,19 +14,22 @@ from typing import Any
 
 import numpy as np
 
+from .._header import CURVES
+
 __all__ = ["FIT_MAX", "FIT_TOLERANCE", "KINDS", "classify"]
 
 #: Curve kinds.
 KINDS = ("line", "arc", "freeform")
+# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
 #: RMS distance to the fitted line or circle, in spacings, up to which it fits: a
 #: refined cloud curve lies within about 0.3 spacing of its edge (docs/curves.md), and a
 #: mesh curve's vertices lie on the edge.
-FIT_TOLERANCE = 0.5
+FIT_TOLERANCE = CURVES.real("FIT_TOLERANCE")
 #: The largest distance may be this many times the tolerance (single stray vertices).
-FIT_MAX = 4.0
+FIT_MAX = CURVES.real("FIT_MAX")
 #: A circle is reported only up to this radius, in multiples of the curve's extent:
 #: flatter arcs are lines within the tolerance or too flat to place a centre reliably.
-MAX_RADIUS_RATIO = 20.0
+MAX_RADIUS_RATIO = CURVES.real("MAX_RADIUS_RATIO")
 
 
 def _fits(residual: np.ndarray, tol: float) -> bool:

@@ -17,6 +17,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial import cKDTree
 
+from .._header import CURVES
 from ..neighbourhoods import squared_distances
 
 __all__ = [
@@ -33,22 +34,23 @@ __all__ = [
     "spanning_forest",
 ]
 
+# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
 #: Feature neighbours a cloud feature point is linked to, at most: enough for a band
 #: three points wide (the paper mode's lines) to stay connected along its length.
-LINK_NEIGHBOURS = 8
+LINK_NEIGHBOURS = CURVES.integer("LINK_NEIGHBOURS")
 #: Longest link, in spacings: one missing point on a line (a gap of 2 spacings) is
 #: bridged; two parallel lines 3 spacings apart are not linked.
-LINK_RADIUS = 2.5
+LINK_RADIUS = CURVES.real("LINK_RADIUS")
 #: Spurs (a branch from a free end to a junction) shorter than this, in spacings, are
 #: removed: a band of feature points up to 4 spacings wide leaves side branches up to
 #: about half its width plus one link.
-SPUR_LENGTH = 4.0
+SPUR_LENGTH = CURVES.real("SPUR_LENGTH")
 #: Mesh edge weight: length / (sin(turn / 2) + MESH_FLAT_WEIGHT); a flat edge (turn 0)
 #: costs 20 times its length, a 90-degree crease 1.3 times: the skeleton follows the
 #: crease, not the band of feature vertices beside it.
-MESH_FLAT_WEIGHT = 0.05
+MESH_FLAT_WEIGHT = CURVES.real("MESH_FLAT_WEIGHT")
 #: Rounds of spur pruning (a spur on a spur is removed in the next round).
-PRUNE_ROUNDS = 4
+PRUNE_ROUNDS = CURVES.integer("PRUNE_ROUNDS")
 
 
 def cloud_graph(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:

@@ -16,6 +16,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .._header import CURVES
 from .graph import nearest
 
 __all__ = [
@@ -29,29 +30,30 @@ __all__ = [
     "refine_neighbours",
 ]
 
+# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
 #: Points near a vertex that the two arms are fitted to (before the features among
 #: them are left out): a disc of about 3.5 spacings' radius.
-REFINE_NEIGHBOURS = 40
+REFINE_NEIGHBOURS = CURVES.integer("REFINE_NEIGHBOURS")
 #: Each point's weight in the arms' fits falls off with its distance d along the curve
 #: as ``exp(-(d / (SLAB * spacing))**2 / 2)``: on a curved edge of radius r the
 #: cross-section of a point d away is off by ``d**2 / (2 r)``, 0.06 spacing for
 #: d = 1 spacing and r = 8 spacings (unweighted, d up to 3.5 spacings: 0.8 spacing).
-SLAB = 1.0
+SLAB = CURVES.real("SLAB")
 #: Rounds of fitting the two arms' lines, each point then going to the nearer line
 #: (the first split is by the side of the points' mean direction, which mixes the arms
 #: when the vertex lies on one of the faces rather than on the edge).
-ARM_ITERATIONS = 3
+ARM_ITERATIONS = CURVES.integer("ARM_ITERATIONS")
 #: Fewest non-feature points on each arm for a line fit (total weight).
-MIN_ARM_POINTS = 3
+MIN_ARM_POINTS = CURVES.real("MIN_ARM_POINTS")
 #: Largest move onto the intersection, in spacings: a detected point lies within about
 #: one spacing of the edge (a band 2 spacings wide), and the arms' fit adds noise.
-MAX_SHIFT = 3.0
+MAX_SHIFT = CURVES.real("MAX_SHIFT")
 #: Smallest angle, in degrees, between the two arms' lines: the crease angle below
 #: which an edge is not sharp (``robust.CREASE_ANGLE``).
-MIN_ARM_ANGLE = 20.0
+MIN_ARM_ANGLE = CURVES.real("MIN_ARM_ANGLE")
 #: Largest RMS distance of an arm's points to its line, in spacings (the scanner noise
 #: the fit copes with: 25 % of the spacing is one standard deviation).
-MAX_ARM_RMS = 0.5
+MAX_ARM_RMS = CURVES.real("MAX_ARM_RMS")
 
 
 class CellGrid:

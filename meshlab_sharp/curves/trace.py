@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .._header import CURVES
 from .graph import adjacency
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "trace_paths",
 ]
 
+# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
 #: Degrees: a curve turning by more than this at a vertex has a corner there; two curve
 #: ends meeting at more than this meet at a corner (less: one curve continues into the
 #: other). The turn at a vertex is the angle between the chords of the curve from
@@ -41,40 +43,41 @@ __all__ = [
 #: to a radius of ``2.5 / radians(CORNER_TURN)`` = 4.1 spacings stay whole; the edges of
 #: a 45-degree chamfer meet the faces' edges at 54.7 degrees, which the smoothing of
 #: the positions (a few vertices) rounds off by up to 15 degrees.
-CORNER_TURN = 35.0
+CORNER_TURN = CURVES.real("CORNER_TURN")
 #: Chords measuring the turn at a vertex start this far from it, in spacings of arc ...
-TURN_INNER = 0.5
+TURN_INNER = CURVES.real("TURN_INNER")
 #: ... and end this far.
-TURN_OUTER = 2.0
+TURN_OUTER = CURVES.real("TURN_OUTER")
 #: The turn is measured with the chords at these multiples of their distances (see
 #: turn_angles).
-TURN_SCALES = (1.0, 2.0, 4.0, 8.0)
+TURN_SCALES = CURVES.reals("TURN_SCALES")
 #: Fewest chord scales that must fit on the piece for a turn to count.
-MIN_TURN_SCALES = 2
+MIN_TURN_SCALES = CURVES.integer("MIN_TURN_SCALES")
 #: Half-width, in spacings of arc, of the chord giving a curve's direction at a vertex.
-TANGENT_WINDOW = 2.0
+TANGENT_WINDOW = CURVES.real("TANGENT_WINDOW")
 #: Curve ends closer than this, in spacings, are joined (one curve continues, a loop
 #: closes, or curves meet at a corner): detection leaves gaps of a few points at
 #: corners, where neighbourhoods straddle three faces.
-GAP_LENGTH = 4.0
-#: Open pieces shorter than this, in spacings, are not cut: both parts would be shorter
-#: than the shortest curve kept (``extract.MIN_CURVE_LENGTH`` = GAP_LENGTH).
-SHORTEST_CUT = 2 * GAP_LENGTH
+GAP_LENGTH = CURVES.real("GAP_LENGTH")
+#: Open pieces shorter than this, in spacings (twice GAP_LENGTH), are not cut: both
+#: parts would be shorter than the shortest curve kept (``extract.MIN_CURVE_LENGTH`` =
+#: GAP_LENGTH).
+SHORTEST_CUT = CURVES.real("SHORTEST_CUT")
 #: A piece whose two ends meet is a loop only if it is at least this many times
 #: GAP_LENGTH long (a circle of 2 spacings' radius at least); a shorter one's two ends
 #: are not joined, nor taken for a corner.
-LOOP_LENGTH = 3
+LOOP_LENGTH = CURVES.real("LOOP_LENGTH")
 #: Two free ends facing each other are joined across up to this many spacings: the
 #: gaps detection leaves along weak edges (a chamfer's 45-degree edges) and in noise.
-LONG_GAP = 12.0
+LONG_GAP = CURVES.real("LONG_GAP")
 #: Scale (index into :data:`TURN_SCALES`) of the end chords whose lines place corners:
 #: chords from 2 to 8 spacings before the end (the last vertices bend in noise).
-CORNER_SCALE = 2
+CORNER_SCALE = CURVES.integer("CORNER_SCALE")
 #: Two ends continue one curve only if each (or its end chord's inner vertex) lies
 #: within this many spacings of the other's line, and two end lines meet at a corner
 #: only if they pass this close: the width of a feature band in noise (parallel edges
 #: are farther apart).
-LATERAL_OFFSET = 2.0
+LATERAL_OFFSET = CURVES.real("LATERAL_OFFSET")
 
 
 @dataclass
