@@ -25,6 +25,16 @@
 /* Default scales: k nearest neighbours on a point cloud, k-rings on a mesh. */
 #define MS_DEFAULT_KNN_SCALES {12, 16, 20, 24, 28, 32, 36, 40}
 #define MS_DEFAULT_RING_SCALES {1, 2, 3, 4}
+/* The smallest scales (k of a cloud, ring of a mesh) and the most scales a detection
+ * takes (pipeline.MAX_SCALES). */
+#define MS_MIN_KNN_SCALE 2
+#define MS_MIN_RING_SCALE 1
+#define MS_MAX_SCALES 64
+/* Default options, as indices into the lists the plugin's enums and Python share:
+ * modes 0 paper, 1 robust (pipeline.MODES); weightings 0 gaussian, 1 none
+ * (normals.WEIGHTINGS). */
+#define MS_DEFAULT_MODE 1
+#define MS_DEFAULT_WEIGHTING 0
 /* Histogram bins of Otsu's threshold (threshold.BINS). */
 #define MS_BINS 256
 /* A scale whose projected distances span at most this fraction of the bounding-box

@@ -34,7 +34,7 @@ from .io import (
 )
 from .io.writers import HELD_SIGNALS
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
-from .normals import WEIGHTINGS
+from .normals import DEFAULT_WEIGHTING, WEIGHTINGS
 from .pipeline import DEFAULT_MODE, MAX_SCALES, MODES, DetectionResult, detect
 from .plugin import add_plugin_command
 from .preprocessing import Preprocessing
@@ -133,8 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     det.add_argument(
         "--weighting",
         choices=WEIGHTINGS,
-        default="gaussian",
-        help="weights of the PCA normals (default: gaussian)",
+        default=DEFAULT_WEIGHTING,
+        help=f"weights of the PCA normals (default: {DEFAULT_WEIGHTING})",
     )
     det.add_argument(
         "--mode",

@@ -8,7 +8,7 @@ import numpy as np
 import pymeshlab
 
 from .io import add_vertex_attribute, curve_arrays, select_vertices
-from .normals import Weighting
+from .normals import DEFAULT_WEIGHTING, Weighting
 from .pipeline import DEFAULT_MODE, DetectionResult, detect
 
 
@@ -16,7 +16,7 @@ def detect_meshset(
     ms: pymeshlab.MeshSet,
     *,
     scales: Sequence[int] | None = None,
-    weighting: Weighting = "gaussian",
+    weighting: Weighting = DEFAULT_WEIGHTING,
     as_points: bool = False,
     mode: str = DEFAULT_MODE,
     colorize: bool = False,

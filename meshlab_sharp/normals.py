@@ -14,6 +14,8 @@ from .neighbourhoods import squared_distances
 
 Weighting = Literal["gaussian", "none"]
 WEIGHTINGS: tuple[str, ...] = ("gaussian", "none")
+#: The weighting ``detect``, the CLI and the MeshLab plugin use unless told otherwise.
+DEFAULT_WEIGHTING: Weighting = WEIGHTINGS[_header.integer("DEFAULT_WEIGHTING")]  # type: ignore[assignment]
 
 #: A vertex whose summed face normals are shorter than this is treated as a point.
 ZERO_NORMAL = _header.real("ZERO_NORMAL")

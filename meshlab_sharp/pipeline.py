@@ -13,14 +13,14 @@ from typing import Any
 import numpy as np
 import pymeshlab
 
-from . import _kernels
+from . import _header, _kernels
 from .cleaning import clean
 from .curves import Corners, Curve, extract_curves
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
 from .neighbourhoods import build_neighbourhoods, unit_scale
-from .normals import WEIGHTINGS, Weighting, face_average_normals
+from .normals import DEFAULT_WEIGHTING, WEIGHTINGS, Weighting, face_average_normals
 from .preprocessing import (
     Preprocessing,
     PreprocessingReport,
@@ -37,9 +37,13 @@ Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | py
 #: (:mod:`meshlab_sharp.robust`, docs/robust-mode.md).
 MODES = ("paper", "robust")
 #: The mode ``detect``, the CLI and the MeshLab plugin use unless told otherwise.
-DEFAULT_MODE = "robust"
+DEFAULT_MODE = MODES[_header.integer("DEFAULT_MODE")]
 #: The most scales one detection takes (the defaults have 8 and 4).
-MAX_SCALES = 64
+MAX_SCALES = _header.integer("MAX_SCALES")
+#: The smallest scales: k nearest neighbours (the point itself and one more) ...
+MIN_KNN_SCALE = _header.integer("MIN_KNN_SCALE")
+#: ... and rings.
+MIN_RING_SCALE = _header.integer("MIN_RING_SCALE")
 
 
 @dataclass
@@ -104,7 +108,7 @@ class DetectionResult:
     distances: np.ndarray | None = None
     normals: np.ndarray | None = None
     preprocessing: PreprocessingReport | None = None
-    mode: str = "robust"
+    mode: str = DEFAULT_MODE
     curves: list[Curve] | None = None
     corners: Corners | None = None
     tiling: dict[str, Any] | None = None
@@ -165,7 +169,7 @@ def detect(
     faces: np.ndarray | None = None,
     *,
     scales: Sequence[int] | int | None = None,
-    weighting: Weighting = "gaussian",
+    weighting: Weighting = DEFAULT_WEIGHTING,
     as_points: bool = False,
     return_details: bool = False,
     progress: bool | Progress = False,
@@ -480,7 +484,7 @@ def _check_scales(
         raise InputError(f"scales must be integers, got {list(given)!r}")
     if not values:
         raise InputError("at least one scale is needed")
-    low = 1 if kind == "mesh" else 2
+    low = MIN_RING_SCALE if kind == "mesh" else MIN_KNN_SCALE
     if values[0] < low:
         what = "rings" if kind == "mesh" else "kNN sizes"
         raise InputError(f"{what} must be >= {low}, got {values[0]}")

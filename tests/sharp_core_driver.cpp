@@ -47,8 +47,8 @@ int main(int argc, char **argv) {
 	options.asPoints = std::strcmp(argv[7], "1") == 0;
 	sharp::Result r;
 	try {
-		options.knnScales = sharp::parseScales(argv[4], 2);
-		options.ringScales = sharp::parseScales(argv[5], 1);
+		options.knnScales = sharp::parseScales(argv[4], MS_MIN_KNN_SCALE);
+		options.ringScales = sharp::parseScales(argv[5], MS_MIN_RING_SCALE);
 		r = sharp::detect(vertices, faces, options, record);
 	} catch (const sharp::InputError &e) {
 		std::cerr << "error: " << e.what() << "\n";

@@ -214,6 +214,53 @@ def test_the_constants_are_the_headers():
         assert tuple(map(int, found.group(1).split())) == c[key]
 
 
+def test_the_option_lists_are_the_headers():
+    """The default mode and weighting, the smallest scales and the most scales are the
+    header's in Python (known values) and in the plugin's filter (its enums take the
+    header's default index, and list the same names in the same order as Python); the
+    example scripts name the same enums and defaults (a .mlx names every parameter)."""
+    from meshlab_sharp import normals, pipeline
+
+    assert (pipeline.DEFAULT_MODE, normals.DEFAULT_WEIGHTING) == ("robust", "gaussian")
+    assert (pipeline.MIN_KNN_SCALE, pipeline.MIN_RING_SCALE, pipeline.MAX_SCALES) == (2, 1, 64)
+    assert meshlab_sharp.DetectionResult.mode == pipeline.DEFAULT_MODE
+    lists = {"mode": pipeline.MODES, "weighting": normals.WEIGHTINGS}
+    defaults = {"mode": pipeline.DEFAULT_MODE, "weighting": normals.DEFAULT_WEIGHTING}
+    glue = (ROOT / "meshlab_plugin_cpp" / "src" / "filter_sharp_features.cpp").read_text()
+    for name, names in lists.items():
+        enum = re.search(rf'RichEnum\("{name}", (\w+), QStringList\(\)((?: << "\w+")+)', glue)
+        assert enum, name
+        assert enum.group(1) == f"MS_DEFAULT_{name.upper()}"
+        assert tuple(re.findall(r'"(\w+)"', enum.group(2).lower())) == names
+    for scales, low in (("knnScales", "MS_MIN_KNN_SCALE"), ("ringScales", "MS_MIN_RING_SCALE")):
+        assert f'parseScales(par.getString("{scales}").toStdString(), {low});' in glue
+    for script in (ROOT / "meshlab_plugin_cpp" / "examples").glob("*.mlx"):
+        text = script.read_text()
+        for name, names in lists.items():
+            param = re.search(rf'<Param type="RichEnum" value="(\d)" name="{name}"[^>]*>', text)
+            assert param, (script.name, name)
+            labels = re.findall(r'enum_val\d="(\w+)"', param.group(0))
+            assert tuple(x.lower() for x in labels) == names, script.name
+            assert names[int(param.group(1))] == defaults[name], script.name
+
+
+@pytest.mark.parametrize(
+    ("knn", "message"),
+    [
+        ("2:66", "invalid scales '2:66': 65 scales, more than 64"),
+        ("2:2000000000", "invalid scales '2:2000000000': 1999999999 scales, more than 64"),
+        (" ".join(["12"] * 65), "65 scales, more than 64"),
+        ("1 12", "scales must be >= 2, got 1"),
+    ],
+)
+def test_the_core_refuses_the_scales_python_refuses(driver, tmp_path, knn, message):
+    """At most MAX_SCALES scales (a range is refused before it is built), k at least
+    MIN_KNN_SCALE: the command line's limits and messages."""
+    points = shapes.cube_grid_points(9)
+    with pytest.raises(InputError, match=re.escape(message)):
+        run_core(driver, tmp_path, points, None, mode="robust", knn=knn)
+
+
 def test_the_header_parser_reads_only_its_forms():
     assert _header.parse("#define MS_A (1.0 / 4.0)\n#define MS_B {1, 2}\n#define MS_C 7\n") == {
         "A": 0.25,

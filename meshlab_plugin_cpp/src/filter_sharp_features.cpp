@@ -129,12 +129,12 @@ void FilterSharpFeaturesPlugin::initParameterSet(QAction *a, MeshModel &, RichPa
 	par.addParam(RichString("ringScales", QString::fromStdString(sharp::formatScales(defaults.ringScales)),
 	                        "Mesh scales (rings)",
 	                        "k-ring sizes used on meshes: a list like '1 2 3 4' or a range '1:4'."));
-	par.addParam(RichEnum("weighting", 0, QStringList() << "Gaussian" << "None", "Normal weighting",
+	par.addParam(RichEnum("weighting", MS_DEFAULT_WEIGHTING, QStringList() << "Gaussian" << "None", "Normal weighting",
 	                      "Weights of the PCA normals: Gaussian exp(-d^2/h^2), h the farthest "
 	                      "neighbour, or none (plain PCA)."));
 	par.addParam(RichBool("asPoints", false, "Treat a mesh as points",
 	                      "Ignore the faces and use k nearest neighbours."));
-	par.addParam(RichEnum("mode", 1, QStringList() << "Paper" << "Robust", "Mode",
+	par.addParam(RichEnum("mode", MS_DEFAULT_MODE, QStringList() << "Paper" << "Robust", "Mode",
 	                      "Robust (default): isolated points left out, scales grown with the "
 	                      "measured noise, projected distance relative to the local spacing, a "
 	                      "threshold floor of a 20-degree edge, support along and thinning across "
@@ -163,8 +163,8 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 	CMeshO &m = mm->cm;
 	sharp::Options options;
 	try {
-		options.knnScales = sharp::parseScales(par.getString("knnScales").toStdString(), 2);
-		options.ringScales = sharp::parseScales(par.getString("ringScales").toStdString(), 1);
+		options.knnScales = sharp::parseScales(par.getString("knnScales").toStdString(), MS_MIN_KNN_SCALE);
+		options.ringScales = sharp::parseScales(par.getString("ringScales").toStdString(), MS_MIN_RING_SCALE);
 	} catch (const sharp::InputError &e) {
 		return fail(e.what());
 	}

@@ -666,6 +666,13 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 	return d;
 }
 
+// More than MS_MAX_SCALES scales (the command line's message).
+std::string tooMany(const std::string &text, long count)
+{
+	return "invalid scales '" + text + "': " + std::to_string(count) + " scales, more than " +
+	       std::to_string(MS_MAX_SCALES);
+}
+
 }  // namespace
 
 std::vector<int> parseScales(const std::string &text, int minimum) {
@@ -681,6 +688,8 @@ std::vector<int> parseScales(const std::string &text, int minimum) {
 		if (!(in >> a >> b)) throw InputError("invalid scales '" + text + "': use 12 16 20 or 12:40:4");
 		if (!(in >> step)) step = 1;
 		if (step <= 0) throw InputError("invalid scales '" + text + "': the step must be positive");
+		if (b >= a && (long(b) - a) / step >= MS_MAX_SCALES)  // checked before it is built
+			throw InputError(tooMany(text, (long(b) - a) / step + 1));
 		for (int s = a; s <= b; s += step) out.push_back(s);
 	} else {
 		std::istringstream in(t);
@@ -697,6 +706,7 @@ std::vector<int> parseScales(const std::string &text, int minimum) {
 			out.push_back(s);
 		}
 	}
+	if (long(out.size()) > MS_MAX_SCALES) throw InputError(tooMany(text, long(out.size())));
 	std::sort(out.begin(), out.end());
 	out.erase(std::unique(out.begin(), out.end()), out.end());
 	if (out.empty()) throw InputError("at least one scale is needed");

@@ -23,9 +23,9 @@ struct Point { double x, y, z; };
 struct Options {
 	std::vector<int> knnScales MS_DEFAULT_KNN_SCALES;    // point clouds
 	std::vector<int> ringScales MS_DEFAULT_RING_SCALES;  // meshes
-	bool gaussian = true;   // Gaussian-weighted PCA normals; false: plain PCA
-	bool asPoints = false;  // ignore the faces
-	bool robust = false;    // robust mode (docs/robust-mode.md); false: the paper's method
+	bool gaussian = MS_DEFAULT_WEIGHTING == 0;  // Gaussian-weighted PCA normals; false: plain PCA
+	bool asPoints = false;                      // ignore the faces
+	bool robust = MS_DEFAULT_MODE == 1;  // robust mode (docs/robust-mode.md); false: the paper's method
 };
 
 struct Result {
