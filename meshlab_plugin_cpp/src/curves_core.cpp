@@ -1269,7 +1269,7 @@ Refined planeIntersection(const Vec3 &vertex, const Vec3 &t, const std::vector<l
                           const std::vector<Vec3> &treePts, const std::vector<char> &treeFeature,
                           double spacing)
 {
-	const Vec3 helper = std::fabs(t[0]) < 0.9 ? Vec3{1.0, 0.0, 0.0} : Vec3{0.0, 1.0, 0.0};
+	const Vec3 helper = std::fabs(t[0]) < MS_CURVE_FRAME_SWITCH ? Vec3{1.0, 0.0, 0.0} : Vec3{0.0, 1.0, 0.0};
 	Vec3 u = cross(t, helper);
 	const double un = norm(u);
 	u = {u[0] / un, u[1] / un, u[2] / un};
@@ -1284,7 +1284,7 @@ Refined planeIntersection(const Vec3 &vertex, const Vec3 &t, const std::vector<l
 		const double along = edot(d, t) / (MS_CURVE_SLAB * spacing);
 		weight[i] = std::exp(-0.5 * (along * along));
 		const double r = std::sqrt(xy[i][0] * xy[i][0] + xy[i][1] * xy[i][1]);
-		use[i] = !treeFeature[nbrs[i]] && r > 1e-12 * spacing;
+		use[i] = !treeFeature[nbrs[i]] && r > MS_CURVE_ZERO_OFFSET * spacing;
 		const double rr = r > 0 ? r : 1.0;
 		unitv[i] = {xy[i][0] / rr, xy[i][1] / rr};
 	}
@@ -1508,7 +1508,7 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 		const double cnt = double(c.size());
 		const Vec3 mean{sum[0] / cnt, sum[1] / cnt, sum[2] / cnt};
 		Vec3 corner = mean;
-		if (condition(a) < 1e6) {
+		if (condition(a) < MS_CURVE_MAX_CORNER_CONDITION) {
 			const Vec3 x = solve3(a, b);
 			bool near = true;
 			if (cloud) {  // within MS_CURVE_LONG_GAP spacings of every end

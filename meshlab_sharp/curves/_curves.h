@@ -48,6 +48,7 @@
 #define MS_CURVE_LINE_FIT_HALF 2
 #define MS_CURVE_RAW_TANGENT_WINDOW (2.0 * MS_CURVE_TANGENT_WINDOW)
 #define MS_CURVE_SNAP 0.75
+#define MS_CURVE_MAX_CORNER_CONDITION 1e6
 
 /* refine.py: the two arms' lines across a cloud curve. */
 #define MS_CURVE_REFINE_NEIGHBOURS 40
@@ -58,6 +59,8 @@
 #define MS_CURVE_MAX_SHIFT 3.0
 #define MS_CURVE_MIN_ARM_ANGLE 20.0
 #define MS_CURVE_MAX_ARM_RMS 0.5
+#define MS_CURVE_ZERO_OFFSET 1e-12
+#define MS_CURVE_FRAME_SWITCH 0.9
 
 /* fit.py: line, arc or free-form (Python only: the plugin does not classify). */
 #define MS_CURVE_FIT_TOLERANCE 0.5

@@ -73,6 +73,10 @@ RAW_TANGENT_WINDOW = CURVES.real("RAW_TANGENT_WINDOW")
 #: A curve end farther than this, in spacings, from its corner gets the corner as an
 #: extra vertex; a nearer one moves onto the corner (clouds).
 SNAP = CURVES.real("SNAP")
+#: The corner where curve ends meet is the least-squares meeting point of their lines
+#: only where that 3x3 system's condition number is below this (lines not nearly
+#: parallel).
+MAX_CORNER_CONDITION = CURVES.real("MAX_CORNER_CONDITION")
 
 
 @dataclass
@@ -406,7 +410,7 @@ def _corners(
             b += proj @ through[i]
         mean = ends.point[c].mean(axis=0)
         corner = mean
-        if np.linalg.cond(a) < 1e6:
+        if np.linalg.cond(a) < MAX_CORNER_CONDITION:
             x = _solve3(a, b)
             if paths is None:  # within LONG_GAP spacings of every end
                 near = np.linalg.norm(ends.point[c] - x, axis=1).max() <= LONG_GAP * spacing

@@ -54,6 +54,12 @@ MIN_ARM_ANGLE = CURVES.real("MIN_ARM_ANGLE")
 #: Largest RMS distance of an arm's points to its line, in spacings (the scanner noise
 #: the fit copes with: 25 % of the spacing is one standard deviation).
 MAX_ARM_RMS = CURVES.real("MAX_ARM_RMS")
+#: Points closer than this, in spacings, to the vertex in the plane across the curve
+#: have no direction from it and take no part in the arms.
+ZERO_OFFSET = CURVES.real("ZERO_OFFSET")
+#: The plane across a unit direction t is spanned from the x axis, or from the y axis
+#: where ``|t_x|`` is at least this (t nearly along x).
+FRAME_SWITCH = CURVES.real("FRAME_SWITCH")
 
 
 class CellGrid:
@@ -139,7 +145,7 @@ def refine_neighbours(tree: cKDTree, vertices: np.ndarray) -> np.ndarray:
 
 def _frame(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors orthogonal to each unit row of ``t`` and to each other."""
-    helper = np.where(np.abs(t[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    helper = np.where(np.abs(t[:, :1]) < FRAME_SWITCH, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     u = np.cross(t, helper)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     return u, np.cross(t, u)
@@ -215,7 +221,7 @@ def plane_intersection_positions(
     along = np.einsum("vkj,vj->vk", d, directions) / (SLAB * spacing)
     weight = np.exp(-0.5 * along**2)
     r = np.linalg.norm(xy, axis=-1)
-    use = ~tree_is_feature[idx] & (r > 1e-12 * spacing)
+    use = ~tree_is_feature[idx] & (r > ZERO_OFFSET * spacing)
     unit = xy / np.where(r > 0, r, 1.0)[..., None]
     bisector = (unit * use[..., None]).sum(axis=1)
     side = (bisector[:, None, 0] * unit[..., 1] - bisector[:, None, 1] * unit[..., 0]) > 0
