@@ -289,7 +289,7 @@ def _bad(tmp_path: Path, case: str) -> Path:
     if case == "degenerate-faces":
         v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], float)
         return write_ply(tmp_path / "deg.ply", v, [[0, 1, 2], [1, 2, 3]])
-    if case == "bad-scales":
+    if case in ("bad-scales", "too-many-scales"):
         return write_ply(tmp_path / "cube.ply", shapes.cube_grid_points(9))
     raise AssertionError(case)
 
@@ -301,6 +301,7 @@ BAD = {
     "all-identical": ("identical", {}),
     "degenerate-faces": ("zero area", {}),
     "bad-scales": ("invalid scales", {"knnScales": "twelve"}),
+    "too-many-scales": ("65 scales, more than 64", {"knnScales": "2:66"}),  # MAX_SCALES
 }
 
 

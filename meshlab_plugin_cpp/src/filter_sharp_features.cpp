@@ -80,19 +80,20 @@ QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType filter) const
 		       "skeleton of the feature points, moved onto the intersection of the surfaces "
 		       "fitted on each side (below the point spacing). The same steps and arithmetic as "
 		       "the meshlab-sharp Python package (detect(..., curves=True), docs/curves.md).";
-	return "Selects the sharp features (creases, corners) of a mesh or point cloud automatically, "
+	return QString("Selects the sharp features (creases, corners) of a mesh or point cloud automatically, "
 	       "with the projected-distance method of Tran et al. (2014): per vertex, the distance "
 	       "between the vertex and the centroid of its neighbourhood along the normal; Otsu's "
 	       "threshold on its histogram; at several scales (k-rings on a mesh, k nearest "
 	       "neighbours on a point cloud). A vertex is a feature if it is a candidate at every "
 	       "scale. The default Robust mode also leaves out isolated points (outliers), grows "
 	       "the scales on noisy clouds, divides the distance by the local spacing, never "
-	       "thresholds below a 20-degree edge (no features on smooth objects), keeps points "
+	       "thresholds below a %1-degree edge (no features on smooth objects), keeps points "
 	       "with neighbours along their feature line, thins lines to one point across, and on "
-	       "meshes adds the vertices of edges whose faces turn by more than 20 degrees (CAD "
+	       "meshes adds the vertices of edges whose faces turn by more than %1 degrees (CAD "
 	       "tessellations). Paper mode is the method as the paper describes it. Vertex quality "
 	       "is set to the feature strength (fraction of scales), the selection to the features. "
-	       "The same algorithm as the meshlab-sharp Python package.";
+	       "The same algorithm as the meshlab-sharp Python package.")
+	    .arg(MS_CREASE_ANGLE);
 }
 
 MeshFilterInterface::FilterClass FilterSharpFeaturesPlugin::getClass(QAction *a)
@@ -135,13 +136,14 @@ void FilterSharpFeaturesPlugin::initParameterSet(QAction *a, MeshModel &, RichPa
 	par.addParam(RichBool("asPoints", false, "Treat a mesh as points",
 	                      "Ignore the faces and use k nearest neighbours."));
 	par.addParam(RichEnum("mode", MS_DEFAULT_MODE, QStringList() << "Paper" << "Robust", "Mode",
-	                      "Robust (default): isolated points left out, scales grown with the "
+	                      QString("Robust (default): isolated points left out, scales grown with the "
 	                      "measured noise, projected distance relative to the local spacing, a "
-	                      "threshold floor of a 20-degree edge, support along and thinning across "
+	                      "threshold floor of a %1-degree edge, support along and thinning across "
 	                      "the feature lines, and on meshes the edges whose faces turn by more "
-	                      "than 20 degrees (docs/robust-mode.md): survives outliers and noise, "
+	                      "than %1 degrees (docs/robust-mode.md): survives outliers and noise, "
 	                      "says 'no features' on smooth objects, handles CAD tessellations. "
-	                      "Paper: the method as the paper describes it (ALGORITHM.md)."));
+	                      "Paper: the method as the paper describes it (ALGORITHM.md).")
+	                          .arg(MS_CREASE_ANGLE)));
 	if (ID(a) == FP_SHARP_CURVES)
 		return;
 	par.addParam(RichBool("colorize", true, "Colour the features",
