@@ -1093,6 +1093,18 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                     stamp[w] = (int32_t)i;
                 }
             }
+            while (s < nscales && rings[s] == ring && fn != NULL) {
+                /* a fixed normal: the mean offset is all it needs */
+                for (; done_j < tail; done_j++) {
+                    const double *pj = p + 3 * (int64_t)queue[done_j];
+                    sx += pj[0] - pi[0]; sy += pj[1] - pi[1]; sz += pj[2] - pi[2];
+                }
+                double mean[3] = {sx / (double)tail, sy / (double)tail, sz / (double)tail};
+                double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
+                out_pdis[s * n + i] =
+                    neighbourhood_pdis(NULL, NULL, tail, mean, 0.0, gaussian, fn, nrm, NULL);
+                s++;
+            }
             while (s < nscales && rings[s] == ring) {
                 int64_t m = tail;
                 double *q = (double *)buf[1], *d2 = (double *)buf[2];

@@ -518,7 +518,9 @@ def adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"a face index lies outside the {n} vertices")
     if rc != 0:
         raise MemoryError("out of memory building the mesh adjacency")
-    return ptr, idx[: ptr[-1]].copy()
+    # trimmed in place (a shrinking realloc): no copy beside the untrimmed array
+    idx.resize(int(ptr[-1]), refcheck=False)
+    return ptr, idx
 
 
 def ring_projected_distances(

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -19,7 +20,12 @@ from .curves import Corners, Curve, extract_curves
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
-from .neighbourhoods import build_neighbourhoods, unit_scale
+from .neighbourhoods import (
+    KnnNeighbourhoods,
+    RingNeighbourhoods,
+    build_neighbourhoods,
+    unit_scale,
+)
 from .normals import DEFAULT_WEIGHTING, WEIGHTINGS, Weighting, face_average_normals
 from .preprocessing import (
     Preprocessing,
@@ -362,8 +368,9 @@ def _detect(
         _check_cloud_size(len(geometry.vertices), len(points), max(scales_t), geometry.source)
 
     t = time.perf_counter()
-    neighbourhoods = build_neighbourhoods(points, cleaned.faces, scales_t, workers=workers)
-    normals = face_average_normals(points, cleaned.faces) if is_mesh else None
+    neighbourhoods, normals = _neighbourhoods_and_normals(
+        points, cleaned.faces if is_mesh else None, scales_t, workers
+    )
     robust = None
     work, work_neighbourhoods = points, neighbourhoods
     if mode == "robust":
@@ -433,6 +440,27 @@ def _detect(
     if not isinstance(progress, Progress):
         bar.close()
     return result
+
+
+def _neighbourhoods_and_normals(
+    points: np.ndarray, faces: np.ndarray | None, scales: tuple[int, ...], workers: int
+) -> tuple[KnnNeighbourhoods | RingNeighbourhoods, np.ndarray | None]:
+    """:func:`build_neighbourhoods` and, on a mesh (``faces`` (m, 3) not None), the
+    face-average normals (n, 3), None on a cloud. Unless ``workers`` is 1 the normals are
+    computed on a second thread meanwhile: with the compiled backend both are
+    single-threaded C calls that release the GIL (the mesh's adjacency, then its
+    normals, took one core each in turn)."""
+    if faces is None:
+        return build_neighbourhoods(points, None, scales, workers=workers), None
+    if workers == 1 or _kernels.resolve(None) != "compiled":
+        return (
+            build_neighbourhoods(points, faces, scales, workers=workers),
+            face_average_normals(points, faces),
+        )
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        normals = pool.submit(face_average_normals, points, faces)
+        neighbourhoods = build_neighbourhoods(points, faces, scales, workers=workers)
+        return neighbourhoods, normals.result()
 
 
 def _add_curves(result: DetectionResult, geometry: Geometry, as_points: bool) -> None:

@@ -488,9 +488,9 @@ def relative_distances(pdis: np.ndarray, scale: np.ndarray) -> np.ndarray:
     (m,) float64
         ``min(pdis / scale, 1)``; 0 where ``scale == 0``.
     """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.where(scale > 0, pdis / np.where(scale > 0, scale, 1.0), 0.0)
-    return np.minimum(r, 1.0)
+    r = np.zeros(np.shape(pdis))
+    np.divide(pdis, scale, out=r, where=scale > 0)
+    return np.minimum(r, 1.0, out=r)
 
 
 def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:

@@ -453,6 +453,42 @@ def test_compiled_ring_local_scales_identical_to_the_ring_lists():
         assert np.array_equal(off[s], ref_off)
 
 
+def _delaunay_mesh(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A bumpy height field over the Delaunay triangulation of n random points in the
+    unit square, vertices in random order: valences from 3 to about 12 and rings whose
+    order owes nothing to a grid."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n, 2))
+    faces = Delaunay(xy).simplices.astype(np.int64)
+    z = 0.1 * np.sin(7.0 * xy[:, 0]) * np.cos(5.0 * xy[:, 1])
+    vertices = np.column_stack([xy, z])
+    order = rng.permutation(n)  # vertex i of the mesh is old vertex order[i]
+    new_index = np.empty(n, dtype=np.int64)
+    new_index[order] = np.arange(n)
+    return vertices[order], new_index[faces]
+
+
+def test_compiled_ring_local_scales_identical_to_scipy_on_irregular_valences():
+    """ms_ring_local_scale equals the reference (scipy's sparse products, then numpy's
+    sums) bit for bit on an irregular mesh in random vertex order, over several chunks
+    on two threads (each reusing its visit marks) and rings that skip one."""
+    vertices, faces = _delaunay_mesh(20000, seed=11)
+    n = len(vertices)
+    rings = RingNeighbourhoods(faces, n, backend="numpy")
+    valences = np.diff(rings.one_ring.indptr) - 1
+    assert valences.min() <= 3 and valences.max() >= 10
+    assert n > 2 * _kernels.CHUNK
+    one = _kernels.sorted_one_ring(_kernels.adjacency(faces, n))
+    scales = (1, 2, 3, 5)
+    ell, off = _kernels.ring_local_scale(vertices, one, scales, workers=2)
+    for s, k in enumerate(scales):
+        ref_ell, ref_off = local_scale(vertices, rings.at(k), backend="numpy")
+        assert ell[s].tobytes() == ref_ell.tobytes()
+        assert off[s].tobytes() == ref_off.tobytes()
+
+
 def _adjacency_with_repeats(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Each vertex's neighbours as its faces list them, repeats kept (both other corners
     of each face in face order): the lists the search read before they were deduplicated."""
