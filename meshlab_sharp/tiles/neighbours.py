@@ -149,14 +149,22 @@ def gather(
     for t in tiles:
         a, b = int(layout.offsets[t]), int(layout.offsets[t + 1])
         pts = store.read("coords", a, b)
-        use = store.read("rep", a, b) == np.arange(a, b)
+        # the points inside, an axis at a time where the tile's box sticks out (the
+        # farthest first: a halo's slab of a neighbour tile leaves few for the others)
         tlo, thi = layout.boxes[t]
-        if not (np.all(tlo >= blo) and np.all(thi <= bhi)):  # the tile's box sticks out
-            inside = (pts >= blo) & (pts <= bhi)
-            use &= inside[:, 0] & inside[:, 1] & inside[:, 2]
+        out = np.maximum(blo - tlo, 0.0) + np.maximum(thi - bhi, 0.0)
+        where = None
+        for axis in np.argsort(-out, kind="stable")[: np.count_nonzero(out)]:
+            col = pts[:, axis] if where is None else pts[where, axis]
+            hit = (col >= blo[axis]) & (col <= bhi[axis])
+            where = np.flatnonzero(hit) if where is None else where[hit]
+        rep = store.read("rep", a, b)
+        if where is None:
+            where = np.flatnonzero(rep == np.arange(a, b))
+        else:
+            where = where[rep[where] == a + where]
         if kept is not None:
-            use &= store.read(kept, a, b)
-        where = np.flatnonzero(use)
+            where = where[store.read(kept, a, b)[where]]
         parts.append((a + where, pts[where], store.read("ids", a, b)[where]))
     if not parts:
         return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64)
