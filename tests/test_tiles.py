@@ -119,9 +119,12 @@ def test_default_scales_and_far_outliers_only_tiles() -> None:
     assert not ref.kept.all()  # robust mode left the lone outlier out
 
 
-def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path) -> None:
+@pytest.mark.parametrize("share", [None, 0.02])
+def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path, share: float | None) -> None:
     """The halo check: whatever the first halo (none at all), every row's k nearest in
-    its tile context are the cloud's k nearest, in the same order."""
+    its tile context are the cloud's k nearest, in the same order; with rows marked
+    (a few, none in some tiles: the box is then the marked points' own), exactly those
+    rows."""
     pts = hostile_cloud(2500, seed=3)
     store = Store(str(tmp_path))
     layout = build_layout(
@@ -131,9 +134,23 @@ def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path) -> None:
     k = 12
     ref = KnnNeighbourhoods(pts[to_first], k).indices
     ids = store.read("ids", 0, len(pts))
+    query, want = Query(k), len(to_first)
+    if share is not None:
+        marked = np.zeros(len(pts), bool)  # distinct points only, as the steps mark
+        marked[to_first] = np.random.default_rng(5).random(len(to_first)) < share
+        store.create("marked", (len(pts),), bool)
+        store.write("marked", 0, marked[ids])
+        query = Query(k, rows="marked")
+        want = int(marked[to_first].sum())
+        empty = [
+            t
+            for t in range(layout.n_tiles)
+            if not marked[ids[layout.offsets[t] : layout.offsets[t + 1]]].any()
+        ]
+        assert len(empty) >= 2
     seen, halos, streamed = 0, [], 0
     for t in range(layout.n_tiles):
-        contexts, halo, _, far = neighbours(store, layout, t, Query(k), halo=0.0, most_points=900)
+        contexts, halo, _, far = neighbours(store, layout, t, query, halo=0.0, most_points=900)
         halos.append(halo)
         streamed += far
         for ctx in contexts:
@@ -141,10 +158,12 @@ def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path) -> None:
             cleaned = np.searchsorted(to_first, input_ids)
             rows = cleaned[ctx.rows]
             assert np.array_equal(cleaned[ctx.idx], ref[rows])
+            if share is not None:
+                assert marked[input_ids[ctx.rows]].all()
             seen += len(rows)
-    assert seen == len(to_first)
+    assert seen == want
     assert max(halos) > 0.0  # widened from nothing
-    assert streamed >= 5  # the far points
+    assert streamed >= (5 if share is None else 0)  # the far points
 
 
 def test_max_memory_api_and_cli_output(tmp_path) -> None:

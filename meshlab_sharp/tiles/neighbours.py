@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 from .. import _kernels, robust
 from ..errors import InputError
 from ..neighbourhoods import Neighbourhood, squared_distances
-from .layout import Layout
+from .layout import Layout, bounds
 from .store import Store
 
 #: Relative margin of the ball-in-box test.
@@ -361,9 +361,17 @@ def _searched(
     workers: int,
 ) -> tuple[list[Context], float, int, int]:
     """:func:`neighbours` by a search of the tile's box (and the streaming route). The
-    rows whose balls fit are done; a wider box searches (and computes) only the others."""
+    rows whose balls fit are done; a wider box searches (and computes) only the others.
+    With :attr:`Query.rows`, the box is that of the tile's points marked (none: no
+    search), a halo's width around them (the few features of a support step, not the
+    whole tile and its neighbours)."""
     a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
     lo0, hi0 = layout.boxes[tile]
+    if query.rows is not None:
+        marked = store.read(query.rows, a, b).astype(bool)
+        if not marked.any():
+            return [], float(halo), 0, 0
+        lo0, hi0 = bounds(store.read("coords", a, b)[marked])
     diag = float(np.linalg.norm(layout.hi - layout.lo)) or 1.0
     h = float(halo)
     biggest = 0
