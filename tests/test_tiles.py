@@ -452,7 +452,8 @@ def test_tile_size_known_answers() -> None:
 def test_tiles_run_two_at_once_until_the_scales_grow(monkeypatch) -> None:
     """Without Dask two tiles run at a time (each search's first tile alone, for the
     halo guess); once the noise grows robust mode's scales, one at a time (the tiles
-    are sized for that). The answer is the in-memory one."""
+    are sized for that); with one thread (``workers=1``), one at a time. The answer is
+    the in-memory one."""
     import threading
     import time
 
@@ -478,7 +479,7 @@ def test_tiles_run_two_at_once_until_the_scales_grow(monkeypatch) -> None:
     pts = hostile_cloud(3000, seed=7)
     noisy = pts + np.random.default_rng(1).normal(scale=0.012, size=pts.shape)
     ref = meshlab_sharp.detect(noisy, mode="robust")
-    out = detect_tiled(noisy, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500)
+    out = detect_tiled(noisy, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500, workers=2)
     assert out["scales"] == ref.scales != DEFAULT_KNN_SCALES
     assert_same(out, ref)
     assert out["tiling"]["tiles"] >= 6
@@ -486,6 +487,10 @@ def test_tiles_run_two_at_once_until_the_scales_grow(monkeypatch) -> None:
     assert first["pass"] == (0, 1)  # alone
     grown = ("pass grown", "decide", "support", "thin")
     assert all(most[label] == 1 for label in grown)
+    most.clear()
+    one = detect_tiled(noisy, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500, workers=1)
+    assert_same(one, ref)
+    assert set(most.values()) == {1}  # one thread asked for: one tile at a time
 
 
 def test_store_writes_rows_in_runs_and_scattered(tmp_path, monkeypatch) -> None:

@@ -102,7 +102,7 @@ class Runner:
         Threads of a Dask tile task's kNN search; in this process, of the searches of
         the tiles run at once together.
     at_once : int
-        Tiles run at the same time in this process (no client).
+        Tiles run at the same time in this process (no client), at most ``workers``.
     on_tile : callable, optional
         ``on_tile(label, tile, n_tiles)`` after each tile (progress).
     client : dask.distributed.Client, optional
@@ -124,8 +124,9 @@ class Runner:
         self.layout = layout
         self.most_points = most_points
         self.workers = workers
-        #: Tiles at a time in this process; a mode may lower it between steps.
-        self.at_once = max(1, int(at_once))
+        #: Tiles at a time in this process (no more than the threads); a mode may
+        #: lower it between steps.
+        self.at_once = max(1, min(int(at_once), _kernels._workers(workers)))
         self.on_tile = on_tile
         self.client = client
         self.halos = np.zeros(layout.n_tiles)
