@@ -1,4 +1,4 @@
-"""Running the steps over the tiles: one after another, or as Dask tasks.
+"""Running the steps over the tiles: a few at a time on threads, or as Dask tasks.
 
 A tile task is :func:`tile_task` (a module-level function of picklable arguments), so
 that it runs the same in this process or on a Dask worker; the partials it returns are
