@@ -119,9 +119,12 @@ def test_default_scales_and_far_outliers_only_tiles() -> None:
     assert not ref.kept.all()  # robust mode left the lone outlier out
 
 
-def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path) -> None:
+@pytest.mark.parametrize("share", [None, 0.02])
+def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path, share: float | None) -> None:
     """The halo check: whatever the first halo (none at all), every row's k nearest in
-    its tile context are the cloud's k nearest, in the same order."""
+    its tile context are the cloud's k nearest, in the same order; with rows marked
+    (a few, none in some tiles: the box is then the marked points' own), exactly those
+    rows."""
     pts = hostile_cloud(2500, seed=3)
     store = Store(str(tmp_path))
     layout = build_layout(
@@ -131,9 +134,23 @@ def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path) -> None:
     k = 12
     ref = KnnNeighbourhoods(pts[to_first], k).indices
     ids = store.read("ids", 0, len(pts))
+    query, want = Query(k), len(to_first)
+    if share is not None:
+        marked = np.zeros(len(pts), bool)  # distinct points only, as the steps mark
+        marked[to_first] = np.random.default_rng(5).random(len(to_first)) < share
+        store.create("marked", (len(pts),), bool)
+        store.write("marked", 0, marked[ids])
+        query = Query(k, rows="marked")
+        want = int(marked[to_first].sum())
+        empty = [
+            t
+            for t in range(layout.n_tiles)
+            if not marked[ids[layout.offsets[t] : layout.offsets[t + 1]]].any()
+        ]
+        assert len(empty) >= 2
     seen, halos, streamed = 0, [], 0
     for t in range(layout.n_tiles):
-        contexts, halo, _, far = neighbours(store, layout, t, Query(k), halo=0.0, most_points=900)
+        contexts, halo, _, far = neighbours(store, layout, t, query, halo=0.0, most_points=900)
         halos.append(halo)
         streamed += far
         for ctx in contexts:
@@ -141,10 +158,12 @@ def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path) -> None:
             cleaned = np.searchsorted(to_first, input_ids)
             rows = cleaned[ctx.rows]
             assert np.array_equal(cleaned[ctx.idx], ref[rows])
+            if share is not None:
+                assert marked[input_ids[ctx.rows]].all()
             seen += len(rows)
-    assert seen == len(to_first)
+    assert seen == want
     assert max(halos) > 0.0  # widened from nothing
-    assert streamed >= 5  # the far points
+    assert streamed >= (5 if share is None else 0)  # the far points
 
 
 def test_max_memory_api_and_cli_output(tmp_path) -> None:
@@ -377,6 +396,101 @@ def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
     assert tiles >= 2 and features > 0
     assert 50 * 2**20 < peak < 300 * 2**20
     assert reported <= peak  # the summary's peak is the same measure, taken earlier
+
+
+def test_peak_memory_stays_under_the_limit_when_the_noise_grows_the_scales(tmp_path) -> None:
+    """The tiles are sized for two at a time at the given scales; when the noise grows
+    robust mode's scales threefold (more memory per point than the sizing's scales),
+    the grown steps run one tile at a time and a fresh process still peaks below the
+    limit."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    rng = np.random.default_rng(0)
+    pts = random_box_points(200_000, seed=1) + rng.normal(scale=0.003, size=(200_000, 3))
+    path = tmp_path / "noisy.ply"
+    header = (
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(pts)}\n"
+        "property double x\nproperty double y\nproperty double z\nend_header\n"
+    )
+    path.write_bytes(header.encode() + pts.astype("<f8").tobytes())
+    code = (
+        "import meshlab_sharp\n"
+        "from meshlab_sharp.tiles.run import peak_rss\n"
+        f"r = meshlab_sharp.detect({str(path)!r}, max_memory='200MB', mode='robust')\n"
+        "print(r.tiling['tiles'], max(r.scales), peak_rss())\n"
+    )
+    root = str(Path(__file__).resolve().parent.parent)
+    env = {"PYTHONPATH": root, "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    )
+    tiles, k_top, peak = map(int, proc.stdout.split())
+    assert tiles >= 4 and k_top == 3 * max(DEFAULT_KNN_SCALES)
+    assert 50 * 2**20 < peak < 200 * 2**20
+
+
+def test_tile_size_known_answers() -> None:
+    """Bytes per tile point at k: (BYTES_PER_POINT + 8 k + 16 s) * HALO_FACTOR, 2870 at
+    the default scales (k = 40, s = 8), 4470 at robust mode's largest growth (k = 120).
+    In this process two tiles run at once: paper mode sizes for two at k = 40, robust
+    mode for the larger of two at k = 40 and one at k = 120; a Dask task runs one."""
+    from meshlab_sharp.tiles import BYTES_PER_POINT, HALO_FACTOR, tile_size
+
+    assert (BYTES_PER_POINT, HALO_FACTOR) == (700, 2.5)
+    assert tile_size(10**9, DEFAULT_KNN_SCALES, "paper", 2) == 10**9 // 5740
+    assert tile_size(10**9, DEFAULT_KNN_SCALES, "paper", 1) == 10**9 // 2870
+    assert tile_size(10**9, DEFAULT_KNN_SCALES, "robust", 2) == 10**9 // 5740
+    assert tile_size(10**9, DEFAULT_KNN_SCALES, "robust", 1) == 10**9 // 4470
+    # one scale: two tiles at k = 40 take more than one at 120; one at k = 300 more
+    # than two at 100
+    assert tile_size(10**9, (40,), "robust", 2) == 10**9 // ((700 + 320 + 16) * 2.5 * 2)
+    assert tile_size(10**9, (100,), "robust", 2) == 10**9 // ((700 + 2400 + 16) * 2.5)
+
+
+def test_tiles_run_two_at_once_until_the_scales_grow(monkeypatch) -> None:
+    """Without Dask two tiles run at a time (each search's first tile alone, for the
+    halo guess); once the noise grows robust mode's scales, one at a time (the tiles
+    are sized for that); with one thread (``workers=1``), one at a time. The answer is
+    the in-memory one."""
+    import threading
+    import time
+
+    from meshlab_sharp.tiles import run
+
+    lock = threading.Lock()
+    active, most, first = [0], {}, {}
+    real = run.tile_task
+
+    def counted(step, store, layout, tile, *args):
+        with lock:
+            active[0] += 1
+            most[step.label] = max(most.get(step.label, 0), active[0])
+            first.setdefault(step.label, (tile, active[0]))
+        try:
+            time.sleep(0.02)  # time for a second tile to start, where one may
+            return real(step, store, layout, tile, *args)
+        finally:
+            with lock:
+                active[0] -= 1
+
+    monkeypatch.setattr(run, "tile_task", counted)
+    pts = hostile_cloud(3000, seed=7)
+    noisy = pts + np.random.default_rng(1).normal(scale=0.012, size=pts.shape)
+    ref = meshlab_sharp.detect(noisy, mode="robust")
+    out = detect_tiled(noisy, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500, workers=2)
+    assert out["scales"] == ref.scales != DEFAULT_KNN_SCALES
+    assert_same(out, ref)
+    assert out["tiling"]["tiles"] >= 6
+    assert most["pass"] == most["isolated"] == 2
+    assert first["pass"] == (0, 1)  # alone
+    grown = ("pass grown", "decide", "support", "thin")
+    assert all(most[label] == 1 for label in grown)
+    most.clear()
+    one = detect_tiled(noisy, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500, workers=1)
+    assert_same(one, ref)
+    assert set(most.values()) == {1}  # one thread asked for: one tile at a time
 
 
 def test_store_writes_rows_in_runs_and_scattered(tmp_path, monkeypatch) -> None:

@@ -59,13 +59,16 @@ from .store import Store
 if TYPE_CHECKING:
     from ..pipeline import DetectionResult
 
-__all__ = ["PointSource", "detect_out_of_core", "detect_tiled", "parse_memory"]
+__all__ = ["PointSource", "detect_out_of_core", "detect_tiled", "parse_memory", "tile_size"]
 
 #: Bytes a point of a tile (with its halo) takes while its neighbourhoods are searched,
 #: beyond ``8 * k_max`` for the neighbour lists (measured, with a margin).
 BYTES_PER_POINT = 700
 #: Halo points per tile point assumed when sizing the tiles.
 HALO_FACTOR = 2.5
+#: Tiles run at the same time in one process (without Dask): one's Python work and
+#: reads overlap the other's compiled pass.
+TILES_AT_ONCE = 2
 #: Default memory of a tile task on a Dask worker without ``max_memory``.
 DASK_TILE_MEMORY = 1 << 30
 
@@ -89,6 +92,22 @@ def parse_memory(text: str | int) -> int:
     if value <= 0:
         raise InputError(f"the memory size must be positive, got {text!r}")
     return value
+
+
+def tile_size(budget: float, scales: tuple[int, ...], mode: str, at_once: int) -> int:
+    """Points per tile for ``budget`` bytes of tile memory: ``at_once`` tiles at the
+    given scales fit in it, or one tile at the largest scales robust mode may grow them
+    to (``NOISE_MAX_FACTOR``-fold; once grown, the tiles run one at a time), each tile
+    searching up to ``HALO_FACTOR`` times its points at ``BYTES_PER_POINT`` plus its
+    neighbour lists and per-scale values."""
+    k_max = max(scales)
+    # robust mode may grow the scales with the noise, up to NOISE_MAX_FACTOR-fold
+    k_most = k_max * (robust.NOISE_MAX_FACTOR if mode == "robust" else 1.0)
+
+    def per_point(k: float) -> float:
+        return (BYTES_PER_POINT + 8 * k + 16 * len(scales)) * HALO_FACTOR
+
+    return int(budget / max(at_once * per_point(k_max), per_point(k_most)))
 
 
 def detect_tiled(
@@ -153,10 +172,7 @@ def detect_tiled(
             budget -= _resident() + 10 * source.n
         else:  # a worker's interpreter and imports
             budget -= WORKER_BASELINE
-        # robust mode may grow the scales with the noise, up to NOISE_MAX_FACTOR-fold
-        k_most = k_max * (robust.NOISE_MAX_FACTOR if mode == "robust" else 1.0)
-        per_point = (BYTES_PER_POINT + 8 * k_most + 16 * len(scales)) * HALO_FACTOR
-        tile_points = int(budget / per_point)
+        tile_points = tile_size(budget, scales, mode, 1 if dask is not None else TILES_AT_ONCE)
         if tile_points < 4 * k_max:
             raise InputError(
                 f"--max-memory {max_memory}: too little memory for tiles of "
@@ -191,6 +207,7 @@ def detect_tiled(
             layout,
             most_points=int(HALO_FACTOR * tile_points),
             workers=1 if client is not None and str(dask).startswith("local:") else workers,
+            at_once=TILES_AT_ONCE,
             on_tile=on_tile,
             client=client,
         )
@@ -396,7 +413,8 @@ def _robust(
         hist = runner.step(Step("histograms", robust_histograms))["hist"]
     nu = order_statistic(runner, "ratio", "kept", (n_kept - 1) // 2)
     factor = min(robust.noise_factor(nu), n_kept / top)
-    if factor > 1.0:
+    if factor > 1.0:  # the tiles are sized for one at a time at the grown scales
+        runner.at_once = 1
         scales = robust.grown_scales(scales, factor)
         top = max(scales)
         store.create("r", (n, len(scales)), np.float64)

@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 from .. import _kernels, robust
 from ..errors import InputError
 from ..neighbourhoods import Neighbourhood, squared_distances
-from .layout import Layout
+from .layout import Layout, bounds
 from .store import Store
 
 #: Relative margin of the ball-in-box test.
@@ -149,14 +149,22 @@ def gather(
     for t in tiles:
         a, b = int(layout.offsets[t]), int(layout.offsets[t + 1])
         pts = store.read("coords", a, b)
-        use = store.read("rep", a, b) == np.arange(a, b)
+        # the points inside, an axis at a time where the tile's box sticks out (the
+        # farthest first: a halo's slab of a neighbour tile leaves few for the others)
         tlo, thi = layout.boxes[t]
-        if not (np.all(tlo >= blo) and np.all(thi <= bhi)):  # the tile's box sticks out
-            inside = (pts >= blo) & (pts <= bhi)
-            use &= inside[:, 0] & inside[:, 1] & inside[:, 2]
+        out = np.maximum(blo - tlo, 0.0) + np.maximum(thi - bhi, 0.0)
+        where = None
+        for axis in np.argsort(-out, kind="stable")[: np.count_nonzero(out)]:
+            col = pts[:, axis] if where is None else pts[where, axis]
+            hit = (col >= blo[axis]) & (col <= bhi[axis])
+            where = np.flatnonzero(hit) if where is None else where[hit]
+        rep = store.read("rep", a, b)
+        if where is None:
+            where = np.flatnonzero(rep == np.arange(a, b))
+        else:
+            where = where[rep[where] == a + where]
         if kept is not None:
-            use &= store.read(kept, a, b)
-        where = np.flatnonzero(use)
+            where = where[store.read(kept, a, b)[where]]
         parts.append((a + where, pts[where], store.read("ids", a, b)[where]))
     if not parts:
         return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64)
@@ -353,9 +361,17 @@ def _searched(
     workers: int,
 ) -> tuple[list[Context], float, int, int]:
     """:func:`neighbours` by a search of the tile's box (and the streaming route). The
-    rows whose balls fit are done; a wider box searches (and computes) only the others."""
+    rows whose balls fit are done; a wider box searches (and computes) only the others.
+    With :attr:`Query.rows`, the box is that of the tile's points marked (none: no
+    search), a halo's width around them (the few features of a support step, not the
+    whole tile and its neighbours)."""
     a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
     lo0, hi0 = layout.boxes[tile]
+    if query.rows is not None:
+        marked = store.read(query.rows, a, b).astype(bool)
+        if not marked.any():
+            return [], float(halo), 0, 0
+        lo0, hi0 = bounds(store.read("coords", a, b)[marked])
     diag = float(np.linalg.norm(layout.hi - layout.lo)) or 1.0
     h = float(halo)
     biggest = 0

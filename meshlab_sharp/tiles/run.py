@@ -1,4 +1,4 @@
-"""Running the steps over the tiles: one after another, or as Dask tasks.
+"""Running the steps over the tiles: a few at a time on threads, or as Dask tasks.
 
 A tile task is :func:`tile_task` (a module-level function of picklable arguments), so
 that it runs the same in this process or on a Dask worker; the partials it returns are
@@ -8,10 +8,12 @@ reduction.
 
 from __future__ import annotations
 
+import itertools
 import resource
 import sys
 import time
 from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any
 
@@ -97,7 +99,10 @@ class Runner:
     most_points : int
         Largest box a halo may widen to.
     workers : int
-        Threads of each tile's kNN search.
+        Threads of a Dask tile task's kNN search; in this process, of the searches of
+        the tiles run at once together.
+    at_once : int
+        Tiles run at the same time in this process (no client), at most ``workers``.
     on_tile : callable, optional
         ``on_tile(label, tile, n_tiles)`` after each tile (progress).
     client : dask.distributed.Client, optional
@@ -111,6 +116,7 @@ class Runner:
         *,
         most_points: int,
         workers: int,
+        at_once: int = 1,
         on_tile: Callable[[str, int, int], None] | None = None,
         client: Any = None,
     ) -> None:
@@ -118,6 +124,9 @@ class Runner:
         self.layout = layout
         self.most_points = most_points
         self.workers = workers
+        #: Tiles at a time in this process (no more than the threads); a mode may
+        #: lower it between steps.
+        self.at_once = max(1, min(int(at_once), _kernels._workers(workers)))
         self.on_tile = on_tile
         self.client = client
         self.halos = np.zeros(layout.n_tiles)
@@ -134,19 +143,12 @@ class Runner:
     def step(self, step: Step) -> Partial:
         """Run ``step`` on every tile; the reduced partial."""
         n = self.layout.n_tiles
-        args = (self.most_points, self.workers, self.backend)
         started = time.perf_counter()
         if self.client is None:
-            outcomes = []
-            guess = float(self.halos.max(initial=0.0))
-            for t in range(n):
-                halo = self.halos[t] if self.halos[t] > 0 else guess
-                outcomes.append(tile_task(step, self.store, self.layout, t, halo, *args))
-                guess = max(guess, outcomes[-1].halo) if step.query is not None else guess
-                if self.on_tile is not None:
-                    self.on_tile(step.label, t + 1, n)
+            outcomes = self._local(step, n)
             reduced = combine([o.partial for o in outcomes])
         else:
+            args = (self.most_points, self.workers, self.backend)
             futures = [
                 self.client.submit(
                     tile_task, step, self.store, self.layout, t, self.halos[t], *args, pure=False
@@ -174,6 +176,38 @@ class Runner:
         busy = sum(o.seconds for o in outcomes)
         self.task_seconds[label] = self.task_seconds.get(label, 0.0) + busy
         return reduced
+
+    def _local(self, step: Step, n: int) -> list[Outcome]:
+        """The outcomes of ``step`` on the tiles ``0..n-1`` in this process, ``at_once``
+        tiles at a time on threads (ctypes and numpy release the GIL: one tile's Python
+        work and reads overlap another's compiled pass), the searches sharing the
+        ``workers`` threads. A tile's first halo is the widest that held in the tiles
+        done so far (or its own from an earlier step): a guess, proven per point either
+        way; without any, the first tile runs alone and gives one."""
+        threads = max(1, _kernels._workers(self.workers) // self.at_once)
+        args = (self.most_points, threads, self.backend)
+        outcomes: dict[int, Outcome] = {}
+        guess = float(self.halos.max(initial=0.0))
+
+        def submit(pool: ThreadPoolExecutor, t: int) -> Future[Outcome]:
+            halo = self.halos[t] if self.halos[t] > 0 else guess
+            return pool.submit(tile_task, step, self.store, self.layout, t, halo, *args)
+
+        first = 1 if step.query is not None and guess == 0.0 else self.at_once
+        with ThreadPoolExecutor(max_workers=self.at_once) as pool:
+            running = {submit(pool, t): t for t in range(min(first, n))}
+            queued = iter(range(len(running), n))
+            while running:
+                finished, _ = wait(running, return_when=FIRST_COMPLETED)
+                for f in finished:
+                    o = outcomes[running.pop(f)] = f.result()
+                    if step.query is not None:
+                        guess = max(guess, o.halo)
+                    if self.on_tile is not None:
+                        self.on_tile(step.label, len(outcomes), n)
+                for t in itertools.islice(queued, self.at_once - len(running)):
+                    running[submit(pool, t)] = t
+        return [outcomes[t] for t in range(n)]
 
     def finish(self, n: int, mask: str, kept: str | None) -> dict[str, np.ndarray]:
         """Per input point (input order): mask, strength, kept."""
