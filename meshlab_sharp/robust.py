@@ -12,7 +12,11 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    times the spacing, are left out of every neighbourhood below when they are one
    sheet (a single gap on that side), at least ``SHEET_MIN`` points, and no more than
    ``1 / SHEET_OWN`` times the points kept (at an edge or a corner every neighbour
-   lies to one side).
+   lies to one side). Where that finds no such gap (near a rim the end face joins the
+   two sides of the wall), the same in the column around the point (within
+   ``SHEET_COLUMN`` spacings of its normal line; gap ``SHEET_COLUMN_GAP``), unless
+   the points left out on one side span more than ``SHEET_FAR_SPAN`` spacings of
+   height (a face turning away at an edge, not a parallel sheet).
 1b. **Scales from the noise** (point clouds): the median over the points of
    ``|d . n| / |d|`` (``d`` the offset to the nearest neighbour, ``n`` the normal of the
    point and its 6 nearest, both on its own sheet) measures the noise; above
@@ -180,7 +184,8 @@ SHEET_OWN = _header.real("SHEET_OWN")
 #: heights left out on one side span more than SHEET_FAR_SPAN times ``a`` (a face
 #: turning away at an edge, sampled sparsely in the column, not a parallel sheet).
 #: Measured (20,000 points, thin1 / thin2 / thin3 F1; docs/robust-mode.md): without
-#: the rule 0.744 / 0.711 / 0.913, column 1.2, gap 0.7, span 1.0: 0.755 / 0.765 / 0.914.
+#: the rule 0.744 / 0.711 / 0.913; column 1.1, gap 0.75, span 1.25: 0.757 / 0.797 /
+#: 0.911 (1 % outliers 0.9507 -> 0.9506; span 1.5: thin2 0.805 but outliers 0.9498).
 SHEET_COLUMN = _header.real("SHEET_COLUMN")
 SHEET_COLUMN_GAP = _header.real("SHEET_COLUMN_GAP")
 SHEET_FAR_SPAN = _header.real("SHEET_FAR_SPAN")
