@@ -344,11 +344,11 @@ static void sheet_cuts(const double *hs, int64_t k, int64_t z, double g, int mid
     *lo = gaps_down != 1 ? -INFINITY : mid ? 0.5 * (hs[down - 1] + hs[down]) : hs[down];
 }
 
-/* Insertion sort of v (k) into hs (k); returns how many are < 0. */
-static int64_t sorted_heights(const double *v, int64_t k, double *hs) {
+/* Insertion sort of hs (k) in place; returns how many are < 0. */
+static int64_t sort_heights(double *hs, int64_t k) {
     int64_t z = 0;
     for (int64_t j = 0; j < k; j++) {
-        double x = v[j];
+        double x = hs[j];
         z += x < 0;
         int64_t u = j;
         while (u > 0 && hs[u - 1] > x) { hs[u] = hs[u - 1]; u--; }
@@ -416,19 +416,13 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     }
     if (!nan && hmax - hmin <= g && (sp->column <= 0.0 || hmax - hmin <= g2)) return 0;
     double lo, hi;
-    sheet_cuts(hs, k, sorted_heights(h, k, hs), g, 0, &lo, &hi);
+    for (int64_t j = 0; j < k; j++) hs[j] = h[j];
+    sheet_cuts(hs, k, sort_heights(hs, k), g, 0, &lo, &hi);
     int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep);
     if (dropped > 0 || sp->column <= 0.0) return dropped;
     double c = sp->column * a, c2 = c * c;
-    for (int64_t j = 0; j < k; j++) { /* the column's heights, sorted into hs */
-        double v = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
-        int64_t u = j;
-        while (u > 0 && hs[u - 1] > v) { hs[u] = hs[u - 1]; u--; }
-        hs[u] = v;
-    }
-    int64_t z = 0;
-    while (z < k && hs[z] < 0) z++;
-    sheet_cuts(hs, k, z, g2, 1, &lo, &hi);
+    for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
+    sheet_cuts(hs, k, sort_heights(hs, k), g2, 1, &lo, &hi);
     return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep);
 }
 
