@@ -325,7 +325,7 @@ def sheet_mask(
     normals : (n, 3) float64
         Unit normal of each list (the weighted PCA normal of its ``k`` points).
     parameters : (gap, minimum, own, column, column_gap, far_span), optional
-        Default :func:`sheet_parameters` (0.4, 6, 0.5, 1.2, 0.7, 1.0).
+        Default :func:`sheet_parameters` (0.4, 6, 0.5, 1.1, 0.75, 1.25).
 
     Returns
     -------
