@@ -322,26 +322,89 @@ static double noise_ratio(const double *q, int64_t k) {
     return length > 0 ? across / length : 0.0;
 }
 
+/* robust.sheet_mask's parameters (cloud_out_t's sheet_*). */
+typedef struct {
+    double gap;
+    int64_t minimum;
+    double own, column, column_gap, far_span;
+} sheet_params_t;
+
+/* The kept range [lo, hi] of heights from one increasingly sorted list hs (k), z of
+ * them below 0 (hs[z] is the point's own height 0), a gap being a step > g: above 0,
+ * when exactly one step above z is a gap, hi is its near end (mid = 0) or its middle
+ * (mid = 1), else +inf; likewise lo below 0, else -inf. */
+static void sheet_cuts(const double *hs, int64_t k, int64_t z, double g, int mid, double *lo,
+                       double *hi) {
+    int64_t up = z, down = z, gaps_up = 0, gaps_down = 0;
+    for (int64_t j = z; j + 1 < k; j++) gaps_up += hs[j + 1] - hs[j] > g;
+    for (int64_t j = z; j > 0; j--) gaps_down += hs[j] - hs[j - 1] > g;
+    while (up + 1 < k && !(hs[up + 1] - hs[up] > g)) up++;
+    while (down > 0 && !(hs[down] - hs[down - 1] > g)) down--;
+    *hi = gaps_up != 1 ? INFINITY : mid ? 0.5 * (hs[up] + hs[up + 1]) : hs[up];
+    *lo = gaps_down != 1 ? -INFINITY : mid ? 0.5 * (hs[down - 1] + hs[down]) : hs[down];
+}
+
+/* Insertion sort of hs (k) in place; returns how many are < 0. */
+static int64_t sort_heights(double *hs, int64_t k) {
+    int64_t z = 0;
+    for (int64_t j = 0; j < k; j++) {
+        double x = hs[j];
+        z += x < 0;
+        int64_t u = j;
+        while (u > 0 && hs[u - 1] > x) { hs[u] = hs[u - 1]; u--; }
+        hs[u] = x;
+    }
+    return z;
+}
+
+/* keep[j] = lo <= h[j] <= hi; returns the number dropped, or 0 (every keep[j] 1) when
+ * fewer than minimum would be, the kept would be fewer than own times the dropped, or
+ * the dropped heights on one side span more than span. */
+static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int64_t minimum,
+                           double own, double span, char *keep) {
+    int64_t dropped = 0;
+    double blo = INFINITY, bhi = -INFINITY, alo = INFINITY, ahi = -INFINITY;
+    for (int64_t j = 0; j < k; j++) {
+        double v = h[j];
+        keep[j] = v >= lo && v <= hi;
+        dropped += !keep[j];
+        if (v < lo) { if (v < blo) blo = v; if (v > bhi) bhi = v; }
+        if (v > hi) { if (v < alo) alo = v; if (v > ahi) ahi = v; }
+    }
+    if (dropped < minimum || (double)(k - dropped) < own * (double)dropped ||
+        (bhi >= blo && bhi - blo > span) || (ahi >= alo && ahi - alo > span)) {
+        for (int64_t j = 0; j < k; j++) keep[j] = 1;
+        return 0;
+    }
+    return dropped;
+}
+
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
- * squared lengths d2 (k), the list's normal nrm; hs (2 k) scratch. Writes keep[j] (1:
- * kept) and returns the number of neighbours dropped (0 when fewer than minimum would
- * be, or it would keep fewer than own times as many as it drops: then every keep[j]
- * is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m =
- * min(6, k - 1), summed in order; a gap is a step > gap * a between consecutive sorted
- * h. Above 0 (the point's own h), the points beyond the gap are dropped when there is
- * exactly one gap above 0; likewise below. */
+ * squared lengths d2 (k), the list's normal nrm, the parameters sp; hs (2 k) scratch.
+ * Writes keep[j] (1: kept) and returns the number of neighbours dropped (0: every
+ * keep[j] is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m = min(6, k - 1),
+ * summed in order. Rule 1, the whole list: a gap is a step > sheet_gap * a between
+ * consecutive sorted h; above 0 (the point's own h) the points beyond the gap are
+ * dropped when there is exactly one gap above 0; likewise below; not when fewer than
+ * sheet_min would be, or the kept would be fewer than sheet_own times the dropped.
+ * Rule 2, when rule 1 drops none: the same with the heights of the points of the
+ * column (tangential distance t_j, t_j^2 = d2_j - h_j^2, at most sheet_column * a; the
+ * others' heights read as 0), gaps > sheet_column_gap * a and the cuts in the middle of
+ * the gaps, and not when the dropped heights on one side span more than
+ * sheet_far_span * a. */
 static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const double *nrm,
-                          double gap, int64_t minimum, double own, double *hs, char *keep) {
+                          const sheet_params_t *sp, double *hs, char *keep) {
     for (int64_t j = 0; j < k; j++) keep[j] = 1;
     int64_t m = k - 1 < 6 ? k - 1 : 6;
     if (m < 1) return 0;
     double a = sqrt(d2[1]);
     for (int64_t j = 2; j <= m; j++) a += sqrt(d2[j]);
     a /= (double)m;
-    double g = gap * a;
-    /* No step between consecutive sorted heights exceeds (max h) - (min h) as rounded
-     * (rounding is monotone): when that is at most g there is no gap, and every
-     * neighbour is kept (most points: a smooth surface), without sorting. */
+    double g = sp->gap * a, g2 = sp->column_gap * a;
+    /* No step between consecutive sorted heights, of the whole list or of the column,
+     * exceeds (max h) - (min h) as rounded (rounding is monotone): when that is at most
+     * both gaps there is none, and every neighbour is kept (most points: a smooth
+     * surface), without sorting. */
     double *h = hs + k, hmin = INFINITY, hmax = -INFINITY;
     int nan = 0;
     for (int64_t j = 0; j < k; j++) {
@@ -351,31 +414,16 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
         if (v < hmin) hmin = v;
         if (v > hmax) hmax = v;
     }
-    if (!nan && hmax - hmin <= g) return 0;
-    int64_t z = 0;
-    for (int64_t j = 0; j < k; j++) { /* insertion sort */
-        double v = h[j];
-        z += v < 0;
-        int64_t u = j;
-        while (u > 0 && hs[u - 1] > v) { hs[u] = hs[u - 1]; u--; }
-        hs[u] = v;
-    }
-    int64_t up = z, down = z, gaps_up = 0, gaps_down = 0;
-    for (int64_t j = z; j + 1 < k; j++) gaps_up += hs[j + 1] - hs[j] > g;
-    for (int64_t j = z; j > 0; j--) gaps_down += hs[j] - hs[j - 1] > g;
-    while (up + 1 < k && !(hs[up + 1] - hs[up] > g)) up++;
-    while (down > 0 && !(hs[down] - hs[down - 1] > g)) down--;
-    double hi = gaps_up == 1 ? hs[up] : INFINITY, lo = gaps_down == 1 ? hs[down] : -INFINITY;
-    int64_t dropped = 0;
-    for (int64_t j = 0; j < k; j++) {
-        keep[j] = h[j] >= lo && h[j] <= hi;
-        dropped += !keep[j];
-    }
-    if (dropped < minimum || (double)(k - dropped) < own * (double)dropped) {
-        for (int64_t j = 0; j < k; j++) keep[j] = 1;
-        return 0;
-    }
-    return dropped;
+    if (!nan && hmax - hmin <= g && (sp->column <= 0.0 || hmax - hmin <= g2)) return 0;
+    double lo, hi;
+    for (int64_t j = 0; j < k; j++) hs[j] = h[j];
+    sheet_cuts(hs, k, sort_heights(hs, k), g, 0, &lo, &hi);
+    int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep);
+    if (dropped > 0 || sp->column <= 0.0) return dropped;
+    double c = sp->column * a, c2 = c * c;
+    for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
+    sheet_cuts(hs, k, sort_heights(hs, k), g2, 1, &lo, &hi);
+    return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep);
 }
 
 /* ------------------------------------------------------------------ kd-tree */
@@ -804,6 +852,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
     double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
     char *keep = (char *)malloc((size_t)kmax);
+    const sheet_params_t sheet = {out->sheet_gap, out->sheet_min, out->sheet_own,
+                                  out->sheet_column, out->sheet_column_gap, out->sheet_far_span};
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     int32_t *sel = (int32_t *)malloc((size_t)limit * sizeof(int32_t));
     uint8_t *bucket = (uint8_t *)malloc((size_t)limit);
@@ -885,8 +935,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             double mean[3] = {sx / (double)kmax, sy / (double)kmax, sz / (double)kmax};
             top_pd = neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, nrm, mu);
             reuse = 1;
-            if (sheet_keep(q, d2, kmax, nrm, out->sheet_gap, out->sheet_min, out->sheet_own, hs,
-                           keep) > 0) {
+            if (sheet_keep(q, d2, kmax, nrm, &sheet, hs, keep) > 0) {
                 reuse = 0;
                 int64_t t = 0, s = 0;
                 for (int64_t j = 0; j < kmax; j++) {

@@ -58,6 +58,12 @@
 #define MS_SHEET_GAP 0.4
 #define MS_SHEET_MIN 6
 #define MS_SHEET_OWN 0.5
+/* Its second rule (where the first drops none): the column around the point (tangential
+ * radius in spacings), the gap in spacings there, and the widest span, in spacings, of
+ * the heights it drops on one side. */
+#define MS_SHEET_COLUMN 1.1
+#define MS_SHEET_COLUMN_GAP 0.75
+#define MS_SHEET_FAR_SPAN 1.25
 #define MS_THIN_CONE_COS 0.5
 #define MS_THIN_KNN 12
 #define MS_THIN_RING 2
@@ -87,7 +93,9 @@ extern "C" {
  *                             order), and score[oi] its ranking: the sum over the scales
  *                             in order of min(o / l, 1) / nscales (RelativeRule's);
  *   noise[oi]                 robust.noise_scale_factor's ratio over the noise_k nearest;
- *   sheet_gap > 0             robust.sheet_mask (sheet_gap, sheet_min, sheet_own) first
+ *   sheet_gap > 0             robust.sheet_mask (sheet_gap, sheet_min, sheet_own,
+ *                             sheet_column, sheet_column_gap, sheet_far_span; rule 2
+ *                             off when sheet_column <= 0) first
  *                             (normal: the weighted PCA normal of the kmax nearest):
  *                             every scale's neighbourhood, and the noise's, is then the
  *                             kept points among its neighbours;
@@ -104,6 +112,7 @@ typedef struct {
     double sheet_gap;
     int64_t sheet_min;
     double sheet_own;
+    double sheet_column, sheet_column_gap, sheet_far_span;
     int64_t tree_order;
 } cloud_out_t;
 

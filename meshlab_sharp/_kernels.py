@@ -265,12 +265,23 @@ class _CloudOut(ctypes.Structure):
         ("sheet_gap", ctypes.c_double),
         ("sheet_min", _i64),
         ("sheet_own", ctypes.c_double),
+        ("sheet_column", ctypes.c_double),
+        ("sheet_column_gap", ctypes.c_double),
+        ("sheet_far_span", ctypes.c_double),
         ("tree_order", _i64),
     ]
 
 
 #: The fields of :class:`_CloudOut` that are numbers, not arrays.
-_NUMBERS = ("noise_k", "sheet_gap", "sheet_min", "sheet_own")
+_NUMBERS = (
+    "noise_k",
+    "sheet_gap",
+    "sheet_min",
+    "sheet_own",
+    "sheet_column",
+    "sheet_column_gap",
+    "sheet_far_span",
+)
 #: The arrays of :class:`_CloudOut` with a leading scale axis, (s, n, ...).
 _PER_SCALE = ("pdis", "normals", "relative")
 
@@ -308,7 +319,7 @@ def _cloud_call(
     """One pass of ``ms_cloud_pdis`` over the tree's points (only the points ``rows``,
     cleaned indices, and a few near them in the tree, when given) at the scales ``ks``;
     ``out`` names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
-    ``noise_k``, ``sheet_gap``, ``sheet_min`` and ``sheet_own``. Without the kNN table
+    ``noise_k`` and ``sheet_*``. Without the kNN table
     (``idx``) the pass writes its rows in tree order, moved to cleaned order after."""
     lib = _LIB
     assert lib is not None
@@ -417,6 +428,11 @@ class ScalePass:
     stats: CloudStats | None = None
 
 
+#: Robust mode's sheet filter parameters (:func:`meshlab_sharp.robust.sheet_parameters`):
+#: gap, minimum, own, column, column gap, far span.
+SheetParameters = tuple[float, int, float, float, float, float]
+
+
 def cloud_projected_distances(
     tree: KdTree,
     scales: Sequence[int],
@@ -426,7 +442,7 @@ def cloud_projected_distances(
     relative: bool = False,
     keep_pdis: bool | None = None,
     noise_k: int = 0,
-    sheet: tuple[float, int, float] | None = None,
+    sheet: SheetParameters | None = None,
     workers: int = -1,
     rows: np.ndarray | None = None,
 ) -> ScalePass:
@@ -434,8 +450,9 @@ def cloud_projected_distances(
     (s, n, 3) when ``keep_normals``; with ``relative`` robust mode's relative distances
     and score (:class:`ScalePass`), and then the projected distances only when
     ``keep_pdis`` (default: not ``relative``); with ``noise_k > 0`` the
-    :class:`CloudStats` (noise ratio over the ``noise_k`` nearest). With ``sheet =
-    (gap, minimum, own)``, robust mode's :func:`meshlab_sharp.robust.sheet_mask` first: every
+    :class:`CloudStats` (noise ratio over the ``noise_k`` nearest). With ``sheet``
+    (:func:`meshlab_sharp.robust.sheet_parameters`), robust mode's
+    :func:`meshlab_sharp.robust.sheet_mask` first: every
     neighbourhood (the scales', the noise's) is then the kept neighbours among its
     points. One neighbour search at the largest scale. With ``rows`` (cleaned indices),
     only those points' values are computed (and a few others'); the rest are undefined."""
@@ -458,7 +475,13 @@ def cloud_projected_distances(
             near=st.near, kth_d2=st.kth_d2, kth_idx=st.kth_idx, noise=st.noise, noise_k=noise_k
         )
     if sheet is not None:
-        fields.update(sheet_gap=float(sheet[0]), sheet_min=int(sheet[1]), sheet_own=float(sheet[2]))
+        gap, minimum, own, column, column_gap, far_span = sheet
+        fields.update(sheet_gap=float(gap), sheet_min=int(minimum), sheet_own=float(own))
+        fields.update(
+            sheet_column=float(column),
+            sheet_column_gap=float(column_gap),
+            sheet_far_span=float(far_span),
+        )
     _cloud_call(tree, ks, weighting == "gaussian", workers, rows, **fields)
     return out
 

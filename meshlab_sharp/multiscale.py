@@ -180,7 +180,7 @@ def _compiled_projected_distances(
     weighting: Weighting,
     keep_normals: bool,
     relative: bool,
-    sheet: tuple[float, int, float] | None = None,
+    sheet: _kernels.SheetParameters | None = None,
 ) -> _kernels.ScalePass | None:
     """Projected distances (s, m) and normals (s, m, 3) or None, or (clouds, when
     ``relative``) robust mode's relative distances and score instead of the distances,

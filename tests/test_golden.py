@@ -70,6 +70,12 @@ NUDGES: dict[str, tuple[ModuleType, str, Callable[[float], float]]] = {
     "sheet min +1": (robust, "SHEET_MIN", lambda v: v + 1),
     "sheet own x0.8": (robust, "SHEET_OWN", lambda v: v * 0.8),
     "sheet own x1.25": (robust, "SHEET_OWN", lambda v: v * 1.25),
+    "sheet column x0.85": (robust, "SHEET_COLUMN", lambda v: v * 0.85),
+    "sheet column x1.15": (robust, "SHEET_COLUMN", lambda v: v * 1.15),
+    "sheet column gap x0.85": (robust, "SHEET_COLUMN_GAP", lambda v: v * 0.85),
+    "sheet column gap x1.15": (robust, "SHEET_COLUMN_GAP", lambda v: v * 1.15),
+    "sheet far span x0.8": (robust, "SHEET_FAR_SPAN", lambda v: v * 0.8),
+    "sheet far span x1.25": (robust, "SHEET_FAR_SPAN", lambda v: v * 1.25),
 }
 
 

@@ -38,6 +38,9 @@ NOISE_KNN, NOISE_TOLERATED, NOISE_MAX_FACTOR = 7, 0.15, 3.0
 NOISE_QUIET = 0.05
 #: Step 1a: a gap of 0.4 spacings, at least 6 points beyond it.
 SHEET_GAP, SHEET_MIN, SHEET_OWN = 0.4, 6, 0.5
+#: Step 1a, second rule: a column 1.1 spacings wide, a gap of 0.75 there, the heights
+#: left out on one side within 1.25 spacings.
+SHEET_COLUMN, SHEET_COLUMN_GAP, SHEET_FAR_SPAN = 1.1, 0.75, 1.25
 #: Steps 7 and 8.
 SUPPORT_KNN, SUPPORT_MIN, THIN_KNN, MESH_RING, CONE_COS = 16, 2, 12, 2, 0.5
 #: Step 9: 20 degrees, 4 / 0.3186 lower quartiles.
@@ -206,26 +209,52 @@ def _own_sheet(points: np.ndarray, i: int, hood: np.ndarray) -> np.ndarray:
     from 0 (``i``'s own height) up and down through the sorted heights until a step
     wider than SHEET_GAP times the mean distance to the 6 nearest; what lies beyond is
     dropped when it is one sheet (no second such gap on that side), at least SHEET_MIN
-    points, and at most 1 / SHEET_OWN times as many as are kept."""
+    points, and at most 1 / SHEET_OWN times as many as are kept. Where that drops
+    nothing: the same through the heights of the column (tangential distance at most
+    SHEET_COLUMN spacings; the others count as height 0) with steps wider than
+    SHEET_COLUMN_GAP spacings, cut in the middle of the step, and not when what is
+    dropped on one side spans more than SHEET_FAR_SPAN spacings of height."""
     q = points[hood] - points[i]
     h = q @ spec_pca_normal(points, i, hood, "gaussian")
     a = np.sqrt((q[1:7] ** 2).sum(axis=1)).mean()
-    steps = sorted(h)
+    below, above = _sheet_cuts(list(h), SHEET_GAP * a, middle=False)
+    own = _sheet_rules(h, below, above, math.inf)
+    if own.all():
+        tangential = np.sqrt(np.maximum((q * q).sum(axis=1) - h * h, 0.0))
+        column = [v if t <= SHEET_COLUMN * a else 0.0 for v, t in zip(h, tangential, strict=True)]
+        below, above = _sheet_cuts(column, SHEET_COLUMN_GAP * a, middle=True)
+        own = _sheet_rules(h, below, above, SHEET_FAR_SPAN * a)
+    return own
+
+
+def _sheet_cuts(heights: list[float], gap: float, *, middle: bool) -> tuple[float, float]:
+    """The lowest and highest height kept: from 0 up and down the sorted ``heights``
+    to the first step wider than ``gap``, when it is the only one on that side; the
+    cut at the near end of the step or, ``middle``, half way across it."""
+    steps = sorted(heights)
     lo = hi = steps.index(0.0)  # i's own height (its offset is 0)
-    while hi + 1 < len(steps) and steps[hi + 1] - steps[hi] <= SHEET_GAP * a:
+    while hi + 1 < len(steps) and steps[hi + 1] - steps[hi] <= gap:
         hi += 1
-    while lo > 0 and steps[lo] - steps[lo - 1] <= SHEET_GAP * a:
+    while lo > 0 and steps[lo] - steps[lo - 1] <= gap:
         lo -= 1
     below, above = -math.inf, math.inf
     if hi + 1 < len(steps) and not any(
-        steps[j + 1] - steps[j] > SHEET_GAP * a for j in range(hi + 1, len(steps) - 1)
+        steps[j + 1] - steps[j] > gap for j in range(hi + 1, len(steps) - 1)
     ):
-        above = steps[hi]
-    if lo > 0 and not any(steps[j] - steps[j - 1] > SHEET_GAP * a for j in range(1, lo)):
-        below = steps[lo]
+        above = (steps[hi] + steps[hi + 1]) / 2 if middle else steps[hi]
+    if lo > 0 and not any(steps[j] - steps[j - 1] > gap for j in range(1, lo)):
+        below = (steps[lo - 1] + steps[lo]) / 2 if middle else steps[lo]
+    return below, above
+
+
+def _sheet_rules(h: np.ndarray, below: float, above: float, span: float) -> np.ndarray:
+    """The heights ``h`` within ``[below, above]``, or all of them when fewer than
+    SHEET_MIN fall outside, fewer than SHEET_OWN times as many inside, or those
+    outside on one side span more than ``span``."""
     own = (h >= below) & (h <= above)
-    if (~own).sum() < SHEET_MIN or own.sum() < SHEET_OWN * (~own).sum():
-        return np.ones(len(hood), bool)
+    spans = [np.ptp(side) for side in (h[h < below], h[h > above]) if len(side)]
+    if (~own).sum() < SHEET_MIN or own.sum() < SHEET_OWN * (~own).sum() or max(spans) > span:
+        return np.ones(len(h), bool)
     return own
 
 

@@ -159,6 +159,41 @@ def test_sheet_mask_keeps_what_is_not_one_separate_sheet():
     np.testing.assert_array_equal(_mask(points, lists), points[:, 2] == 0.0)
 
 
+def _rim(bridge: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """A wall two spacings thick near its rim: :func:`_two_sheets` with the other side at
+    z = -2, and the end face joining them as points at the heights ``bridge``, 4
+    spacings aside (outside the point's column)."""
+    points, _ = _two_sheets(12, [-2.0])
+    end = np.array([(4.0, 0.0, z) for z in bridge])
+    points = np.vstack([points, end])
+    return points, np.arange(len(points))[None, :]
+
+
+def test_sheet_mask_finds_the_other_side_in_the_column_where_the_end_face_joins_them():
+    a = (4 + 2 * math.sqrt(2)) / 6
+    # rule 1 sees steps of 0.4 < SHEET_GAP * a (0.455) all the way down: no gap
+    points, lists = _rim([-0.4, -0.8, -1.2, -1.6])
+    assert robust.sheet_mask(
+        points, lists, np.array([[0.0, 0.0, 1.0]]), (0.4, 6, 0.5, 0.0, 0.0, 0.0)
+    )[0].all()
+    # rule 2: in the column (the 4 points below within SHEET_COLUMN * a = 1.25 of the
+    # axis) a step of 2 > SHEET_COLUMN_GAP * a; cut half way, at -1
+    np.testing.assert_array_equal(_mask(points, lists), points[:, 2] >= -1.0)
+    # the points left out span 0.8 spacings (-2 to -1.2); 1.6 > SHEET_FAR_SPAN * a
+    # (1.42): not one parallel sheet, every point kept
+    points, lists = _rim([-0.4, -0.8, -1.2, -1.6, -2.4, -2.8])
+    assert robust.SHEET_FAR_SPAN * a < 1.6
+    assert _mask(points, lists).all()
+    # the column: the other side's nearest lie 0.71 from the axis; a column narrower than
+    # that sees no other side
+    points, lists = _rim([-0.4, -0.8, -1.2, -1.6])
+    narrow = (0.4, 6, 0.5, 0.7 / a, robust.SHEET_COLUMN_GAP, robust.SHEET_FAR_SPAN)
+    assert robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), narrow)[0].all()
+    # a step of exactly SHEET_COLUMN_GAP * a is no gap
+    exact = (0.4, 6, 0.5, robust.SHEET_COLUMN, 2.0 / a, robust.SHEET_FAR_SPAN)
+    assert robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), exact)[0].all()
+
+
 def test_sheet_neighbourhoods_keep_the_prefixes_of_the_kept_points():
     # a 5 x 5 grid and, one spacing above, a 4 x 4 grid centred on the same axis: the
     # PCA normal of all 41 points is the z axis

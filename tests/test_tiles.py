@@ -91,7 +91,7 @@ def test_compiled_passes_of_some_rows_equal_the_whole_pass() -> None:
     rows = np.flatnonzero(pts[:, 0] < 0.1)  # a slab: runs of the tree, and stray points
     rows = np.union1d(rows, [5, 17, len(pts) - 1])
     tree = _kernels.build_tree(pts)
-    sheet = (robust.SHEET_GAP, robust.SHEET_MIN, robust.SHEET_OWN)
+    sheet = robust.sheet_parameters()
     kw = {"relative": True, "noise_k": 7, "sheet": sheet}
     whole = _kernels.cloud_projected_distances(tree, SCALES, **kw)
     some = _kernels.cloud_projected_distances(tree, SCALES, rows=rows, **kw)

@@ -245,6 +245,9 @@ CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian
 		out.sheet_gap = MS_SHEET_GAP;
 		out.sheet_min = MS_SHEET_MIN;
 		out.sheet_own = MS_SHEET_OWN;
+		out.sheet_column = MS_SHEET_COLUMN;
+		out.sheet_column_gap = MS_SHEET_COLUMN_GAP;
+		out.sheet_far_span = MS_SHEET_FAR_SPAN;
 	} else {
 		c.pdis.resize(S * t.n);
 		out.pdis = c.pdis.data();

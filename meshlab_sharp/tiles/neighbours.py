@@ -197,7 +197,7 @@ def _search(
             query.weighting,
             relative=True,
             noise_k=min(robust.NOISE_KNN, k),
-            sheet=(robust.SHEET_GAP, robust.SHEET_MIN, robust.SHEET_OWN),
+            sheet=robust.sheet_parameters(),
             workers=workers,
             rows=rows,
         )
