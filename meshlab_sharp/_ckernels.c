@@ -318,6 +318,26 @@ static void smallest_eigvec_pair(const double *ma, const double *mb, double *na,
 }
 #endif
 
+/* Each scale's mean offset smean (3 a scale) and largest squared distance sh2 over the
+ * first mk[s] offsets q with squared lengths d2 (mk increasing): one running sum, in
+ * order from the first offset. */
+static void scale_means(const double *q, const double *d2, const int64_t *mk, int nscales,
+                        double *smean, double *sh2) {
+    double sx = 0, sy = 0, sz = 0, h2 = 0;
+    int64_t j = 0;
+    for (int s = 0; s < nscales; s++) {
+        int64_t m = mk[s];
+        for (; j < m; j++) {
+            sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
+            if (d2[j] > h2) h2 = d2[j];
+        }
+        smean[3 * s] = sx / (double)m;
+        smean[3 * s + 1] = sy / (double)m;
+        smean[3 * s + 2] = sz / (double)m;
+        sh2[s] = h2;
+    }
+}
+
 /* The (weighted) PCA normals of the first ma and mb >= ma offsets q with squared lengths
  * d2 (means mean_a, mean_b; h2a, h2b the largest d2 of each) into na and nb: what
  * neighbourhood_pdis computes for each (without a fixed normal). mu: room for 2 mb. */
@@ -1032,20 +1052,31 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             d2[j] = h.c[j].d2;
         }
         for (int s = 0; s < nscales; s++) mk[s] = ks[s];
-        int reuse = 0; /* the largest scale's normal and pdis: the sheet filter's */
+        /* known: how many of the largest scales have their normal from the sheet filter's
+         * PCA (the largest scale's, and the next one's computed beside it): their lists
+         * are the same when the filter keeps every neighbour */
+        int known = 0, means = 0; /* means: smean and sh2 hold the lists' */
         double top_pd = 0.0, top_nrm[3] = {0, 0, 0};
+        int pdis_wanted = out->pdis != NULL || out->relative != NULL;
         if (out->sheet_gap > 0.0) {
-            double sx = 0, sy = 0, sz = 0, h2 = 0, *nrm = top_nrm;
-            for (int64_t j = 0; j < kmax; j++) {
-                sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
-                if (d2[j] > h2) h2 = d2[j];
+            scale_means(q, d2, mk, nscales, smean, sh2);
+            const double *mean = smean + 3 * (nscales - 1);
+            double h2 = sh2[nscales - 1];
+            if (pdis_wanted && nscales >= 2) {
+                int u = nscales - 2;
+                pca_normal_pair(q, d2, mk[u], smean + 3 * u, sh2[u], kmax, mean, h2, gaussian, mu,
+                                snrm + 3 * u, top_nrm);
+                known = 2;
+            } else {
+                neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, top_nrm, mu);
+                known = 1;
             }
-            double mean[3] = {sx / (double)kmax, sy / (double)kmax, sz / (double)kmax};
-            top_pd = neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, nrm, mu);
-            reuse = 1;
-            if (sheet_keep(q, d2, kmax, nrm, out->sheet_gap, out->sheet_min, out->sheet_own, hs,
-                           keep) > 0) {
-                reuse = 0;
+            top_pd = fabs(mean[0] * top_nrm[0] + mean[1] * top_nrm[1] + mean[2] * top_nrm[2]);
+            means = 1;
+            if (sheet_keep(q, d2, kmax, top_nrm, out->sheet_gap, out->sheet_min, out->sheet_own,
+                           hs, keep) > 0) {
+                known = 0;
+                means = 0;
                 int64_t t = 0, s = 0;
                 for (int64_t j = 0; j < kmax; j++) {
                     while (s < nscales && ks[s] == j) mk[s++] = t;
@@ -1072,20 +1103,9 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             local_scale_prefixes(soa, mk, nscales, ell, ell + nscales);
         }
         if (out->pdis == NULL && out->relative == NULL) continue;
-        double score = 0.0, sx = 0, sy = 0, sz = 0, h2 = 0;
-        int64_t j = 0;
-        for (int s = 0; s < nscales; s++) { /* each scale's mean and largest d2 */
-            int64_t m = mk[s];
-            for (; j < m; j++) {
-                sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
-                if (d2[j] > h2) h2 = d2[j];
-            }
-            smean[3 * s] = sx / (double)m;
-            smean[3 * s + 1] = sy / (double)m;
-            smean[3 * s + 2] = sz / (double)m;
-            sh2[s] = h2;
-        }
-        int last = reuse ? nscales - 1 : nscales, held = -1; /* the scales with a PCA */
+        double score = 0.0;
+        if (!means) scale_means(q, d2, mk, nscales, smean, sh2);
+        int last = nscales - known, held = -1; /* the scales with a PCA still to do */
         for (int s = 0; s < last; s++) { /* their normals, two scales at once */
             if (held < 0) { held = s; continue; }
             pca_normal_pair(q, d2, mk[held], smean + 3 * held, sh2[held], mk[s], smean + 3 * s,
@@ -1096,13 +1116,13 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             neighbourhood_pdis(q, d2, mk[held], smean + 3 * held, sh2[held], gaussian, NULL,
                                snrm + 3 * held, mu);
         }
-        if (reuse) { /* the largest scale: the same sums over the same list as the sheet's */
+        if (known > 0) { /* the largest scale: the same sums over the same list as the sheet's */
             double *t = snrm + 3 * (nscales - 1);
             t[0] = top_nrm[0]; t[1] = top_nrm[1]; t[2] = top_nrm[2];
         }
         for (int s = 0; s < nscales; s++) {
             const double *mean = smean + 3 * s, *nv = snrm + 3 * s;
-            double pd = reuse && s == nscales - 1
+            double pd = known > 0 && s == nscales - 1
                             ? top_pd
                             : fabs(mean[0] * nv[0] + mean[1] * nv[1] + mean[2] * nv[2]);
             if (out->normals != NULL) {
