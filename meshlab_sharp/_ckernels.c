@@ -256,9 +256,12 @@ static void smallest_eigvec_pair(const double *ma, const double *mb, double *na,
         return;
     }
     __m128d s = _mm_set_pd(sb, sa);
-    __m128d a = _mm_mul_pd(_mm_set_pd(mb[0], ma[0]), s), b = _mm_mul_pd(_mm_set_pd(mb[1], ma[1]), s);
-    __m128d c = _mm_mul_pd(_mm_set_pd(mb[2], ma[2]), s), d = _mm_mul_pd(_mm_set_pd(mb[3], ma[3]), s);
-    __m128d e = _mm_mul_pd(_mm_set_pd(mb[4], ma[4]), s), f = _mm_mul_pd(_mm_set_pd(mb[5], ma[5]), s);
+    __m128d a = _mm_mul_pd(_mm_set_pd(mb[0], ma[0]), s);
+    __m128d b = _mm_mul_pd(_mm_set_pd(mb[1], ma[1]), s);
+    __m128d c = _mm_mul_pd(_mm_set_pd(mb[2], ma[2]), s);
+    __m128d d = _mm_mul_pd(_mm_set_pd(mb[3], ma[3]), s);
+    __m128d e = _mm_mul_pd(_mm_set_pd(mb[4], ma[4]), s);
+    __m128d f = _mm_mul_pd(_mm_set_pd(mb[5], ma[5]), s);
     __m128d p1 = _mm_add_pd(_mm_add_pd(_mm_mul_pd(b, b), _mm_mul_pd(c, c)), _mm_mul_pd(e, e));
     __m128d q = _mm_div_pd(_mm_add_pd(_mm_add_pd(a, d), f), _mm_set1_pd(3.0));
     __m128d aq = _mm_sub_pd(a, q), dq = _mm_sub_pd(d, q), fq = _mm_sub_pd(f, q);
@@ -280,7 +283,8 @@ static void smallest_eigvec_pair(const double *ma, const double *mb, double *na,
         if (x > 1.0) x = 1.0;
         cs[l] = cos(acos(x) / 3.0 + 2.0943951023931954923);
     }
-    __m128d lam = _mm_add_pd(q, _mm_mul_pd(_mm_mul_pd(_mm_set1_pd(2.0), p), _mm_set_pd(cs[1], cs[0])));
+    __m128d two_p = _mm_mul_pd(_mm_set1_pd(2.0), p);
+    __m128d lam = _mm_add_pd(q, _mm_mul_pd(two_p, _mm_set_pd(cs[1], cs[0])));
     __m128d r00 = _mm_sub_pd(a, lam), r11 = _mm_sub_pd(d, lam), r22 = _mm_sub_pd(f, lam);
     /* rows r0 = (r00, b, c), r1 = (b, r11, e), r2 = (c, e, r22) */
     __m128d x[3][3];
@@ -295,8 +299,8 @@ static void smallest_eigvec_pair(const double *ma, const double *mb, double *na,
     x[2][2] = _mm_sub_pd(_mm_mul_pd(b, e), _mm_mul_pd(r11, c));
     double xs[3][3][2], nn[3][2];
     for (int i = 0; i < 3; i++) {
-        __m128d v = _mm_add_pd(_mm_add_pd(_mm_mul_pd(x[i][0], x[i][0]), _mm_mul_pd(x[i][1], x[i][1])),
-                               _mm_mul_pd(x[i][2], x[i][2]));
+        __m128d v = _mm_add_pd(_mm_mul_pd(x[i][0], x[i][0]), _mm_mul_pd(x[i][1], x[i][1]));
+        v = _mm_add_pd(v, _mm_mul_pd(x[i][2], x[i][2]));
         nn[i][0] = lane0(v); nn[i][1] = lane1(v);
         for (int k = 0; k < 3; k++) { xs[i][k][0] = lane0(x[i][k]); xs[i][k][1] = lane1(x[i][k]); }
     }
@@ -976,7 +980,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
     double *mu = (double *)malloc((size_t)kmax * 2 * sizeof(double));
-    double *smean = (double *)malloc((size_t)nscales * 7 * sizeof(double)); /* mean, normal, h2 */
+    /* per scale: mean offset (3), normal (3), largest squared distance (1) */
+    double *smean = (double *)malloc((size_t)nscales * 7 * sizeof(double));
     double *snrm = smean ? smean + 3 * nscales : NULL, *sh2 = smean ? smean + 6 * nscales : NULL;
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
@@ -990,7 +995,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     int64_t leaf_s = 0, leaf_e = 0;
     double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk || !sel || !bucket) {
+    if (!h.c || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk || !sel ||
+        !bucket) {
         rc = -1;
         goto done;
     }
