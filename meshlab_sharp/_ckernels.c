@@ -183,6 +183,186 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
     return fabs(mean[0] * nrm[0] + mean[1] * nrm[1] + mean[2] * nrm[2]);
 }
 
+/* ------------------------------------------------------------------ two scales at once */
+
+/* Two neighbourhoods of one point side by side, a and b, the first ma and mb >= ma
+ * offsets of the same list: each one's arithmetic exactly as above (scatter,
+ * smallest_eigvec), one SIMD lane each. Independent chains of additions and
+ * divisions, and half the instructions: the scales of a cloud's pass go by pairs. */
+
+#ifdef __SSE2__
+static inline double lane0(__m128d v) { return _mm_cvtsd_f64(v); }
+static inline double lane1(__m128d v) { return _mm_cvtsd_f64(_mm_unpackhi_pd(v, v)); }
+
+/* scatter of a (ma, mean_a, weights wa) and of b (mb, mean_b, wb) into ca and cb; the
+ * weights are given (all 1 for no weighting: 1 * x is x). */
+static void scatter_pair(const double *q, int64_t ma, const double *mean_a, const double *wa,
+                         int64_t mb, const double *mean_b, const double *wb, double *ca,
+                         double *cb) {
+    __m128d mx = _mm_set_pd(mean_b[0], mean_a[0]), my = _mm_set_pd(mean_b[1], mean_a[1]);
+    __m128d mz = _mm_set_pd(mean_b[2], mean_a[2]);
+    __m128d c00 = _mm_setzero_pd(), c01 = c00, c02 = c00, c11 = c00, c12 = c00, c22 = c00;
+    int64_t j = 0;
+    for (; j < ma; j++) {
+        __m128d rx = _mm_sub_pd(_mm_set1_pd(q[3 * j]), mx);
+        __m128d ry = _mm_sub_pd(_mm_set1_pd(q[3 * j + 1]), my);
+        __m128d rz = _mm_sub_pd(_mm_set1_pd(q[3 * j + 2]), mz);
+        __m128d w = _mm_set_pd(wb[j], wa[j]);
+        __m128d sx = _mm_mul_pd(w, rx), sy = _mm_mul_pd(w, ry), sz = _mm_mul_pd(w, rz);
+        c00 = _mm_add_pd(c00, _mm_mul_pd(sx, rx));
+        c01 = _mm_add_pd(c01, _mm_mul_pd(sx, ry));
+        c02 = _mm_add_pd(c02, _mm_mul_pd(sx, rz));
+        c11 = _mm_add_pd(c11, _mm_mul_pd(sy, ry));
+        c12 = _mm_add_pd(c12, _mm_mul_pd(sy, rz));
+        c22 = _mm_add_pd(c22, _mm_mul_pd(sz, rz));
+    }
+    ca[0] = lane0(c00); ca[1] = lane0(c01); ca[2] = lane0(c02);
+    ca[3] = lane0(c11); ca[4] = lane0(c12); ca[5] = lane0(c22);
+    double b00 = lane1(c00), b01 = lane1(c01), b02 = lane1(c02), b11 = lane1(c11),
+           b12 = lane1(c12), b22 = lane1(c22);
+    for (; j < mb; j++) { /* b's last mb - ma terms */
+        double rx = q[3 * j] - mean_b[0], ry = q[3 * j + 1] - mean_b[1],
+               rz = q[3 * j + 2] - mean_b[2];
+        double sx = wb[j] * rx, sy = wb[j] * ry, sz = wb[j] * rz;
+        b00 += sx * rx; b01 += sx * ry; b02 += sx * rz;
+        b11 += sy * ry; b12 += sy * rz; b22 += sz * rz;
+    }
+    cb[0] = b00; cb[1] = b01; cb[2] = b02; cb[3] = b11; cb[4] = b12; cb[5] = b22;
+}
+
+/* The power of two smallest_eigvec scales a matrix m (6 entries) by, or 0 when
+ * smallest_eigvec takes another branch for it (zero matrix, diagonal, a scale not
+ * built from the exponent bits). */
+static inline double eig_scale(const double *m) {
+    double p1 = m[1] * m[1] + m[2] * m[2] + m[4] * m[4];
+    double scale = fabs(m[0]) + fabs(m[1]) + fabs(m[2]) + fabs(m[3]) + fabs(m[4]) + fabs(m[5]);
+    if (scale == 0.0 || p1 == 0.0) return 0.0;
+    uint64_t bits;
+    memcpy(&bits, &scale, sizeof bits);
+    int64_t biased = (int64_t)(bits >> 52);
+    if (biased < 1 || biased > 2044) return 0.0;
+    double s;
+    bits = (uint64_t)(2045 - biased) << 52;
+    memcpy(&s, &bits, sizeof s);
+    return s;
+}
+
+/* smallest_eigvec of ma and mb (6 entries each) into na and nb, one lane each. */
+static void smallest_eigvec_pair(const double *ma, const double *mb, double *na, double *nb) {
+    double sa = eig_scale(ma), sb = eig_scale(mb);
+    if (sa == 0.0 || sb == 0.0) {
+        smallest_eigvec(ma[0], ma[1], ma[2], ma[3], ma[4], ma[5], na);
+        smallest_eigvec(mb[0], mb[1], mb[2], mb[3], mb[4], mb[5], nb);
+        return;
+    }
+    __m128d s = _mm_set_pd(sb, sa);
+    __m128d a = _mm_mul_pd(_mm_set_pd(mb[0], ma[0]), s);
+    __m128d b = _mm_mul_pd(_mm_set_pd(mb[1], ma[1]), s);
+    __m128d c = _mm_mul_pd(_mm_set_pd(mb[2], ma[2]), s);
+    __m128d d = _mm_mul_pd(_mm_set_pd(mb[3], ma[3]), s);
+    __m128d e = _mm_mul_pd(_mm_set_pd(mb[4], ma[4]), s);
+    __m128d f = _mm_mul_pd(_mm_set_pd(mb[5], ma[5]), s);
+    __m128d p1 = _mm_add_pd(_mm_add_pd(_mm_mul_pd(b, b), _mm_mul_pd(c, c)), _mm_mul_pd(e, e));
+    __m128d q = _mm_div_pd(_mm_add_pd(_mm_add_pd(a, d), f), _mm_set1_pd(3.0));
+    __m128d aq = _mm_sub_pd(a, q), dq = _mm_sub_pd(d, q), fq = _mm_sub_pd(f, q);
+    __m128d p2 = _mm_add_pd(
+        _mm_add_pd(_mm_add_pd(_mm_mul_pd(aq, aq), _mm_mul_pd(dq, dq)), _mm_mul_pd(fq, fq)),
+        _mm_mul_pd(_mm_set1_pd(2.0), p1));
+    __m128d p = _mm_sqrt_pd(_mm_div_pd(p2, _mm_set1_pd(6.0)));
+    __m128d ip = _mm_div_pd(_mm_set1_pd(1.0), p);
+    __m128d B00 = _mm_mul_pd(aq, ip), B11 = _mm_mul_pd(dq, ip), B22 = _mm_mul_pd(fq, ip);
+    __m128d B01 = _mm_mul_pd(b, ip), B02 = _mm_mul_pd(c, ip), B12 = _mm_mul_pd(e, ip);
+    __m128d t0 = _mm_mul_pd(B00, _mm_sub_pd(_mm_mul_pd(B11, B22), _mm_mul_pd(B12, B12)));
+    __m128d t1 = _mm_mul_pd(B01, _mm_sub_pd(_mm_mul_pd(B01, B22), _mm_mul_pd(B12, B02)));
+    __m128d t2 = _mm_mul_pd(B02, _mm_sub_pd(_mm_mul_pd(B01, B12), _mm_mul_pd(B11, B02)));
+    __m128d r = _mm_mul_pd(_mm_set1_pd(0.5), _mm_add_pd(_mm_sub_pd(t0, t1), t2));
+    double rr[2] = {lane0(r), lane1(r)}, cs[2];
+    for (int l = 0; l < 2; l++) { /* as smallest_eigvec: clamp (NaN kept), acos, cos */
+        double x = rr[l];
+        if (x < -1.0) x = -1.0;
+        if (x > 1.0) x = 1.0;
+        cs[l] = cos(acos(x) / 3.0 + 2.0943951023931954923);
+    }
+    __m128d two_p = _mm_mul_pd(_mm_set1_pd(2.0), p);
+    __m128d lam = _mm_add_pd(q, _mm_mul_pd(two_p, _mm_set_pd(cs[1], cs[0])));
+    __m128d r00 = _mm_sub_pd(a, lam), r11 = _mm_sub_pd(d, lam), r22 = _mm_sub_pd(f, lam);
+    /* rows r0 = (r00, b, c), r1 = (b, r11, e), r2 = (c, e, r22) */
+    __m128d x[3][3];
+    x[0][0] = _mm_sub_pd(_mm_mul_pd(b, e), _mm_mul_pd(c, r11));
+    x[0][1] = _mm_sub_pd(_mm_mul_pd(c, b), _mm_mul_pd(r00, e));
+    x[0][2] = _mm_sub_pd(_mm_mul_pd(r00, r11), _mm_mul_pd(b, b));
+    x[1][0] = _mm_sub_pd(_mm_mul_pd(b, r22), _mm_mul_pd(c, e));
+    x[1][1] = _mm_sub_pd(_mm_mul_pd(c, c), _mm_mul_pd(r00, r22));
+    x[1][2] = _mm_sub_pd(_mm_mul_pd(r00, e), _mm_mul_pd(b, c));
+    x[2][0] = _mm_sub_pd(_mm_mul_pd(r11, r22), _mm_mul_pd(e, e));
+    x[2][1] = _mm_sub_pd(_mm_mul_pd(e, c), _mm_mul_pd(b, r22));
+    x[2][2] = _mm_sub_pd(_mm_mul_pd(b, e), _mm_mul_pd(r11, c));
+    double xs[3][3][2], nn[3][2];
+    for (int i = 0; i < 3; i++) {
+        __m128d v = _mm_add_pd(_mm_mul_pd(x[i][0], x[i][0]), _mm_mul_pd(x[i][1], x[i][1]));
+        v = _mm_add_pd(v, _mm_mul_pd(x[i][2], x[i][2]));
+        nn[i][0] = lane0(v); nn[i][1] = lane1(v);
+        for (int k = 0; k < 3; k++) { xs[i][k][0] = lane0(x[i][k]); xs[i][k][1] = lane1(x[i][k]); }
+    }
+    double *out[2] = {na, nb};
+    for (int l = 0; l < 2; l++) { /* as smallest_eigvec: the longest cross product */
+        double best = -1.0;
+        int bi = 0;
+        for (int i = 0; i < 3; i++) {
+            if (nn[i][l] > best) { best = nn[i][l]; bi = i; }
+        }
+        if (!(best > 0.0)) {
+            out[l][0] = 1.0; out[l][1] = 0.0; out[l][2] = 0.0;
+        } else {
+            double inv = 1.0 / sqrt(best);
+            out[l][0] = xs[bi][0][l] * inv; out[l][1] = xs[bi][1][l] * inv;
+            out[l][2] = xs[bi][2][l] * inv;
+        }
+    }
+}
+#endif
+
+/* Each scale's mean offset smean (3 a scale) and largest squared distance sh2 over the
+ * first mk[s] offsets q with squared lengths d2 (mk increasing): one running sum, in
+ * order from the first offset. */
+static void scale_means(const double *q, const double *d2, const int64_t *mk, int nscales,
+                        double *smean, double *sh2) {
+    double sx = 0, sy = 0, sz = 0, h2 = 0;
+    int64_t j = 0;
+    for (int s = 0; s < nscales; s++) {
+        int64_t m = mk[s];
+        for (; j < m; j++) {
+            sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
+            if (d2[j] > h2) h2 = d2[j];
+        }
+        smean[3 * s] = sx / (double)m;
+        smean[3 * s + 1] = sy / (double)m;
+        smean[3 * s + 2] = sz / (double)m;
+        sh2[s] = h2;
+    }
+}
+
+/* The (weighted) PCA normals of the first ma and mb >= ma offsets q with squared lengths
+ * d2 (means mean_a, mean_b; h2a, h2b the largest d2 of each) into na and nb: what
+ * neighbourhood_pdis computes for each (without a fixed normal). mu: room for 2 mb. */
+static void pca_normal_pair(const double *q, const double *d2, int64_t ma, const double *mean_a,
+                            double h2a, int64_t mb, const double *mean_b, double h2b,
+                            int gaussian, double *mu, double *na, double *nb) {
+#ifdef __SSE2__
+    double *mua = mu, *mub = mu + mb;
+    if (gaussian && h2a > 0.0) gaussian_weights(d2, ma, h2a, mua);
+    else for (int64_t j = 0; j < ma; j++) mua[j] = 1.0;
+    if (gaussian && h2b > 0.0) gaussian_weights(d2, mb, h2b, mub);
+    else for (int64_t j = 0; j < mb; j++) mub[j] = 1.0;
+    double ca[6], cb[6];
+    scatter_pair(q, ma, mean_a, mua, mb, mean_b, mub, ca, cb);
+    smallest_eigvec_pair(ca, cb, na, nb);
+#else
+    neighbourhood_pdis(q, d2, ma, mean_a, h2a, gaussian, NULL, na, mu);
+    neighbourhood_pdis(q, d2, mb, mean_b, h2b, gaussian, NULL, nb, mu);
+#endif
+}
+
 /* ------------------------------------------------------------------ robust mode */
 
 /* numpy's pairwise summation of a[0], a[stride], ... (n terms), as its add.reduce
@@ -847,7 +1027,10 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     block_t blk = {NULL, NULL, NULL, NULL, NULL, NULL, 0, 0};
     double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
-    double *mu = (double *)malloc((size_t)kmax * sizeof(double));
+    double *mu = (double *)malloc((size_t)kmax * 2 * sizeof(double));
+    /* per scale: mean offset (3), normal (3), largest squared distance (1) */
+    double *smean = (double *)malloc((size_t)nscales * 7 * sizeof(double));
+    double *snrm = smean ? smean + 3 * nscales : NULL, *sh2 = smean ? smean + 6 * nscales : NULL;
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
     double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
@@ -862,7 +1045,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     int64_t leaf_s = 0, leaf_e = 0;
     double r2 = -1.0, leaf_max = 0.0;
     double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !soa || !ell || !hs || !keep || !mk || !sel || !bucket) {
+    if (!h.c || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk || !sel ||
+        !bucket) {
         rc = -1;
         goto done;
     }
@@ -924,19 +1108,30 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             d2[j] = h.c[j].d2;
         }
         for (int s = 0; s < nscales; s++) mk[s] = ks[s];
-        int reuse = 0; /* the largest scale's normal and pdis: the sheet filter's */
+        /* known: how many of the largest scales have their normal from the sheet filter's
+         * PCA (the largest scale's, and the next one's computed beside it): their lists
+         * are the same when the filter keeps every neighbour */
+        int known = 0, means = 0; /* means: smean and sh2 hold the lists' */
         double top_pd = 0.0, top_nrm[3] = {0, 0, 0};
+        int pdis_wanted = out->pdis != NULL || out->relative != NULL;
         if (out->sheet_gap > 0.0) {
-            double sx = 0, sy = 0, sz = 0, h2 = 0, *nrm = top_nrm;
-            for (int64_t j = 0; j < kmax; j++) {
-                sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
-                if (d2[j] > h2) h2 = d2[j];
+            scale_means(q, d2, mk, nscales, smean, sh2);
+            const double *mean = smean + 3 * (nscales - 1);
+            double h2 = sh2[nscales - 1];
+            if (pdis_wanted && nscales >= 2) {
+                int u = nscales - 2;
+                pca_normal_pair(q, d2, mk[u], smean + 3 * u, sh2[u], kmax, mean, h2, gaussian, mu,
+                                snrm + 3 * u, top_nrm);
+                known = 2;
+            } else {
+                neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, top_nrm, mu);
+                known = 1;
             }
-            double mean[3] = {sx / (double)kmax, sy / (double)kmax, sz / (double)kmax};
-            top_pd = neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, nrm, mu);
-            reuse = 1;
-            if (sheet_keep(q, d2, kmax, nrm, &sheet, hs, keep) > 0) {
-                reuse = 0;
+            top_pd = fabs(mean[0] * top_nrm[0] + mean[1] * top_nrm[1] + mean[2] * top_nrm[2]);
+            means = 1;
+            if (sheet_keep(q, d2, kmax, top_nrm, &sheet, hs, keep) > 0) {
+                known = 0;
+                means = 0;
                 int64_t t = 0, s = 0;
                 for (int64_t j = 0; j < kmax; j++) {
                     while (s < nscales && ks[s] == j) mk[s++] = t;
@@ -963,22 +1158,31 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             local_scale_prefixes(soa, mk, nscales, ell, ell + nscales);
         }
         if (out->pdis == NULL && out->relative == NULL) continue;
-        double score = 0.0, sx = 0, sy = 0, sz = 0, h2 = 0;
-        int64_t j = 0;
+        double score = 0.0;
+        if (!means) scale_means(q, d2, mk, nscales, smean, sh2);
+        int last = nscales - known, held = -1; /* the scales with a PCA still to do */
+        for (int s = 0; s < last; s++) { /* their normals, two scales at once */
+            if (held < 0) { held = s; continue; }
+            pca_normal_pair(q, d2, mk[held], smean + 3 * held, sh2[held], mk[s], smean + 3 * s,
+                            sh2[s], gaussian, mu, snrm + 3 * held, snrm + 3 * s);
+            held = -1;
+        }
+        if (held >= 0) {
+            neighbourhood_pdis(q, d2, mk[held], smean + 3 * held, sh2[held], gaussian, NULL,
+                               snrm + 3 * held, mu);
+        }
+        if (known > 0) { /* the largest scale: the same sums over the same list as the sheet's */
+            double *t = snrm + 3 * (nscales - 1);
+            t[0] = top_nrm[0]; t[1] = top_nrm[1]; t[2] = top_nrm[2];
+        }
         for (int s = 0; s < nscales; s++) {
-            int64_t m = mk[s];
-            for (; j < m; j++) {
-                sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
-                if (d2[j] > h2) h2 = d2[j];
-            }
-            double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
-            double *nrm = out->normals ? out->normals + 3 * (s * n + oi) : NULL;
-            double pd;
-            if (reuse && s == nscales - 1) { /* the same sums over the same list */
-                pd = top_pd;
-                if (nrm != NULL) { nrm[0] = top_nrm[0]; nrm[1] = top_nrm[1]; nrm[2] = top_nrm[2]; }
-            } else {
-                pd = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, NULL, nrm, mu);
+            const double *mean = smean + 3 * s, *nv = snrm + 3 * s;
+            double pd = known > 0 && s == nscales - 1
+                            ? top_pd
+                            : fabs(mean[0] * nv[0] + mean[1] * nv[1] + mean[2] * nv[2]);
+            if (out->normals != NULL) {
+                double *nrm = out->normals + 3 * (s * n + oi);
+                nrm[0] = nv[0]; nrm[1] = nv[1]; nrm[2] = nv[2];
             }
             if (out->pdis != NULL) out->pdis[s * n + oi] = pd;
             if (out->relative != NULL) { /* min(x / l, 1) keeps a NaN, as np.minimum */
@@ -995,6 +1199,7 @@ done:
     free(q);
     free(d2);
     free(mu);
+    free(smean);
     free(soa);
     free(ell);
     free(hs);
