@@ -10,7 +10,7 @@ import numpy as np
 
 from . import _header, _kernels
 from .neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods
-from .normals import Weighting
+from .normals import DEFAULT_WEIGHTING, Weighting
 from .projected_distance import projected_distances
 from .threshold import FLAT_TOLERANCE, normalise, otsu_threshold
 
@@ -56,7 +56,7 @@ def run_scales(
     scales: Sequence[int],
     *,
     normals: np.ndarray | None = None,
-    weighting: Weighting = "gaussian",
+    weighting: Weighting = DEFAULT_WEIGHTING,
     keep_details: bool = False,
     on_scale: Callable[[int], None] | None = None,
     rule: Callable[..., tuple[np.ndarray, float]] | None = None,
@@ -160,7 +160,7 @@ def projected_distances_all(
     scales: Sequence[int],
     *,
     normals: np.ndarray | None = None,
-    weighting: Weighting = "gaussian",
+    weighting: Weighting = DEFAULT_WEIGHTING,
 ) -> np.ndarray:
     """Raw projected distances (s, m) of every scale, with the neighbourhoods' backend
     (what :func:`run_scales` thresholds; for benchmarks and tests)."""

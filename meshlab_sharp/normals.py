@@ -62,7 +62,7 @@ def weighted_pca_normals(
     starts: np.ndarray,
     counts: np.ndarray,
     mean: np.ndarray,
-    weighting: Weighting = "gaussian",
+    weighting: Weighting = DEFAULT_WEIGHTING,
 ) -> np.ndarray:
     """PCA normals of a block of neighbourhoods given as offsets from their centre point.
 

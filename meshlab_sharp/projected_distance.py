@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .neighbourhoods import Neighbourhood
-from .normals import Weighting, weighted_pca_normals
+from .normals import DEFAULT_WEIGHTING, Weighting, weighted_pca_normals
 
 #: Points per block: bounds the (block * k, 3) temporaries.
 BLOCK = 32768
@@ -18,7 +18,7 @@ def projected_distances(
     neighbourhood: Neighbourhood,
     normals: np.ndarray | None = None,
     *,
-    weighting: Weighting = "gaussian",
+    weighting: Weighting = DEFAULT_WEIGHTING,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``|(p_i - c_i) . n_i|`` for every point, ``c_i`` the plain centroid of its neighbours.
 

@@ -69,7 +69,7 @@ from .neighbourhoods import (
     RingNeighbourhoods,
     build_neighbourhoods,
 )
-from .normals import Weighting
+from .normals import DEFAULT_WEIGHTING, Weighting
 from .projected_distance import projected_distances
 from .threshold import histogram, otsu_from_histogram
 
@@ -854,7 +854,7 @@ class RobustSetup:
         scales: tuple[int, ...],
         *,
         workers: int = -1,
-        weighting: Weighting = "gaussian",
+        weighting: Weighting = DEFAULT_WEIGHTING,
         keep_normals: bool = False,
     ) -> None:
         self.n = len(points)

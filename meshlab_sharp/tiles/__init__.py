@@ -32,7 +32,8 @@ from ..extras import require
 from ..io import Geometry
 from ..io.stream import PointSource, open_points
 from ..multiscale import DEFAULT_KNN_SCALES
-from ..normals import WEIGHTINGS
+from ..normals import DEFAULT_WEIGHTING, WEIGHTINGS
+from ..pipeline import DEFAULT_MODE
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
 from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
@@ -114,8 +115,8 @@ def detect_tiled(
     source: PointSource | np.ndarray | Geometry,
     *,
     scales: tuple[int, ...],
-    weighting: str = "gaussian",
-    mode: str = "robust",
+    weighting: str = DEFAULT_WEIGHTING,
+    mode: str = DEFAULT_MODE,
     max_memory: str | int | None = None,
     tile_points: int | None = None,
     dask: str | Any = None,

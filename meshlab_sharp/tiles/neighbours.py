@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 from .. import _kernels, robust
 from ..errors import InputError
 from ..neighbourhoods import Neighbourhood, squared_distances
+from ..normals import DEFAULT_WEIGHTING
 from .layout import Layout, bounds
 from .store import Store
 
@@ -75,7 +76,7 @@ class Query:
     kept: str | None = None
     rows: str | None = None
     scales: tuple[int, ...] | None = None
-    weighting: str = "gaussian"
+    weighting: str = DEFAULT_WEIGHTING
     robust: bool = False
     save: str | None = None
     reuse: str | None = None
