@@ -43,6 +43,8 @@ SHEET_GAP, SHEET_MIN, SHEET_OWN = 0.4, 6, 0.5
 SHEET_COLUMN, SHEET_COLUMN_GAP, SHEET_FAR_SPAN = 1.1, 0.75, 1.25
 #: Steps 7 and 8.
 SUPPORT_KNN, SUPPORT_MIN, THIN_KNN, MESH_RING, CONE_COS = 16, 2, 12, 2, 0.5
+#: Step 7: on a cloud whose nu is at most NOISE_QUIET, no support below this score.
+SUPPORT_FREE_SCORE = 0.22
 #: Step 9: 20 degrees, 4 / 0.3186 lower quartiles.
 CREASE, QUARTILE_FACTOR = math.pi / 9, 4 / 0.3186
 
@@ -62,6 +64,7 @@ class Reading:
             scales = meshlab_sharp.DEFAULT_KNN_SCALES
             keep, points, hoods, own, scales, growth, nu = self._cloud(points, scales)
             otsu = nu > NOISE_QUIET  # step 3: the floor alone on a cloud without noise
+            free = 0.0 if otsu else SUPPORT_FREE_SCORE  # step 7
             normals = None
             around = [h[: min(SUPPORT_KNN, len(h))] for h in hoods]
             thin_k = math.floor(THIN_KNN * growth + 0.5)  # grown with the scales
@@ -72,6 +75,7 @@ class Reading:
             scales = meshlab_sharp.DEFAULT_RING_SCALES
             keep = np.arange(n)
             otsu = True
+            free = 0.0
             normals = spec_face_normals(points, faces)
             ring = min(MESH_RING, max(scales))
             around = compare = spec_rings(faces, n, ring)
@@ -131,8 +135,8 @@ class Reading:
                 across_sure, across_maybe = cosines(i, j)
                 most += not across_sure
                 least += bool(sure_f0[j] and not across_maybe)
-            sure_f1[i] = sure_f0[i] and least >= SUPPORT_MIN
-            maybe_f1[i] = most >= SUPPORT_MIN
+            sure_f1[i] = sure_f0[i] and (least >= SUPPORT_MIN or score[i] < free - EPS)
+            maybe_f1[i] = most >= SUPPORT_MIN or score[i] < free + EPS
 
         # step 8: thinning across the line, every test on F1
         sure_f2, maybe_f2 = np.zeros(m, bool), np.zeros(m, bool)

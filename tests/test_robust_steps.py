@@ -83,6 +83,22 @@ def test_otsu_splits_on_meshes_and_on_clouds_with_noise():
     assert robust.otsu_splits(False, 0.05 + 1e-12)
 
 
+def test_weak_candidates_of_a_cloud_without_noise_need_no_support():
+    assert robust.SUPPORT_FREE_SCORE == 0.22
+    score = np.array([0.0, 0.2199, 0.22, 0.9])
+    np.testing.assert_array_equal(robust.support_exempt(score, False, 0.05), [1, 1, 0, 0])
+    assert not robust.support_exempt(score, False, 0.05 + 1e-12).any()  # noisy cloud
+    assert not robust.support_exempt(score, True, 0.0).any()  # mesh
+    # a lone feature (no other feature along its line) stays only where exempt
+    pts = np.array([[0.0, 0, 0], [0, 1, 0], [0, 0, 3]])
+    mask = np.array([True, True, False])
+    e = np.tile([1.0, 0.0, 0.0], (3, 1))
+    around = _csr([[0, 1, 2], [1, 0, 2], [2, 0]])
+    exempt = np.array([True, False, True])
+    out = robust.supported(pts, mask, e, around, 2, exempt=exempt)
+    np.testing.assert_array_equal(out, [True, False, False])
+
+
 def test_a_cloud_without_noise_is_thresholded_at_the_floor_a_noisy_one_by_otsu():
     clean = meshlab_sharp.detect(shapes.random_box_points(800, seed=2), mode="robust")
     assert (clean.thresholds == robust.R_MIN).all()

@@ -378,10 +378,12 @@ inline bool across(const std::vector<double> &p, Index i, Index j, const double 
 // robust.supported then robust.thin for the candidates rows (increasing), with the line
 // directions of f0 computed once; D, S, K: direction, support and comparison lists by
 // candidate slot. F1 = features with at least SUPPORT_MIN other features along their line
-// in S(i); F2 = F1 less the points beaten, across the line, by a higher score in K(i).
+// in S(i), or a score below `free` (robust.support_exempt: SUPPORT_FREE_SCORE on a cloud
+// without noise, 0 elsewhere); F2 = F1 less the points beaten, across the line, by a
+// higher score in K(i).
 std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
-                                 const Lists &D, const Lists &S, const Lists &K) {
+                                 const Lists &D, const Lists &S, const Lists &K, double free) {
 	std::vector<double> e(3 * rows.size()), col;
 	std::vector<char> f1(f0.size(), 0);
 	for (size_t c = 0; c < rows.size(); ++c) {
@@ -390,7 +392,7 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 		int along = 0;
 		for (const Index *j = S.begin(c); j != S.end(c); ++j)
 			if (*j != i && f0[*j] && !across(p, i, *j, &e[3 * c])) ++along;
-		f1[i] = along >= MS_SUPPORT_MIN;
+		f1[i] = along >= MS_SUPPORT_MIN || score[i] < free;
 	}
 	std::vector<char> f2 = f1;
 	for (size_t c = 0; c < rows.size(); ++c) {
@@ -571,12 +573,13 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85);
 	}
 	bar.report(85, "thresholds");
+	const bool quiet = !(ratio[at] > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
 	const size_t S = r.scales.size();
 	std::vector<int> votes(n, 0);
 	for (size_t s = 0; s < S; ++s) {
 		const std::vector<double> v(pass.relative.begin() + s * n, pass.relative.begin() + (s + 1) * n);
 		// robust.otsu_splits: without noise the floor alone
-		vote(v, ratio[at] > MS_NOISE_QUIET ? std::max(otsu(v), R_MIN) : R_MIN, true, votes, r);
+		vote(v, quiet ? R_MIN : std::max(otsu(v), R_MIN), true, votes, r);
 	}
 	decide(votes, S, d);
 	std::vector<Index> rows;
@@ -606,7 +609,7 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
 		K.add(row, row + std::min(thinKnn, top));
 	}
-	d.feature = supportAndThin(pts, d.feature, pass.score, rows, D, Sup, K);
+	d.feature = supportAndThin(pts, d.feature, pass.score, rows, D, Sup, K, quiet ? MS_SUPPORT_FREE_SCORE : 0.0);
 	return d;
 }
 
@@ -658,7 +661,7 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 				if (ring == top) D.add(nb.data(), nb.data() + nb.size());
 			}
 		}
-		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup);
+		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup, 0.0);
 	}
 	const auto edges = sharpVertices(c.pts, c.faces);
 	for (Index i = 0; i < n; ++i)
