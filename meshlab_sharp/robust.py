@@ -49,7 +49,10 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    scales of the centroid's distance relative to ``l``, which peaks on acute edges
    where ``r`` does not): non-maximum suppression
    across the line, so lines stay one point wide; comparing only within about 1.9
-   spacings keeps most of two parallel lines (the rims of a thin wall) apart.
+   spacings keeps most of two parallel lines (the rims of a thin wall) apart, and on
+   a cloud thresholded at the floor alone a point that is not a candidate lying
+   between the two (the middle of a wall's end face) keeps both
+   (:func:`thin_blockers`).
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
    an edge whose two faces turn by more than ``CREASE_ANGLE`` (more on a noisy mesh)
    are features too. On a CAD tessellation they are all of them.
@@ -115,6 +118,7 @@ __all__ = [
     "support_exempt",
     "supported",
     "thin",
+    "thin_blockers",
     "thin_knn",
 ]
 
@@ -620,6 +624,17 @@ def otsu_splits(mesh: bool, noise: float) -> bool:
     return mesh or noise > NOISE_QUIET
 
 
+def thin_blockers(candidates: np.ndarray, mesh: bool, noise: float) -> np.ndarray | None:
+    """:func:`thin`'s ``between``: on a cloud whose noise ratio ``noise`` (as
+    :func:`otsu_splits` takes it) is at most ``NOISE_QUIET``, the points that are not
+    ``candidates`` (m,) bool (at every scale); None (no blocking) on meshes and noisier
+    clouds. The two rims of a wall 2 spacings thick then do not thin each other away:
+    the end face's middle, between them, is not a candidate."""
+    if mesh or noise > NOISE_QUIET:
+        return None
+    return ~np.asarray(candidates, bool)
+
+
 def support_exempt(score: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
     """The points that :func:`supported` keeps without support: on a cloud whose noise
     ratio ``noise`` (as :func:`otsu_splits` takes it) is at most ``NOISE_QUIET``, those
@@ -800,13 +815,15 @@ def thin(
     compare: Neighbourhood,
     *,
     cone_cos: float = THIN_CONE_COS,
+    between: np.ndarray | None = None,
 ) -> np.ndarray:
     """Non-maximum suppression of feature points across the feature line.
 
     A feature point ``i`` is dropped when some feature point ``j != i`` of
     ``compare[i]`` with ``d = p_j - p_i`` lies across the line through ``i``
-    (``|d . e_i| < cone_cos * |d|``) and ``score[j] > score[i]``. Every decision uses
-    the mask before thinning.
+    (``|d . e_i| < cone_cos * |d|``) and ``score[j] > score[i]``, unless (with
+    ``between``) a point ``m`` of ``compare[i]`` with ``between[m]`` lies between them:
+    ``(p_m - p_i) . (p_m - p_j) < 0``. Every decision uses the mask before thinning.
 
     Parameters
     ----------
@@ -820,6 +837,8 @@ def thin(
     compare : Neighbourhood
         CSR lists for the comparison (``THIN_KNN`` nearest or the ``THIN_RING``-ring).
     cone_cos : float, default THIN_CONE_COS (0.5)
+    between : (m,) bool, optional
+        The points that part two features (:func:`thin_blockers`); default none.
 
     Returns
     -------
@@ -832,6 +851,15 @@ def thin(
         return mask.copy()
     owner, ci, nb, across = _feature_pairs(points, mask, e, compare, cone_cos)
     beaten = across & (score[nb] > score[ci])
+    if between is not None:
+        pair = np.flatnonzero(beaten)
+        at, m = _rows(compare, ci[pair])
+        use = np.asarray(between, bool)[m]
+        at, m = at[use], m[use]
+        a = points[m] - points[ci[pair[at]]]
+        b = points[m] - points[nb[pair[at]]]
+        dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+        beaten[pair[np.unique(at[dot < 0])]] = False
     suppressed = np.bincount(owner[beaten], minlength=len(cand)) > 0
     out = mask.copy()
     out[cand[suppressed]] = False
@@ -1078,10 +1106,19 @@ class RobustSetup:
             self._one_ring = None  # the rings are listed: the 1-ring is done with
             e = line_directions(self.points, mask, direction)
             free = support_exempt(self.rule.score, self.faces is not None, self.noise)
+            block = thin_blockers(mask, self.faces is not None, self.noise)
             mask = supported(
                 self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS, exempt=free
             )
-            mask = thin(self.points, mask, self.rule.score, e, compare, cone_cos=THIN_CONE_COS)
+            mask = thin(
+                self.points,
+                mask,
+                self.rule.score,
+                e,
+                compare,
+                cone_cos=THIN_CONE_COS,
+                between=block,
+            )
         if self.sharp_edges is not None:
             mask = mask | self.sharp_edges
             strength = np.where(self.sharp_edges, 1.0, strength)

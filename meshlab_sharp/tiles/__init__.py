@@ -428,7 +428,7 @@ def _robust(
     runner.step(Step("support", robust_support, near, support))
     compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     reuse = Query(compare, "kept", "mask1", reuse="lists")  # mask1: a subset of mask
-    runner.step(Step("thin", robust_thin, reuse, {"compare": compare}))
+    runner.step(Step("thin", robust_thin, reuse, {"compare": compare, "noise": nu}))
     return thresholds, decided["counts"], "final", "kept", scales
 
 

@@ -217,8 +217,10 @@ def robust_support(ctx: Context, *, top: int, around: int, noise: float) -> Part
     return {}
 
 
-def robust_thin(ctx: Context, *, compare: int) -> Partial:
-    """:func:`meshlab_sharp.robust.thin` of the rows; writes ``final``."""
+def robust_thin(ctx: Context, *, compare: int, noise: float) -> Partial:
+    """:func:`meshlab_sharp.robust.thin` of the rows, blocked by
+    :func:`meshlab_sharp.robust.thin_blockers` of the cloud's noise ratio ``noise``;
+    writes ``final``."""
     out = robust.thin(
         ctx.points,
         ctx.gather("mask1"),
@@ -226,6 +228,7 @@ def robust_thin(ctx: Context, *, compare: int) -> Partial:
         ctx.gather("e"),
         ctx.lists(compare),
         cone_cos=robust.THIN_CONE_COS,
+        between=robust.thin_blockers(ctx.gather("mask"), False, noise),
     )
     ctx.store.write_at("final", ctx.own, out[ctx.rows])
     return {}
