@@ -69,6 +69,10 @@
 #define MS_THIN_RING 2
 #define MS_SUPPORT_KNN 16
 #define MS_SUPPORT_MIN 2
+/* On a cloud thresholded at the floor alone (noise ratio at most MS_NOISE_QUIET), a
+ * candidate whose score (the mean o / l over the scales) is below this needs no support
+ * (robust.support_exempt): the candidates of weak edges come only here and there. */
+#define MS_SUPPORT_FREE_SCORE 0.22
 /* Points per chunk handed to a thread (_kernels.CHUNK). */
 #define MS_CHUNK 8192
 /* Most points in a leaf of the kd-tree (_kernels.KD_LEAF). */

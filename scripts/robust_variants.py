@@ -50,6 +50,8 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "no support": ((robust, "SUPPORT_MIN", 0),),
     "support >= 1": ((robust, "SUPPORT_MIN", 1),),
     "support >= 3": ((robust, "SUPPORT_MIN", 3),),
+    "support for every candidate (no free score)": ((robust, "SUPPORT_FREE_SCORE", 0.0),),
+    "support free below score 0.3": ((robust, "SUPPORT_FREE_SCORE", 0.3),),
     "thinning compares 16 nearest": ((robust, "THIN_KNN", 16),),
     "thinning compares 8 nearest": ((robust, "THIN_KNN", 8),),
     "thinning list not grown with the scales": ((robust, "thin_knn", lambda growth: 12),),

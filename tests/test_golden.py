@@ -54,6 +54,8 @@ NUDGES: dict[str, tuple[ModuleType, str, Callable[[float], float]]] = {
     "support kNN +2": (robust, "SUPPORT_KNN", lambda v: v + 2),
     "support min -1": (robust, "SUPPORT_MIN", lambda v: v - 1),
     "support min +1": (robust, "SUPPORT_MIN", lambda v: v + 1),
+    "support free score x0.85": (robust, "SUPPORT_FREE_SCORE", lambda v: v * 0.85),
+    "support free score x1.15": (robust, "SUPPORT_FREE_SCORE", lambda v: v * 1.15),
     "noise kNN -1": (robust, "NOISE_KNN", lambda v: v - 1),
     "noise kNN +1": (robust, "NOISE_KNN", lambda v: v + 1),
     "noise tolerated x0.93": (robust, "NOISE_TOLERATED", lambda v: v * 0.93),

@@ -43,6 +43,8 @@ SHEET_GAP, SHEET_MIN, SHEET_OWN = 0.4, 6, 0.5
 SHEET_COLUMN, SHEET_COLUMN_GAP, SHEET_FAR_SPAN = 1.1, 0.75, 1.25
 #: Steps 7 and 8.
 SUPPORT_KNN, SUPPORT_MIN, THIN_KNN, MESH_RING, CONE_COS = 16, 2, 12, 2, 0.5
+#: Step 7: on a cloud whose nu is at most NOISE_QUIET, no support below this score.
+SUPPORT_FREE_SCORE = 0.22
 #: Step 9: 20 degrees, 4 / 0.3186 lower quartiles.
 CREASE, QUARTILE_FACTOR = math.pi / 9, 4 / 0.3186
 
@@ -62,6 +64,8 @@ class Reading:
             scales = meshlab_sharp.DEFAULT_KNN_SCALES
             keep, points, hoods, own, scales, growth, nu = self._cloud(points, scales)
             otsu = nu > NOISE_QUIET  # step 3: the floor alone on a cloud without noise
+            free = 0.0 if otsu else SUPPORT_FREE_SCORE  # step 7
+            block = not otsu  # step 8: blocked by non-candidates between
             normals = None
             around = [h[: min(SUPPORT_KNN, len(h))] for h in hoods]
             thin_k = math.floor(THIN_KNN * growth + 0.5)  # grown with the scales
@@ -72,6 +76,8 @@ class Reading:
             scales = meshlab_sharp.DEFAULT_RING_SCALES
             keep = np.arange(n)
             otsu = True
+            free = 0.0
+            block = False
             normals = spec_face_normals(points, faces)
             ring = min(MESH_RING, max(scales))
             around = compare = spec_rings(faces, n, ring)
@@ -131,8 +137,19 @@ class Reading:
                 across_sure, across_maybe = cosines(i, j)
                 most += not across_sure
                 least += bool(sure_f0[j] and not across_maybe)
-            sure_f1[i] = sure_f0[i] and least >= SUPPORT_MIN
-            maybe_f1[i] = most >= SUPPORT_MIN
+            sure_f1[i] = sure_f0[i] and (least >= SUPPORT_MIN or score[i] < free - EPS)
+            maybe_f1[i] = most >= SUPPORT_MIN or score[i] < free + EPS
+
+        def parted(i: int, j: int) -> tuple[bool, bool]:
+            """(surely, possibly) a non-candidate of compare[i] between i and j."""
+            if not block:
+                return False, False
+            sure = maybe = False
+            for k in compare[i]:
+                dot = (points[k] - points[i]) @ (points[k] - points[j])
+                sure |= bool(not maybe_f0[k] and dot < -EPS)
+                maybe |= bool(not sure_f0[k] and dot < EPS)
+            return sure, maybe
 
         # step 8: thinning across the line, every test on F1
         sure_f2, maybe_f2 = np.zeros(m, bool), np.zeros(m, bool)
@@ -142,8 +159,11 @@ class Reading:
                 if j == i or not maybe_f1[j]:
                     continue
                 across_sure, across_maybe = cosines(i, j)
-                beaten_maybe |= across_maybe and score[j] > score[i] - EPS
-                beaten_sure |= bool(sure_f1[j] and across_sure and score[j] > score[i] + EPS)
+                parted_sure, parted_maybe = parted(i, j)
+                beaten_maybe |= across_maybe and score[j] > score[i] - EPS and not parted_sure
+                beaten_sure |= bool(
+                    sure_f1[j] and across_sure and score[j] > score[i] + EPS and not parted_maybe
+                )
             sure_f2[i] = sure_f1[i] and not beaten_maybe
             maybe_f2[i] = not beaten_sure
 

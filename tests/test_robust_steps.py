@@ -83,6 +83,22 @@ def test_otsu_splits_on_meshes_and_on_clouds_with_noise():
     assert robust.otsu_splits(False, 0.05 + 1e-12)
 
 
+def test_weak_candidates_of_a_cloud_without_noise_need_no_support():
+    assert robust.SUPPORT_FREE_SCORE == 0.22
+    score = np.array([0.0, 0.2199, 0.22, 0.9])
+    np.testing.assert_array_equal(robust.support_exempt(score, False, 0.05), [1, 1, 0, 0])
+    assert not robust.support_exempt(score, False, 0.05 + 1e-12).any()  # noisy cloud
+    assert not robust.support_exempt(score, True, 0.0).any()  # mesh
+    # a lone feature (no other feature along its line) stays only where exempt
+    pts = np.array([[0.0, 0, 0], [0, 1, 0], [0, 0, 3]])
+    mask = np.array([True, True, False])
+    e = np.tile([1.0, 0.0, 0.0], (3, 1))
+    around = _csr([[0, 1, 2], [1, 0, 2], [2, 0]])
+    exempt = np.array([True, False, True])
+    out = robust.supported(pts, mask, e, around, 2, exempt=exempt)
+    np.testing.assert_array_equal(out, [True, False, False])
+
+
 def test_a_cloud_without_noise_is_thresholded_at_the_floor_a_noisy_one_by_otsu():
     clean = meshlab_sharp.detect(shapes.random_box_points(800, seed=2), mode="robust")
     assert (clean.thresholds == robust.R_MIN).all()
@@ -219,3 +235,26 @@ def test_thinning_list_grows_with_the_scales():
     assert robust.thin_knn(1.8) == 22  # 21.6, rounded half up as the scales are
     assert robust.thin_knn(3.0) == 36
     assert robust.thin_knn(1.125) == 14  # 13.5 exactly: half up
+
+
+def test_thinning_is_blocked_by_a_non_candidate_between_on_a_cloud_without_noise():
+    # two parallel lines along x (the rims of a wall), 1 apart in y; feature 0 (score
+    # 0.5) is beaten across its line by feature 1 (0.9) unless point 2, no candidate,
+    # lies between them ((p_2 - p_0) . (p_2 - p_1) < 0); point 3 lies beyond 1
+    pts = np.array([[0.0, 0, 0], [0, 1, 0], [0, 0.5, 0.1], [0, 2, 0]])
+    mask = np.array([True, True, False, False])
+    score = np.array([0.5, 0.9, 0.0, 0.0])
+    e = np.tile([1.0, 0.0, 0.0], (4, 1))
+    compare = _csr([[0, 1, 2], [1, 0], [2], [3]])
+    assert robust.thin(pts, mask, score, e, compare).tolist() == [False, True, False, False]
+    between = robust.thin_blockers(np.array([True, True, False, False]), False, 0.0)
+    np.testing.assert_array_equal(between, [False, False, True, True])
+    kept = robust.thin(pts, mask, score, e, compare, between=between)
+    assert kept.tolist() == [True, True, False, False]
+    beyond = _csr([[0, 1, 3], [1, 0], [2], [3]])  # (p_3 - p_0) . (p_3 - p_1) = 2 > 0
+    out = robust.thin(pts, mask, score, e, beyond, between=between)
+    assert out.tolist() == [False, True, False, False]
+    # meshes and clouds with noise: no blocking
+    assert robust.thin_blockers(mask, True, 0.0) is None
+    assert robust.thin_blockers(mask, False, 0.05 + 1e-12) is None
+    assert robust.thin_blockers(mask, False, 0.05) is not None

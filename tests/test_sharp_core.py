@@ -202,6 +202,7 @@ def test_the_constants_are_the_headers():
         "NOISE_KNN",
         "NOISE_QUIET",
         "NOISE_TOLERATED",
+        "SUPPORT_FREE_SCORE",
         "NOISE_MAX_FACTOR",
         "THIN_CONE_COS",
     ):

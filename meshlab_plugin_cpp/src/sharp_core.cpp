@@ -375,13 +375,29 @@ inline bool across(const std::vector<double> &p, Index i, Index j, const double 
 	return std::fabs(dx * e[0] + dy * e[1] + dz * e[2]) < MS_THIN_CONE_COS * std::sqrt(dx * dx + dy * dy + dz * dz);
 }
 
+// Whether a point m of [begin, end) that is not in f0 lies between i and j:
+// (p_m - p_i) . (p_m - p_j) < 0 (robust.thin's `between`).
+inline bool parted(const std::vector<double> &p, const std::vector<char> &f0, Index i, Index j, const Index *begin,
+                   const Index *end) {
+	for (const Index *m = begin; m != end; ++m) {
+		if (f0[*m]) continue;
+		const double ax = p[3 * *m] - p[3 * i], ay = p[3 * *m + 1] - p[3 * i + 1], az = p[3 * *m + 2] - p[3 * i + 2];
+		const double bx = p[3 * *m] - p[3 * j], by = p[3 * *m + 1] - p[3 * j + 1], bz = p[3 * *m + 2] - p[3 * j + 2];
+		if (ax * bx + ay * by + az * bz < 0) return true;
+	}
+	return false;
+}
+
 // robust.supported then robust.thin for the candidates rows (increasing), with the line
 // directions of f0 computed once; D, S, K: direction, support and comparison lists by
 // candidate slot. F1 = features with at least SUPPORT_MIN other features along their line
-// in S(i); F2 = F1 less the points beaten, across the line, by a higher score in K(i).
+// in S(i), or a score below `free` (robust.support_exempt: SUPPORT_FREE_SCORE on a cloud
+// without noise, 0 elsewhere); F2 = F1 less the points beaten, across the line, by a
+// higher score in K(i), unless (`block`: robust.thin_blockers, a cloud without noise) a
+// point of K(i) not in F0 lies between them.
 std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
-                                 const Lists &D, const Lists &S, const Lists &K) {
+                                 const Lists &D, const Lists &S, const Lists &K, double free, bool block) {
 	std::vector<double> e(3 * rows.size()), col;
 	std::vector<char> f1(f0.size(), 0);
 	for (size_t c = 0; c < rows.size(); ++c) {
@@ -390,14 +406,15 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 		int along = 0;
 		for (const Index *j = S.begin(c); j != S.end(c); ++j)
 			if (*j != i && f0[*j] && !across(p, i, *j, &e[3 * c])) ++along;
-		f1[i] = along >= MS_SUPPORT_MIN;
+		f1[i] = along >= MS_SUPPORT_MIN || score[i] < free;
 	}
 	std::vector<char> f2 = f1;
 	for (size_t c = 0; c < rows.size(); ++c) {
 		const Index i = rows[c];
 		if (!f1[i]) continue;
 		for (const Index *j = K.begin(c); j != K.end(c); ++j)
-			if (*j != i && f1[*j] && across(p, i, *j, &e[3 * c]) && score[*j] > score[i]) {
+			if (*j != i && f1[*j] && across(p, i, *j, &e[3 * c]) && score[*j] > score[i] &&
+			    !(block && parted(p, f0, i, *j, K.begin(c), K.end(c)))) {
 				f2[i] = 0;
 				break;
 			}
@@ -571,12 +588,13 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85);
 	}
 	bar.report(85, "thresholds");
+	const bool quiet = !(ratio[at] > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
 	const size_t S = r.scales.size();
 	std::vector<int> votes(n, 0);
 	for (size_t s = 0; s < S; ++s) {
 		const std::vector<double> v(pass.relative.begin() + s * n, pass.relative.begin() + (s + 1) * n);
 		// robust.otsu_splits: without noise the floor alone
-		vote(v, ratio[at] > MS_NOISE_QUIET ? std::max(otsu(v), R_MIN) : R_MIN, true, votes, r);
+		vote(v, quiet ? R_MIN : std::max(otsu(v), R_MIN), true, votes, r);
 	}
 	decide(votes, S, d);
 	std::vector<Index> rows;
@@ -606,7 +624,7 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
 		K.add(row, row + std::min(thinKnn, top));
 	}
-	d.feature = supportAndThin(pts, d.feature, pass.score, rows, D, Sup, K);
+	d.feature = supportAndThin(pts, d.feature, pass.score, rows, D, Sup, K, quiet ? MS_SUPPORT_FREE_SCORE : 0.0, quiet);
 	return d;
 }
 
@@ -658,7 +676,7 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 				if (ring == top) D.add(nb.data(), nb.data() + nb.size());
 			}
 		}
-		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup);
+		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup, 0.0, false);
 	}
 	const auto edges = sharpVertices(c.pts, c.faces);
 	for (Index i = 0; i < n; ++i)

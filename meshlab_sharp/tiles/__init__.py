@@ -424,12 +424,12 @@ def _robust(
     otsu = robust.otsu_splits(False, nu)
     thresholds = np.array([robust.robust_threshold_from_histogram(h, otsu) for h in hist])
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
-    support = {"top": top, "around": min(robust.SUPPORT_KNN, top)}
+    support = {"top": top, "around": min(robust.SUPPORT_KNN, top), "noise": nu}
     near = Query(top, "kept", "mask", save="lists", hint="kd2")
     runner.step(Step("support", robust_support, near, support))
     compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     reuse = Query(compare, "kept", "mask1", reuse="lists")  # mask1: a subset of mask
-    runner.step(Step("thin", robust_thin, reuse, {"compare": compare}))
+    runner.step(Step("thin", robust_thin, reuse, {"compare": compare, "noise": nu}))
     return thresholds, decided["counts"], "final", "kept", scales
 
 

@@ -197,9 +197,10 @@ def robust_decide(span: Span, *, thresholds: np.ndarray) -> Partial:
     return _decided(span, d, span.read("r")[d] >= thresholds)
 
 
-def robust_support(ctx: Context, *, top: int, around: int) -> Partial:
+def robust_support(ctx: Context, *, top: int, around: int, noise: float) -> Partial:
     """The rows' line directions (:func:`meshlab_sharp.robust.line_directions`, to
-    ``e``) and :func:`meshlab_sharp.robust.supported` (to ``mask1``)."""
+    ``e``) and :func:`meshlab_sharp.robust.supported` (to ``mask1``), exempting
+    :func:`meshlab_sharp.robust.support_exempt` of the cloud's noise ratio ``noise``."""
     mask = ctx.gather("mask")
     e = robust.line_directions(ctx.points, mask, ctx.lists(top))
     out = robust.supported(
@@ -209,14 +210,17 @@ def robust_support(ctx: Context, *, top: int, around: int) -> Partial:
         ctx.lists(around),
         robust.SUPPORT_MIN,
         cone_cos=robust.THIN_CONE_COS,
+        exempt=robust.support_exempt(ctx.gather("score"), False, noise),
     )
     ctx.store.write_at("e", ctx.own, e[ctx.rows])
     ctx.store.write_at("mask1", ctx.own, out[ctx.rows])
     return {}
 
 
-def robust_thin(ctx: Context, *, compare: int) -> Partial:
-    """:func:`meshlab_sharp.robust.thin` of the rows; writes ``final``."""
+def robust_thin(ctx: Context, *, compare: int, noise: float) -> Partial:
+    """:func:`meshlab_sharp.robust.thin` of the rows, blocked by
+    :func:`meshlab_sharp.robust.thin_blockers` of the cloud's noise ratio ``noise``;
+    writes ``final``."""
     out = robust.thin(
         ctx.points,
         ctx.gather("mask1"),
@@ -224,6 +228,7 @@ def robust_thin(ctx: Context, *, compare: int) -> Partial:
         ctx.gather("e"),
         ctx.lists(compare),
         cone_cos=robust.THIN_CONE_COS,
+        between=robust.thin_blockers(ctx.gather("mask"), False, noise),
     )
     ctx.store.write_at("final", ctx.own, out[ctx.rows])
     return {}
