@@ -148,23 +148,7 @@ class Runner:
             outcomes = self._local(step, n)
             reduced = combine([o.partial for o in outcomes])
         else:
-            args = (self.most_points, self.workers, self.backend)
-            futures = [
-                self.client.submit(
-                    tile_task, step, self.store, self.layout, t, self.halos[t], *args, pure=False
-                )
-                for t in range(n)
-            ]
-            partials = [self.client.submit(_partial, f) for f in futures]
-            total = self.client.submit(_combine_all, partials)
-            from dask.distributed import as_completed
-
-            for done, f in enumerate(as_completed(futures), start=1):
-                f.result()
-                if self.on_tile is not None:
-                    self.on_tile(step.label, done, n)
-            outcomes = self.client.gather(futures)
-            reduced = total.result()
+            outcomes, reduced = self._dask(step, n)
         for t, o in enumerate(outcomes):
             self.halos[t] = max(self.halos[t], o.halo)
             self.peak = max(self.peak, o.peak)
@@ -176,6 +160,39 @@ class Runner:
         busy = sum(o.seconds for o in outcomes)
         self.task_seconds[label] = self.task_seconds.get(label, 0.0) + busy
         return reduced
+
+    def _halo(self, t: int, guess: float) -> float:
+        """Tile ``t``'s first halo: its own from an earlier step, else ``guess``."""
+        return float(self.halos[t]) if self.halos[t] > 0 else guess
+
+    def _dask(self, step: Step, n: int) -> tuple[list[Outcome], Partial]:
+        """The outcomes of ``step`` on the tiles ``0..n-1`` as Dask tasks, and their
+        partials reduced by a Dask task. First halos as in :meth:`_local`: without any
+        (a first search step), the first tile runs alone and its halo is every other
+        tile's guess (a tile started with no halo searches twice)."""
+        assert self.client is not None
+        args = (self.most_points, self.workers, self.backend)
+        guess = float(self.halos.max(initial=0.0))
+
+        def submit(t: int) -> Any:
+            halo = self._halo(t, guess)
+            task = (tile_task, step, self.store, self.layout, t, halo, *args)
+            return self.client.submit(*task, pure=False)
+
+        futures = []
+        if step.query is not None and guess == 0.0 and n > 0:
+            futures.append(submit(0))
+            guess = futures[0].result().halo
+        futures += [submit(t) for t in range(len(futures), n)]
+        partials = [self.client.submit(_partial, f) for f in futures]
+        total = self.client.submit(_combine_all, partials)
+        from dask.distributed import as_completed
+
+        for done, f in enumerate(as_completed(futures), start=1):
+            f.result()
+            if self.on_tile is not None:
+                self.on_tile(step.label, done, n)
+        return self.client.gather(futures), total.result()
 
     def _local(self, step: Step, n: int) -> list[Outcome]:
         """The outcomes of ``step`` on the tiles ``0..n-1`` in this process, ``at_once``
@@ -190,7 +207,7 @@ class Runner:
         guess = float(self.halos.max(initial=0.0))
 
         def submit(pool: ThreadPoolExecutor, t: int) -> Future[Outcome]:
-            halo = self.halos[t] if self.halos[t] > 0 else guess
+            halo = self._halo(t, guess)
             return pool.submit(tile_task, step, self.store, self.layout, t, halo, *args)
 
         first = 1 if step.query is not None and guess == 0.0 else self.at_once
