@@ -145,7 +145,9 @@ def detect_tiled(
     on_tile : callable, optional
         ``on_tile(label, done, n_tiles)`` after each tile task.
     workers : int
-        Threads of the kNN search in each tile task.
+        Threads of the kNN search in each tile task; <= 0 (default): on Dask, the
+        cores of the worker's machine shared by its workers' threads
+        (:func:`meshlab_sharp.tiles.run.task_threads`), else all the cores.
 
     Returns
     -------
@@ -156,6 +158,7 @@ def detect_tiled(
         ``step_<label>`` per step (wall) and ``tasks_<label>`` (its tile tasks' own
         seconds, summed), ``finish``, ``total``),
         and ``tiling`` (tiles, steps, tasks, halo, points that took the streaming route,
+        most threads of a tile task's searches (``task_threads``),
         robust mode's points whose pass ran again (``redone``), peak memory of this
         process and of the workers).
     """
@@ -206,7 +209,7 @@ def detect_tiled(
             store,
             layout,
             most_points=int(HALO_FACTOR * tile_points),
-            workers=1 if client is not None and str(dask).startswith("local:") else workers,
+            workers=workers,
             at_once=TILES_AT_ONCE,
             on_tile=on_tile,
             client=client,
@@ -234,6 +237,7 @@ def detect_tiled(
             "tasks": runner.tasks,
             "largest_search": runner.gathered,
             "streamed": runner.streamed,
+            "task_threads": runner.threads,
             "redone": runner.notes.get("redone", 0),
             "halo_max": float(runner.halos.max(initial=0.0)),
             "peak_bytes": peak_rss(),

@@ -12,7 +12,7 @@ import itertools
 import resource
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any
@@ -49,7 +49,8 @@ def peak_rss() -> int:
 @dataclass(frozen=True)
 class Outcome:
     """What a tile task returns: the partial, the halo that held, points searched, rows
-    that took the streaming route, the process's peak memory, the task's own seconds."""
+    that took the streaming route, the process's peak memory, the task's own seconds,
+    the threads of its searches."""
 
     partial: Partial
     halo: float
@@ -57,6 +58,7 @@ class Outcome:
     streamed: int
     peak: int
     seconds: float
+    threads: int
 
 
 def tile_task(
@@ -68,9 +70,19 @@ def tile_task(
     most_points: int,
     workers: int,
     backend: str,
+    sharing: Mapping[str, int] | None = None,
 ) -> Outcome:
-    """Run ``step`` on one tile."""
+    """Run ``step`` on one tile with ``workers`` threads; on a Dask worker (``sharing``
+    given: threads of the workers per machine) ``workers <= 0`` is
+    :func:`task_threads` of the worker's machine."""
     started = time.perf_counter()
+    if sharing is not None and workers <= 0:
+        from distributed import get_worker
+        from distributed.comm import get_address_host
+
+        worker = get_worker()
+        share = sharing.get(get_address_host(worker.address), worker.state.nthreads)
+        workers = task_threads(_kernels._workers(-1), share)
     with _kernels.use_backend(backend):
         if step.query is None:
             a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
@@ -81,7 +93,24 @@ def tile_task(
                 store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
             )
             partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
-    return Outcome(partial, used, gathered, streamed, peak_rss(), time.perf_counter() - started)
+    seconds = time.perf_counter() - started
+    return Outcome(partial, used, gathered, streamed, peak_rss(), seconds, workers)
+
+
+def task_threads(cores: int, sharing: int) -> int:
+    """Threads of a tile task's searches on a Dask worker: the cores of its machine
+    shared by the threads of the workers on it (each runs a task at a time), at least
+    one. ``dask worker --nworkers 8 --nthreads 1`` on 8 cores: one each, not 8 x 8."""
+    return max(1, cores // max(1, sharing))
+
+
+def machine_threads(client: Any) -> dict[str, int]:
+    """Threads of the cluster's workers per machine (host), as the scheduler knows
+    them now."""
+    out: dict[str, int] = {}
+    for info in client.scheduler_info(n_workers=-1)["workers"].values():
+        out[info["host"]] = out.get(info["host"], 0) + int(info["nthreads"])
+    return out
 
 
 def finish_task(store: Store, layout: Layout, tile: int, mask: str, kept: str | None) -> dict:
@@ -99,8 +128,8 @@ class Runner:
     most_points : int
         Largest box a halo may widen to.
     workers : int
-        Threads of a Dask tile task's kNN search; in this process, of the searches of
-        the tiles run at once together.
+        Threads of a Dask tile task's kNN search (<= 0: :func:`task_threads` of its
+        machine); in this process, of the searches of the tiles run at once together.
     at_once : int
         Tiles run at the same time in this process (no client), at most ``workers``.
     on_tile : callable, optional
@@ -134,11 +163,15 @@ class Runner:
         self.tasks = 0
         self.gathered = 0
         self.streamed = 0
+        #: Most threads a tile task's searches used.
+        self.threads = 0
         self.seconds: dict[str, float] = {}
         self.task_seconds: dict[str, float] = {}
         #: Counts a mode reports in the summary (robust mode: ``redone``).
         self.notes: dict[str, int] = {}
         self.backend = _kernels.default_backend()
+        #: Threads of the workers per machine (Dask), for :func:`task_threads`.
+        self.sharing = None if client is None else machine_threads(client)
 
     def step(self, step: Step) -> Partial:
         """Run ``step`` on every tile; the reduced partial."""
@@ -154,6 +187,7 @@ class Runner:
             self.peak = max(self.peak, o.peak)
             self.gathered = max(self.gathered, o.gathered)
             self.streamed += o.streamed
+            self.threads = max(self.threads, o.threads)
         self.tasks += n
         label = step.label
         self.seconds[label] = self.seconds.get(label, 0.0) + time.perf_counter() - started
@@ -171,7 +205,7 @@ class Runner:
         (a first search step), the first tile runs alone and its halo is every other
         tile's guess (a tile started with no halo searches twice)."""
         assert self.client is not None
-        args = (self.most_points, self.workers, self.backend)
+        args = (self.most_points, self.workers, self.backend, self.sharing)
         guess = float(self.halos.max(initial=0.0))
 
         def submit(t: int) -> Any:
