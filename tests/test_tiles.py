@@ -218,6 +218,21 @@ def test_dask_equals_in_memory() -> None:
     assert_same(one, ref)
 
 
+def test_local_cluster_workers_keep_glibc_memory_handling(monkeypatch) -> None:
+    """--dask local:N starts its workers without Dask's MALLOC_TRIM_THRESHOLD_ (which
+    fixes glibc's mmap threshold: every large array mapped and faulted in anew)."""
+    pytest.importorskip("dask.distributed")
+    from contextlib import ExitStack
+
+    from meshlab_sharp.tiles import _client
+
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    with ExitStack() as stack:
+        client = _client("local:1", stack)
+        got = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"))
+    assert list(got.values()) == ["unset"]
+
+
 def test_task_threads_share_the_machine() -> None:
     """A Dask tile task's threads: the machine's cores over the threads of the workers
     on it, at least one (8 single-thread workers on 8 cores: one each, not 8 x 8)."""

@@ -74,6 +74,12 @@ DASK_TILE_MEMORY = 1 << 30
 
 #: Memory of a Dask worker before its first tile (interpreter, numpy, scipy, dask).
 WORKER_BASELINE = 200 << 20
+#: Dask settings while a ``local:N`` cluster starts: its workers keep glibc's own
+#: memory handling. Dask's nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536``,
+#: which also fixes glibc's mmap threshold at 128 kB: every array over it is mapped,
+#: faulted in page by page and unmapped again, tile after tile (measured: 8x the page
+#: faults, 1.46x the workers' CPU time on 500k points).
+LOCAL_WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 #: Tile steps of each mode (progress bar).
 STEPS = {"paper": 3, "robust": 8}
 
@@ -460,15 +466,16 @@ def _client(dask: str | Any, stack: ExitStack) -> Any:
             n = 0
         if n < 1:
             raise InputError(f"--dask {dask}: write local:N with N >= 1 workers")
-        cluster = stack.enter_context(
-            LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address="127.0.0.1:0",
-                host="127.0.0.1",
+        with require("dask", "--dask", "dask").config.set(LOCAL_WORKER_CONFIG):
+            cluster = stack.enter_context(
+                LocalCluster(
+                    n_workers=n,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address="127.0.0.1:0",
+                    host="127.0.0.1",
+                )
             )
-        )
         return stack.enter_context(Client(cluster))
     if dask.startswith("tcp://"):
         try:
