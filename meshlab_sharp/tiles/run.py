@@ -113,12 +113,6 @@ def machine_threads(client: Any) -> dict[str, int]:
     return out
 
 
-def finish_task(store: Store, layout: Layout, tile: int, mask: str, kept: str | None) -> dict:
-    """:func:`meshlab_sharp.tiles.steps.finish` of one tile."""
-    a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
-    return finish(Span(store, a, b), mask=mask, kept=kept)
-
-
 class Runner:
     """Runs steps on every tile and reduces their partials.
 
@@ -261,22 +255,18 @@ class Runner:
         return [outcomes[t] for t in range(n)]
 
     def finish(self, n: int, mask: str, kept: str | None) -> dict[str, np.ndarray]:
-        """Per input point (input order): mask, strength, kept."""
+        """Per input point (input order): mask, strength, kept; read here from the
+        store, with Dask too (the driver wrote the tiles there: no per-point array
+        goes through the workers and the scheduler)."""
         out = {
             "mask": np.zeros(n, bool),
             "strength": np.zeros(n),
             "kept": np.zeros(n, bool),
         }
-        tiles = range(self.layout.n_tiles)
-        if self.client is None:
-            parts = (finish_task(self.store, self.layout, t, mask, kept) for t in tiles)
-        else:
-            futures = [
-                self.client.submit(finish_task, self.store, self.layout, t, mask, kept)
-                for t in tiles
-            ]
-            parts = (f.result() for f in futures)
-        for part in parts:
+        offsets = self.layout.offsets
+        for t in range(self.layout.n_tiles):
+            span = Span(self.store, int(offsets[t]), int(offsets[t + 1]))
+            part = finish(span, mask=mask, kept=kept)
             for key in ("mask", "strength", "kept"):
                 out[key][part["ids"]] = part[key]
         return out
