@@ -218,6 +218,40 @@ def test_dask_equals_in_memory() -> None:
     assert_same(one, ref)
 
 
+def _no_values(ctx: object) -> dict:
+    """A step that only needs the neighbourhoods (their halos)."""
+    return {}
+
+
+def test_dask_tiles_start_from_the_first_tiles_halo(tmp_path) -> None:
+    """On Dask as on threads, a search step's first tile runs alone and every other
+    tile starts from the halo it held: none searches its bare box first, so every
+    halo is at least the first tile's (from no halo, some tiles would hold less)."""
+    distributed = pytest.importorskip("dask.distributed")
+    from meshlab_sharp.tiles.run import Runner
+    from meshlab_sharp.tiles.steps import Step
+
+    pts = random_box_points(3000, seed=3)
+    store = Store(str(tmp_path))
+    layout = build_layout(len(pts), lambda: iter([pts]), store, tile_points=250, source="t")
+    query = Query(12)
+    alone = [
+        neighbours(store, layout, t, query, halo=0.0, most_points=900)[1]
+        for t in range(layout.n_tiles)
+    ]
+    assert layout.n_tiles >= 8 and min(alone) < alone[0]
+    with (
+        distributed.LocalCluster(
+            n_workers=1, threads_per_worker=2, processes=False, dashboard_address="127.0.0.1:0"
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        runner = Runner(store, layout, most_points=900, workers=1, client=client)
+        runner.step(Step("search", _no_values, query))
+    assert runner.halos[0] == alone[0]
+    assert (runner.halos >= alone[0]).all()
+
+
 def test_local_cluster_workers_keep_glibc_memory_handling(monkeypatch) -> None:
     """--dask local:N starts its workers without Dask's MALLOC_TRIM_THRESHOLD_ (which
     fixes glibc's mmap threshold: every large array mapped and faulted in anew)."""
