@@ -17,7 +17,7 @@ from meshlab_sharp.neighbourhoods import KnnNeighbourhoods
 from meshlab_sharp.tiles import detect_tiled, parse_memory
 from meshlab_sharp.tiles.layout import build_layout
 from meshlab_sharp.tiles.neighbours import Query, neighbours
-from meshlab_sharp.tiles.run import machine_threads, task_threads
+from meshlab_sharp.tiles.run import machine_threads, task_threads, warm_up
 from meshlab_sharp.tiles.store import Store
 
 pytestmark = pytest.mark.skipif(not _kernels.available(), reason="needs the compiled kernels")
@@ -254,7 +254,8 @@ def test_dask_tiles_start_from_the_first_tiles_halo(tmp_path) -> None:
 
 def test_local_cluster_workers_keep_glibc_memory_handling(monkeypatch) -> None:
     """--dask local:N starts its workers without Dask's MALLOC_TRIM_THRESHOLD_ (which
-    fixes glibc's mmap threshold: every large array mapped and faulted in anew)."""
+    fixes glibc's mmap threshold: every large array mapped and faulted in anew); the
+    warm-up runs a task on each worker."""
     pytest.importorskip("dask.distributed")
     from contextlib import ExitStack
 
@@ -264,6 +265,7 @@ def test_local_cluster_workers_keep_glibc_memory_handling(monkeypatch) -> None:
     with ExitStack() as stack:
         client = _client("local:1", stack)
         got = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"))
+        assert client.gather(warm_up(client)) == [None]  # a no-op task per worker
     assert list(got.values()) == ["unset"]
 
 

@@ -39,7 +39,7 @@ from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
 from .curves import curves_out_of_core
 from .layout import build_layout
 from .neighbours import Query
-from .run import Runner, peak_rss
+from .run import Runner, peak_rss, warm_up
 from .select import order_statistic
 from .steps import (
     Step,
@@ -197,6 +197,7 @@ def detect_tiled(
         client = _client(dask, stack)
         if client is not None:
             timings["cluster"] = time.perf_counter() - t
+        ready = [] if client is None else warm_up(client)  # imports while the tiles are cut
         t = time.perf_counter()
         layout = build_layout(
             source.n,
@@ -206,6 +207,8 @@ def detect_tiled(
             source=source.name,
         )
         timings["tiles"] = time.perf_counter() - t
+        if ready:
+            client.gather(ready)
         if layout.n_clean < k_max:
             raise InputError(
                 f"{source.name}: {layout.n_clean} distinct points, fewer than the largest "

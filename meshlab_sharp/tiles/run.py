@@ -97,6 +97,20 @@ def tile_task(
     return Outcome(partial, used, gathered, streamed, peak_rss(), seconds, workers)
 
 
+def warm_up(client: Any) -> list[Any]:
+    """Futures of a no-op task on each of the cluster's workers: loading it imports
+    meshlab_sharp there (numpy, scipy, pymeshlab, the compiled kernels: about a
+    second), all workers at once, instead of in each worker's first tile task."""
+    return [
+        client.submit(_ready, workers=[address], allow_other_workers=True, pure=False)
+        for address in client.scheduler_info(n_workers=-1)["workers"]
+    ]
+
+
+def _ready() -> None:
+    """Nothing: :func:`warm_up`'s task."""
+
+
 def task_threads(cores: int, sharing: int) -> int:
     """Threads of a tile task's searches on a Dask worker: the cores of its machine
     shared by the threads of the workers on it (each runs a task at a time), at least
