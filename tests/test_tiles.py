@@ -3,6 +3,8 @@ run bit for bit, the halos are proven, the streaming readers and writers keep or
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from shapes import random_box_points
@@ -15,6 +17,7 @@ from meshlab_sharp.neighbourhoods import KnnNeighbourhoods
 from meshlab_sharp.tiles import detect_tiled, parse_memory
 from meshlab_sharp.tiles.layout import build_layout
 from meshlab_sharp.tiles.neighbours import Query, neighbours
+from meshlab_sharp.tiles.run import machine_threads, task_threads, warm_up
 from meshlab_sharp.tiles.store import Store
 
 pytestmark = pytest.mark.skipif(not _kernels.available(), reason="needs the compiled kernels")
@@ -193,8 +196,11 @@ def test_dask_equals_in_memory() -> None:
     distributed = pytest.importorskip("dask.distributed")
     pts = hostile_cloud(2500, seed=9)
     ref = meshlab_sharp.detect(pts, scales=SCALES, mode="paper")
+    # 2 single-thread workers on this machine: each task's searches get half the cores
+    shared = task_threads(len(os.sched_getaffinity(0)), 2)
     out = detect_tiled(pts, scales=SCALES, mode="paper", tile_points=400, dask="local:2")
     assert out["tiling"]["worker_peak_bytes"] > 0 and out["tiling"]["tiles"] >= 4
+    assert out["tiling"]["task_threads"] == shared
     assert_same(out, ref)
     ref = meshlab_sharp.detect(pts, scales=SCALES, mode="robust")
     with distributed.LocalCluster(
@@ -202,8 +208,75 @@ def test_dask_equals_in_memory() -> None:
     ) as cluster:
         address = cluster.scheduler_address
         assert address.startswith("tcp://127.0.0.1:")
+        with distributed.Client(address) as client:
+            assert machine_threads(client) == {"127.0.0.1": 2}
         out = detect_tiled(pts, scales=SCALES, mode="robust", tile_points=400, dask=address)
+        assert out["tiling"]["task_threads"] == shared
+        one = detect_tiled(pts, scales=SCALES, tile_points=400, dask=address, workers=1)
+        assert one["tiling"]["task_threads"] == 1
     assert_same(out, ref)
+    assert_same(one, ref)
+
+
+def _no_values(ctx: object) -> dict:
+    """A step that only needs the neighbourhoods (their halos)."""
+    return {}
+
+
+def test_dask_tiles_start_from_the_first_tiles_halo(tmp_path) -> None:
+    """On Dask as on threads, a search step's first tile runs alone and every other
+    tile starts from the halo it held: none searches its bare box first, so every
+    halo is at least the first tile's (from no halo, some tiles would hold less)."""
+    distributed = pytest.importorskip("dask.distributed")
+    from meshlab_sharp.tiles.run import Runner
+    from meshlab_sharp.tiles.steps import Step
+
+    pts = random_box_points(3000, seed=3)
+    store = Store(str(tmp_path))
+    layout = build_layout(len(pts), lambda: iter([pts]), store, tile_points=250, source="t")
+    query = Query(12)
+    alone = [
+        neighbours(store, layout, t, query, halo=0.0, most_points=900)[1]
+        for t in range(layout.n_tiles)
+    ]
+    assert layout.n_tiles >= 8 and min(alone) < alone[0]
+    with (
+        distributed.LocalCluster(
+            n_workers=1, threads_per_worker=2, processes=False, dashboard_address="127.0.0.1:0"
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        runner = Runner(store, layout, most_points=900, workers=1, client=client)
+        runner.step(Step("search", _no_values, query))
+    assert runner.halos[0] == alone[0]
+    assert (runner.halos >= alone[0]).all()
+
+
+def test_local_cluster_workers_keep_glibc_memory_handling(monkeypatch) -> None:
+    """--dask local:N starts its workers without Dask's MALLOC_TRIM_THRESHOLD_ (which
+    fixes glibc's mmap threshold: every large array mapped and faulted in anew); the
+    warm-up runs a task on each worker."""
+    pytest.importorskip("dask.distributed")
+    from contextlib import ExitStack
+
+    from meshlab_sharp.tiles import _client
+
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    with ExitStack() as stack:
+        client = _client("local:1", stack)
+        got = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"))
+        assert client.gather(warm_up(client)) == [None]  # a no-op task per worker
+    assert list(got.values()) == ["unset"]
+
+
+def test_task_threads_share_the_machine() -> None:
+    """A Dask tile task's threads: the machine's cores over the threads of the workers
+    on it, at least one (8 single-thread workers on 8 cores: one each, not 8 x 8)."""
+    assert task_threads(8, 8) == 1
+    assert task_threads(8, 2) == 4
+    assert task_threads(8, 3) == 2
+    assert task_threads(2, 4) == 1
+    assert task_threads(4, 0) == 4
 
 
 def test_las_laz_round_trip_keeps_order(tmp_path) -> None:

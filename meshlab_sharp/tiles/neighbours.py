@@ -193,7 +193,7 @@ def _search(
     if query.robust:
         assert query.scales is not None
         got = _kernels.cloud_projected_distances(
-            _kernels.build_tree(points),
+            _kernels.build_tree(points, workers),
             query.scales,
             query.weighting,
             relative=True,
@@ -216,12 +216,12 @@ def _search(
     found = {}
     if query.scales is not None:
         idx, pdis = _kernels.cloud_knn_projected_distances(
-            _kernels.build_tree(points), query.scales, query.weighting, workers, rows
+            _kernels.build_tree(points, workers), query.scales, query.weighting, workers, rows
         )
         found["pdis"] = np.ascontiguousarray(pdis[:, rows].T)
         idx = idx[rows]
     elif all_rows:
-        idx = _kernels.cloud_knn(_kernels.build_tree(points), k, workers, rows)[rows]
+        idx = _kernels.cloud_knn(_kernels.build_tree(points, workers), k, workers, rows)[rows]
     else:  # a few rows: no table of the set
         idx = _knn_near(points, rows, k, workers, hint)
     return idx, found, squared_distances(points[idx[:, -1]], points[rows])
@@ -251,7 +251,7 @@ def _knn_near(
                 break
             if len(near) >= k:
                 sub = np.searchsorted(near, rows[todo])
-                tree = _kernels.build_tree(points[near])
+                tree = _kernels.build_tree(points[near], workers)
                 got = near[_kernels.cloud_knn_rows(tree, sub, k, workers)]
                 d2 = squared_distances(points[got[:, -1]], points[rows[todo]])
                 ok = np.sqrt(d2) < g * (1.0 - 1e-6)
@@ -260,7 +260,7 @@ def _knn_near(
                 if len(todo) == 0:
                     return idx
             g *= 2.0
-    tree = _kernels.build_tree(points)
+    tree = _kernels.build_tree(points, workers)
     idx[todo] = _kernels.cloud_knn_rows(tree, rows[todo], k, workers)
     return idx
 

@@ -12,7 +12,7 @@ import itertools
 import resource
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any
@@ -49,7 +49,8 @@ def peak_rss() -> int:
 @dataclass(frozen=True)
 class Outcome:
     """What a tile task returns: the partial, the halo that held, points searched, rows
-    that took the streaming route, the process's peak memory, the task's own seconds."""
+    that took the streaming route, the process's peak memory, the task's own seconds,
+    the threads of its searches."""
 
     partial: Partial
     halo: float
@@ -57,6 +58,7 @@ class Outcome:
     streamed: int
     peak: int
     seconds: float
+    threads: int
 
 
 def tile_task(
@@ -68,9 +70,19 @@ def tile_task(
     most_points: int,
     workers: int,
     backend: str,
+    sharing: Mapping[str, int] | None = None,
 ) -> Outcome:
-    """Run ``step`` on one tile."""
+    """Run ``step`` on one tile with ``workers`` threads; on a Dask worker (``sharing``
+    given: threads of the workers per machine) ``workers <= 0`` is
+    :func:`task_threads` of the worker's machine."""
     started = time.perf_counter()
+    if sharing is not None and workers <= 0:
+        from distributed import get_worker
+        from distributed.comm import get_address_host
+
+        worker = get_worker()
+        share = sharing.get(get_address_host(worker.address), worker.state.nthreads)
+        workers = task_threads(_kernels._workers(-1), share)
     with _kernels.use_backend(backend):
         if step.query is None:
             a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
@@ -81,13 +93,38 @@ def tile_task(
                 store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
             )
             partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
-    return Outcome(partial, used, gathered, streamed, peak_rss(), time.perf_counter() - started)
+    seconds = time.perf_counter() - started
+    return Outcome(partial, used, gathered, streamed, peak_rss(), seconds, workers)
 
 
-def finish_task(store: Store, layout: Layout, tile: int, mask: str, kept: str | None) -> dict:
-    """:func:`meshlab_sharp.tiles.steps.finish` of one tile."""
-    a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
-    return finish(Span(store, a, b), mask=mask, kept=kept)
+def warm_up(client: Any) -> list[Any]:
+    """Futures of a no-op task on each of the cluster's workers: loading it imports
+    meshlab_sharp there (numpy, scipy, pymeshlab, the compiled kernels: about a
+    second), all workers at once, instead of in each worker's first tile task."""
+    return [
+        client.submit(_ready, workers=[address], allow_other_workers=True, pure=False)
+        for address in client.scheduler_info(n_workers=-1)["workers"]
+    ]
+
+
+def _ready() -> None:
+    """Nothing: :func:`warm_up`'s task."""
+
+
+def task_threads(cores: int, sharing: int) -> int:
+    """Threads of a tile task's searches on a Dask worker: the cores of its machine
+    shared by the threads of the workers on it (each runs a task at a time), at least
+    one. ``dask worker --nworkers 8 --nthreads 1`` on 8 cores: one each, not 8 x 8."""
+    return max(1, cores // max(1, sharing))
+
+
+def machine_threads(client: Any) -> dict[str, int]:
+    """Threads of the cluster's workers per machine (host), as the scheduler knows
+    them now."""
+    out: dict[str, int] = {}
+    for info in client.scheduler_info(n_workers=-1)["workers"].values():
+        out[info["host"]] = out.get(info["host"], 0) + int(info["nthreads"])
+    return out
 
 
 class Runner:
@@ -99,8 +136,8 @@ class Runner:
     most_points : int
         Largest box a halo may widen to.
     workers : int
-        Threads of a Dask tile task's kNN search; in this process, of the searches of
-        the tiles run at once together.
+        Threads of a Dask tile task's kNN search (<= 0: :func:`task_threads` of its
+        machine); in this process, of the searches of the tiles run at once together.
     at_once : int
         Tiles run at the same time in this process (no client), at most ``workers``.
     on_tile : callable, optional
@@ -134,11 +171,15 @@ class Runner:
         self.tasks = 0
         self.gathered = 0
         self.streamed = 0
+        #: Most threads a tile task's searches used.
+        self.threads = 0
         self.seconds: dict[str, float] = {}
         self.task_seconds: dict[str, float] = {}
         #: Counts a mode reports in the summary (robust mode: ``redone``).
         self.notes: dict[str, int] = {}
         self.backend = _kernels.default_backend()
+        #: Threads of the workers per machine (Dask), for :func:`task_threads`.
+        self.sharing = None if client is None else machine_threads(client)
 
     def step(self, step: Step) -> Partial:
         """Run ``step`` on every tile; the reduced partial."""
@@ -148,34 +189,52 @@ class Runner:
             outcomes = self._local(step, n)
             reduced = combine([o.partial for o in outcomes])
         else:
-            args = (self.most_points, self.workers, self.backend)
-            futures = [
-                self.client.submit(
-                    tile_task, step, self.store, self.layout, t, self.halos[t], *args, pure=False
-                )
-                for t in range(n)
-            ]
-            partials = [self.client.submit(_partial, f) for f in futures]
-            total = self.client.submit(_combine_all, partials)
-            from dask.distributed import as_completed
-
-            for done, f in enumerate(as_completed(futures), start=1):
-                f.result()
-                if self.on_tile is not None:
-                    self.on_tile(step.label, done, n)
-            outcomes = self.client.gather(futures)
-            reduced = total.result()
+            outcomes, reduced = self._dask(step, n)
         for t, o in enumerate(outcomes):
             self.halos[t] = max(self.halos[t], o.halo)
             self.peak = max(self.peak, o.peak)
             self.gathered = max(self.gathered, o.gathered)
             self.streamed += o.streamed
+            self.threads = max(self.threads, o.threads)
         self.tasks += n
         label = step.label
         self.seconds[label] = self.seconds.get(label, 0.0) + time.perf_counter() - started
         busy = sum(o.seconds for o in outcomes)
         self.task_seconds[label] = self.task_seconds.get(label, 0.0) + busy
         return reduced
+
+    def _halo(self, t: int, guess: float) -> float:
+        """Tile ``t``'s first halo: its own from an earlier step, else ``guess``."""
+        return float(self.halos[t]) if self.halos[t] > 0 else guess
+
+    def _dask(self, step: Step, n: int) -> tuple[list[Outcome], Partial]:
+        """The outcomes of ``step`` on the tiles ``0..n-1`` as Dask tasks, and their
+        partials reduced by a Dask task. First halos as in :meth:`_local`: without any
+        (a first search step), the first tile runs alone and its halo is every other
+        tile's guess (a tile started with no halo searches twice)."""
+        assert self.client is not None
+        args = (self.most_points, self.workers, self.backend, self.sharing)
+        guess = float(self.halos.max(initial=0.0))
+
+        def submit(t: int) -> Any:
+            halo = self._halo(t, guess)
+            task = (tile_task, step, self.store, self.layout, t, halo, *args)
+            return self.client.submit(*task, pure=False)
+
+        futures = []
+        if step.query is not None and guess == 0.0 and n > 0:
+            futures.append(submit(0))
+            guess = futures[0].result().halo
+        futures += [submit(t) for t in range(len(futures), n)]
+        partials = [self.client.submit(_partial, f) for f in futures]
+        total = self.client.submit(_combine_all, partials)
+        from dask.distributed import as_completed
+
+        for done, f in enumerate(as_completed(futures), start=1):
+            f.result()
+            if self.on_tile is not None:
+                self.on_tile(step.label, done, n)
+        return self.client.gather(futures), total.result()
 
     def _local(self, step: Step, n: int) -> list[Outcome]:
         """The outcomes of ``step`` on the tiles ``0..n-1`` in this process, ``at_once``
@@ -190,7 +249,7 @@ class Runner:
         guess = float(self.halos.max(initial=0.0))
 
         def submit(pool: ThreadPoolExecutor, t: int) -> Future[Outcome]:
-            halo = self.halos[t] if self.halos[t] > 0 else guess
+            halo = self._halo(t, guess)
             return pool.submit(tile_task, step, self.store, self.layout, t, halo, *args)
 
         first = 1 if step.query is not None and guess == 0.0 else self.at_once
@@ -210,22 +269,18 @@ class Runner:
         return [outcomes[t] for t in range(n)]
 
     def finish(self, n: int, mask: str, kept: str | None) -> dict[str, np.ndarray]:
-        """Per input point (input order): mask, strength, kept."""
+        """Per input point (input order): mask, strength, kept; read here from the
+        store, with Dask too (the driver wrote the tiles there: no per-point array
+        goes through the workers and the scheduler)."""
         out = {
             "mask": np.zeros(n, bool),
             "strength": np.zeros(n),
             "kept": np.zeros(n, bool),
         }
-        tiles = range(self.layout.n_tiles)
-        if self.client is None:
-            parts = (finish_task(self.store, self.layout, t, mask, kept) for t in tiles)
-        else:
-            futures = [
-                self.client.submit(finish_task, self.store, self.layout, t, mask, kept)
-                for t in tiles
-            ]
-            parts = (f.result() for f in futures)
-        for part in parts:
+        offsets = self.layout.offsets
+        for t in range(self.layout.n_tiles):
+            span = Span(self.store, int(offsets[t]), int(offsets[t + 1]))
+            part = finish(span, mask=mask, kept=kept)
             for key in ("mask", "strength", "kept"):
                 out[key][part["ids"]] = part[key]
         return out
