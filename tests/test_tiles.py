@@ -430,6 +430,34 @@ def test_curves_out_of_core_cli(tmp_path) -> None:
     assert b"\nl " in (tmp_path / "a.obj").read_bytes()
 
 
+def _detect_in_child(tmp_path, pts: np.ndarray, options: str, prints: str) -> list[int]:
+    """Write ``pts`` (n, 3) as a binary PLY, run ``meshlab_sharp.detect(path, <options>)``
+    in a fresh interpreter and return the integers it prints: the tile count, then
+    ``prints`` (an expression list over the result ``r`` and ``peak_rss``)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    path = tmp_path / "cloud.ply"
+    header = (
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(pts)}\n"
+        "property double x\nproperty double y\nproperty double z\nend_header\n"
+    )
+    path.write_bytes(header.encode() + pts.astype("<f8").tobytes())
+    code = (
+        "import meshlab_sharp\n"
+        "from meshlab_sharp.tiles.run import peak_rss\n"
+        f"r = meshlab_sharp.detect({str(path)!r}, {options})\n"
+        f"print(r.tiling['tiles'], {prints})\n"
+    )
+    root = str(Path(__file__).resolve().parent.parent)
+    env = {"PYTHONPATH": root, "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    )
+    return [int(v) for v in proc.stdout.split()]
+
+
 @pytest.mark.parametrize("mode", ["robust", "paper"])
 def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
     """A fresh process reading a 400k-point binary PLY with --max-memory 300MB peaks
@@ -440,32 +468,17 @@ def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
     ``ru_maxrss``, which made this test report pytest's own memory (653-672 MB after a
     long session). This test holds 400 MB itself while the child runs, so an inherited
     peak would fail it."""
-    import subprocess
-    import sys
-    from pathlib import Path
-
     rng = np.random.default_rng(0)
     pts = random_box_points(400_000, seed=1) + rng.normal(scale=1e-4, size=(400_000, 3))
-    path = tmp_path / "big.ply"
-    header = (
-        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(pts)}\n"
-        "property double x\nproperty double y\nproperty double z\nend_header\n"
-    )
-    path.write_bytes(header.encode() + pts.astype("<f8").tobytes())
-    code = (
-        "import meshlab_sharp\n"
-        "from meshlab_sharp.tiles.run import peak_rss\n"
-        f"r = meshlab_sharp.detect({str(path)!r}, max_memory='300MB', mode={mode!r})\n"
-        "print(r.tiling['tiles'], r.n_features, peak_rss(), r.tiling['peak_bytes'])\n"
-    )
-    root = str(Path(__file__).resolve().parent.parent)
-    env = {"PYTHONPATH": root, "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
     ballast = np.ones(400 << 17)  # 400 MB resident in this process during the run
-    proc = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    out = _detect_in_child(
+        tmp_path,
+        pts,
+        f"max_memory='300MB', mode={mode!r}",
+        "r.n_features, peak_rss(), r.tiling['peak_bytes']",
     )
     assert ballast.sum() == 400 << 17
-    tiles, features, peak, reported = map(int, proc.stdout.split())
+    tiles, features, peak, reported = out
     assert tiles >= 2 and features > 0
     assert 50 * 2**20 < peak < 300 * 2**20
     assert reported <= peak  # the summary's peak is the same measure, taken earlier
@@ -476,30 +489,12 @@ def test_peak_memory_stays_under_the_limit_when_the_noise_grows_the_scales(tmp_p
     robust mode's scales threefold (more memory per point than the sizing's scales),
     the grown steps run one tile at a time and a fresh process still peaks below the
     limit."""
-    import subprocess
-    import sys
-    from pathlib import Path
-
     rng = np.random.default_rng(0)
     pts = random_box_points(200_000, seed=1) + rng.normal(scale=0.003, size=(200_000, 3))
-    path = tmp_path / "noisy.ply"
-    header = (
-        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(pts)}\n"
-        "property double x\nproperty double y\nproperty double z\nend_header\n"
+    out = _detect_in_child(
+        tmp_path, pts, "max_memory='200MB', mode='robust'", "max(r.scales), peak_rss()"
     )
-    path.write_bytes(header.encode() + pts.astype("<f8").tobytes())
-    code = (
-        "import meshlab_sharp\n"
-        "from meshlab_sharp.tiles.run import peak_rss\n"
-        f"r = meshlab_sharp.detect({str(path)!r}, max_memory='200MB', mode='robust')\n"
-        "print(r.tiling['tiles'], max(r.scales), peak_rss())\n"
-    )
-    root = str(Path(__file__).resolve().parent.parent)
-    env = {"PYTHONPATH": root, "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
-    proc = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
-    )
-    tiles, k_top, peak = map(int, proc.stdout.split())
+    tiles, k_top, peak = out
     assert tiles >= 4 and k_top == 3 * max(DEFAULT_KNN_SCALES)
     assert 50 * 2**20 < peak < 200 * 2**20
 
