@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import signal
 import sys
 import threading
@@ -40,35 +41,48 @@ from .plugin import add_plugin_command
 from .preprocessing import Preprocessing
 from .progress import Progress
 
+#: ASCII white space, the only separator of a space-separated list (the plugin's too).
+_SPACE = " \t\n\r\f\v"
+#: One number of a scale list: an optional sign and digits, white space around it.
+_NUMBER = re.compile(rf"[{_SPACE}]*([+-]?[0-9]+)[{_SPACE}]*")
+
+
+def _scale_number(token: str) -> int:
+    """One number of :func:`parse_scales`' grammar, at most 2**31 - 1 in magnitude."""
+    match = _NUMBER.fullmatch(token)
+    if match is None or abs(int(match.group(1))) > 2**31 - 1:
+        raise ValueError(token)
+    return int(match.group(1))
+
 
 def parse_scales(text: str) -> list[int]:
     """Parse a list ``"12,16,20"`` or ``"12 16 20"`` (the plugin's format), or an
     inclusive range ``"12:40:4"`` (``"1:4"`` steps by 1).
 
-    A list is comma-separated (spaces around the commas allowed) or space-separated,
-    never both; a range is checked before it is built: at most :data:`MAX_SCALES`
-    values.
+    A list is comma-separated (white space around the commas allowed) or separated by
+    ASCII white space, never both; each number is an optional sign and digits. A range
+    is checked before it is built: at most :data:`MAX_SCALES` values. The MeshLab
+    plugin's ``parseScales`` reads the same grammar with the same messages
+    (``tests/test_sharp_core.py`` checks both on one table).
     """
     hint = "use a list like 12,16,20 or 12 16 20, or a range like 12:40:4"
     values: Sequence[int]
     try:
         if ":" in text:
-            parts = [int(p) for p in text.split(":")]
+            parts = [_scale_number(p) for p in text.split(":")]
             if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] <= 0):
                 raise ValueError
             values = range(parts[0], parts[1] + 1, parts[2] if len(parts) == 3 else 1)
         else:
-            items = [p.strip() for p in text.split(",")] if "," in text else text.split()
-            if not items or any(len(p.split()) != 1 for p in items):
-                raise ValueError
-            values = [int(p) for p in items]
+            items = text.split(",") if "," in text else re.split(f"[{_SPACE}]+", text.strip(_SPACE))
+            values = [_scale_number(p) for p in items]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid scales {text!r}: {hint}") from None
+        raise argparse.ArgumentTypeError(f"invalid scales '{text}': {hint}") from None
     if len(values) == 0:
-        raise argparse.ArgumentTypeError(f"invalid scales {text!r}: the range is empty")
+        raise argparse.ArgumentTypeError(f"invalid scales '{text}': the range is empty")
     if len(values) > MAX_SCALES:
         raise argparse.ArgumentTypeError(
-            f"invalid scales {text!r}: {len(values)} scales, more than {MAX_SCALES}"
+            f"invalid scales '{text}': {len(values)} scales, more than {MAX_SCALES}"
         )
     return list(values)
 

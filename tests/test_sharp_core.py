@@ -6,6 +6,7 @@ Runs wherever g++ is (no MeshLab sources, no Qt)."""
 
 from __future__ import annotations
 
+import argparse
 import re
 import shutil
 import subprocess
@@ -18,7 +19,9 @@ import shapes
 import meshlab_sharp
 from evaluation import groundtruth
 from meshlab_sharp import _header
+from meshlab_sharp.cli import parse_scales
 from meshlab_sharp.errors import InputError
+from meshlab_sharp.pipeline import MIN_KNN_SCALE
 from meshlab_sharp.sample import sample_part
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -295,3 +298,50 @@ def test_the_ctypes_signatures_are_the_headers():
             base = arg.rsplit(" ", 1)[0].replace("const ", "")
             expected = ctypes.c_void_p if "*" in arg else ctype[base]
             assert given is expected, (name, arg)
+
+
+SCALE_TEXTS = [
+    "12 16 20",
+    "20,12, 16",
+    " 8\t12  16 ",
+    "12:40:4",
+    "10:30:10",
+    "4:4",
+    "+12 16",
+    "16 16 12",
+    "8 12,16",
+    "8,,12",
+    "8,",
+    "",
+    " ",
+    "12;16",
+    "1_2 16",
+    "12.0 16",
+    "4:2",
+    "1:2:0",
+    "1:2:3:4",
+    "2:66",
+    "99999999999 12",
+    "1 12",
+]
+
+
+@pytest.mark.parametrize("text", SCALE_TEXTS)
+def test_the_core_reads_scales_as_the_command_line_does(driver, tmp_path, text):
+    """One grammar for the scales: the plugin's ``parseScales`` accepts what
+    ``meshlab_sharp.cli.parse_scales`` accepts, giving the same sorted distinct scales,
+    and refuses the rest with the same message."""
+    points = shapes.cube_grid_points(9)
+    try:
+        expected: list[float] | str = [float(s) for s in sorted(set(parse_scales(text)))]
+    except argparse.ArgumentTypeError as error:
+        expected = str(error)
+    if isinstance(expected, list) and expected[0] < MIN_KNN_SCALE:
+        expected = f"scales must be >= {MIN_KNN_SCALE}, got {int(expected[0])}"
+    try:
+        got: list[float] | str = run_core(driver, tmp_path, points, None, mode="paper", knn=text)[
+            0
+        ]["scales"]
+    except InputError as error:
+        got = str(error)
+    assert got == expected

@@ -687,50 +687,87 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 	return d;
 }
 
-// More than MS_MAX_SCALES scales (the command line's message).
-std::string tooMany(const std::string &text, long count)
-{
-	return "invalid scales '" + text + "': " + std::to_string(count) + " scales, more than " +
-	       std::to_string(MS_MAX_SCALES);
+// The command line's grammar (meshlab_sharp.cli.parse_scales), read the same way:
+// a list "12,16,20" (commas) or "12 16 20" (ASCII white space), never both, or an
+// inclusive range "12:40:4" ("1:4" steps by 1); each number an optional sign and digits,
+// white space around it allowed, at most 2^31 - 1 in magnitude. Errors name the text.
+bool isSpace(const char ch) {
+	return ch == ' ' || ch == '\t' || ch == '\n' || ch == '\r' || ch == '\f' || ch == '\v';
+}
+
+// One number of the grammar; false when `token` is not one.
+bool scaleNumber(const std::string &token, long &value) {
+	size_t i = 0, end = token.size();
+	while (i < end && isSpace(token[i])) ++i;
+	while (end > i && isSpace(token[end - 1])) --end;
+	const bool negative = i < end && token[i] == '-';
+	if (i < end && (token[i] == '+' || token[i] == '-')) ++i;
+	if (i == end) return false;
+	long v = 0;
+	for (; i < end; ++i) {
+		if (token[i] < '0' || token[i] > '9') return false;
+		v = 10 * v + (token[i] - '0');
+		if (v > 2147483647L) return false;
+	}
+	value = negative ? -v : v;
+	return true;
+}
+
+std::vector<std::string> splitAt(const std::string &text, const char sep) {
+	std::vector<std::string> parts(1);
+	for (char ch : text)
+		if (ch == sep)
+			parts.emplace_back();
+		else
+			parts.back() += ch;
+	return parts;
+}
+
+InputError badScales(const std::string &text, const std::string &why) {
+	return InputError("invalid scales '" + text + "': " + why);
 }
 
 }  // namespace
 
 std::vector<int> parseScales(const std::string &text, int minimum) {
-	std::string t = text;
-	for (char &ch : t)
-		if (ch == ',' || ch == ';') ch = ' ';
-	std::vector<int> out;
-	if (t.find(':') != std::string::npos) {
-		for (char &ch : t)
-			if (ch == ':') ch = ' ';
-		std::istringstream in(t);
-		int a = 0, b = 0, step = 1;
-		if (!(in >> a >> b)) throw InputError("invalid scales '" + text + "': use 12 16 20 or 12:40:4");
-		if (!(in >> step)) step = 1;
-		if (step <= 0) throw InputError("invalid scales '" + text + "': the step must be positive");
-		if (b >= a && (long(b) - a) / step >= MS_MAX_SCALES)  // checked before it is built
-			throw InputError(tooMany(text, (long(b) - a) / step + 1));
-		for (int s = a; s <= b; s += step) out.push_back(s);
+	const std::string hint = "use a list like 12,16,20 or 12 16 20, or a range like 12:40:4";
+	std::vector<long> values;
+	if (text.find(':') != std::string::npos) {
+		const std::vector<std::string> parts = splitAt(text, ':');
+		long v[3] = {0, 0, 1};
+		if (parts.size() != 2 && parts.size() != 3) throw badScales(text, hint);
+		for (size_t j = 0; j < parts.size(); ++j)
+			if (!scaleNumber(parts[j], v[j])) throw badScales(text, hint);
+		if (v[2] <= 0) throw badScales(text, hint);
+		if (v[1] < v[0]) throw badScales(text, "the range is empty");
+		const long count = (v[1] - v[0]) / v[2] + 1;  // checked before it is built
+		if (count > MS_MAX_SCALES)
+			throw badScales(text, std::to_string(count) + " scales, more than " + std::to_string(MS_MAX_SCALES));
+		for (long s = v[0]; s <= v[1]; s += v[2]) values.push_back(s);
 	} else {
-		std::istringstream in(t);
-		std::string token;
-		while (in >> token) {
-			size_t used = 0;
-			int s = 0;
-			try {
-				s = std::stoi(token, &used);
-			} catch (const std::exception &) {
-				used = 0;
-			}
-			if (used != token.size()) throw InputError("invalid scales '" + text + "': use 12 16 20 or 12:40:4");
-			out.push_back(s);
+		std::vector<std::string> items;
+		if (text.find(',') != std::string::npos) {
+			items = splitAt(text, ',');
+		} else {
+			std::string token;
+			for (char ch : text + " ")
+				if (!isSpace(ch))
+					token += ch;
+				else if (!token.empty())
+					items.push_back(token), token.clear();
 		}
+		if (items.empty()) throw badScales(text, hint);
+		for (const std::string &item : items) {
+			long v = 0;
+			if (!scaleNumber(item, v)) throw badScales(text, hint);
+			values.push_back(v);
+		}
+		if (long(values.size()) > MS_MAX_SCALES)
+			throw badScales(text, std::to_string(values.size()) + " scales, more than " + std::to_string(MS_MAX_SCALES));
 	}
-	if (long(out.size()) > MS_MAX_SCALES) throw InputError(tooMany(text, long(out.size())));
+	std::vector<int> out(values.begin(), values.end());
 	std::sort(out.begin(), out.end());
 	out.erase(std::unique(out.begin(), out.end()), out.end());
-	if (out.empty()) throw InputError("at least one scale is needed");
 	if (out.front() < minimum)
 		throw InputError("scales must be >= " + std::to_string(minimum) + ", got " + std::to_string(out.front()));
 	return out;
