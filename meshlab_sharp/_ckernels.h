@@ -73,6 +73,13 @@
  * candidate whose score (the mean o / l over the scales) is below this needs no support
  * (robust.support_exempt): the candidates of weak edges come only here and there. */
 #define MS_SUPPORT_FREE_SCORE 0.22
+/* On such a cloud, a point that is not a candidate at every scale but whose score lies in
+ * [MS_ACUTE_SCORE, MS_ACUTE_SCORE_MAX) and that lies between two candidates of its
+ * thinning list (robust.acute_tips) is a candidate too: the tip of an acute edge, where
+ * the PCA normal turns into the wedge's mid-plane and r is small while o / l peaks.
+ * Outliers that are not isolated score above the cap (0.8-0.96). */
+#define MS_ACUTE_SCORE 0.5
+#define MS_ACUTE_SCORE_MAX 0.8
 /* Points per chunk handed to a thread (_kernels.CHUNK). */
 #define MS_CHUNK 8192
 /* Most points in a leaf of the kd-tree (_kernels.KD_LEAF). */
