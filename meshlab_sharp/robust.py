@@ -36,6 +36,12 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    noise the flat and smooth points have ``r`` near 0 and the floor is the definition
    of sharp, while Otsu's split, above it on parts with strong edges, drops the weaker
    ones (the fandisk's, concave edges and the rims of thin walls).
+3b. **Acute tips** (:func:`acute_tips`): on a cloud thresholded at the floor alone, a
+   point that is not a candidate at every scale but whose score (step 5's ranking)
+   lies in ``[ACUTE_SCORE, ACUTE_SCORE_MAX)`` and that lies between two candidates of
+   its thinning list is a candidate too: at an acute edge the PCA normal turns
+   perpendicular to the wedge's mid-plane, ``r`` is small on the tip and the
+   candidates lie on the two faces beside it, while ``o / l`` peaks on the tip.
 4. **Support**: a point that is a candidate at every scale is kept only when at least
    ``SUPPORT_MIN`` (2) other such points among its ``SUPPORT_KNN`` (16) nearest (its
    ``THIN_RING``-ring on meshes) lie along its feature line: a line has neighbours
@@ -696,9 +702,10 @@ def acute_tips(
     (t,) bool
         For ``i = rows[a]``: some ``j != l`` of ``lists[i]``, both in ``mask`` and not
         ``i``, with ``(p_j - p_i) . (p_l - p_i) < 0`` (components ``x, y, z``, products
-        added in that order, strict). Such an ``i`` joins the candidates: at an acute
-        edge the candidates lie on the two faces beside the tip, and the tip, between
-        them, has the higher score (thinning then keeps it, one line, not two).
+        added in that order, strict: ``i`` lies inside the ball on ``p_j p_l`` as a
+        diameter). Such an ``i`` joins the candidates: at an acute edge the candidates
+        lie on the two faces beside the tip, ahead of and behind it along the edge, and
+        the tip has the higher score (thinning keeps it: one line, not two beside it).
     """
     rows = np.asarray(rows, np.int64)
     mask = np.asarray(mask, bool)

@@ -207,6 +207,8 @@ def test_the_constants_are_the_headers():
         "NOISE_QUIET",
         "NOISE_TOLERATED",
         "SUPPORT_FREE_SCORE",
+        "ACUTE_SCORE",
+        "ACUTE_SCORE_MAX",
         "NOISE_MAX_FACTOR",
         "THIN_CONE_COS",
     ):
