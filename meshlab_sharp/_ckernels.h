@@ -73,6 +73,15 @@
  * candidate whose score (the mean o / l over the scales) is below this needs no support
  * (robust.support_exempt): the candidates of weak edges come only here and there. */
 #define MS_SUPPORT_FREE_SCORE 0.22
+/* On such a cloud, a point that is not a candidate at every scale but whose score lies in
+ * [MS_ACUTE_SCORE, MS_ACUTE_SCORE_MAX) and that lies between two candidates of its
+ * thinning list, (p_j - p_i) . (p_l - p_i) < 0 (robust.acute_tips), is a candidate too:
+ * the tip of an acute edge, where the PCA normal turns perpendicular to the wedge's
+ * mid-plane and r is small while o / l peaks; the candidates lie on the two faces beside
+ * it, ahead and behind along the edge. Outliers that are not isolated score above the
+ * cap (0.8-0.96). */
+#define MS_ACUTE_SCORE 0.5
+#define MS_ACUTE_SCORE_MAX 0.8
 /* Points per chunk handed to a thread (_kernels.CHUNK). */
 #define MS_CHUNK 8192
 /* Most points in a leaf of the kd-tree (_kernels.KD_LEAF). */

@@ -16,6 +16,7 @@ import numpy as np
 import shapes
 
 import meshlab_sharp
+from evaluation import groundtruth
 
 FOLDER = Path(__file__).parent / "data" / "golden"
 MODES = ("robust", "paper")
@@ -26,6 +27,18 @@ SHAPES: dict[str, Shape] = {
     # isolation; support and thinning on clean lines
     "box_points_outliers": lambda: (
         shapes.with_outliers(shapes.random_box_points(1500, seed=2), 15),
+        None,
+    ),
+    # 60 outliers, some near the surface and not isolated: ACUTE_SCORE_MAX keeps those
+    # between candidates out of the candidates
+    "box_points_many_outliers": lambda: (
+        shapes.with_outliers(shapes.random_box_points(1500, seed=0), 60),
+        None,
+    ),
+    # a 45-degree wedge (the evaluation's Poisson-disk samples): its tip's points join
+    # the candidates (robust.acute_tips)
+    "wedge45_points": lambda: (
+        groundtruth.make_condition("wedge45", "acute", n_points=1500).vertices,
         None,
     ),
     # normal noise of 12 % of the spacing on uniform samples: the scales grow x2.76,

@@ -25,6 +25,7 @@ import shapes
 from test_spec import spec_face_normals, spec_knn, spec_otsu, spec_pca_normal, spec_rings
 
 import meshlab_sharp
+from evaluation import groundtruth
 
 #: A relative distance this close to its threshold may fall on either side.
 EPS_R = 1e-9
@@ -45,6 +46,9 @@ SHEET_COLUMN, SHEET_COLUMN_GAP, SHEET_FAR_SPAN = 1.1, 0.75, 1.25
 SUPPORT_KNN, SUPPORT_MIN, THIN_KNN, MESH_RING, CONE_COS = 16, 2, 12, 2, 0.5
 #: Step 7: on a cloud whose nu is at most NOISE_QUIET, no support below this score.
 SUPPORT_FREE_SCORE = 0.22
+#: Step 5b: on a cloud whose nu is at most NOISE_QUIET, a point scoring in [0.5, 0.8)
+#: between two candidates of its thinning list is a candidate too.
+ACUTE_SCORE, ACUTE_SCORE_MAX = 0.5, 0.8
 #: Step 9: 20 degrees, 4 / 0.3186 lower quartiles.
 CREASE, QUARTILE_FACTOR = math.pi / 9, 4 / 0.3186
 
@@ -103,6 +107,26 @@ class Reading:
         sure_f0 = (r >= thresholds[:, None] + EPS_R).all(axis=0)
         maybe_f0 = (r >= thresholds[:, None] - EPS_R).all(axis=0)
         near = (np.abs(r - thresholds[:, None]) < EPS_R).any(axis=0)
+        if faces is None and not otsu:  # step 5b: acute tips join the candidates
+            sure_tip, maybe_tip = np.zeros(m, bool), np.zeros(m, bool)
+            for i in np.flatnonzero(~sure_f0):
+                s_i = score[i]
+                if not ACUTE_SCORE - EPS <= s_i < ACUTE_SCORE_MAX + EPS:
+                    continue
+                for j in compare[i]:
+                    for k in compare[i]:
+                        if i in (j, k):
+                            continue
+                        dot = (points[j] - points[i]) @ (points[k] - points[i])
+                        maybe_tip[i] |= bool(maybe_f0[j] and maybe_f0[k] and dot < EPS)
+                        sure_tip[i] |= bool(
+                            not maybe_f0[i]
+                            and ACUTE_SCORE + EPS <= s_i < ACUTE_SCORE_MAX - EPS
+                            and sure_f0[j]
+                            and sure_f0[k]
+                            and dot < -EPS
+                        )
+            sure_f0, maybe_f0 = sure_f0 | sure_tip, maybe_f0 | maybe_tip
 
         # step 6: line directions of the possible features; unsure where a member's
         # membership is, or where the largest eigenvalue is repeated
@@ -329,6 +353,12 @@ CASES = {
     ),
     "thin-plate-points": lambda: (
         shapes.random_box_points(800, seed=3, size=(2.0, 1.6, 0.12)),
+        None,
+    ),
+    # a 45-degree wedge (Poisson-disk samples): its tip's points join the candidates
+    # (step 5b)
+    "wedge45-points": lambda: (
+        groundtruth.make_condition("wedge45", "acute", n_points=600).vertices,
         None,
     ),
     "cube-grid-mesh": lambda: shapes.cube_grid_mesh(3),

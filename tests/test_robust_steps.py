@@ -258,3 +258,39 @@ def test_thinning_is_blocked_by_a_non_candidate_between_on_a_cloud_without_noise
     assert robust.thin_blockers(mask, True, 0.0) is None
     assert robust.thin_blockers(mask, False, 0.05 + 1e-12) is None
     assert robust.thin_blockers(mask, False, 0.05) is not None
+
+
+def test_acute_tests_are_the_non_candidates_scoring_in_the_band_on_a_cloud_without_noise():
+    assert (robust.ACUTE_SCORE, robust.ACUTE_SCORE_MAX) == (0.5, 0.8)
+    score = np.array([0.4999, 0.5, 0.7999, 0.8, 0.6, 0.95])
+    mask = np.array([False, False, False, False, True, False])
+    # candidates (4) are not tested; the band is [0.5, 0.8)
+    assert robust.acute_tests(score, mask, False, 0.05).tolist() == [1, 2]
+    assert robust.acute_tests(score, mask, False, 0.05 + 1e-12).tolist() == []  # noisy
+    assert robust.acute_tests(score, mask, True, 0.0).tolist() == []  # mesh
+
+
+def test_a_point_between_two_candidates_is_an_acute_tip():
+    # a 45-degree wedge along z, its tip 0 at the origin: the candidates lie on the two
+    # faces, a spacing behind the tip (x = -c, y = +-s); 1 and 2 one spacing apart
+    # along the edge on either side of 0, 3 level with 2 on the other face
+    s = math.sin(math.radians(22.5))
+    c = math.cos(math.radians(22.5))
+    pts = np.array([[0.0, 0, 0], [-c, s, 1], [-c, -s, -1], [-c, s, -1], [0, 0, -1]])
+    rows = np.array([0])
+    everything = _csr([[0, 1, 2, 3, 4], [], [], [], []])
+    # (p_1 - p_0) . (p_2 - p_0) = c^2 - s^2 - 1 < 0: 0 lies between 1 and 2
+    mask = np.array([False, True, True, False, False])
+    assert robust.acute_tips(pts, mask, rows, everything).tolist() == [True]
+    # 2 and 3 lie on the same side (c^2 - s^2 + 1 > 0): not between
+    mask = np.array([False, False, True, True, False])
+    assert robust.acute_tips(pts, mask, rows, everything).tolist() == [False]
+    # only candidates in the list count
+    mask = np.array([False, True, True, False, False])
+    assert robust.acute_tips(pts, mask, rows, _csr([[0, 1, 3], [], [], [], []])).tolist() == [False]
+    # a dot product of exactly 0 (at right angles) is not between (strict)
+    right = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    lists = _csr([[0, 1, 2], [], []])
+    assert robust.acute_tips(right, np.array([False, True, True]), rows, lists).tolist() == [False]
+    # no points tested: an empty answer
+    assert robust.acute_tips(pts, mask, np.array([], np.int64), everything).size == 0

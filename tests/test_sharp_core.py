@@ -108,6 +108,9 @@ def _case(name: str) -> tuple[np.ndarray, np.ndarray | None, dict[str, object]]:
     if name == "noise50":  # robust mode grows the scales
         s = groundtruth.make_condition("fandisk", "noise50", n_points=6000)
         return s.vertices, None, {}
+    if name == "star-prism":  # acute tips join the candidates (robust.acute_tips)
+        s = groundtruth.make_condition("star_prism", "clean", n_points=6000)
+        return s.vertices, None, {}
     if name == "fandisk-mesh":
         v, f, _ = groundtruth.reference_surface("fandisk")
         return v, f, {}
@@ -126,6 +129,7 @@ CASES = [
     "box-other-scales",
     "outliers",
     "noise50",
+    "star-prism",
     "fandisk-mesh",
     "cube-mesh-rings-1-6",
 ]
@@ -206,6 +210,8 @@ def test_the_constants_are_the_headers():
         "NOISE_QUIET",
         "NOISE_TOLERATED",
         "SUPPORT_FREE_SCORE",
+        "ACUTE_SCORE",
+        "ACUTE_SCORE_MAX",
         "NOISE_MAX_FACTOR",
         "THIN_CONE_COS",
     ):

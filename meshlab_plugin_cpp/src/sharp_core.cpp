@@ -388,6 +388,22 @@ inline bool parted(const std::vector<double> &p, const std::vector<char> &f0, In
 	return false;
 }
 
+// Whether two points j, l of [begin, end), both in f0 and not i, lie on either side of i:
+// (p_j - p_i) . (p_l - p_i) < 0 (robust.acute_tips).
+inline bool between(const std::vector<double> &p, const std::vector<char> &f0, Index i, const Index *begin,
+                    const Index *end) {
+	for (const Index *j = begin; j != end; ++j) {
+		if (*j == i || !f0[*j]) continue;
+		const double ax = p[3 * *j] - p[3 * i], ay = p[3 * *j + 1] - p[3 * i + 1], az = p[3 * *j + 2] - p[3 * i + 2];
+		for (const Index *l = j + 1; l != end; ++l) {
+			if (*l == i || !f0[*l]) continue;
+			const double bx = p[3 * *l] - p[3 * i], by = p[3 * *l + 1] - p[3 * i + 1], bz = p[3 * *l + 2] - p[3 * i + 2];
+			if (ax * bx + ay * by + az * bz < 0) return true;
+		}
+	}
+	return false;
+}
+
 // robust.supported then robust.thin for the candidates rows (increasing), with the line
 // directions of f0 computed once; D, S, K: direction, support and comparison lists by
 // candidate slot. F1 = features with at least SUPPORT_MIN other features along their line
@@ -542,6 +558,32 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 // robust.relative_distances: min(x / l, 1), 0 where l is 0.
 inline double relative(double x, double l) { return l > 0.0 ? std::min(x / l, 1.0) : 0.0; }
 
+// The k nearest of each of rows (_kernels.cloud_knn_rows, searched in tree order): the
+// list of rows[c] at row(c).
+struct KnnRows {
+	std::vector<Index> table, rank;
+	int k;
+	const Index *row(size_t c) const { return &table[rank[c] * k]; }
+};
+
+KnnRows knnRows(const Tree &t, const std::vector<Index> &rows, int k, Bar &bar, int from, int to) {
+	KnnRows out{std::vector<Index>(rows.size() * k), std::vector<Index>(rows.size()), k};
+	std::vector<Index> where(t.n), pos(rows.size());
+	for (Index x = 0; x < t.n; ++x) where[t.orig[x]] = x;
+	for (size_t c = 0; c < rows.size(); ++c) pos[c] = where[rows[c]];
+	// searched in tree order: row c lands at rank[c]
+	std::vector<Index> order(rows.size());
+	std::iota(order.begin(), order.end(), Index(0));
+	std::sort(order.begin(), order.end(), [&](Index a, Index b) { return pos[a] < pos[b]; });
+	for (size_t c = 0; c < rows.size(); ++c) out.rank[order[c]] = Index(c);
+	std::sort(pos.begin(), pos.end());
+	chunks(Index(rows.size()), [&](unsigned, Index a, Index b) {
+		return ms_knn_rows(t.pts.data(), t.orig.data(), t.n, t.box.data(), t.depth, pos.data(), k, a, b,
+		                   out.table.data());
+	}, bar, from, to, "support and thinning");
+	return out;
+}
+
 // robust.RobustSetup on a cloud: isolated points left out (_isolated_from_stats), scales
 // grown with the noise, then the pass at the final scales; relative distances and score
 // from the kernel (RelativeRule.from_pass); support and thinning on the candidates' kNN
@@ -597,29 +639,27 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		vote(v, quiet ? R_MIN : std::max(otsu(v), R_MIN), true, votes, r);
 	}
 	decide(votes, S, d);
+	bar.report(85, "support and thinning");
+	const int top = r.scales.back();
+	std::vector<Index> tests;  // robust.acute_tests, then acute_tips
+	for (Index i = 0; quiet && i < n; ++i)
+		if (!d.feature[i] && pass.score[i] >= MS_ACUTE_SCORE && pass.score[i] < MS_ACUTE_SCORE_MAX) tests.push_back(i);
+	if (!tests.empty()) {
+		const KnnRows near = knnRows(*tree, tests, std::min(thinKnn, top), bar, 85, 87);
+		std::vector<char> tip(tests.size());
+		for (size_t c = 0; c < tests.size(); ++c)
+			tip[c] = between(pts, d.feature, tests[c], near.row(c), near.row(c) + near.k);
+		for (size_t c = 0; c < tests.size(); ++c)
+			if (tip[c]) d.feature[tests[c]] = 1;
+	}
 	std::vector<Index> rows;
 	for (Index i = 0; i < n; ++i)
 		if (d.feature[i]) rows.push_back(i);
 	if (rows.empty()) return d;
-	bar.report(85, "support and thinning");
-	const int top = r.scales.back();
-	std::vector<Index> where(n), pos(rows.size()), rank(rows.size()), table(rows.size() * top);
-	for (Index t = 0; t < n; ++t) where[tree->orig[t]] = t;
-	for (size_t c2 = 0; c2 < rows.size(); ++c2) pos[c2] = where[rows[c2]];
-	// searched in tree order (_kernels.cloud_knn_rows): row c2 lands at rank[c2]
-	std::vector<Index> order(rows.size());
-	std::iota(order.begin(), order.end(), Index(0));
-	std::sort(order.begin(), order.end(), [&](Index a, Index b) { return pos[a] < pos[b]; });
-	for (size_t c = 0; c < rows.size(); ++c) rank[order[c]] = Index(c);
-	std::sort(pos.begin(), pos.end());
-	const Tree &t = *tree;
-	chunks(Index(rows.size()), [&](unsigned, Index a, Index b) {
-		return ms_knn_rows(t.pts.data(), t.orig.data(), t.n, t.box.data(), t.depth, pos.data(), top, a, b,
-		                   table.data());
-	}, bar, 85, 95, "support and thinning");
+	const KnnRows table = knnRows(*tree, rows, top, bar, 87, 95);
 	Lists D, Sup, K;
 	for (size_t c2 = 0; c2 < rows.size(); ++c2) {
-		const Index *row = &table[rank[c2] * top];
+		const Index *row = table.row(c2);
 		D.add(row, row + top);
 		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
 		K.add(row, row + std::min(thinKnn, top));

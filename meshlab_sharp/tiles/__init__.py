@@ -47,6 +47,9 @@ from .steps import (
     paper_decide,
     paper_distances,
     paper_histograms,
+    robust_acute_join,
+    robust_acute_tests,
+    robust_acute_tips,
     robust_affected,
     robust_decide,
     robust_histograms,
@@ -437,10 +440,18 @@ def _robust(
     otsu = robust.otsu_splits(False, nu)
     thresholds = np.array([robust.robust_threshold_from_histogram(h, otsu) for h in hist])
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
+    compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
+    if not otsu:  # robust.acute_tests: on a cloud without noise, tips of acute edges
+        for name in ("tested", "tip"):
+            store.create(name, (n,), bool)
+        tested = runner.step(Step("acute tests", robust_acute_tests, None, {"noise": nu}))
+        if int(tested["tested"]):
+            tips = Query(compare, "kept", "tested", hint="kd2")
+            runner.step(Step("acute tips", robust_acute_tips, tips, {"compare": compare}))
+            runner.step(Step("acute join", robust_acute_join))
     support = {"top": top, "around": min(robust.SUPPORT_KNN, top), "noise": nu}
     near = Query(top, "kept", "mask", save="lists", hint="kd2")
     runner.step(Step("support", robust_support, near, support))
-    compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     reuse = Query(compare, "kept", "mask1", reuse="lists")  # mask1: a subset of mask
     runner.step(Step("thin", robust_thin, reuse, {"compare": compare, "noise": nu}))
     return thresholds, decided["counts"], "final", "kept", scales

@@ -197,6 +197,30 @@ def robust_decide(span: Span, *, thresholds: np.ndarray) -> Partial:
     return _decided(span, d, span.read("r")[d] >= thresholds)
 
 
+def robust_acute_tests(span: Span, *, noise: float) -> Partial:
+    """:func:`meshlab_sharp.robust.acute_tests` of the kept distinct points, with the
+    cloud's noise ratio ``noise``: writes ``tested``; their count."""
+    d = span.distinct
+    d = d[span.read("kept")[d]]
+    test = robust.acute_tests(span.read("score")[d], span.read("mask")[d], False, noise)
+    span.store.write_at("tested", span.a + d[test], np.ones(len(test), bool))
+    return {"tested": np.array(len(test))}
+
+
+def robust_acute_tips(ctx: Context, *, compare: int) -> Partial:
+    """:func:`meshlab_sharp.robust.acute_tips` of the rows (the points tested) among the
+    candidates ``mask`` of their ``compare`` nearest: writes ``tip``."""
+    tips = robust.acute_tips(ctx.points, ctx.gather("mask"), ctx.rows, ctx.lists(compare))
+    ctx.store.write_at("tip", ctx.own, tips)
+    return {}
+
+
+def robust_acute_join(span: Span) -> Partial:
+    """The tips join the candidates: ``mask`` or ``tip``."""
+    span.store.write_at("mask", np.arange(span.a, span.b), span.read("mask") | span.read("tip"))
+    return {}
+
+
 def robust_support(ctx: Context, *, top: int, around: int, noise: float) -> Partial:
     """The rows' line directions (:func:`meshlab_sharp.robust.line_directions`, to
     ``e``) and :func:`meshlab_sharp.robust.supported` (to ``mask1``), exempting
