@@ -511,17 +511,22 @@ typedef struct {
 
 /* The kept range [lo, hi] of heights from one increasingly sorted list hs (k), z of
  * them below 0 (hs[z] is the point's own height 0), a gap being a step > g: above 0,
- * when exactly one step above z is a gap, hi is its near end (mid = 0) or its middle
- * (mid = 1), else +inf; likewise lo below 0, else -inf. */
-static void sheet_cuts(const double *hs, int64_t k, int64_t z, double g, int mid, double *lo,
-                       double *hi) {
+ * hi is the first gap's near end (rule 1, column = 0) or, when it is the only gap above
+ * z, its middle (rule 2, column = 1), else +inf; likewise lo below 0, else -inf. */
+static void sheet_cuts(const double *hs, int64_t k, int64_t z, double g, int column,
+                       double *lo, double *hi) {
     int64_t up = z, down = z, gaps_up = 0, gaps_down = 0;
     for (int64_t j = z; j + 1 < k; j++) gaps_up += hs[j + 1] - hs[j] > g;
     for (int64_t j = z; j > 0; j--) gaps_down += hs[j] - hs[j - 1] > g;
     while (up + 1 < k && !(hs[up + 1] - hs[up] > g)) up++;
     while (down > 0 && !(hs[down] - hs[down - 1] > g)) down--;
-    *hi = gaps_up != 1 ? INFINITY : mid ? 0.5 * (hs[up] + hs[up + 1]) : hs[up];
-    *lo = gaps_down != 1 ? -INFINITY : mid ? 0.5 * (hs[down - 1] + hs[down]) : hs[down];
+    if (column) {
+        *hi = gaps_up != 1 ? INFINITY : 0.5 * (hs[up] + hs[up + 1]);
+        *lo = gaps_down != 1 ? -INFINITY : 0.5 * (hs[down - 1] + hs[down]);
+    } else {
+        *hi = gaps_up == 0 ? INFINITY : hs[up];
+        *lo = gaps_down == 0 ? -INFINITY : hs[down];
+    }
 }
 
 /* Insertion sort of hs (k) in place; returns how many are < 0. */
@@ -564,13 +569,13 @@ static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int
  * Writes keep[j] (1: kept) and returns the number of neighbours dropped (0: every
  * keep[j] is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m = min(6, k - 1),
  * summed in order. Rule 1, the whole list: a gap is a step > sheet_gap * a between
- * consecutive sorted h; above 0 (the point's own h) the points beyond the gap are
- * dropped when there is exactly one gap above 0; likewise below; not when fewer than
+ * consecutive sorted h; above 0 (the point's own h) the points beyond the first gap are
+ * dropped (whatever lies beyond them); likewise below; not when fewer than
  * sheet_min would be, or the kept would be fewer than sheet_own times the dropped.
  * Rule 2, when rule 1 drops none: the same with the heights of the points of the
  * column (tangential distance t_j, t_j^2 = d2_j - h_j^2, at most sheet_column * a; the
- * others' heights read as 0), gaps > sheet_column_gap * a and the cuts in the middle of
- * the gaps, and not when the dropped heights on one side span more than
+ * others' heights read as 0), gaps > sheet_column_gap * a, a side cut only when its gap
+ * is the only one on that side, the cuts in the middle of the gaps, and not when the dropped heights on one side span more than
  * sheet_far_span * a. */
 static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const double *nrm,
                           const sheet_params_t *sp, double *hs, char *keep) {

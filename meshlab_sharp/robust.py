@@ -9,14 +9,15 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 1a. **Neighbourhoods stay on their own sheet** (point clouds): the neighbours lying on
    a parallel sheet (the other side of a thin wall), separated from the point's own
    sheet along the normal (of the ``k_max`` nearest) by a gap wider than ``SHEET_GAP``
-   times the spacing, are left out of every neighbourhood below when they are one
-   sheet (a single gap on that side), at least ``SHEET_MIN`` points, and no more than
-   ``1 / SHEET_OWN`` times the points kept (at an edge or a corner every neighbour
-   lies to one side). Where that finds no such gap (near a rim the end face joins the
-   two sides of the wall), the same in the column around the point (within
-   ``SHEET_COLUMN`` spacings of its normal line; gap ``SHEET_COLUMN_GAP``), unless
-   the points left out on one side span more than ``SHEET_FAR_SPAN`` spacings of
-   height (a face turning away at an edge, not a parallel sheet).
+   times the spacing, are left out of every neighbourhood below, with whatever lies
+   beyond them (a rib standing on the far side of a floor), when they are at least
+   ``SHEET_MIN`` points, and no more than ``1 / SHEET_OWN`` times the points kept (at
+   an edge or a corner every neighbour lies to one side). Where that finds no such gap
+   (near a rim the end face joins the two sides of the wall), the same in the column
+   around the point (within ``SHEET_COLUMN`` spacings of its normal line; gap
+   ``SHEET_COLUMN_GAP``; one sheet: a single gap on that side), unless the points left
+   out on one side span more than ``SHEET_FAR_SPAN`` spacings of height (a face turning
+   away at an edge, not a parallel sheet).
 1b. **Scales from the noise** (point clouds): the median over the points of
    ``|d . n| / |d|`` (``d`` the offset to the nearest neighbour, ``n`` the normal of the
    point and its 6 nearest, both on its own sheet) measures the noise; above
@@ -377,15 +378,16 @@ def sheet_mask(
         (``x*x' + y*y' + z*z'``), ``a_i`` the mean of ``|q_1| .. |q_m|`` (``m = min(6,
         k - 1)``, added in order). **Rule 1**: with the ``h`` sorted increasingly, a gap
         is a step ``> gap * a_i`` between consecutive ``h``. Above 0 (``i``'s own
-        height) the points beyond the first gap are dropped when there is exactly one
-        gap above 0 (they form one sheet; several gaps: rows of a lattice, as on a face
-        of a regular grid that turns away, are kept); likewise below 0. A row that
+        height) the points beyond the first gap are dropped, whatever lies beyond them
+        (a rib standing on the far side of a floor adds gaps of its own); likewise
+        below 0. A row that
         would drop fewer than ``minimum`` points, or keep fewer than ``own`` times as
         many as it drops (the points of an edge or a corner have all their neighbours
         to one side), keeps them all. **Rule 2**, on the rows that rule 1 keeps whole
         (none when ``column <= 0``): the same with the heights of the column only
         (``t_j^2 = |q_j|^2 - h_j^2 <= (column * a_i)^2``; the others' heights read as
-        0), gaps ``> column_gap * a_i``, and the cut in the middle of the gap (``h_j``
+        0), gaps ``> column_gap * a_i``, a side cut only when its gap is the only one
+        on that side, and the cut in the middle of the gap (``h_j``
         above ``(hs[c] + hs[c + 1]) / 2`` dropped, for the gap between sorted
         ``hs[c]`` and ``hs[c + 1]``; below likewise); it also keeps the row whole when
         the heights it would drop on one side span more than ``far_span * a_i``.
@@ -410,23 +412,23 @@ def sheet_mask(
         for j in range(2, m + 1):
             a = a + dist[:, j]
         a = a / m
-        lo, hi = _sheet_cuts(h, gap * a, False)
+        lo, hi = _sheet_cuts(h, gap * a, column=False)
         kept = _sheet_apply(h, lo, hi, minimum, own, np.full(len(rows), np.inf))
         if column > 0:
             whole = np.flatnonzero(kept.all(axis=1))
             hw, aw = h[whole], a[whole]
             inside = d2[whole] - hw * hw <= ((column * aw) ** 2)[:, None]
-            lo, hi = _sheet_cuts(np.where(inside, hw, 0.0), column_gap * aw, True)
+            lo, hi = _sheet_cuts(np.where(inside, hw, 0.0), column_gap * aw, column=True)
             kept[whole] = _sheet_apply(hw, lo, hi, minimum, own, far_span * aw)
         keep[rows] = kept
     return keep
 
 
-def _sheet_cuts(h: np.ndarray, g: np.ndarray, middle: bool) -> tuple[np.ndarray, np.ndarray]:
+def _sheet_cuts(h: np.ndarray, g: np.ndarray, *, column: bool) -> tuple[np.ndarray, np.ndarray]:
     """The kept range ``lo <= h <= hi`` per row of heights h (r, k), a gap being a step
-    ``> g`` (r,) between sorted heights: above 0, when exactly one step is a gap, its
-    near end (or its middle when ``middle``), else ``+inf``; below 0 likewise, else
-    ``-inf``. Returns lo, hi (r,)."""
+    ``> g`` (r,) between sorted heights: above 0, the first gap's near end (rule 1) or,
+    ``column`` (rule 2), its middle when it is the only gap above 0; ``+inf`` when
+    there is none; below 0 likewise, else ``-inf``. Returns lo, hi (r,)."""
     k = h.shape[1]
     hs = np.sort(h, axis=1)
     z = (hs < 0).sum(axis=1)
@@ -437,13 +439,14 @@ def _sheet_cuts(h: np.ndarray, g: np.ndarray, middle: bool) -> tuple[np.ndarray,
     r = np.arange(len(hs))
     c_up = up.argmax(axis=1)
     c_down = (k - 2) - down[:, ::-1].argmax(axis=1)
-    if middle:
+    if column:
         top = 0.5 * (hs[r, c_up] + hs[r, c_up + 1])
         bottom = 0.5 * (hs[r, c_down] + hs[r, c_down + 1])
     else:
         top, bottom = hs[r, c_up], hs[r, c_down + 1]
-    hi = np.where(up.sum(axis=1) == 1, top, np.inf)
-    lo = np.where(down.sum(axis=1) == 1, bottom, -np.inf)
+    n_up, n_down = up.sum(axis=1), down.sum(axis=1)
+    hi = np.where((n_up == 1) if column else (n_up >= 1), top, np.inf)
+    lo = np.where((n_down == 1) if column else (n_down >= 1), bottom, -np.inf)
     return lo, hi
 
 

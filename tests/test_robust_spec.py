@@ -252,12 +252,12 @@ def _own_sheet(points: np.ndarray, i: int, hood: np.ndarray) -> np.ndarray:
     own sheet, (len(hood),) bool. Heights along the weighted PCA normal of the list;
     from 0 (``i``'s own height) up and down through the sorted heights until a step
     wider than SHEET_GAP times the mean distance to the 6 nearest; what lies beyond is
-    dropped when it is one sheet (no second such gap on that side), at least SHEET_MIN
-    points, and at most 1 / SHEET_OWN times as many as are kept. Where that drops
-    nothing: the same through the heights of the column (tangential distance at most
-    SHEET_COLUMN spacings; the others count as height 0) with steps wider than
-    SHEET_COLUMN_GAP spacings, cut in the middle of the step, and not when what is
-    dropped on one side spans more than SHEET_FAR_SPAN spacings of height."""
+    dropped (whatever gaps follow) when it is at least SHEET_MIN points, and at most 1 /
+    SHEET_OWN times as many as are kept. Where that drops nothing: the same through the
+    heights of the column (tangential distance at most SHEET_COLUMN spacings; the others
+    count as height 0) with steps wider than SHEET_COLUMN_GAP spacings, only where the
+    step is the only one on that side (one sheet), cut in the middle of the step, and not
+    when what is dropped on one side spans more than SHEET_FAR_SPAN spacings of height."""
     q = points[hood] - points[i]
     h = q @ spec_pca_normal(points, i, hood, "gaussian")
     a = np.sqrt((q[1:7] ** 2).sum(axis=1)).mean()
@@ -273,8 +273,9 @@ def _own_sheet(points: np.ndarray, i: int, hood: np.ndarray) -> np.ndarray:
 
 def _sheet_cuts(heights: list[float], gap: float, *, middle: bool) -> tuple[float, float]:
     """The lowest and highest height kept: from 0 up and down the sorted ``heights``
-    to the first step wider than ``gap``, when it is the only one on that side; the
-    cut at the near end of the step or, ``middle``, half way across it."""
+    to the first step wider than ``gap``; the cut at the near end of the step or,
+    ``middle`` (the column), half way across it and only when it is the only such step
+    on that side."""
     steps = sorted(heights)
     lo = hi = steps.index(0.0)  # i's own height (its offset is 0)
     while hi + 1 < len(steps) and steps[hi + 1] - steps[hi] <= gap:
@@ -282,11 +283,11 @@ def _sheet_cuts(heights: list[float], gap: float, *, middle: bool) -> tuple[floa
     while lo > 0 and steps[lo] - steps[lo - 1] <= gap:
         lo -= 1
     below, above = -math.inf, math.inf
-    if hi + 1 < len(steps) and not any(
-        steps[j + 1] - steps[j] > gap for j in range(hi + 1, len(steps) - 1)
+    if hi + 1 < len(steps) and not (
+        middle and any(steps[j + 1] - steps[j] > gap for j in range(hi + 1, len(steps) - 1))
     ):
         above = (steps[hi] + steps[hi + 1]) / 2 if middle else steps[hi]
-    if lo > 0 and not any(steps[j] - steps[j - 1] > gap for j in range(1, lo)):
+    if lo > 0 and not (middle and any(steps[j] - steps[j - 1] > gap for j in range(1, lo))):
         below = (steps[lo - 1] + steps[lo]) / 2 if middle else steps[lo]
     return below, above
 

@@ -164,8 +164,14 @@ def test_sheet_mask_keeps_what_is_not_one_separate_sheet():
     assert _mask(points, lists).all()
     points, lists = _two_sheets(12, [1.0], per_level=robust.SHEET_MIN)
     assert not _mask(points, lists).all()
-    # two gaps: rows of a face turning away (a regular grid), not a sheet
+    # two gaps: everything beyond the first is dropped (a rib standing on the far side
+    # of a floor one spacing thick adds gaps of its own above that side)
     points, lists = _two_sheets(12, [1.0, 2.0], per_level=6)
+    np.testing.assert_array_equal(_mask(points, lists), points[:, 2] == 0.0)
+    # ... as long as the own rule holds: 12 beyond the first gap need 6 kept
+    points, lists = _two_sheets(5, [1.0, 2.0], per_level=6)
+    np.testing.assert_array_equal(_mask(points, lists), points[:, 2] == 0.0)
+    points, lists = _two_sheets(4, [1.0, 2.0], per_level=6)
     assert _mask(points, lists).all()
     # more than 1 / SHEET_OWN (2) times as many beyond the gap as kept: the point is an
     # edge or a corner of the surface
