@@ -628,8 +628,9 @@ def thin_blockers(candidates: np.ndarray, mesh: bool, noise: float) -> np.ndarra
     """:func:`thin`'s ``between``: on a cloud whose noise ratio ``noise`` (as
     :func:`otsu_splits` takes it) is at most ``NOISE_QUIET``, the points that are not
     ``candidates`` (m,) bool (at every scale); None (no blocking) on meshes and noisier
-    clouds. The two rims of a wall 2 spacings thick then do not thin each other away:
-    the end face's middle, between them, is not a candidate."""
+    clouds. The two rims of a wall 2-3 spacings thick then do not thin each other away:
+    the end face's middle, between them, is not a candidate, or ranks below both (a
+    valley of the score, which :func:`thin` also reads as a parting)."""
     if mesh or noise > NOISE_QUIET:
         return None
     return ~np.asarray(candidates, bool)
@@ -822,8 +823,9 @@ def thin(
     A feature point ``i`` is dropped when some feature point ``j != i`` of
     ``compare[i]`` with ``d = p_j - p_i`` lies across the line through ``i``
     (``|d . e_i| < cone_cos * |d|``) and ``score[j] > score[i]``, unless (with
-    ``between``) a point ``m`` of ``compare[i]`` with ``between[m]`` lies between them:
-    ``(p_m - p_i) . (p_m - p_j) < 0``. Every decision uses the mask before thinning.
+    ``between``) a point ``m`` of ``compare[i]`` with ``between[m]`` or ``score[m] <
+    score[i]`` (a valley between two ridges) lies between them: ``(p_m - p_i) . (p_m -
+    p_j) < 0``. Every decision uses the mask before thinning.
 
     Parameters
     ----------
@@ -838,7 +840,8 @@ def thin(
         CSR lists for the comparison (``THIN_KNN`` nearest or the ``THIN_RING``-ring).
     cone_cos : float, default THIN_CONE_COS (0.5)
     between : (m,) bool, optional
-        The points that part two features (:func:`thin_blockers`); default none.
+        The points that part two features whatever their score (:func:`thin_blockers`);
+        default none, and then no blocking at all.
 
     Returns
     -------
@@ -854,7 +857,7 @@ def thin(
     if between is not None:
         pair = np.flatnonzero(beaten)
         at, m = _rows(compare, ci[pair])
-        use = np.asarray(between, bool)[m]
+        use = np.asarray(between, bool)[m] | (score[m] < score[ci[pair[at]]])
         at, m = at[use], m[use]
         a = points[m] - points[ci[pair[at]]]
         b = points[m] - points[nb[pair[at]]]

@@ -65,7 +65,7 @@ class Reading:
             keep, points, hoods, own, scales, growth, nu = self._cloud(points, scales)
             otsu = nu > NOISE_QUIET  # step 3: the floor alone on a cloud without noise
             free = 0.0 if otsu else SUPPORT_FREE_SCORE  # step 7
-            block = not otsu  # step 8: blocked by non-candidates between
+            block = not otsu  # step 8: blocked by non-candidates or valleys between
             normals = None
             around = [h[: min(SUPPORT_KNN, len(h))] for h in hoods]
             thin_k = math.floor(THIN_KNN * growth + 0.5)  # grown with the scales
@@ -141,14 +141,19 @@ class Reading:
             maybe_f1[i] = most >= SUPPORT_MIN or score[i] < free + EPS
 
         def parted(i: int, j: int) -> tuple[bool, bool]:
-            """(surely, possibly) a non-candidate of compare[i] between i and j."""
+            """(surely, possibly) a non-candidate of compare[i], or a point ranking
+            below i, between i and j."""
             if not block:
                 return False, False
             sure = maybe = False
             for k in compare[i]:
+                if k in (i, j):  # their dot product is exactly 0: never between
+                    continue
                 dot = (points[k] - points[i]) @ (points[k] - points[j])
-                sure |= bool(not maybe_f0[k] and dot < -EPS)
-                maybe |= bool(not sure_f0[k] and dot < EPS)
+                parts_sure = not maybe_f0[k] or score[k] < score[i] - EPS
+                parts_maybe = not sure_f0[k] or score[k] < score[i] + EPS
+                sure |= bool(parts_sure and dot < -EPS)
+                maybe |= bool(parts_maybe and dot < EPS)
             return sure, maybe
 
         # step 8: thinning across the line, every test on F1

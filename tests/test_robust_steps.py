@@ -237,7 +237,7 @@ def test_thinning_list_grows_with_the_scales():
     assert robust.thin_knn(1.125) == 14  # 13.5 exactly: half up
 
 
-def test_thinning_is_blocked_by_a_non_candidate_between_on_a_cloud_without_noise():
+def test_thinning_is_blocked_by_a_non_candidate_or_a_valley_between_on_a_quiet_cloud():
     # two parallel lines along x (the rims of a wall), 1 apart in y; feature 0 (score
     # 0.5) is beaten across its line by feature 1 (0.9) unless point 2, no candidate,
     # lies between them ((p_2 - p_0) . (p_2 - p_1) < 0); point 3 lies beyond 1
@@ -254,6 +254,11 @@ def test_thinning_is_blocked_by_a_non_candidate_between_on_a_cloud_without_noise
     beyond = _csr([[0, 1, 3], [1, 0], [2], [3]])  # (p_3 - p_0) . (p_3 - p_1) = 2 > 0
     out = robust.thin(pts, mask, score, e, beyond, between=between)
     assert out.tolist() == [False, True, False, False]
+    # a candidate between blocks only when it ranks below the beaten point (a valley)
+    valley = robust.thin_blockers(np.array([True, True, True, False]), False, 0.0)
+    for middle, blocked in ((0.49, True), (0.5, False), (0.7, False)):
+        got = robust.thin(pts, mask, np.array([0.5, 0.9, middle, 0.0]), e, compare, between=valley)
+        assert got.tolist() == [blocked, True, False, False]
     # meshes and clouds with noise: no blocking
     assert robust.thin_blockers(mask, True, 0.0) is None
     assert robust.thin_blockers(mask, False, 0.05 + 1e-12) is None
