@@ -156,6 +156,14 @@ class Reading:
                 maybe |= bool(parts_maybe and dot < EPS)
             return sure, maybe
 
+        # step 8: the ranking; where the noise grew the scales to the cap, the score
+        # averaged over the THIN_KNN nearest
+        rank = score
+        if faces is None and min(max(1.0, (nu / NOISE_TOLERATED) ** 2), NOISE_MAX_FACTOR) == (
+            NOISE_MAX_FACTOR
+        ):
+            rank = np.array([score[h[:THIN_KNN]].mean() for h in hoods])
+
         # step 8: thinning across the line, every test on F1
         sure_f2, maybe_f2 = np.zeros(m, bool), np.zeros(m, bool)
         for i in np.flatnonzero(maybe_f1):
@@ -165,9 +173,9 @@ class Reading:
                     continue
                 across_sure, across_maybe = cosines(i, j)
                 parted_sure, parted_maybe = parted(i, j)
-                beaten_maybe |= across_maybe and score[j] > score[i] - EPS and not parted_sure
+                beaten_maybe |= across_maybe and rank[j] > rank[i] - EPS and not parted_sure
                 beaten_sure |= bool(
-                    sure_f1[j] and across_sure and score[j] > score[i] + EPS and not parted_maybe
+                    sure_f1[j] and across_sure and rank[j] > rank[i] + EPS and not parted_maybe
                 )
             sure_f2[i] = sure_f1[i] and not beaten_maybe
             maybe_f2[i] = not beaten_sure
@@ -328,6 +336,8 @@ CASES = {
     "cube-grid-points": lambda: (shapes.cube_grid_points(11), None),
     # noise of 12 % of the mean spacing on uniform samples: scales grow x2.59 (step 1b)
     "noisy-box-points": lambda: (shapes.noisy_box_points(800, 0.12), None),
+    # noise of 20 %: the scales grow to the cap (x3), thinning ranks by the mean score
+    "noisier-box-points": lambda: (shapes.noisy_box_points(800, 0.2), None),
     "box-points-outliers": lambda: (
         shapes.with_outliers(shapes.random_box_points(800, seed=2), 8),
         None,

@@ -389,6 +389,21 @@ inline bool parted(const std::vector<double> &p, const std::vector<char> &f0, co
 	return false;
 }
 
+// robust.smoothed_ranking: the score averaged over the first `window` entries of each
+// candidate's K(i) (added in list order to 0.0), the score itself elsewhere.
+std::vector<double> smoothedRanking(const std::vector<double> &score, const std::vector<Index> &rows, const Lists &K,
+                                    int window) {
+	std::vector<double> rank = score;
+	for (size_t c = 0; c < rows.size(); ++c) {
+		const Index *first = K.begin(c), *last = std::min(K.end(c), first + window);
+		if (first == last) continue;
+		double acc = 0.0;
+		for (const Index *j = first; j != last; ++j) acc += score[*j];
+		rank[rows[c]] = acc / double(last - first);
+	}
+	return rank;
+}
+
 // robust.supported then robust.thin for the candidates rows (increasing), with the line
 // directions of f0 computed once; D, S, K: direction, support and comparison lists by
 // candidate slot. F1 = features with at least SUPPORT_MIN other features along their line
@@ -625,7 +640,11 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
 		K.add(row, row + std::min(thinKnn, top));
 	}
-	d.feature = supportAndThin(pts, d.feature, pass.score, rows, D, Sup, K, quiet ? MS_SUPPORT_FREE_SCORE : 0.0, quiet);
+	// robust.ranking_smoothed: where the noise grew the scales to the cap, thinning ranks by
+	// the score averaged over the THIN_KNN nearest (support reads no score there: not quiet)
+	const bool smooth = noise == MS_NOISE_MAX_FACTOR;
+	d.feature = supportAndThin(pts, d.feature, smooth ? smoothedRanking(pass.score, rows, K, MS_THIN_KNN) : pass.score,
+	                           rows, D, Sup, K, quiet ? MS_SUPPORT_FREE_SCORE : 0.0, quiet);
 	return d;
 }
 

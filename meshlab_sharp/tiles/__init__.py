@@ -52,6 +52,7 @@ from .steps import (
     robust_histograms,
     robust_isolated,
     robust_pass,
+    robust_rank,
     robust_support,
     robust_thin,
 )
@@ -442,7 +443,13 @@ def _robust(
     runner.step(Step("support", robust_support, near, support))
     compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     reuse = Query(compare, "kept", "mask1", reuse="lists")  # mask1: a subset of mask
-    runner.step(Step("thin", robust_thin, reuse, {"compare": compare, "noise": nu}))
+    ranking = "score"
+    if robust.ranking_smoothed(False, nu):  # thinning compares the rows of mask1 only
+        ranking = "rank"
+        store.create(ranking, (n,), np.float64)
+        runner.step(Step("rank", robust_rank, reuse, {"compare": compare}))
+    thin = {"compare": compare, "noise": nu, "ranking": ranking}
+    runner.step(Step("thin", robust_thin, reuse, thin))
     return thresholds, decided["counts"], "final", "kept", scales
 
 
