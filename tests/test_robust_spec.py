@@ -69,7 +69,7 @@ class Reading:
             keep, points, hoods, own, scales, growth, nu = self._cloud(points, scales)
             otsu = nu > NOISE_QUIET  # step 3: the floor alone on a cloud without noise
             free = 0.0 if otsu else SUPPORT_FREE_SCORE  # step 7
-            block = not otsu  # step 8: blocked by non-candidates between
+            block = not otsu  # step 8: blocked by non-candidates or valleys between
             normals = None
             around = [h[: min(SUPPORT_KNN, len(h))] for h in hoods]
             thin_k = math.floor(THIN_KNN * growth + 0.5)  # grown with the scales
@@ -165,15 +165,28 @@ class Reading:
             maybe_f1[i] = most >= SUPPORT_MIN or score[i] < free + EPS
 
         def parted(i: int, j: int) -> tuple[bool, bool]:
-            """(surely, possibly) a non-candidate of compare[i] between i and j."""
+            """(surely, possibly) a non-candidate of compare[i], or a point ranking
+            below i, between i and j."""
             if not block:
                 return False, False
             sure = maybe = False
             for k in compare[i]:
+                if k in (i, j):  # their dot product is exactly 0: never between
+                    continue
                 dot = (points[k] - points[i]) @ (points[k] - points[j])
-                sure |= bool(not maybe_f0[k] and dot < -EPS)
-                maybe |= bool(not sure_f0[k] and dot < EPS)
+                parts_sure = not maybe_f0[k] or score[k] < score[i] - EPS
+                parts_maybe = not sure_f0[k] or score[k] < score[i] + EPS
+                sure |= bool(parts_sure and dot < -EPS)
+                maybe |= bool(parts_maybe and dot < EPS)
             return sure, maybe
+
+        # step 8: the ranking; where the noise grew the scales to the cap, the score
+        # averaged over the THIN_KNN nearest
+        rank = score
+        if faces is None and min(max(1.0, (nu / NOISE_TOLERATED) ** 2), NOISE_MAX_FACTOR) == (
+            NOISE_MAX_FACTOR
+        ):
+            rank = np.array([score[h[:THIN_KNN]].mean() for h in hoods])
 
         # step 8: thinning across the line, every test on F1
         sure_f2, maybe_f2 = np.zeros(m, bool), np.zeros(m, bool)
@@ -184,9 +197,9 @@ class Reading:
                     continue
                 across_sure, across_maybe = cosines(i, j)
                 parted_sure, parted_maybe = parted(i, j)
-                beaten_maybe |= across_maybe and score[j] > score[i] - EPS and not parted_sure
+                beaten_maybe |= across_maybe and rank[j] > rank[i] - EPS and not parted_sure
                 beaten_sure |= bool(
-                    sure_f1[j] and across_sure and score[j] > score[i] + EPS and not parted_maybe
+                    sure_f1[j] and across_sure and rank[j] > rank[i] + EPS and not parted_maybe
                 )
             sure_f2[i] = sure_f1[i] and not beaten_maybe
             maybe_f2[i] = not beaten_sure
@@ -348,6 +361,8 @@ CASES = {
     "cube-grid-points": lambda: (shapes.cube_grid_points(11), None),
     # noise of 12 % of the mean spacing on uniform samples: scales grow x2.59 (step 1b)
     "noisy-box-points": lambda: (shapes.noisy_box_points(800, 0.12), None),
+    # noise of 20 %: the scales grow to the cap (x3), thinning ranks by the mean score
+    "noisier-box-points": lambda: (shapes.noisy_box_points(800, 0.2), None),
     "box-points-outliers": lambda: (
         shapes.with_outliers(shapes.random_box_points(800, seed=2), 8),
         None,

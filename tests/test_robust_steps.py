@@ -243,7 +243,29 @@ def test_thinning_list_grows_with_the_scales():
     assert robust.thin_knn(1.125) == 14  # 13.5 exactly: half up
 
 
-def test_thinning_is_blocked_by_a_non_candidate_between_on_a_cloud_without_noise():
+def test_thinning_ranks_by_the_mean_score_where_the_noise_grew_the_scales_to_the_cap():
+    # the cap is reached at nu = 0.15 * sqrt(3) = 0.2598...: below it, and on meshes, the
+    # score itself
+    assert robust.ranking_smoothed(False, 0.27)
+    assert not robust.ranking_smoothed(False, 0.25)
+    assert not robust.ranking_smoothed(True, 0.5)
+    score = np.array([0.9, 0.1, 0.2, 0.6, 0.3])
+    compare = _csr([[0, 1, 2, 3], [1, 0], [], [3, 4, 0], []])
+    rank = robust.smoothed_ranking(score, compare, 3)
+    # rows: the mean of their first 3 entries (the point itself first); empty: the score
+    np.testing.assert_array_equal(rank, [(0.9 + 0.1 + 0.2) / 3, (0.1 + 0.9) / 2, 0.2, 0.6, 0.3])
+    # a point lifted beside a line outranks the line's point (0.9 > 0.6), but not its mean
+    pts = np.array([[0.0, 0, 0], [0, 1, 0], [1, 0, 0], [-1, 0, 0], [1, 1, 0], [-1, 1, 0]])
+    score = np.array([0.6, 0.9, 0.6, 0.6, 0.0, 0.0])
+    mask = np.array([True, True, False, False, False, False])
+    e = np.tile([1.0, 0.0, 0.0], (6, 1))
+    compare = _csr([[0, 1, 2, 3], [1, 0, 4, 5], [], [], [], []])
+    assert robust.thin(pts, mask, score, e, compare).tolist() == [False, True] + [False] * 4
+    rank = robust.smoothed_ranking(score, compare, 4)
+    assert robust.thin(pts, mask, rank, e, compare).tolist() == [True, False] + [False] * 4
+
+
+def test_thinning_is_blocked_by_a_non_candidate_or_a_valley_between_on_a_quiet_cloud():
     # two parallel lines along x (the rims of a wall), 1 apart in y; feature 0 (score
     # 0.5) is beaten across its line by feature 1 (0.9) unless point 2, no candidate,
     # lies between them ((p_2 - p_0) . (p_2 - p_1) < 0); point 3 lies beyond 1
@@ -260,6 +282,11 @@ def test_thinning_is_blocked_by_a_non_candidate_between_on_a_cloud_without_noise
     beyond = _csr([[0, 1, 3], [1, 0], [2], [3]])  # (p_3 - p_0) . (p_3 - p_1) = 2 > 0
     out = robust.thin(pts, mask, score, e, beyond, between=between)
     assert out.tolist() == [False, True, False, False]
+    # a candidate between blocks only when it ranks below the beaten point (a valley)
+    valley = robust.thin_blockers(np.array([True, True, True, False]), False, 0.0)
+    for middle, blocked in ((0.49, True), (0.5, False), (0.7, False)):
+        got = robust.thin(pts, mask, np.array([0.5, 0.9, middle, 0.0]), e, compare, between=valley)
+        assert got.tolist() == [blocked, True, False, False]
     # meshes and clouds with noise: no blocking
     assert robust.thin_blockers(mask, True, 0.0) is None
     assert robust.thin_blockers(mask, False, 0.05 + 1e-12) is None

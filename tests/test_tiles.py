@@ -331,13 +331,16 @@ def test_bad_options() -> None:
         meshlab_sharp.detect(pts[:10], scales=[16], max_memory="1GB")
 
 
-def test_noise_grown_scales_equal_in_memory() -> None:
+@pytest.mark.parametrize("noise", [0.006, 0.012])
+def test_noise_grown_scales_equal_in_memory(noise: float) -> None:
     """Robust mode's scales grow with the measured noise (a lower median over all
-    points, reduced exactly): the tiled run grows them the same way."""
+    points, reduced exactly): the tiled run grows them the same way; at the cap (x3)
+    thinning ranks by the mean score (the tiles' "rank" step)."""
     pts = hostile_cloud(3000, seed=7)
-    noisy = pts + np.random.default_rng(1).normal(scale=0.012, size=pts.shape)
+    noisy = pts + np.random.default_rng(1).normal(scale=noise, size=pts.shape)
     ref = meshlab_sharp.detect(noisy, mode="robust")
     assert ref.scales != DEFAULT_KNN_SCALES
+    assert (max(ref.scales) == 3 * max(DEFAULT_KNN_SCALES)) == (noise == 0.012)
     out = detect_tiled(noisy, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500)
     assert out["scales"] == ref.scales
     assert_same(out, ref)

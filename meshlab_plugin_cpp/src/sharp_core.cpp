@@ -375,12 +375,13 @@ inline bool across(const std::vector<double> &p, Index i, Index j, const double 
 	return std::fabs(dx * e[0] + dy * e[1] + dz * e[2]) < MS_THIN_CONE_COS * std::sqrt(dx * dx + dy * dy + dz * dz);
 }
 
-// Whether a point m of [begin, end) that is not in f0 lies between i and j:
-// (p_m - p_i) . (p_m - p_j) < 0 (robust.thin's `between`).
-inline bool parted(const std::vector<double> &p, const std::vector<char> &f0, Index i, Index j, const Index *begin,
-                   const Index *end) {
+// Whether a point m of [begin, end) that is not in f0, or whose score is below i's (a
+// valley between two ridges), lies between i and j: (p_m - p_i) . (p_m - p_j) < 0
+// (robust.thin's `between`).
+inline bool parted(const std::vector<double> &p, const std::vector<char> &f0, const std::vector<double> &score,
+                   Index i, Index j, const Index *begin, const Index *end) {
 	for (const Index *m = begin; m != end; ++m) {
-		if (f0[*m]) continue;
+		if (f0[*m] && !(score[*m] < score[i])) continue;
 		const double ax = p[3 * *m] - p[3 * i], ay = p[3 * *m + 1] - p[3 * i + 1], az = p[3 * *m + 2] - p[3 * i + 2];
 		const double bx = p[3 * *m] - p[3 * j], by = p[3 * *m + 1] - p[3 * j + 1], bz = p[3 * *m + 2] - p[3 * j + 2];
 		if (ax * bx + ay * by + az * bz < 0) return true;
@@ -404,13 +405,28 @@ inline bool between(const std::vector<double> &p, const std::vector<char> &f0, I
 	return false;
 }
 
+// robust.smoothed_ranking: the score averaged over the first `window` entries of each
+// candidate's K(i) (added in list order to 0.0), the score itself elsewhere.
+std::vector<double> smoothedRanking(const std::vector<double> &score, const std::vector<Index> &rows, const Lists &K,
+                                    int window) {
+	std::vector<double> rank = score;
+	for (size_t c = 0; c < rows.size(); ++c) {
+		const Index *first = K.begin(c), *last = std::min(K.end(c), first + window);
+		if (first == last) continue;
+		double acc = 0.0;
+		for (const Index *j = first; j != last; ++j) acc += score[*j];
+		rank[rows[c]] = acc / double(last - first);
+	}
+	return rank;
+}
+
 // robust.supported then robust.thin for the candidates rows (increasing), with the line
 // directions of f0 computed once; D, S, K: direction, support and comparison lists by
 // candidate slot. F1 = features with at least SUPPORT_MIN other features along their line
 // in S(i), or a score below `free` (robust.support_exempt: SUPPORT_FREE_SCORE on a cloud
 // without noise, 0 elsewhere); F2 = F1 less the points beaten, across the line, by a
 // higher score in K(i), unless (`block`: robust.thin_blockers, a cloud without noise) a
-// point of K(i) not in F0 lies between them.
+// point of K(i) not in F0, or ranking below i, lies between them.
 std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
                                  const Lists &D, const Lists &S, const Lists &K, double free, bool block) {
@@ -430,7 +446,7 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 		if (!f1[i]) continue;
 		for (const Index *j = K.begin(c); j != K.end(c); ++j)
 			if (*j != i && f1[*j] && across(p, i, *j, &e[3 * c]) && score[*j] > score[i] &&
-			    !(block && parted(p, f0, i, *j, K.begin(c), K.end(c)))) {
+			    !(block && parted(p, f0, score, i, *j, K.begin(c), K.end(c)))) {
 				f2[i] = 0;
 				break;
 			}
@@ -664,7 +680,11 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
 		K.add(row, row + std::min(thinKnn, top));
 	}
-	d.feature = supportAndThin(pts, d.feature, pass.score, rows, D, Sup, K, quiet ? MS_SUPPORT_FREE_SCORE : 0.0, quiet);
+	// robust.ranking_smoothed: where the noise grew the scales to the cap, thinning ranks by
+	// the score averaged over the THIN_KNN nearest (support reads no score there: not quiet)
+	const bool smooth = noise == MS_NOISE_MAX_FACTOR;
+	d.feature = supportAndThin(pts, d.feature, smooth ? smoothedRanking(pass.score, rows, K, MS_THIN_KNN) : pass.score,
+	                           rows, D, Sup, K, quiet ? MS_SUPPORT_FREE_SCORE : 0.0, quiet);
 	return d;
 }
 

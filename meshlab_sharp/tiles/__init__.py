@@ -55,6 +55,7 @@ from .steps import (
     robust_histograms,
     robust_isolated,
     robust_pass,
+    robust_rank,
     robust_support,
     robust_thin,
 )
@@ -453,7 +454,13 @@ def _robust(
     near = Query(top, "kept", "mask", save="lists", hint="kd2")
     runner.step(Step("support", robust_support, near, support))
     reuse = Query(compare, "kept", "mask1", reuse="lists")  # mask1: a subset of mask
-    runner.step(Step("thin", robust_thin, reuse, {"compare": compare, "noise": nu}))
+    ranking = "score"
+    if robust.ranking_smoothed(False, nu):  # thinning compares the rows of mask1 only
+        ranking = "rank"
+        store.create(ranking, (n,), np.float64)
+        runner.step(Step("rank", robust_rank, reuse, {"compare": compare}))
+    thin = {"compare": compare, "noise": nu, "ranking": ranking}
+    runner.step(Step("thin", robust_thin, reuse, thin))
     return thresholds, decided["counts"], "final", "kept", scales
 
 

@@ -241,14 +241,23 @@ def robust_support(ctx: Context, *, top: int, around: int, noise: float) -> Part
     return {}
 
 
-def robust_thin(ctx: Context, *, compare: int, noise: float) -> Partial:
-    """:func:`meshlab_sharp.robust.thin` of the rows, blocked by
-    :func:`meshlab_sharp.robust.thin_blockers` of the cloud's noise ratio ``noise``;
+def robust_rank(ctx: Context, *, compare: int) -> Partial:
+    """:func:`meshlab_sharp.robust.smoothed_ranking` of the rows over the first
+    ``THIN_KNN`` of their ``compare`` nearest (to ``rank``)."""
+    rank = robust.smoothed_ranking(ctx.gather("score"), ctx.lists(compare), robust.THIN_KNN)
+    ctx.store.write_at("rank", ctx.own, rank[ctx.rows])
+    return {}
+
+
+def robust_thin(ctx: Context, *, compare: int, noise: float, ranking: str) -> Partial:
+    """:func:`meshlab_sharp.robust.thin` of the rows by the store array ``ranking``
+    (``score``, or ``rank`` where :func:`meshlab_sharp.robust.ranking_smoothed`), blocked
+    by :func:`meshlab_sharp.robust.thin_blockers` of the cloud's noise ratio ``noise``;
     writes ``final``."""
     out = robust.thin(
         ctx.points,
         ctx.gather("mask1"),
-        ctx.gather("score"),
+        ctx.gather(ranking),
         ctx.gather("e"),
         ctx.lists(compare),
         cone_cos=robust.THIN_CONE_COS,
