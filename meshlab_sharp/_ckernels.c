@@ -18,6 +18,11 @@
 #ifdef __SSE2__
 #include <emmintrin.h>
 #endif
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+/* AVX2 code paths, compiled whatever -m flags the build has, chosen at run time */
+#define HAVE_AVX2_PATH 1
+#endif
 
 #if defined(__x86_64__) && defined(__GLIBC__) && defined(MS_LIBMVEC)
 #include <emmintrin.h>
@@ -939,6 +944,77 @@ static int gather(const tree_t *T, const double *lb, double r2, int64_t t, int64
     return 0;
 }
 
+/* The squared distances b->d2[j] of the block's points from (px, py, pz), and the
+ * entries j with d2 <= limit2, increasing, into sel (room for b->n + 3): returns their
+ * number. dx * dx + dy * dy + dz * dz summed in that order, every lane as the scalar. */
+static int64_t block_scan(const block_t *b, double px, double py, double pz, double limit2,
+                          int32_t *sel) {
+    int64_t nb = b->n, m = 0;
+    double *bd = b->d2;
+    for (int64_t j = 0; j < nb; j++) {
+        double dx = b->x[j] - px, dy = b->y[j] - py, dz = b->z[j] - pz;
+        bd[j] = dx * dx + dy * dy + dz * dz;
+    }
+    for (int64_t j = 0; j < nb; j++) { /* branch-free: sel holds nb */
+        sel[m] = (int32_t)j;
+        m += bd[j] <= limit2;
+    }
+    return m;
+}
+
+#ifdef HAVE_AVX2_PATH
+/* block_scan on 4 lanes (AVX2, no fused multiply-add: the same roundings); the entries
+ * kept written branch-free, 4 at a time from a table of the 16 masks. */
+/* scan_pick[mask]: the lanes set in mask, in order (then 0s) */
+static const int32_t scan_pick[16][4] = {
+    {0, 0, 0, 0}, {0, 0, 0, 0}, {1, 0, 0, 0}, {0, 1, 0, 0},
+    {2, 0, 0, 0}, {0, 2, 0, 0}, {1, 2, 0, 0}, {0, 1, 2, 0},
+    {3, 0, 0, 0}, {0, 3, 0, 0}, {1, 3, 0, 0}, {0, 1, 3, 0},
+    {2, 3, 0, 0}, {0, 2, 3, 0}, {1, 2, 3, 0}, {0, 1, 2, 3}};
+
+__attribute__((target("avx2,popcnt"))) static int64_t block_scan_avx2(const block_t *b, double px,
+                                                                double py, double pz,
+                                                                double limit2, int32_t *sel) {
+    int64_t nb = b->n, m = 0, j = 0;
+    double *bd = b->d2;
+    __m256d vx = _mm256_set1_pd(px), vy = _mm256_set1_pd(py), vz = _mm256_set1_pd(pz);
+    __m256d lim = _mm256_set1_pd(limit2);
+    for (; j + 4 <= nb; j += 4) {
+        __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(b->x + j), vx);
+        __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(b->y + j), vy);
+        __m256d dz = _mm256_sub_pd(_mm256_loadu_pd(b->z + j), vz);
+        __m256d d = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                                  _mm256_mul_pd(dz, dz));
+        _mm256_storeu_pd(bd + j, d);
+        int mask = _mm256_movemask_pd(_mm256_cmp_pd(d, lim, _CMP_LE_OQ));
+        __m128i at = _mm_add_epi32(_mm_loadu_si128((const __m128i *)scan_pick[mask]),
+                                   _mm_set1_epi32((int32_t)j));
+        _mm_storeu_si128((__m128i *)(sel + m), at);
+        m += __builtin_popcount((unsigned)mask);
+    }
+    for (; j < nb; j++) {
+        double dx = b->x[j] - px, dy = b->y[j] - py, dz = b->z[j] - pz;
+        bd[j] = dx * dx + dy * dy + dz * dz;
+        sel[m] = (int32_t)j;
+        m += bd[j] <= limit2;
+    }
+    return m;
+}
+#endif
+
+typedef int64_t (*block_scan_fn)(const block_t *, double, double, double, double, int32_t *);
+
+/* The block_scan to use: the AVX2 one where the CPU has it, unless the environment sets
+ * MESHLAB_SHARP_NO_AVX2 (the tests compare both: the same bits). */
+static block_scan_fn block_scanner(void) {
+#ifdef HAVE_AVX2_PATH
+    if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt") && getenv("MESHLAB_SHARP_NO_AVX2") == NULL) {
+        return block_scan_avx2;
+    }
+#endif
+    return block_scan;
+}
+
 /* Buckets of nearest_of_block's counting sort. */
 #define NEAR_BUCKETS 64
 
@@ -1038,7 +1114,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     const sheet_params_t sheet = {out->sheet_gap, out->sheet_min, out->sheet_own,
                                   out->sheet_column, out->sheet_column_gap, out->sheet_far_span};
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
-    int32_t *sel = (int32_t *)malloc((size_t)limit * sizeof(int32_t));
+    int32_t *sel = (int32_t *)malloc((size_t)(limit + 3) * sizeof(int32_t));
+    block_scan_fn scan = block_scanner();
     uint8_t *bucket = (uint8_t *)malloc((size_t)limit);
     int32_t count[NEAR_BUCKETS + 1];
     int rc = 0, have_block = 0;
@@ -1069,16 +1146,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         if (have_block && blk.n >= kmax) {
             double limit2 = tau < r2 ? tau : r2;
             double px = pi[0], py = pi[1], pz = pi[2];
-            int64_t nb = blk.n, m = 0;
             double *bd = blk.d2;
-            for (int64_t j = 0; j < nb; j++) {
-                double dx = blk.x[j] - px, dy = blk.y[j] - py, dz = blk.z[j] - pz;
-                bd[j] = dx * dx + dy * dy + dz * dz;
-            }
-            for (int64_t j = 0; j < nb; j++) { /* branch-free: sel holds limit >= nb */
-                sel[m] = (int32_t)j;
-                m += bd[j] <= limit2;
-            }
+            int64_t m = scan(&blk, px, py, pz, limit2, sel);
             if (m >= kmax) {
                 nearest_of_block(&blk, bd, sel, m, kmax, limit2, h.c, bucket, count);
                 found = 1;
