@@ -1279,6 +1279,19 @@ done:
     return rc;
 }
 
+/* Rows [begin, end) of src (n rows of `width` 8-byte words, tree order) to their
+ * cleaned positions in dst: row i to row orig[i] (the pass's tree_order outputs). */
+void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, int64_t begin,
+                     int64_t end, uint64_t *dst) {
+    if (width == 1) {
+        for (int64_t i = begin; i < end; i++) dst[orig[i]] = src[i];
+        return;
+    }
+    for (int64_t i = begin; i < end; i++) {
+        memcpy(dst + orig[i] * width, src + i * width, (size_t)width * sizeof(uint64_t));
+    }
+}
+
 /* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx)
  * for the points [begin, end) of p (n, 3), cleaned order: out[i] = 1 when i is not among
  * the kmax nearest of j = near[i], i.e. when (|p_i - p_j|^2, i) comes after (kth_d2[j],

@@ -146,6 +146,11 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
                   const cloud_out_t *out);
 
+/* Rows [begin, end) of src (n rows of `width` 8-byte words, tree order) to their
+ * cleaned positions in dst: row i to row orig[i]. */
+void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, int64_t begin,
+                     int64_t end, uint64_t *dst);
+
 /* robust.isolated_points from a pass's statistics near, kth_d2, kth_idx (n, cleaned
  * order) for the points [begin, end) of p (n, 3): out[i] = 1 when i is not among the
  * kmax nearest of near[i] ((|p_i - p_near[i]|^2, i) after that point's kmax-th
