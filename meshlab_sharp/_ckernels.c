@@ -1080,27 +1080,107 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  * the previous leaf (radius x 1.25). */
 #define BLOCK_GROW 1.5625
 
-/* cloud_out_t: what one pass over the points writes (_ckernels.h). */
-
-/* kNN of tree positions [begin, end) at k = max(ks), then what out asks for (see
- * cloud_out_t). Returns 0, or -1 out of memory.
+/* The exact kNN of points of the tree taken one after the other (in increasing tree
+ * position: every one, or a few here and there), each answer into h.c[0..k), sorted by
+ * (d2, idx).
  *
  * Points are taken leaf by leaf. The points of the leaves within a radius r of the
  * leaf's box are gathered once for all its points (r: 1.25 times the largest k-th
- * distance of the previous leaf); a point's k nearest are among them when at least k
- * lie within r. The k-th distance of the previous point plus the distance between the
- * two bounds this point's k-th distance (triangle inequality), which prunes the
- * candidates before the selection. Otherwise (the k-th distance grew, or the block
+ * distance found in the previous leaf); a point's k nearest are among them when at
+ * least k lie within r. The k-th distance of the previous point plus the distance
+ * between the two bounds this point's k-th distance (triangle inequality), which prunes
+ * the candidates before the selection. Otherwise (the k-th distance grew, or the block
  * would exceed a few thousand points, as around a far outlier) the point gets a heap
  * search of the tree: O(log n) per point whatever the spatial distribution. */
+typedef struct {
+    tree_t T;
+    int64_t k, limit;
+    heap_t h;
+    block_t blk;
+    int32_t *sel;
+    uint8_t *bucket;
+    int32_t count[NEAR_BUCKETS + 1];
+    block_scan_fn scan;
+    int have_block;
+    int64_t leaf_s, leaf_e;
+    double r2, leaf_max, prev_r, prev_p[3];
+} knn_cursor_t;
+
+/* Returns 0, or -1 out of memory (then knn_cursor_free it all the same). */
+static int knn_cursor_init(knn_cursor_t *c, const tree_t *T, int64_t k) {
+    memset(c, 0, sizeof *c);
+    c->T = *T;
+    c->k = k;
+    c->limit = 32 * k + 512;
+    c->h.c = (cand_t *)malloc((size_t)c->limit * sizeof(cand_t));
+    c->h.k = k;
+    c->h.tau = INFINITY;
+    c->sel = (int32_t *)malloc((size_t)(c->limit + 3) * sizeof(int32_t));
+    c->bucket = (uint8_t *)malloc((size_t)c->limit);
+    c->scan = block_scanner();
+    c->r2 = -1.0;
+    c->prev_r = -1.0;
+    return c->h.c && c->sel && c->bucket ? 0 : -1;
+}
+
+static void knn_cursor_free(knn_cursor_t *c) {
+    free(c->h.c);
+    free(c->blk.x); free(c->blk.y); free(c->blk.z); free(c->blk.d2);
+    free(c->blk.idx); free(c->blk.pos);
+    free(c->sel);
+    free(c->bucket);
+}
+
+/* The k nearest of the point at tree position i into c->h.c[0..k) (fastest with the
+ * positions increasing). Returns 0, or -1 out of memory. */
+static int knn_cursor_next(knn_cursor_t *c, int64_t i) {
+    const tree_t *T = &c->T;
+    const double *pi = T->p + 3 * i;
+    int64_t k = c->k;
+    double tau = kth_bound(pi, c->prev_p, c->prev_r);
+    if (i < c->leaf_s || i >= c->leaf_e) {
+        int64_t t = leaf_of(T, i, &c->leaf_s, &c->leaf_e);
+        if (c->leaf_max > 0.0) c->r2 = c->leaf_max * BLOCK_GROW;
+        c->leaf_max = 0.0;
+        c->blk.n = 0;
+        c->have_block = 0;
+        if (c->r2 >= 0.0) {
+            int g = gather(T, T->box + 6 * t, c->r2, 0, 0, T->n, 0, c->limit, &c->blk);
+            if (g < 0) return -1;
+            c->have_block = g == 0;
+        }
+    }
+    int found = 0;
+    if (c->have_block && c->blk.n >= k) {
+        double limit2 = tau < c->r2 ? tau : c->r2;
+        int64_t m = c->scan(&c->blk, pi[0], pi[1], pi[2], limit2, c->sel);
+        if (m >= k) {
+            nearest_of_block(&c->blk, c->blk.d2, c->sel, m, k, limit2, c->h.c, c->bucket,
+                             c->count);
+            found = 1;
+        }
+    }
+    if (!found) knn_search(T, pi, k, tau, &c->h);
+    double kth = c->h.c[k - 1].d2;
+    if (kth > c->leaf_max) c->leaf_max = kth;
+    if (c->r2 < 0.0) c->r2 = kth * BLOCK_GROW; /* the first point */
+    c->prev_r = sqrt(kth);
+    c->prev_p[0] = pi[0]; c->prev_p[1] = pi[1]; c->prev_p[2] = pi[2];
+    return 0;
+}
+
+/* cloud_out_t: what one pass over the points writes (_ckernels.h). */
+
+/* kNN of tree positions [begin, end) at k = max(ks) (knn_cursor_t), then what out asks
+ * for (see cloud_out_t). Returns 0, or -1 out of memory. */
 int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
                   const cloud_out_t *out) {
     tree_t T = {p, orig, box, n, depth};
     int64_t kmax = ks[nscales - 1];
-    int64_t limit = 32 * kmax + 512;
-    heap_t h = {(cand_t *)malloc((size_t)limit * sizeof(cand_t)), 0, kmax, INFINITY};
-    block_t blk = {NULL, NULL, NULL, NULL, NULL, NULL, 0, 0};
+    knn_cursor_t cur;
+    int cur_rc = knn_cursor_init(&cur, &T, kmax);
+    const cand_t *nb = cur.h.c;
     double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
     double *mu = (double *)malloc((size_t)kmax * 2 * sizeof(double));
@@ -1114,67 +1194,30 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     const sheet_params_t sheet = {out->sheet_gap, out->sheet_min, out->sheet_own,
                                   out->sheet_column, out->sheet_column_gap, out->sheet_far_span};
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
-    int32_t *sel = (int32_t *)malloc((size_t)(limit + 3) * sizeof(int32_t));
-    block_scan_fn scan = block_scanner();
-    uint8_t *bucket = (uint8_t *)malloc((size_t)limit);
-    int32_t count[NEAR_BUCKETS + 1];
-    int rc = 0, have_block = 0;
-    int64_t leaf_s = 0, leaf_e = 0;
-    double r2 = -1.0, leaf_max = 0.0;
-    double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk || !sel ||
-        !bucket) {
+    int rc = 0;
+    if (cur_rc || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk) {
         rc = -1;
         goto done;
     }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
-        double tau = kth_bound(pi, prev_p, prev_r);
-        if (i >= leaf_e) {
-            int64_t t = leaf_of(&T, i, &leaf_s, &leaf_e);
-            if (leaf_max > 0.0) r2 = leaf_max * BLOCK_GROW;
-            leaf_max = 0.0;
-            blk.n = 0;
-            have_block = 0;
-            if (r2 >= 0.0) {
-                int g = gather(&T, box + 6 * t, r2, 0, 0, n, 0, limit, &blk);
-                if (g < 0) { rc = -1; goto done; }
-                have_block = g == 0;
-            }
-        }
-        int found = 0;
-        if (have_block && blk.n >= kmax) {
-            double limit2 = tau < r2 ? tau : r2;
-            double px = pi[0], py = pi[1], pz = pi[2];
-            double *bd = blk.d2;
-            int64_t m = scan(&blk, px, py, pz, limit2, sel);
-            if (m >= kmax) {
-                nearest_of_block(&blk, bd, sel, m, kmax, limit2, h.c, bucket, count);
-                found = 1;
-            }
-        }
-        if (!found) knn_search(&T, pi, kmax, tau, &h);
-        double kth = h.c[kmax - 1].d2;
-        if (kth > leaf_max) leaf_max = kth;
-        if (r2 < 0.0) r2 = kth * BLOCK_GROW; /* the first point of the chunk */
-        prev_r = sqrt(kth);
-        prev_p[0] = pi[0]; prev_p[1] = pi[1]; prev_p[2] = pi[2];
+        if (knn_cursor_next(&cur, i)) { rc = -1; goto done; }
         int64_t ci = orig[i], oi = out->tree_order ? i : ci; /* cleaned index, its row */
         if (out->idx != NULL) {
-            for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = h.c[j].idx;
+            for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = nb[j].idx;
         }
-        if (out->near != NULL) out->near[oi] = kmax > 1 ? h.c[1].idx : ci;
+        if (out->near != NULL) out->near[oi] = kmax > 1 ? nb[1].idx : ci;
         if (out->kth_d2 != NULL) {
-            out->kth_d2[oi] = h.c[kmax - 1].d2;
-            out->kth_idx[oi] = h.c[kmax - 1].idx;
+            out->kth_d2[oi] = nb[kmax - 1].d2;
+            out->kth_idx[oi] = nb[kmax - 1].idx;
         }
         if (out->pdis == NULL && out->relative == NULL && out->noise == NULL) continue;
         for (int64_t j = 0; j < kmax; j++) {
-            const double *pj = p + 3 * h.c[j].pos;
+            const double *pj = p + 3 * nb[j].pos;
             q[3 * j] = pj[0] - pi[0];
             q[3 * j + 1] = pj[1] - pi[1];
             q[3 * j + 2] = pj[2] - pi[2];
-            d2[j] = h.c[j].d2;
+            d2[j] = nb[j].d2;
         }
         for (int s = 0; s < nscales; s++) mk[s] = ks[s];
         /* known: how many of the largest scales have their normal from the sheet filter's
@@ -1263,8 +1306,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         if (out->score != NULL) out->score[oi] = score;
     }
 done:
-    free(h.c);
-    free(blk.x); free(blk.y); free(blk.z); free(blk.d2); free(blk.idx); free(blk.pos);
+    knn_cursor_free(&cur);
     free(q);
     free(d2);
     free(mu);
@@ -1274,8 +1316,6 @@ done:
     free(hs);
     free(keep);
     free(mk);
-    free(sel);
-    free(bucket);
     return rc;
 }
 
@@ -1314,19 +1354,14 @@ void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx) {
     tree_t T = {p, orig, box, n, depth};
-    heap_t h = {(cand_t *)malloc((size_t)k * sizeof(cand_t)), 0, k, INFINITY};
-    if (!h.c) return -1;
-    double prev_r = -1.0;
-    const double *prev_p = p;
-    for (int64_t r = begin; r < end; r++) {
-        const double *pi = p + 3 * pos[r];
-        knn_search(&T, pi, k, kth_bound(pi, prev_p, prev_r), &h);
-        for (int64_t j = 0; j < k; j++) out_idx[r * k + j] = h.c[j].idx;
-        prev_r = sqrt(h.c[k - 1].d2);
-        prev_p = pi;
+    knn_cursor_t cur;
+    int rc = knn_cursor_init(&cur, &T, k);
+    for (int64_t r = begin; r < end && rc == 0; r++) {
+        rc = knn_cursor_next(&cur, pos[r]);
+        for (int64_t j = 0; j < k && rc == 0; j++) out_idx[r * k + j] = cur.h.c[j].idx;
     }
-    free(h.c);
-    return 0;
+    knn_cursor_free(&cur);
+    return rc;
 }
 
 /* ------------------------------------------------------------------ meshes */
