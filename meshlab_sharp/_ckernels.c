@@ -1348,9 +1348,9 @@ void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...] (cleaned indices sorted by (squared distance, index), the rows of
- * ms_cloud_pdis's kNN table). Each search is pruned from the start by the bound that
- * the previous row's k-th distance gives (rows in increasing tree position: near each
- * other). Returns 0, or -1 out of memory. */
+ * ms_cloud_pdis's kNN table), by the same knn_cursor_t: rows in increasing tree
+ * position share their leaf's block and are pruned by the previous row's k-th
+ * distance. Returns 0, or -1 out of memory. */
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx) {
     tree_t T = {p, orig, box, n, depth};

@@ -159,8 +159,9 @@ void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
                  const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
- * out_idx[r * k ...], cleaned indices sorted by (squared distance, index). Fastest with
- * pos increasing (each search is pruned by the previous row's k-th distance). Returns
+ * out_idx[r * k ...], cleaned indices sorted by (squared distance, index): the search
+ * of ms_cloud_pdis (a leaf's block of nearby points, shared by the rows in that leaf,
+ * pruned by the previous row's k-th distance), fastest with pos increasing. Returns
  * 0, or -1 out of memory. */
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx);

@@ -377,9 +377,9 @@ def cloud_knn(
 
 
 def cloud_knn_rows(tree: KdTree, rows: np.ndarray, k: int, workers: int = -1) -> np.ndarray:
-    """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64, each by a
-    search of the tree (for a few rows: the table of every point is not built), the
-    rows searched in tree order."""
+    """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64 (for a few
+    rows: the table of every point is not built), searched in tree order as the pass
+    searches them (the rows of one leaf share its block of nearby points)."""
     lib = _LIB
     assert lib is not None
     t = tree
