@@ -18,6 +18,11 @@
 #ifdef __SSE2__
 #include <emmintrin.h>
 #endif
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+/* AVX2 code paths, compiled whatever -m flags the build has, chosen at run time */
+#define HAVE_AVX2_PATH 1
+#endif
 
 #if defined(__x86_64__) && defined(__GLIBC__) && defined(MS_LIBMVEC)
 #include <emmintrin.h>
@@ -944,6 +949,77 @@ static int gather(const tree_t *T, const double *lb, double r2, int64_t t, int64
     return 0;
 }
 
+/* The squared distances b->d2[j] of the block's points from (px, py, pz), and the
+ * entries j with d2 <= limit2, increasing, into sel (room for b->n + 3): returns their
+ * number. dx * dx + dy * dy + dz * dz summed in that order, every lane as the scalar. */
+static int64_t block_scan(const block_t *b, double px, double py, double pz, double limit2,
+                          int32_t *sel) {
+    int64_t nb = b->n, m = 0;
+    double *bd = b->d2;
+    for (int64_t j = 0; j < nb; j++) {
+        double dx = b->x[j] - px, dy = b->y[j] - py, dz = b->z[j] - pz;
+        bd[j] = dx * dx + dy * dy + dz * dz;
+    }
+    for (int64_t j = 0; j < nb; j++) { /* branch-free: sel holds nb */
+        sel[m] = (int32_t)j;
+        m += bd[j] <= limit2;
+    }
+    return m;
+}
+
+#ifdef HAVE_AVX2_PATH
+/* block_scan on 4 lanes (AVX2, no fused multiply-add: the same roundings); the entries
+ * kept written branch-free, 4 at a time from a table of the 16 masks. */
+/* scan_pick[mask]: the lanes set in mask, in order (then 0s) */
+static const int32_t scan_pick[16][4] = {
+    {0, 0, 0, 0}, {0, 0, 0, 0}, {1, 0, 0, 0}, {0, 1, 0, 0},
+    {2, 0, 0, 0}, {0, 2, 0, 0}, {1, 2, 0, 0}, {0, 1, 2, 0},
+    {3, 0, 0, 0}, {0, 3, 0, 0}, {1, 3, 0, 0}, {0, 1, 3, 0},
+    {2, 3, 0, 0}, {0, 2, 3, 0}, {1, 2, 3, 0}, {0, 1, 2, 3}};
+
+__attribute__((target("avx2,popcnt"))) static int64_t block_scan_avx2(const block_t *b, double px,
+                                                                double py, double pz,
+                                                                double limit2, int32_t *sel) {
+    int64_t nb = b->n, m = 0, j = 0;
+    double *bd = b->d2;
+    __m256d vx = _mm256_set1_pd(px), vy = _mm256_set1_pd(py), vz = _mm256_set1_pd(pz);
+    __m256d lim = _mm256_set1_pd(limit2);
+    for (; j + 4 <= nb; j += 4) {
+        __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(b->x + j), vx);
+        __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(b->y + j), vy);
+        __m256d dz = _mm256_sub_pd(_mm256_loadu_pd(b->z + j), vz);
+        __m256d d = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                                  _mm256_mul_pd(dz, dz));
+        _mm256_storeu_pd(bd + j, d);
+        int mask = _mm256_movemask_pd(_mm256_cmp_pd(d, lim, _CMP_LE_OQ));
+        __m128i at = _mm_add_epi32(_mm_loadu_si128((const __m128i *)scan_pick[mask]),
+                                   _mm_set1_epi32((int32_t)j));
+        _mm_storeu_si128((__m128i *)(sel + m), at);
+        m += __builtin_popcount((unsigned)mask);
+    }
+    for (; j < nb; j++) {
+        double dx = b->x[j] - px, dy = b->y[j] - py, dz = b->z[j] - pz;
+        bd[j] = dx * dx + dy * dy + dz * dz;
+        sel[m] = (int32_t)j;
+        m += bd[j] <= limit2;
+    }
+    return m;
+}
+#endif
+
+typedef int64_t (*block_scan_fn)(const block_t *, double, double, double, double, int32_t *);
+
+/* The block_scan to use: the AVX2 one where the CPU has it, unless the environment sets
+ * MESHLAB_SHARP_NO_AVX2 (the tests compare both: the same bits). */
+static block_scan_fn block_scanner(void) {
+#ifdef HAVE_AVX2_PATH
+    if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt") && getenv("MESHLAB_SHARP_NO_AVX2") == NULL) {
+        return block_scan_avx2;
+    }
+#endif
+    return block_scan;
+}
+
 /* Buckets of nearest_of_block's counting sort. */
 #define NEAR_BUCKETS 64
 
@@ -1009,27 +1085,107 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  * the previous leaf (radius x 1.25). */
 #define BLOCK_GROW 1.5625
 
-/* cloud_out_t: what one pass over the points writes (_ckernels.h). */
-
-/* kNN of tree positions [begin, end) at k = max(ks), then what out asks for (see
- * cloud_out_t). Returns 0, or -1 out of memory.
+/* The exact kNN of points of the tree taken one after the other (in increasing tree
+ * position: every one, or a few here and there), each answer into h.c[0..k), sorted by
+ * (d2, idx).
  *
  * Points are taken leaf by leaf. The points of the leaves within a radius r of the
  * leaf's box are gathered once for all its points (r: 1.25 times the largest k-th
- * distance of the previous leaf); a point's k nearest are among them when at least k
- * lie within r. The k-th distance of the previous point plus the distance between the
- * two bounds this point's k-th distance (triangle inequality), which prunes the
- * candidates before the selection. Otherwise (the k-th distance grew, or the block
+ * distance found in the previous leaf); a point's k nearest are among them when at
+ * least k lie within r. The k-th distance of the previous point plus the distance
+ * between the two bounds this point's k-th distance (triangle inequality), which prunes
+ * the candidates before the selection. Otherwise (the k-th distance grew, or the block
  * would exceed a few thousand points, as around a far outlier) the point gets a heap
  * search of the tree: O(log n) per point whatever the spatial distribution. */
+typedef struct {
+    tree_t T;
+    int64_t k, limit;
+    heap_t h;
+    block_t blk;
+    int32_t *sel;
+    uint8_t *bucket;
+    int32_t count[NEAR_BUCKETS + 1];
+    block_scan_fn scan;
+    int have_block;
+    int64_t leaf_s, leaf_e;
+    double r2, leaf_max, prev_r, prev_p[3];
+} knn_cursor_t;
+
+/* Returns 0, or -1 out of memory (then knn_cursor_free it all the same). */
+static int knn_cursor_init(knn_cursor_t *c, const tree_t *T, int64_t k) {
+    memset(c, 0, sizeof *c);
+    c->T = *T;
+    c->k = k;
+    c->limit = 32 * k + 512;
+    c->h.c = (cand_t *)malloc((size_t)c->limit * sizeof(cand_t));
+    c->h.k = k;
+    c->h.tau = INFINITY;
+    c->sel = (int32_t *)malloc((size_t)(c->limit + 3) * sizeof(int32_t));
+    c->bucket = (uint8_t *)malloc((size_t)c->limit);
+    c->scan = block_scanner();
+    c->r2 = -1.0;
+    c->prev_r = -1.0;
+    return c->h.c && c->sel && c->bucket ? 0 : -1;
+}
+
+static void knn_cursor_free(knn_cursor_t *c) {
+    free(c->h.c);
+    free(c->blk.x); free(c->blk.y); free(c->blk.z); free(c->blk.d2);
+    free(c->blk.idx); free(c->blk.pos);
+    free(c->sel);
+    free(c->bucket);
+}
+
+/* The k nearest of the point at tree position i into c->h.c[0..k) (fastest with the
+ * positions increasing). Returns 0, or -1 out of memory. */
+static int knn_cursor_next(knn_cursor_t *c, int64_t i) {
+    const tree_t *T = &c->T;
+    const double *pi = T->p + 3 * i;
+    int64_t k = c->k;
+    double tau = kth_bound(pi, c->prev_p, c->prev_r);
+    if (i < c->leaf_s || i >= c->leaf_e) {
+        int64_t t = leaf_of(T, i, &c->leaf_s, &c->leaf_e);
+        if (c->leaf_max > 0.0) c->r2 = c->leaf_max * BLOCK_GROW;
+        c->leaf_max = 0.0;
+        c->blk.n = 0;
+        c->have_block = 0;
+        if (c->r2 >= 0.0) {
+            int g = gather(T, T->box + 6 * t, c->r2, 0, 0, T->n, 0, c->limit, &c->blk);
+            if (g < 0) return -1;
+            c->have_block = g == 0;
+        }
+    }
+    int found = 0;
+    if (c->have_block && c->blk.n >= k) {
+        double limit2 = tau < c->r2 ? tau : c->r2;
+        int64_t m = c->scan(&c->blk, pi[0], pi[1], pi[2], limit2, c->sel);
+        if (m >= k) {
+            nearest_of_block(&c->blk, c->blk.d2, c->sel, m, k, limit2, c->h.c, c->bucket,
+                             c->count);
+            found = 1;
+        }
+    }
+    if (!found) knn_search(T, pi, k, tau, &c->h);
+    double kth = c->h.c[k - 1].d2;
+    if (kth > c->leaf_max) c->leaf_max = kth;
+    if (c->r2 < 0.0) c->r2 = kth * BLOCK_GROW; /* the first point */
+    c->prev_r = sqrt(kth);
+    c->prev_p[0] = pi[0]; c->prev_p[1] = pi[1]; c->prev_p[2] = pi[2];
+    return 0;
+}
+
+/* cloud_out_t: what one pass over the points writes (_ckernels.h). */
+
+/* kNN of tree positions [begin, end) at k = max(ks) (knn_cursor_t), then what out asks
+ * for (see cloud_out_t). Returns 0, or -1 out of memory. */
 int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
                   const cloud_out_t *out) {
     tree_t T = {p, orig, box, n, depth};
     int64_t kmax = ks[nscales - 1];
-    int64_t limit = 32 * kmax + 512;
-    heap_t h = {(cand_t *)malloc((size_t)limit * sizeof(cand_t)), 0, kmax, INFINITY};
-    block_t blk = {NULL, NULL, NULL, NULL, NULL, NULL, 0, 0};
+    knn_cursor_t cur;
+    int cur_rc = knn_cursor_init(&cur, &T, kmax);
+    const cand_t *nb = cur.h.c;
     double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
     double *mu = (double *)malloc((size_t)kmax * 2 * sizeof(double));
@@ -1043,74 +1199,30 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     const sheet_params_t sheet = {out->sheet_gap, out->sheet_min, out->sheet_own,
                                   out->sheet_column, out->sheet_column_gap, out->sheet_far_span};
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
-    int32_t *sel = (int32_t *)malloc((size_t)limit * sizeof(int32_t));
-    uint8_t *bucket = (uint8_t *)malloc((size_t)limit);
-    int32_t count[NEAR_BUCKETS + 1];
-    int rc = 0, have_block = 0;
-    int64_t leaf_s = 0, leaf_e = 0;
-    double r2 = -1.0, leaf_max = 0.0;
-    double prev_r = -1.0, prev_p[3] = {0, 0, 0};
-    if (!h.c || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk || !sel ||
-        !bucket) {
+    int rc = 0;
+    if (cur_rc || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk) {
         rc = -1;
         goto done;
     }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
-        double tau = kth_bound(pi, prev_p, prev_r);
-        if (i >= leaf_e) {
-            int64_t t = leaf_of(&T, i, &leaf_s, &leaf_e);
-            if (leaf_max > 0.0) r2 = leaf_max * BLOCK_GROW;
-            leaf_max = 0.0;
-            blk.n = 0;
-            have_block = 0;
-            if (r2 >= 0.0) {
-                int g = gather(&T, box + 6 * t, r2, 0, 0, n, 0, limit, &blk);
-                if (g < 0) { rc = -1; goto done; }
-                have_block = g == 0;
-            }
-        }
-        int found = 0;
-        if (have_block && blk.n >= kmax) {
-            double limit2 = tau < r2 ? tau : r2;
-            double px = pi[0], py = pi[1], pz = pi[2];
-            int64_t nb = blk.n, m = 0;
-            double *bd = blk.d2;
-            for (int64_t j = 0; j < nb; j++) {
-                double dx = blk.x[j] - px, dy = blk.y[j] - py, dz = blk.z[j] - pz;
-                bd[j] = dx * dx + dy * dy + dz * dz;
-            }
-            for (int64_t j = 0; j < nb; j++) { /* branch-free: sel holds limit >= nb */
-                sel[m] = (int32_t)j;
-                m += bd[j] <= limit2;
-            }
-            if (m >= kmax) {
-                nearest_of_block(&blk, bd, sel, m, kmax, limit2, h.c, bucket, count);
-                found = 1;
-            }
-        }
-        if (!found) knn_search(&T, pi, kmax, tau, &h);
-        double kth = h.c[kmax - 1].d2;
-        if (kth > leaf_max) leaf_max = kth;
-        if (r2 < 0.0) r2 = kth * BLOCK_GROW; /* the first point of the chunk */
-        prev_r = sqrt(kth);
-        prev_p[0] = pi[0]; prev_p[1] = pi[1]; prev_p[2] = pi[2];
+        if (knn_cursor_next(&cur, i)) { rc = -1; goto done; }
         int64_t ci = orig[i], oi = out->tree_order ? i : ci; /* cleaned index, its row */
         if (out->idx != NULL) {
-            for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = h.c[j].idx;
+            for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = nb[j].idx;
         }
-        if (out->near != NULL) out->near[oi] = kmax > 1 ? h.c[1].idx : ci;
+        if (out->near != NULL) out->near[oi] = kmax > 1 ? nb[1].idx : ci;
         if (out->kth_d2 != NULL) {
-            out->kth_d2[oi] = h.c[kmax - 1].d2;
-            out->kth_idx[oi] = h.c[kmax - 1].idx;
+            out->kth_d2[oi] = nb[kmax - 1].d2;
+            out->kth_idx[oi] = nb[kmax - 1].idx;
         }
         if (out->pdis == NULL && out->relative == NULL && out->noise == NULL) continue;
         for (int64_t j = 0; j < kmax; j++) {
-            const double *pj = p + 3 * h.c[j].pos;
+            const double *pj = p + 3 * nb[j].pos;
             q[3 * j] = pj[0] - pi[0];
             q[3 * j + 1] = pj[1] - pi[1];
             q[3 * j + 2] = pj[2] - pi[2];
-            d2[j] = h.c[j].d2;
+            d2[j] = nb[j].d2;
         }
         for (int s = 0; s < nscales; s++) mk[s] = ks[s];
         /* known: how many of the largest scales have their normal from the sheet filter's
@@ -1199,8 +1311,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         if (out->score != NULL) out->score[oi] = score;
     }
 done:
-    free(h.c);
-    free(blk.x); free(blk.y); free(blk.z); free(blk.d2); free(blk.idx); free(blk.pos);
+    knn_cursor_free(&cur);
     free(q);
     free(d2);
     free(mu);
@@ -1210,9 +1321,20 @@ done:
     free(hs);
     free(keep);
     free(mk);
-    free(sel);
-    free(bucket);
     return rc;
+}
+
+/* Rows [begin, end) of src (n rows of `width` 8-byte words, tree order) to their
+ * cleaned positions in dst: row i to row orig[i] (the pass's tree_order outputs). */
+void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, int64_t begin,
+                     int64_t end, uint64_t *dst) {
+    if (width == 1) {
+        for (int64_t i = begin; i < end; i++) dst[orig[i]] = src[i];
+        return;
+    }
+    for (int64_t i = begin; i < end; i++) {
+        memcpy(dst + orig[i] * width, src + i * width, (size_t)width * sizeof(uint64_t));
+    }
 }
 
 /* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx)
@@ -1231,25 +1353,20 @@ void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...] (cleaned indices sorted by (squared distance, index), the rows of
- * ms_cloud_pdis's kNN table). Each search is pruned from the start by the bound that
- * the previous row's k-th distance gives (rows in increasing tree position: near each
- * other). Returns 0, or -1 out of memory. */
+ * ms_cloud_pdis's kNN table), by the same knn_cursor_t: rows in increasing tree
+ * position share their leaf's block and are pruned by the previous row's k-th
+ * distance. Returns 0, or -1 out of memory. */
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx) {
     tree_t T = {p, orig, box, n, depth};
-    heap_t h = {(cand_t *)malloc((size_t)k * sizeof(cand_t)), 0, k, INFINITY};
-    if (!h.c) return -1;
-    double prev_r = -1.0;
-    const double *prev_p = p;
-    for (int64_t r = begin; r < end; r++) {
-        const double *pi = p + 3 * pos[r];
-        knn_search(&T, pi, k, kth_bound(pi, prev_p, prev_r), &h);
-        for (int64_t j = 0; j < k; j++) out_idx[r * k + j] = h.c[j].idx;
-        prev_r = sqrt(h.c[k - 1].d2);
-        prev_p = pi;
+    knn_cursor_t cur;
+    int rc = knn_cursor_init(&cur, &T, k);
+    for (int64_t r = begin; r < end && rc == 0; r++) {
+        rc = knn_cursor_next(&cur, pos[r]);
+        for (int64_t j = 0; j < k && rc == 0; j++) out_idx[r * k + j] = cur.h.c[j].idx;
     }
-    free(h.c);
-    return 0;
+    knn_cursor_free(&cur);
+    return rc;
 }
 
 /* ------------------------------------------------------------------ meshes */

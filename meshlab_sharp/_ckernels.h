@@ -155,6 +155,11 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
                   const cloud_out_t *out);
 
+/* Rows [begin, end) of src (n rows of `width` 8-byte words, tree order) to their
+ * cleaned positions in dst: row i to row orig[i]. */
+void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, int64_t begin,
+                     int64_t end, uint64_t *dst);
+
 /* robust.isolated_points from a pass's statistics near, kth_d2, kth_idx (n, cleaned
  * order) for the points [begin, end) of p (n, 3): out[i] = 1 when i is not among the
  * kmax nearest of near[i] ((|p_i - p_near[i]|^2, i) after that point's kmax-th
@@ -163,8 +168,9 @@ void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
                  const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
- * out_idx[r * k ...], cleaned indices sorted by (squared distance, index). Fastest with
- * pos increasing (each search is pruned by the previous row's k-th distance). Returns
+ * out_idx[r * k ...], cleaned indices sorted by (squared distance, index): the search
+ * of ms_cloud_pdis (a leaf's block of nearby points, shared by the rows in that leaf,
+ * pruned by the previous row's k-th distance), fastest with pos increasing. Returns
  * 0, or -1 out of memory. */
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx);

@@ -53,6 +53,7 @@ _SIGNATURES = {
         _int,
         [_c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _i64, _i64, _i64, _c_void_p],
     ),
+    "ms_scatter_rows": (None, [_c_void_p, _c_void_p, _i64, _i64, _i64, _c_void_p]),
     "ms_isolated": (
         None,
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
@@ -286,13 +287,26 @@ _NUMBERS = (
 _PER_SCALE = ("pdis", "normals", "relative")
 
 
-def _to_cleaned_order(rows: np.ndarray, orig: np.ndarray, scratch: np.ndarray) -> None:
-    """``rows`` (n, ...) written at tree positions, moved in place to cleaned order
-    (``orig``: the cleaned index of each position); ``scratch``: bytes, at least
-    ``rows.nbytes`` of them."""
+def _to_cleaned_order(
+    rows: np.ndarray, orig: np.ndarray, scratch: np.ndarray, workers: int = -1
+) -> None:
+    """``rows`` (n, ...) of 8-byte items, C-contiguous, written at tree positions, moved
+    in place to cleaned order (``orig``: the cleaned index of each position) on
+    ``workers`` threads; ``scratch``: bytes, at least ``rows.nbytes`` of them."""
+    lib = _LIB
+    assert lib is not None and rows.itemsize == 8 and rows.flags.c_contiguous
     copy = scratch[: rows.nbytes].view(rows.dtype).reshape(rows.shape)
     np.copyto(copy, rows)
-    rows[orig] = copy
+    n = len(rows)
+    width = rows.size // n if n else 1
+    args = (_ptr(orig), _ptr(copy), width)
+    w = _workers(workers)
+
+    def task(a: int, b: int) -> int:
+        lib.ms_scatter_rows(*args, a, b, _ptr(rows))
+        return 0
+
+    _run_chunks(n, w, task, chunk=max(CHUNK, -(-n // w)))
 
 
 def _tree_spans(tree: KdTree, rows: np.ndarray) -> list[tuple[int, int]]:
@@ -348,7 +362,7 @@ def _cloud_call(
     moved = [r for name, a in arrays.items() for r in (a if name in _PER_SCALE else (a,))]
     scratch = np.empty(max((r.nbytes for r in moved), default=0), np.uint8)  # one for all
     for r in moved:
-        _to_cleaned_order(r, t.orig, scratch)
+        _to_cleaned_order(r, t.orig, scratch, workers)
 
 
 def cloud_knn(
@@ -363,9 +377,9 @@ def cloud_knn(
 
 
 def cloud_knn_rows(tree: KdTree, rows: np.ndarray, k: int, workers: int = -1) -> np.ndarray:
-    """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64, each by a
-    search of the tree (for a few rows: the table of every point is not built), the
-    rows searched in tree order."""
+    """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64 (for a few
+    rows: the table of every point is not built), searched in tree order as the pass
+    searches them (the rows of one leaf share its block of nearby points)."""
     lib = _LIB
     assert lib is not None
     t = tree

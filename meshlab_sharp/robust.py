@@ -1151,13 +1151,12 @@ class RobustSetup:
             table = np.asarray(self.neighbourhoods.indices)[rows, :top]
         else:
             table = _kernels.cloud_knn_rows(tree, rows, top, self.neighbourhoods.workers)
-        out = []
-        for k in ks:
-            sizes = np.zeros(len(self.points), dtype=np.int64)
-            sizes[rows] = k
-            indptr = np.concatenate([[0], np.cumsum(sizes)])
-            out.append(Neighbourhood(indptr, np.ascontiguousarray(table[:, :k]).reshape(-1)))
-        return out
+        before = np.zeros(len(self.points) + 1, dtype=np.int64)  # rows before each point
+        before[np.asarray(rows, dtype=np.int64) + 1] = 1
+        np.cumsum(before, out=before)
+        return [
+            Neighbourhood(before * k, np.ascontiguousarray(table[:, :k]).reshape(-1)) for k in ks
+        ]
 
     def _ring_local_scale(self, i: int, scale: int) -> tuple[np.ndarray, np.ndarray]:
         """:func:`local_scale` at the i-th ring scale, from one compiled pass over every

@@ -206,9 +206,17 @@ SPREADS = {
 }
 
 
-def _run_on_points(script: str, points: np.ndarray, result: Path, *, timeout: float):
+def _run_on_points(
+    script: str,
+    points: np.ndarray,
+    result: Path,
+    *,
+    timeout: float,
+    env: dict[str, str] | None = None,
+):
     """Run ``script`` (argv: a .npy of ``points``, then ``result``) in a subprocess with a
-    time limit against a hang, from the repository root; ``np.load(result)``."""
+    time limit against a hang, from the repository root, ``env`` added to the
+    environment; ``np.load(result)``."""
     source = result.with_name("points.npy")
     np.save(source, points)
     root = Path(__file__).resolve().parent.parent
@@ -217,7 +225,7 @@ def _run_on_points(script: str, points: np.ndarray, result: Path, *, timeout: fl
         check=True,
         timeout=timeout,
         cwd=root,
-        env={**os.environ, "PYTHONPATH": str(root)},
+        env={**os.environ, "PYTHONPATH": str(root), **(env or {})},
     )
     return np.load(result)
 
@@ -228,6 +236,16 @@ import numpy as np
 from meshlab_sharp.neighbourhoods import KnnNeighbourhoods
 np.save(sys.argv[2], KnnNeighbourhoods(np.load(sys.argv[1]), 40, backend="compiled").indices)
 """
+
+
+@pytest.mark.parametrize("name", ["grid_cube_ties", "random_box"])
+def test_knn_identical_without_the_avx2_scan(name, tmp_path):
+    """The kNN's block scan on 4 lanes (AVX2, where the CPU has it) and the plain one
+    (``MESHLAB_SHARP_NO_AVX2``) give the same table, the numpy one, ties included."""
+    points = clean(as_geometry(CLOUDS[name]()), backend="numpy").vertices
+    env = {"MESHLAB_SHARP_NO_AVX2": "1"}
+    plain = _run_on_points(_COMPILED_KNN, points, tmp_path / "knn.npy", timeout=60, env=env)
+    np.testing.assert_array_equal(plain, knn(points, 40))
 
 
 @pytest.mark.parametrize("name", sorted(SPREADS))
