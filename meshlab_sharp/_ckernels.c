@@ -1305,22 +1305,33 @@ static int reserve(void **arrays, const size_t *size, int count, int64_t *cap, i
 }
 
 /* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
- * the projected distance into out_pdis[s * n + i] (normals into out_normals when not
- * NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA. stamp: (n,) int32
- * scratch of this thread, all -1 initially (or left by an earlier call). The members are
- * summed in the order the search meets them. */
+ * the projected distance into out_pdis[s * n + i] when not NULL (normals into
+ * out_normals when not NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA.
+ * stamp: (n,) int32 scratch of this thread, all -1 initially (or left by an earlier
+ * call). The members are summed in the order the search meets them: the vertex, then
+ * each ring after the last, its vertices in the order met walking the last ring's new
+ * members' lists (RingNeighbourhoods.at). With out_relative (and out_score) not NULL,
+ * robust mode's RelativeRule in the same walk: the local scales of each ring in numpy's
+ * summation order (local_scale_prefixes), out_relative[s * n + i] = min(pdis / l, 1) and
+ * out_score[i] = the sum over the scales of min(o / l, 1) / nscales (0 where l = 0). */
 int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
                  const double *fixed, const int64_t *rings, int nscales, int gaussian,
                  int64_t begin, int64_t end, int32_t *stamp, double *out_pdis,
-                 double *out_normals) {
+                 double *out_normals, double *out_relative, double *out_score) {
     int64_t cap = 1024;
-    /* queue (int32), q (3 doubles), d2, mu */
-    void *buf[4] = {malloc((size_t)cap * 4), malloc((size_t)cap * 24), malloc((size_t)cap * 8),
-                    malloc((size_t)cap * 8)};
-    const size_t size[4] = {4, 24, 8, 8};
+    /* queue (int32), q (3 doubles), d2, mu, |q| and q side by side (4 doubles) */
+    void *buf[5] = {malloc((size_t)cap * 4), malloc((size_t)cap * 24), malloc((size_t)cap * 8),
+                    malloc((size_t)cap * 8), malloc((size_t)cap * 32)};
+    const size_t size[5] = {4, 24, 8, 8, 32};
+    /* per scale: the ring's size, its projected distance, l, then o */
+    int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
+    double *spd = (double *)malloc((size_t)nscales * 3 * sizeof(double));
     int rc = 0;
     int64_t rmax = rings[nscales - 1];
-    if (!buf[0] || !buf[1] || !buf[2] || !buf[3]) { rc = -1; goto done; }
+    if (!buf[0] || !buf[1] || !buf[2] || !buf[3] || !buf[4] || !mk || !spd) {
+        rc = -1;
+        goto done;
+    }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         const double *fn = fixed ? fixed + 3 * i : NULL;
@@ -1337,7 +1348,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
             for (; head < level_end; head++) {
                 int32_t v = queue[head];
                 int64_t t0 = ptr[v], t1 = ptr[v + 1];
-                if (reserve(buf, size, 4, &cap, tail + (t1 - t0)) != 0) { rc = -1; goto done; }
+                if (reserve(buf, size, 5, &cap, tail + (t1 - t0)) != 0) { rc = -1; goto done; }
                 queue = (int32_t *)buf[0];
                 /* branch-free: write every neighbour, keep it when first met */
                 for (int64_t t = t0; t < t1; t++) {
@@ -1355,8 +1366,8 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                 }
                 double mean[3] = {sx / (double)tail, sy / (double)tail, sz / (double)tail};
                 double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
-                out_pdis[s * n + i] =
-                    neighbourhood_pdis(NULL, NULL, tail, mean, 0.0, gaussian, fn, nrm, NULL);
+                mk[s] = tail;
+                spd[s] = neighbourhood_pdis(NULL, NULL, tail, mean, 0.0, gaussian, fn, nrm, NULL);
                 s++;
             }
             while (s < nscales && rings[s] == ring) {
@@ -1373,14 +1384,35 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                 }
                 double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
                 double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
-                out_pdis[s * n + i] =
-                    neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm, (double *)buf[3]);
+                mk[s] = m;
+                spd[s] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm, (double *)buf[3]);
                 s++;
             }
         }
+        if (out_pdis != NULL) {
+            for (s = 0; s < nscales; s++) out_pdis[s * n + i] = spd[s];
+        }
+        if (out_relative == NULL) continue;
+        double *v = (double *)buf[4];
+        for (int64_t j = 0; j < tail; j++) {
+            const double *pj = p + 3 * (int64_t)queue[j];
+            double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
+            v[4 * j] = sqrt(x * x + y * y + z * z);
+            v[4 * j + 1] = x; v[4 * j + 2] = y; v[4 * j + 3] = z;
+        }
+        double *ell = spd + nscales, score = 0.0;
+        local_scale_prefixes(v, mk, nscales, ell, ell + nscales);
+        for (s = 0; s < nscales; s++) { /* min(x / l, 1) keeps a NaN, as np.minimum */
+            double l = ell[s], r = l > 0 ? spd[s] / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
+            out_relative[s * n + i] = r > 1.0 ? 1.0 : r;
+            score += (g > 1.0 ? 1.0 : g) / (double)nscales;
+        }
+        out_score[i] = score;
     }
 done:
-    for (int t = 0; t < 4; t++) free(buf[t]);
+    for (int t = 0; t < 5; t++) free(buf[t]);
+    free(mk);
+    free(spd);
     return rc;
 }
 
@@ -1502,103 +1534,6 @@ void ms_face_double_areas(const double *p, const int64_t *faces, int64_t m, doub
 }
 
 /* ------------------------------------------------------------ robust mode on meshes */
-
-static int cmp_i32(const void *a, const void *b) {
-    int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
-    return (x > y) - (x < y);
-}
-
-/* RingNeighbourhoods.one_ring as CSR: each vertex's 1-ring and itself, sorted, without
- * repeats (scipy's sorted boolean matrix), from ms_adjacency's lists (ptr, adj), which
- * have repeats. out_idx: room for ptr[n] + n entries; out_ptr (n + 1). */
-void ms_sorted_one_ring(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t *out_ptr,
-                        int32_t *out_idx) {
-    int64_t w = 0;
-    out_ptr[0] = 0;
-    for (int64_t v = 0; v < n; v++) {
-        int32_t *a = out_idx + w;
-        int64_t m = 0;
-        a[m++] = (int32_t)v;
-        for (int64_t t = ptr[v]; t < ptr[v + 1]; t++) a[m++] = adj[t];
-        if (m <= 32) {
-            for (int64_t i = 1; i < m; i++) {
-                int32_t x = a[i];
-                int64_t j = i;
-                for (; j > 0 && a[j - 1] > x; j--) a[j] = a[j - 1];
-                a[j] = x;
-            }
-        } else {
-            qsort(a, (size_t)m, sizeof(int32_t), cmp_i32);
-        }
-        int64_t u = 1;
-        for (int64_t i = 1; i < m; i++)
-            if (a[i] != a[u - 1]) a[u++] = a[i];
-        w += u;
-        out_ptr[v + 1] = w;
-    }
-}
-
-/* robust.local_scale of vertices [begin, end) over their k-rings, k = rings[s] (increasing),
- * the rings listed in the order of RingNeighbourhoods.at (scipy's sparse product), which
- * fixes the rounding of the sums: ring k + 1 lists the vertices met first when walking
- * ring k's list and, for each member, its sorted one_ring (ptr1, one: ms_sorted_one_ring),
- * in reverse order. mark: (n,) int64 scratch of this thread, all -1 initially (or left by
- * an earlier call). out_ell, out_off: (nscales, n). Returns 0, or -1 out of memory. */
-int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const int32_t *one,
-                        const int64_t *rings, int nscales, int64_t begin, int64_t end,
-                        int64_t *mark, double *out_ell, double *out_off) {
-    int64_t cap = 1024, rmax = rings[nscales - 1];
-    /* the last ring listed backwards, the next one, q (3 doubles), dist */
-    void *buf[4] = {malloc((size_t)cap * 4), malloc((size_t)cap * 4), malloc((size_t)cap * 24),
-                    malloc((size_t)cap * 8)};
-    const size_t size[4] = {4, 4, 24, 8};
-    int rc = 0;
-    if (!buf[0] || !buf[1] || !buf[2] || !buf[3]) { rc = -1; goto done; }
-    for (int64_t i = begin; i < end; i++) {
-        const double *pi = p + 3 * i;
-        int64_t m = 1;
-        ((int32_t *)buf[0])[0] = (int32_t)i;
-        int s = 0;
-        for (int64_t ring = 1; ring <= rmax && s < nscales; ring++) {
-            int64_t gen = i * (rmax + 1) + ring, k = 0;
-            /* walk the last ring in its order (buf[0] holds it backwards) */
-            for (int64_t a = m - 1; a >= 0; a--) {
-                int32_t v = ((int32_t *)buf[0])[a];
-                int64_t t0 = ptr1[v], t1 = ptr1[v + 1];
-                if (reserve(buf, size, 4, &cap, k + (t1 - t0)) != 0) { rc = -1; goto done; }
-                int32_t *next = (int32_t *)buf[1];
-                /* branch-free: write every member, keep it when first met */
-                for (int64_t t = t0; t < t1; t++) {
-                    int32_t w = one[t];
-                    next[k] = w;
-                    k += mark[w] != gen;
-                    mark[w] = gen;
-                }
-            }
-            /* the new ring is the members met, backwards: buf[1] read from its end */
-            void *last = buf[0];
-            buf[0] = buf[1];
-            buf[1] = last;
-            m = k;
-            if (ring != rings[s]) continue;
-            const int32_t *back = (const int32_t *)buf[0];
-            double *q = (double *)buf[2], *dist = (double *)buf[3];
-            for (int64_t j = 0; j < m; j++) {
-                const double *pj = p + 3 * (int64_t)back[m - 1 - j];
-                q[3 * j] = pj[0] - pi[0]; q[3 * j + 1] = pj[1] - pi[1]; q[3 * j + 2] = pj[2] - pi[2];
-            }
-            for (int64_t j = 0; j < m; j++) {
-                const double *x = q + 3 * j;
-                dist[j] = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-            }
-            local_scale_one(q, dist, m, out_ell + s * n + i, out_off + s * n + i);
-            s++;
-        }
-    }
-done:
-    for (int t = 0; t < 4; t++) free(buf[t]);
-    return rc;
-}
 
 static int cmp_i64(const void *a, const void *b) {
     int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;

@@ -65,18 +65,12 @@ _SIGNATURES = {
     "ms_ring_pdis": (
         _int,
         [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _int, _int, _i64, _i64]
-        + [_c_void_p, _c_void_p, _c_void_p],
+        + [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
     ),
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_face_double_areas": (None, [_c_void_p, _c_void_p, _i64, _c_void_p]),
     "ms_two_face_edges": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
-    "ms_sorted_one_ring": (None, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p]),
-    "ms_ring_local_scale": (
-        _int,
-        [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _int, _i64, _i64, _c_void_p]
-        + [_c_void_p, _c_void_p],
-    ),
 }
 
 
@@ -555,29 +549,40 @@ def ring_projected_distances(
     weighting: str = "gaussian",
     *,
     keep_normals: bool = False,
+    relative: bool = False,
     workers: int = -1,
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """Projected distances (s, n) at every ring, by breadth-first search; ``normals``
-    (n, 3) fixed (zero rows: PCA of the ring) or None (PCA everywhere)."""
+) -> ScalePass:
+    """Projected distances (s, n) at every ring, by breadth-first search over the
+    adjacency (``indptr``, ``indices``: :func:`adjacency`); ``normals`` (n, 3) fixed (zero
+    rows: PCA of the ring) or None (PCA everywhere). Each ring is summed in the order
+    ``RingNeighbourhoods.at`` lists it. With ``relative``, robust mode's
+    :class:`meshlab_sharp.robust.RelativeRule` in the same walk instead of the projected
+    distances: the relative distances (s, n) and the score (n,), bit for bit (the local
+    scales of each ring summed in numpy's order)."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     n = len(points)
     rs = np.ascontiguousarray(rings, dtype=np.int64)
     fixed = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
-    pdis = np.empty((len(rs), n))
-    out_normals = np.empty((len(rs), n, 3)) if keep_normals else None
+    out = ScalePass(
+        pdis=None if relative else np.empty((len(rs), n)),
+        normals=np.empty((len(rs), n, 3)) if keep_normals else None,
+        relative=np.empty((len(rs), n)) if relative else None,
+        score=np.empty(n) if relative else None,
+    )
     w = _workers(workers)
     stamp = _thread_scratch(n, np.int32)
 
     def task(a: int, b: int) -> int:
         return lib.ms_ring_pdis(
             _ptr(points), n, _ptr(indptr), _ptr(indices), _ptr(fixed), _ptr(rs), len(rs),
-            int(weighting == "gaussian"), a, b, _ptr(stamp()), _ptr(pdis), _ptr(out_normals),
+            int(weighting == "gaussian"), a, b, _ptr(stamp()), _ptr(out.pdis),
+            _ptr(out.normals), _ptr(out.relative), _ptr(out.score),
         )  # fmt: skip
 
     _run_chunks(n, w, task)
-    return pdis, out_normals
+    return out
 
 
 def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -598,61 +603,6 @@ def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, n
     if e < 0:
         raise MemoryError("out of memory pairing the faces of the mesh's edges")
     return edges[:e], dot[:e]
-
-
-def sorted_one_ring(adjacent: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Each vertex's 1-ring and itself, sorted, without repeats, in CSR form: indptr
-    (n + 1,) int64, indices int32, the lists of ``RingNeighbourhoods.one_ring``, from
-    :func:`adjacency`'s lists."""
-    lib = _LIB
-    assert lib is not None
-    ptr, adj = adjacent
-    n = len(ptr) - 1
-    out_ptr = np.empty(n + 1, dtype=np.int64)
-    out_idx = np.empty(len(adj) + n, dtype=np.int32)
-    lib.ms_sorted_one_ring(_ptr(ptr), _ptr(adj), n, _ptr(out_ptr), _ptr(out_idx))
-    return out_ptr, out_idx[: out_ptr[-1]]
-
-
-def ring_local_scale(
-    points: np.ndarray,
-    one_ring: tuple[np.ndarray, np.ndarray],
-    rings: Sequence[int],
-    workers: int = -1,
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`meshlab_sharp.robust.local_scale` over the k-rings of every vertex, for
-    each k in ``rings`` (increasing), bit for bit as over ``RingNeighbourhoods.at(k)``
-    (whose order of the members it follows), without building the lists.
-
-    Parameters
-    ----------
-    points : (n, 3) float64
-    one_ring : (indptr (n + 1,) int64, indices int32)
-        :func:`sorted_one_ring` of the mesh.
-    rings : sequence of int
-    workers : int, default -1
-
-    Returns
-    -------
-    ell, off : (s, n) float64
-    """
-    lib = _LIB
-    assert lib is not None
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    n = len(points)
-    rs = np.ascontiguousarray(rings, dtype=np.int64)
-    ptr, idx = (np.ascontiguousarray(a) for a in one_ring)
-    ell, off = np.empty((len(rs), n)), np.empty((len(rs), n))
-    mark = _thread_scratch(n, np.int64)
-
-    def task(a: int, b: int) -> int:
-        return lib.ms_ring_local_scale(
-            _ptr(points), n, _ptr(ptr), _ptr(idx), _ptr(rs), len(rs), a, b, _ptr(mark()),
-            _ptr(ell), _ptr(off),
-        )  # fmt: skip
-
-    _run_chunks(n, workers, task)
-    return ell, off
 
 
 def face_average_normals(points: np.ndarray, faces: np.ndarray, zero: float) -> np.ndarray:
