@@ -1326,7 +1326,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
     /* per scale: the ring's size, its projected distance, l, then o */
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     double *spd = (double *)malloc((size_t)nscales * 3 * sizeof(double));
-    int rc = 0;
+    int rc = 0, local = out_relative != NULL;
     int64_t rmax = rings[nscales - 1];
     if (!buf[0] || !buf[1] || !buf[2] || !buf[3] || !buf[4] || !mk || !spd) {
         rc = -1;
@@ -1359,10 +1359,17 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                 }
             }
             while (s < nscales && rings[s] == ring && fn != NULL) {
-                /* a fixed normal: the mean offset is all it needs */
+                /* a fixed normal: the mean offset is all it needs (and the local scale
+                 * each offset and its length) */
+                double *v = (double *)buf[4];
                 for (; done_j < tail; done_j++) {
                     const double *pj = p + 3 * (int64_t)queue[done_j];
-                    sx += pj[0] - pi[0]; sy += pj[1] - pi[1]; sz += pj[2] - pi[2];
+                    double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
+                    sx += x; sy += y; sz += z;
+                    if (local) {
+                        v[4 * done_j] = sqrt(x * x + y * y + z * z);
+                        v[4 * done_j + 1] = x; v[4 * done_j + 2] = y; v[4 * done_j + 3] = z;
+                    }
                 }
                 double mean[3] = {sx / (double)tail, sy / (double)tail, sz / (double)tail};
                 double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
@@ -1372,7 +1379,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
             }
             while (s < nscales && rings[s] == ring) {
                 int64_t m = tail;
-                double *q = (double *)buf[1], *d2 = (double *)buf[2];
+                double *q = (double *)buf[1], *d2 = (double *)buf[2], *v = (double *)buf[4];
                 for (; done_j < m; done_j++) {
                     const double *pj = p + 3 * (int64_t)queue[done_j];
                     double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
@@ -1381,6 +1388,10 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                     d2[done_j] = dd;
                     if (dd > h2) h2 = dd;
                     sx += x; sy += y; sz += z;
+                    if (local) {
+                        v[4 * done_j] = sqrt(dd);
+                        v[4 * done_j + 1] = x; v[4 * done_j + 2] = y; v[4 * done_j + 3] = z;
+                    }
                 }
                 double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
                 double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
@@ -1392,16 +1403,9 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
         if (out_pdis != NULL) {
             for (s = 0; s < nscales; s++) out_pdis[s * n + i] = spd[s];
         }
-        if (out_relative == NULL) continue;
-        double *v = (double *)buf[4];
-        for (int64_t j = 0; j < tail; j++) {
-            const double *pj = p + 3 * (int64_t)queue[j];
-            double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
-            v[4 * j] = sqrt(x * x + y * y + z * z);
-            v[4 * j + 1] = x; v[4 * j + 2] = y; v[4 * j + 3] = z;
-        }
+        if (!local) continue;
         double *ell = spd + nscales, score = 0.0;
-        local_scale_prefixes(v, mk, nscales, ell, ell + nscales);
+        local_scale_prefixes((const double *)buf[4], mk, nscales, ell, ell + nscales);
         for (s = 0; s < nscales; s++) { /* min(x / l, 1) keeps a NaN, as np.minimum */
             double l = ell[s], r = l > 0 ? spd[s] / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
             out_relative[s * n + i] = r > 1.0 ? 1.0 : r;
@@ -1414,6 +1418,51 @@ done:
     free(mk);
     free(spd);
     return rc;
+}
+
+/* The rings of the vertices rows[r] (r < m) in breadth-first order over (ptr, adj), the
+ * order ms_ring_pdis sums them in (RingNeighbourhoods.at): ring k is a prefix of ring
+ * k + 1. out_len[s * m + r]: the length of ring rings[s] (nrings increasing); when
+ * out_idx is not NULL, the last ring's members from out_idx[out_start[r]] on. stamp: (n,)
+ * int32 scratch, all -1 on entry and on return. Returns 0, or -1 out of memory. */
+int ms_ring_lists(const int64_t *ptr, const int32_t *adj, const int64_t *rows, int64_t m,
+                  const int64_t *rings, int nrings, int32_t *stamp, int64_t *out_len,
+                  const int64_t *out_start, int32_t *out_idx) {
+    int64_t cap = 1024, rmax = rings[nrings - 1];
+    void *buf[1] = {malloc((size_t)cap * 4)};
+    const size_t size[1] = {4};
+    if (!buf[0]) return -1;
+    for (int64_t r = 0; r < m; r++) {
+        int32_t *queue = (int32_t *)buf[0];
+        int64_t head = 0, tail = 0;
+        queue[tail++] = (int32_t)rows[r];
+        stamp[rows[r]] = 0;
+        int s = 0;
+        for (int64_t ring = 1; ring <= rmax; ring++) {
+            int64_t level_end = tail;
+            for (; head < level_end; head++) {
+                int32_t v = queue[head];
+                int64_t t0 = ptr[v], t1 = ptr[v + 1];
+                if (reserve(buf, size, 1, &cap, tail + (t1 - t0)) != 0) {
+                    for (int64_t j = 0; j < tail; j++) stamp[queue[j]] = -1;
+                    free(buf[0]);
+                    return -1;
+                }
+                queue = (int32_t *)buf[0];
+                for (int64_t t = t0; t < t1; t++) {
+                    int32_t w = adj[t];
+                    queue[tail] = w;
+                    tail += stamp[w] != 0;
+                    stamp[w] = 0;
+                }
+            }
+            while (s < nrings && rings[s] == ring) out_len[s++ * m + r] = tail;
+        }
+        if (out_idx != NULL) memcpy(out_idx + out_start[r], queue, (size_t)tail * sizeof(int32_t));
+        for (int64_t j = 0; j < tail; j++) stamp[queue[j]] = -1;
+    }
+    free(buf[0]);
+    return 0;
 }
 
 /* Unit normal of face f into u: cross(p1 - p0, p2 - p0) / |.| (|.| the square root of the

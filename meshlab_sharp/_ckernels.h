@@ -188,6 +188,15 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                  int64_t begin, int64_t end, int32_t *stamp, double *out_pdis,
                  double *out_normals, double *out_relative, double *out_score);
 
+/* The rings of the vertices rows[r] (r < m), breadth-first over (ptr, adj) as
+ * ms_ring_pdis lists them (ring k a prefix of ring k + 1): the length of ring rings[s]
+ * (nrings increasing) into out_len[s * m + r], and when out_idx is not NULL the last
+ * ring's members from out_idx[out_start[r]] on. stamp: (n,) int32 scratch, all -1 on
+ * entry (and on return). Returns 0, or -1 out of memory. */
+int ms_ring_lists(const int64_t *ptr, const int32_t *adj, const int64_t *rows, int64_t m,
+                  const int64_t *rings, int nrings, int32_t *stamp, int64_t *out_len,
+                  const int64_t *out_start, int32_t *out_idx);
+
 /* Face-average vertex normals (unit, or zero when shorter than `zero`) into acc (n, 3),
  * zero on entry; faces (m, 3). */
 void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,

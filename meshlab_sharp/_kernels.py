@@ -67,6 +67,11 @@ _SIGNATURES = {
         [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _int, _int, _i64, _i64]
         + [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
     ),
+    "ms_ring_lists": (
+        _int,
+        [_c_void_p, _c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _c_void_p]
+        + [_c_void_p, _c_void_p],
+    ),
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_face_double_areas": (None, [_c_void_p, _c_void_p, _i64, _c_void_p]),
@@ -582,6 +587,43 @@ def ring_projected_distances(
         )  # fmt: skip
 
     _run_chunks(n, w, task)
+    return out
+
+
+def ring_lists(
+    adjacent: tuple[np.ndarray, np.ndarray], rows: np.ndarray, rings: Sequence[int]
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The k-rings of the vertices ``rows`` (r,) for each k in ``rings`` (increasing), in
+    breadth-first order over :func:`adjacency`'s lists (``adjacent``), as
+    :func:`meshlab_sharp.neighbourhoods.grow_rings` lists them: per ring, indptr (r + 1,)
+    int64 and indices int32."""
+    lib = _LIB
+    assert lib is not None
+    ptr, adj = adjacent
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    rs = np.ascontiguousarray(rings, dtype=np.int64)
+    m = len(rows)
+    stamp = np.full(len(ptr) - 1, -1, dtype=np.int32)
+    lengths = np.empty((len(rs), m), dtype=np.int64)
+    start = np.zeros(m + 1, dtype=np.int64)
+    indices = np.empty(0, dtype=np.int32)
+    for fill in (False, True):  # the lengths, then the lists
+        if fill:
+            np.cumsum(lengths[-1], out=start[1:])
+            indices = np.empty(int(start[-1]), dtype=np.int32)
+        rc = lib.ms_ring_lists(
+            _ptr(ptr), _ptr(adj), _ptr(rows), m, _ptr(rs), len(rs), _ptr(stamp),
+            _ptr(lengths), _ptr(start) if fill else None, _ptr(indices) if fill else None,
+        )  # fmt: skip
+        if rc != 0:
+            raise MemoryError("out of memory listing the rings")
+    position = np.arange(len(indices)) - np.repeat(start[:-1], lengths[-1])
+    owner_length = [np.repeat(length, lengths[-1]) for length in lengths]
+    out = []
+    for length, within in zip(lengths, owner_length, strict=True):
+        indptr = np.zeros(m + 1, dtype=np.int64)
+        np.cumsum(length, out=indptr[1:])
+        out.append((indptr, indices[position < within]))
     return out
 
 

@@ -1019,19 +1019,23 @@ class RobustSetup:
 
     def _ring_rows(self, rows: np.ndarray, rings: tuple[int, ...]) -> list[Neighbourhood]:
         """The k-rings, k in ``rings`` (increasing), of the vertices ``rows`` only (the
-        other rows empty), each listed as ``RingNeighbourhoods.at(k)`` lists it
-        (:func:`meshlab_sharp.neighbourhoods.grow_rings`: a row depends only on its
-        vertex)."""
+        other rows empty), each listed as ``RingNeighbourhoods.at(k)`` lists it (a row
+        depends only on its vertex: :func:`meshlab_sharp.neighbourhoods.grow_rings`, or
+        its compiled twin :func:`meshlab_sharp._kernels.ring_lists`)."""
         assert isinstance(self.neighbourhoods, RingNeighbourhoods)
-        grown = grow_rings(self.neighbourhoods.lists(), rows)
+        adjacency = self.neighbourhoods.adjacency
+        if adjacency is not None:
+            lists = [Neighbourhood(*ring) for ring in _kernels.ring_lists(adjacency, rows, rings)]
+        else:
+            grown = grow_rings(self.neighbourhoods.lists(), rows)
+            listed = dict(zip(range(1, max(rings) + 1), grown, strict=False))
+            lists = [listed[k] for k in rings]
         out = []
-        for k in range(1, max(rings) + 1):
-            ring = next(grown)
-            if k in rings:
-                sizes = np.zeros(self.n, dtype=np.int64)
-                sizes[rows] = np.diff(ring.indptr)
-                indptr = np.concatenate([[0], np.cumsum(sizes)])
-                out.append(Neighbourhood(indptr, ring.indices))
+        for ring in lists:
+            sizes = np.zeros(self.n, dtype=np.int64)
+            sizes[rows] = ring.sizes
+            indptr = np.concatenate([[0], np.cumsum(sizes)])
+            out.append(Neighbourhood(indptr, ring.indices))
         return out
 
     def _lists(self, scale: int) -> Neighbourhood:

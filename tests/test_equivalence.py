@@ -34,6 +34,7 @@ from meshlab_sharp.neighbourhoods import (
     Neighbourhood,
     RingNeighbourhoods,
     face_order_adjacency,
+    grow_rings,
     knn,
     squared_distances,
 )
@@ -529,6 +530,21 @@ def test_rings_in_breadth_first_order():
         assert one.indices[one.indptr[4] : one.indptr[5]].tolist() == [4, 0, 3]
         assert two.indices[two.indptr[4] : two.indptr[5]].tolist() == [4, 0, 3, 1, 2]
         assert two.indices[two.indptr[1] : two.indptr[2]].tolist() == [1, 0, 2, 3, 4]
+
+
+def test_compiled_ring_lists_identical_to_grow_rings():
+    """_kernels.ring_lists (robust mode's support and thinning lists of the candidates)
+    lists the rings of a few rows as grow_rings does, a ring asked for twice included."""
+    vertices, faces = _delaunay_mesh(3000, seed=12)
+    adjacency = _kernels.adjacency(faces, len(vertices))
+    rows = np.sort(np.random.default_rng(2).choice(len(vertices), 400, replace=False))
+    got = _kernels.ring_lists(adjacency, rows, (2, 2, 4))
+    grown = grow_rings(face_order_adjacency(faces, len(vertices)), rows)
+    expected = [next(grown) for _ in range(4)]
+    assert len(got) == 3
+    for (indptr, indices), k in zip(got, (2, 2, 4), strict=True):
+        assert np.array_equal(indptr, expected[k - 1].indptr)
+        assert np.array_equal(indices, expected[k - 1].indices)
 
 
 def _adjacency_with_repeats(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

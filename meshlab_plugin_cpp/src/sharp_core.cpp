@@ -300,43 +300,26 @@ Rings adjacency(const Clean &c) {
 	return a;
 }
 
-// The k-rings of a mesh in the order of the Python package's RingNeighbourhoods.at
-// (neighbourhoods.grow_rings), which robust mode's support lists use and the kernel's
-// ring pass sums in: breadth-first, ring k + 1 = ring k's list, then the vertices not yet
-// met walking the adjacency lists of ring k's last level.
-class BreadthFirstRings {
-public:
-	explicit BreadthFirstRings(const Rings &adj) : adj_(adj), mark_(adj.ptr.size() - 1, -1) {}
-	// Start at vertex i: the 0-ring {i}.
-	void start(Index i) {
-		++generation_;
-		current_.assign(1, i);
-		mark_[i] = generation_;
-		head_ = 0;
+// The rings `inner` and `outer` (inner <= outer) of the vertices rows, breadth-first as
+// ms_ring_pdis sums them (ms_ring_lists, as _kernels.ring_lists and RobustSetup._ring_rows):
+// into In and Out, one list per row.
+void ringLists(const Rings &adj, const std::vector<Index> &rows, int inner, int outer, Lists &In, Lists &Out) {
+	const Index m = Index(rows.size());
+	const Index rings[2] = {inner, outer};
+	std::vector<int32_t> stamp(adj.ptr.size() - 1, -1), idx;
+	std::vector<Index> length(2 * m), start(m + 1, 0);
+	check(ms_ring_lists(adj.ptr.data(), adj.idx.data(), rows.data(), m, rings, 2, stamp.data(), length.data(),
+	                    nullptr, nullptr));
+	for (Index r = 0; r < m; ++r) start[r + 1] = start[r] + length[m + r];
+	idx.resize(start[m]);
+	check(ms_ring_lists(adj.ptr.data(), adj.idx.data(), rows.data(), m, rings, 2, stamp.data(), length.data(),
+	                    start.data(), idx.data()));
+	const std::vector<Index> wide(idx.begin(), idx.end());
+	for (Index r = 0; r < m; ++r) {
+		In.add(wide.data() + start[r], wide.data() + start[r] + length[r]);
+		Out.add(wide.data() + start[r], wide.data() + start[r + 1]);
 	}
-	// The next ring, from the current one.
-	const std::vector<Index> &grow() {
-		const size_t level = current_.size();
-		for (; head_ < level; ++head_) {
-			const Index j = current_[head_];
-			for (Index t = adj_.ptr[j]; t < adj_.ptr[j + 1]; ++t) {
-				const Index k = adj_.idx[t];
-				if (mark_[k] != generation_) {
-					mark_[k] = generation_;
-					current_.push_back(k);
-				}
-			}
-		}
-		return current_;
-	}
-
-private:
-	const Rings &adj_;
-	std::vector<Index> mark_;
-	Index generation_ = 0;
-	size_t head_ = 0;
-	std::vector<Index> current_;
-};
+}
 
 // robust.line_directions for a feature point i: the unit eigenvector of the largest
 // eigenvalue of the covariance of p_j - p_i over the features j of D (i included), sums in
@@ -651,17 +634,8 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 	for (Index i = 0; i < n; ++i)
 		if (d.feature[i]) rows.push_back(i);
 	if (!rows.empty()) {
-		const int compareRing = std::min(MS_THIN_RING, top);
-		BreadthFirstRings walk(adj);
 		Lists D, Sup;
-		for (Index i : rows) {
-			walk.start(i);
-			for (int ring = 1; ring <= top; ++ring) {
-				const std::vector<Index> &nb = walk.grow();
-				if (ring == compareRing) Sup.add(nb.data(), nb.data() + nb.size());
-				if (ring == top) D.add(nb.data(), nb.data() + nb.size());
-			}
-		}
+		ringLists(adj, rows, std::min(MS_THIN_RING, top), top, Sup, D);
 		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup, 0.0, false);
 	}
 	const auto edges = sharpVertices(c.pts, c.faces);
