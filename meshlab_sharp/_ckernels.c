@@ -420,7 +420,7 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
  * innermost: the compiler pairs them in SIMD lanes, each lane the scalar arithmetic). */
 static void local_scale_prefixes(const double *v, const int64_t *ks, int nscales, double *ell,
                                  double *off) {
-    double r[8][4] = {{0}};
+    double r[8][4]; /* set when first used (i = 0) */
     int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
@@ -1361,13 +1361,13 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
             while (s < nscales && rings[s] == ring && fn != NULL) {
                 /* a fixed normal: the mean offset is all it needs (and the local scale
                  * each offset and its length) */
-                double *v = (double *)buf[4];
+                double *v = (double *)buf[4], *d2 = (double *)buf[2];
                 for (; done_j < tail; done_j++) {
                     const double *pj = p + 3 * (int64_t)queue[done_j];
                     double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
                     sx += x; sy += y; sz += z;
                     if (local) {
-                        v[4 * done_j] = sqrt(x * x + y * y + z * z);
+                        d2[done_j] = x * x + y * y + z * z;
                         v[4 * done_j + 1] = x; v[4 * done_j + 2] = y; v[4 * done_j + 3] = z;
                     }
                 }
@@ -1389,7 +1389,6 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                     if (dd > h2) h2 = dd;
                     sx += x; sy += y; sz += z;
                     if (local) {
-                        v[4 * done_j] = sqrt(dd);
                         v[4 * done_j + 1] = x; v[4 * done_j + 2] = y; v[4 * done_j + 3] = z;
                     }
                 }
@@ -1404,8 +1403,11 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
             for (s = 0; s < nscales; s++) out_pdis[s * n + i] = spd[s];
         }
         if (!local) continue;
-        double *ell = spd + nscales, score = 0.0;
-        local_scale_prefixes((const double *)buf[4], mk, nscales, ell, ell + nscales);
+        /* the lengths apart, over the contiguous squared lengths (SIMD square roots) */
+        double *v = (double *)buf[4], *ell = spd + nscales, score = 0.0;
+        const double *d2 = (const double *)buf[2];
+        for (int64_t j = 0; j < tail; j++) v[4 * j] = sqrt(d2[j]);
+        local_scale_prefixes(v, mk, nscales, ell, ell + nscales);
         for (s = 0; s < nscales; s++) { /* min(x / l, 1) keeps a NaN, as np.minimum */
             double l = ell[s], r = l > 0 ? spd[s] / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
             out_relative[s * n + i] = r > 1.0 ? 1.0 : r;
