@@ -1592,32 +1592,31 @@ static int cmp_i64(const void *a, const void *b) {
 }
 
 /* creases.dihedral_angles without the angle: the edges (a, b), a < b, with exactly two
- * faces, sorted lexicographically, into out_edges (room for 3 m / 2 rows), and the dot
+ * faces, sorted lexicographically, into out_edges (room for (3 m + 1) / 2 rows), and the dot
  * product u . v of the two faces' unit normals (face_normal; face order: the lower index
  * first) into out_dot. n * m must be below 2^63. Returns the number of edges, or -1 out
- * of memory. */
+ * of memory. out_edges (3 m int64) first holds the sort keys: edge e is written at 2 e,
+ * never past the keys still to read (each edge written took two keys). */
 int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot) {
-    int64_t *ptr = (int64_t *)calloc((size_t)n + 1, sizeof(int64_t));
+    /* ptr[v + 1]: where the keys of lower end v start, then (after the fill) end */
+    int64_t *ptr = (int64_t *)calloc((size_t)n + 2, sizeof(int64_t));
     /* per lower end, the other end and the face as one key: hi * m + f */
-    int64_t *key = (int64_t *)malloc((size_t)(3 * m > 0 ? 3 * m : 1) * sizeof(int64_t));
-    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
-    int64_t e = -1;
-    if (!ptr || !key || !fill) goto done;
+    int64_t *key = out_edges;
+    if (!ptr) return -1;
     for (int64_t f = 0; f < m; f++)
         for (int c = 0; c < 3; c++) {
             int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
-            ptr[(a < b ? a : b) + 1]++;
+            ptr[(a < b ? a : b) + 2]++;
         }
-    for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
-    memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
+    for (int64_t v = 0; v < n; v++) ptr[v + 2] += ptr[v + 1];
     for (int64_t f = 0; f < m; f++)
         for (int c = 0; c < 3; c++) {
             int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
             int64_t lo = a < b ? a : b, hi = a < b ? b : a;
-            key[fill[lo]++] = hi * m + f;
+            key[ptr[lo + 1]++] = hi * m + f;
         }
-    e = 0;
+    int64_t e = 0;
     for (int64_t v = 0; v < n; v++) {
         int64_t *it = key + ptr[v];
         int64_t k = ptr[v + 1] - ptr[v];
@@ -1633,9 +1632,10 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
             int64_t hi = it[i] / m, j = i + 1;
             while (j < k && it[j] / m == hi) j++;
             if (j - i == 2) {
+                int64_t f0 = it[i] % m, f1 = it[i + 1] % m; /* read before edge e is written */
                 double u[3], w[3];
-                face_normal(p, faces, it[i] % m, u);
-                face_normal(p, faces, it[i + 1] % m, w);
+                face_normal(p, faces, f0, u);
+                face_normal(p, faces, f1, w);
                 out_edges[2 * e] = v;
                 out_edges[2 * e + 1] = hi;
                 out_dot[e++] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
@@ -1643,10 +1643,7 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
             i = j;
         }
     }
-done:
     free(ptr);
-    free(key);
-    free(fill);
     return e;
 }
 

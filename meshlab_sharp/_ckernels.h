@@ -203,7 +203,7 @@ void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, i
                              double zero, double *acc);
 
 /* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for
- * 3 m / 2 rows), and the dot products of their faces' unit normals (cross(p1 - p0,
+ * (3 m + 1) / 2 rows: 3 m int64, the sort keys' scratch first), and the dot products of their faces' unit normals (cross(p1 - p0,
  * p2 - p0) / |.| of the points p), the lower face first, into out_dot (creases.dihedral_angles). n * m < 2^63.
  * Returns the count, or -1 out of memory. */
 int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,

@@ -638,7 +638,9 @@ def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, n
     n, m = len(points), len(faces)
     if m and n > (2**63 - 1) // m:
         raise ValueError("too many vertices and faces for the compiled face pairing")
-    room = 3 * m // 2  # each such edge takes two of the 3 m face edges
+    # each such edge takes two of the 3 m face edges; the kernel sorts its 3 m keys in
+    # the edges' array before writing the edges there
+    room = (3 * m + 1) // 2
     edges = np.empty((room, 2), dtype=np.int64)
     dot = np.empty(room)
     e = lib.ms_two_face_edges(_ptr(points), _ptr(faces), m, n, _ptr(edges), _ptr(dot))

@@ -404,8 +404,8 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 // the edges and their normals' dot products from the kernel (_kernels.two_face_edges).
 std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<Index> &faces) {
 	const Index F = Index(faces.size() / 3), n = Index(p.size() / 3);
-	std::vector<Index> pairs(2 * (3 * F / 2));
-	std::vector<double> angles(3 * F / 2);
+	std::vector<Index> pairs(2 * ((3 * F + 1) / 2));  // room for the kernel's 3 F sort keys
+	std::vector<double> angles((3 * F + 1) / 2);
 	const Index e = ms_two_face_edges(p.data(), faces.data(), F, n, pairs.data(), angles.data());
 	check(e < 0 ? -1 : 0);
 	angles.resize(e);
