@@ -425,7 +425,7 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
  * innermost: the compiler pairs them in SIMD lanes, each lane the scalar arithmetic). */
 static void local_scale_prefixes(const double *v, const int64_t *ks, int nscales, double *ell,
                                  double *off) {
-    double r[8][4] = {{0}};
+    double r[8][4]; /* set when first used (i = 0) */
     int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
@@ -1427,22 +1427,33 @@ static int reserve(void **arrays, const size_t *size, int count, int64_t *cap, i
 }
 
 /* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
- * the projected distance into out_pdis[s * n + i] (normals into out_normals when not
- * NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA. stamp: (n,) int32
- * scratch of this thread, all -1 initially (or left by an earlier call). The members are
- * summed in the order the search meets them. */
+ * the projected distance into out_pdis[s * n + i] when not NULL (normals into
+ * out_normals when not NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA.
+ * stamp: (n,) int32 scratch of this thread, all -1 initially (or left by an earlier
+ * call). The members are summed in the order the search meets them: the vertex, then
+ * each ring after the last, its vertices in the order met walking the last ring's new
+ * members' lists (RingNeighbourhoods.at). With out_relative (and out_score) not NULL,
+ * robust mode's RelativeRule in the same walk: the local scales of each ring in numpy's
+ * summation order (local_scale_prefixes), out_relative[s * n + i] = min(pdis / l, 1) and
+ * out_score[i] = the sum over the scales of min(o / l, 1) / nscales (0 where l = 0). */
 int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
                  const double *fixed, const int64_t *rings, int nscales, int gaussian,
                  int64_t begin, int64_t end, int32_t *stamp, double *out_pdis,
-                 double *out_normals) {
+                 double *out_normals, double *out_relative, double *out_score) {
     int64_t cap = 1024;
-    /* queue (int32), q (3 doubles), d2, mu */
-    void *buf[4] = {malloc((size_t)cap * 4), malloc((size_t)cap * 24), malloc((size_t)cap * 8),
-                    malloc((size_t)cap * 8)};
-    const size_t size[4] = {4, 24, 8, 8};
-    int rc = 0;
+    /* queue (int32), q (3 doubles), d2, mu, |q| and q side by side (4 doubles) */
+    void *buf[5] = {malloc((size_t)cap * 4), malloc((size_t)cap * 24), malloc((size_t)cap * 8),
+                    malloc((size_t)cap * 8), malloc((size_t)cap * 32)};
+    const size_t size[5] = {4, 24, 8, 8, 32};
+    /* per scale: the ring's size, its projected distance, l, then o */
+    int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
+    double *spd = (double *)malloc((size_t)nscales * 3 * sizeof(double));
+    int rc = 0, local = out_relative != NULL;
     int64_t rmax = rings[nscales - 1];
-    if (!buf[0] || !buf[1] || !buf[2] || !buf[3]) { rc = -1; goto done; }
+    if (!buf[0] || !buf[1] || !buf[2] || !buf[3] || !buf[4] || !mk || !spd) {
+        rc = -1;
+        goto done;
+    }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
         const double *fn = fixed ? fixed + 3 * i : NULL;
@@ -1459,7 +1470,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
             for (; head < level_end; head++) {
                 int32_t v = queue[head];
                 int64_t t0 = ptr[v], t1 = ptr[v + 1];
-                if (reserve(buf, size, 4, &cap, tail + (t1 - t0)) != 0) { rc = -1; goto done; }
+                if (reserve(buf, size, 5, &cap, tail + (t1 - t0)) != 0) { rc = -1; goto done; }
                 queue = (int32_t *)buf[0];
                 /* branch-free: write every neighbour, keep it when first met */
                 for (int64_t t = t0; t < t1; t++) {
@@ -1470,20 +1481,27 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                 }
             }
             while (s < nscales && rings[s] == ring && fn != NULL) {
-                /* a fixed normal: the mean offset is all it needs */
+                /* a fixed normal: the mean offset is all it needs (and the local scale
+                 * each offset and its length) */
+                double *v = (double *)buf[4], *d2 = (double *)buf[2];
                 for (; done_j < tail; done_j++) {
                     const double *pj = p + 3 * (int64_t)queue[done_j];
-                    sx += pj[0] - pi[0]; sy += pj[1] - pi[1]; sz += pj[2] - pi[2];
+                    double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
+                    sx += x; sy += y; sz += z;
+                    if (local) {
+                        d2[done_j] = x * x + y * y + z * z;
+                        v[4 * done_j + 1] = x; v[4 * done_j + 2] = y; v[4 * done_j + 3] = z;
+                    }
                 }
                 double mean[3] = {sx / (double)tail, sy / (double)tail, sz / (double)tail};
                 double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
-                out_pdis[s * n + i] =
-                    neighbourhood_pdis(NULL, NULL, tail, mean, 0.0, gaussian, fn, nrm, NULL);
+                mk[s] = tail;
+                spd[s] = neighbourhood_pdis(NULL, NULL, tail, mean, 0.0, gaussian, fn, nrm, NULL);
                 s++;
             }
             while (s < nscales && rings[s] == ring) {
                 int64_t m = tail;
-                double *q = (double *)buf[1], *d2 = (double *)buf[2];
+                double *q = (double *)buf[1], *d2 = (double *)buf[2], *v = (double *)buf[4];
                 for (; done_j < m; done_j++) {
                     const double *pj = p + 3 * (int64_t)queue[done_j];
                     double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
@@ -1492,18 +1510,83 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
                     d2[done_j] = dd;
                     if (dd > h2) h2 = dd;
                     sx += x; sy += y; sz += z;
+                    if (local) {
+                        v[4 * done_j + 1] = x; v[4 * done_j + 2] = y; v[4 * done_j + 3] = z;
+                    }
                 }
                 double mean[3] = {sx / (double)m, sy / (double)m, sz / (double)m};
                 double *nrm = out_normals ? out_normals + 3 * (s * n + i) : NULL;
-                out_pdis[s * n + i] =
-                    neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm, (double *)buf[3]);
+                mk[s] = m;
+                spd[s] = neighbourhood_pdis(q, d2, m, mean, h2, gaussian, fn, nrm, (double *)buf[3]);
                 s++;
             }
         }
+        if (out_pdis != NULL) {
+            for (s = 0; s < nscales; s++) out_pdis[s * n + i] = spd[s];
+        }
+        if (!local) continue;
+        /* the lengths apart, over the contiguous squared lengths (SIMD square roots) */
+        double *v = (double *)buf[4], *ell = spd + nscales, score = 0.0;
+        const double *d2 = (const double *)buf[2];
+        for (int64_t j = 0; j < tail; j++) v[4 * j] = sqrt(d2[j]);
+        local_scale_prefixes(v, mk, nscales, ell, ell + nscales);
+        for (s = 0; s < nscales; s++) { /* min(x / l, 1) keeps a NaN, as np.minimum */
+            double l = ell[s], r = l > 0 ? spd[s] / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
+            out_relative[s * n + i] = r > 1.0 ? 1.0 : r;
+            score += (g > 1.0 ? 1.0 : g) / (double)nscales;
+        }
+        out_score[i] = score;
     }
 done:
-    for (int t = 0; t < 4; t++) free(buf[t]);
+    for (int t = 0; t < 5; t++) free(buf[t]);
+    free(mk);
+    free(spd);
     return rc;
+}
+
+/* The rings of the vertices rows[r] (r < m) in breadth-first order over (ptr, adj), the
+ * order ms_ring_pdis sums them in (RingNeighbourhoods.at): ring k is a prefix of ring
+ * k + 1. out_len[s * m + r]: the length of ring rings[s] (nrings increasing); when
+ * out_idx is not NULL, the last ring's members from out_idx[out_start[r]] on. stamp: (n,)
+ * int32 scratch, all -1 on entry and on return. Returns 0, or -1 out of memory. */
+int ms_ring_lists(const int64_t *ptr, const int32_t *adj, const int64_t *rows, int64_t m,
+                  const int64_t *rings, int nrings, int32_t *stamp, int64_t *out_len,
+                  const int64_t *out_start, int32_t *out_idx) {
+    int64_t cap = 1024, rmax = rings[nrings - 1];
+    void *buf[1] = {malloc((size_t)cap * 4)};
+    const size_t size[1] = {4};
+    if (!buf[0]) return -1;
+    for (int64_t r = 0; r < m; r++) {
+        int32_t *queue = (int32_t *)buf[0];
+        int64_t head = 0, tail = 0;
+        queue[tail++] = (int32_t)rows[r];
+        stamp[rows[r]] = 0;
+        int s = 0;
+        for (int64_t ring = 1; ring <= rmax; ring++) {
+            int64_t level_end = tail;
+            for (; head < level_end; head++) {
+                int32_t v = queue[head];
+                int64_t t0 = ptr[v], t1 = ptr[v + 1];
+                if (reserve(buf, size, 1, &cap, tail + (t1 - t0)) != 0) {
+                    for (int64_t j = 0; j < tail; j++) stamp[queue[j]] = -1;
+                    free(buf[0]);
+                    return -1;
+                }
+                queue = (int32_t *)buf[0];
+                for (int64_t t = t0; t < t1; t++) {
+                    int32_t w = adj[t];
+                    queue[tail] = w;
+                    tail += stamp[w] != 0;
+                    stamp[w] = 0;
+                }
+            }
+            while (s < nrings && rings[s] == ring) out_len[s++ * m + r] = tail;
+        }
+        if (out_idx != NULL) memcpy(out_idx + out_start[r], queue, (size_t)tail * sizeof(int32_t));
+        for (int64_t j = 0; j < tail; j++) stamp[queue[j]] = -1;
+    }
+    free(buf[0]);
+    return 0;
 }
 
 /* Unit normal of face f into u: cross(p1 - p0, p2 - p0) / |.| (|.| the square root of the
@@ -1625,135 +1708,37 @@ void ms_face_double_areas(const double *p, const int64_t *faces, int64_t m, doub
 
 /* ------------------------------------------------------------ robust mode on meshes */
 
-static int cmp_i32(const void *a, const void *b) {
-    int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
-    return (x > y) - (x < y);
-}
-
-/* RingNeighbourhoods.one_ring as CSR: each vertex's 1-ring and itself, sorted, without
- * repeats (scipy's sorted boolean matrix), from ms_adjacency's lists (ptr, adj), which
- * have repeats. out_idx: room for ptr[n] + n entries; out_ptr (n + 1). */
-void ms_sorted_one_ring(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t *out_ptr,
-                        int32_t *out_idx) {
-    int64_t w = 0;
-    out_ptr[0] = 0;
-    for (int64_t v = 0; v < n; v++) {
-        int32_t *a = out_idx + w;
-        int64_t m = 0;
-        a[m++] = (int32_t)v;
-        for (int64_t t = ptr[v]; t < ptr[v + 1]; t++) a[m++] = adj[t];
-        if (m <= 32) {
-            for (int64_t i = 1; i < m; i++) {
-                int32_t x = a[i];
-                int64_t j = i;
-                for (; j > 0 && a[j - 1] > x; j--) a[j] = a[j - 1];
-                a[j] = x;
-            }
-        } else {
-            qsort(a, (size_t)m, sizeof(int32_t), cmp_i32);
-        }
-        int64_t u = 1;
-        for (int64_t i = 1; i < m; i++)
-            if (a[i] != a[u - 1]) a[u++] = a[i];
-        w += u;
-        out_ptr[v + 1] = w;
-    }
-}
-
-/* robust.local_scale of vertices [begin, end) over their k-rings, k = rings[s] (increasing),
- * the rings listed in the order of RingNeighbourhoods.at (scipy's sparse product), which
- * fixes the rounding of the sums: ring k + 1 lists the vertices met first when walking
- * ring k's list and, for each member, its sorted one_ring (ptr1, one: ms_sorted_one_ring),
- * in reverse order. mark: (n,) int64 scratch of this thread, all -1 initially (or left by
- * an earlier call). out_ell, out_off: (nscales, n). Returns 0, or -1 out of memory. */
-int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const int32_t *one,
-                        const int64_t *rings, int nscales, int64_t begin, int64_t end,
-                        int64_t *mark, double *out_ell, double *out_off) {
-    int64_t cap = 1024, rmax = rings[nscales - 1];
-    /* the last ring listed backwards, the next one, q (3 doubles), dist */
-    void *buf[4] = {malloc((size_t)cap * 4), malloc((size_t)cap * 4), malloc((size_t)cap * 24),
-                    malloc((size_t)cap * 8)};
-    const size_t size[4] = {4, 4, 24, 8};
-    int rc = 0;
-    if (!buf[0] || !buf[1] || !buf[2] || !buf[3]) { rc = -1; goto done; }
-    for (int64_t i = begin; i < end; i++) {
-        const double *pi = p + 3 * i;
-        int64_t m = 1;
-        ((int32_t *)buf[0])[0] = (int32_t)i;
-        int s = 0;
-        for (int64_t ring = 1; ring <= rmax && s < nscales; ring++) {
-            int64_t gen = i * (rmax + 1) + ring, k = 0;
-            /* walk the last ring in its order (buf[0] holds it backwards) */
-            for (int64_t a = m - 1; a >= 0; a--) {
-                int32_t v = ((int32_t *)buf[0])[a];
-                int64_t t0 = ptr1[v], t1 = ptr1[v + 1];
-                if (reserve(buf, size, 4, &cap, k + (t1 - t0)) != 0) { rc = -1; goto done; }
-                int32_t *next = (int32_t *)buf[1];
-                /* branch-free: write every member, keep it when first met */
-                for (int64_t t = t0; t < t1; t++) {
-                    int32_t w = one[t];
-                    next[k] = w;
-                    k += mark[w] != gen;
-                    mark[w] = gen;
-                }
-            }
-            /* the new ring is the members met, backwards: buf[1] read from its end */
-            void *last = buf[0];
-            buf[0] = buf[1];
-            buf[1] = last;
-            m = k;
-            if (ring != rings[s]) continue;
-            const int32_t *back = (const int32_t *)buf[0];
-            double *q = (double *)buf[2], *dist = (double *)buf[3];
-            for (int64_t j = 0; j < m; j++) {
-                const double *pj = p + 3 * (int64_t)back[m - 1 - j];
-                q[3 * j] = pj[0] - pi[0]; q[3 * j + 1] = pj[1] - pi[1]; q[3 * j + 2] = pj[2] - pi[2];
-            }
-            for (int64_t j = 0; j < m; j++) {
-                const double *x = q + 3 * j;
-                dist[j] = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-            }
-            local_scale_one(q, dist, m, out_ell + s * n + i, out_off + s * n + i);
-            s++;
-        }
-    }
-done:
-    for (int t = 0; t < 4; t++) free(buf[t]);
-    return rc;
-}
-
 static int cmp_i64(const void *a, const void *b) {
     int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
     return (x > y) - (x < y);
 }
 
 /* creases.dihedral_angles without the angle: the edges (a, b), a < b, with exactly two
- * faces, sorted lexicographically, into out_edges (room for 3 m / 2 rows), and the dot
+ * faces, sorted lexicographically, into out_edges (room for (3 m + 1) / 2 rows), and the dot
  * product u . v of the two faces' unit normals (face_normal; face order: the lower index
  * first) into out_dot. n * m must be below 2^63. Returns the number of edges, or -1 out
- * of memory. */
+ * of memory. out_edges (3 m int64) first holds the sort keys: edge e is written at 2 e,
+ * never past the keys still to read (each edge written took two keys). */
 int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot) {
-    int64_t *ptr = (int64_t *)calloc((size_t)n + 1, sizeof(int64_t));
+    /* ptr[v + 1]: where the keys of lower end v start, then (after the fill) end */
+    int64_t *ptr = (int64_t *)calloc((size_t)n + 2, sizeof(int64_t));
     /* per lower end, the other end and the face as one key: hi * m + f */
-    int64_t *key = (int64_t *)malloc((size_t)(3 * m > 0 ? 3 * m : 1) * sizeof(int64_t));
-    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
-    int64_t e = -1;
-    if (!ptr || !key || !fill) goto done;
+    int64_t *key = out_edges;
+    if (!ptr) return -1;
     for (int64_t f = 0; f < m; f++)
         for (int c = 0; c < 3; c++) {
             int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
-            ptr[(a < b ? a : b) + 1]++;
+            ptr[(a < b ? a : b) + 2]++;
         }
-    for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
-    memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
+    for (int64_t v = 0; v < n; v++) ptr[v + 2] += ptr[v + 1];
     for (int64_t f = 0; f < m; f++)
         for (int c = 0; c < 3; c++) {
             int64_t a = faces[3 * f + c], b = faces[3 * f + (c + 1) % 3];
             int64_t lo = a < b ? a : b, hi = a < b ? b : a;
-            key[fill[lo]++] = hi * m + f;
+            key[ptr[lo + 1]++] = hi * m + f;
         }
-    e = 0;
+    int64_t e = 0;
     for (int64_t v = 0; v < n; v++) {
         int64_t *it = key + ptr[v];
         int64_t k = ptr[v + 1] - ptr[v];
@@ -1769,9 +1754,10 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
             int64_t hi = it[i] / m, j = i + 1;
             while (j < k && it[j] / m == hi) j++;
             if (j - i == 2) {
+                int64_t f0 = it[i] % m, f1 = it[i + 1] % m; /* read before edge e is written */
                 double u[3], w[3];
-                face_normal(p, faces, it[i] % m, u);
-                face_normal(p, faces, it[i + 1] % m, w);
+                face_normal(p, faces, f0, u);
+                face_normal(p, faces, f1, w);
                 out_edges[2 * e] = v;
                 out_edges[2 * e + 1] = hi;
                 out_dot[e++] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
@@ -1779,10 +1765,7 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
             i = j;
         }
     }
-done:
     free(ptr);
-    free(key);
-    free(fill);
     return e;
 }
 

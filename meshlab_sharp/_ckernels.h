@@ -192,35 +192,33 @@ int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32
 
 /* k-rings by breadth-first search over (ptr, adj) for the vertices [begin, end) and the
  * projected distance at every ring of rings (nscales increasing) into
- * out_pdis[s * n + i], normals into out_normals when not NULL. fixed: (n, 3) normals, a
- * zero row meaning PCA, or NULL. stamp: (n,) int32 scratch of the calling thread, all -1
- * before its first call. Returns 0, or -1 out of memory. */
+ * out_pdis[s * n + i] when not NULL, normals into out_normals when not NULL. fixed: (n, 3)
+ * normals, a zero row meaning PCA, or NULL. Each ring is listed in the search's order
+ * (RingNeighbourhoods.at). With out_relative and out_score not NULL, robust mode's
+ * RelativeRule over the same rings (local scales in numpy's summation order): the
+ * relative distances (nscales, n) and the score (n). stamp: (n,) int32 scratch of the
+ * calling thread, all -1 before its first call. Returns 0, or -1 out of memory. */
 int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
                  const double *fixed, const int64_t *rings, int nscales, int gaussian,
                  int64_t begin, int64_t end, int32_t *stamp, double *out_pdis,
-                 double *out_normals);
+                 double *out_normals, double *out_relative, double *out_score);
+
+/* The rings of the vertices rows[r] (r < m), breadth-first over (ptr, adj) as
+ * ms_ring_pdis lists them (ring k a prefix of ring k + 1): the length of ring rings[s]
+ * (nrings increasing) into out_len[s * m + r], and when out_idx is not NULL the last
+ * ring's members from out_idx[out_start[r]] on. stamp: (n,) int32 scratch, all -1 on
+ * entry (and on return). Returns 0, or -1 out of memory. */
+int ms_ring_lists(const int64_t *ptr, const int32_t *adj, const int64_t *rows, int64_t m,
+                  const int64_t *rings, int nrings, int32_t *stamp, int64_t *out_len,
+                  const int64_t *out_start, int32_t *out_idx);
 
 /* Face-average vertex normals (unit, or zero when shorter than `zero`) into acc (n, 3),
  * zero on entry; faces (m, 3). */
 void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                              double zero, double *acc);
 
-/* Each vertex's 1-ring and itself, sorted (RingNeighbourhoods.one_ring), from
- * ms_adjacency's lists (ptr, adj): out_ptr (n + 1), out_idx (room for ptr[n] + n). */
-void ms_sorted_one_ring(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t *out_ptr,
-                        int32_t *out_idx);
-
-/* robust.local_scale of the vertices [begin, end) over their k-rings, k = rings[s]
- * (nscales increasing), the rings listed in the order of RingNeighbourhoods.at (scipy's
- * sparse product) from ms_sorted_one_ring's lists (ptr1, one), into out_ell and out_off
- * (nscales, n). mark: (n,) int64 scratch of the calling thread, all -1 before its first
- * call. Returns 0, or -1 out of memory. */
-int ms_ring_local_scale(const double *p, int64_t n, const int64_t *ptr1, const int32_t *one,
-                        const int64_t *rings, int nscales, int64_t begin, int64_t end,
-                        int64_t *mark, double *out_ell, double *out_off);
-
 /* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for
- * 3 m / 2 rows), and the dot products of their faces' unit normals (cross(p1 - p0,
+ * (3 m + 1) / 2 rows: 3 m int64, the sort keys' scratch first), and the dot products of their faces' unit normals (cross(p1 - p0,
  * p2 - p0) / |.| of the points p), the lower face first, into out_dot (creases.dihedral_angles). n * m < 2^63.
  * Returns the count, or -1 out of memory. */
 int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,

@@ -66,18 +66,17 @@ _SIGNATURES = {
     "ms_ring_pdis": (
         _int,
         [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _int, _int, _i64, _i64]
-        + [_c_void_p, _c_void_p, _c_void_p],
+        + [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
+    ),
+    "ms_ring_lists": (
+        _int,
+        [_c_void_p, _c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _c_void_p]
+        + [_c_void_p, _c_void_p],
     ),
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_face_double_areas": (None, [_c_void_p, _c_void_p, _i64, _c_void_p]),
     "ms_two_face_edges": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
-    "ms_sorted_one_ring": (None, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p]),
-    "ms_ring_local_scale": (
-        _int,
-        [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _int, _i64, _i64, _c_void_p]
-        + [_c_void_p, _c_void_p],
-    ),
 }
 
 
@@ -569,29 +568,77 @@ def ring_projected_distances(
     weighting: str = "gaussian",
     *,
     keep_normals: bool = False,
+    relative: bool = False,
     workers: int = -1,
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """Projected distances (s, n) at every ring, by breadth-first search; ``normals``
-    (n, 3) fixed (zero rows: PCA of the ring) or None (PCA everywhere)."""
+) -> ScalePass:
+    """Projected distances (s, n) at every ring, by breadth-first search over the
+    adjacency (``indptr``, ``indices``: :func:`adjacency`); ``normals`` (n, 3) fixed (zero
+    rows: PCA of the ring) or None (PCA everywhere). Each ring is summed in the order
+    ``RingNeighbourhoods.at`` lists it. With ``relative``, robust mode's
+    :class:`meshlab_sharp.robust.RelativeRule` in the same walk instead of the projected
+    distances: the relative distances (s, n) and the score (n,), bit for bit (the local
+    scales of each ring summed in numpy's order)."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     n = len(points)
     rs = np.ascontiguousarray(rings, dtype=np.int64)
     fixed = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
-    pdis = np.empty((len(rs), n))
-    out_normals = np.empty((len(rs), n, 3)) if keep_normals else None
+    out = ScalePass(
+        pdis=None if relative else np.empty((len(rs), n)),
+        normals=np.empty((len(rs), n, 3)) if keep_normals else None,
+        relative=np.empty((len(rs), n)) if relative else None,
+        score=np.empty(n) if relative else None,
+    )
     w = _workers(workers)
     stamp = _thread_scratch(n, np.int32)
 
     def task(a: int, b: int) -> int:
         return lib.ms_ring_pdis(
             _ptr(points), n, _ptr(indptr), _ptr(indices), _ptr(fixed), _ptr(rs), len(rs),
-            int(weighting == "gaussian"), a, b, _ptr(stamp()), _ptr(pdis), _ptr(out_normals),
+            int(weighting == "gaussian"), a, b, _ptr(stamp()), _ptr(out.pdis),
+            _ptr(out.normals), _ptr(out.relative), _ptr(out.score),
         )  # fmt: skip
 
     _run_chunks(n, w, task)
-    return pdis, out_normals
+    return out
+
+
+def ring_lists(
+    adjacent: tuple[np.ndarray, np.ndarray], rows: np.ndarray, rings: Sequence[int]
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The k-rings of the vertices ``rows`` (r,) for each k in ``rings`` (increasing), in
+    breadth-first order over :func:`adjacency`'s lists (``adjacent``), as
+    :func:`meshlab_sharp.neighbourhoods.grow_rings` lists them: per ring, indptr (r + 1,)
+    int64 and indices int32."""
+    lib = _LIB
+    assert lib is not None
+    ptr, adj = adjacent
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    rs = np.ascontiguousarray(rings, dtype=np.int64)
+    m = len(rows)
+    stamp = np.full(len(ptr) - 1, -1, dtype=np.int32)
+    lengths = np.empty((len(rs), m), dtype=np.int64)
+    start = np.zeros(m + 1, dtype=np.int64)
+    indices = np.empty(0, dtype=np.int32)
+    for fill in (False, True):  # the lengths, then the lists
+        if fill:
+            np.cumsum(lengths[-1], out=start[1:])
+            indices = np.empty(int(start[-1]), dtype=np.int32)
+        rc = lib.ms_ring_lists(
+            _ptr(ptr), _ptr(adj), _ptr(rows), m, _ptr(rs), len(rs), _ptr(stamp),
+            _ptr(lengths), _ptr(start) if fill else None, _ptr(indices) if fill else None,
+        )  # fmt: skip
+        if rc != 0:
+            raise MemoryError("out of memory listing the rings")
+    position = np.arange(len(indices)) - np.repeat(start[:-1], lengths[-1])
+    owner_length = [np.repeat(length, lengths[-1]) for length in lengths]
+    out = []
+    for length, within in zip(lengths, owner_length, strict=True):
+        indptr = np.zeros(m + 1, dtype=np.int64)
+        np.cumsum(length, out=indptr[1:])
+        out.append((indptr, indices[position < within]))
+    return out
 
 
 def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -605,68 +652,15 @@ def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, n
     n, m = len(points), len(faces)
     if m and n > (2**63 - 1) // m:
         raise ValueError("too many vertices and faces for the compiled face pairing")
-    room = 3 * m // 2  # each such edge takes two of the 3 m face edges
+    # each such edge takes two of the 3 m face edges; the kernel sorts its 3 m keys in
+    # the edges' array before writing the edges there
+    room = (3 * m + 1) // 2
     edges = np.empty((room, 2), dtype=np.int64)
     dot = np.empty(room)
     e = lib.ms_two_face_edges(_ptr(points), _ptr(faces), m, n, _ptr(edges), _ptr(dot))
     if e < 0:
         raise MemoryError("out of memory pairing the faces of the mesh's edges")
     return edges[:e], dot[:e]
-
-
-def sorted_one_ring(adjacent: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Each vertex's 1-ring and itself, sorted, without repeats, in CSR form: indptr
-    (n + 1,) int64, indices int32, the lists of ``RingNeighbourhoods.one_ring``, from
-    :func:`adjacency`'s lists."""
-    lib = _LIB
-    assert lib is not None
-    ptr, adj = adjacent
-    n = len(ptr) - 1
-    out_ptr = np.empty(n + 1, dtype=np.int64)
-    out_idx = np.empty(len(adj) + n, dtype=np.int32)
-    lib.ms_sorted_one_ring(_ptr(ptr), _ptr(adj), n, _ptr(out_ptr), _ptr(out_idx))
-    return out_ptr, out_idx[: out_ptr[-1]]
-
-
-def ring_local_scale(
-    points: np.ndarray,
-    one_ring: tuple[np.ndarray, np.ndarray],
-    rings: Sequence[int],
-    workers: int = -1,
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`meshlab_sharp.robust.local_scale` over the k-rings of every vertex, for
-    each k in ``rings`` (increasing), bit for bit as over ``RingNeighbourhoods.at(k)``
-    (whose order of the members it follows), without building the lists.
-
-    Parameters
-    ----------
-    points : (n, 3) float64
-    one_ring : (indptr (n + 1,) int64, indices int32)
-        :func:`sorted_one_ring` of the mesh.
-    rings : sequence of int
-    workers : int, default -1
-
-    Returns
-    -------
-    ell, off : (s, n) float64
-    """
-    lib = _LIB
-    assert lib is not None
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    n = len(points)
-    rs = np.ascontiguousarray(rings, dtype=np.int64)
-    ptr, idx = (np.ascontiguousarray(a) for a in one_ring)
-    ell, off = np.empty((len(rs), n)), np.empty((len(rs), n))
-    mark = _thread_scratch(n, np.int64)
-
-    def task(a: int, b: int) -> int:
-        return lib.ms_ring_local_scale(
-            _ptr(points), n, _ptr(ptr), _ptr(idx), _ptr(rs), len(rs), a, b, _ptr(mark()),
-            _ptr(ell), _ptr(off),
-        )  # fmt: skip
-
-    _run_chunks(n, workers, task)
-    return ell, off
 
 
 def face_average_normals(points: np.ndarray, faces: np.ndarray, zero: float) -> np.ndarray:

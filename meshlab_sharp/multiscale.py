@@ -86,10 +86,10 @@ def run_scales(
         None: the paper's rule.
     relative : bool, default False
         Robust mode (``rule`` a :class:`meshlab_sharp.robust.RelativeRule`): where the
-        compiled pass over a cloud computes the projected distances it also computes
-        what the rule computes from them, bit for bit (the relative distances and the
-        score, on the neighbourhoods less ``rule.sheet``'s other sheets), and
-        ``rule.from_pass`` takes them; elsewhere the rule is called.
+        compiled pass over a cloud or a mesh's rings computes the projected distances it
+        also computes what the rule computes from them, bit for bit (the relative
+        distances and the score; on a cloud, on the neighbourhoods less ``rule.sheet``'s
+        other sheets), and ``rule.from_pass`` takes them; elsewhere the rule is called.
     fused : ScalePass, optional
         The compiled pass over these points at these scales, already run
         (:class:`meshlab_sharp.robust.RobustSetup` runs it to read the isolated points
@@ -187,8 +187,8 @@ def _compiled_projected_distances(
     relative: bool,
     sheet: _kernels.SheetParameters | None = None,
 ) -> _kernels.ScalePass | None:
-    """Projected distances (s, m) and normals (s, m, 3) or None, or (clouds, when
-    ``relative``) robust mode's relative distances and score instead of the distances,
+    """Projected distances (s, m) and normals (s, m, 3) or None, or (when ``relative``)
+    robust mode's relative distances and score instead of the distances,
     of every scale at once with the compiled kernels; None when the neighbourhoods are
     the numpy ones. ``sheet``: robust mode's sheet filter (``RelativeRule.sheet``)."""
     if not scales:
@@ -211,10 +211,16 @@ def _compiled_projected_distances(
         if min(scales) < 1:
             return None
         indptr, indices = neighbourhoods.adjacency
-        pdis, used = _kernels.ring_projected_distances(
-            points, indptr, indices, scales, normals, weighting, keep_normals=keep_normals
+        return _kernels.ring_projected_distances(
+            points,
+            indptr,
+            indices,
+            scales,
+            normals,
+            weighting,
+            keep_normals=keep_normals,
+            relative=relative,
         )
-        return _kernels.ScalePass(pdis, used)
     return None
 
 

@@ -6,8 +6,9 @@ one kNN query at the largest scale serves every scale (the smaller ones are pref
 for meshes each ring is grown from the previous one.
 
 Two backends give the same neighbourhoods (``tests/test_equivalence.py``): "numpy",
-the reference (cKDTree, sparse matrix powers), and "compiled" (the default when built,
-:mod:`meshlab_sharp._kernels`), which builds a balanced kd-tree and searches it in C.
+the reference (cKDTree; rings listed one level at a time), and "compiled" (the default
+when built, :mod:`meshlab_sharp._kernels`), which builds a balanced kd-tree and
+searches it, or a mesh's rings, in C.
 With the compiled backend the neighbourhoods are not stored:
 :func:`meshlab_sharp.multiscale.run_scales` searches them and uses them at once, point by
 point, and ``at()`` computes a scale's table only when asked for.
@@ -16,11 +17,10 @@ point, and ``at()`` computes a scale's table only when asked for.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from . import _header, _kernels
@@ -222,11 +222,101 @@ class KnnNeighbourhoods:
         )
 
 
+def face_order_adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's neighbours in the order its faces list them, each once.
+
+    Face ``(a, b, c)``, in face order, lists ``b, c`` for ``a``, ``a, c`` for ``b`` and
+    ``a, b`` for ``c``; a neighbour is kept where it is first listed. The numpy reading
+    of :func:`meshlab_sharp._kernels.adjacency` (the same lists).
+
+    Parameters
+    ----------
+    faces : (m, 3) int
+        Triangles, indices in ``[0, n)``.
+    n : int
+        Number of vertices.
+
+    Returns
+    -------
+    indptr : (n + 1,) int64
+    indices : (nnz,) int64
+        Vertex ``v``'s neighbours are ``indices[indptr[v]:indptr[v + 1]]``.
+    """
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
+    owner = np.stack([a, a, b, b, c, c], axis=1).reshape(-1)
+    other = np.stack([b, c, a, c, a, b], axis=1).reshape(-1)
+    return _first_occurrences(owner, other, n, n)
+
+
+def _first_occurrences(
+    owner: np.ndarray, member: np.ndarray, rows: int, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """CSR lists (``rows`` rows) of ``member`` (k,) grouped by ``owner`` (k,), each row in
+    the order of the input, each member kept where it first occurs in its row (members
+    in ``[0, n)``): indptr (rows + 1,) int64, indices int64."""
+    first = np.unique(owner * n + member, return_index=True)[1]
+    first = first[np.lexsort((first, owner[first]))]
+    indptr = np.zeros(rows + 1, dtype=np.int64)
+    np.cumsum(np.bincount(owner[first], minlength=rows), out=indptr[1:])
+    return indptr, member[first]
+
+
+def grow_rings(
+    adjacency: tuple[np.ndarray, np.ndarray], rows: np.ndarray
+) -> Iterator[Neighbourhood]:
+    """The k-rings of the vertices ``rows``, k = 1, 2, ..., one level at a time.
+
+    Each ring is listed in the order a breadth-first search meets its vertices: ring
+    k + 1 is ring k's list, then the vertices not yet met, in the order met walking
+    the adjacency lists of ring k's last level (its members not in ring k - 1) in
+    ring k's order. Ring 0 is the vertex itself, so every ring starts with it. The
+    compiled ring pass (``_kernels.ring_projected_distances``) sums each ring in
+    this order.
+
+    Parameters
+    ----------
+    adjacency : (indptr (n + 1,) int64, indices (nnz,) int)
+        Each vertex's neighbours (:func:`face_order_adjacency`).
+    rows : (r,) int
+        The centres.
+
+    Yields
+    ------
+    Neighbourhood
+        Ring k (k = 1, 2, ...) of each centre, ``r`` rows.
+    """
+    aptr, adj = adjacency
+    n, r = len(aptr) - 1, len(rows)
+    indptr = np.arange(r + 1, dtype=np.int64)
+    indices = np.asarray(rows, np.int64)
+    inner = np.zeros(r, dtype=np.int64)  # the length of the ring before, per row
+    while True:
+        sizes = np.diff(indptr)
+        owner = np.repeat(np.arange(r), sizes)
+        last = np.arange(len(indices)) - indptr[owner] >= inner[owner]
+        members, member_owner = indices[last], owner[last]
+        degree = aptr[members + 1] - aptr[members]
+        ends = np.cumsum(degree)
+        at = np.repeat(aptr[members] - (ends - degree), degree) + np.arange(
+            ends[-1] if len(ends) else 0
+        )
+        indptr, indices = _first_occurrences(
+            np.concatenate([owner, np.repeat(member_owner, degree)]),
+            np.concatenate([indices, adj[at].astype(np.int64)]),
+            r,
+            n,
+        )
+        inner = sizes
+        yield Neighbourhood(indptr=indptr, indices=indices)
+
+
 class RingNeighbourhoods:
     """k-ring neighbourhoods of a triangle mesh, grown one ring at a time.
 
     Rings must be asked for in increasing order (each is grown from the last one
-    asked, which is all that is kept in memory).
+    asked, which is all that is kept in memory). Each ring is listed in breadth-first
+    order (:func:`grow_rings`).
 
     Parameters
     ----------
@@ -237,7 +327,7 @@ class RingNeighbourhoods:
     backend : {"compiled", "numpy"}, optional
         Default: :func:`meshlab_sharp._kernels.default_backend`. The compiled backend
         keeps the 1-ring adjacency (``adjacency``) for a breadth-first search in C and
-        builds the sparse matrices only if ``at()`` is called.
+        lists the rings only if ``at()`` is called.
     """
 
     def __init__(self, faces: np.ndarray, n: int, *, backend: str | None = None) -> None:
@@ -247,41 +337,31 @@ class RingNeighbourhoods:
         #: (indptr, indices) 1-ring adjacency, each neighbour once (compiled backend), else
         #: None.
         self.adjacency: tuple[np.ndarray, np.ndarray] | None = None
-        self._one_ring: sp.csr_matrix | None = None
         if self.backend == "compiled" and n < 2**31:
             self.adjacency = _kernels.adjacency(faces, n)
-        else:
-            self._one_ring = self._build_one_ring()
         self._ring = 0
-        self._current = None
+        self._rings: Iterator[Neighbourhood] | None = None
+        self._current: Neighbourhood | None = None
 
-    def _build_one_ring(self) -> sp.csr_matrix:
-        faces, n = self.faces, self.n
-        i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2], np.arange(n)])
-        j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0], np.arange(n)])
-        a = sp.coo_matrix((np.ones(len(i), dtype=bool), (i, j)), shape=(n, n)).tocsr()
-        one_ring = (a + a.T).tocsr()
-        one_ring.sort_indices()
-        return one_ring
-
-    @property
-    def one_ring(self) -> sp.csr_matrix:
-        """The 1-ring (and self) as a boolean sparse matrix."""
-        if self._one_ring is None:
-            self._one_ring = self._build_one_ring()
-        return self._one_ring
+    def lists(self) -> tuple[np.ndarray, np.ndarray]:
+        """The 1-ring adjacency (:func:`face_order_adjacency`; the compiled backend's
+        ``adjacency``, the same lists, when built)."""
+        if self.adjacency is not None:
+            return self.adjacency
+        return face_order_adjacency(self.faces, self.n)
 
     def at(self, ring: int) -> Neighbourhood:
-        """Every vertex within ``ring`` edges, the vertex itself included."""
-        if ring < self._ring:
-            raise ValueError("rings must be requested in increasing order")
-        if self._current is None:
-            self._current = sp.identity(self.n, dtype=bool, format="csr")
+        """Every vertex within ``ring`` edges, the vertex itself first, in breadth-first
+        order (:func:`grow_rings`)."""
+        if ring < max(self._ring, 1):
+            raise ValueError("rings must be requested in increasing order, from 1")
+        if self._rings is None:
+            self._rings = grow_rings(self.lists(), np.arange(self.n))
         while self._ring < ring:
-            self._current = (self._current @ self.one_ring).tocsr()
+            self._current = next(self._rings)
             self._ring += 1
-        m = self._current
-        return Neighbourhood(indptr=m.indptr.astype(np.int64), indices=m.indices)
+        assert self._current is not None
+        return self._current
 
 
 def build_neighbourhoods(

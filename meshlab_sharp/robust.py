@@ -68,11 +68,9 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from . import _header, _kernels
 from .creases import CREASE_ANGLE, sharp_vertices
@@ -81,6 +79,7 @@ from .neighbourhoods import (
     Neighbourhood,
     RingNeighbourhoods,
     build_neighbourhoods,
+    grow_rings,
 )
 from .normals import DEFAULT_WEIGHTING, Weighting
 from .projected_distance import projected_distances
@@ -794,9 +793,6 @@ class RelativeRule:
     sheet : (float, int, float, float, float, float) or None
         :func:`sheet_parameters` when ``lists`` leave out the other sheets
         (:class:`SheetNeighbourhoods`): the compiled pass over a cloud then does too.
-    local : callable, optional
-        ``local(i, scale) -> (l, o)``, :func:`local_scale` of the i-th scale computed
-        without the lists (the compiled ring pass); default: from ``lists``.
     otsu : bool, default True
         :func:`robust_threshold`'s ``otsu`` (:func:`otsu_splits`).
     """
@@ -805,7 +801,6 @@ class RelativeRule:
     lists: object
     n_scales: int
     sheet: _kernels.SheetParameters | None = None
-    local: Callable[[int, int], tuple[np.ndarray, np.ndarray]] | None = None
     otsu: bool = True
 
     def __post_init__(self) -> None:
@@ -813,18 +808,15 @@ class RelativeRule:
 
     def __call__(self, i: int, scale: int, pdis: np.ndarray) -> tuple[np.ndarray, float]:
         """Relative distances (m,) and threshold of the i-th scale, ``scale``."""
-        if self.local is not None:
-            ell, offset = self.local(i, scale)
-        else:
-            ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
+        ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
         return r, robust_threshold(r, self.otsu)
 
     def from_pass(self, relative: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, float]:
-        """What ``__call__`` returns, from the compiled pass over a cloud, which computed
-        the relative distances (m,) of this scale and the final ``score`` (m,) with
-        this rule's arithmetic (:class:`meshlab_sharp._kernels.ScalePass`)."""
+        """What ``__call__`` returns, from the compiled pass (over a cloud or a mesh's
+        rings), which computed the relative distances (m,) of this scale and the final
+        ``score`` (m,) with this rule's arithmetic (:class:`meshlab_sharp._kernels.ScalePass`)."""
         self.score = score
         return relative, robust_threshold(relative, self.otsu)
 
@@ -1108,14 +1100,8 @@ class RobustSetup:
                 self.scale_neighbourhoods = self.neighbourhoods if compiled else self._sheets()
         self._rings: RingNeighbourhoods | None = None
         self.sharp_edges = None if faces is None else sharp_vertices(points, faces)[0]
-        self._one_ring: sp.csr_matrix | None = None
-        self._ring_scales: tuple[np.ndarray, np.ndarray] | None = None
-        compiled_rings = isinstance(neighbourhoods, RingNeighbourhoods) and (
-            neighbourhoods.adjacency is not None
-        )
-        local = self._ring_local_scale if compiled_rings else None
         otsu = otsu_splits(faces is not None, self.noise)
-        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, local, otsu)
+        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, otsu)
 
     def _sheets(self) -> SheetNeighbourhoods:
         """:class:`SheetNeighbourhoods` of ``neighbourhoods`` (numpy kNN lists)."""
@@ -1158,42 +1144,25 @@ class RobustSetup:
             Neighbourhood(before * k, np.ascontiguousarray(table[:, :k]).reshape(-1)) for k in ks
         ]
 
-    def _ring_local_scale(self, i: int, scale: int) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`local_scale` at the i-th ring scale, from one compiled pass over every
-        ring (the same bits as over ``RingNeighbourhoods.at(scale)``)."""
-        if self._ring_scales is None:
-            assert isinstance(self.neighbourhoods, RingNeighbourhoods)
-            assert self.neighbourhoods.adjacency is not None
-            one = _kernels.sorted_one_ring(self.neighbourhoods.adjacency)
-            self._one_ring = sp.csr_matrix(
-                (np.ones(len(one[1]), dtype=bool), one[1], one[0]), shape=(self.n, self.n)
-            )
-            self._ring_scales = _kernels.ring_local_scale(self.points, one, self.scales)
-        ell, off = self._ring_scales
-        if i == len(self.scales) - 1:
-            self._ring_scales = None  # the last scale: freed when the rule is done with it
-        return ell[i], off[i]
-
     def _ring_rows(self, rows: np.ndarray, rings: tuple[int, ...]) -> list[Neighbourhood]:
         """The k-rings, k in ``rings`` (increasing), of the vertices ``rows`` only (the
-        other rows empty), each listed as ``RingNeighbourhoods.at(k)`` lists it: a row of
-        a sparse product depends only on that row."""
-        one = self._one_ring
-        if one is None:
-            one = self._one_ring = RingNeighbourhoods(self.faces, self.n, backend="numpy").one_ring
-        current = sp.csr_matrix(
-            (np.ones(len(rows), dtype=bool), rows, np.arange(len(rows) + 1)),
-            shape=(len(rows), self.n),
-        )
-        out, ring = [], 0
-        for k in rings:
-            while ring < k:
-                current = (current @ one).tocsr()
-                ring += 1
+        other rows empty), each listed as ``RingNeighbourhoods.at(k)`` lists it (a row
+        depends only on its vertex: :func:`meshlab_sharp.neighbourhoods.grow_rings`, or
+        its compiled twin :func:`meshlab_sharp._kernels.ring_lists`)."""
+        assert isinstance(self.neighbourhoods, RingNeighbourhoods)
+        adjacency = self.neighbourhoods.adjacency
+        if adjacency is not None:
+            lists = [Neighbourhood(*ring) for ring in _kernels.ring_lists(adjacency, rows, rings)]
+        else:
+            grown = grow_rings(self.neighbourhoods.lists(), rows)
+            listed = dict(zip(range(1, max(rings) + 1), grown, strict=False))
+            lists = [listed[k] for k in rings]
+        out = []
+        for ring in lists:
             sizes = np.zeros(self.n, dtype=np.int64)
-            sizes[rows] = np.diff(current.indptr)
+            sizes[rows] = ring.sizes
             indptr = np.concatenate([[0], np.cumsum(sizes)])
-            out.append(Neighbourhood(indptr, current.indices.astype(np.int64)))
+            out.append(Neighbourhood(indptr, ring.indices))
         return out
 
     def _lists(self, scale: int) -> Neighbourhood:
@@ -1237,7 +1206,6 @@ class RobustSetup:
                 ks = (min(THIN_RING, top), top)
                 around, direction = self._ring_rows(np.flatnonzero(mask), ks)
                 compare = around
-            self._one_ring = None  # the rings are listed: the 1-ring is done with
             e = line_directions(self.points, mask, direction)
             free = support_exempt(self.rule.score, self.faces is not None, self.noise)
             block = thin_blockers(mask, self.faces is not None, self.noise)

@@ -1,7 +1,7 @@
 """The compiled fast path gives the reference path's answers: same masks, same thresholds.
 
 The reference is the numpy implementation (``backend="numpy"``: pymeshlab cleaning,
-cKDTree, sparse matrix powers, ``np.linalg.eigh``); the fast path is the C kernels
+cKDTree, rings listed with numpy, ``np.linalg.eigh``); the fast path is the C kernels
 (``backend="compiled"``). Neighbourhoods, cleaning and face normals must be identical;
 projected distances agree to round-off (the smallest eigenvector is computed in closed
 form instead of LAPACK), which may only change a point whose normalised distance lies
@@ -33,6 +33,8 @@ from meshlab_sharp.neighbourhoods import (
     KnnNeighbourhoods,
     Neighbourhood,
     RingNeighbourhoods,
+    face_order_adjacency,
+    grow_rings,
     knn,
     squared_distances,
 )
@@ -443,8 +445,8 @@ def test_isolated_points_and_noise_from_one_search(name):
 
 
 def _fan_and_grid_mesh() -> tuple[np.ndarray, np.ndarray]:
-    """A grid mesh plus a cone of 60 faces around one apex: valences 6 and 60 (the C
-    kernel sorts short 1-rings by insertion, long ones with qsort)."""
+    """A grid mesh plus a cone of 60 faces around one apex: valences 6 and 60 (rings of
+    more than 129 vertices, whose sums numpy splits in two)."""
     vertices, faces = cube_grid_mesh(5)
     vertices, faces = np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
     t = np.linspace(0.0, 2.0 * np.pi, 60, endpoint=False)
@@ -456,19 +458,32 @@ def _fan_and_grid_mesh() -> tuple[np.ndarray, np.ndarray]:
     return np.vstack([vertices, apex, rim]), np.vstack([faces, fan])
 
 
-def test_compiled_ring_local_scales_identical_to_the_ring_lists():
-    """The compiled ring pass lists each k-ring in the order of the sparse product
-    (``RingNeighbourhoods.at``), so its sums are the reference's, bit for bit."""
+def _relative_reference(vertices, faces, rings, normals):
+    """RelativeRule's relative distances (s, n) and score (n,) over the numpy ring lists
+    (``RingNeighbourhoods.at``), from the compiled pass's projected distances."""
+    lists = RingNeighbourhoods(faces, len(vertices), backend="numpy")
+    indptr, indices = _kernels.adjacency(faces, len(vertices))
+    pdis = _kernels.ring_projected_distances(vertices, indptr, indices, rings, normals).pdis
+    assert pdis is not None
+    rule = RelativeRule(vertices, lists.at, len(rings))
+    relative = np.stack([rule(s, k, pdis[s])[0] for s, k in enumerate(rings)])
+    return relative, rule.score
+
+
+def test_compiled_ring_pass_local_scales_identical_to_the_ring_lists():
+    """The compiled ring pass sums each k-ring's local scale in breadth-first order,
+    the order ``RingNeighbourhoods.at`` lists it, so its relative distances and score
+    are the reference's, bit for bit (PCA and face normals, the valence-60 apex)."""
     vertices, faces = _fan_and_grid_mesh()
-    rings = RingNeighbourhoods(faces, len(vertices), backend="numpy")
-    one = _kernels.sorted_one_ring(_kernels.adjacency(faces, len(vertices)))
-    assert np.array_equal(one[0], rings.one_ring.indptr)
-    assert np.array_equal(one[1], rings.one_ring.indices)
-    ell, off = _kernels.ring_local_scale(vertices, one, (1, 2, 4))
-    for s, k in enumerate((1, 2, 4)):
-        ref_ell, ref_off = local_scale(vertices, rings.at(k), backend="numpy")
-        assert np.array_equal(ell[s], ref_ell)
-        assert np.array_equal(off[s], ref_off)
+    indptr, indices = _kernels.adjacency(faces, len(vertices))
+    for normals in (None, face_average_normals(vertices, faces, backend="compiled")):
+        fused = _kernels.ring_projected_distances(
+            vertices, indptr, indices, (1, 2, 4), normals, relative=True
+        )
+        assert fused.pdis is None and fused.relative is not None
+        relative, score = _relative_reference(vertices, faces, (1, 2, 4), normals)
+        assert np.array_equal(fused.relative, relative)
+        assert np.array_equal(fused.score, score)
 
 
 def _delaunay_mesh(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -488,23 +503,66 @@ def _delaunay_mesh(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return vertices[order], new_index[faces]
 
 
-def test_compiled_ring_local_scales_identical_to_scipy_on_irregular_valences():
-    """ms_ring_local_scale equals the reference (scipy's sparse products, then numpy's
-    sums) bit for bit on an irregular mesh in random vertex order, over several chunks
-    on two threads (each reusing its visit marks) and rings that skip one."""
+def test_compiled_ring_pass_local_scales_identical_on_irregular_valences():
+    """The ring pass's relative distances and score equal the reference's (numpy's ring
+    lists and sums) bit for bit on an irregular mesh in random vertex order, over
+    several chunks on two threads (each reusing its visit marks) and rings that skip
+    one; the local scales there see the order (summed over the sorted rings instead,
+    thousands of them change)."""
     vertices, faces = _delaunay_mesh(20000, seed=11)
     n = len(vertices)
-    rings = RingNeighbourhoods(faces, n, backend="numpy")
-    valences = np.diff(rings.one_ring.indptr) - 1
+    indptr, indices = _kernels.adjacency(faces, n)
+    valences = np.diff(indptr)
     assert valences.min() <= 3 and valences.max() >= 10
     assert n > 2 * _kernels.CHUNK
-    one = _kernels.sorted_one_ring(_kernels.adjacency(faces, n))
     scales = (1, 2, 3, 5)
-    ell, off = _kernels.ring_local_scale(vertices, one, scales, workers=2)
-    for s, k in enumerate(scales):
-        ref_ell, ref_off = local_scale(vertices, rings.at(k), backend="numpy")
-        assert ell[s].tobytes() == ref_ell.tobytes()
-        assert off[s].tobytes() == ref_off.tobytes()
+    fused = _kernels.ring_projected_distances(
+        vertices, indptr, indices, scales, None, relative=True, workers=2
+    )
+    relative, score = _relative_reference(vertices, faces, scales, None)
+    assert fused.relative is not None and fused.score is not None
+    assert fused.relative.tobytes() == relative.tobytes()
+    assert fused.score.tobytes() == score.tobytes()
+    ring = RingNeighbourhoods(faces, n, backend="numpy").at(3)
+    rows = np.repeat(np.arange(n), np.diff(ring.indptr))
+    ordered = np.lexsort((ring.indices, rows))
+    ell = local_scale(vertices, ring, backend="numpy")[0]
+    by_index = local_scale(
+        vertices, Neighbourhood(ring.indptr, ring.indices[ordered]), backend="numpy"
+    )[0]
+    assert int((ell != by_index).sum()) > 1000
+
+
+def test_rings_in_breadth_first_order():
+    """A fan of three triangles around vertex 0, adjacency in face order: each ring is
+    the last one, then the vertices met walking its new members' lists."""
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4]])
+    indptr, indices = face_order_adjacency(faces, 5)
+    lists = [indices[indptr[v] : indptr[v + 1]].tolist() for v in range(5)]
+    assert lists == [[1, 2, 3, 4], [0, 2], [0, 1, 3], [0, 2, 4], [0, 3]]
+    for backend in ("numpy", "compiled"):
+        rings = RingNeighbourhoods(faces, 5, backend=backend)
+        one, two = rings.at(1), rings.at(2)
+        with pytest.raises(ValueError, match="increasing order"):
+            rings.at(1)
+        assert one.indices[one.indptr[4] : one.indptr[5]].tolist() == [4, 0, 3]
+        assert two.indices[two.indptr[4] : two.indptr[5]].tolist() == [4, 0, 3, 1, 2]
+        assert two.indices[two.indptr[1] : two.indptr[2]].tolist() == [1, 0, 2, 3, 4]
+
+
+def test_compiled_ring_lists_identical_to_grow_rings():
+    """_kernels.ring_lists (robust mode's support and thinning lists of the candidates)
+    lists the rings of a few rows as grow_rings does, a ring asked for twice included."""
+    vertices, faces = _delaunay_mesh(3000, seed=12)
+    adjacency = _kernels.adjacency(faces, len(vertices))
+    rows = np.sort(np.random.default_rng(2).choice(len(vertices), 400, replace=False))
+    got = _kernels.ring_lists(adjacency, rows, (2, 2, 4))
+    grown = grow_rings(face_order_adjacency(faces, len(vertices)), rows)
+    expected = [next(grown) for _ in range(4)]
+    assert len(got) == 3
+    for (indptr, indices), k in zip(got, (2, 2, 4), strict=True):
+        assert np.array_equal(indptr, expected[k - 1].indptr)
+        assert np.array_equal(indices, expected[k - 1].indices)
 
 
 def _adjacency_with_repeats(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -532,11 +590,13 @@ def test_adjacency_keeps_the_first_occurrence_and_the_search_order():
         row = full[full_ptr[v] : full_ptr[v + 1]].tolist()
         first = [w for t, w in enumerate(row) if w not in row[:t]]
         assert indices[indptr[v] : indptr[v + 1]].tolist() == first
+    reference = face_order_adjacency(faces, n)
+    assert np.array_equal(reference[0], indptr) and np.array_equal(reference[1], indices)
     normals = face_average_normals(vertices, faces, backend="compiled")
     for fixed in (normals, None):
         got = _kernels.ring_projected_distances(vertices, indptr, indices, (1, 2, 3, 5), fixed)
         ref = _kernels.ring_projected_distances(vertices, full_ptr, full, (1, 2, 3, 5), fixed)
-        assert np.array_equal(got[0], ref[0])
+        assert np.array_equal(got.pdis, ref.pdis)
 
 
 def test_robust_mesh_with_a_high_valence_vertex_same_answers():

@@ -283,7 +283,7 @@ struct Lists {
 };
 
 // A mesh's 1-ring lists in CSR form: ms_adjacency's (each vertex's neighbours in the order
-// of its faces) or ms_sorted_one_ring's (sorted, the vertex itself included).
+// of its faces).
 struct Rings {
 	std::vector<Index> ptr;
 	std::vector<int32_t> idx;
@@ -300,49 +300,26 @@ Rings adjacency(const Clean &c) {
 	return a;
 }
 
-// ms_sorted_one_ring of ms_adjacency's lists, as _kernels.sorted_one_ring.
-Rings sortedOneRing(const Rings &adj) {
-	const Index n = Index(adj.ptr.size()) - 1;
-	Rings one;
-	one.ptr.resize(n + 1);
-	one.idx.resize(adj.idx.size() + n);
-	ms_sorted_one_ring(adj.ptr.data(), adj.idx.data(), n, one.ptr.data(), one.idx.data());
-	one.idx.resize(one.ptr[n]);
-	return one;
-}
-
-// The k-rings of a mesh in the order of the Python package's RingNeighbourhoods
-// (backend "numpy", scipy's sparse product), which robust mode's support lists use (and
-// ms_ring_local_scale follows): ring k + 1 lists the vertices met first when walking ring
-// k's list and, for each member, its sorted 1-ring (itself included), in reverse order.
-class SparseRings {
-public:
-	explicit SparseRings(const Rings &one) : one_(one), mark_(one.ptr.size() - 1, -1) {}
-	// Start at vertex i: the 0-ring {i}.
-	void start(Index i) { current_.assign(1, i); }
-	// The next ring, from the current one.
-	const std::vector<Index> &grow() {
-		++generation_;
-		next_.clear();
-		for (Index j : current_)
-			for (Index t = one_.ptr[j]; t < one_.ptr[j + 1]; ++t) {
-				const Index k = one_.idx[t];
-				if (mark_[k] != generation_) {
-					mark_[k] = generation_;
-					next_.push_back(k);
-				}
-			}
-		std::reverse(next_.begin(), next_.end());
-		current_.swap(next_);
-		return current_;
+// The rings `inner` and `outer` (inner <= outer) of the vertices rows, breadth-first as
+// ms_ring_pdis sums them (ms_ring_lists, as _kernels.ring_lists and RobustSetup._ring_rows):
+// into In and Out, one list per row.
+void ringLists(const Rings &adj, const std::vector<Index> &rows, int inner, int outer, Lists &In, Lists &Out) {
+	const Index m = Index(rows.size());
+	const Index rings[2] = {inner, outer};
+	std::vector<int32_t> stamp(adj.ptr.size() - 1, -1), idx;
+	std::vector<Index> length(2 * m), start(m + 1, 0);
+	check(ms_ring_lists(adj.ptr.data(), adj.idx.data(), rows.data(), m, rings, 2, stamp.data(), length.data(),
+	                    nullptr, nullptr));
+	for (Index r = 0; r < m; ++r) start[r + 1] = start[r] + length[m + r];
+	idx.resize(start[m]);
+	check(ms_ring_lists(adj.ptr.data(), adj.idx.data(), rows.data(), m, rings, 2, stamp.data(), length.data(),
+	                    start.data(), idx.data()));
+	const std::vector<Index> wide(idx.begin(), idx.end());
+	for (Index r = 0; r < m; ++r) {
+		In.add(wide.data() + start[r], wide.data() + start[r] + length[r]);
+		Out.add(wide.data() + start[r], wide.data() + start[r + 1]);
 	}
-
-private:
-	const Rings &one_;
-	std::vector<Index> mark_;
-	Index generation_ = 0;
-	std::vector<Index> current_, next_;
-};
+}
 
 // robust.line_directions for a feature point i: the unit eigenvector of the largest
 // eigenvalue of the covariance of p_j - p_i over the features j of D (i included), sums in
@@ -459,8 +436,8 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 // the edges and their normals' dot products from the kernel (_kernels.two_face_edges).
 std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<Index> &faces) {
 	const Index F = Index(faces.size() / 3), n = Index(p.size() / 3);
-	std::vector<Index> pairs(2 * (3 * F / 2));
-	std::vector<double> angles(3 * F / 2);
+	std::vector<Index> pairs(2 * ((3 * F + 1) / 2));  // room for the kernel's 3 F sort keys
+	std::vector<double> angles((3 * F + 1) / 2);
 	const Index e = ms_two_face_edges(p.data(), faces.data(), F, n, pairs.data(), angles.data());
 	check(e < 0 ? -1 : 0);
 	angles.resize(e);
@@ -509,21 +486,27 @@ void decide(const std::vector<int> &votes, size_t S, Decision &d) {
 }
 
 // The mesh's projected distances (S, n) at every ring by the kernel's breadth-first search,
-// face-average normals fixed (zero rows: PCA), as _kernels.ring_projected_distances.
+// face-average normals fixed (zero rows: PCA), as _kernels.ring_projected_distances; with
+// score not null, robust mode's relative distances (S, n) instead, and the score (n) into
+// *score, from the same walk (relative=True).
 std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector<int> &scales, bool gaussian,
-                             Bar &bar, int from, int to) {
+                             std::vector<double> *score, Bar &bar, int from, int to) {
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
 	std::vector<double> normals(3 * n, 0.0);
 	ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data());
 	const std::vector<Index> rings(scales.begin(), scales.end());
-	std::vector<double> pdis(rings.size() * n);
+	std::vector<double> out(rings.size() * n);
+	if (score) score->assign(n, 0.0);
+	double *pdis = score ? nullptr : out.data(), *relative = score ? out.data() : nullptr;
+	double *scores = score ? score->data() : nullptr;
 	std::vector<std::vector<int32_t>> stamps(workers());
 	chunks(n, [&](unsigned w, Index a, Index b) {
 		if (stamps[w].empty()) stamps[w].assign(n, -1);
 		return ms_ring_pdis(c.pts.data(), n, adj.ptr.data(), adj.idx.data(), normals.data(), rings.data(),
-		                    int(rings.size()), int(gaussian), a, b, stamps[w].data(), pdis.data(), nullptr);
-	}, bar, from, to, "rings and projected distances");
-	return pdis;
+		                    int(rings.size()), int(gaussian), a, b, stamps[w].data(), pdis, nullptr, relative,
+		                    scores);
+	}, bar, from, to, score ? "rings, projected distances and local scales" : "rings and projected distances");
+	return out;
 }
 
 // The paper's method (ALGORITHM.md): min-max normalisation with the flat-scale rule,
@@ -533,7 +516,7 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 	const size_t S = r.scales.size();
 	std::vector<double> pdis;
 	if (r.mesh) {
-		pdis = ringPdis(c, adjacency(c), r.scales, options.gaussian, bar, 0, 90);
+		pdis = ringPdis(c, adjacency(c), r.scales, options.gaussian, nullptr, bar, 0, 90);
 	} else {
 		bar.report(0, "kd-tree");
 		pdis = cloudPass(Tree(c.pts), r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
@@ -571,8 +554,6 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 	return d;
 }
 
-// robust.relative_distances: min(x / l, 1), 0 where l is 0.
-inline double relative(double x, double l) { return l > 0.0 ? std::min(x / l, 1.0) : 0.0; }
 
 // The k nearest of each of rows (_kernels.cloud_knn_rows, searched in tree order): the
 // list of rows[c] at row(c).
@@ -688,32 +669,21 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	return d;
 }
 
-// Robust mode on a mesh: pdis from the kernel's rings, the local scales over the rings in
-// the Python package's sparse order (ms_ring_local_scale, as RobustSetup), support and
-// thinning over the 2-ring, and the vertices of the mesh's sharp edges (creases.py).
+// Robust mode on a mesh: the relative distances and the score from the kernel's ring pass
+// (the local scales summed in breadth-first order, as RobustSetup), support and thinning
+// over the 2-ring, and the vertices of the mesh's sharp edges (creases.py).
 Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = c.size();
 	const size_t S = r.scales.size();
 	const int top = r.scales.back();
 	const Rings adj = adjacency(c);
-	const std::vector<double> pdis = ringPdis(c, adj, r.scales, options.gaussian, bar, 0, 45);
-	const Rings one = sortedOneRing(adj);
-	const std::vector<Index> rings(r.scales.begin(), r.scales.end());
-	std::vector<double> ell(S * n), off(S * n);
-	std::vector<std::vector<Index>> marks(workers());
-	chunks(n, [&](unsigned w, Index a, Index b) {
-		if (marks[w].empty()) marks[w].assign(n, -1);
-		return ms_ring_local_scale(c.pts.data(), n, one.ptr.data(), one.idx.data(), rings.data(), int(S), a, b,
-		                           marks[w].data(), ell.data(), off.data());
-	}, bar, 45, 85, "local scales");
+	std::vector<double> score;
+	const std::vector<double> relative = ringPdis(c, adj, r.scales, options.gaussian, &score, bar, 0, 85);
 	bar.report(85, "thresholds");
 	std::vector<int> votes(n, 0);
-	std::vector<double> v(n), score(n, 0.0);
+	std::vector<double> v(n);
 	for (size_t s = 0; s < S; ++s) {
-		for (Index i = 0; i < n; ++i) {
-			v[i] = relative(pdis[s * n + i], ell[s * n + i]);
-			score[i] += relative(off[s * n + i], ell[s * n + i]) / double(S);
-		}
+		std::copy(relative.begin() + s * n, relative.begin() + (s + 1) * n, v.begin());
 		vote(v, std::max(otsu(v), R_MIN), true, votes, r);
 	}
 	Decision d;
@@ -725,17 +695,8 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 	for (Index i = 0; i < n; ++i)
 		if (d.feature[i]) rows.push_back(i);
 	if (!rows.empty()) {
-		const int compareRing = std::min(MS_THIN_RING, top);
-		SparseRings walk(one);
 		Lists D, Sup;
-		for (Index i : rows) {
-			walk.start(i);
-			for (int ring = 1; ring <= top; ++ring) {
-				const std::vector<Index> &nb = walk.grow();
-				if (ring == compareRing) Sup.add(nb.data(), nb.data() + nb.size());
-				if (ring == top) D.add(nb.data(), nb.data() + nb.size());
-			}
-		}
+		ringLists(adj, rows, std::min(MS_THIN_RING, top), top, Sup, D);
 		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup, 0.0, false);
 	}
 	const auto edges = sharpVertices(c.pts, c.faces);
