@@ -554,7 +554,6 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 	return d;
 }
 
-
 // The k nearest of each of rows (_kernels.cloud_knn_rows, searched in tree order): the
 // list of rows[c] at row(c).
 struct KnnRows {
