@@ -47,6 +47,8 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "sheet far span 1.0": ((robust, "SHEET_FAR_SPAN", 1.0),),
     "sheet far span 1.5": ((robust, "SHEET_FAR_SPAN", 1.5),),
     "no far-span check": ((robust, "SHEET_FAR_SPAN", math.inf),),
+    "no second sheet pass (trim)": ((robust, "SHEET_TRIM", 0.0),),
+    "sheet pass 2 without turn limit": ((robust, "SHEET_TRIM_COS", 0.0),),
     "no support": ((robust, "SUPPORT_MIN", 0),),
     "support >= 1": ((robust, "SUPPORT_MIN", 1),),
     "support >= 3": ((robust, "SUPPORT_MIN", 3),),
