@@ -511,7 +511,7 @@ static double noise_ratio(const double *q, int64_t k) {
 typedef struct {
     double gap;
     int64_t minimum;
-    double own, column, column_gap, far_span;
+    double own, column, column_gap, far_span, trim, trim_cos;
 } sheet_params_t;
 
 /* The kept range [lo, hi] of heights from one increasingly sorted list hs (k), z of
@@ -569,19 +569,38 @@ static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int
     return dropped;
 }
 
+/* Rules 1 and 2 of robust.sheet_mask on the heights h (k) of one list, squared lengths
+ * d2 (k), spacing a; hs (k) scratch. Writes keep[j] and returns the number dropped (0:
+ * every keep[j] is 1). Rule 1, the whole list: a gap is a step > sheet_gap * a between
+ * consecutive sorted h; above 0 (the point's own h) the points beyond the first gap are
+ * dropped (whatever lies beyond them); likewise below; not when fewer than sheet_min
+ * would be, or the kept would be fewer than sheet_own times the dropped. Rule 2, when
+ * rule 1 drops none: the same with the heights of the points of the column (tangential
+ * distance t_j, t_j^2 = d2_j - h_j^2, at most sheet_column * a; the others' heights
+ * read as 0), gaps > sheet_column_gap * a, a side cut only when its gap is the only
+ * one on that side, the cuts in the middle of the gaps, and not when the dropped
+ * heights on one side span more than sheet_far_span * a. */
+static int64_t sheet_rules(const double *h, const double *d2, int64_t k, double a,
+                           const sheet_params_t *sp, double *hs, char *keep) {
+    double lo, hi;
+    for (int64_t j = 0; j < k; j++) hs[j] = h[j];
+    sheet_cuts(hs, k, sort_heights(hs, k), sp->gap * a, 0, &lo, &hi);
+    int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep);
+    if (dropped > 0 || sp->column <= 0.0) return dropped;
+    double c = sp->column * a, c2 = c * c;
+    for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
+    sheet_cuts(hs, k, sort_heights(hs, k), sp->column_gap * a, 1, &lo, &hi);
+    return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep);
+}
+
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
  * squared lengths d2 (k), the list's normal nrm, the parameters sp; hs (2 k) scratch.
  * Writes keep[j] (1: kept) and returns the number of neighbours dropped (0: every
  * keep[j] is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m = min(6, k - 1),
- * summed in order. Rule 1, the whole list: a gap is a step > sheet_gap * a between
- * consecutive sorted h; above 0 (the point's own h) the points beyond the first gap are
- * dropped (whatever lies beyond them); likewise below; not when fewer than
- * sheet_min would be, or the kept would be fewer than sheet_own times the dropped.
- * Rule 2, when rule 1 drops none: the same with the heights of the points of the
- * column (tangential distance t_j, t_j^2 = d2_j - h_j^2, at most sheet_column * a; the
- * others' heights read as 0), gaps > sheet_column_gap * a, a side cut only when its gap
- * is the only one on that side, the cuts in the middle of the gaps, and not when the dropped heights on one side span more than
- * sheet_far_span * a. */
+ * summed in order; sheet_rules on those heights. Pass 2, when they drop none, some
+ * |h_j| > sheet_trim * a and at least 3 are not: sheet_rules again on the heights along
+ * the unweighted PCA normal n2 (smallest_eigvec of the scatter, sums in order) of the
+ * q_j with |h_j| <= sheet_trim * a, when |n2 . n| >= sheet_trim_cos. */
 static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const double *nrm,
                           const sheet_params_t *sp, double *hs, char *keep) {
     for (int64_t j = 0; j < k; j++) keep[j] = 1;
@@ -590,11 +609,12 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     double a = sqrt(d2[1]);
     for (int64_t j = 2; j <= m; j++) a += sqrt(d2[j]);
     a /= (double)m;
-    double g = sp->gap * a, g2 = sp->column_gap * a;
+    double g = sp->gap * a, g2 = sp->column_gap * a, t = sp->trim * a;
     /* No step between consecutive sorted heights, of the whole list or of the column,
-     * exceeds (max h) - (min h) as rounded (rounding is monotone): when that is at most
-     * both gaps there is none, and every neighbour is kept (most points: a smooth
-     * surface), without sorting. */
+     * exceeds (max h) - (min h) as rounded (rounding is monotone), and no |h_j| does
+     * (0 is among them): when that is at most both gaps and the trim there is none, no
+     * second pass, and every neighbour is kept (most points: a smooth surface), without
+     * sorting. */
     double *h = hs + k, hmin = INFINITY, hmax = -INFINITY;
     int nan = 0;
     for (int64_t j = 0; j < k; j++) {
@@ -604,16 +624,32 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
         if (v < hmin) hmin = v;
         if (v > hmax) hmax = v;
     }
-    if (!nan && hmax - hmin <= g && (sp->column <= 0.0 || hmax - hmin <= g2)) return 0;
-    double lo, hi;
-    for (int64_t j = 0; j < k; j++) hs[j] = h[j];
-    sheet_cuts(hs, k, sort_heights(hs, k), g, 0, &lo, &hi);
-    int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep);
-    if (dropped > 0 || sp->column <= 0.0) return dropped;
-    double c = sp->column * a, c2 = c * c;
-    for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
-    sheet_cuts(hs, k, sort_heights(hs, k), g2, 1, &lo, &hi);
-    return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep);
+    if (!nan && hmax - hmin <= g && (sp->column <= 0.0 || hmax - hmin <= g2) &&
+        (sp->trim <= 0.0 || hmax - hmin <= t))
+        return 0;
+    int64_t dropped = sheet_rules(h, d2, k, a, sp, hs, keep);
+    if (dropped > 0 || sp->trim <= 0.0) return dropped;
+    double sx = 0.0, sy = 0.0, sz = 0.0;
+    int64_t count = 0;
+    for (int64_t j = 0; j < k; j++) {
+        if (!(fabs(h[j]) <= t)) continue;
+        sx += q[3 * j]; sy += q[3 * j + 1]; sz += q[3 * j + 2];
+        count++;
+    }
+    if (count < 3 || count == k) return 0;
+    double mx = sx / (double)count, my = sy / (double)count, mz = sz / (double)count;
+    double c[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, n2[3];
+    for (int64_t j = 0; j < k; j++) {
+        if (!(fabs(h[j]) <= t)) continue;
+        double x = q[3 * j] - mx, y = q[3 * j + 1] - my, z = q[3 * j + 2] - mz;
+        c[0] += x * x; c[1] += x * y; c[2] += x * z;
+        c[3] += y * y; c[4] += y * z; c[5] += z * z;
+    }
+    smallest_eigvec(c[0], c[1], c[2], c[3], c[4], c[5], n2);
+    if (!(fabs(n2[0] * nrm[0] + n2[1] * nrm[1] + n2[2] * nrm[2]) >= sp->trim_cos)) return 0;
+    for (int64_t j = 0; j < k; j++)
+        h[j] = q[3 * j] * n2[0] + q[3 * j + 1] * n2[1] + q[3 * j + 2] * n2[2];
+    return sheet_rules(h, d2, k, a, sp, hs, keep);
 }
 
 /* ------------------------------------------------------------------ kd-tree */
@@ -1197,7 +1233,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
     char *keep = (char *)malloc((size_t)kmax);
     const sheet_params_t sheet = {out->sheet_gap, out->sheet_min, out->sheet_own,
-                                  out->sheet_column, out->sheet_column_gap, out->sheet_far_span};
+                                  out->sheet_column, out->sheet_column_gap, out->sheet_far_span,
+                                  out->sheet_trim, out->sheet_trim_cos};
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     int rc = 0;
     if (cur_rc || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk) {

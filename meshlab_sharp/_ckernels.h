@@ -64,6 +64,11 @@
 #define MS_SHEET_COLUMN 1.1
 #define MS_SHEET_COLUMN_GAP 0.75
 #define MS_SHEET_FAR_SPAN 1.25
+/* Its second pass (where the rules drop none): the rules again along the normal of the
+ * neighbours within this many spacings of the point's plane, where that normal turns
+ * from the list's by at most about 10 degrees (the cosine). */
+#define MS_SHEET_TRIM 1.3
+#define MS_SHEET_TRIM_COS 0.985
 #define MS_THIN_CONE_COS 0.5
 #define MS_THIN_KNN 12
 #define MS_THIN_RING 2
@@ -107,8 +112,10 @@ extern "C" {
  *                             in order of min(o / l, 1) / nscales (RelativeRule's);
  *   noise[oi]                 robust.noise_scale_factor's ratio over the noise_k nearest;
  *   sheet_gap > 0             robust.sheet_mask (sheet_gap, sheet_min, sheet_own,
- *                             sheet_column, sheet_column_gap, sheet_far_span; rule 2
- *                             off when sheet_column <= 0) first
+ *                             sheet_column, sheet_column_gap, sheet_far_span,
+ *                             sheet_trim, sheet_trim_cos; rule 2 off when
+ *                             sheet_column <= 0, the second pass when sheet_trim <= 0)
+ *                             first
  *                             (normal: the weighted PCA normal of the kmax nearest):
  *                             every scale's neighbourhood, and the noise's, is then the
  *                             kept points among its neighbours;
@@ -125,7 +132,7 @@ typedef struct {
     double sheet_gap;
     int64_t sheet_min;
     double sheet_own;
-    double sheet_column, sheet_column_gap, sheet_far_span;
+    double sheet_column, sheet_column_gap, sheet_far_span, sheet_trim, sheet_trim_cos;
     int64_t tree_order;
 } cloud_out_t;
 

@@ -268,6 +268,8 @@ class _CloudOut(ctypes.Structure):
         ("sheet_column", ctypes.c_double),
         ("sheet_column_gap", ctypes.c_double),
         ("sheet_far_span", ctypes.c_double),
+        ("sheet_trim", ctypes.c_double),
+        ("sheet_trim_cos", ctypes.c_double),
         ("tree_order", _i64),
     ]
 
@@ -281,6 +283,8 @@ _NUMBERS = (
     "sheet_column",
     "sheet_column_gap",
     "sheet_far_span",
+    "sheet_trim",
+    "sheet_trim_cos",
 )
 #: The arrays of :class:`_CloudOut` with a leading scale axis, (s, n, ...).
 _PER_SCALE = ("pdis", "normals", "relative")
@@ -443,7 +447,7 @@ class ScalePass:
 
 #: Robust mode's sheet filter parameters (:func:`meshlab_sharp.robust.sheet_parameters`):
 #: gap, minimum, own, column, column gap, far span.
-SheetParameters = tuple[float, int, float, float, float, float]
+SheetParameters = tuple[float, int, float, float, float, float, float, float]
 
 
 def cloud_projected_distances(
@@ -488,12 +492,14 @@ def cloud_projected_distances(
             near=st.near, kth_d2=st.kth_d2, kth_idx=st.kth_idx, noise=st.noise, noise_k=noise_k
         )
     if sheet is not None:
-        gap, minimum, own, column, column_gap, far_span = sheet
+        gap, minimum, own, column, column_gap, far_span, trim, trim_cos = sheet
         fields.update(sheet_gap=float(gap), sheet_min=int(minimum), sheet_own=float(own))
         fields.update(
             sheet_column=float(column),
             sheet_column_gap=float(column_gap),
             sheet_far_span=float(far_span),
+            sheet_trim=float(trim),
+            sheet_trim_cos=float(trim_cos),
         )
     _cloud_call(tree, ks, weighting == "gaussian", workers, rows, **fields)
     return out

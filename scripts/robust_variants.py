@@ -50,6 +50,8 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "no acute tips": ((robust, "ACUTE_SCORE", math.inf),),
     "acute tips from score 0.45": ((robust, "ACUTE_SCORE", 0.45),),
     "acute tips: no score cap": ((robust, "ACUTE_SCORE_MAX", math.inf),),
+    "no second sheet pass (trim)": ((robust, "SHEET_TRIM", 0.0),),
+    "sheet pass 2 without turn limit": ((robust, "SHEET_TRIM_COS", 0.0),),
     "no support": ((robust, "SUPPORT_MIN", 0),),
     "support >= 1": ((robust, "SUPPORT_MIN", 1),),
     "support >= 3": ((robust, "SUPPORT_MIN", 3),),

@@ -82,6 +82,10 @@ NUDGES: dict[str, tuple[ModuleType, str, Callable[[float], float]]] = {
     "sheet column gap x1.15": (robust, "SHEET_COLUMN_GAP", lambda v: v * 1.15),
     "sheet far span x0.8": (robust, "SHEET_FAR_SPAN", lambda v: v * 0.8),
     "sheet far span x1.25": (robust, "SHEET_FAR_SPAN", lambda v: v * 1.25),
+    "sheet trim x0.85": (robust, "SHEET_TRIM", lambda v: v * 0.85),
+    "sheet trim x1.15": (robust, "SHEET_TRIM", lambda v: v * 1.15),
+    "sheet trim cos 0.97": (robust, "SHEET_TRIM_COS", lambda v: 0.97),
+    "sheet trim cos 0.995": (robust, "SHEET_TRIM_COS", lambda v: 0.995),
 }
 
 

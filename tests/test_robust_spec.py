@@ -42,6 +42,9 @@ SHEET_GAP, SHEET_MIN, SHEET_OWN = 0.4, 6, 0.5
 #: Step 1a, second rule: a column 1.1 spacings wide, a gap of 0.75 there, the heights
 #: left out on one side within 1.25 spacings.
 SHEET_COLUMN, SHEET_COLUMN_GAP, SHEET_FAR_SPAN = 1.1, 0.75, 1.25
+#: Step 1a, second pass: the plane of the neighbours within 1.3 spacings of height,
+#: turning by at most about 10 degrees (cosine 0.985).
+SHEET_TRIM, SHEET_TRIM_COS = 1.3, 0.985
 #: Steps 7 and 8.
 SUPPORT_KNN, SUPPORT_MIN, THIN_KNN, MESH_RING, CONE_COS = 16, 2, 12, 2, 0.5
 #: Step 7: on a cloud whose nu is at most NOISE_QUIET, no support below this score.
@@ -270,10 +273,28 @@ def _own_sheet(points: np.ndarray, i: int, hood: np.ndarray) -> np.ndarray:
     heights of the column (tangential distance at most SHEET_COLUMN spacings; the others
     count as height 0) with steps wider than SHEET_COLUMN_GAP spacings, only where the
     step is the only one on that side (one sheet), cut in the middle of the step, and not
-    when what is dropped on one side spans more than SHEET_FAR_SPAN spacings of height."""
+    when what is dropped on one side spans more than SHEET_FAR_SPAN spacings of height.
+    Where all that drops nothing: again along the plain PCA normal of the neighbours
+    within SHEET_TRIM spacings of the point's plane, when some lie farther and at
+    least 3 do not, and that normal's cosine with the list's is at least
+    SHEET_TRIM_COS."""
     q = points[hood] - points[i]
-    h = q @ spec_pca_normal(points, i, hood, "gaussian")
+    normal = spec_pca_normal(points, i, hood, "gaussian")
+    h = q @ normal
     a = np.sqrt((q[1:7] ** 2).sum(axis=1)).mean()
+    own = _own_by_heights(q, h, a)
+    near = np.abs(h) <= SHEET_TRIM * a
+    if own.all() and 3 <= near.sum() < len(h):
+        inner = q[near] - q[near].mean(axis=0)
+        plane = np.linalg.eigh(inner.T @ inner)[1][:, 0]
+        if abs(plane @ normal) >= SHEET_TRIM_COS:
+            own = _own_by_heights(q, q @ plane, a)
+    return own
+
+
+def _own_by_heights(q: np.ndarray, h: np.ndarray, a: float) -> np.ndarray:
+    """The sheet rules of :func:`_own_sheet` for offsets q (k, 3), their heights h (k,)
+    and the spacing a."""
     below, above = _sheet_cuts(list(h), SHEET_GAP * a, middle=False)
     own = _sheet_rules(h, below, above, math.inf)
     if own.all():

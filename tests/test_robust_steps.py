@@ -196,24 +196,57 @@ def test_sheet_mask_finds_the_other_side_in_the_column_where_the_end_face_joins_
     # rule 1 sees steps of 0.4 < SHEET_GAP * a (0.455) all the way down: no gap
     points, lists = _rim([-0.4, -0.8, -1.2, -1.6])
     assert robust.sheet_mask(
-        points, lists, np.array([[0.0, 0.0, 1.0]]), (0.4, 6, 0.5, 0.0, 0.0, 0.0)
+        points, lists, np.array([[0.0, 0.0, 1.0]]), (0.4, 6, 0.5, 0.0, 0.0, 0.0, 0.0, 1.0)
     )[0].all()
     # rule 2: in the column (the 4 points below within SHEET_COLUMN * a = 1.25 of the
     # axis) a step of 2 > SHEET_COLUMN_GAP * a; cut half way, at -1
     np.testing.assert_array_equal(_mask(points, lists), points[:, 2] >= -1.0)
     # the points left out span 0.8 spacings (-2 to -1.2); 1.6 > SHEET_FAR_SPAN * a
     # (1.42): not one parallel sheet, every point kept
+    # (rules 1 and 2 alone: the second pass, tested below, runs where a height exceeds
+    # SHEET_TRIM * a, as -2.8 does)
     points, lists = _rim([-0.4, -0.8, -1.2, -1.6, -2.4, -2.8])
     assert robust.SHEET_FAR_SPAN * a < 1.6
-    assert _mask(points, lists).all()
+    rules_only = robust.sheet_parameters()[:6] + (0.0, 1.0)
+    assert robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), rules_only)[0].all()
     # the column: the other side's nearest lie 0.71 from the axis; a column narrower than
     # that sees no other side
     points, lists = _rim([-0.4, -0.8, -1.2, -1.6])
-    narrow = (0.4, 6, 0.5, 0.7 / a, robust.SHEET_COLUMN_GAP, robust.SHEET_FAR_SPAN)
+    narrow = (0.4, 6, 0.5, 0.7 / a, robust.SHEET_COLUMN_GAP, robust.SHEET_FAR_SPAN, 0.0, 1.0)
     assert robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), narrow)[0].all()
     # a step of exactly SHEET_COLUMN_GAP * a is no gap
-    exact = (0.4, 6, 0.5, robust.SHEET_COLUMN, 2.0 / a, robust.SHEET_FAR_SPAN)
+    exact = (0.4, 6, 0.5, robust.SHEET_COLUMN, 2.0 / a, robust.SHEET_FAR_SPAN, 0.0, 1.0)
     assert robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), exact)[0].all()
+
+
+def test_sheet_mask_tries_again_along_the_plane_of_the_nearer_heights():
+    # a floor one spacing thick (two 5 x 5 grids, z = 0 and z = 1) with a rib's points
+    # above it, and a normal tilted by 8 degrees (as the rib tilts the PCA normal):
+    # each grid's heights spread over the gap between them, no rule finds a gap
+    grid = sorted(
+        [(x, y) for x in range(-2, 3) for y in range(-2, 3)],
+        key=lambda p: (p[0] ** 2 + p[1] ** 2, p),
+    )
+    floor = [(float(x), float(y), z) for z in (0.0, 1.0) for x, y in grid]
+    rib = [(0.0, 0.0, z) for z in (2.0, 2.5, 3.0)]
+    t = math.radians(8.0)
+    normal = np.array([[math.sin(t), 0.0, math.cos(t)]])
+    points = np.array(floor + rib)
+    lists = np.arange(len(points))[None, :]
+    rules_only = robust.sheet_parameters()[:6] + (0.0, 1.0)
+    assert robust.sheet_mask(points, lists, normal, rules_only)[0].all()
+    # the rib's points lie higher than SHEET_TRIM * a (a = (5 + sqrt 2) / 6): the plane
+    # of the others is the floor's, along which the other side lies beyond a gap
+    np.testing.assert_array_equal(robust.sheet_mask(points, lists, normal)[0], points[:, 2] == 0.0)
+    # ... only where its normal turns from the given one by at most about 10 degrees
+    # (SHEET_TRIM_COS): here by 8, more than 7
+    turned = robust.sheet_parameters()[:7] + (math.cos(math.radians(7.0)),)
+    assert robust.sheet_mask(points, lists, normal, turned)[0].all()
+    assert math.cos(math.radians(8.5)) > robust.SHEET_TRIM_COS
+    # without the rib every height is within SHEET_TRIM * a: no second pass
+    floor_only = np.array(floor)
+    assert robust.sheet_mask(floor_only, np.arange(50)[None, :], normal)[0].all()
+    assert robust.SHEET_TRIM * (5 + math.sqrt(2)) / 6 < 2.0 * math.cos(t)
 
 
 def test_sheet_neighbourhoods_keep_the_prefixes_of_the_kept_points():

@@ -248,6 +248,8 @@ CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian
 		out.sheet_column = MS_SHEET_COLUMN;
 		out.sheet_column_gap = MS_SHEET_COLUMN_GAP;
 		out.sheet_far_span = MS_SHEET_FAR_SPAN;
+		out.sheet_trim = MS_SHEET_TRIM;
+		out.sheet_trim_cos = MS_SHEET_TRIM_COS;
 	} else {
 		c.pdis.resize(S * t.n);
 		out.pdis = c.pdis.data();
