@@ -52,7 +52,8 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    alone, and the candidates of weak edges come only here and there.
 5. **Thinning**: a point is dropped when a supported neighbour among its ``THIN_KNN``
    (12) nearest (grown with the scales on noisy clouds), lying across the feature
-   line (more than 60 degrees from the line's direction), ranks higher (mean over the
+   line (more than 60 degrees from the line's direction; on noisy clouds about 63,
+   ``THIN_CONE_COS_NOISY``: noise tilts a line's own offsets), ranks higher (mean over the
    scales of the centroid's distance relative to ``l``, which peaks on acute edges
    where ``r`` does not): non-maximum suppression
    across the line, so lines stay one point wide; comparing only within about 1.9
