@@ -70,6 +70,10 @@
 #define MS_SHEET_TRIM 1.3
 #define MS_SHEET_TRIM_COS 0.985
 #define MS_THIN_CONE_COS 0.5
+/* On a noisy cloud (noise ratio above MS_NOISE_QUIET) thinning's cone is wider (about 63
+ * degrees; support keeps MS_THIN_CONE_COS): noise tilts the offsets between a line's own
+ * points, which then count as across it and thin the line to gaps (robust.thin_cone). */
+#define MS_THIN_CONE_COS_NOISY 0.45
 #define MS_THIN_KNN 12
 #define MS_THIN_RING 2
 #define MS_SUPPORT_KNN 16

@@ -61,6 +61,8 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
     "thinning compares 8 nearest": ((robust, "THIN_KNN", 8),),
     "thinning list not grown with the scales": ((robust, "thin_knn", lambda growth: 12),),
     "thinning cone 45 deg": ((robust, "THIN_CONE_COS", math.cos(math.radians(45))),),
+    "noisy clouds: thinning cone 60 deg (as quiet ones)": ((robust, "THIN_CONE_COS_NOISY", 0.5),),
+    "noisy clouds: thinning cone 66 deg (cos 0.4)": ((robust, "THIN_CONE_COS_NOISY", 0.4),),
     "no sharp mesh edges": ((creases, "CREASE_ANGLE", 180.0),),
     "mesh edges: no noise factor": ((creases, "NOISE_FACTOR", 0.0),),
     "Otsu on clouds without noise too": ((robust, "otsu_splits", lambda mesh, noise: True),),

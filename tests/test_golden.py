@@ -46,6 +46,8 @@ NUDGES: dict[str, tuple[ModuleType, str, Callable[[float], float]]] = {
     "R_MIN x1.15 (23 deg)": (robust, "R_MIN", lambda v: v * 1.15),
     "cone cos -0.1": (robust, "THIN_CONE_COS", lambda v: v - 0.1),
     "cone cos +0.1": (robust, "THIN_CONE_COS", lambda v: v + 0.1),
+    "noisy cone cos -0.05": (robust, "THIN_CONE_COS_NOISY", lambda v: v - 0.05),
+    "noisy cone cos +0.05": (robust, "THIN_CONE_COS_NOISY", lambda v: v + 0.05),
     "thinning kNN -2": (robust, "THIN_KNN", lambda v: v - 2),
     "thinning kNN +2": (robust, "THIN_KNN", lambda v: v + 2),
     "mesh ring -1": (robust, "THIN_RING", lambda v: v - 1),

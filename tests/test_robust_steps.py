@@ -326,6 +326,24 @@ def test_thinning_is_blocked_by_a_non_candidate_or_a_valley_between_on_a_quiet_c
     assert robust.thin_blockers(mask, False, 0.05) is not None
 
 
+def test_thinning_cone_is_wider_on_a_noisy_cloud():
+    assert robust.thin_cone(False, 0.05) == robust.THIN_CONE_COS == 0.5
+    assert robust.thin_cone(False, 0.05 + 1e-12) == robust.THIN_CONE_COS_NOISY == 0.45
+    assert robust.thin_cone(True, 0.5) == robust.THIN_CONE_COS  # meshes: never
+    # feature 0 (score 0.5) and feature 1 (0.9) at 62 degrees from the line along x
+    # (cos 0.469): across in the 60-degree cone, so 1 beats 0; along the line in the
+    # noisy cone (about 63 degrees); at 64 degrees (cos 0.438) across in both
+    mask = np.array([True, True])
+    score = np.array([0.5, 0.9])
+    e = np.tile([1.0, 0.0, 0.0], (2, 1))
+    compare = _csr([[0, 1], [1, 0]])
+    for degrees, cone, kept in ((62, 0.5, False), (62, 0.45, True), (64, 0.45, False)):
+        a = math.radians(degrees)
+        pts = np.array([[0.0, 0, 0], [math.cos(a), math.sin(a), 0]])
+        got = robust.thin(pts, mask, score, e, compare, cone_cos=cone)
+        assert got.tolist() == [kept, True], (degrees, cone)
+
+
 def test_acute_tests_are_the_non_candidates_scoring_in_the_band_on_a_cloud_without_noise():
     assert (robust.ACUTE_SCORE, robust.ACUTE_SCORE_MAX) == (0.5, 0.8)
     score = np.array([0.4999, 0.5, 0.7999, 0.8, 0.6, 0.95])

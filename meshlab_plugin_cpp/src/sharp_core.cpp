@@ -348,10 +348,10 @@ void lineDirection(const std::vector<double> &p, Index i, const Index *first, co
 	ms_eigvecs(negated, 1, e);
 }
 
-// Whether d = p_j - p_i lies across the line through i: |d . e| < THIN_CONE_COS |d|.
-inline bool across(const std::vector<double> &p, Index i, Index j, const double e[3]) {
+// Whether d = p_j - p_i lies across the line through i: |d . e| < cone |d|.
+inline bool across(const std::vector<double> &p, Index i, Index j, const double e[3], double cone) {
 	const double dx = p[3 * j] - p[3 * i], dy = p[3 * j + 1] - p[3 * i + 1], dz = p[3 * j + 2] - p[3 * i + 2];
-	return std::fabs(dx * e[0] + dy * e[1] + dz * e[2]) < MS_THIN_CONE_COS * std::sqrt(dx * dx + dy * dy + dz * dz);
+	return std::fabs(dx * e[0] + dy * e[1] + dz * e[2]) < cone * std::sqrt(dx * dx + dy * dy + dz * dz);
 }
 
 // Whether a point m of [begin, end) that is not in f0, or whose score is below i's (a
@@ -402,13 +402,15 @@ std::vector<double> smoothedRanking(const std::vector<double> &score, const std:
 // robust.supported then robust.thin for the candidates rows (increasing), with the line
 // directions of f0 computed once; D, S, K: direction, support and comparison lists by
 // candidate slot. F1 = features with at least SUPPORT_MIN other features along their line
-// in S(i), or a score below `free` (robust.support_exempt: SUPPORT_FREE_SCORE on a cloud
-// without noise, 0 elsewhere); F2 = F1 less the points beaten, across the line, by a
-// higher score in K(i), unless (`block`: robust.thin_blockers, a cloud without noise) a
-// point of K(i) not in F0, or ranking below i, lies between them.
+// in S(i) (across: outside the cone THIN_CONE_COS), or a score below `free`
+// (robust.support_exempt: SUPPORT_FREE_SCORE on a cloud without noise, 0 elsewhere); F2 =
+// F1 less the points beaten, across the line (outside the cone `cone`: robust.thin_cone),
+// by a higher score in K(i), unless (`block`: robust.thin_blockers, a cloud without noise)
+// a point of K(i) not in F0, or ranking below i, lies between them.
 std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
-                                 const Lists &D, const Lists &S, const Lists &K, double free, bool block) {
+                                 const Lists &D, const Lists &S, const Lists &K, double free, bool block,
+                                 double cone) {
 	std::vector<double> e(3 * rows.size()), col;
 	std::vector<char> f1(f0.size(), 0);
 	for (size_t c = 0; c < rows.size(); ++c) {
@@ -416,7 +418,7 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 		lineDirection(p, i, D.begin(c), D.end(c), f0, col, &e[3 * c]);
 		int along = 0;
 		for (const Index *j = S.begin(c); j != S.end(c); ++j)
-			if (*j != i && f0[*j] && !across(p, i, *j, &e[3 * c])) ++along;
+			if (*j != i && f0[*j] && !across(p, i, *j, &e[3 * c], MS_THIN_CONE_COS)) ++along;
 		f1[i] = along >= MS_SUPPORT_MIN || score[i] < free;
 	}
 	std::vector<char> f2 = f1;
@@ -424,7 +426,7 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 		const Index i = rows[c];
 		if (!f1[i]) continue;
 		for (const Index *j = K.begin(c); j != K.end(c); ++j)
-			if (*j != i && f1[*j] && across(p, i, *j, &e[3 * c]) && score[*j] > score[i] &&
+			if (*j != i && f1[*j] && across(p, i, *j, &e[3 * c], cone) && score[*j] > score[i] &&
 			    !(block && parted(p, f0, score, i, *j, K.begin(c), K.end(c)))) {
 				f2[i] = 0;
 				break;
@@ -666,7 +668,8 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	// the score averaged over the THIN_KNN nearest (support reads no score there: not quiet)
 	const bool smooth = noise == MS_NOISE_MAX_FACTOR;
 	d.feature = supportAndThin(pts, d.feature, smooth ? smoothedRanking(pass.score, rows, K, MS_THIN_KNN) : pass.score,
-	                           rows, D, Sup, K, quiet ? MS_SUPPORT_FREE_SCORE : 0.0, quiet);
+	                           rows, D, Sup, K, quiet ? MS_SUPPORT_FREE_SCORE : 0.0, quiet,
+	                           quiet ? MS_THIN_CONE_COS : MS_THIN_CONE_COS_NOISY);  // robust.thin_cone
 	return d;
 }
 
@@ -698,7 +701,7 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 	if (!rows.empty()) {
 		Lists D, Sup;
 		ringLists(adj, rows, std::min(MS_THIN_RING, top), top, Sup, D);
-		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup, 0.0, false);
+		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup, 0.0, false, MS_THIN_CONE_COS);
 	}
 	const auto edges = sharpVertices(c.pts, c.faces);
 	for (Index i = 0; i < n; ++i)

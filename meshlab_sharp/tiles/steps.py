@@ -252,15 +252,15 @@ def robust_rank(ctx: Context, *, compare: int) -> Partial:
 def robust_thin(ctx: Context, *, compare: int, noise: float, ranking: str) -> Partial:
     """:func:`meshlab_sharp.robust.thin` of the rows by the store array ``ranking``
     (``score``, or ``rank`` where :func:`meshlab_sharp.robust.ranking_smoothed`), blocked
-    by :func:`meshlab_sharp.robust.thin_blockers` of the cloud's noise ratio ``noise``;
-    writes ``final``."""
+    by :func:`meshlab_sharp.robust.thin_blockers` of the cloud's noise ratio ``noise``,
+    in the cone :func:`meshlab_sharp.robust.thin_cone` of it; writes ``final``."""
     out = robust.thin(
         ctx.points,
         ctx.gather("mask1"),
         ctx.gather(ranking),
         ctx.gather("e"),
         ctx.lists(compare),
-        cone_cos=robust.THIN_CONE_COS,
+        cone_cos=robust.thin_cone(False, noise),
         between=robust.thin_blockers(ctx.gather("mask"), False, noise),
     )
     ctx.store.write_at("final", ctx.own, out[ctx.rows])
