@@ -28,6 +28,8 @@ from .errors import InputError
 
 #: Rows per block of kNN queries (bounds the temporary memory).
 QUERY_BLOCK = 131072
+#: Rows per block when the numpy reference grows the rings (bounds the temporaries).
+RING_BLOCK = 16384
 #: Coordinates up to 2**UNIT_RANGE in absolute value, and at least 2**-UNIT_RANGE for
 #: the largest, are used as they are; others are scaled (:func:`unit_scale`).
 UNIT_RANGE = _header.integer("UNIT_RANGE")
@@ -246,17 +248,22 @@ def face_order_adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndar
     a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
     owner = np.stack([a, a, b, b, c, c], axis=1).reshape(-1)
     other = np.stack([b, c, a, c, a, b], axis=1).reshape(-1)
-    return _first_occurrences(owner, other, n, n)
+    order = np.argsort(owner, kind="stable")
+    return _first_occurrences(owner[order], other[order], n, n)
 
 
 def _first_occurrences(
     owner: np.ndarray, member: np.ndarray, rows: int, n: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """CSR lists (``rows`` rows) of ``member`` (k,) grouped by ``owner`` (k,), each row in
-    the order of the input, each member kept where it first occurs in its row (members
-    in ``[0, n)``): indptr (rows + 1,) int64, indices int64."""
-    first = np.unique(owner * n + member, return_index=True)[1]
-    first = first[np.lexsort((first, owner[first]))]
+    """CSR lists (``rows`` rows) of ``member`` (k,) grouped by ``owner`` (k,), increasing,
+    each row in the order of the input, each member kept where it first occurs in its row
+    (members in ``[0, n)``): indptr (rows + 1,) int64, indices int64."""
+    key = owner * n + member
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    new = np.ones(len(key), dtype=bool)
+    new[1:] = key[1:] != key[:-1]
+    first = np.sort(order[new])  # each row's first occurrences, in the input's order
     indptr = np.zeros(rows + 1, dtype=np.int64)
     np.cumsum(np.bincount(owner[first], minlength=rows), out=indptr[1:])
     return indptr, member[first]
@@ -286,29 +293,54 @@ def grow_rings(
     Neighbourhood
         Ring k (k = 1, 2, ...) of each centre, ``r`` rows.
     """
-    aptr, adj = adjacency
-    n, r = len(aptr) - 1, len(rows)
+    r = len(rows)
     indptr = np.arange(r + 1, dtype=np.int64)
     indices = np.asarray(rows, np.int64)
     inner = np.zeros(r, dtype=np.int64)  # the length of the ring before, per row
     while True:
         sizes = np.diff(indptr)
-        owner = np.repeat(np.arange(r), sizes)
-        last = np.arange(len(indices)) - indptr[owner] >= inner[owner]
-        members, member_owner = indices[last], owner[last]
-        degree = aptr[members + 1] - aptr[members]
-        ends = np.cumsum(degree)
-        at = np.repeat(aptr[members] - (ends - degree), degree) + np.arange(
-            ends[-1] if len(ends) else 0
-        )
-        indptr, indices = _first_occurrences(
-            np.concatenate([owner, np.repeat(member_owner, degree)]),
-            np.concatenate([indices, adj[at].astype(np.int64)]),
-            r,
-            n,
-        )
+        parts = []  # blocks of rows, which keep the temporaries small
+        for a in range(0, r, RING_BLOCK):
+            b = min(a + RING_BLOCK, r)
+            lists = indices[indptr[a] : indptr[b]], indptr[a : b + 1] - indptr[a]
+            parts.append(_next_ring(adjacency, *lists, inner[a:b]))
+        indices = np.concatenate([p[1] for p in parts] or [indices])
+        counts = np.concatenate([np.diff(p[0]) for p in parts] or [np.zeros(0, np.int64)])
+        indptr = np.zeros(r + 1, dtype=np.int64)
+        np.cumsum(counts, out=indptr[1:])
         inner = sizes
         yield Neighbourhood(indptr=indptr, indices=indices)
+
+
+def _next_ring(
+    adjacency: tuple[np.ndarray, np.ndarray],
+    indices: np.ndarray,
+    indptr: np.ndarray,
+    inner: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`grow_rings`' next level of the rings (``indptr`` (r + 1,), ``indices``)
+    whose levels before the last hold ``inner`` (r,) members: (indptr, indices)."""
+    aptr, adj = adjacency
+    n, r = len(aptr) - 1, len(inner)
+    sizes = np.diff(indptr)
+    owner = np.repeat(np.arange(r), sizes)
+    last = np.arange(len(indices)) - indptr[owner] >= inner[owner]
+    members = indices[last]
+    degree = aptr[members + 1] - aptr[members]
+    ends = np.cumsum(degree)
+    at = np.repeat(aptr[members] - (ends - degree), degree) + np.arange(
+        ends[-1] if len(ends) else 0
+    )
+    # each row: its ring, then the lists of its last level's members, in order
+    found = np.bincount(np.repeat(owner[last], degree), minlength=r)
+    sequence_owner = np.repeat(np.arange(r), sizes + found)
+    start = np.zeros(r + 1, dtype=np.int64)
+    np.cumsum(sizes + found, out=start[1:])
+    ring = np.arange(len(sequence_owner)) - start[sequence_owner] < sizes[sequence_owner]
+    sequence = np.empty(len(sequence_owner), dtype=np.int64)
+    sequence[ring] = indices
+    sequence[~ring] = adj[at]
+    return _first_occurrences(sequence_owner, sequence, r, n)
 
 
 class RingNeighbourhoods:
