@@ -1173,7 +1173,6 @@ class RobustSetup:
                 )
                 self.fused = None
                 self.scale_neighbourhoods = self.neighbourhoods if compiled else self._sheets()
-        self._rings: RingNeighbourhoods | None = None
         self.sharp_edges = None if faces is None else sharp_vertices(points, faces)[0]
         otsu = otsu_splits(faces is not None, self.noise)
         self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, otsu)
@@ -1241,11 +1240,9 @@ class RobustSetup:
         return out
 
     def _lists(self, scale: int) -> Neighbourhood:
-        if self.faces is None:
-            return self.scale_neighbourhoods.at(scale)
-        if self._rings is None:
-            self._rings = RingNeighbourhoods(self.faces, self.n, backend="numpy")
-        return self._rings.at(scale)
+        """The lists of ``scale`` for the rule: the ones ``run_scales`` has just listed
+        (a mesh's rings are listed once)."""
+        return self.scale_neighbourhoods.at(scale)
 
     def finish(self, mask: np.ndarray, strength: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Acute tips (clouds without noise), support, thinning and (meshes) the sharp
