@@ -290,7 +290,35 @@ def _boolean(op: str, a: Mesh, b: Mesh) -> Mesh:
     ms.meshing_remove_null_faces()
     ms.meshing_remove_unreferenced_vertices()
     m = ms.current_mesh()
-    return m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64)
+    return _canonical(m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64))
+
+
+def _canonical(verts: np.ndarray, faces: np.ndarray) -> Mesh:
+    """The same triangles in one order, whatever order a filter wrote them in.
+
+    pymeshlab's booleans list their output in an order that depends on thread timing
+    (measured: four concurrent runs, three vertex orders, one set of triangles), and the
+    sampling draws faces by index. Vertices sorted by (x, y, z); each face starting at its
+    smallest vertex, orientation kept; faces sorted.
+
+    Parameters
+    ----------
+    verts : (n, 3) float64
+    faces : (m, 3) int64
+
+    Returns
+    -------
+    verts : (n, 3) float64
+    faces : (m, 3) int64
+    """
+    order = np.lexsort(verts.T[::-1])
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    f = rank[faces]
+    first = np.argmin(f, axis=1)
+    rows = np.arange(len(f))
+    f = np.stack([f[rows, (first + j) % 3] for j in range(3)], axis=1)
+    return verts[order], f[np.lexsort(f.T[::-1])]
 
 
 def _union(*meshes: Mesh) -> Mesh:
