@@ -1463,6 +1463,36 @@ static int reserve(void **arrays, const size_t *size, int count, int64_t *cap, i
     return 0;
 }
 
+
+/* One breadth-first level: the members queue[*head .. *tail) on entry each append their
+ * neighbours in (ptr, adj) not yet stamped `mark`, branch-free (every neighbour written,
+ * kept when first met). The queue is arrays[0], grown with reserve over `count` arrays;
+ * *head and *tail advance. Returns 0, or -1 out of memory (*tail then counts every member
+ * stamped so far). */
+static inline int bfs_level(const int64_t *ptr, const int32_t *adj, int32_t *stamp, int32_t mark,
+                            void **arrays, const size_t *size, int count, int64_t *cap, int64_t *head,
+                            int64_t *tail) {
+    const int64_t level_end = *tail;
+    int64_t t_end = *tail;
+    for (; *head < level_end; (*head)++) {
+        const int32_t v = ((const int32_t *)arrays[0])[*head];
+        const int64_t t0 = ptr[v], t1 = ptr[v + 1];
+        if (reserve(arrays, size, count, cap, t_end + (t1 - t0)) != 0) {
+            *tail = t_end;
+            return -1;
+        }
+        int32_t *queue = (int32_t *)arrays[0];
+        for (int64_t t = t0; t < t1; t++) {
+            const int32_t w = adj[t];
+            queue[t_end] = w;
+            t_end += stamp[w] != mark;
+            stamp[w] = mark;
+        }
+    }
+    *tail = t_end;
+    return 0;
+}
+
 /* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
  * the projected distance into out_pdis[s * n + i] when not NULL (normals into
  * out_normals when not NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA.
@@ -1503,20 +1533,11 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
         int64_t done_j = 0;
         int s = 0;
         for (int64_t ring = 1; ring <= rmax; ring++) {
-            int64_t level_end = tail;
-            for (; head < level_end; head++) {
-                int32_t v = queue[head];
-                int64_t t0 = ptr[v], t1 = ptr[v + 1];
-                if (reserve(buf, size, 5, &cap, tail + (t1 - t0)) != 0) { rc = -1; goto done; }
-                queue = (int32_t *)buf[0];
-                /* branch-free: write every neighbour, keep it when first met */
-                for (int64_t t = t0; t < t1; t++) {
-                    int32_t w = adj[t];
-                    queue[tail] = w;
-                    tail += stamp[w] != (int32_t)i;
-                    stamp[w] = (int32_t)i;
-                }
+            if (bfs_level(ptr, adj, stamp, (int32_t)i, buf, size, 5, &cap, &head, &tail) != 0) {
+                rc = -1;
+                goto done;
             }
+            queue = (int32_t *)buf[0];
             while (s < nscales && rings[s] == ring && fn != NULL) {
                 /* a fixed normal: the mean offset is all it needs (and the local scale
                  * each offset and its length) */
@@ -1600,22 +1621,12 @@ int ms_ring_lists(const int64_t *ptr, const int32_t *adj, const int64_t *rows, i
         stamp[rows[r]] = 0;
         int s = 0;
         for (int64_t ring = 1; ring <= rmax; ring++) {
-            int64_t level_end = tail;
-            for (; head < level_end; head++) {
-                int32_t v = queue[head];
-                int64_t t0 = ptr[v], t1 = ptr[v + 1];
-                if (reserve(buf, size, 1, &cap, tail + (t1 - t0)) != 0) {
-                    for (int64_t j = 0; j < tail; j++) stamp[queue[j]] = -1;
-                    free(buf[0]);
-                    return -1;
-                }
-                queue = (int32_t *)buf[0];
-                for (int64_t t = t0; t < t1; t++) {
-                    int32_t w = adj[t];
-                    queue[tail] = w;
-                    tail += stamp[w] != 0;
-                    stamp[w] = 0;
-                }
+            const int grown = bfs_level(ptr, adj, stamp, 0, buf, size, 1, &cap, &head, &tail);
+            queue = (int32_t *)buf[0];
+            if (grown != 0) {
+                for (int64_t j = 0; j < tail; j++) stamp[queue[j]] = -1;
+                free(buf[0]);
+                return -1;
             }
             while (s < nrings && rings[s] == ring) out_len[s++ * m + r] = tail;
         }
