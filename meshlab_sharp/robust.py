@@ -61,12 +61,17 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
    where ``r`` does not): non-maximum suppression
    across the line, so lines stay one point wide; comparing only within about 1.9
    spacings keeps most of two parallel lines (the rims of a thin wall) apart, and on
-   a cloud thresholded at the floor alone a point that is not a candidate lying
-   between the two (the middle of a wall's end face) keeps both
-   (:func:`thin_blockers`).
+   a cloud thresholded at the floor alone a point that is not a candidate, or ranks
+   below the point (a valley of the ranking), lying between the two (the middle of a
+   wall's end face) keeps both (:func:`thin_blockers`). Where the noise grew the scales
+   to the cap, the ranking is the mean over the ``THIN_KNN`` nearest (points lifted by
+   the noise beside a line do not outrank it).
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
    an edge whose two faces turn by more than ``CREASE_ANGLE`` (more on a noisy mesh)
-   are features too. On a CAD tessellation they are all of them.
+   are features too. On a CAD tessellation they are all of them. A mesh's rings (its
+   neighbourhoods at every step) are listed breadth-first
+   (:class:`meshlab_sharp.neighbourhoods.RingNeighbourhoods`), the order in which the
+   sums over them are taken.
 """
 
 from __future__ import annotations
@@ -181,7 +186,8 @@ SUPPORT_FREE_SCORE = _header.real("SUPPORT_FREE_SCORE")
 #: bisector makes ``o / l`` peak (0.5-0.8 on the 30-60 degree wedges, the star prism
 #: and the rims of walls 1 spacing thick; outliers that are not isolated: 0.8-0.96;
 #: the density gradient's offsets along the surface: below 0.5, and not between two
-#: candidates). Measured (20,000 points; docs/robust-mode.md, last section): clean
+#: candidates). Measured (20,000 points; docs/robust-mode.md, "Acute tips join the
+#: candidates"): clean
 #: 0.966 -> 0.974 (star prism 0.901 -> 0.961), acute 0.929 -> 0.964, thin walls 1
 #: spacing 0.736 -> 0.80.
 ACUTE_SCORE = _header.real("ACUTE_SCORE")
@@ -249,7 +255,8 @@ SHEET_FAR_SPAN = _header.real("SHEET_FAR_SPAN")
 #: plane (the rib's points, higher, left out of it), where that normal turns by at most
 #: about 10 degrees (``|n2 . n| >= SHEET_TRIM_COS``; beside an edge of a scan it turns
 #: more, and the sparse face turning away showed gaps). Measured (20,000 points, thin1 /
-#: thin2 / thin3 / scan F1; docs/robust-mode.md, last section): without the pass 0.745 /
+#: thin2 / thin3 / scan F1; docs/robust-mode.md, "The sheet filter cuts at the first
+#: gap"): without the pass 0.745 /
 #: 0.866 / 0.922 / 0.888; trim 1.3, no turn limit: 0.754 / 0.874 / 0.927 / 0.871; at
 #: most 10 / 15 / 20 degrees: 0.753 / 0.873 / 0.923 / 0.888, 0.754 / 0.874 / 0.925 /
 #: 0.888, 0.754 / 0.874 / 0.927 / 0.878; trim 1.6 (no limit): 0.749 / 0.872 / 0.929.
