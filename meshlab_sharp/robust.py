@@ -132,6 +132,7 @@ __all__ = [
     "noise_ratios_lists",
     "noise_scale_factor",
     "otsu_splits",
+    "quiet_cloud",
     "relative_distances",
     "robust_threshold",
     "robust_threshold_from_histogram",
@@ -712,13 +713,22 @@ def robust_threshold_from_histogram(counts: np.ndarray, otsu: bool = True) -> fl
     return max(otsu_from_histogram(counts), R_MIN) if otsu else R_MIN
 
 
+def quiet_cloud(mesh: bool, noise: float) -> bool:
+    """Whether the input is a cloud without noise: not a mesh, and its noise ratio
+    ``noise`` (the lower median of :func:`noise_ratios`, as :func:`noise_scale_factor`
+    takes it) not above ``NOISE_QUIET``. The one test behind every rule kept for such
+    clouds: the floor alone (:func:`otsu_splits`), :func:`support_exempt`,
+    :func:`acute_tests`, :func:`thin_blockers` and the cone of :func:`thin_cone`."""
+    return not (mesh or noise > NOISE_QUIET)
+
+
 def otsu_splits(mesh: bool, noise: float) -> bool:
     """Whether Otsu's split raises the threshold above ``R_MIN``: on meshes, and on
     clouds whose noise ratio ``noise`` (the lower median of :func:`noise_ratios`, as
     :func:`noise_scale_factor` takes it) exceeds ``NOISE_QUIET``. On a cloud without
     noise the floor alone (measured, docs/robust-mode.md: thin walls 1 / 2 / 3
     spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)."""
-    return mesh or noise > NOISE_QUIET
+    return not quiet_cloud(mesh, noise)
 
 
 def thin_blockers(candidates: np.ndarray, mesh: bool, noise: float) -> np.ndarray | None:
@@ -728,7 +738,7 @@ def thin_blockers(candidates: np.ndarray, mesh: bool, noise: float) -> np.ndarra
     clouds. The two rims of a wall 2-3 spacings thick then do not thin each other away:
     the end face's middle, between them, is not a candidate, or ranks below both (a
     valley of the score, which :func:`thin` also reads as a parting)."""
-    if mesh or noise > NOISE_QUIET:
+    if not quiet_cloud(mesh, noise):
         return None
     return ~np.asarray(candidates, bool)
 
@@ -740,7 +750,7 @@ def thin_cone(mesh: bool, noise: float) -> float:
     line's own points, which then count as across the line and thin it to gaps
     (measured, docs/robust-mode.md: thickness on the scan 0.79 -> 0.82, at noise 50 %
     0.78 -> 0.83)."""
-    return THIN_CONE_COS_NOISY if not mesh and noise > NOISE_QUIET else THIN_CONE_COS
+    return THIN_CONE_COS if mesh or quiet_cloud(mesh, noise) else THIN_CONE_COS_NOISY
 
 
 def ranking_smoothed(mesh: bool, noise: float) -> bool:
@@ -791,7 +801,7 @@ def support_exempt(score: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
     whose ``score`` (m,) is below ``SUPPORT_FREE_SCORE``; none on meshes and noisier
     clouds. Returns (m,) bool."""
     score = np.asarray(score, np.float64)
-    if mesh or noise > NOISE_QUIET:
+    if not quiet_cloud(mesh, noise):
         return np.zeros(len(score), bool)
     return score < SUPPORT_FREE_SCORE
 
@@ -802,7 +812,7 @@ def acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: float) -
     bool (the candidates at every scale) whose ``score`` (m,) lies in ``[ACUTE_SCORE,
     ACUTE_SCORE_MAX)``; none on meshes and noisier clouds. Returns (t,) int64,
     increasing."""
-    if mesh or noise > NOISE_QUIET:
+    if not quiet_cloud(mesh, noise):
         return np.zeros(0, np.int64)
     score = np.asarray(score, np.float64)
     test = ~np.asarray(mask, bool) & (score >= ACUTE_SCORE) & (score < ACUTE_SCORE_MAX)
@@ -1286,10 +1296,11 @@ class RobustSetup:
                 around, direction = self._ring_rows(np.flatnonzero(mask), ks)
                 compare = around
             e = line_directions(self.points, mask, direction)
-            free = support_exempt(self.rule.score, self.faces is not None, self.noise)
-            block = thin_blockers(mask, self.faces is not None, self.noise)
+            mesh = self.faces is not None
+            free = support_exempt(self.rule.score, mesh, self.noise)
+            block = thin_blockers(mask, mesh, self.noise)
             rank = self.rule.score
-            if ranking_smoothed(self.faces is not None, self.noise):
+            if ranking_smoothed(mesh, self.noise):
                 rank = smoothed_ranking(rank, compare, THIN_KNN)
             mask = supported(
                 self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS, exempt=free
@@ -1300,7 +1311,7 @@ class RobustSetup:
                 rank,
                 e,
                 compare,
-                cone_cos=thin_cone(self.faces is not None, self.noise),
+                cone_cos=thin_cone(mesh, self.noise),
                 between=block,
             )
         if self.sharp_edges is not None:

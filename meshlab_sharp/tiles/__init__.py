@@ -442,7 +442,7 @@ def _robust(
     thresholds = np.array([robust.robust_threshold_from_histogram(h, otsu) for h in hist])
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
-    if not otsu:  # robust.acute_tests: on a cloud without noise, tips of acute edges
+    if robust.quiet_cloud(False, nu):  # robust.acute_tests: tips of acute edges
         for name in ("tested", "tip"):
             store.create(name, (n,), bool)
         tested = runner.step(Step("acute tests", robust_acute_tests, None, {"noise": nu}))
