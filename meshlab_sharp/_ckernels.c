@@ -1602,6 +1602,22 @@ void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
     }
 }
 
+/* Counts of the values v[begin, end) added to counts (32769): +0.0 in counts[0], any
+ * other value by the top 16 bits b of its IEEE 754 bit pattern in counts[b + 1]: from
+ * +0.0 up to +inf and then NaN, the bins follow the values' order (np.partition's, NaN
+ * last). Returns how many values have the sign bit set (negative, -0.0; left out). */
+int64_t ms_bit_histogram(const double *v, int64_t begin, int64_t end, int64_t *counts) {
+    int64_t negative = 0;
+    for (int64_t i = begin; i < end; i++) {
+        uint64_t bits;
+        memcpy(&bits, v + i, sizeof bits);
+        uint64_t sign = bits >> 63;
+        negative += (int64_t)sign;
+        counts[bits ? (bits >> 48) + 1 : 0] += !sign;
+    }
+    return negative;
+}
+
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...] (cleaned indices sorted by (squared distance, index), the rows of
  * ms_cloud_pdis's kNN table), by the same knn_cursor_t: rows in increasing tree

@@ -178,6 +178,12 @@ void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, in
 void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
                  const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
 
+/* Counts of v[begin, end) added to counts (32769): +0.0 in counts[0], the others by the
+ * top 16 bits b of their bit patterns in counts[b + 1] (the values >= +0.0 and NaN, in
+ * their order); returns how many have the sign bit set (left out). robust mode's noise
+ * median (_kernels.lower_median). */
+int64_t ms_bit_histogram(const double *v, int64_t begin, int64_t end, int64_t *counts);
+
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...], cleaned indices sorted by (squared distance, index): the search
  * of ms_cloud_pdis (a leaf's block of nearby points, shared by the rows in that leaf,

@@ -58,6 +58,7 @@ _SIGNATURES = {
         None,
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
+    "ms_bit_histogram": (_i64, [_c_void_p, _i64, _i64, _c_void_p]),
     "ms_local_scale_csr": (
         _int,
         [_c_void_p, _c_void_p, _c_void_p, _int, _i64, _i64, _c_void_p, _c_void_p],
@@ -428,6 +429,41 @@ def isolated_from_stats(points: np.ndarray, stats: CloudStats, workers: int = -1
 
     _run_chunks(len(points), workers, task)
     return out
+
+
+def lower_median(values: np.ndarray, workers: int = -1) -> float | None:
+    """The lower median of ``values`` (n,) float64, n > 0, the value ``np.partition``
+    puts at ``(n - 1) // 2`` (NaN last), without reordering ``values``: a histogram of
+    the values (+0.0 apart, the others by the top 16 bits of their bit patterns, bins in
+    the values' order) on ``workers`` threads (``ms_bit_histogram``), then a selection
+    among the values of the one bin that holds it (none when it is +0.0's, as on a
+    cloud without noise). None when some value is negative or -0.0 (their bits do not
+    sort)."""
+    lib = _LIB
+    assert lib is not None
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    n = len(values)
+    chunk = max(CHUNK, -(-n // _workers(workers)))
+    counts = np.zeros((-(-n // chunk), (1 << 15) + 1), dtype=np.int64)
+    negative = np.zeros(len(counts), dtype=np.int64)
+
+    def task(a: int, b: int) -> int:
+        negative[a // chunk] = lib.ms_bit_histogram(_ptr(values), a, b, _ptr(counts[a // chunk]))
+        return 0
+
+    _run_chunks(n, workers, task, chunk=chunk)
+    if negative.any():
+        return None
+    total = np.cumsum(counts.sum(axis=0))
+    at = (n - 1) // 2
+    top = int(np.searchsorted(total, at, side="right"))  # the bin of rank `at`
+    if top == 0:
+        return 0.0
+    bits = values.view(np.uint64)
+    members = values[((bits >> np.uint64(48)) == top - 1) & (bits != 0)]
+    rank = at - int(total[top - 1])
+    members.partition(rank)
+    return float(members[rank])
 
 
 @dataclass

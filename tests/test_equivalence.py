@@ -484,6 +484,34 @@ def test_isolated_points_and_noise_from_one_search(name):
     )
 
 
+def _median_cases() -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(4)
+    return {
+        "random": rng.random(100_001),
+        "mostly_zero": np.concatenate([np.zeros(700), rng.random(300)]),
+        "zero_at_the_median": np.concatenate([np.zeros(501), rng.random(500)]),
+        "one_bin": 0.25 + rng.random(5000) * 1e-9,
+        "subnormal_inf_nan": np.array([0.0, 5e-324, 1e-310, 1.0, np.inf, np.nan, np.nan]),
+        "single": np.array([0.125]),
+    }
+
+
+@pytest.mark.parametrize("name", sorted(_median_cases()))
+def test_lower_median_is_numpys(name):
+    """The pass's noise median by a threaded histogram of bit patterns is the value
+    np.partition puts at (n - 1) // 2 (NaN last); None for negative values and -0.0,
+    whose bits do not sort."""
+    values = _median_cases()[name]
+    at = (len(values) - 1) // 2
+    expected = np.partition(values, at)[at]
+    for workers in (1, 2):
+        got = _kernels.lower_median(values, workers)
+        assert got is not None
+        assert np.array_equal(got, expected, equal_nan=True)
+    assert _kernels.lower_median(np.array([0.5, -0.0, 1.0])) is None
+    assert _kernels.lower_median(np.array([0.5, -1.0, 1.0])) is None
+
+
 def _fan_and_grid_mesh() -> tuple[np.ndarray, np.ndarray]:
     """A grid mesh plus a cone of 60 faces around one apex: valences 6 and 60 (rings of
     more than 129 vertices, whose sums numpy splits in two)."""
