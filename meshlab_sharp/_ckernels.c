@@ -933,15 +933,11 @@ static void select_axis(double *x, int64_t *idx, int64_t n, int64_t m, int a, ui
     }
 }
 
-/* Split the points [s, e) at their median along the widest side of their bounding box,
- * recursively down to single points, so that the tree order also orders the points
- * inside a leaf (consecutive points are near each other: see ms_cloud_pdis). The boxes
- * of the nodes down to `depth` go into box (node t at depth d). The nodes at depth
- * `stop` are left as they are (ms_kdtree_build_subtrees; stop < 0: none). */
-static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
-                       int depth, int stop, double *box, uint64_t *rng) {
-    if (d == stop) return;
-    if (e - s < 2 && d > depth) return;
+/* One split of build_node: the box of node t (at depth d) into box when d <= depth, and
+ * the points [s, e) split at their median along the widest side of that box; returns
+ * the split s + (e - s) / 2, or -1 when fewer than 2 points. */
+static int64_t split_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
+                          int depth, double *box, uint64_t *rng) {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (int64_t j = s; j < e; j++) {
         for (int a = 0; a < 3; a++) {
@@ -955,13 +951,27 @@ static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t,
         b[0] = lo[0]; b[1] = lo[1]; b[2] = lo[2];
         b[3] = hi[0]; b[4] = hi[1]; b[5] = hi[2];
     }
-    if (e - s < 2) return;
+    if (e - s < 2) return -1;
     int a = 0;
     for (int c = 1; c < 3; c++) {
         if (hi[c] - lo[c] > hi[a] - lo[a]) a = c;
     }
     int64_t m = s + (e - s) / 2;
     select_axis(x + 3 * s, idx + s, e - s, m - s, a, rng);
+    return m;
+}
+
+/* Split the points [s, e) of node t (depth d) recursively down to single points
+ * (split_node), so that the tree order also orders the points inside a leaf
+ * (consecutive points are near each other: see ms_cloud_pdis). The boxes of the nodes
+ * down to `depth` go into box. The nodes at depth `stop` are left as they are
+ * (ms_kdtree_build_subtrees; stop < 0: none). */
+static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
+                       int depth, int stop, double *box, uint64_t *rng) {
+    if (d == stop) return;
+    if (e - s < 2 && d > depth) return;
+    int64_t m = split_node(x, idx, s, e, t, d, depth, box, rng);
+    if (m < 0) return;
     build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, stop, box, rng);
     build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, stop, box, rng);
 }
@@ -969,24 +979,42 @@ static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t,
 /* The depth at which ms_kdtree_build_top stops: min(depth, MS_KD_TOP). */
 static int top_levels(int depth) { return depth < MS_KD_TOP ? depth : MS_KD_TOP; }
 
+/* The points [*s, *e) of the node u (of the 2^d) at depth d: its median halves. */
+static void node_span(int64_t n, int64_t u, int d, int64_t *s, int64_t *e) {
+    *s = 0;
+    *e = n;
+    for (int b = d - 1; b >= 0; b--) {
+        int64_t m = *s + (*e - *s) / 2;
+        if ((u >> b) & 1) *s = m;
+        else *e = m;
+    }
+}
+
+void ms_kdtree_build_level(double *tp, int64_t *torig, int64_t n, int depth, int level,
+                           int64_t first, int64_t last, double *box) {
+    for (int64_t u = first; u < last; u++) {
+        int64_t s, e, t = ((int64_t)1 << level) - 1 + u;
+        node_span(n, u, level, &s, &e);
+        uint64_t rng = 0x9e3779b97f4a7c15ULL ^ (0x94d049bb133111ebULL * (uint64_t)(t + 1));
+        split_node(tp, torig, s, e, t, level, depth, box, &rng);
+    }
+}
+
 void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
                          double *box) {
     memcpy(tp, p, (size_t)n * 3 * sizeof(double));
     for (int64_t i = 0; i < n; i++) torig[i] = i;
-    uint64_t rng = 0x9e3779b97f4a7c15ULL;
-    build_node(tp, torig, 0, n, 0, 0, depth, top_levels(depth), box, &rng);
+    for (int level = 0; level < top_levels(depth); level++) {
+        ms_kdtree_build_level(tp, torig, n, depth, level, 0, (int64_t)1 << level, box);
+    }
 }
 
 void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, int64_t first,
                               int64_t last, double *box) {
     int top = top_levels(depth);
     for (int64_t u = first; u < last; u++) {
-        int64_t s = 0, e = n; /* the points of node u at depth top: its median halves */
-        for (int d = top - 1; d >= 0; d--) {
-            int64_t m = s + (e - s) / 2;
-            if ((u >> d) & 1) s = m;
-            else e = m;
-        }
+        int64_t s, e; /* the points of node u at depth top */
+        node_span(n, u, top, &s, &e);
         uint64_t rng = 0x9e3779b97f4a7c15ULL ^ (0xbf58476d1ce4e5b9ULL * (uint64_t)(u + 1));
         build_node(tp, torig, s, e, ((int64_t)1 << top) - 1 + u, top, depth, -1, box, &rng);
     }
