@@ -24,6 +24,17 @@
 #define HAVE_AVX2_PATH 1
 #endif
 
+/* Whether to take the AVX2 paths: the CPU has AVX2 and POPCNT, and the environment does
+ * not set MESHLAB_SHARP_NO_AVX2 (the tests compare both: the same bits). */
+static int use_avx2(void) {
+#ifdef HAVE_AVX2_PATH
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt") &&
+           getenv("MESHLAB_SHARP_NO_AVX2") == NULL;
+#else
+    return 0;
+#endif
+}
+
 #if defined(__x86_64__) && defined(__GLIBC__) && defined(MS_LIBMVEC)
 #include <emmintrin.h>
 /* glibc's libmvec: exp of two doubles at once (SSE2, any x86-64), within 1 ulp of
@@ -423,9 +434,9 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
  * prefixes (the same numbers, added in the same order): O(max(ks)) per point instead
  * of O(sum of ks) for lists of up to 129 points. The 4 sums go side by side (t
  * innermost: the compiler pairs them in SIMD lanes, each lane the scalar arithmetic). */
-static void local_scale_prefixes(const double *v, const int64_t *ks, int nscales, double *ell,
-                                 double *off) {
-    double r[8][4]; /* set when first used (i = 0) */
+static inline __attribute__((always_inline)) void local_scale_prefixes_body(
+    const double *v, const int64_t *ks, int nscales, double *ell, double *off) {
+    double r[8][4] = {{0.0}}; /* set when first used (i = 0) */
     int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
@@ -460,6 +471,84 @@ static void local_scale_prefixes(const double *v, const int64_t *ks, int nscales
         double cx = sum[1] / c, cy = sum[2] / c, cz = sum[3] / c;
         off[s] = sqrt(cx * cx + cy * cy + cz * cz);
     }
+}
+
+/* local_scale_prefixes_body, for any x86-64 (or other) CPU. */
+static void local_scale_prefixes(const double *v, const int64_t *ks, int nscales, double *ell,
+                                 double *off) {
+    local_scale_prefixes_body(v, ks, nscales, ell, off);
+}
+
+#ifdef HAVE_AVX2_PATH
+/* The same compiled for AVX2: the 4 sums side by side in one register (additions only,
+ * each lane the scalar arithmetic). */
+__attribute__((target("avx2"))) static void local_scale_prefixes_avx2(const double *v,
+                                                                      const int64_t *ks,
+                                                                      int nscales, double *ell,
+                                                                      double *off) {
+    local_scale_prefixes_body(v, ks, nscales, ell, off);
+}
+#endif
+
+/* local_scale_prefixes, compiled for AVX2 when avx2. */
+static inline void local_scale_prefixes_on(const double *v, const int64_t *ks, int nscales,
+                                           double *ell, double *off, int avx2) {
+#ifdef HAVE_AVX2_PATH
+    if (avx2) {
+        local_scale_prefixes_avx2(v, ks, nscales, ell, off);
+        return;
+    }
+#endif
+    (void)avx2;
+    local_scale_prefixes(v, ks, nscales, ell, off);
+}
+
+/* local_scale_prefixes' values v (m, 4) of the offsets q (m, 3) with squared lengths d2
+ * (m): |q_j| = sqrt(d2_j), then q_j. */
+static void local_scale_values_plain(const double *q, const double *d2, int64_t m, double *v) {
+    for (int64_t j = 0; j < m; j++) {
+        v[4 * j] = sqrt(d2[j]);
+        v[4 * j + 1] = q[3 * j];
+        v[4 * j + 2] = q[3 * j + 1];
+        v[4 * j + 3] = q[3 * j + 2];
+    }
+}
+
+#ifdef HAVE_AVX2_PATH
+/* local_scale_values_plain with 4 square roots an instruction (AVX: correctly rounded,
+ * as sqrt) and each row one load of q (from the previous row's z) and one store. */
+__attribute__((target("avx2"))) static void local_scale_values_avx2(const double *q,
+                                                                    const double *d2, int64_t m,
+                                                                    double *v) {
+    if (m < 2) {
+        local_scale_values_plain(q, d2, m, v);
+        return;
+    }
+    local_scale_values_plain(q, d2, 1, v);
+    int64_t j = 1;
+    double r[4];
+    for (; j + 4 <= m; j += 4) {
+        _mm256_storeu_pd(r, _mm256_sqrt_pd(_mm256_loadu_pd(d2 + j)));
+        for (int l = 0; l < 4; l++) {
+            __m256d row = _mm256_loadu_pd(q + 3 * (j + l) - 1); /* z of the row before */
+            _mm256_storeu_pd(v + 4 * (j + l), _mm256_blend_pd(row, _mm256_broadcast_sd(r + l), 1));
+        }
+    }
+    local_scale_values_plain(q + 3 * j, d2 + j, m - j, v + 4 * j);
+}
+#endif
+
+/* local_scale_values_plain, on 4 lanes when avx2. */
+static inline void local_scale_values(const double *q, const double *d2, int64_t m, double *v,
+                                      int avx2) {
+#ifdef HAVE_AVX2_PATH
+    if (avx2) {
+        local_scale_values_avx2(q, d2, m, v);
+        return;
+    }
+#endif
+    (void)avx2;
+    local_scale_values_plain(q, d2, m, v);
 }
 
 /* robust.local_scale over CSR lists (indptr, indices int32 or int64 when wide), points
@@ -507,11 +596,13 @@ static double noise_ratio(const double *q, int64_t k) {
     return length > 0 ? across / length : 0.0;
 }
 
-/* robust.sheet_mask's parameters (cloud_out_t's sheet_*). */
+/* robust.sheet_mask's parameters (cloud_out_t's sheet_*), and whether to take the AVX2
+ * paths (use_avx2). */
 typedef struct {
     double gap;
     int64_t minimum;
     double own, column, column_gap, far_span, trim, trim_cos;
+    int avx2;
 } sheet_params_t;
 
 /* The kept range [lo, hi] of heights from one increasingly sorted list hs (k), z of
@@ -545,6 +636,144 @@ static int64_t sort_heights(double *hs, int64_t k) {
         hs[u] = x;
     }
     return z;
+}
+
+#ifdef HAVE_AVX2_PATH
+/* Most heights sort_heights_avx2 sorts by ranks (a kNN list's length up to 2 blocks of
+ * 32: the default scales' 40); longer lists go to sort_heights. */
+#define RANK_SORT_MAX 64
+
+/* The ranks' comparisons of one height y = hs[i] with the 4 heights x of a block
+ * starting at j0: y <= x in the lanes j > i (ties count), y < x in the others. */
+__attribute__((target("avx2"))) static inline __m256d rank_cmp(__m256d y, __m256d x,
+                                                               int64_t i, int64_t j0) {
+    if (i < j0) return _mm256_cmp_pd(y, x, _CMP_LE_OQ);
+    if (i >= j0 + 4) return _mm256_cmp_pd(y, x, _CMP_LT_OQ);
+    __m256i after = _mm256_cmpgt_epi64(_mm256_setr_epi64x(0, 1, 2, 3), _mm256_set1_epi64x(i - j0));
+    return _mm256_blendv_pd(_mm256_cmp_pd(y, x, _CMP_LT_OQ), _mm256_cmp_pd(y, x, _CMP_LE_OQ),
+                            _mm256_castsi256_pd(after));
+}
+
+/* sort_heights by ranks, 8 heights at a time (AVX2, two blocks of 4): hs[j] goes to its
+ * rank, the number of hs[i] < hs[j] plus the number of i < j with hs[i] == hs[j]: where
+ * the (stable) insertion sort puts it, so the array is the same, bit for bit (-0.0 and
+ * 0.0 included). Branch-free but for the loop; sort_heights itself when some height is
+ * NaN (no order) or k > RANK_SORT_MAX. */
+__attribute__((target("avx2"))) static int64_t sort_heights_avx2(double *hs, int64_t k) {
+    if (k > RANK_SORT_MAX) return sort_heights(hs, k);
+    double v[RANK_SORT_MAX + 8];
+    int64_t z = 0, rank[8];
+    int nan = 0;
+    for (int64_t j = 0; j < k; j++) {
+        v[j] = hs[j];
+        z += v[j] < 0;
+        nan |= v[j] != v[j];
+    }
+    if (nan) return sort_heights(hs, k);
+    for (int64_t j = k; j < k + 8; j++) v[j] = 0.0;
+    for (int64_t j0 = 0; j0 < k; j0 += 8) {
+        __m256d x0 = _mm256_loadu_pd(v + j0), x1 = _mm256_loadu_pd(v + j0 + 4);
+        __m256i acc0 = _mm256_setzero_si256(), acc1 = _mm256_setzero_si256();
+        int64_t i = 0;
+        for (; i < j0; i++) { /* before both blocks */
+            __m256d y = _mm256_broadcast_sd(v + i);
+            acc0 = _mm256_sub_epi64(acc0, _mm256_castpd_si256(_mm256_cmp_pd(y, x0, _CMP_LE_OQ)));
+            acc1 = _mm256_sub_epi64(acc1, _mm256_castpd_si256(_mm256_cmp_pd(y, x1, _CMP_LE_OQ)));
+        }
+        int64_t mid = j0 + 8 < k ? j0 + 8 : k;
+        for (; i < mid; i++) { /* inside them */
+            __m256d y = _mm256_broadcast_sd(v + i);
+            acc0 = _mm256_sub_epi64(acc0, _mm256_castpd_si256(rank_cmp(y, x0, i, j0)));
+            acc1 = _mm256_sub_epi64(acc1, _mm256_castpd_si256(rank_cmp(y, x1, i, j0 + 4)));
+        }
+        for (; i < k; i++) { /* after both */
+            __m256d y = _mm256_broadcast_sd(v + i);
+            acc0 = _mm256_sub_epi64(acc0, _mm256_castpd_si256(_mm256_cmp_pd(y, x0, _CMP_LT_OQ)));
+            acc1 = _mm256_sub_epi64(acc1, _mm256_castpd_si256(_mm256_cmp_pd(y, x1, _CMP_LT_OQ)));
+        }
+        _mm256_storeu_si256((__m256i *)rank, acc0);
+        _mm256_storeu_si256((__m256i *)(rank + 4), acc1);
+        for (int l = 0; l < 8 && j0 + l < k; l++) hs[rank[l]] = v[j0 + l];
+    }
+    return z;
+}
+#endif
+
+/* sort_heights, by ranks when avx2. */
+static inline int64_t sorted_heights(double *hs, int64_t k, int avx2) {
+#ifdef HAVE_AVX2_PATH
+    if (avx2) return sort_heights_avx2(hs, k);
+#endif
+    (void)avx2;
+    return sort_heights(hs, k);
+}
+
+/* h[j] = q_j . nrm for the offsets q (k, 3), summed as (x n0 + y n1) + z n2; *lo and *hi
+ * their smallest and largest (when none is NaN); returns whether some h[j] is NaN. */
+static int sheet_heights(const double *q, int64_t k, const double *nrm, double *h, double *lo,
+                         double *hi) {
+    double hmin = INFINITY, hmax = -INFINITY;
+    int nan = 0;
+    for (int64_t j = 0; j < k; j++) {
+        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
+        h[j] = v;
+        nan |= v != v;
+        if (v < hmin) hmin = v;
+        if (v > hmax) hmax = v;
+    }
+    *lo = hmin;
+    *hi = hmax;
+    return nan;
+}
+
+#ifdef HAVE_AVX2_PATH
+/* sheet_heights on 4 lanes (AVX2: the same products and sums, no fused multiply-add):
+ * 4 offsets (12 coordinates, 3 loads) transposed to their x, y and z. */
+__attribute__((target("avx2"))) static int sheet_heights_avx2(const double *q, int64_t k,
+                                                              const double *nrm, double *h,
+                                                              double *lo, double *hi) {
+    __m256d n0 = _mm256_set1_pd(nrm[0]), n1 = _mm256_set1_pd(nrm[1]), n2 = _mm256_set1_pd(nrm[2]);
+    __m256d vmin = _mm256_set1_pd(INFINITY), vmax = _mm256_set1_pd(-INFINITY);
+    __m256d vnan = _mm256_setzero_pd();
+    int64_t j = 0;
+    for (; j + 4 <= k; j += 4) {
+        const double *r = q + 3 * j;
+        __m256d a = _mm256_loadu_pd(r), b = _mm256_loadu_pd(r + 4), c = _mm256_loadu_pd(r + 8);
+        __m256d xy = _mm256_blend_pd(a, b, 12);           /* x0 y0 x2 y2 */
+        __m256d zx = _mm256_permute2f128_pd(a, c, 0x21);  /* z0 x1 z2 x3 */
+        __m256d yz = _mm256_blend_pd(b, c, 12);           /* y1 z1 y3 z3 */
+        __m256d x = _mm256_blend_pd(xy, zx, 10), y = _mm256_shuffle_pd(xy, yz, 5),
+                z = _mm256_blend_pd(zx, yz, 10);
+        __m256d v = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(x, n0), _mm256_mul_pd(y, n1)),
+                                  _mm256_mul_pd(z, n2));
+        _mm256_storeu_pd(h + j, v);
+        vnan = _mm256_or_pd(vnan, _mm256_cmp_pd(v, v, _CMP_UNORD_Q));
+        vmin = _mm256_min_pd(vmin, v);
+        vmax = _mm256_max_pd(vmax, v);
+    }
+    double m4[4], x4[4], hmin, hmax;
+    _mm256_storeu_pd(m4, vmin);
+    _mm256_storeu_pd(x4, vmax);
+    int nan = _mm256_movemask_pd(vnan) != 0;
+    nan |= sheet_heights(q + 3 * j, k - j, nrm, h + j, &hmin, &hmax);
+    for (int l = 0; l < 4; l++) {
+        if (m4[l] < hmin) hmin = m4[l];
+        if (x4[l] > hmax) hmax = x4[l];
+    }
+    *lo = hmin;
+    *hi = hmax;
+    return nan;
+}
+#endif
+
+/* sheet_heights, on 4 lanes when avx2. */
+static inline int heights_of(const double *q, int64_t k, const double *nrm, double *h,
+                             double *lo, double *hi, int avx2) {
+#ifdef HAVE_AVX2_PATH
+    if (avx2) return sheet_heights_avx2(q, k, nrm, h, lo, hi);
+#endif
+    (void)avx2;
+    return sheet_heights(q, k, nrm, h, lo, hi);
 }
 
 /* keep[j] = lo <= h[j] <= hi; returns the number dropped, or 0 (every keep[j] 1) when
@@ -584,12 +813,12 @@ static int64_t sheet_rules(const double *h, const double *d2, int64_t k, double 
                            const sheet_params_t *sp, double *hs, char *keep) {
     double lo, hi;
     for (int64_t j = 0; j < k; j++) hs[j] = h[j];
-    sheet_cuts(hs, k, sort_heights(hs, k), sp->gap * a, 0, &lo, &hi);
+    sheet_cuts(hs, k, sorted_heights(hs, k, sp->avx2), sp->gap * a, 0, &lo, &hi);
     int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep);
     if (dropped > 0 || sp->column <= 0.0) return dropped;
     double c = sp->column * a, c2 = c * c;
     for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
-    sheet_cuts(hs, k, sort_heights(hs, k), sp->column_gap * a, 1, &lo, &hi);
+    sheet_cuts(hs, k, sorted_heights(hs, k, sp->avx2), sp->column_gap * a, 1, &lo, &hi);
     return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep);
 }
 
@@ -615,15 +844,8 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
      * (0 is among them): when that is at most both gaps and the trim there is none, no
      * second pass, and every neighbour is kept (most points: a smooth surface), without
      * sorting. */
-    double *h = hs + k, hmin = INFINITY, hmax = -INFINITY;
-    int nan = 0;
-    for (int64_t j = 0; j < k; j++) {
-        double v = q[3 * j] * nrm[0] + q[3 * j + 1] * nrm[1] + q[3 * j + 2] * nrm[2];
-        h[j] = v;
-        nan |= v != v;
-        if (v < hmin) hmin = v;
-        if (v > hmax) hmax = v;
-    }
+    double *h = hs + k, hmin, hmax;
+    int nan = heights_of(q, k, nrm, h, &hmin, &hmax, sp->avx2);
     if (!nan && hmax - hmin <= g && (sp->column <= 0.0 || hmax - hmin <= g2) &&
         (sp->trim <= 0.0 || hmax - hmin <= t))
         return 0;
@@ -711,15 +933,11 @@ static void select_axis(double *x, int64_t *idx, int64_t n, int64_t m, int a, ui
     }
 }
 
-/* Split the points [s, e) at their median along the widest side of their bounding box,
- * recursively down to single points, so that the tree order also orders the points
- * inside a leaf (consecutive points are near each other: see ms_cloud_pdis). The boxes
- * of the nodes down to `depth` go into box (node t at depth d). The nodes at depth
- * `stop` are left as they are (ms_kdtree_build_subtrees; stop < 0: none). */
-static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
-                       int depth, int stop, double *box, uint64_t *rng) {
-    if (d == stop) return;
-    if (e - s < 2 && d > depth) return;
+/* One split of build_node: the box of node t (at depth d) into box when d <= depth, and
+ * the points [s, e) split at their median along the widest side of that box; returns
+ * the split s + (e - s) / 2, or -1 when fewer than 2 points. */
+static int64_t split_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
+                          int depth, double *box, uint64_t *rng) {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (int64_t j = s; j < e; j++) {
         for (int a = 0; a < 3; a++) {
@@ -733,13 +951,27 @@ static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t,
         b[0] = lo[0]; b[1] = lo[1]; b[2] = lo[2];
         b[3] = hi[0]; b[4] = hi[1]; b[5] = hi[2];
     }
-    if (e - s < 2) return;
+    if (e - s < 2) return -1;
     int a = 0;
     for (int c = 1; c < 3; c++) {
         if (hi[c] - lo[c] > hi[a] - lo[a]) a = c;
     }
     int64_t m = s + (e - s) / 2;
     select_axis(x + 3 * s, idx + s, e - s, m - s, a, rng);
+    return m;
+}
+
+/* Split the points [s, e) of node t (depth d) recursively down to single points
+ * (split_node), so that the tree order also orders the points inside a leaf
+ * (consecutive points are near each other: see ms_cloud_pdis). The boxes of the nodes
+ * down to `depth` go into box. The nodes at depth `stop` are left as they are
+ * (ms_kdtree_build_subtrees; stop < 0: none). */
+static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
+                       int depth, int stop, double *box, uint64_t *rng) {
+    if (d == stop) return;
+    if (e - s < 2 && d > depth) return;
+    int64_t m = split_node(x, idx, s, e, t, d, depth, box, rng);
+    if (m < 0) return;
     build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, stop, box, rng);
     build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, stop, box, rng);
 }
@@ -747,24 +979,42 @@ static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t,
 /* The depth at which ms_kdtree_build_top stops: min(depth, MS_KD_TOP). */
 static int top_levels(int depth) { return depth < MS_KD_TOP ? depth : MS_KD_TOP; }
 
+/* The points [*s, *e) of the node u (of the 2^d) at depth d: its median halves. */
+static void node_span(int64_t n, int64_t u, int d, int64_t *s, int64_t *e) {
+    *s = 0;
+    *e = n;
+    for (int b = d - 1; b >= 0; b--) {
+        int64_t m = *s + (*e - *s) / 2;
+        if ((u >> b) & 1) *s = m;
+        else *e = m;
+    }
+}
+
+void ms_kdtree_build_level(double *tp, int64_t *torig, int64_t n, int depth, int level,
+                           int64_t first, int64_t last, double *box) {
+    for (int64_t u = first; u < last; u++) {
+        int64_t s, e, t = ((int64_t)1 << level) - 1 + u;
+        node_span(n, u, level, &s, &e);
+        uint64_t rng = 0x9e3779b97f4a7c15ULL ^ (0x94d049bb133111ebULL * (uint64_t)(t + 1));
+        split_node(tp, torig, s, e, t, level, depth, box, &rng);
+    }
+}
+
 void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
                          double *box) {
     memcpy(tp, p, (size_t)n * 3 * sizeof(double));
     for (int64_t i = 0; i < n; i++) torig[i] = i;
-    uint64_t rng = 0x9e3779b97f4a7c15ULL;
-    build_node(tp, torig, 0, n, 0, 0, depth, top_levels(depth), box, &rng);
+    for (int level = 0; level < top_levels(depth); level++) {
+        ms_kdtree_build_level(tp, torig, n, depth, level, 0, (int64_t)1 << level, box);
+    }
 }
 
 void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, int64_t first,
                               int64_t last, double *box) {
     int top = top_levels(depth);
     for (int64_t u = first; u < last; u++) {
-        int64_t s = 0, e = n; /* the points of node u at depth top: its median halves */
-        for (int d = top - 1; d >= 0; d--) {
-            int64_t m = s + (e - s) / 2;
-            if ((u >> d) & 1) s = m;
-            else e = m;
-        }
+        int64_t s, e; /* the points of node u at depth top */
+        node_span(n, u, top, &s, &e);
         uint64_t rng = 0x9e3779b97f4a7c15ULL ^ (0xbf58476d1ce4e5b9ULL * (uint64_t)(u + 1));
         build_node(tp, torig, s, e, ((int64_t)1 << top) - 1 + u, top, depth, -1, box, &rng);
     }
@@ -1045,13 +1295,10 @@ __attribute__((target("avx2,popcnt"))) static int64_t block_scan_avx2(const bloc
 
 typedef int64_t (*block_scan_fn)(const block_t *, double, double, double, double, int32_t *);
 
-/* The block_scan to use: the AVX2 one where the CPU has it, unless the environment sets
- * MESHLAB_SHARP_NO_AVX2 (the tests compare both: the same bits). */
+/* The block_scan to use: the AVX2 one when use_avx2. */
 static block_scan_fn block_scanner(void) {
 #ifdef HAVE_AVX2_PATH
-    if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt") && getenv("MESHLAB_SHARP_NO_AVX2") == NULL) {
-        return block_scan_avx2;
-    }
+    if (use_avx2()) return block_scan_avx2;
 #endif
     return block_scan;
 }
@@ -1234,7 +1481,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     char *keep = (char *)malloc((size_t)kmax);
     const sheet_params_t sheet = {out->sheet_gap, out->sheet_min, out->sheet_own,
                                   out->sheet_column, out->sheet_column_gap, out->sheet_far_span,
-                                  out->sheet_trim, out->sheet_trim_cos};
+                                  out->sheet_trim, out->sheet_trim_cos, use_avx2()};
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     int rc = 0;
     if (cur_rc || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk) {
@@ -1303,13 +1550,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             out->noise[oi] = k0 >= 2 ? noise_ratio(q, k0) : 0.0;
         }
         if (out->relative != NULL) {
-            for (int64_t j = 0; j < kk; j++) {
-                soa[4 * j] = sqrt(d2[j]);
-                soa[4 * j + 1] = q[3 * j];
-                soa[4 * j + 2] = q[3 * j + 1];
-                soa[4 * j + 3] = q[3 * j + 2];
-            }
-            local_scale_prefixes(soa, mk, nscales, ell, ell + nscales);
+            local_scale_values(q, d2, kk, soa, sheet.avx2);
+            local_scale_prefixes_on(soa, mk, nscales, ell, ell + nscales, sheet.avx2);
         }
         if (out->pdis == NULL && out->relative == NULL) continue;
         double score = 0.0;
@@ -1386,6 +1628,22 @@ void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
         double d2 = dx * dx + dy * dy + dz * dz, kth = kth_d2[near[i]];
         out[i] = !(d2 < kth || (d2 == kth && i <= kth_idx[near[i]]));
     }
+}
+
+/* Counts of the values v[begin, end) added to counts (32769): +0.0 in counts[0], any
+ * other value by the top 16 bits b of its IEEE 754 bit pattern in counts[b + 1]: from
+ * +0.0 up to +inf and then NaN, the bins follow the values' order (np.partition's, NaN
+ * last). Returns how many values have the sign bit set (negative, -0.0; left out). */
+int64_t ms_bit_histogram(const double *v, int64_t begin, int64_t end, int64_t *counts) {
+    int64_t negative = 0;
+    for (int64_t i = begin; i < end; i++) {
+        uint64_t bits;
+        memcpy(&bits, v + i, sizeof bits);
+        uint64_t sign = bits >> 63;
+        negative += (int64_t)sign;
+        counts[bits ? (bits >> 48) + 1 : 0] += !sign;
+    }
+    return negative;
 }
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into

@@ -149,9 +149,13 @@ void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t 
 /* ms_kdtree_build in two steps, the same tree: the top levels, down to t = min(depth,
  * MS_KD_TOP) (copies p into tp, fills torig), then the subtrees of the nodes u in
  * [first, last) of the 2^t at depth t (disjoint ranges of tp, torig and box: callers
- * run them on threads). */
+ * run them on threads). The top levels in steps too: tp a copy of p and torig[i] = i,
+ * then for each level l < t in turn the splits of its nodes u in [first, last) of the
+ * 2^l (ms_kdtree_build_level, on threads as well). */
 void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
                          double *box);
+void ms_kdtree_build_level(double *tp, int64_t *torig, int64_t n, int depth, int level,
+                           int64_t first, int64_t last, double *box);
 void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, int64_t first,
                               int64_t last, double *box);
 
@@ -177,6 +181,12 @@ void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, in
  * neighbour in the lists' order). */
 void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
                  const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
+
+/* Counts of v[begin, end) added to counts (32769): +0.0 in counts[0], the others by the
+ * top 16 bits b of their bit patterns in counts[b + 1] (the values >= +0.0 and NaN, in
+ * their order); returns how many have the sign bit set (left out). robust mode's noise
+ * median (_kernels.lower_median). */
+int64_t ms_bit_histogram(const double *v, int64_t begin, int64_t end, int64_t *counts);
 
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...], cleaned indices sorted by (squared distance, index): the search

@@ -38,7 +38,10 @@ KD_TOP = _header.integer("KD_TOP")
 _c_void_p, _i64, _f64, _int = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
 _SIGNATURES = {
     "ms_kdtree_build": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
-    "ms_kdtree_build_top": (None, [_c_void_p, _i64, _int, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_kdtree_build_level": (
+        None,
+        [_c_void_p, _c_void_p, _i64, _int, _int, _i64, _i64, _c_void_p],
+    ),
     "ms_kdtree_build_subtrees": (
         None,
         [_c_void_p, _c_void_p, _i64, _int, _i64, _i64, _c_void_p],
@@ -58,6 +61,7 @@ _SIGNATURES = {
         None,
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
+    "ms_bit_histogram": (_i64, [_c_void_p, _i64, _i64, _c_void_p]),
     "ms_local_scale_csr": (
         _int,
         [_c_void_p, _c_void_p, _c_void_p, _int, _i64, _i64, _c_void_p, _c_void_p],
@@ -227,24 +231,31 @@ class KdTree:
 
 def build_tree(points: np.ndarray, workers: int = -1) -> KdTree:
     """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points: its
-    top :data:`KD_TOP` levels, then the subtrees below them on ``workers`` threads (the
-    same tree as ``ms_kdtree_build``)."""
+    top :data:`KD_TOP` levels one after the other, the nodes of each on ``workers``
+    threads, then the subtrees below them (the same tree as ``ms_kdtree_build``)."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     n = len(points)
     depth = max(0, int(np.ceil(np.log2(max(n, 1) / KD_LEAF))))
-    tree_points = np.empty_like(points)
-    orig = np.empty(n, dtype=np.int64)
+    tree_points = points.copy()
+    orig = np.arange(n, dtype=np.int64)
     boxes = np.empty((2 ** (depth + 1) - 1, 6))
     tp, to, tb = _ptr(tree_points), _ptr(orig), _ptr(boxes)
-    lib.ms_kdtree_build_top(_ptr(points), n, depth, tp, to, tb)
+    top = min(depth, KD_TOP)
+    for level in range(top):
+
+        def split(a: int, b: int, level: int = level) -> int:
+            lib.ms_kdtree_build_level(tp, to, n, depth, level, a, b, tb)
+            return 0
+
+        _run_chunks(2**level, workers, split, chunk=1)
 
     def task(a: int, b: int) -> int:
         lib.ms_kdtree_build_subtrees(tp, to, n, depth, a, b, tb)
         return 0
 
-    _run_chunks(2 ** min(depth, KD_TOP), workers, task, chunk=1)
+    _run_chunks(2**top, workers, task, chunk=1)
     return KdTree(tree_points, orig, boxes, depth)
 
 
@@ -428,6 +439,41 @@ def isolated_from_stats(points: np.ndarray, stats: CloudStats, workers: int = -1
 
     _run_chunks(len(points), workers, task)
     return out
+
+
+def lower_median(values: np.ndarray, workers: int = -1) -> float | None:
+    """The lower median of ``values`` (n,) float64, n > 0, the value ``np.partition``
+    puts at ``(n - 1) // 2`` (NaN last), without reordering ``values``: a histogram of
+    the values (+0.0 apart, the others by the top 16 bits of their bit patterns, bins in
+    the values' order) on ``workers`` threads (``ms_bit_histogram``), then a selection
+    among the values of the one bin that holds it (none when it is +0.0's, as on a
+    cloud without noise). None when some value is negative or -0.0 (their bits do not
+    sort)."""
+    lib = _LIB
+    assert lib is not None
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    n = len(values)
+    chunk = max(CHUNK, -(-n // _workers(workers)))
+    counts = np.zeros((-(-n // chunk), (1 << 15) + 1), dtype=np.int64)
+    negative = np.zeros(len(counts), dtype=np.int64)
+
+    def task(a: int, b: int) -> int:
+        negative[a // chunk] = lib.ms_bit_histogram(_ptr(values), a, b, _ptr(counts[a // chunk]))
+        return 0
+
+    _run_chunks(n, workers, task, chunk=chunk)
+    if negative.any():
+        return None
+    total = np.cumsum(counts.sum(axis=0))
+    at = (n - 1) // 2
+    top = int(np.searchsorted(total, at, side="right"))  # the bin of rank `at`
+    if top == 0:
+        return 0.0
+    bits = values.view(np.uint64)
+    members = values[((bits >> np.uint64(48)) == top - 1) & (bits != 0)]
+    rank = at - int(total[top - 1])
+    members.partition(rank)
+    return float(members[rank])
 
 
 @dataclass

@@ -377,6 +377,13 @@ def _noise_median(ratio: np.ndarray) -> float:
     return float(ratio[at])
 
 
+def _pass_noise_median(ratio: np.ndarray, workers: int = -1) -> float:
+    """:func:`_noise_median` of the compiled pass's ratios (n,), the same value, on
+    ``workers`` threads (:func:`meshlab_sharp._kernels.lower_median`)."""
+    median = _kernels.lower_median(ratio, workers)
+    return _noise_median(ratio) if median is None else median
+
+
 def sheet_parameters() -> _kernels.SheetParameters:
     """The sheet filter's parameters as the module holds them now: ``(SHEET_GAP,
     SHEET_MIN, SHEET_OWN, SHEET_COLUMN, SHEET_COLUMN_GAP, SHEET_FAR_SPAN, SHEET_TRIM,
@@ -1173,7 +1180,7 @@ class RobustSetup:
                     self.fused = self._pass(k0, sheet)
             del isolated
             if self.fused is not None and self.fused.stats is not None:
-                self.noise = _noise_median(self.fused.stats.noise)
+                self.noise = _pass_noise_median(self.fused.stats.noise, workers)
                 self.fused.stats = None  # read: its (n,) arrays are not kept
                 self.scale_neighbourhoods = self.neighbourhoods
             else:

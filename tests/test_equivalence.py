@@ -250,6 +250,46 @@ def test_knn_identical_without_the_avx2_scan(name, tmp_path):
     np.testing.assert_array_equal(plain, knn(points, 40))
 
 
+_COMPILED_ROBUST_PASS = """
+import sys
+import numpy as np
+from meshlab_sharp import _kernels
+from meshlab_sharp.robust import sheet_parameters
+points = np.load(sys.argv[1])
+fused = _kernels.cloud_projected_distances(
+    _kernels.build_tree(points), (12, 16, 20, 24, 28, 32, 36, 40), keep_normals=True,
+    relative=True, keep_pdis=True, noise_k=7, sheet=sheet_parameters())
+arrays = {name: getattr(fused, name) for name in ("pdis", "normals", "relative", "score")}
+arrays.update({name: getattr(fused.stats, name) for name in ("near", "kth_d2", "kth_idx", "noise")})
+np.savez(sys.argv[2], **arrays)
+"""
+
+
+def _parallel_sheets() -> np.ndarray:
+    """Two parallel integer grids 1.5 apart, the second shifted by half a step, shuffled:
+    tied distances and heights, and sheets the filter cuts apart."""
+    g = np.stack(np.meshgrid(np.arange(30.0), np.arange(30.0), indexing="ij"), -1).reshape(-1, 2)
+    lower = np.column_stack([g, np.zeros(len(g))])
+    upper = np.column_stack([g + 0.5, np.full(len(g), 1.5)])
+    return _shuffled(np.concatenate([lower, upper]))
+
+
+@pytest.mark.parametrize("name", ["parallel_sheets", "noisy_outliers"])
+def test_robust_pass_identical_without_the_avx2_paths(name, tmp_path):
+    """Robust mode's pass (sheet filter, noise, local scales, every output) with its AVX2
+    paths (the kNN scan, the heights, their sort by ranks, the local scales' sums, where
+    the CPU has AVX2) and without them (``MESHLAB_SHARP_NO_AVX2``): the same bits."""
+    cloud = _parallel_sheets() if name == "parallel_sheets" else ROBUST_CLOUDS[name]()
+    points = np.unique(cloud, axis=0)
+    script, env = _COMPILED_ROBUST_PASS, {"MESHLAB_SHARP_NO_AVX2": "1"}
+    fast = _run_on_points(script, points, tmp_path / "fast.npz", timeout=60)
+    plain = _run_on_points(script, points, tmp_path / "plain.npz", timeout=60, env=env)
+    assert sorted(fast.files) == sorted(plain.files)
+    for key in fast.files:
+        np.testing.assert_array_equal(fast[key], plain[key], err_msg=key)
+        assert fast[key].tobytes() == plain[key].tobytes(), key
+
+
 @pytest.mark.parametrize("name", sorted(SPREADS))
 def test_knn_any_spatial_distribution(name, tmp_path):
     """100k points. A far outlier or distant clusters made the former grid search
@@ -442,6 +482,34 @@ def test_isolated_points_and_noise_from_one_search(name):
     assert _noise_factor(fused.stats.noise) == pytest.approx(
         noise_scale_factor(points, table, 7), rel=1e-12
     )
+
+
+def _median_cases() -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(4)
+    return {
+        "random": rng.random(100_001),
+        "mostly_zero": np.concatenate([np.zeros(700), rng.random(300)]),
+        "zero_at_the_median": np.concatenate([np.zeros(501), rng.random(500)]),
+        "one_bin": 0.25 + rng.random(5000) * 1e-9,
+        "subnormal_inf_nan": np.array([0.0, 5e-324, 1e-310, 1.0, np.inf, np.nan, np.nan]),
+        "single": np.array([0.125]),
+    }
+
+
+@pytest.mark.parametrize("name", sorted(_median_cases()))
+def test_lower_median_is_numpys(name):
+    """The pass's noise median by a threaded histogram of bit patterns is the value
+    np.partition puts at (n - 1) // 2 (NaN last); None for negative values and -0.0,
+    whose bits do not sort."""
+    values = _median_cases()[name]
+    at = (len(values) - 1) // 2
+    expected = np.partition(values, at)[at]
+    for workers in (1, 2):
+        got = _kernels.lower_median(values, workers)
+        assert got is not None
+        assert np.array_equal(got, expected, equal_nan=True)
+    assert _kernels.lower_median(np.array([0.5, -0.0, 1.0])) is None
+    assert _kernels.lower_median(np.array([0.5, -1.0, 1.0])) is None
 
 
 def _fan_and_grid_mesh() -> tuple[np.ndarray, np.ndarray]:
