@@ -250,6 +250,42 @@ def test_knn_identical_without_the_avx2_scan(name, tmp_path):
     np.testing.assert_array_equal(plain, knn(points, 40))
 
 
+_COMPILED_PASS = """
+import sys
+import numpy as np
+from meshlab_sharp import _kernels
+from meshlab_sharp.robust import sheet_parameters
+tree = _kernels.build_tree(np.load(sys.argv[1]))
+out = {}
+for scales in ((12, 16, 20, 24, 28, 32, 36, 40), (2, 9, 33, 106, 131)):
+    for weighting in ("gaussian", "none"):
+        for sheet in (None, sheet_parameters()):
+            run = _kernels.cloud_projected_distances(
+                tree, scales, weighting, keep_normals=True, relative=True, keep_pdis=True,
+                sheet=sheet,
+            )
+            key = f"{len(scales)}_{weighting}_{sheet is not None}"
+            out.update({key + "_pdis": run.pdis, key + "_normals": run.normals})
+            out.update({key + "_relative": run.relative, key + "_score": run.score})
+np.savez(sys.argv[2], **out)
+"""
+
+
+@pytest.mark.parametrize("name", ["noisy_box_cylinder", "outliers_grid_ties"])
+def test_pass_identical_without_avx2(name, tmp_path):
+    """The pass's PCA on 4 lanes with AVX2 and fused multiply-adds (where the CPU has
+    them) and its plain build (``MESHLAB_SHARP_NO_AVX2``) give the same bits: normals,
+    projected distances, relative distances and scores, both weightings, with and
+    without the sheet filter, 8 scales (two groups of 4) and 5 (a group of 1)."""
+    points = np.unique(ROBUST_CLOUDS[name](), axis=0)
+    fast = _run_on_points(_COMPILED_PASS, points, tmp_path / "fast.npz", timeout=120)
+    env = {"MESHLAB_SHARP_NO_AVX2": "1"}
+    plain = _run_on_points(_COMPILED_PASS, points, tmp_path / "plain.npz", timeout=120, env=env)
+    assert sorted(fast.files) == sorted(plain.files) and len(fast.files) == 32
+    for key in fast.files:
+        np.testing.assert_array_equal(fast[key], plain[key], err_msg=key)
+
+
 @pytest.mark.parametrize("name", sorted(SPREADS))
 def test_knn_any_spatial_distribution(name, tmp_path):
     """100k points. A far outlier or distant clusters made the former grid search
