@@ -6,8 +6,10 @@
  * needed to build it, and ctypes releases the GIL during a call, so Python threads run
  * chunks of points on every core) and compiled into the MeshLab plugin
  * (meshlab_plugin_cpp/src/sharp_core.cpp, std::thread over the same chunks). Built by setuptools (setup.py) with
- * -ffp-contract=off: no fused multiply-add, every product and sum rounded as numpy
- * rounds it, in the order docs/implementation-notes.md pins down.
+ * -ffp-contract=off: no fused multiply-add the code does not write, every product and
+ * sum rounded as numpy rounds it, in the order docs/implementation-notes.md pins down;
+ * the cloud pass's PCA (pca_lanes) writes its fused multiply-adds (fma()) and its own
+ * exp, acos and cos, the same bits on every machine (see that page).
  */
 #include "_ckernels.h"
 
@@ -268,10 +270,56 @@ LANES_INLINE v4d v4_exp(v4d x) {
     return (v4d)((v4u)p + (((v4u)t - (v4u)shifter) << 52));
 }
 
+/* asin(s) = s + s z P(z) / Q(z), z = s^2 <= 1/4: fdlibm's rational (e_asin.c), P and Q
+ * from their highest coefficient (Q's constant term 1) */
+static const double asin_p[6] = {3.47933107596021167570e-05, 7.91534994289814532176e-04,
+                                 -4.00555345006794114027e-02, 2.01212532134862925881e-01,
+                                 -3.25565818622400915405e-01, 1.66666666666666657415e-01};
+static const double asin_q[4] = {7.70381505559019352791e-02, -6.88283971605453293030e-01,
+                                 2.02094576023350569471e+00, -2.40339491173441421878e+00};
+/* (-1)^n / (2n)!, n = 9 down to 1: cos's Taylor coefficients */
+static const double cos_coef[9] = {-1.0 / 6402373705728000.0, 1.0 / 20922789888000.0,
+                                   -1.0 / 87178291200.0, 1.0 / 479001600.0, -1.0 / 3628800.0,
+                                   1.0 / 40320.0, -1.0 / 720.0, 1.0 / 24.0, -0.5};
+
+/* cos(acos(x) / 3 + 2 pi / 3), x clamped to [-1, 1] (NaN kept): the cosine of the
+ * smallest eigenvalue's angle, in [-1, -1/2], within 3e-16. acos(x) from asin: of x when
+ * |x| <= 1/2, else of sqrt((1 - |x|) / 2); then u = (acos(x) - pi) / 3 in [-pi/3, 0] (pi
+ * and pi/2 in two parts) and the value -cos(u) by its Taylor polynomial of degree 18
+ * (truncation below 1e-18). */
+LANES_INLINE v4d v4_cos_third_acos(v4d x) {
+    const v4i sign = (v4i)v4_set1(-0.0);
+    x = v4_sel(x < v4_set1(-1.0), v4_set1(-1.0), x);
+    x = v4_sel(x > v4_set1(1.0), v4_set1(1.0), x);
+    v4d ax = (v4d)((v4i)x & ~sign);
+    v4i big = ax > v4_set1(0.5);
+    v4d z = v4_sel(big, (1.0 - ax) * 0.5, x * x);
+    v4d s = v4_sel(big, v4_sqrt(z), ax);
+    v4d p = v4_set1(asin_p[0]), qd = v4_set1(asin_q[0]);
+#pragma GCC unroll 6
+    for (int i = 1; i < 6; i++) p = v4_fma(p, z, v4_set1(asin_p[i]));
+#pragma GCC unroll 4
+    for (int i = 1; i < 4; i++) qd = v4_fma(qd, z, v4_set1(asin_q[i]));
+    qd = v4_fma(qd, z, v4_set1(1.0));
+    v4d as = v4_fma(s * z, p / qd, s); /* asin(s) */
+    /* acos(x) - pi: -pi/2 - asin(x) when |x| <= 1/2, else 2 asin(s) - pi (x > 0) or
+     * -2 asin(s) (x < 0) */
+    v4d asx = (v4d)((v4i)as | ((v4i)x & sign));
+    v4d t_small = -(v4_set1(0x1.921fb54442d18p0) + (asx + v4_set1(0x1.1a62633145c07p-54)));
+    v4d t_pos = (2.0 * as - v4_set1(0x1.921fb54442d18p1)) - v4_set1(0x1.1a62633145c07p-53);
+    v4d t = v4_sel(big, v4_sel(x > 0.0, t_pos, -2.0 * as), t_small);
+    v4d u = t / 3.0;
+    v4d v = u * u;
+    v4d c = v4_set1(cos_coef[0]);
+#pragma GCC unroll 9
+    for (int i = 1; i < 9; i++) c = v4_fma(c, v, v4_set1(cos_coef[i]));
+    return -v4_fma(c, v, v4_set1(1.0));
+}
 /* The normals nrm (3 a lane) of lanes l < count: the PCA of the first m[l] offsets q
  * (m, 3) with squared lengths d2, mean mean[3 l ..], weighted by exp(-d2 / h2[l]) when
- * gaussian and h2[l] > 0 (else 1): the weighted scatter summed in order from the first
- * offset with fused multiply-adds, then smallest_eigvec's closed form. */
+ * gaussian and h2[l] > 0 (else 1; v4_exp): the weighted scatter summed in order from
+ * the first offset with fused multiply-adds, then smallest_eigvec's closed form (its
+ * angle by v4_cos_third_acos). */
 LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_t *m,
                                  const double *mean, const double *h2, int count, int gaussian,
                                  double *nrm) {
@@ -318,14 +366,7 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     v4d B00 = aq * ip, B11 = dq * ip, B22 = fq * ip, B01 = b * ip, B02 = c * ip, B12 = e * ip;
     v4d r = 0.5 * (B00 * (B11 * B22 - B12 * B12) - B01 * (B01 * B22 - B12 * B02) +
                    B02 * (B01 * B12 - B11 * B02));
-    double cs[PCA_LANES];
-    for (int l = 0; l < PCA_LANES; l++) { /* clamp (NaN kept), acos, cos */
-        double x = r[l];
-        if (x < -1.0) x = -1.0;
-        if (x > 1.0) x = 1.0;
-        cs[l] = cos(acos(x) / 3.0 + 2.0943951023931954923);
-    }
-    v4d lam = qq + 2.0 * p * (v4d){cs[0], cs[1], cs[2], cs[3]};
+    v4d lam = qq + 2.0 * p * v4_cos_third_acos(r);
     v4d r00 = a - lam, r11 = d - lam, r22 = f - lam;
     /* the cross products of the rows (r00, b, c), (b, r11, e), (c, e, r22), and the
      * longest (the first of equals) */
