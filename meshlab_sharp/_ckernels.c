@@ -250,14 +250,12 @@ static const double exp_coef[12] = {
     1.0 / 362880.0,     1.0 / 40320.0,     1.0 / 5040.0,      1.0 / 720.0,
     1.0 / 120.0,        1.0 / 24.0,        1.0 / 6.0,         0.5};
 
-/* exp(x), x clamped to [-708, 708], within about 1 ulp: x = k ln2 + r (k rounded to
- * nearest by the shifter 1.5 2^52, ln2 in two parts, |r| <= ln2 / 2), exp(r) by its
- * Taylor polynomial of degree 13 (truncation below 1e-17; Horner's rule in fused
- * multiply-adds), times 2^k added to the exponent bits. */
+/* exp(x) for x in [-708, 708] (other lanes: any bits), within about 1 ulp: x = k ln2 + r
+ * (k rounded to nearest by the shifter 1.5 2^52, ln2 in two parts, |r| <= ln2 / 2),
+ * exp(r) by its Taylor polynomial of degree 13 (truncation below 1e-17; Horner's rule
+ * in fused multiply-adds), times 2^k added to the exponent bits. */
 LANES_INLINE v4d v4_exp(v4d x) {
     const v4d shifter = v4_set1(0x1.8p52);
-    x = v4_sel(x < v4_set1(-708.0), v4_set1(-708.0), x);
-    x = v4_sel(x > v4_set1(708.0), v4_set1(708.0), x);
     v4d t = v4_fma(x, v4_set1(0x1.71547652b82fep0), shifter); /* k + shifter */
     v4d k = t - shifter;
     v4d r = v4_fma(k, v4_set1(-0x1.62e42fefa3800p-1), x);
@@ -337,9 +335,11 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     v4d vnih = {nih[0], nih[1], nih[2], nih[3]};
     v4i vm = {mi[0], mi[1], mi[2], mi[3]};
     v4d c00 = v4_set1(0.0), c01 = c00, c02 = c00, c11 = c00, c12 = c00, c22 = c00;
-    for (int64_t j = 0; j < mmax; j++) {
-        v4d w = v4_exp(d2[j] * vnih);
-        w = (v4d)((v4i)w & ((v4i){j, j, j, j} < vm)); /* 0 past each lane's m */
+    v4i vj = {0, 0, 0, 0};
+    for (int64_t j = 0; j < mmax; j++, vj += 1) {
+        /* the weight, 0 past each lane's m (there the exponent may lie outside exp's
+         * range: -d2 / h2 is in [-1, 0] only over the lane's own m offsets) */
+        v4d w = (v4d)((v4i)v4_exp(d2[j] * vnih) & (vj < vm));
         v4d rx = q[3 * j] - mx, ry = q[3 * j + 1] - my, rz = q[3 * j + 2] - mz;
         v4d sx = w * rx, sy = w * ry, sz = w * rz;
         c00 = v4_fma(sx, rx, c00);
