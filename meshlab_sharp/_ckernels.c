@@ -321,25 +321,25 @@ LANES_INLINE v4d v4_cos_third_acos(v4d x) {
 LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_t *m,
                                  const double *mean, const double *h2, int count, int gaussian,
                                  double *nrm) {
-    double mm[3][PCA_LANES] = {{0}}, nih[PCA_LANES] = {0};
+    double mm[3][PCA_LANES] = {{0}}, hh[PCA_LANES] = {0};
     int64_t mi[PCA_LANES] = {0}, mmax = 0;
     for (int l = 0; l < count; l++) {
         for (int a = 0; a < 3; a++) mm[a][l] = mean[3 * l + a];
-        nih[l] = gaussian && h2[l] > 0.0 ? -1.0 / h2[l] : 0.0; /* exp(d2 * 0) = 1 */
+        hh[l] = gaussian && h2[l] > 0.0 ? h2[l] : INFINITY; /* exp(-d2 / inf) = 1 */
         mi[l] = m[l];
         if (m[l] > mmax) mmax = m[l];
     }
     v4d mx = {mm[0][0], mm[0][1], mm[0][2], mm[0][3]};
     v4d my = {mm[1][0], mm[1][1], mm[1][2], mm[1][3]};
     v4d mz = {mm[2][0], mm[2][1], mm[2][2], mm[2][3]};
-    v4d vnih = {nih[0], nih[1], nih[2], nih[3]};
+    v4d vh2 = {hh[0], hh[1], hh[2], hh[3]};
     v4i vm = {mi[0], mi[1], mi[2], mi[3]};
     v4d c00 = v4_set1(0.0), c01 = c00, c02 = c00, c11 = c00, c12 = c00, c22 = c00;
     v4i vj = {0, 0, 0, 0};
     for (int64_t j = 0; j < mmax; j++, vj += 1) {
         /* the weight, 0 past each lane's m (there the exponent may lie outside exp's
          * range: -d2 / h2 is in [-1, 0] only over the lane's own m offsets) */
-        v4d w = (v4d)((v4i)v4_exp(d2[j] * vnih) & (vj < vm));
+        v4d w = (v4d)((v4i)v4_exp(-d2[j] / vh2) & (vj < vm));
         v4d rx = q[3 * j] - mx, ry = q[3 * j + 1] - my, rz = q[3 * j + 2] - mz;
         v4d sx = w * rx, sy = w * ry, sz = w * rz;
         c00 = v4_fma(sx, rx, c00);

@@ -444,6 +444,19 @@ def test_local_scale_identical_on_rings_and_empty_lists():
     _local_scale_both(vertices[:4], lists)
 
 
+def test_pass_normals_of_a_subnormal_neighbourhood():
+    """Neighbourhoods about 2^-515 across: their squared radii h2 are subnormal and 1 / h2
+    overflows, yet the Gaussian weights exp(-d2 / h2) stay in (0, 1] (the pass divides,
+    as numpy does): unit normals, the plane's, and zero projected distances."""
+    rng = np.random.default_rng(3)
+    plane = np.column_stack([rng.random((500, 2)), np.zeros(500)])
+    tree = _kernels.build_tree(np.ldexp(plane, -515))
+    run = _kernels.cloud_projected_distances(tree, (12, 16, 20, 24, 28), keep_normals=True)
+    assert run.normals is not None and run.pdis is not None
+    np.testing.assert_allclose(np.abs(run.normals[..., 2]), 1.0, atol=1e-6)
+    assert np.all(run.pdis == 0.0)
+
+
 @pytest.mark.parametrize("scales", [(12, 16, 20, 24, 28, 32, 36, 40), (2, 9, 33, 106, 131)])
 def test_relative_distances_in_the_pass_identical(scales):
     """The relative distances and the score computed inside the kNN pass (local scales
