@@ -196,23 +196,6 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
     return fabs(mean[0] * nrm[0] + mean[1] * nrm[1] + mean[2] * nrm[2]);
 }
 
-/* The power of two smallest_eigvec scales a matrix m (6 entries) by, or 0 when
- * smallest_eigvec takes another branch for it (zero matrix, diagonal, a scale not
- * built from the exponent bits). */
-static inline double eig_scale(const double *m) {
-    double p1 = m[1] * m[1] + m[2] * m[2] + m[4] * m[4];
-    double scale = fabs(m[0]) + fabs(m[1]) + fabs(m[2]) + fabs(m[3]) + fabs(m[4]) + fabs(m[5]);
-    if (scale == 0.0 || p1 == 0.0) return 0.0;
-    uint64_t bits;
-    memcpy(&bits, &scale, sizeof bits);
-    int64_t biased = (int64_t)(bits >> 52);
-    if (biased < 1 || biased > 2044) return 0.0;
-    double s;
-    bits = (uint64_t)(2045 - biased) << 52;
-    memcpy(&s, &bits, sizeof s);
-    return s;
-}
-
 /* ------------------------------------------------------------------ four scales at once */
 
 /* The PCA normals of up to four scales of one point side by side, one lane each (the
@@ -313,6 +296,20 @@ LANES_INLINE v4d v4_cos_third_acos(v4d x) {
     for (int i = 1; i < 9; i++) c = v4_fma(c, v, v4_set1(cos_coef[i]));
     return -v4_fma(c, v, v4_set1(1.0));
 }
+/* The power of two smallest_eigvec scales each lane's matrix [[a, b, c], [b, d, e],
+ * [c, e, f]] by, or 0 where smallest_eigvec takes another branch for it (zero matrix,
+ * diagonal, a scale not built from the exponent bits). */
+LANES_INLINE v4d v4_eig_scale(v4d a, v4d b, v4d c, v4d d, v4d e, v4d f) {
+    const v4i magnitude = ~(v4i)v4_set1(-0.0);
+    v4d p1 = b * b + c * c + e * e;
+    v4d scale = (v4d)((v4i)a & magnitude) + (v4d)((v4i)b & magnitude) +
+                (v4d)((v4i)c & magnitude) + (v4d)((v4i)d & magnitude) +
+                (v4d)((v4i)e & magnitude) + (v4d)((v4i)f & magnitude);
+    v4i biased = (v4i)((v4u)scale >> 52); /* a sign bit (NaN) makes it > 2044 */
+    v4i ok = (scale != 0.0) & (p1 != 0.0) & (biased >= 1) & (biased <= 2044);
+    return (v4d)(((v4u)(2045 - biased) << 52) & (v4u)ok);
+}
+
 /* The normals nrm (3 a lane) of lanes l < count: the PCA of the first m[l] offsets q
  * (m, 3) with squared lengths d2, mean mean[3 l ..], weighted by exp(-d2 / h2[l]) when
  * gaussian and h2[l] > 0 (else 1; v4_exp): the weighted scatter summed in order from
@@ -351,12 +348,7 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     }
     /* smallest_eigvec on each lane, its power-of-two scale first (a lane whose matrix
      * takes another branch there goes through smallest_eigvec itself, below) */
-    double sc[PCA_LANES];
-    for (int l = 0; l < PCA_LANES; l++) {
-        double cm[6] = {c00[l], c01[l], c02[l], c11[l], c12[l], c22[l]};
-        sc[l] = eig_scale(cm);
-    }
-    v4d s = {sc[0], sc[1], sc[2], sc[3]};
+    v4d s = v4_eig_scale(c00, c01, c02, c11, c12, c22);
     v4d a = c00 * s, b = c01 * s, c = c02 * s, d = c11 * s, e = c12 * s, f = c22 * s;
     v4d p1 = b * b + c * c + e * e;
     v4d qq = (a + d + f) / 3.0;
@@ -389,7 +381,7 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     v2 = v4_sel(ok, v2 * inv, v4_set1(0.0));
     for (int l = 0; l < count; l++) {
         double *o = nrm + 3 * l;
-        if (sc[l] == 0.0) {
+        if (s[l] == 0.0) {
             smallest_eigvec(c00[l], c01[l], c02[l], c11[l], c12[l], c22[l], o);
         } else {
             o[0] = v0[l]; o[1] = v1[l]; o[2] = v2[l];
