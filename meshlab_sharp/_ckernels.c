@@ -296,6 +296,7 @@ LANES_INLINE v4d v4_cos_third_acos(v4d x) {
     for (int i = 1; i < 9; i++) c = v4_fma(c, v, v4_set1(cos_coef[i]));
     return -v4_fma(c, v, v4_set1(1.0));
 }
+
 /* The power of two smallest_eigvec scales each lane's matrix [[a, b, c], [b, d, e],
  * [c, e, f]] by, or 0 where smallest_eigvec takes another branch for it (zero matrix,
  * diagonal, a scale not built from the exponent bits). */
