@@ -6,8 +6,10 @@
  * needed to build it, and ctypes releases the GIL during a call, so Python threads run
  * chunks of points on every core) and compiled into the MeshLab plugin
  * (meshlab_plugin_cpp/src/sharp_core.cpp, std::thread over the same chunks). Built by setuptools (setup.py) with
- * -ffp-contract=off: no fused multiply-add, every product and sum rounded as numpy
- * rounds it, in the order docs/implementation-notes.md pins down.
+ * -ffp-contract=off: no fused multiply-add the code does not write, every product and
+ * sum rounded as numpy rounds it, in the order docs/implementation-notes.md pins down;
+ * the cloud pass's PCA (pca_lanes) writes its fused multiply-adds (fma()) and its own
+ * exp, acos and cos, the same bits on every machine (see that page).
  */
 #include "_ckernels.h"
 
@@ -24,12 +26,14 @@
 #define HAVE_AVX2_PATH 1
 #endif
 
-/* Whether to take the AVX2 paths: the CPU has AVX2 and POPCNT, and the environment does
- * not set MESHLAB_SHARP_NO_AVX2 (the tests compare both: the same bits). */
+/* Whether to take the AVX2 paths (the kNN's block scan, the sheet test's lanes, the
+ * PCA's 4 lanes with fused multiply-adds): the CPU has AVX2, FMA and POPCNT, and the
+ * environment does not set MESHLAB_SHARP_NO_AVX2. Every path gives the same bits
+ * without them (the tests compare both). */
 static int use_avx2(void) {
 #ifdef HAVE_AVX2_PATH
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt") &&
-           getenv("MESHLAB_SHARP_NO_AVX2") == NULL;
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
+           __builtin_cpu_supports("popcnt") && getenv("MESHLAB_SHARP_NO_AVX2") == NULL;
 #else
     return 0;
 #endif
@@ -199,144 +203,239 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
     return fabs(mean[0] * nrm[0] + mean[1] * nrm[1] + mean[2] * nrm[2]);
 }
 
-/* ------------------------------------------------------------------ two scales at once */
+/* ------------------------------------------------------------------ four scales at once */
 
-/* Two neighbourhoods of one point side by side, a and b, the first ma and mb >= ma
- * offsets of the same list: each one's arithmetic exactly as above (scatter,
- * smallest_eigvec), one SIMD lane each. Independent chains of additions and
- * divisions, and half the instructions: the scales of a cloud's pass go by pairs. */
+/* The PCA normals of up to four scales of one point side by side, one lane each (the
+ * cloud pass's scales: the first m of the same offsets, m increasing), written once on
+ * vectors of 4 doubles (the GCC / Clang vector extension) and compiled twice: with AVX2
+ * and FMA (chosen at run time) and plain. Every operation in it is correctly rounded
+ * (+, -, *, /, sqrt, and fma(), exact then rounded once, on every machine), so both
+ * builds give the same bits; docs/implementation-notes.md says how this differs from
+ * the numpy reference. */
+#if defined(__GNUC__) && !defined(__clang__)
+/* the helpers below pass vectors only inlined: no ABI to keep */
+#pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+typedef double v4d __attribute__((vector_size(32)));
+typedef int64_t v4i __attribute__((vector_size(32)));
+typedef uint64_t v4u __attribute__((vector_size(32)));
+#define PCA_LANES 4
+#define LANES_INLINE static inline __attribute__((always_inline))
 
-#ifdef __SSE2__
-static inline double lane0(__m128d v) { return _mm_cvtsd_f64(v); }
-static inline double lane1(__m128d v) { return _mm_cvtsd_f64(_mm_unpackhi_pd(v, v)); }
+LANES_INLINE v4d v4_set1(double x) { return (v4d){x, x, x, x}; }
 
-/* scatter of a (ma, mean_a, weights wa) and of b (mb, mean_b, wb) into ca and cb; the
- * weights are given (all 1 for no weighting: 1 * x is x). */
-static void scatter_pair(const double *q, int64_t ma, const double *mean_a, const double *wa,
-                         int64_t mb, const double *mean_b, const double *wb, double *ca,
-                         double *cb) {
-    __m128d mx = _mm_set_pd(mean_b[0], mean_a[0]), my = _mm_set_pd(mean_b[1], mean_a[1]);
-    __m128d mz = _mm_set_pd(mean_b[2], mean_a[2]);
-    __m128d c00 = _mm_setzero_pd(), c01 = c00, c02 = c00, c11 = c00, c12 = c00, c22 = c00;
-    int64_t j = 0;
-    for (; j < ma; j++) {
-        __m128d rx = _mm_sub_pd(_mm_set1_pd(q[3 * j]), mx);
-        __m128d ry = _mm_sub_pd(_mm_set1_pd(q[3 * j + 1]), my);
-        __m128d rz = _mm_sub_pd(_mm_set1_pd(q[3 * j + 2]), mz);
-        __m128d w = _mm_set_pd(wb[j], wa[j]);
-        __m128d sx = _mm_mul_pd(w, rx), sy = _mm_mul_pd(w, ry), sz = _mm_mul_pd(w, rz);
-        c00 = _mm_add_pd(c00, _mm_mul_pd(sx, rx));
-        c01 = _mm_add_pd(c01, _mm_mul_pd(sx, ry));
-        c02 = _mm_add_pd(c02, _mm_mul_pd(sx, rz));
-        c11 = _mm_add_pd(c11, _mm_mul_pd(sy, ry));
-        c12 = _mm_add_pd(c12, _mm_mul_pd(sy, rz));
-        c22 = _mm_add_pd(c22, _mm_mul_pd(sz, rz));
-    }
-    ca[0] = lane0(c00); ca[1] = lane0(c01); ca[2] = lane0(c02);
-    ca[3] = lane0(c11); ca[4] = lane0(c12); ca[5] = lane0(c22);
-    double b00 = lane1(c00), b01 = lane1(c01), b02 = lane1(c02), b11 = lane1(c11),
-           b12 = lane1(c12), b22 = lane1(c22);
-    for (; j < mb; j++) { /* b's last mb - ma terms */
-        double rx = q[3 * j] - mean_b[0], ry = q[3 * j + 1] - mean_b[1],
-               rz = q[3 * j + 2] - mean_b[2];
-        double sx = wb[j] * rx, sy = wb[j] * ry, sz = wb[j] * rz;
-        b00 += sx * rx; b01 += sx * ry; b02 += sx * rz;
-        b11 += sy * ry; b12 += sy * rz; b22 += sz * rz;
-    }
-    cb[0] = b00; cb[1] = b01; cb[2] = b02; cb[3] = b11; cb[4] = b12; cb[5] = b22;
+LANES_INLINE v4d v4_fma(v4d a, v4d b, v4d c) {
+    return (v4d){fma(a[0], b[0], c[0]), fma(a[1], b[1], c[1]), fma(a[2], b[2], c[2]),
+                 fma(a[3], b[3], c[3])};
 }
 
-/* The power of two smallest_eigvec scales a matrix m (6 entries) by, or 0 when
- * smallest_eigvec takes another branch for it (zero matrix, diagonal, a scale not
- * built from the exponent bits). */
-static inline double eig_scale(const double *m) {
-    double p1 = m[1] * m[1] + m[2] * m[2] + m[4] * m[4];
-    double scale = fabs(m[0]) + fabs(m[1]) + fabs(m[2]) + fabs(m[3]) + fabs(m[4]) + fabs(m[5]);
-    if (scale == 0.0 || p1 == 0.0) return 0.0;
-    uint64_t bits;
-    memcpy(&bits, &scale, sizeof bits);
-    int64_t biased = (int64_t)(bits >> 52);
-    if (biased < 1 || biased > 2044) return 0.0;
-    double s;
-    bits = (uint64_t)(2045 - biased) << 52;
-    memcpy(&s, &bits, sizeof s);
-    return s;
+LANES_INLINE v4d v4_sqrt(v4d a) { return (v4d){sqrt(a[0]), sqrt(a[1]), sqrt(a[2]), sqrt(a[3])}; }
+
+/* a where the mask m is set (all ones), else b */
+LANES_INLINE v4d v4_sel(v4i m, v4d a, v4d b) { return (v4d)((m & (v4i)a) | (~m & (v4i)b)); }
+
+/* 1 / n!, n = 13 down to 2: exp's Taylor coefficients */
+static const double exp_coef[12] = {
+    1.0 / 6227020800.0, 1.0 / 479001600.0, 1.0 / 39916800.0, 1.0 / 3628800.0,
+    1.0 / 362880.0,     1.0 / 40320.0,     1.0 / 5040.0,      1.0 / 720.0,
+    1.0 / 120.0,        1.0 / 24.0,        1.0 / 6.0,         0.5};
+
+/* exp(x) for x in [-708, 708] (other lanes: any bits), within about 1 ulp: x = k ln2 + r
+ * (k rounded to nearest by the shifter 1.5 2^52, ln2 in two parts, |r| <= ln2 / 2),
+ * exp(r) by its Taylor polynomial of degree 13 (truncation below 1e-17; Horner's rule
+ * in fused multiply-adds), times 2^k added to the exponent bits. */
+LANES_INLINE v4d v4_exp(v4d x) {
+    const v4d shifter = v4_set1(0x1.8p52);
+    v4d t = v4_fma(x, v4_set1(0x1.71547652b82fep0), shifter); /* k + shifter */
+    v4d k = t - shifter;
+    v4d r = v4_fma(k, v4_set1(-0x1.62e42fefa3800p-1), x);
+    r = v4_fma(k, v4_set1(-0x1.ef35793c76730p-45), r);
+    v4d p = v4_set1(exp_coef[0]);
+#pragma GCC unroll 12
+    for (int i = 1; i < 12; i++) p = v4_fma(p, r, v4_set1(exp_coef[i]));
+    p = v4_fma(p, r, v4_set1(1.0));
+    p = v4_fma(p, r, v4_set1(1.0));
+    return (v4d)((v4u)p + (((v4u)t - (v4u)shifter) << 52));
 }
 
-/* smallest_eigvec of ma and mb (6 entries each) into na and nb, one lane each. */
-static void smallest_eigvec_pair(const double *ma, const double *mb, double *na, double *nb) {
-    double sa = eig_scale(ma), sb = eig_scale(mb);
-    if (sa == 0.0 || sb == 0.0) {
-        smallest_eigvec(ma[0], ma[1], ma[2], ma[3], ma[4], ma[5], na);
-        smallest_eigvec(mb[0], mb[1], mb[2], mb[3], mb[4], mb[5], nb);
-        return;
+/* asin(s) = s + s z P(z) / Q(z), z = s^2 <= 1/4: fdlibm's rational (e_asin.c), P and Q
+ * from their highest coefficient (Q's constant term 1) */
+static const double asin_p[6] = {3.47933107596021167570e-05, 7.91534994289814532176e-04,
+                                 -4.00555345006794114027e-02, 2.01212532134862925881e-01,
+                                 -3.25565818622400915405e-01, 1.66666666666666657415e-01};
+static const double asin_q[4] = {7.70381505559019352791e-02, -6.88283971605453293030e-01,
+                                 2.02094576023350569471e+00, -2.40339491173441421878e+00};
+/* (-1)^n / (2n)!, n = 9 down to 1: cos's Taylor coefficients */
+static const double cos_coef[9] = {-1.0 / 6402373705728000.0, 1.0 / 20922789888000.0,
+                                   -1.0 / 87178291200.0, 1.0 / 479001600.0, -1.0 / 3628800.0,
+                                   1.0 / 40320.0, -1.0 / 720.0, 1.0 / 24.0, -0.5};
+
+/* cos(acos(x) / 3 + 2 pi / 3), x clamped to [-1, 1] (NaN kept): the cosine of the
+ * smallest eigenvalue's angle, in [-1, -1/2], within 3e-16. acos(x) from asin: of x when
+ * |x| <= 1/2, else of sqrt((1 - |x|) / 2); then u = (acos(x) - pi) / 3 in [-pi/3, 0] (pi
+ * and pi/2 in two parts) and the value -cos(u) by its Taylor polynomial of degree 18
+ * (truncation below 1e-18). */
+LANES_INLINE v4d v4_cos_third_acos(v4d x) {
+    const v4i sign = (v4i)v4_set1(-0.0);
+    x = v4_sel(x < v4_set1(-1.0), v4_set1(-1.0), x);
+    x = v4_sel(x > v4_set1(1.0), v4_set1(1.0), x);
+    v4d ax = (v4d)((v4i)x & ~sign);
+    v4i big = ax > v4_set1(0.5);
+    v4d z = v4_sel(big, (1.0 - ax) * 0.5, x * x);
+    v4d s = v4_sel(big, v4_sqrt(z), ax);
+    v4d p = v4_set1(asin_p[0]), qd = v4_set1(asin_q[0]);
+#pragma GCC unroll 6
+    for (int i = 1; i < 6; i++) p = v4_fma(p, z, v4_set1(asin_p[i]));
+#pragma GCC unroll 4
+    for (int i = 1; i < 4; i++) qd = v4_fma(qd, z, v4_set1(asin_q[i]));
+    qd = v4_fma(qd, z, v4_set1(1.0));
+    v4d as = v4_fma(s * z, p / qd, s); /* asin(s) */
+    /* acos(x) - pi: -pi/2 - asin(x) when |x| <= 1/2, else 2 asin(s) - pi (x > 0) or
+     * -2 asin(s) (x < 0) */
+    v4d asx = (v4d)((v4i)as | ((v4i)x & sign));
+    v4d t_small = -(v4_set1(0x1.921fb54442d18p0) + (asx + v4_set1(0x1.1a62633145c07p-54)));
+    v4d t_pos = (2.0 * as - v4_set1(0x1.921fb54442d18p1)) - v4_set1(0x1.1a62633145c07p-53);
+    v4d t = v4_sel(big, v4_sel(x > 0.0, t_pos, -2.0 * as), t_small);
+    v4d u = t / 3.0;
+    v4d v = u * u;
+    v4d c = v4_set1(cos_coef[0]);
+#pragma GCC unroll 9
+    for (int i = 1; i < 9; i++) c = v4_fma(c, v, v4_set1(cos_coef[i]));
+    return -v4_fma(c, v, v4_set1(1.0));
+}
+
+/* The power of two smallest_eigvec scales each lane's matrix [[a, b, c], [b, d, e],
+ * [c, e, f]] by, or 0 where smallest_eigvec takes another branch for it (zero matrix,
+ * diagonal, a scale not built from the exponent bits). */
+LANES_INLINE v4d v4_eig_scale(v4d a, v4d b, v4d c, v4d d, v4d e, v4d f) {
+    const v4i magnitude = ~(v4i)v4_set1(-0.0);
+    v4d p1 = b * b + c * c + e * e;
+    v4d scale = (v4d)((v4i)a & magnitude) + (v4d)((v4i)b & magnitude) +
+                (v4d)((v4i)c & magnitude) + (v4d)((v4i)d & magnitude) +
+                (v4d)((v4i)e & magnitude) + (v4d)((v4i)f & magnitude);
+    v4i biased = (v4i)((v4u)scale >> 52); /* a sign bit (NaN) makes it > 2044 */
+    v4i ok = (scale != 0.0) & (p1 != 0.0) & (biased >= 1) & (biased <= 2044);
+    return (v4d)(((v4u)(2045 - biased) << 52) & (v4u)ok);
+}
+
+/* The normals nrm (3 a lane) of lanes l < count: the PCA of the first m[l] offsets q
+ * (m, 3) with squared lengths d2, mean mean[3 l ..], weighted by exp(-d2 / h2[l]) when
+ * gaussian and h2[l] > 0 (else 1; v4_exp): the weighted scatter summed in order from
+ * the first offset with fused multiply-adds, then smallest_eigvec's closed form (its
+ * angle by v4_cos_third_acos). */
+LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_t *m,
+                                 const double *mean, const double *h2, int count, int gaussian,
+                                 double *nrm) {
+    double mm[3][PCA_LANES] = {{0}}, hh[PCA_LANES] = {0};
+    int64_t mi[PCA_LANES] = {0}, mmax = 0;
+    for (int l = 0; l < count; l++) {
+        for (int a = 0; a < 3; a++) mm[a][l] = mean[3 * l + a];
+        hh[l] = gaussian && h2[l] > 0.0 ? h2[l] : INFINITY; /* exp(-d2 / inf) = 1 */
+        mi[l] = m[l];
+        if (m[l] > mmax) mmax = m[l];
     }
-    __m128d s = _mm_set_pd(sb, sa);
-    __m128d a = _mm_mul_pd(_mm_set_pd(mb[0], ma[0]), s);
-    __m128d b = _mm_mul_pd(_mm_set_pd(mb[1], ma[1]), s);
-    __m128d c = _mm_mul_pd(_mm_set_pd(mb[2], ma[2]), s);
-    __m128d d = _mm_mul_pd(_mm_set_pd(mb[3], ma[3]), s);
-    __m128d e = _mm_mul_pd(_mm_set_pd(mb[4], ma[4]), s);
-    __m128d f = _mm_mul_pd(_mm_set_pd(mb[5], ma[5]), s);
-    __m128d p1 = _mm_add_pd(_mm_add_pd(_mm_mul_pd(b, b), _mm_mul_pd(c, c)), _mm_mul_pd(e, e));
-    __m128d q = _mm_div_pd(_mm_add_pd(_mm_add_pd(a, d), f), _mm_set1_pd(3.0));
-    __m128d aq = _mm_sub_pd(a, q), dq = _mm_sub_pd(d, q), fq = _mm_sub_pd(f, q);
-    __m128d p2 = _mm_add_pd(
-        _mm_add_pd(_mm_add_pd(_mm_mul_pd(aq, aq), _mm_mul_pd(dq, dq)), _mm_mul_pd(fq, fq)),
-        _mm_mul_pd(_mm_set1_pd(2.0), p1));
-    __m128d p = _mm_sqrt_pd(_mm_div_pd(p2, _mm_set1_pd(6.0)));
-    __m128d ip = _mm_div_pd(_mm_set1_pd(1.0), p);
-    __m128d B00 = _mm_mul_pd(aq, ip), B11 = _mm_mul_pd(dq, ip), B22 = _mm_mul_pd(fq, ip);
-    __m128d B01 = _mm_mul_pd(b, ip), B02 = _mm_mul_pd(c, ip), B12 = _mm_mul_pd(e, ip);
-    __m128d t0 = _mm_mul_pd(B00, _mm_sub_pd(_mm_mul_pd(B11, B22), _mm_mul_pd(B12, B12)));
-    __m128d t1 = _mm_mul_pd(B01, _mm_sub_pd(_mm_mul_pd(B01, B22), _mm_mul_pd(B12, B02)));
-    __m128d t2 = _mm_mul_pd(B02, _mm_sub_pd(_mm_mul_pd(B01, B12), _mm_mul_pd(B11, B02)));
-    __m128d r = _mm_mul_pd(_mm_set1_pd(0.5), _mm_add_pd(_mm_sub_pd(t0, t1), t2));
-    double rr[2] = {lane0(r), lane1(r)}, cs[2];
-    for (int l = 0; l < 2; l++) { /* as smallest_eigvec: clamp (NaN kept), acos, cos */
-        double x = rr[l];
-        if (x < -1.0) x = -1.0;
-        if (x > 1.0) x = 1.0;
-        cs[l] = cos(acos(x) / 3.0 + 2.0943951023931954923);
+    v4d mx = {mm[0][0], mm[0][1], mm[0][2], mm[0][3]};
+    v4d my = {mm[1][0], mm[1][1], mm[1][2], mm[1][3]};
+    v4d mz = {mm[2][0], mm[2][1], mm[2][2], mm[2][3]};
+    v4d vh2 = {hh[0], hh[1], hh[2], hh[3]};
+    v4i vm = {mi[0], mi[1], mi[2], mi[3]};
+    v4d c00 = v4_set1(0.0), c01 = c00, c02 = c00, c11 = c00, c12 = c00, c22 = c00;
+    v4i vj = {0, 0, 0, 0};
+    for (int64_t j = 0; j < mmax; j++, vj += 1) {
+        /* the weight, 0 past each lane's m (there the exponent may lie outside exp's
+         * range: -d2 / h2 is in [-1, 0] only over the lane's own m offsets) */
+        v4d w = (v4d)((v4i)v4_exp(-d2[j] / vh2) & (vj < vm));
+        v4d rx = q[3 * j] - mx, ry = q[3 * j + 1] - my, rz = q[3 * j + 2] - mz;
+        v4d sx = w * rx, sy = w * ry, sz = w * rz;
+        c00 = v4_fma(sx, rx, c00);
+        c01 = v4_fma(sx, ry, c01);
+        c02 = v4_fma(sx, rz, c02);
+        c11 = v4_fma(sy, ry, c11);
+        c12 = v4_fma(sy, rz, c12);
+        c22 = v4_fma(sz, rz, c22);
     }
-    __m128d two_p = _mm_mul_pd(_mm_set1_pd(2.0), p);
-    __m128d lam = _mm_add_pd(q, _mm_mul_pd(two_p, _mm_set_pd(cs[1], cs[0])));
-    __m128d r00 = _mm_sub_pd(a, lam), r11 = _mm_sub_pd(d, lam), r22 = _mm_sub_pd(f, lam);
-    /* rows r0 = (r00, b, c), r1 = (b, r11, e), r2 = (c, e, r22) */
-    __m128d x[3][3];
-    x[0][0] = _mm_sub_pd(_mm_mul_pd(b, e), _mm_mul_pd(c, r11));
-    x[0][1] = _mm_sub_pd(_mm_mul_pd(c, b), _mm_mul_pd(r00, e));
-    x[0][2] = _mm_sub_pd(_mm_mul_pd(r00, r11), _mm_mul_pd(b, b));
-    x[1][0] = _mm_sub_pd(_mm_mul_pd(b, r22), _mm_mul_pd(c, e));
-    x[1][1] = _mm_sub_pd(_mm_mul_pd(c, c), _mm_mul_pd(r00, r22));
-    x[1][2] = _mm_sub_pd(_mm_mul_pd(r00, e), _mm_mul_pd(b, c));
-    x[2][0] = _mm_sub_pd(_mm_mul_pd(r11, r22), _mm_mul_pd(e, e));
-    x[2][1] = _mm_sub_pd(_mm_mul_pd(e, c), _mm_mul_pd(b, r22));
-    x[2][2] = _mm_sub_pd(_mm_mul_pd(b, e), _mm_mul_pd(r11, c));
-    double xs[3][3][2], nn[3][2];
+    /* smallest_eigvec on each lane, its power-of-two scale first (a lane whose matrix
+     * takes another branch there goes through smallest_eigvec itself, below) */
+    v4d s = v4_eig_scale(c00, c01, c02, c11, c12, c22);
+    v4d a = c00 * s, b = c01 * s, c = c02 * s, d = c11 * s, e = c12 * s, f = c22 * s;
+    v4d p1 = b * b + c * c + e * e;
+    v4d qq = (a + d + f) / 3.0;
+    v4d aq = a - qq, dq = d - qq, fq = f - qq;
+    v4d p = v4_sqrt((aq * aq + dq * dq + fq * fq + 2.0 * p1) / 6.0);
+    v4d ip = 1.0 / p;
+    v4d B00 = aq * ip, B11 = dq * ip, B22 = fq * ip, B01 = b * ip, B02 = c * ip, B12 = e * ip;
+    v4d r = 0.5 * (B00 * (B11 * B22 - B12 * B12) - B01 * (B01 * B22 - B12 * B02) +
+                   B02 * (B01 * B12 - B11 * B02));
+    v4d lam = qq + 2.0 * p * v4_cos_third_acos(r);
+    v4d r00 = a - lam, r11 = d - lam, r22 = f - lam;
+    /* the cross products of the rows (r00, b, c), (b, r11, e), (c, e, r22), and the
+     * longest (the first of equals) */
+    v4d x[3][3] = {{b * e - c * r11, c * b - r00 * e, r00 * r11 - b * b},
+                   {b * r22 - c * e, c * c - r00 * r22, r00 * e - b * c},
+                   {r11 * r22 - e * e, e * c - b * r22, b * e - r11 * c}};
+    v4d best = v4_set1(-1.0), v0 = x[0][0], v1 = x[0][1], v2 = x[0][2];
     for (int i = 0; i < 3; i++) {
-        __m128d v = _mm_add_pd(_mm_mul_pd(x[i][0], x[i][0]), _mm_mul_pd(x[i][1], x[i][1]));
-        v = _mm_add_pd(v, _mm_mul_pd(x[i][2], x[i][2]));
-        nn[i][0] = lane0(v); nn[i][1] = lane1(v);
-        for (int k = 0; k < 3; k++) { xs[i][k][0] = lane0(x[i][k]); xs[i][k][1] = lane1(x[i][k]); }
+        v4d nn = x[i][0] * x[i][0] + x[i][1] * x[i][1] + x[i][2] * x[i][2];
+        v4i longer = nn > best;
+        best = v4_sel(longer, nn, best);
+        v0 = v4_sel(longer, x[i][0], v0);
+        v1 = v4_sel(longer, x[i][1], v1);
+        v2 = v4_sel(longer, x[i][2], v2);
     }
-    double *out[2] = {na, nb};
-    for (int l = 0; l < 2; l++) { /* as smallest_eigvec: the longest cross product */
-        double best = -1.0;
-        int bi = 0;
-        for (int i = 0; i < 3; i++) {
-            if (nn[i][l] > best) { best = nn[i][l]; bi = i; }
-        }
-        if (!(best > 0.0)) {
-            out[l][0] = 1.0; out[l][1] = 0.0; out[l][2] = 0.0;
+    v4i ok = best > 0.0;
+    v4d inv = 1.0 / v4_sqrt(best);
+    v0 = v4_sel(ok, v0 * inv, v4_set1(1.0));
+    v1 = v4_sel(ok, v1 * inv, v4_set1(0.0));
+    v2 = v4_sel(ok, v2 * inv, v4_set1(0.0));
+    for (int l = 0; l < count; l++) {
+        double *o = nrm + 3 * l;
+        if (s[l] == 0.0) {
+            smallest_eigvec(c00[l], c01[l], c02[l], c11[l], c12[l], c22[l], o);
         } else {
-            double inv = 1.0 / sqrt(best);
-            out[l][0] = xs[bi][0][l] * inv; out[l][1] = xs[bi][1][l] * inv;
-            out[l][2] = xs[bi][2][l] * inv;
+            o[0] = v0[l]; o[1] = v1[l]; o[2] = v2[l];
         }
     }
+}
+
+typedef void (*pca_lanes_fn)(const double *, const double *, const int64_t *, const double *,
+                             const double *, int, int, double *);
+
+static void pca_lanes_plain(const double *q, const double *d2, const int64_t *m,
+                            const double *mean, const double *h2, int count, int gaussian,
+                            double *nrm) {
+    pca_lanes_body(q, d2, m, mean, h2, count, gaussian, nrm);
+}
+
+#ifdef HAVE_AVX2_PATH
+__attribute__((target("avx2,fma"))) static void pca_lanes_avx2(const double *q,
+                                                               const double *d2,
+                                                               const int64_t *m,
+                                                               const double *mean,
+                                                               const double *h2, int count,
+                                                               int gaussian, double *nrm) {
+    pca_lanes_body(q, d2, m, mean, h2, count, gaussian, nrm);
 }
 #endif
+
+/* The pca_lanes to use: AVX2 + FMA when use_avx2(); the same
+ * bits either way (the tests compare both). */
+static pca_lanes_fn pca_lanes(void) {
+#ifdef HAVE_AVX2_PATH
+    if (use_avx2()) return pca_lanes_avx2;
+#endif
+    return pca_lanes_plain;
+}
+
+/* The normals snrm (3 a scale) of the scales [s0, s1) of one point (mk, smean, sh2 as
+ * scale_means gives them), PCA_LANES at a time. */
+static void pca_scales(pca_lanes_fn pca, const double *q, const double *d2, const int64_t *mk,
+                       const double *smean, const double *sh2, int s0, int s1, int gaussian,
+                       double *snrm) {
+    for (int s = s0; s < s1; s += PCA_LANES) {
+        int count = s1 - s < PCA_LANES ? s1 - s : PCA_LANES;
+        pca(q, d2, mk + s, smean + 3 * s, sh2 + s, count, gaussian, snrm + 3 * s);
+    }
+}
 
 /* Each scale's mean offset smean (3 a scale) and largest squared distance sh2 over the
  * first mk[s] offsets q with squared lengths d2 (mk increasing): one running sum, in
@@ -356,27 +455,6 @@ static void scale_means(const double *q, const double *d2, const int64_t *mk, in
         smean[3 * s + 2] = sz / (double)m;
         sh2[s] = h2;
     }
-}
-
-/* The (weighted) PCA normals of the first ma and mb >= ma offsets q with squared lengths
- * d2 (means mean_a, mean_b; h2a, h2b the largest d2 of each) into na and nb: what
- * neighbourhood_pdis computes for each (without a fixed normal). mu: room for 2 mb. */
-static void pca_normal_pair(const double *q, const double *d2, int64_t ma, const double *mean_a,
-                            double h2a, int64_t mb, const double *mean_b, double h2b,
-                            int gaussian, double *mu, double *na, double *nb) {
-#ifdef __SSE2__
-    double *mua = mu, *mub = mu + mb;
-    if (gaussian && h2a > 0.0) gaussian_weights(d2, ma, h2a, mua);
-    else for (int64_t j = 0; j < ma; j++) mua[j] = 1.0;
-    if (gaussian && h2b > 0.0) gaussian_weights(d2, mb, h2b, mub);
-    else for (int64_t j = 0; j < mb; j++) mub[j] = 1.0;
-    double ca[6], cb[6];
-    scatter_pair(q, ma, mean_a, mua, mb, mean_b, mub, ca, cb);
-    smallest_eigvec_pair(ca, cb, na, nb);
-#else
-    neighbourhood_pdis(q, d2, ma, mean_a, h2a, gaussian, NULL, na, mu);
-    neighbourhood_pdis(q, d2, mb, mean_b, h2b, gaussian, NULL, nb, mu);
-#endif
 }
 
 /* ------------------------------------------------------------------ robust mode */
@@ -1471,7 +1549,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     const cand_t *nb = cur.h.c;
     double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
-    double *mu = (double *)malloc((size_t)kmax * 2 * sizeof(double));
+    pca_lanes_fn pca = pca_lanes();
     /* per scale: mean offset (3), normal (3), largest squared distance (1) */
     double *smean = (double *)malloc((size_t)nscales * 7 * sizeof(double));
     double *snrm = smean ? smean + 3 * nscales : NULL, *sh2 = smean ? smean + 6 * nscales : NULL;
@@ -1484,7 +1562,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                                   out->sheet_trim, out->sheet_trim_cos, use_avx2()};
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     int rc = 0;
-    if (cur_rc || !q || !d2 || !mu || !smean || !soa || !ell || !hs || !keep || !mk) {
+    if (cur_rc || !q || !d2 || !smean || !soa || !ell || !hs || !keep || !mk) {
         rc = -1;
         goto done;
     }
@@ -1513,24 +1591,14 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
          * PCA (the largest scale's, and the next one's computed beside it): their lists
          * are the same when the filter keeps every neighbour */
         int known = 0, means = 0; /* means: smean and sh2 hold the lists' */
-        double top_pd = 0.0, top_nrm[3] = {0, 0, 0};
         int pdis_wanted = out->pdis != NULL || out->relative != NULL;
         if (out->sheet_gap > 0.0) {
             scale_means(q, d2, mk, nscales, smean, sh2);
-            const double *mean = smean + 3 * (nscales - 1);
-            double h2 = sh2[nscales - 1];
-            if (pdis_wanted && nscales >= 2) {
-                int u = nscales - 2;
-                pca_normal_pair(q, d2, mk[u], smean + 3 * u, sh2[u], kmax, mean, h2, gaussian, mu,
-                                snrm + 3 * u, top_nrm);
-                known = 2;
-            } else {
-                neighbourhood_pdis(q, d2, kmax, mean, h2, gaussian, NULL, top_nrm, mu);
-                known = 1;
-            }
-            top_pd = fabs(mean[0] * top_nrm[0] + mean[1] * top_nrm[1] + mean[2] * top_nrm[2]);
             means = 1;
-            if (sheet_keep(q, d2, kmax, top_nrm, &sheet, hs, keep) > 0) {
+            /* the largest scale's normal for the filter, and the next ones' beside it */
+            known = !pdis_wanted ? 1 : nscales < PCA_LANES ? nscales : PCA_LANES;
+            pca_scales(pca, q, d2, mk, smean, sh2, nscales - known, nscales, gaussian, snrm);
+            if (sheet_keep(q, d2, kmax, snrm + 3 * (nscales - 1), &sheet, hs, keep) > 0) {
                 known = 0;
                 means = 0;
                 int64_t t = 0, s = 0;
@@ -1556,26 +1624,11 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         if (out->pdis == NULL && out->relative == NULL) continue;
         double score = 0.0;
         if (!means) scale_means(q, d2, mk, nscales, smean, sh2);
-        int last = nscales - known, held = -1; /* the scales with a PCA still to do */
-        for (int s = 0; s < last; s++) { /* their normals, two scales at once */
-            if (held < 0) { held = s; continue; }
-            pca_normal_pair(q, d2, mk[held], smean + 3 * held, sh2[held], mk[s], smean + 3 * s,
-                            sh2[s], gaussian, mu, snrm + 3 * held, snrm + 3 * s);
-            held = -1;
-        }
-        if (held >= 0) {
-            neighbourhood_pdis(q, d2, mk[held], smean + 3 * held, sh2[held], gaussian, NULL,
-                               snrm + 3 * held, mu);
-        }
-        if (known > 0) { /* the largest scale: the same sums over the same list as the sheet's */
-            double *t = snrm + 3 * (nscales - 1);
-            t[0] = top_nrm[0]; t[1] = top_nrm[1]; t[2] = top_nrm[2];
-        }
+        /* the scales whose normals are still to do, PCA_LANES at a time */
+        pca_scales(pca, q, d2, mk, smean, sh2, 0, nscales - known, gaussian, snrm);
         for (int s = 0; s < nscales; s++) {
             const double *mean = smean + 3 * s, *nv = snrm + 3 * s;
-            double pd = known > 0 && s == nscales - 1
-                            ? top_pd
-                            : fabs(mean[0] * nv[0] + mean[1] * nv[1] + mean[2] * nv[2]);
+            double pd = fabs(mean[0] * nv[0] + mean[1] * nv[1] + mean[2] * nv[2]);
             if (out->normals != NULL) {
                 double *nrm = out->normals + 3 * (s * n + oi);
                 nrm[0] = nv[0]; nrm[1] = nv[1]; nrm[2] = nv[2];
@@ -1593,7 +1646,6 @@ done:
     knn_cursor_free(&cur);
     free(q);
     free(d2);
-    free(mu);
     free(smean);
     free(soa);
     free(ell);

@@ -250,18 +250,26 @@ def test_knn_identical_without_the_avx2_scan(name, tmp_path):
     np.testing.assert_array_equal(plain, knn(points, 40))
 
 
-_COMPILED_ROBUST_PASS = """
+_COMPILED_PASS = """
 import sys
 import numpy as np
 from meshlab_sharp import _kernels
 from meshlab_sharp.robust import sheet_parameters
-points = np.load(sys.argv[1])
-fused = _kernels.cloud_projected_distances(
-    _kernels.build_tree(points), (12, 16, 20, 24, 28, 32, 36, 40), keep_normals=True,
-    relative=True, keep_pdis=True, noise_k=7, sheet=sheet_parameters())
-arrays = {name: getattr(fused, name) for name in ("pdis", "normals", "relative", "score")}
-arrays.update({name: getattr(fused.stats, name) for name in ("near", "kth_d2", "kth_idx", "noise")})
-np.savez(sys.argv[2], **arrays)
+tree = _kernels.build_tree(np.load(sys.argv[1]))
+out = {}
+for scales in ((12, 16, 20, 24, 28, 32, 36, 40), (2, 9, 33, 106, 131)):
+    for weighting in ("gaussian", "none"):
+        for sheet in (None, sheet_parameters()):
+            run = _kernels.cloud_projected_distances(
+                tree, scales, weighting, keep_normals=True, relative=True, keep_pdis=True,
+                noise_k=7, sheet=sheet,
+            )
+            key = f"{len(scales)}_{weighting}_{sheet is not None}"
+            out.update({key + "_pdis": run.pdis, key + "_normals": run.normals})
+            out.update({key + "_relative": run.relative, key + "_score": run.score})
+            for name in ("near", "kth_d2", "kth_idx", "noise"):
+                out[f"{key}_{name}"] = getattr(run.stats, name)
+np.savez(sys.argv[2], **out)
 """
 
 
@@ -274,17 +282,20 @@ def _parallel_sheets() -> np.ndarray:
     return _shuffled(np.concatenate([lower, upper]))
 
 
-@pytest.mark.parametrize("name", ["parallel_sheets", "noisy_outliers"])
-def test_robust_pass_identical_without_the_avx2_paths(name, tmp_path):
-    """Robust mode's pass (sheet filter, noise, local scales, every output) with its AVX2
-    paths (the kNN scan, the heights, their sort by ranks, the local scales' sums, where
-    the CPU has AVX2) and without them (``MESHLAB_SHARP_NO_AVX2``): the same bits."""
+@pytest.mark.parametrize("name", ["parallel_sheets", "noisy_box_cylinder", "outliers_grid_ties"])
+def test_pass_identical_without_the_avx2_paths(name, tmp_path):
+    """The compiled cloud pass with its AVX2 paths (where the CPU has AVX2, FMA and
+    POPCNT: the kNN scan, the sheet test's heights and their sort by ranks, the local
+    scales' sums, the PCA's 4 lanes with fused multiply-adds) and without them
+    (``MESHLAB_SHARP_NO_AVX2``) gives the same bits: normals, projected and relative
+    distances, scores, the noise statistics; both weightings, with and without the
+    sheet filter, 8 scales (two groups of 4) and 5 (a group of 1)."""
     cloud = _parallel_sheets() if name == "parallel_sheets" else ROBUST_CLOUDS[name]()
     points = np.unique(cloud, axis=0)
-    script, env = _COMPILED_ROBUST_PASS, {"MESHLAB_SHARP_NO_AVX2": "1"}
-    fast = _run_on_points(script, points, tmp_path / "fast.npz", timeout=60)
-    plain = _run_on_points(script, points, tmp_path / "plain.npz", timeout=60, env=env)
-    assert sorted(fast.files) == sorted(plain.files)
+    fast = _run_on_points(_COMPILED_PASS, points, tmp_path / "fast.npz", timeout=120)
+    env = {"MESHLAB_SHARP_NO_AVX2": "1"}
+    plain = _run_on_points(_COMPILED_PASS, points, tmp_path / "plain.npz", timeout=120, env=env)
+    assert sorted(fast.files) == sorted(plain.files) and len(fast.files) == 64
     for key in fast.files:
         np.testing.assert_array_equal(fast[key], plain[key], err_msg=key)
         assert fast[key].tobytes() == plain[key].tobytes(), key
@@ -446,6 +457,19 @@ def test_local_scale_identical_on_rings_and_empty_lists():
         _local_scale_both(vertices, rings.at(ring))
     lists = Neighbourhood(np.array([0, 0, 2, 2, 5]), np.array([1, 0, 2, 0, 3]))
     _local_scale_both(vertices[:4], lists)
+
+
+def test_pass_normals_of_a_subnormal_neighbourhood():
+    """Neighbourhoods about 2^-515 across: their squared radii h2 are subnormal and 1 / h2
+    overflows, yet the Gaussian weights exp(-d2 / h2) stay in (0, 1] (the pass divides,
+    as numpy does): unit normals, the plane's, and zero projected distances."""
+    rng = np.random.default_rng(3)
+    plane = np.column_stack([rng.random((500, 2)), np.zeros(500)])
+    tree = _kernels.build_tree(np.ldexp(plane, -515))
+    run = _kernels.cloud_projected_distances(tree, (12, 16, 20, 24, 28), keep_normals=True)
+    assert run.normals is not None and run.pdis is not None
+    np.testing.assert_allclose(np.abs(run.normals[..., 2]), 1.0, atol=1e-6)
+    assert np.all(run.pdis == 0.0)
 
 
 @pytest.mark.parametrize("scales", [(12, 16, 20, 24, 28, 32, 36, 40), (2, 9, 33, 106, 131)])
