@@ -1742,16 +1742,29 @@ int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
     return m;
 }
 
-/* Double area of each face as vcg computes it: |(p1 - p0) ^ (p2 - p0)|. */
-void ms_face_double_areas(const double *p, const int64_t *faces, int64_t m, double *out) {
+/* Double area of the face (i0, i1, i2) as vcg computes it: |(p1 - p0) ^ (p2 - p0)|. */
+static inline double double_area(const double *p, int64_t i0, int64_t i1, int64_t i2) {
+    const double *p0 = p + 3 * i0, *p1 = p + 3 * i1, *p2 = p + 3 * i2;
+    double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
+    double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
+    double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
+    return sqrt(x * x + y * y + z * z);
+}
+
+int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const int64_t *from_input,
+                      int64_t *out, uint8_t *used) {
+    int64_t kept = 0;
     for (int64_t f = 0; f < m; f++) {
-        const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
-                     *p2 = p + 3 * faces[3 * f + 2];
-        double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
-        double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-        double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
-        out[f] = sqrt(x * x + y * y + z * z);
+        int64_t a = faces[3 * f], b = faces[3 * f + 1], c = faces[3 * f + 2];
+        if (from_input != NULL) {
+            a = from_input[a]; b = from_input[b]; c = from_input[c];
+        }
+        if (!(double_area(p, a, b, c) > 0.0)) continue;
+        out[3 * kept] = a; out[3 * kept + 1] = b; out[3 * kept + 2] = c;
+        used[a] = 1; used[b] = 1; used[c] = 1;
+        kept++;
     }
+    return kept;
 }
 
 /* ------------------------------------------------------------ robust mode on meshes */
@@ -1821,4 +1834,79 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
  * add.reduceat does). */
 double ms_segment_sum(const double *a, int64_t n, int64_t stride) {
     return segment_sum(a, n, stride);
+}
+
+/* ------------------------------------------------------- thresholds (global steps) */
+
+/* Bin of a value in [0, 1]: min(floor(v * MS_BINS), MS_BINS - 1) (threshold.histogram;
+ * below 0, not a value the method makes, bin 0 rather than a write out of bounds). */
+static inline int64_t value_bin(double v) {
+    double b = floor(v * MS_BINS);
+    if (!(b >= 0.0)) return 0;
+    return b > MS_BINS - 1 ? MS_BINS - 1 : (int64_t)b;
+}
+
+double ms_otsu(const int64_t *counts) {
+    int64_t total = 0, weighted_total = 0;
+    for (int64_t b = 0; b < MS_BINS; b++) {
+        total += counts[b];
+        weighted_total += counts[b] * (2 * b + 1);
+    }
+    int64_t n0 = 0, s0 = 0, best_t = -1;
+    double best = 0.0;
+    for (int64_t t = 1; t < MS_BINS; t++) {
+        n0 += counts[t - 1];
+        s0 += counts[t - 1] * (2 * (t - 1) + 1);
+        if (n0 == 0 || n0 == total) continue;
+        const double dn0 = (double)n0, dn1 = (double)total - dn0;
+        const double ds0 = (double)s0, ds1 = (double)weighted_total - ds0;
+        const double diff = ds0 * dn1 - ds1 * dn0;
+        const double crit = diff * diff / (dn0 * dn1);
+        if (best_t < 0 || crit > best) {
+            best = crit;
+            best_t = t;
+        }
+    }
+    return best_t < 0 ? 1.0 : (double)best_t / MS_BINS;
+}
+
+void ms_histogram(const double *x, int64_t n, double lo, double span, int64_t *counts) {
+    if (span > 0.0) {
+        for (int64_t i = 0; i < n; i++) counts[value_bin((x[i] - lo) / span)]++;
+    } else if (span == 0.0) {
+        for (int64_t i = 0; i < n; i++) counts[value_bin(x[i])]++;
+    } else {
+        counts[0] += n;
+    }
+}
+
+double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
+                     double floor_, double *out, int64_t *votes, int64_t *count) {
+    double lo = 0.0, span = 0.0; /* values as given */
+    if (normalise) {
+        double mn = n > 0 ? x[0] : 0.0, mx = mn;
+        for (int64_t i = 1; i < n; i++) {
+            mn = x[i] < mn ? x[i] : mn;
+            mx = x[i] > mx ? x[i] : mx;
+        }
+        lo = mn;
+        span = mx - mn > flat_span ? mx - mn : -1.0; /* -1: flat, every value 0 */
+    }
+    double t = floor_;
+    if (otsu) {
+        int64_t counts[MS_BINS] = {0};
+        ms_histogram(x, n, lo, span, counts);
+        const double split = ms_otsu(counts);
+        t = split > floor_ ? split : floor_;
+    }
+    int64_t c = 0;
+    for (int64_t i = 0; i < n; i++) {
+        const double v = span > 0.0 ? (x[i] - lo) / span : span == 0.0 ? x[i] : 0.0;
+        const int64_t hit = v >= t;
+        if (out != NULL) out[i] = v;
+        votes[i] += hit;
+        c += hit;
+    }
+    *count = c;
+    return t;
 }

@@ -242,9 +242,31 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
 int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input);
 
-/* Double area |(p1 - p0) x (p2 - p0)| of each face (m, 3) into out (m), as vcg's
- * DoubleArea. */
-void ms_face_double_areas(const double *p, const int64_t *faces, int64_t m, double *out);
+/* Cleaning's faces in one pass (cleaning.clean): each face of faces (m, 3) (indices of
+ * the input points, mapped through from_input when not NULL) whose double area on p,
+ * |(p1 - p0) x (p2 - p0)| as vcg's DoubleArea computes it, is > 0, in order, into out (room for m rows; may be faces
+ * itself when from_input is NULL), its vertices marked 1 in used (zeroed by the caller).
+ * Returns the number of faces kept. */
+int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const int64_t *from_input,
+                      int64_t *out, uint8_t *used);
+
+/* Thresholds, the global steps of every path (docs/implementation-notes.md,
+ * "Normalisation and Otsu"; threshold.py is the numpy reference).
+ * ms_otsu: Otsu's threshold t / MS_BINS from the MS_BINS counts of a histogram, in the
+ * integer form of the notes (the first largest split wins); 1.0 when no split has points
+ * on both sides (threshold.otsu_from_histogram).
+ * ms_histogram: adds the bins min(floor(v * MS_BINS), MS_BINS - 1) of v = (x[i] - lo) /
+ * span (span > 0), v = x[i] (span == 0), or v = 0 (span < 0: a flat scale) of x (n) to
+ * counts (MS_BINS) (threshold.histogram).
+ * ms_scale_vote: one scale's decision over x (n). With `normalise`, v is the min-max
+ * normalised x, all 0 when max - min <= flat_span (threshold.normalise); else v = x (in
+ * [0, 1]). The threshold is T = max(ms_otsu(histogram of v), floor_) with `otsu`, floor_
+ * without (no histogram; robust.robust_threshold); then votes[i] += v[i] >= T, the number
+ * of such points into *count, and v into out when out is not NULL. Returns T. */
+double ms_otsu(const int64_t *counts);
+void ms_histogram(const double *x, int64_t n, double lo, double span, int64_t *counts);
+double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
+                     double floor_, double *out, int64_t *votes, int64_t *count);
 
 #ifdef __cplusplus
 }

@@ -75,7 +75,13 @@ _SIGNATURES = {
     ),
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
-    "ms_face_double_areas": (None, [_c_void_p, _c_void_p, _i64, _c_void_p]),
+    "ms_keep_faces": (_i64, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_otsu": (_f64, [_c_void_p]),
+    "ms_histogram": (None, [_c_void_p, _i64, _f64, _f64, _c_void_p]),
+    "ms_scale_vote": (
+        _f64,
+        [_c_void_p, _i64, _int, _f64, _int, _f64, _c_void_p, _c_void_p, _c_void_p],
+    ),
     "ms_two_face_edges": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
 }
 
@@ -680,15 +686,91 @@ def face_average_normals(points: np.ndarray, faces: np.ndarray, zero: float) -> 
     return acc
 
 
-def face_double_areas(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``|(p1 - p0) x (p2 - p0)|`` of every face, as vcg's DoubleArea computes it."""
+def keep_faces(
+    points: np.ndarray, faces: np.ndarray, from_input: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Cleaning's faces in one C pass (``ms_keep_faces``): ``faces`` (f, 3) mapped
+    through ``from_input`` (n,) when not None, those whose double area on ``points``
+    (m, 3) (``|(p1 - p0) x (p2 - p0)|``, as vcg's DoubleArea) is > 0, in order.
+
+    Returns
+    -------
+    kept : (k, 3) int64
+    used : (m,) bool
+        The vertices that a kept face uses.
+    """
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    out = np.empty(len(faces))
-    lib.ms_face_double_areas(_ptr(points), _ptr(faces), len(faces), _ptr(out))
-    return out
+    remap = None if from_input is None else np.ascontiguousarray(from_input, dtype=np.int64)
+    out = np.empty_like(faces)
+    used = np.zeros(len(points), dtype=bool)
+    k = lib.ms_keep_faces(_ptr(points), _ptr(faces), len(faces), _ptr(remap), _ptr(out), _ptr(used))
+    out.resize((k, 3), refcheck=False)
+    return out, used
+
+
+def scale_vote(
+    values: np.ndarray,
+    votes: np.ndarray,
+    *,
+    flat_span: float | None = None,
+    otsu: bool = True,
+    floor: float = 0.0,
+    out: np.ndarray | None = None,
+) -> tuple[float, int]:
+    """One scale's threshold and votes in one C call (``ms_scale_vote``), bit for bit
+    :func:`meshlab_sharp.threshold.normalise` (when ``flat_span`` is not None),
+    :func:`~meshlab_sharp.threshold.otsu_threshold` and ``v >= T``.
+
+    Parameters
+    ----------
+    values : (m,) float64
+        Projected distances (normalised here when ``flat_span`` is given) or values
+        already in [0, 1] (robust mode's relative distances).
+    votes : (m,) int64
+        Incremented in place where ``v >= T``.
+    flat_span : float, optional
+        Min-max normalise first, every value 0 when ``max - min <= flat_span``.
+    otsu : bool, default True
+        ``T = max(otsu_threshold(v), floor)``; False: ``T = floor``
+        (:func:`meshlab_sharp.robust.robust_threshold`).
+    floor : float, default 0.0
+    out : (m,) float64, optional
+        Receives ``v``.
+
+    Returns
+    -------
+    threshold : float
+    count : int
+        Points with ``v >= T``.
+    """
+    lib = _LIB
+    assert lib is not None
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    if votes.dtype != np.int64 or not votes.flags.c_contiguous or votes.shape != values.shape:
+        raise ValueError("votes must be a contiguous int64 array shaped like values")
+    if out is not None and (out.dtype != np.float64 or not out.flags.c_contiguous):
+        raise ValueError("out must be a contiguous float64 array")
+    count = ctypes.c_int64(0)
+    normalise = flat_span is not None
+    t = lib.ms_scale_vote(
+        _ptr(values), len(values), int(normalise), float(flat_span or 0.0), int(otsu),
+        float(floor), _ptr(out), _ptr(votes), ctypes.byref(count),
+    )  # fmt: skip
+    return float(t), int(count.value)
+
+
+def otsu_from_histogram(counts: np.ndarray) -> float:
+    """``ms_otsu``: :func:`meshlab_sharp.threshold.otsu_from_histogram` of the ``BINS``
+    counts (B,) int64, bit for bit."""
+    lib = _LIB
+    assert lib is not None
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    if counts.shape != (_header.integer("BINS"),):
+        raise ValueError(f"counts must have {_header.integer('BINS')} bins")
+    return float(lib.ms_otsu(_ptr(counts)))
 
 
 def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
