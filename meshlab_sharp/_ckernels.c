@@ -1830,6 +1830,110 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
     return e;
 }
 
+int ms_vertex_faces(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *inc) {
+    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
+    if (fill == NULL) return -1;
+    memset(ptr, 0, (size_t)(n + 1) * sizeof(int64_t));
+    for (int64_t k = 0; k < 3 * m; k++) ptr[faces[k] + 1]++;
+    for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
+    memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
+    for (int64_t k = 0; k < 3 * m; k++) inc[fill[faces[k]]++] = (int32_t)(k / 3);
+    free(fill);
+    return 0;
+}
+
+/* The two-face edges (a, b), a < b, of the vertices a in [a0, a1) of ms_vertex_faces'
+ * lists, in the order both crease functions meet them: a increasing, then a's faces in
+ * order, then the face's corners after a's; each edge where its first face lists it,
+ * numbered from e. With mask NULL, the dot products of the two faces' unit normals
+ * (face_normal, the lower face first, as ms_two_face_edges) into dot, and the number of
+ * the first edge of each vertex into estart (n + 1); else the vertices of the edges whose
+ * angle[e] > threshold marked in mask. Returns the number after the last edge. A vertex's
+ * faces and their two other corners are read once into a small table (a fan of more than
+ * CREASE_FAN faces: read from faces). */
+enum { CREASE_FAN = 64 };
+
+static int64_t crease_walk(const double *p, const int64_t *faces, int64_t a0, int64_t a1,
+                           const int64_t *ptr, const int32_t *inc, int64_t e, double *dot,
+                           int64_t *estart, const double *angle, double threshold, uint8_t *mask) {
+    int64_t other[2 * CREASE_FAN];
+    for (int64_t a = a0; a < a1; a++) {
+        if (estart != NULL) estart[a] = e;
+        const int32_t *fa = inc + ptr[a];
+        const int64_t deg = ptr[a + 1] - ptr[a];
+        const int64_t local = deg <= CREASE_FAN;
+        for (int64_t i = 0; local && i < deg; i++) {
+            const int64_t *c = faces + 3 * (int64_t)fa[i];
+            const int at = c[0] == a ? 0 : c[1] == a ? 1 : 2;
+            other[2 * i] = c[(at + 1) % 3];
+            other[2 * i + 1] = c[(at + 2) % 3];
+        }
+        for (int64_t i = 0; i < deg; i++) {
+            int64_t corner[2];
+            if (local) {
+                corner[0] = other[2 * i];
+                corner[1] = other[2 * i + 1];
+            } else {
+                const int64_t *c = faces + 3 * (int64_t)fa[i];
+                const int at = c[0] == a ? 0 : c[1] == a ? 1 : 2;
+                corner[0] = c[(at + 1) % 3];
+                corner[1] = c[(at + 2) % 3];
+            }
+            for (int k = 0; k < 2; k++) {
+                const int64_t b = corner[k];
+                if (b < a) continue;
+                int64_t count = 1, second = -1, seen = 0;
+                for (int64_t j = 0; j < deg; j++) {
+                    if (j == i) continue;
+                    int has;
+                    if (local) {
+                        has = other[2 * j] == b || other[2 * j + 1] == b;
+                    } else {
+                        const int64_t *c = faces + 3 * (int64_t)fa[j];
+                        has = c[0] == b || c[1] == b || c[2] == b;
+                    }
+                    if (!has) continue;
+                    if (j < i) {
+                        seen = 1;
+                        break;
+                    }
+                    count++;
+                    second = fa[j];
+                }
+                if (seen || count != 2) continue;
+                if (mask == NULL) {
+                    double u[3], w[3];
+                    face_normal(p, faces, fa[i], u);
+                    face_normal(p, faces, second, w);
+                    dot[e] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+                } else if (angle[e] > threshold) {
+                    mask[a] = 1;
+                    mask[b] = 1;
+                }
+                e++;
+            }
+        }
+    }
+    if (estart != NULL) estart[a1] = e;
+    return e;
+}
+
+int64_t ms_crease_dots(const double *p, const int64_t *faces, int64_t n, const int64_t *ptr,
+                       const int32_t *inc, double *dot, int64_t *estart) {
+    return crease_walk(p, faces, 0, n, ptr, inc, 0, dot, estart, NULL, 0.0, NULL);
+}
+
+void ms_crease_mask(const int64_t *faces, int64_t n, const int64_t *ptr, const int32_t *inc,
+                    const int64_t *estart, const double *angle, double threshold, uint8_t *mask) {
+    /* only the vertices with an edge above the threshold are walked again */
+    for (int64_t a = 0; a < n; a++) {
+        int64_t k = estart[a];
+        while (k < estart[a + 1] && !(angle[k] > threshold)) k++;
+        if (k < estart[a + 1])
+            crease_walk(NULL, faces, a, a + 1, ptr, inc, estart[a], NULL, NULL, angle, threshold, mask);
+    }
+}
+
 /* segment_sum, for callers outside this file (the plugin's line directions sum as numpy's
  * add.reduceat does). */
 double ms_segment_sum(const double *a, int64_t n, int64_t stride) {

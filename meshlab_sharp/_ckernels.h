@@ -235,6 +235,21 @@ void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, i
 int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot);
 
+/* creases.sharp_vertices in less memory than ms_two_face_edges (no sort keys, no edge
+ * list). ms_vertex_faces: each vertex's faces, in face order, as CSR ptr (n + 1), inc
+ * (3 m; m < 2^31); returns 0 or -1 out of memory. ms_crease_dots: the dot products u . v
+ * of the unit normals of the two faces of every edge with exactly two faces (the same
+ * values as ms_two_face_edges', in another order: the lower vertex increasing, then its
+ * faces in order) into dot (room for (3 m + 1) / 2), where each vertex's edges start
+ * into estart (n + 1); returns their number. ms_crease_mask: the same edges; both
+ * vertices of each edge whose angle[e] > threshold marked 1 in mask (n, zeroed by the
+ * caller). */
+int ms_vertex_faces(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *inc);
+int64_t ms_crease_dots(const double *p, const int64_t *faces, int64_t n, const int64_t *ptr,
+                       const int32_t *inc, double *dot, int64_t *estart);
+void ms_crease_mask(const int64_t *faces, int64_t n, const int64_t *ptr, const int32_t *inc,
+                    const int64_t *estart, const double *angle, double threshold, uint8_t *mask);
+
 /* Merge exactly equal points into their first occurrence. table: (tmask + 1) int64
  * scratch, all -1, tmask + 1 a power of two >= 2 n. from_input (n): cleaned index of
  * each input point; to_input (n, first m used): input index of each cleaned point.

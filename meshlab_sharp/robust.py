@@ -1252,9 +1252,9 @@ class RobustSetup:
             lists = [listed[k] for k in rings]
         out = []
         for ring in lists:
-            sizes = np.zeros(self.n, dtype=np.int64)
-            sizes[rows] = ring.sizes
-            indptr = np.concatenate([[0], np.cumsum(sizes)])
+            indptr = np.zeros(self.n + 1, dtype=np.int64)  # the sizes, summed in place
+            indptr[np.asarray(rows, dtype=np.int64) + 1] = ring.sizes
+            np.cumsum(indptr, out=indptr)
             out.append(Neighbourhood(indptr, ring.indices))
         return out
 

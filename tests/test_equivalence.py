@@ -669,3 +669,28 @@ def test_compiled_threshold_and_votes_identical(name):
             int((v >= expected).sum()),
         )
         assert np.array_equal(votes, v >= expected)
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.02])
+def test_sharp_vertices_identical(noise):
+    """The compiled sharp mesh edges (``crease_vertices``: each vertex's faces, no edge
+    list) give the numpy reference's mask and threshold, on a mesh with creases, boundary
+    edges and edges of three faces; with noise the lower quartile sets the threshold."""
+    from meshlab_sharp.creases import CREASE_ANGLE, sharp_vertices
+
+    vertices, faces = cube_grid_mesh(3)
+    vertices = vertices + np.random.default_rng(3).normal(0.0, noise, vertices.shape)
+    # a fin of two faces on one edge of the first face (three faces there), and a lone
+    # face (three boundary edges)
+    a, b = faces[0][:2]
+    extra = len(vertices)
+    vertices = np.vstack(
+        [vertices, [[3.0, 3.0, 3.0], [5.0, 5.0, 6.0], [5.0, 6.0, 5.0], [6.0, 5.0, 5.0]]]
+    )
+    faces = np.vstack([faces, [[a, b, extra], [extra + 1, extra + 2, extra + 3]]])
+    ref_mask, ref_threshold = sharp_vertices(vertices, faces, backend="numpy")
+    mask, threshold = sharp_vertices(vertices, faces, backend="compiled")
+    assert threshold == ref_threshold
+    assert (threshold > np.radians(CREASE_ANGLE)) == (noise > 0)
+    assert ref_mask.any() and not ref_mask.all()
+    np.testing.assert_array_equal(mask, ref_mask)

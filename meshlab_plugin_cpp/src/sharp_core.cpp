@@ -401,14 +401,14 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 
 // creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
 // normals turn by more than max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles);
-// the edges and their normals' dot products from the kernel (_kernels.two_face_edges).
+// the edges and their normals' dot products from the kernel (_kernels.crease_vertices).
 std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<Index> &faces) {
 	const Index F = Index(faces.size() / 3), n = Index(p.size() / 3);
-	std::vector<Index> pairs(2 * ((3 * F + 1) / 2));  // room for the kernel's 3 F sort keys
+	std::vector<Index> ptr(n + 1), estart(n + 1);
+	std::vector<int32_t> inc(3 * F);
+	check(ms_vertex_faces(faces.data(), F, n, ptr.data(), inc.data()));
 	std::vector<double> angles((3 * F + 1) / 2);
-	const Index e = ms_two_face_edges(p.data(), faces.data(), F, n, pairs.data(), angles.data());
-	check(e < 0 ? -1 : 0);
-	angles.resize(e);
+	angles.resize(ms_crease_dots(p.data(), faces.data(), n, ptr.data(), inc.data(), angles.data(), estart.data()));
 	for (double &a : angles) a = std::acos(std::min(1.0, std::max(-1.0, a)));
 	double theta = MS_CREASE_ANGLE * (M_PI / 180.0);
 	if (!angles.empty()) {
@@ -417,10 +417,9 @@ std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<
 		std::nth_element(sorted.begin(), sorted.begin() + at, sorted.end());
 		theta = std::max(theta, MS_NOISE_FACTOR * sorted[at]);
 	}
-	std::vector<char> out(n, 0);
-	for (Index k = 0; k < e; ++k)
-		if (angles[k] > theta) out[pairs[2 * k]] = out[pairs[2 * k + 1]] = 1;
-	return out;
+	std::vector<uint8_t> mask(n, 0);
+	ms_crease_mask(faces.data(), n, ptr.data(), inc.data(), estart.data(), angles.data(), theta, mask.data());
+	return std::vector<char>(mask.begin(), mask.end());
 }
 
 // What one mode leaves per processed point.
