@@ -1943,11 +1943,13 @@ double ms_segment_sum(const double *a, int64_t n, int64_t stride) {
 /* ------------------------------------------------------- thresholds (global steps) */
 
 /* Bin of a value in [0, 1]: min(floor(v * MS_BINS), MS_BINS - 1) (threshold.histogram;
- * below 0, not a value the method makes, bin 0 rather than a write out of bounds). */
+ * below 0, not a value the method makes, bin 0 rather than a write out of bounds). On
+ * [0, MS_BINS - 1) the conversion's truncation is floor (no call of floor: a plain build
+ * has no SSE4.1 rounding instruction). */
 static inline int64_t value_bin(double v) {
-    double b = floor(v * MS_BINS);
+    const double b = v * MS_BINS;
     if (!(b >= 0.0)) return 0;
-    return b > MS_BINS - 1 ? MS_BINS - 1 : (int64_t)b;
+    return b >= MS_BINS - 1 ? MS_BINS - 1 : (int64_t)b;
 }
 
 double ms_otsu(const int64_t *counts) {
