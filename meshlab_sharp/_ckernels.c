@@ -1702,10 +1702,10 @@ static inline uint64_t point_hash(const double *x) {
 }
 
 /* Merge exactly equal points (==, so -0.0 equals 0.0) into their first occurrence.
- * table: (tmask + 1) int64 scratch, all -1. from_input (n): cleaned index of each
- * input point; to_input (n, first m used): input index of each cleaned point.
+ * table: (tmask + 1) int32 scratch, all -1 (n < 2^31). from_input (n): cleaned index
+ * of each input point; to_input (n, first m used): input index of each cleaned point.
  * Returns m. */
-int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
+int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input) {
     /* the slots of the next DEDUP_AHEAD points are fetched while this one is probed */
     enum { DEDUP_AHEAD = 16 };
@@ -1726,7 +1726,7 @@ int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
         while (1) {
             int64_t t = table[h];
             if (t < 0) {
-                table[h] = i;
+                table[h] = (int32_t)i;
                 from_input[i] = m;
                 to_input[m++] = i;
                 break;
@@ -1942,6 +1942,19 @@ double ms_segment_sum(const double *a, int64_t n, int64_t stride) {
 
 /* ------------------------------------------------------- thresholds (global steps) */
 
+void ms_extent(const double *p, int64_t n, double *out) {
+    double lo[3] = {0.0, 0.0, 0.0}, hi[3] = {0.0, 0.0, 0.0};
+    if (n > 0)
+        for (int a = 0; a < 3; a++) lo[a] = hi[a] = p[a];
+    for (int64_t i = 1; i < n; i++)
+        for (int a = 0; a < 3; a++) {
+            const double x = p[3 * i + a];
+            lo[a] = x < lo[a] ? x : lo[a];
+            hi[a] = x > hi[a] ? x : hi[a];
+        }
+    for (int a = 0; a < 3; a++) out[a] = hi[a] - lo[a];
+}
+
 /* Bin of a value in [0, 1]: min(floor(v * MS_BINS), MS_BINS - 1) (threshold.histogram;
  * below 0, not a value the method makes, bin 0 rather than a write out of bounds). On
  * [0, MS_BINS - 1) the conversion's truncation is floor (no call of floor: a plain build
@@ -1952,7 +1965,10 @@ static inline int64_t value_bin(double v) {
     return b >= MS_BINS - 1 ? MS_BINS - 1 : (int64_t)b;
 }
 
-double ms_otsu(const int64_t *counts) {
+/* Otsu's threshold t / MS_BINS from the MS_BINS counts of a histogram, in the integer
+ * form of the notes (the first largest split wins); 1.0 when no split has points on both
+ * sides (threshold.otsu_from_histogram). */
+static double otsu_split(const int64_t *counts) {
     int64_t total = 0, weighted_total = 0;
     for (int64_t b = 0; b < MS_BINS; b++) {
         total += counts[b];
@@ -1976,7 +1992,9 @@ double ms_otsu(const int64_t *counts) {
     return best_t < 0 ? 1.0 : (double)best_t / MS_BINS;
 }
 
-void ms_histogram(const double *x, int64_t n, double lo, double span, int64_t *counts) {
+/* Adds the bins (value_bin) of v = (x[i] - lo) / span (span > 0), v = x[i] (span == 0),
+ * or v = 0 (span < 0: a flat scale) of x (n) to counts (MS_BINS) (threshold.histogram). */
+static void histogram(const double *x, int64_t n, double lo, double span, int64_t *counts) {
     if (span > 0.0) {
         for (int64_t i = 0; i < n; i++) counts[value_bin((x[i] - lo) / span)]++;
     } else if (span == 0.0) {
@@ -2001,8 +2019,8 @@ double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span
     double t = floor_;
     if (otsu) {
         int64_t counts[MS_BINS] = {0};
-        ms_histogram(x, n, lo, span, counts);
-        const double split = ms_otsu(counts);
+        histogram(x, n, lo, span, counts);
+        const double split = otsu_split(counts);
         t = split > floor_ ? split : floor_;
     }
     int64_t c = 0;

@@ -250,11 +250,11 @@ int64_t ms_crease_dots(const double *p, const int64_t *faces, int64_t n, const i
 void ms_crease_mask(const int64_t *faces, int64_t n, const int64_t *ptr, const int32_t *inc,
                     const int64_t *estart, const double *angle, double threshold, uint8_t *mask);
 
-/* Merge exactly equal points into their first occurrence. table: (tmask + 1) int64
- * scratch, all -1, tmask + 1 a power of two >= 2 n. from_input (n): cleaned index of
- * each input point; to_input (n, first m used): input index of each cleaned point.
- * Returns m. */
-int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
+/* Merge exactly equal points into their first occurrence. table: (tmask + 1) int32
+ * scratch, all -1, tmask + 1 a power of two >= 2 n; n < 2^31. from_input (n): cleaned
+ * index of each input point; to_input (n, first m used): input index of each cleaned
+ * point. Returns m. */
+int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input);
 
 /* Cleaning's faces in one pass (cleaning.clean): each face of faces (m, 3) (indices of
@@ -267,19 +267,16 @@ int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const in
 
 /* Thresholds, the global steps of every path (docs/implementation-notes.md,
  * "Normalisation and Otsu"; threshold.py is the numpy reference).
- * ms_otsu: Otsu's threshold t / MS_BINS from the MS_BINS counts of a histogram, in the
- * integer form of the notes (the first largest split wins); 1.0 when no split has points
- * on both sides (threshold.otsu_from_histogram).
- * ms_histogram: adds the bins min(floor(v * MS_BINS), MS_BINS - 1) of v = (x[i] - lo) /
- * span (span > 0), v = x[i] (span == 0), or v = 0 (span < 0: a flat scale) of x (n) to
- * counts (MS_BINS) (threshold.histogram).
+ * ms_extent: max - min of each coordinate of the finite points p (n, 3) into out (3)
+ * (numpy's ptp of each column; 0 when n = 0), for the flat rule's bounding box.
  * ms_scale_vote: one scale's decision over x (n). With `normalise`, v is the min-max
  * normalised x, all 0 when max - min <= flat_span (threshold.normalise); else v = x (in
- * [0, 1]). The threshold is T = max(ms_otsu(histogram of v), floor_) with `otsu`, floor_
+ * [0, 1]). The threshold is T = max(Otsu's split of the MS_BINS-bin histogram of v (bin
+ * min(floor(v * MS_BINS), MS_BINS - 1); the split's integer form of the notes, the first
+ * largest wins; 1.0 when no split has points on both sides), floor_) with `otsu`, floor_
  * without (no histogram; robust.robust_threshold); then votes[i] += v[i] >= T, the number
  * of such points into *count, and v into out when out is not NULL. Returns T. */
-double ms_otsu(const int64_t *counts);
-void ms_histogram(const double *x, int64_t n, double lo, double span, int64_t *counts);
+void ms_extent(const double *p, int64_t n, double *out);
 double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
                      double floor_, double *out, int64_t *votes, int64_t *count);
 

@@ -76,8 +76,7 @@ _SIGNATURES = {
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_keep_faces": (_i64, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
-    "ms_otsu": (_f64, [_c_void_p]),
-    "ms_histogram": (None, [_c_void_p, _i64, _f64, _f64, _c_void_p]),
+    "ms_extent": (None, [_c_void_p, _i64, _c_void_p]),
     "ms_scale_vote": (
         _f64,
         [_c_void_p, _i64, _int, _f64, _int, _f64, _c_void_p, _c_void_p, _c_void_p],
@@ -763,6 +762,17 @@ def keep_faces(
     return out, used
 
 
+def extent(points: np.ndarray) -> np.ndarray:
+    """``max - min`` of each coordinate of the finite ``points`` (n, 3): (3,) float64,
+    numpy's ``ptp`` of each column (``ms_extent``, one pass)."""
+    lib = _LIB
+    assert lib is not None
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.empty(3)
+    lib.ms_extent(_ptr(points), len(points), _ptr(out))
+    return out
+
+
 def scale_vote(
     values: np.ndarray,
     votes: np.ndarray,
@@ -814,17 +824,6 @@ def scale_vote(
     return float(t), int(count.value)
 
 
-def otsu_from_histogram(counts: np.ndarray) -> float:
-    """``ms_otsu``: :func:`meshlab_sharp.threshold.otsu_from_histogram` of the ``BINS``
-    counts (B,) int64, bit for bit."""
-    lib = _LIB
-    assert lib is not None
-    counts = np.ascontiguousarray(counts, dtype=np.int64)
-    if counts.shape != (_header.integer("BINS"),):
-        raise ValueError(f"counts must have {_header.integer('BINS')} bins")
-    return float(lib.ms_otsu(_ptr(counts)))
-
-
 def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Exactly equal points merged into their first occurrence.
 
@@ -839,13 +838,16 @@ def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     n = len(points)
+    if n >= 2**31:
+        raise ValueError("the compiled duplicate merge handles fewer than 2**31 points")
     size = 1 << int(np.ceil(np.log2(max(2 * n, 2))))
-    table = np.full(size, -1, dtype=np.int64)
+    table = np.full(size, -1, dtype=np.int32)
     from_input = np.empty(n, dtype=np.int64)
     to_input = np.empty(n, dtype=np.int64)
     m = lib.ms_dedup(_ptr(points), n, _ptr(table), size - 1, _ptr(from_input), _ptr(to_input))
     del table
-    return to_input[:m].copy() if m < n else to_input, from_input
+    to_input.resize(m, refcheck=False)  # trimmed in place: no copy
+    return to_input, from_input
 
 
 def smallest_eigenvectors(cov: np.ndarray) -> np.ndarray:

@@ -49,7 +49,7 @@ from meshlab_sharp.robust import (
     noise_scale_factor,
     robust_threshold,
 )
-from meshlab_sharp.threshold import histogram, normalise, otsu_threshold
+from meshlab_sharp.threshold import normalise, otsu_threshold
 
 pytestmark = pytest.mark.skipif(
     not _kernels.available(),
@@ -660,7 +660,6 @@ def test_compiled_threshold_and_votes_identical(name):
     assert _kernels.scale_vote(x, votes, flat_span=flat_span, out=out) == (t, int((v >= t).sum()))
     assert np.array_equal(out, v)
     assert np.array_equal(votes, np.arange(len(x)) + (v >= t))
-    assert _kernels.otsu_from_histogram(histogram(v)) == t
     for otsu in (True, False):
         expected = robust_threshold(v, otsu)
         votes = np.zeros(len(x), np.int64)
@@ -694,3 +693,12 @@ def test_sharp_vertices_identical(noise):
     assert (threshold > np.radians(CREASE_ANGLE)) == (noise > 0)
     assert ref_mask.any() and not ref_mask.all()
     np.testing.assert_array_equal(mask, ref_mask)
+
+
+@pytest.mark.parametrize("n", [1, 2, 1000])
+def test_compiled_extent_is_numpy_ptp(n):
+    """``_kernels.extent``, the flat rule's bounding box in one C pass, is numpy's ``ptp``
+    of each column, bit for bit."""
+    points = np.random.default_rng(n).normal(0.0, 1.0, (n, 3)) * [1e-3, 7.0, 1e5] - 2.5
+    expected = [np.ptp(points[:, a]) for a in range(3)]
+    np.testing.assert_array_equal(_kernels.extent(points), expected)

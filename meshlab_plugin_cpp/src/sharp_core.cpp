@@ -140,7 +140,8 @@ Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool 
 	const Index n = Index(v.size() / 3);
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
-	std::vector<Index> table(size, -1), toInput(n), fromInput(n);
+	std::vector<int32_t> table(size, -1);
+	std::vector<Index> toInput(n), fromInput(n);
 	const Index m = ms_dedup(v.data(), n, table.data(), size - 1, fromInput.data(), toInput.data());
 	toInput.resize(m);
 	Clean c;
@@ -488,15 +489,9 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 		bar.report(0, "kd-tree");
 		pdis = cloudPass(Tree(c.pts), r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
 	}
-	double lo[3], hi[3];
-	for (int a = 0; a < 3; ++a) lo[a] = hi[a] = c.pts[a];
-	for (Index i = 0; i < n; ++i)
-		for (int a = 0; a < 3; ++a) {
-			lo[a] = std::min(lo[a], c.pts[3 * i + a]);
-			hi[a] = std::max(hi[a], c.pts[3 * i + a]);
-		}
-	const double dx = hi[0] - lo[0], dy = hi[1] - lo[1], dz = hi[2] - lo[2];
-	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(dx * dx + dy * dy + dz * dz);
+	double box[3];
+	ms_extent(c.pts.data(), n, box);
+	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(box[0] * box[0] + box[1] * box[1] + box[2] * box[2]);
 	bar.report(90, "thresholds");
 	std::vector<int64_t> votes(n, 0);
 	r.allFlat = true;
