@@ -702,3 +702,21 @@ def test_compiled_extent_is_numpy_ptp(n):
     points = np.random.default_rng(n).normal(0.0, 1.0, (n, 3)) * [1e-3, 7.0, 1e5] - 2.5
     expected = [np.ptp(points[:, a]) for a in range(3)]
     np.testing.assert_array_equal(_kernels.extent(points), expected)
+
+
+def test_sharp_vertices_identical_on_a_wide_fan():
+    """A vertex with 150 faces (more than the compiled walk's small table holds, so its
+    faces are read from the face array) and bumps on its rim: the same mask and threshold
+    as the numpy reference, a part of the vertices sharp."""
+    from meshlab_sharp.creases import sharp_vertices
+
+    k = 150
+    angle = np.linspace(0.0, 2.0 * np.pi, k, endpoint=False)
+    rim = np.c_[np.cos(angle), np.sin(angle), np.where(np.arange(k) % 10 == 0, 0.3, 0.0)]
+    points = np.vstack([[0.0, 0.0, 0.0], rim])
+    faces = np.array([[0, 1 + i, 1 + (i + 1) % k] for i in range(k)])
+    ref_mask, ref_threshold = sharp_vertices(points, faces, backend="numpy")
+    mask, threshold = sharp_vertices(points, faces, backend="compiled")
+    assert threshold == ref_threshold
+    assert 0 < ref_mask.sum() < len(points)
+    np.testing.assert_array_equal(mask, ref_mask)
