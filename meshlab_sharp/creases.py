@@ -153,6 +153,8 @@ def sharp_vertices(
     ----------
     points : (n, 3) float64
     faces : (f, 3) int
+        Triangles of non-zero area (cleaned: three distinct vertices), as
+        :func:`dihedral_angles` takes them.
     backend : {"compiled", "numpy"}, optional
         Default :func:`meshlab_sharp._kernels.default_backend`; the same result. The
         compiled one lists no edges (:func:`meshlab_sharp._kernels.crease_vertices`).
