@@ -2012,10 +2012,10 @@ static inline uint64_t point_hash(const double *x) {
 }
 
 /* Merge exactly equal points (==, so -0.0 equals 0.0) into their first occurrence.
- * table: (tmask + 1) int64 scratch, all -1. from_input (n): cleaned index of each
- * input point; to_input (n, first m used): input index of each cleaned point.
+ * table: (tmask + 1) int32 scratch, all -1 (n < 2^31). from_input (n): cleaned index
+ * of each input point; to_input (n, first m used): input index of each cleaned point.
  * Returns m. */
-int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
+int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input) {
     /* the slots of the next DEDUP_AHEAD points are fetched while this one is probed */
     enum { DEDUP_AHEAD = 16 };
@@ -2036,7 +2036,7 @@ int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
         while (1) {
             int64_t t = table[h];
             if (t < 0) {
-                table[h] = i;
+                table[h] = (int32_t)i;
                 from_input[i] = m;
                 to_input[m++] = i;
                 break;
@@ -2052,16 +2052,29 @@ int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
     return m;
 }
 
-/* Double area of each face as vcg computes it: |(p1 - p0) ^ (p2 - p0)|. */
-void ms_face_double_areas(const double *p, const int64_t *faces, int64_t m, double *out) {
+/* Double area of the face (i0, i1, i2) as vcg computes it: |(p1 - p0) ^ (p2 - p0)|. */
+static inline double double_area(const double *p, int64_t i0, int64_t i1, int64_t i2) {
+    const double *p0 = p + 3 * i0, *p1 = p + 3 * i1, *p2 = p + 3 * i2;
+    double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
+    double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
+    double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
+    return sqrt(x * x + y * y + z * z);
+}
+
+int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const int64_t *from_input,
+                      int64_t *out, uint8_t *used) {
+    int64_t kept = 0;
     for (int64_t f = 0; f < m; f++) {
-        const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
-                     *p2 = p + 3 * faces[3 * f + 2];
-        double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
-        double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-        double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
-        out[f] = sqrt(x * x + y * y + z * z);
+        int64_t a = faces[3 * f], b = faces[3 * f + 1], c = faces[3 * f + 2];
+        if (from_input != NULL) {
+            a = from_input[a]; b = from_input[b]; c = from_input[c];
+        }
+        if (!(double_area(p, a, b, c) > 0.0)) continue;
+        out[3 * kept] = a; out[3 * kept + 1] = b; out[3 * kept + 2] = c;
+        used[a] = 1; used[b] = 1; used[c] = 1;
+        kept++;
     }
+    return kept;
 }
 
 /* ------------------------------------------------------------ robust mode on meshes */
@@ -2127,8 +2140,207 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
     return e;
 }
 
+int ms_vertex_faces(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *inc) {
+    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
+    if (fill == NULL) return -1;
+    memset(ptr, 0, (size_t)(n + 1) * sizeof(int64_t));
+    for (int64_t k = 0; k < 3 * m; k++) ptr[faces[k] + 1]++;
+    for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
+    memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
+    for (int64_t k = 0; k < 3 * m; k++) inc[fill[faces[k]]++] = (int32_t)(k / 3);
+    free(fill);
+    return 0;
+}
+
+/* The two-face edges (a, b), a < b, of the vertices a in [a0, a1) of ms_vertex_faces'
+ * lists, in the order both crease functions meet them: a increasing, then a's faces in
+ * order, then the face's corners after a's; each edge where its first face lists it,
+ * numbered from e. With mask NULL, the dot products of the two faces' unit normals
+ * (face_normal, the lower face first, as ms_two_face_edges) into dot, and the number of
+ * the first edge of each vertex into estart (n + 1); else the vertices of the edges whose
+ * angle[e] > threshold marked in mask. Returns the number after the last edge. A vertex's
+ * faces and their two other corners are read once into a small table (a fan of more than
+ * CREASE_FAN faces: read from faces). */
+enum { CREASE_FAN = 64 };
+
+static int64_t crease_walk(const double *p, const int64_t *faces, int64_t a0, int64_t a1,
+                           const int64_t *ptr, const int32_t *inc, int64_t e, double *dot,
+                           int64_t *estart, const double *angle, double threshold, uint8_t *mask) {
+    int64_t other[2 * CREASE_FAN];
+    for (int64_t a = a0; a < a1; a++) {
+        if (estart != NULL) estart[a] = e;
+        const int32_t *fa = inc + ptr[a];
+        const int64_t deg = ptr[a + 1] - ptr[a];
+        const int64_t local = deg <= CREASE_FAN;
+        for (int64_t i = 0; local && i < deg; i++) {
+            const int64_t *c = faces + 3 * (int64_t)fa[i];
+            const int at = c[0] == a ? 0 : c[1] == a ? 1 : 2;
+            other[2 * i] = c[(at + 1) % 3];
+            other[2 * i + 1] = c[(at + 2) % 3];
+        }
+        for (int64_t i = 0; i < deg; i++) {
+            int64_t corner[2];
+            if (local) {
+                corner[0] = other[2 * i];
+                corner[1] = other[2 * i + 1];
+            } else {
+                const int64_t *c = faces + 3 * (int64_t)fa[i];
+                const int at = c[0] == a ? 0 : c[1] == a ? 1 : 2;
+                corner[0] = c[(at + 1) % 3];
+                corner[1] = c[(at + 2) % 3];
+            }
+            for (int k = 0; k < 2; k++) {
+                const int64_t b = corner[k];
+                if (b < a) continue;
+                int64_t count = 1, second = -1, seen = 0;
+                for (int64_t j = 0; j < deg; j++) {
+                    if (j == i) continue;
+                    int has;
+                    if (local) {
+                        has = other[2 * j] == b || other[2 * j + 1] == b;
+                    } else {
+                        const int64_t *c = faces + 3 * (int64_t)fa[j];
+                        has = c[0] == b || c[1] == b || c[2] == b;
+                    }
+                    if (!has) continue;
+                    if (j < i) {
+                        seen = 1;
+                        break;
+                    }
+                    count++;
+                    second = fa[j];
+                }
+                if (seen || count != 2) continue;
+                if (mask == NULL) {
+                    double u[3], w[3];
+                    face_normal(p, faces, fa[i], u);
+                    face_normal(p, faces, second, w);
+                    dot[e] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+                } else if (angle[e] > threshold) {
+                    mask[a] = 1;
+                    mask[b] = 1;
+                }
+                e++;
+            }
+        }
+    }
+    if (estart != NULL) estart[a1] = e;
+    return e;
+}
+
+int64_t ms_crease_dots(const double *p, const int64_t *faces, int64_t n, const int64_t *ptr,
+                       const int32_t *inc, double *dot, int64_t *estart) {
+    return crease_walk(p, faces, 0, n, ptr, inc, 0, dot, estart, NULL, 0.0, NULL);
+}
+
+void ms_crease_mask(const int64_t *faces, int64_t n, const int64_t *ptr, const int32_t *inc,
+                    const int64_t *estart, const double *angle, double threshold, uint8_t *mask) {
+    /* only the vertices with an edge above the threshold are walked again */
+    for (int64_t a = 0; a < n; a++) {
+        int64_t k = estart[a];
+        while (k < estart[a + 1] && !(angle[k] > threshold)) k++;
+        if (k < estart[a + 1])
+            crease_walk(NULL, faces, a, a + 1, ptr, inc, estart[a], NULL, NULL, angle, threshold, mask);
+    }
+}
+
 /* segment_sum, for callers outside this file (the plugin's line directions sum as numpy's
  * add.reduceat does). */
 double ms_segment_sum(const double *a, int64_t n, int64_t stride) {
     return segment_sum(a, n, stride);
+}
+
+/* ------------------------------------------------------- thresholds (global steps) */
+
+void ms_extent(const double *p, int64_t n, double *out) {
+    double lo[3] = {0.0, 0.0, 0.0}, hi[3] = {0.0, 0.0, 0.0};
+    if (n > 0)
+        for (int a = 0; a < 3; a++) lo[a] = hi[a] = p[a];
+    for (int64_t i = 1; i < n; i++)
+        for (int a = 0; a < 3; a++) {
+            const double x = p[3 * i + a];
+            lo[a] = x < lo[a] ? x : lo[a];
+            hi[a] = x > hi[a] ? x : hi[a];
+        }
+    for (int a = 0; a < 3; a++) out[a] = hi[a] - lo[a];
+}
+
+/* Bin of a value in [0, 1]: min(floor(v * MS_BINS), MS_BINS - 1) (threshold.histogram;
+ * below 0, not a value the method makes, bin 0 rather than a write out of bounds). On
+ * [0, MS_BINS - 1) the conversion's truncation is floor (no call of floor: a plain build
+ * has no SSE4.1 rounding instruction). */
+static inline int64_t value_bin(double v) {
+    const double b = v * MS_BINS;
+    if (!(b >= 0.0)) return 0;
+    return b >= MS_BINS - 1 ? MS_BINS - 1 : (int64_t)b;
+}
+
+/* Otsu's threshold t / MS_BINS from the MS_BINS counts of a histogram, in the integer
+ * form of the notes (the first largest split wins); 1.0 when no split has points on both
+ * sides (threshold.otsu_from_histogram). */
+static double otsu_split(const int64_t *counts) {
+    int64_t total = 0, weighted_total = 0;
+    for (int64_t b = 0; b < MS_BINS; b++) {
+        total += counts[b];
+        weighted_total += counts[b] * (2 * b + 1);
+    }
+    int64_t n0 = 0, s0 = 0, best_t = -1;
+    double best = 0.0;
+    for (int64_t t = 1; t < MS_BINS; t++) {
+        n0 += counts[t - 1];
+        s0 += counts[t - 1] * (2 * (t - 1) + 1);
+        if (n0 == 0 || n0 == total) continue;
+        const double dn0 = (double)n0, dn1 = (double)total - dn0;
+        const double ds0 = (double)s0, ds1 = (double)weighted_total - ds0;
+        const double diff = ds0 * dn1 - ds1 * dn0;
+        const double crit = diff * diff / (dn0 * dn1);
+        if (best_t < 0 || crit > best) {
+            best = crit;
+            best_t = t;
+        }
+    }
+    return best_t < 0 ? 1.0 : (double)best_t / MS_BINS;
+}
+
+/* Adds the bins (value_bin) of v = (x[i] - lo) / span (span > 0), v = x[i] (span == 0),
+ * or v = 0 (span < 0: a flat scale) of x (n) to counts (MS_BINS) (threshold.histogram). */
+static void histogram(const double *x, int64_t n, double lo, double span, int64_t *counts) {
+    if (span > 0.0) {
+        for (int64_t i = 0; i < n; i++) counts[value_bin((x[i] - lo) / span)]++;
+    } else if (span == 0.0) {
+        for (int64_t i = 0; i < n; i++) counts[value_bin(x[i])]++;
+    } else {
+        counts[0] += n;
+    }
+}
+
+double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
+                     double floor_, double *out, int64_t *votes, int64_t *count) {
+    double lo = 0.0, span = 0.0; /* values as given */
+    if (normalise) {
+        double mn = n > 0 ? x[0] : 0.0, mx = mn;
+        for (int64_t i = 1; i < n; i++) {
+            mn = x[i] < mn ? x[i] : mn;
+            mx = x[i] > mx ? x[i] : mx;
+        }
+        lo = mn;
+        span = mx - mn > flat_span ? mx - mn : -1.0; /* -1: flat, every value 0 */
+    }
+    double t = floor_;
+    if (otsu) {
+        int64_t counts[MS_BINS] = {0};
+        histogram(x, n, lo, span, counts);
+        const double split = otsu_split(counts);
+        t = split > floor_ ? split : floor_;
+    }
+    int64_t c = 0;
+    for (int64_t i = 0; i < n; i++) {
+        const double v = span > 0.0 ? (x[i] - lo) / span : span == 0.0 ? x[i] : 0.0;
+        const int64_t hit = v >= t;
+        if (out != NULL) out[i] = v;
+        votes[i] += hit;
+        c += hit;
+    }
+    *count = c;
+    return t;
 }

@@ -245,16 +245,50 @@ void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, i
 int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot);
 
-/* Merge exactly equal points into their first occurrence. table: (tmask + 1) int64
- * scratch, all -1, tmask + 1 a power of two >= 2 n. from_input (n): cleaned index of
- * each input point; to_input (n, first m used): input index of each cleaned point.
- * Returns m. */
-int64_t ms_dedup(const double *p, int64_t n, int64_t *table, int64_t tmask,
+/* creases.sharp_vertices in less memory than ms_two_face_edges (no sort keys, no edge
+ * list). ms_vertex_faces: each vertex's faces, in face order, as CSR ptr (n + 1), inc
+ * (3 m; m < 2^31); returns 0 or -1 out of memory. ms_crease_dots: the dot products u . v
+ * of the unit normals of the two faces of every edge with exactly two faces (the same
+ * values as ms_two_face_edges', in another order: the lower vertex increasing, then its
+ * faces in order) into dot (room for (3 m + 1) / 2), where each vertex's edges start
+ * into estart (n + 1); returns their number. ms_crease_mask: the same edges; both
+ * vertices of each edge whose angle[e] > threshold marked 1 in mask (n, zeroed by the
+ * caller). */
+int ms_vertex_faces(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *inc);
+int64_t ms_crease_dots(const double *p, const int64_t *faces, int64_t n, const int64_t *ptr,
+                       const int32_t *inc, double *dot, int64_t *estart);
+void ms_crease_mask(const int64_t *faces, int64_t n, const int64_t *ptr, const int32_t *inc,
+                    const int64_t *estart, const double *angle, double threshold, uint8_t *mask);
+
+/* Merge exactly equal points into their first occurrence. table: (tmask + 1) int32
+ * scratch, all -1, tmask + 1 a power of two >= 2 n; n < 2^31. from_input (n): cleaned
+ * index of each input point; to_input (n, first m used): input index of each cleaned
+ * point. Returns m. */
+int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input);
 
-/* Double area |(p1 - p0) x (p2 - p0)| of each face (m, 3) into out (m), as vcg's
- * DoubleArea. */
-void ms_face_double_areas(const double *p, const int64_t *faces, int64_t m, double *out);
+/* Cleaning's faces in one pass (cleaning.clean): each face of faces (m, 3) (indices of
+ * the input points, mapped through from_input when not NULL) whose double area on p,
+ * |(p1 - p0) x (p2 - p0)| as vcg's DoubleArea computes it, is > 0, in order, into out (room for m rows; may be faces
+ * itself when from_input is NULL), its vertices marked 1 in used (zeroed by the caller).
+ * Returns the number of faces kept. */
+int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const int64_t *from_input,
+                      int64_t *out, uint8_t *used);
+
+/* Thresholds, the global steps of every path (docs/implementation-notes.md,
+ * "Normalisation and Otsu"; threshold.py is the numpy reference).
+ * ms_extent: max - min of each coordinate of the finite points p (n, 3) into out (3)
+ * (numpy's ptp of each column; 0 when n = 0), for the flat rule's bounding box.
+ * ms_scale_vote: one scale's decision over x (n). With `normalise`, v is the min-max
+ * normalised x, all 0 when max - min <= flat_span (threshold.normalise); else v = x (in
+ * [0, 1]). The threshold is T = max(Otsu's split of the MS_BINS-bin histogram of v (bin
+ * min(floor(v * MS_BINS), MS_BINS - 1); the split's integer form of the notes, the first
+ * largest wins; 1.0 when no split has points on both sides), floor_) with `otsu`, floor_
+ * without (no histogram; robust.robust_threshold); then votes[i] += v[i] >= T, the number
+ * of such points into *count, and v into out when out is not NULL. Returns T. */
+void ms_extent(const double *p, int64_t n, double *out);
+double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
+                     double floor_, double *out, int64_t *votes, int64_t *count);
 
 #ifdef __cplusplus
 }

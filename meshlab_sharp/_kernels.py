@@ -79,8 +79,22 @@ _SIGNATURES = {
     ),
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
-    "ms_face_double_areas": (None, [_c_void_p, _c_void_p, _i64, _c_void_p]),
+    "ms_keep_faces": (_i64, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_extent": (None, [_c_void_p, _i64, _c_void_p]),
+    "ms_scale_vote": (
+        _f64,
+        [_c_void_p, _i64, _int, _f64, _int, _f64, _c_void_p, _c_void_p, _c_void_p],
+    ),
     "ms_two_face_edges": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
+    "ms_vertex_faces": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
+    "ms_crease_dots": (
+        _i64,
+        [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
+    ),
+    "ms_crease_mask": (
+        None,
+        [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _c_void_p],
+    ),
 }
 
 
@@ -715,6 +729,49 @@ def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, n
     return edges[:e], dot[:e]
 
 
+def crease_vertices(
+    points: np.ndarray,
+    faces: np.ndarray,
+    angles_and_threshold: Callable[[np.ndarray], tuple[np.ndarray, float]],
+) -> tuple[np.ndarray, float]:
+    """The vertices of the edges with two faces that turn by more than a threshold, in
+    less memory than :func:`two_face_edges` (no edge list): ``ms_crease_dots`` gives the
+    dot products (e,) of the edges' unit face normals, ``angles_and_threshold(dots) ->
+    (angles (e,), threshold)`` turns them into angles (it may overwrite ``dots``) and
+    the threshold, and ``ms_crease_mask`` marks the vertices of the edges whose angle
+    exceeds it, walking again only the vertices that have such an edge.
+
+    Returns
+    -------
+    mask : (n,) bool
+    threshold : float
+    """
+    lib = _LIB
+    assert lib is not None
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    n, m = len(points), len(faces)
+    if m >= 2**31:
+        raise ValueError("the compiled crease kernel handles fewer than 2**31 faces")
+    ptr = np.empty(n + 1, dtype=np.int64)
+    inc = np.empty(3 * m, dtype=np.int32)
+    if lib.ms_vertex_faces(_ptr(faces), m, n, _ptr(ptr), _ptr(inc)) != 0:
+        raise MemoryError("out of memory listing the faces of each vertex")
+    dots = np.empty((3 * m + 1) // 2)
+    estart = np.empty(n + 1, dtype=np.int64)
+    e = lib.ms_crease_dots(
+        _ptr(points), _ptr(faces), n, _ptr(ptr), _ptr(inc), _ptr(dots), _ptr(estart)
+    )
+    angles, threshold = angles_and_threshold(dots[:e])
+    angles = np.ascontiguousarray(angles, dtype=np.float64)
+    mask = np.zeros(n, dtype=bool)
+    lib.ms_crease_mask(
+        _ptr(faces), n, _ptr(ptr), _ptr(inc), _ptr(estart), _ptr(angles), float(threshold),
+        _ptr(mask),
+    )  # fmt: skip
+    return mask, float(threshold)
+
+
 def face_average_normals(points: np.ndarray, faces: np.ndarray, zero: float) -> np.ndarray:
     """Face-average vertex normals, bit for bit as the numpy reference computes them."""
     lib = _LIB
@@ -726,15 +783,91 @@ def face_average_normals(points: np.ndarray, faces: np.ndarray, zero: float) -> 
     return acc
 
 
-def face_double_areas(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``|(p1 - p0) x (p2 - p0)|`` of every face, as vcg's DoubleArea computes it."""
+def keep_faces(
+    points: np.ndarray, faces: np.ndarray, from_input: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Cleaning's faces in one C pass (``ms_keep_faces``): ``faces`` (f, 3) mapped
+    through ``from_input`` (n,) when not None, those whose double area on ``points``
+    (m, 3) (``|(p1 - p0) x (p2 - p0)|``, as vcg's DoubleArea) is > 0, in order.
+
+    Returns
+    -------
+    kept : (k, 3) int64
+    used : (m,) bool
+        The vertices that a kept face uses.
+    """
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    out = np.empty(len(faces))
-    lib.ms_face_double_areas(_ptr(points), _ptr(faces), len(faces), _ptr(out))
+    remap = None if from_input is None else np.ascontiguousarray(from_input, dtype=np.int64)
+    out = np.empty_like(faces)
+    used = np.zeros(len(points), dtype=bool)
+    k = lib.ms_keep_faces(_ptr(points), _ptr(faces), len(faces), _ptr(remap), _ptr(out), _ptr(used))
+    out.resize((k, 3), refcheck=False)
+    return out, used
+
+
+def extent(points: np.ndarray) -> np.ndarray:
+    """``max - min`` of each coordinate of the finite ``points`` (n, 3): (3,) float64,
+    numpy's ``ptp`` of each column (``ms_extent``, one pass)."""
+    lib = _LIB
+    assert lib is not None
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.empty(3)
+    lib.ms_extent(_ptr(points), len(points), _ptr(out))
     return out
+
+
+def scale_vote(
+    values: np.ndarray,
+    votes: np.ndarray,
+    *,
+    flat_span: float | None = None,
+    otsu: bool = True,
+    floor: float = 0.0,
+    out: np.ndarray | None = None,
+) -> tuple[float, int]:
+    """One scale's threshold and votes in one C call (``ms_scale_vote``), bit for bit
+    :func:`meshlab_sharp.threshold.normalise` (when ``flat_span`` is not None),
+    :func:`~meshlab_sharp.threshold.otsu_threshold` and ``v >= T``.
+
+    Parameters
+    ----------
+    values : (m,) float64
+        Projected distances (normalised here when ``flat_span`` is given) or values
+        already in [0, 1] (robust mode's relative distances).
+    votes : (m,) int64
+        Incremented in place where ``v >= T``.
+    flat_span : float, optional
+        Min-max normalise first, every value 0 when ``max - min <= flat_span``.
+    otsu : bool, default True
+        ``T = max(otsu_threshold(v), floor)``; False: ``T = floor``
+        (:func:`meshlab_sharp.robust.robust_threshold`).
+    floor : float, default 0.0
+    out : (m,) float64, optional
+        Receives ``v``.
+
+    Returns
+    -------
+    threshold : float
+    count : int
+        Points with ``v >= T``.
+    """
+    lib = _LIB
+    assert lib is not None
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    if votes.dtype != np.int64 or not votes.flags.c_contiguous or votes.shape != values.shape:
+        raise ValueError("votes must be a contiguous int64 array shaped like values")
+    if out is not None and (out.dtype != np.float64 or not out.flags.c_contiguous):
+        raise ValueError("out must be a contiguous float64 array")
+    count = ctypes.c_int64(0)
+    normalise = flat_span is not None
+    t = lib.ms_scale_vote(
+        _ptr(values), len(values), int(normalise), float(flat_span or 0.0), int(otsu),
+        float(floor), _ptr(out), _ptr(votes), ctypes.byref(count),
+    )  # fmt: skip
+    return float(t), int(count.value)
 
 
 def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -751,13 +884,16 @@ def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     n = len(points)
+    if n >= 2**31:
+        raise ValueError("the compiled duplicate merge handles fewer than 2**31 points")
     size = 1 << int(np.ceil(np.log2(max(2 * n, 2))))
-    table = np.full(size, -1, dtype=np.int64)
+    table = np.full(size, -1, dtype=np.int32)
     from_input = np.empty(n, dtype=np.int64)
     to_input = np.empty(n, dtype=np.int64)
     m = lib.ms_dedup(_ptr(points), n, _ptr(table), size - 1, _ptr(from_input), _ptr(to_input))
     del table
-    return to_input[:m].copy() if m < n else to_input, from_input
+    to_input.resize(m, refcheck=False)  # trimmed in place: no copy
+    return to_input, from_input
 
 
 def smallest_eigenvectors(cov: np.ndarray) -> np.ndarray:

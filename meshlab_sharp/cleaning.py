@@ -164,19 +164,12 @@ def _clean_compiled(geometry: Geometry) -> CleanGeometry:
         )
     distinct = len(to_input) == len(v)
     merged = v if distinct else v[to_input]
-    faces = np.asarray(geometry.faces, dtype=np.int64)
-    if not distinct:
-        faces = from_input[faces]
-    nonzero = _kernels.face_double_areas(merged, faces) > 0
-    if not nonzero.all():
-        faces = faces[nonzero]
+    faces, used = _kernels.keep_faces(merged, geometry.faces, None if distinct else from_input)
     if len(faces) == 0:
         raise InputError(
             f"{geometry.source}: every face has zero area; nothing is left of the mesh "
             "(use --as-points to treat its vertices as a point cloud)"
         )
-    used = np.zeros(len(merged), dtype=bool)
-    used[faces.reshape(-1)] = True
     if used.all():
         renumber = None
     else:

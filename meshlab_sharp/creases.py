@@ -72,7 +72,7 @@ def dihedral_angles(
         return np.zeros((0, 2), np.int64), np.zeros(0)
     if _kernels.resolve(backend) == "compiled":
         edges, dot = _kernels.two_face_edges(faces, points)
-        return edges, np.arccos(np.clip(dot, -1.0, 1.0, out=dot), out=dot)
+        return edges, _angles(dot)
     p0, p1, p2 = (points[faces[:, c]] for c in range(3))
     fn = np.cross(p1 - p0, p2 - p0)
     length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
@@ -93,6 +93,23 @@ def dihedral_angles(
     dot = u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] + u[:, 2] * v[:, 2]
     edges = np.stack([code[two] // n, code[two] % n], axis=1)
     return edges, np.arccos(np.clip(dot, -1.0, 1.0))
+
+
+#: Angles per block of crease_threshold's count.
+_BLOCK = 1 << 16
+
+
+def _angles(dot: np.ndarray) -> np.ndarray:
+    """``acos(clamp(dot, -1, 1))`` of the dot products (e,) of two unit face normals, in
+    place (:func:`dihedral_angles`' angles)."""
+    return np.arccos(np.clip(dot, -1.0, 1.0, out=dot), out=dot)
+
+
+def _angles_and_threshold(dot: np.ndarray) -> tuple[np.ndarray, float]:
+    """The angles (e,) of the dot products ``dot`` (overwritten) and their
+    :func:`crease_threshold`."""
+    angles = _angles(dot)
+    return angles, crease_threshold(angles)
 
 
 def crease_threshold(angles: np.ndarray) -> float:
@@ -116,19 +133,31 @@ def crease_threshold(angles: np.ndarray) -> float:
     # When more than ``at`` angles a give NOISE_FACTOR * a <= floor, so does the quartile
     # (rounding is monotonic) and the floor wins: no partial sort (most of a mesh's edges
     # are flat).
-    if np.count_nonzero(NOISE_FACTOR * angles <= floor) > at:
+    # (counted in blocks: no temporary as long as the angles)
+    below = sum(
+        int(np.count_nonzero(NOISE_FACTOR * angles[i : i + _BLOCK] <= floor))
+        for i in range(0, len(angles), _BLOCK)
+    )
+    if below > at:
         return floor
     quartile = float(np.partition(angles, at)[at])
     return max(floor, NOISE_FACTOR * quartile)
 
 
-def sharp_vertices(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
+def sharp_vertices(
+    points: np.ndarray, faces: np.ndarray, *, backend: str | None = None
+) -> tuple[np.ndarray, float]:
     """Vertices on a sharp edge: two faces turning by more than :func:`crease_threshold`.
 
     Parameters
     ----------
     points : (n, 3) float64
     faces : (f, 3) int
+        Triangles of non-zero area (cleaned: three distinct vertices), as
+        :func:`dihedral_angles` takes them.
+    backend : {"compiled", "numpy"}, optional
+        Default :func:`meshlab_sharp._kernels.default_backend`; the same result. The
+        compiled one lists no edges (:func:`meshlab_sharp._kernels.crease_vertices`).
 
     Returns
     -------
@@ -136,7 +165,10 @@ def sharp_vertices(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, f
     threshold : float
         The angle used (radians).
     """
-    edges, angles = dihedral_angles(points, faces)
+    faces = np.asarray(faces, np.int64)
+    if _kernels.resolve(backend) == "compiled":
+        return _kernels.crease_vertices(points, faces, _angles_and_threshold)
+    edges, angles = dihedral_angles(points, faces, backend="numpy")
     threshold = crease_threshold(angles)
     mask = np.zeros(len(points), bool)
     mask[edges[angles > threshold].reshape(-1)] = True

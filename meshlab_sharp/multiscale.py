@@ -89,7 +89,8 @@ def run_scales(
         compiled pass over a cloud or a mesh's rings computes the projected distances it
         also computes what the rule computes from them, bit for bit (the relative
         distances and the score; on a cloud, on the neighbourhoods less ``rule.sheet``'s
-        other sheets), and ``rule.from_pass`` takes them; elsewhere the rule is called.
+        other sheets), ``rule.from_pass`` takes the score and the C kernel thresholds
+        the relative distances; elsewhere the rule is called.
     fused : ScalePass, optional
         The compiled pass over these points at these scales, already run
         (:class:`meshlab_sharp.robust.RobustSetup` runs it to read the isolated points
@@ -97,8 +98,9 @@ def run_scales(
 
     The backend is the neighbourhoods': with "compiled", the projected distances of
     every scale come from one pass of the C kernels over the points (neighbourhoods
-    searched and used at once), then each scale is normalised and thresholded as with
-    "numpy".
+    searched and used at once), then each scale is normalised, thresholded and voted in
+    one C call (:func:`meshlab_sharp._kernels.scale_vote`, the same arithmetic as
+    "numpy").
     """
     m, s = len(points), len(scales)
     if fused is None:
@@ -106,7 +108,8 @@ def run_scales(
         fused = _compiled_projected_distances(
             points, neighbourhoods, scales, normals, weighting, keep_details, relative, sheet
         )
-    flat_span = _flat_span(points) if rule is None else 0.0  # read by the paper's rule only
+    # read by the paper's rule only
+    flat_span = _flat_span(points, fused is not None) if rule is None else 0.0
     thresholds = np.empty(s)
     counts = np.empty(s, dtype=np.int64)
     votes = np.zeros(m, dtype=np.int64)
@@ -114,8 +117,16 @@ def run_scales(
     used_normals = np.empty((s, m, 3)) if keep_details else None
     for i, scale in enumerate(scales):
         used = None if fused is None or fused.normals is None else fused.normals[i]
+        out = None if distances is None else distances[i]
         if fused is not None and fused.relative is not None and fused.score is not None:
-            v, thresholds[i] = rule.from_pass(fused.relative[i], fused.score)  # type: ignore[union-attr]
+            otsu, floor = rule.from_pass(fused.score)  # type: ignore[union-attr]
+            thresholds[i], counts[i] = _kernels.scale_vote(
+                fused.relative[i], votes, otsu=otsu, floor=floor, out=out
+            )
+        elif fused is not None and fused.pdis is not None and rule is None:
+            thresholds[i], counts[i] = _kernels.scale_vote(
+                fused.pdis[i], votes, flat_span=flat_span, out=out
+            )
         else:
             if fused is not None and fused.pdis is not None:
                 pdis = fused.pdis[i]
@@ -128,11 +139,12 @@ def run_scales(
                 thresholds[i] = otsu_threshold(v)
             else:
                 v, thresholds[i] = rule(i, scale, pdis)
-        candidate = v >= thresholds[i]
-        counts[i] = int(candidate.sum())
-        votes += candidate
-        if distances is not None and used_normals is not None:
-            distances[i] = v
+            candidate = v >= thresholds[i]
+            counts[i] = int(candidate.sum())
+            votes += candidate
+            if out is not None:
+                out[:] = v
+        if used_normals is not None:
             used_normals[i] = used
         if on_scale is not None:
             on_scale(scale)
@@ -146,11 +158,14 @@ def run_scales(
     )
 
 
-def _flat_span(points: np.ndarray) -> float:
+def _flat_span(points: np.ndarray, compiled: bool) -> float:
     """``FLAT_TOLERANCE`` times the diagonal of the bounding box of ``points`` (m, 3),
     the box taken column by column (the same values; a reduce over the first axis of an
-    (m, 3) array is many times slower)."""
-    span = np.array([np.ptp(points[:, a]) for a in range(3)])
+    (m, 3) array is many times slower), in one C pass when ``compiled``."""
+    if compiled:
+        span = _kernels.extent(points)
+    else:
+        span = np.array([np.ptp(points[:, a]) for a in range(3)])
     return FLAT_TOLERANCE * float(np.linalg.norm(span))
 
 

@@ -402,9 +402,11 @@ def _detect(
         fused=None if robust is None else robust.fused,
     )
     timings["normals_projected_distance_threshold"] = time.perf_counter() - t
+    del normals  # a mesh's (n, 3) face normals: not needed by what follows
 
     t = time.perf_counter()
     mask, strength = decide(per_scale.votes, len(scales_t))
+    per_scale.votes = np.zeros(0, dtype=np.int64)  # (n,) int64, counted in mask, strength
     if robust is not None:
         mask, strength = robust.finish(mask, strength)
         if per_scale.distances is not None and per_scale.normals is not None:

@@ -874,8 +874,8 @@ def acute_tips(
 class RelativeRule:
     """Per-scale rule of robust mode for :func:`meshlab_sharp.multiscale.run_scales`.
 
-    Called as ``rule(i, scale, pdis)`` for the i-th scale (or, with the compiled pass
-    over a cloud, which does this arithmetic itself, as ``rule.from_pass``): returns
+    Called as ``rule(i, scale, pdis)`` for the i-th scale (the compiled pass, which does
+    this arithmetic itself, hands its score to ``rule.from_pass`` instead): returns
     the relative distances (m,) and the threshold; it also accumulates ``score``, the mean over the
     scales of ``o / l`` (:func:`local_scale`: the centroid's distance relative to the
     local scale), the ranking used by :func:`thin`. Not ``r``: at an acute edge the
@@ -912,12 +912,14 @@ class RelativeRule:
         self.score += relative_distances(offset, ell) / self.n_scales
         return r, robust_threshold(r, self.otsu)
 
-    def from_pass(self, relative: np.ndarray, score: np.ndarray) -> tuple[np.ndarray, float]:
-        """What ``__call__`` returns, from the compiled pass (over a cloud or a mesh's
-        rings), which computed the relative distances (m,) of this scale and the final
-        ``score`` (m,) with this rule's arithmetic (:class:`meshlab_sharp._kernels.ScalePass`)."""
+    def from_pass(self, score: np.ndarray) -> tuple[bool, float]:
+        """Take the final ``score`` (m,) of the compiled pass (over a cloud or a mesh's
+        rings), which computed it and every scale's relative distances with this rule's
+        arithmetic (:class:`meshlab_sharp._kernels.ScalePass`); returns how
+        :func:`robust_threshold` thresholds them, ``(otsu, floor)``, for
+        :func:`meshlab_sharp._kernels.scale_vote` (the same threshold)."""
         self.score = score
-        return relative, robust_threshold(relative, self.otsu)
+        return self.otsu, R_MIN
 
 
 def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourhood) -> np.ndarray:
@@ -1257,9 +1259,9 @@ class RobustSetup:
             lists = [listed[k] for k in rings]
         out = []
         for ring in lists:
-            sizes = np.zeros(self.n, dtype=np.int64)
-            sizes[rows] = ring.sizes
-            indptr = np.concatenate([[0], np.cumsum(sizes)])
+            indptr = np.zeros(self.n + 1, dtype=np.int64)  # the sizes, summed in place
+            indptr[np.asarray(rows, dtype=np.int64) + 1] = ring.sizes
+            np.cumsum(indptr, out=indptr)
             out.append(Neighbourhood(indptr, ring.indices))
         return out
 

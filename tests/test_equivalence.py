@@ -40,13 +40,16 @@ from meshlab_sharp.neighbourhoods import (
 )
 from meshlab_sharp.normals import face_average_normals
 from meshlab_sharp.robust import (
+    R_MIN,
     RelativeRule,
     _isolated_from_stats,
     _noise_factor,
     isolated_points,
     local_scale,
     noise_scale_factor,
+    robust_threshold,
 )
+from meshlab_sharp.threshold import normalise, otsu_threshold
 
 pytestmark = pytest.mark.skipif(
     not _kernels.available(),
@@ -486,7 +489,12 @@ def test_relative_distances_in_the_pass_identical(scales):
     for i, k in enumerate(scales):
         r, threshold = rule(i, k, fused.pdis[i])
         assert np.array_equal(fused.relative[i], r)
-        assert rule.from_pass(fused.relative[i], rule.score)[1] == threshold
+        otsu, floor = rule.from_pass(rule.score)
+        votes = np.zeros(len(points), np.int64)
+        assert _kernels.scale_vote(fused.relative[i], votes, otsu=otsu, floor=floor) == (
+            threshold,
+            int((r >= threshold).sum()),
+        )
     assert np.array_equal(fused.score, rule.score)
 
 
@@ -711,3 +719,96 @@ def test_dihedral_angles_identical():
     assert np.array_equal(ref[0], fast[0]) and np.array_equal(ref[1], fast[1])
     a, b = sorted(faces[0, :2])
     assert not ((ref[0][:, 0] == a) & (ref[0][:, 1] == b)).any()
+
+
+def _threshold_inputs() -> dict[str, np.ndarray]:
+    """Projected distances of several kinds: skewed, values on the bin edges (v * 256
+    an integer after normalisation), ties, two values, one value, none, a flat scale."""
+    rng = np.random.default_rng(13)
+    edges = np.concatenate([np.arange(257) / 256.0, np.arange(257)[::3] / 256.0])
+    return {
+        "skewed": rng.exponential(0.01, 5000) * 37.0,
+        "bin_edges": rng.permutation(edges) * 3.0 + 5.0,
+        "ties": rng.integers(0, 7, 3000).astype(np.float64) * 0.125,
+        "two": np.array([0.0, 1.0]),
+        "one": np.array([2.5]),
+        "none": np.zeros(0),
+        "flat": 4.0 + rng.normal(0.0, 1e-12, 400),
+    }
+
+
+@pytest.mark.parametrize("name", sorted(_threshold_inputs()))
+def test_compiled_threshold_and_votes_identical(name):
+    """``_kernels.scale_vote`` (min-max normalisation, the 256-bin histogram, Otsu's
+    split and the votes in one C call) gives threshold.py's values, threshold, counts
+    and votes bit for bit; robust mode's form (no normalisation, a floor, or the floor
+    alone) gives robust_threshold's."""
+    x = _threshold_inputs()[name]
+    flat_span = 1e-9
+    v = normalise(x, flat_span=flat_span)
+    t = otsu_threshold(v)
+    votes = np.arange(len(x), dtype=np.int64)
+    out = np.full(len(x), np.nan)
+    assert _kernels.scale_vote(x, votes, flat_span=flat_span, out=out) == (t, int((v >= t).sum()))
+    assert np.array_equal(out, v)
+    assert np.array_equal(votes, np.arange(len(x)) + (v >= t))
+    for otsu in (True, False):
+        expected = robust_threshold(v, otsu)
+        votes = np.zeros(len(x), np.int64)
+        assert _kernels.scale_vote(v, votes, otsu=otsu, floor=R_MIN) == (
+            expected,
+            int((v >= expected).sum()),
+        )
+        assert np.array_equal(votes, v >= expected)
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.02])
+def test_sharp_vertices_identical(noise):
+    """The compiled sharp mesh edges (``crease_vertices``: each vertex's faces, no edge
+    list) give the numpy reference's mask and threshold, on a mesh with creases, boundary
+    edges and edges of three faces; with noise the lower quartile sets the threshold."""
+    from meshlab_sharp.creases import CREASE_ANGLE, sharp_vertices
+
+    vertices, faces = cube_grid_mesh(3)
+    vertices = vertices + np.random.default_rng(3).normal(0.0, noise, vertices.shape)
+    # a fin of two faces on one edge of the first face (three faces there), and a lone
+    # face (three boundary edges)
+    a, b = faces[0][:2]
+    extra = len(vertices)
+    vertices = np.vstack(
+        [vertices, [[3.0, 3.0, 3.0], [5.0, 5.0, 6.0], [5.0, 6.0, 5.0], [6.0, 5.0, 5.0]]]
+    )
+    faces = np.vstack([faces, [[a, b, extra], [extra + 1, extra + 2, extra + 3]]])
+    ref_mask, ref_threshold = sharp_vertices(vertices, faces, backend="numpy")
+    mask, threshold = sharp_vertices(vertices, faces, backend="compiled")
+    assert threshold == ref_threshold
+    assert (threshold > np.radians(CREASE_ANGLE)) == (noise > 0)
+    assert ref_mask.any() and not ref_mask.all()
+    np.testing.assert_array_equal(mask, ref_mask)
+
+
+@pytest.mark.parametrize("n", [1, 2, 1000])
+def test_compiled_extent_is_numpy_ptp(n):
+    """``_kernels.extent``, the flat rule's bounding box in one C pass, is numpy's ``ptp``
+    of each column, bit for bit."""
+    points = np.random.default_rng(n).normal(0.0, 1.0, (n, 3)) * [1e-3, 7.0, 1e5] - 2.5
+    expected = [np.ptp(points[:, a]) for a in range(3)]
+    np.testing.assert_array_equal(_kernels.extent(points), expected)
+
+
+def test_sharp_vertices_identical_on_a_wide_fan():
+    """A vertex with 150 faces (more than the compiled walk's small table holds, so its
+    faces are read from the face array) and bumps on its rim: the same mask and threshold
+    as the numpy reference, a part of the vertices sharp."""
+    from meshlab_sharp.creases import sharp_vertices
+
+    k = 150
+    angle = np.linspace(0.0, 2.0 * np.pi, k, endpoint=False)
+    rim = np.c_[np.cos(angle), np.sin(angle), np.where(np.arange(k) % 10 == 0, 0.3, 0.0)]
+    points = np.vstack([[0.0, 0.0, 0.0], rim])
+    faces = np.array([[0, 1 + i, 1 + (i + 1) % k] for i in range(k)])
+    ref_mask, ref_threshold = sharp_vertices(points, faces, backend="numpy")
+    mask, threshold = sharp_vertices(points, faces, backend="compiled")
+    assert threshold == ref_threshold
+    assert 0 < ref_mask.sum() < len(points)
+    np.testing.assert_array_equal(mask, ref_mask)

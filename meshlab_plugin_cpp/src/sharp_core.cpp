@@ -140,7 +140,8 @@ Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool 
 	const Index n = Index(v.size() / 3);
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
-	std::vector<Index> table(size, -1), toInput(n), fromInput(n);
+	std::vector<int32_t> table(size, -1);
+	std::vector<Index> toInput(n), fromInput(n);
 	const Index m = ms_dedup(v.data(), n, table.data(), size - 1, fromInput.data(), toInput.data());
 	toInput.resize(m);
 	Clean c;
@@ -149,18 +150,11 @@ Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool 
 		for (int a = 0; a < 3; ++a) c.pts[3 * i + a] = v[3 * toInput[i] + a];
 	c.fromInput = fromInput;
 	if (!mesh) return c;
-	std::vector<Index> merged(faces.size());
-	for (size_t f = 0; f < faces.size(); ++f) merged[f] = fromInput[faces[f]];
-	std::vector<double> area(faces.size() / 3);
-	ms_face_double_areas(c.pts.data(), merged.data(), Index(area.size()), area.data());
-	std::vector<char> used(m, 0);
-	for (size_t f = 0; f < area.size(); ++f) {
-		if (!(area[f] > 0.0)) continue;
-		for (int a = 0; a < 3; ++a) {
-			c.faces.push_back(merged[3 * f + a]);
-			used[merged[3 * f + a]] = 1;
-		}
-	}
+	c.faces.resize(faces.size());
+	std::vector<uint8_t> used(m, 0);
+	const Index nonzero = ms_keep_faces(c.pts.data(), faces.data(), Index(faces.size() / 3), fromInput.data(),
+	                                    c.faces.data(), used.data());
+	c.faces.resize(3 * nonzero);
 	if (c.faces.empty()) throw InputError("every face has zero area: nothing is left of the mesh");
 	std::vector<Index> renumber(m, -1);
 	Index kept = 0;
@@ -173,35 +167,6 @@ Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool 
 	for (Index &f : c.faces) f = renumber[f];
 	for (Index &i : c.fromInput) i = renumber[i];
 	return c;
-}
-
-// Otsu's split in the integer form of docs/implementation-notes.md: T = t / MS_BINS.
-double otsu(const std::vector<double> &v) {
-	std::vector<long long> count(MS_BINS, 0);
-	for (double x : v) count[std::min(int(std::floor(x * MS_BINS)), MS_BINS - 1)]++;
-	long long total = 0, weightedTotal = 0;
-	for (int b = 0; b < MS_BINS; ++b) {
-		total += count[b];
-		weightedTotal += count[b] * (2LL * b + 1);
-	}
-	long long n0 = 0, s0 = 0;
-	double best = -1.0;
-	int bestT = -1;
-	for (int t = 1; t < MS_BINS; ++t) {
-		n0 += count[t - 1];
-		s0 += count[t - 1] * (2LL * (t - 1) + 1);
-		const long long n1 = total - n0;
-		if (n0 == 0 || n1 == 0) continue;
-		const double dn0 = double(n0), dn1 = double(n1);
-		const double ds0 = double(s0), ds1 = double(weightedTotal) - ds0;
-		const double diff = ds0 * dn1 - ds1 * dn0;
-		const double crit = diff * diff / (dn0 * dn1);
-		if (crit > best) {
-			best = crit;
-			bestT = t;
-		}
-	}
-	return bestT < 0 ? 1.0 : double(bestT) / MS_BINS;
 }
 
 // The kd-tree of the kernel (_kernels.KdTree).
@@ -437,14 +402,14 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 
 // creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
 // normals turn by more than max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles);
-// the edges and their normals' dot products from the kernel (_kernels.two_face_edges).
+// the edges and their normals' dot products from the kernel (_kernels.crease_vertices).
 std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<Index> &faces) {
 	const Index F = Index(faces.size() / 3), n = Index(p.size() / 3);
-	std::vector<Index> pairs(2 * ((3 * F + 1) / 2));  // room for the kernel's 3 F sort keys
+	std::vector<Index> ptr(n + 1), estart(n + 1);
+	std::vector<int32_t> inc(3 * F);
+	check(ms_vertex_faces(faces.data(), F, n, ptr.data(), inc.data()));
 	std::vector<double> angles((3 * F + 1) / 2);
-	const Index e = ms_two_face_edges(p.data(), faces.data(), F, n, pairs.data(), angles.data());
-	check(e < 0 ? -1 : 0);
-	angles.resize(e);
+	angles.resize(ms_crease_dots(p.data(), faces.data(), n, ptr.data(), inc.data(), angles.data(), estart.data()));
 	for (double &a : angles) a = std::acos(std::min(1.0, std::max(-1.0, a)));
 	double theta = MS_CREASE_ANGLE * (M_PI / 180.0);
 	if (!angles.empty()) {
@@ -453,10 +418,9 @@ std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<
 		std::nth_element(sorted.begin(), sorted.begin() + at, sorted.end());
 		theta = std::max(theta, MS_NOISE_FACTOR * sorted[at]);
 	}
-	std::vector<char> out(n, 0);
-	for (Index k = 0; k < e; ++k)
-		if (angles[k] > theta) out[pairs[2 * k]] = out[pairs[2 * k + 1]] = 1;
-	return out;
+	std::vector<uint8_t> mask(n, 0);
+	ms_crease_mask(faces.data(), n, ptr.data(), inc.data(), estart.data(), angles.data(), theta, mask.data());
+	return std::vector<char>(mask.begin(), mask.end());
 }
 
 // What one mode leaves per processed point.
@@ -466,26 +430,26 @@ struct Decision {
 	std::vector<char> feature;
 };
 
-// Candidates v >= T at one scale (none unless active): votes, threshold and count.
-void vote(const std::vector<double> &v, double T, bool active, std::vector<int> &votes, Result &r) {
-	long count = 0;
-	if (active)
-		for (size_t i = 0; i < v.size(); ++i)
-			if (v[i] >= T) {
-				votes[i]++;
-				count++;
-			}
+// One scale's threshold and candidates v >= T over x (n), by the kernel's ms_scale_vote
+// (threshold.py's and robust.robust_threshold's arithmetic): votes, threshold and count.
+// normalise: min-max with the flat rule (flatSpan), else x in [0, 1]; otsu: T =
+// max(Otsu's split, floor), else floor. Returns T.
+double vote(const double *x, Index n, bool normalise, double flatSpan, bool otsu, double floor,
+            std::vector<int64_t> &votes, Result &r) {
+	int64_t count = 0;
+	const double T = ms_scale_vote(x, n, normalise, flatSpan, otsu, floor, nullptr, votes.data(), &count);
 	r.thresholds.push_back(T);
-	r.candidates.push_back(count);
+	r.candidates.push_back(long(count));
+	return T;
 }
 
 // Features are candidates at every scale; strength is the fraction of scales.
-void decide(const std::vector<int> &votes, size_t S, Decision &d) {
+void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 	d.strength.resize(votes.size());
 	d.feature.resize(votes.size());
 	for (size_t i = 0; i < votes.size(); ++i) {
 		d.strength[i] = double(votes[i]) / double(S);
-		d.feature[i] = votes[i] == int(S);
+		d.feature[i] = votes[i] == int64_t(S);
 	}
 }
 
@@ -525,31 +489,16 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 		bar.report(0, "kd-tree");
 		pdis = cloudPass(Tree(c.pts), r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
 	}
-	double lo[3], hi[3];
-	for (int a = 0; a < 3; ++a) lo[a] = hi[a] = c.pts[a];
-	for (Index i = 0; i < n; ++i)
-		for (int a = 0; a < 3; ++a) {
-			lo[a] = std::min(lo[a], c.pts[3 * i + a]);
-			hi[a] = std::max(hi[a], c.pts[3 * i + a]);
-		}
-	const double dx = hi[0] - lo[0], dy = hi[1] - lo[1], dz = hi[2] - lo[2];
-	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(dx * dx + dy * dy + dz * dz);
+	double box[3];
+	ms_extent(c.pts.data(), n, box);
+	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(box[0] * box[0] + box[1] * box[1] + box[2] * box[2]);
 	bar.report(90, "thresholds");
-	std::vector<int> votes(n, 0);
-	std::vector<double> v(n);
+	std::vector<int64_t> votes(n, 0);
 	r.allFlat = true;
 	for (size_t s = 0; s < S; ++s) {
-		const double *ps = &pdis[s * n];
-		double T = 1.0;
-		const auto mm = std::minmax_element(ps, ps + n);
-		const double pmin = *mm.first, pmax = *mm.second;
-		const bool active = pmax - pmin > flatSpan;
-		if (active) {
-			r.allFlat = false;
-			for (Index i = 0; i < n; ++i) v[i] = (ps[i] - pmin) / (pmax - pmin);
-			T = otsu(v);
-		}
-		vote(v, T, active, votes, r);
+		// a flat scale's threshold is 1.0, and only a flat scale's: any other's normalised
+		// values hold 0 and 1, which Otsu's split parts
+		if (vote(&pdis[s * n], n, true, flatSpan, true, 0.0, votes, r) < 1.0) r.allFlat = false;
 	}
 	Decision d;
 	d.toClean.resize(n);
@@ -632,12 +581,9 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	bar.report(85, "thresholds");
 	const bool quiet = !(ratio[at] > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
 	const size_t S = r.scales.size();
-	std::vector<int> votes(n, 0);
-	for (size_t s = 0; s < S; ++s) {
-		const std::vector<double> v(pass.relative.begin() + s * n, pass.relative.begin() + (s + 1) * n);
-		// robust.otsu_splits: without noise the floor alone
-		vote(v, quiet ? R_MIN : std::max(otsu(v), R_MIN), true, votes, r);
-	}
+	std::vector<int64_t> votes(n, 0);
+	for (size_t s = 0; s < S; ++s)  // robust.otsu_splits: without noise the floor alone
+		vote(&pass.relative[s * n], n, false, 0.0, !quiet, R_MIN, votes, r);
 	decide(votes, S, d);
 	bar.report(85, "support and thinning");
 	const int top = r.scales.back();
@@ -684,12 +630,8 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 	std::vector<double> score;
 	const std::vector<double> relative = ringPdis(c, adj, r.scales, options.gaussian, &score, bar, 0, 85);
 	bar.report(85, "thresholds");
-	std::vector<int> votes(n, 0);
-	std::vector<double> v(n);
-	for (size_t s = 0; s < S; ++s) {
-		std::copy(relative.begin() + s * n, relative.begin() + (s + 1) * n, v.begin());
-		vote(v, std::max(otsu(v), R_MIN), true, votes, r);
-	}
+	std::vector<int64_t> votes(n, 0);
+	for (size_t s = 0; s < S; ++s) vote(&relative[s * n], n, false, 0.0, true, R_MIN, votes, r);
 	Decision d;
 	d.toClean.resize(n);
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
