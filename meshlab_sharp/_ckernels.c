@@ -1054,7 +1054,7 @@ static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t,
     build_node(x, idx, m, e, 2 * t + 2, d + 1, depth, stop, box, rng);
 }
 
-/* The depth at which ms_kdtree_build_top stops: min(depth, MS_KD_TOP). */
+/* The depth at which the top levels stop: min(depth, MS_KD_TOP). */
 static int top_levels(int depth) { return depth < MS_KD_TOP ? depth : MS_KD_TOP; }
 
 /* The points [*s, *e) of the node u (of the 2^d) at depth d: its median halves. */
@@ -1078,8 +1078,9 @@ void ms_kdtree_build_level(double *tp, int64_t *torig, int64_t n, int depth, int
     }
 }
 
-void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
-                         double *box) {
+/* The top levels of ms_kdtree_build on one thread (tp, torig filled from p). */
+static void kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
+                             double *box) {
     memcpy(tp, p, (size_t)n * 3 * sizeof(double));
     for (int64_t i = 0; i < n; i++) torig[i] = i;
     for (int level = 0; level < top_levels(depth); level++) {
@@ -1100,7 +1101,7 @@ void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, 
 
 void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
                      double *box) {
-    ms_kdtree_build_top(p, n, depth, tp, torig, box);
+    kdtree_build_top(p, n, depth, tp, torig, box);
     ms_kdtree_build_subtrees(tp, torig, n, depth, 0, (int64_t)1 << top_levels(depth), box);
 }
 

@@ -146,14 +146,11 @@ typedef struct {
 void ms_kdtree_build(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
                      double *box);
 
-/* ms_kdtree_build in two steps, the same tree: the top levels, down to t = min(depth,
- * MS_KD_TOP) (copies p into tp, fills torig), then the subtrees of the nodes u in
- * [first, last) of the 2^t at depth t (disjoint ranges of tp, torig and box: callers
- * run them on threads). The top levels in steps too: tp a copy of p and torig[i] = i,
- * then for each level l < t in turn the splits of its nodes u in [first, last) of the
- * 2^l (ms_kdtree_build_level, on threads as well). */
-void ms_kdtree_build_top(const double *p, int64_t n, int depth, double *tp, int64_t *torig,
-                         double *box);
+/* ms_kdtree_build in steps, the same tree (callers run each step's ranges on threads):
+ * with tp a copy of p and torig[i] = i, for each level l < t = min(depth, MS_KD_TOP) in
+ * turn the splits of its nodes u in [first, last) of the 2^l (ms_kdtree_build_level),
+ * then the subtrees of the nodes u in [first, last) of the 2^t at depth t
+ * (ms_kdtree_build_subtrees; disjoint ranges of tp, torig and box). */
 void ms_kdtree_build_level(double *tp, int64_t *torig, int64_t n, int depth, int level,
                            int64_t first, int64_t last, double *box);
 void ms_kdtree_build_subtrees(double *tp, int64_t *torig, int64_t n, int depth, int64_t first,
