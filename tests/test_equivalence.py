@@ -304,6 +304,29 @@ def test_pass_identical_without_the_avx2_paths(name, tmp_path):
         assert fast[key].tobytes() == plain[key].tobytes(), key
 
 
+@pytest.mark.parametrize("name", ["grid_cube_ties_shuffled", "rotated_duplicates_shuffled"])
+def test_tree_built_on_threads_is_the_one_call_tree(name):
+    """``build_tree`` (the top levels' nodes, then the subtrees, on threads; the plugin
+    builds it the same way) gives the tree of the kernel's one call ``ms_kdtree_build``:
+    the same points in the same order and the same node boxes, ties included."""
+    points = clean(as_geometry(CLOUDS[name]()), backend="numpy").vertices
+    tree = _kernels.build_tree(points, workers=2)
+    n = len(points)
+    tp, orig, boxes = np.empty_like(points), np.empty(n, np.int64), np.empty_like(tree.boxes)
+    _kernels._LIB.ms_kdtree_build(
+        _kernels._ptr(points),
+        n,
+        tree.depth,
+        _kernels._ptr(tp),
+        _kernels._ptr(orig),
+        _kernels._ptr(boxes),
+    )
+    assert tree.depth >= 4  # the threaded top levels and subtrees both run
+    np.testing.assert_array_equal(tree.orig, orig)
+    np.testing.assert_array_equal(tree.points, tp)
+    np.testing.assert_array_equal(tree.boxes, boxes)
+
+
 @pytest.mark.parametrize("name", sorted(SPREADS))
 def test_knn_any_spatial_distribution(name, tmp_path):
     """100k points. A far outlier or distant clusters made the former grid search

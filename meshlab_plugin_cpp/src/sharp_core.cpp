@@ -177,10 +177,36 @@ struct Tree {
 	int depth = 0;
 	Index n = 0;
 
-	explicit Tree(const std::vector<double> &p) : pts(p.size()), orig(p.size() / 3), n(Index(p.size() / 3)) {
+	// As _kernels.build_tree: the top MS_KD_TOP levels one after the other, the nodes of
+	// each on every core, then the subtrees below them (the same tree as ms_kdtree_build).
+	explicit Tree(const std::vector<double> &p) : pts(p), orig(p.size() / 3), n(Index(p.size() / 3)) {
 		depth = std::max(0, int(std::ceil(std::log2(double(std::max<Index>(n, 1)) / MS_KD_LEAF))));
 		box.resize(6 * ((Index(2) << depth) - 1));
-		ms_kdtree_build(p.data(), n, depth, pts.data(), orig.data(), box.data());
+		for (Index i = 0; i < n; ++i) orig[size_t(i)] = i;
+		const int top = std::min(depth, MS_KD_TOP);
+		for (int level = 0; level < top; ++level) {
+			eachNode(Index(1) << level, [&](Index u) {
+				ms_kdtree_build_level(pts.data(), orig.data(), n, depth, level, u, u + 1, box.data());
+			});
+		}
+		eachNode(Index(1) << top, [&](Index u) {
+			ms_kdtree_build_subtrees(pts.data(), orig.data(), n, depth, u, u + 1, box.data());
+		});
+	}
+
+private:
+	// f(u) for every u in [0, count), on every core (disjoint nodes of one level).
+	template <class F>
+	static void eachNode(Index count, F f) {
+		std::atomic<Index> next{0};
+		auto work = [&] {
+			for (Index u; (u = next++) < count;) f(u);
+		};
+		std::vector<std::thread> pool;
+		const unsigned w = unsigned(std::min<Index>(workers(), count));
+		for (unsigned t = 1; t < w; ++t) pool.emplace_back(work);
+		work();
+		for (auto &t : pool) t.join();
 	}
 };
 
