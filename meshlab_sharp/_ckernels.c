@@ -1948,18 +1948,23 @@ int ms_ring_lists(const int64_t *ptr, const int32_t *adj, const int64_t *rows, i
     return 0;
 }
 
-/* Unit normal of face f into u: cross(p1 - p0, p2 - p0) / |.| (|.| the square root of the
- * sum of squares; a zero cross product stays zero), numpy's arithmetic in
- * creases.dihedral_angles and normals.face_average_normals. */
-static void face_normal(const double *p, const int64_t *faces, int64_t f, double *u) {
-    const double *p0 = p + 3 * faces[3 * f], *p1 = p + 3 * faces[3 * f + 1],
-                 *p2 = p + 3 * faces[3 * f + 2];
+/* cross(p1 - p0, p2 - p0) of the triangle (i0, i1, i2) into c; returns its length, the
+ * square root of the sum of squares (vcg's DoubleArea of the face). */
+static inline double face_cross(const double *p, int64_t i0, int64_t i1, int64_t i2, double *c) {
+    const double *p0 = p + 3 * i0, *p1 = p + 3 * i1, *p2 = p + 3 * i2;
     double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
     double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-    double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
-    double len = sqrt(x * x + y * y + z * z);
+    c[0] = a1 * b2 - a2 * b1; c[1] = a2 * b0 - a0 * b2; c[2] = a0 * b1 - a1 * b0;
+    return sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+}
+
+/* Unit normal of face f into u: cross(p1 - p0, p2 - p0) / |.| (a zero cross product stays
+ * zero), numpy's arithmetic in creases.dihedral_angles and normals.face_average_normals. */
+static void face_normal(const double *p, const int64_t *faces, int64_t f, double *u) {
+    double c[3];
+    double len = face_cross(p, faces[3 * f], faces[3 * f + 1], faces[3 * f + 2], c);
     double dv = len > 0 ? len : 1.0;
-    u[0] = x / dv; u[1] = y / dv; u[2] = z / dv;
+    u[0] = c[0] / dv; u[1] = c[1] / dv; u[2] = c[2] / dv;
 }
 
 /* Face-average normals exactly as normals.face_average_normals computes them with
@@ -2053,15 +2058,6 @@ int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
     return m;
 }
 
-/* Double area of the face (i0, i1, i2) as vcg computes it: |(p1 - p0) ^ (p2 - p0)|. */
-static inline double double_area(const double *p, int64_t i0, int64_t i1, int64_t i2) {
-    const double *p0 = p + 3 * i0, *p1 = p + 3 * i1, *p2 = p + 3 * i2;
-    double a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
-    double b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-    double x = a1 * b2 - a2 * b1, y = a2 * b0 - a0 * b2, z = a0 * b1 - a1 * b0;
-    return sqrt(x * x + y * y + z * z);
-}
-
 int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const int64_t *from_input,
                       int64_t *out, uint8_t *used) {
     int64_t kept = 0;
@@ -2070,7 +2066,8 @@ int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const in
         if (from_input != NULL) {
             a = from_input[a]; b = from_input[b]; c = from_input[c];
         }
-        if (!(double_area(p, a, b, c) > 0.0)) continue;
+        double cross[3]; /* kept when its double area (face_cross's length) is > 0 */
+        if (!(face_cross(p, a, b, c, cross) > 0.0)) continue;
         out[3 * kept] = a; out[3 * kept + 1] = b; out[3 * kept + 2] = c;
         used[a] = 1; used[b] = 1; used[c] = 1;
         kept++;
