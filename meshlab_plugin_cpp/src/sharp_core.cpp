@@ -84,6 +84,16 @@ unsigned workers() {
 	return std::max(1u, std::thread::hardware_concurrency());
 }
 
+// run(t) on min(workers(), max(items, 1)) threads, t = 0 on the calling thread.
+template <class Run>
+void onCores(Index items, Run run) {
+	std::vector<std::thread> pool;
+	const unsigned w = unsigned(std::min<Index>(workers(), std::max<Index>(items, 1)));
+	for (unsigned t = 1; t < w; ++t) pool.emplace_back(run, t);
+	run(0u);
+	for (auto &t : pool) t.join();
+}
+
 // task(worker, begin, end) -> kernel status, over [0, n) in chunks of MS_CHUNK on every
 // core (as _kernels._run_chunks); worker < workers() names the thread (its scratch). The
 // calling thread works too and moves the bar from `from` to `to` as chunks finish.
@@ -106,13 +116,18 @@ void chunks(Index n, Task task, Bar &bar, int from, int to, const char *stage) {
 		}
 	};
 	bar.report(from, stage);
-	std::vector<std::thread> pool;
-	const unsigned w = unsigned(std::min<Index>(workers(), std::max<Index>(count, 1)));
-	for (unsigned t = 1; t < w; ++t) pool.emplace_back(work, t, false);
-	work(0, true);
-	for (auto &t : pool) t.join();
+	onCores(count, [&](unsigned t) { work(t, t == 0); });
 	check(status);
 	bar.report(to, stage);
+}
+
+// f(u) for every u in [0, count), on every core (items taken in turn from a counter).
+template <class F>
+void eachIndex(Index count, F f) {
+	std::atomic<Index> next{0};
+	onCores(count, [&](unsigned) {
+		for (Index u; (u = next++) < count;) f(u);
+	});
 }
 
 // neighbourhoods.unit_scale: multiply by 2^-e, 2^(e-1) <= max |coordinate| < 2^e, when e is
@@ -184,29 +199,14 @@ struct Tree {
 		box.resize(6 * ((Index(2) << depth) - 1));
 		for (Index i = 0; i < n; ++i) orig[size_t(i)] = i;
 		const int top = std::min(depth, MS_KD_TOP);
-		for (int level = 0; level < top; ++level) {
-			eachNode(Index(1) << level, [&](Index u) {
+		for (int level = 0; level < top; ++level) {  // the disjoint nodes of one level
+			eachIndex(Index(1) << level, [&](Index u) {
 				ms_kdtree_build_level(pts.data(), orig.data(), n, depth, level, u, u + 1, box.data());
 			});
 		}
-		eachNode(Index(1) << top, [&](Index u) {
+		eachIndex(Index(1) << top, [&](Index u) {
 			ms_kdtree_build_subtrees(pts.data(), orig.data(), n, depth, u, u + 1, box.data());
 		});
-	}
-
-private:
-	// f(u) for every u in [0, count), on every core (disjoint nodes of one level).
-	template <class F>
-	static void eachNode(Index count, F f) {
-		std::atomic<Index> next{0};
-		auto work = [&] {
-			for (Index u; (u = next++) < count;) f(u);
-		};
-		std::vector<std::thread> pool;
-		const unsigned w = unsigned(std::min<Index>(workers(), count));
-		for (unsigned t = 1; t < w; ++t) pool.emplace_back(work);
-		work();
-		for (auto &t : pool) t.join();
 	}
 };
 
