@@ -1263,78 +1263,125 @@ static inline double kth_bound(const double *pi, const double *prev_p, double pr
     return t * t * (1.0 + 1e-9) + 1e-300;
 }
 
-/* The points of a leaf's neighbourhood, as arrays. */
+/* The points of a leaf's neighbourhood, as arrays, leaf by leaf: the points of leaf l in
+ * the slots [start[l], start[l + 1]), padded to a multiple of 4 with NaN coordinates
+ * (never within any bound), and its box in lb[0..6)[l] (lo x, y, z, hi x, y, z; rows
+ * padded to a multiple of 4 with empty boxes, lo = +inf and hi = -inf). Room for `cap`
+ * slots and cap / 4 + 1 leaves. */
 typedef struct {
     double *x, *y, *z, *d2;
     int64_t *idx, *pos;
-    int64_t n, cap;
+    double *lb[6];
+    int32_t *start;
+    int64_t n, nl, cap;
 } block_t;
 
-static int block_reserve(block_t *b, int64_t need) {
-    if (need <= b->cap) return 0;
-    int64_t cap = b->cap ? b->cap : 512;
-    while (cap < need) cap *= 2;
-    double **dp[4] = {&b->x, &b->y, &b->z, &b->d2};
-    for (int t = 0; t < 4; t++) {
-        double *r = (double *)realloc(*dp[t], (size_t)cap * sizeof(double));
-        if (!r) return -1;
-        *dp[t] = r;
-    }
-    int64_t *r1 = (int64_t *)realloc(b->idx, (size_t)cap * sizeof(int64_t));
-    if (!r1) return -1;
-    b->idx = r1;
-    int64_t *r2 = (int64_t *)realloc(b->pos, (size_t)cap * sizeof(int64_t));
-    if (!r2) return -1;
-    b->pos = r2;
+static int block_alloc(block_t *b, int64_t cap) {
+    int64_t lcap = cap / 4 + 8;
     b->cap = cap;
-    return 0;
+    double **dp[4] = {&b->x, &b->y, &b->z, &b->d2};
+    for (int t = 0; t < 4; t++) *dp[t] = (double *)malloc((size_t)cap * sizeof(double));
+    b->idx = (int64_t *)malloc((size_t)cap * sizeof(int64_t));
+    b->pos = (int64_t *)malloc((size_t)cap * sizeof(int64_t));
+    for (int a = 0; a < 6; a++) b->lb[a] = (double *)malloc((size_t)lcap * sizeof(double));
+    b->start = (int32_t *)malloc((size_t)lcap * sizeof(int32_t));
+    int ok = b->x && b->y && b->z && b->d2 && b->idx && b->pos && b->start;
+    for (int a = 0; a < 6; a++) ok = ok && b->lb[a];
+    return ok ? 0 : -1;
+}
+
+static void block_free(block_t *b) {
+    free(b->x); free(b->y); free(b->z); free(b->d2);
+    free(b->idx); free(b->pos);
+    for (int a = 0; a < 6; a++) free(b->lb[a]);
+    free(b->start);
 }
 
 /* Append to b the points of the leaves whose box lies within squared distance r2 of
- * box lb, unless more than limit points: returns 0, 1 (over the limit) or -1 (out of
- * memory). Every point left out is farther than r2 from every point in lb. */
+ * box lb, unless more than b->cap slots: returns 0, or 1 (over). Every point left out
+ * is farther than r2 from every point in lb. */
 static int gather(const tree_t *T, const double *lb, double r2, int64_t t, int64_t s,
-                  int64_t e, int d, int64_t limit, block_t *b) {
+                  int64_t e, int d, block_t *b) {
     if (box_dist2(T->box + 6 * t, lb) > r2) return 0;
     if (d < T->depth) {
         int64_t m = s + (e - s) / 2;
-        int rc = gather(T, lb, r2, 2 * t + 1, s, m, d + 1, limit, b);
-        return rc ? rc : gather(T, lb, r2, 2 * t + 2, m, e, d + 1, limit, b);
+        int rc = gather(T, lb, r2, 2 * t + 1, s, m, d + 1, b);
+        return rc ? rc : gather(T, lb, r2, 2 * t + 2, m, e, d + 1, b);
     }
-    if (b->n + (e - s) > limit) return 1;
-    if (block_reserve(b, b->n + (e - s))) return -1;
-    for (int64_t j = s; j < e; j++) {
-        int64_t u = b->n++;
+    int64_t u = b->n, end = u + ((e - s + 3) & ~(int64_t)3);
+    if (e <= s) return 0;
+    if (end > b->cap) return 1;
+    for (int64_t j = s; j < e; j++, u++) {
         b->x[u] = T->p[3 * j];
         b->y[u] = T->p[3 * j + 1];
         b->z[u] = T->p[3 * j + 2];
         b->idx[u] = T->orig[j];
         b->pos[u] = j;
     }
+    for (; u < end; u++) {
+        b->x[u] = b->y[u] = b->z[u] = NAN;
+        b->idx[u] = b->pos[u] = 0;
+    }
+    for (int a = 0; a < 6; a++) b->lb[a][b->nl] = T->box[6 * t + a];
+    b->start[b->nl++] = (int32_t)b->n;
+    b->start[b->nl] = (int32_t)end;
+    b->n = end;
     return 0;
 }
 
-/* The squared distances b->d2[j] of the block's points from (px, py, pz), and the
- * entries j with d2 <= limit2, increasing, into sel (room for b->n + 3): returns their
- * number. dx * dx + dy * dy + dz * dz summed in that order, every lane as the scalar. */
-static int64_t block_scan(const block_t *b, double px, double py, double pz, double limit2,
-                          int32_t *sel) {
-    int64_t nb = b->n, m = 0;
-    double *bd = b->d2;
-    for (int64_t j = 0; j < nb; j++) {
-        double dx = b->x[j] - px, dy = b->y[j] - py, dz = b->z[j] - pz;
-        bd[j] = dx * dx + dy * dy + dz * dz;
+/* The block of the leaf box lb at squared radius r2 (gather), its box rows padded:
+ * returns 0, or 1 (over b->cap slots). */
+static int gather_block(const tree_t *T, const double *lb, double r2, block_t *b) {
+    b->n = 0;
+    b->nl = 0;
+    b->start[0] = 0;
+    int rc = gather(T, lb, r2, 0, 0, T->n, 0, b);
+    for (int64_t l = b->nl; l < ((b->nl + 3) & ~(int64_t)3); l++) {
+        for (int a = 0; a < 3; a++) b->lb[a][l] = INFINITY;
+        for (int a = 3; a < 6; a++) b->lb[a][l] = -INFINITY;
     }
-    for (int64_t j = 0; j < nb; j++) { /* branch-free: sel holds nb */
-        sel[m] = (int32_t)j;
-        m += bd[j] <= limit2;
+    return rc;
+}
+
+/* Lower bound of the squared distance of (px, py, pz) to the points of box l of b: the
+ * gaps max(lo - p, p - hi, 0) on each axis, squared and summed in order (as box_dist2,
+ * never above a point's d2). */
+static inline double leaf_gap2(const block_t *b, int64_t l, double px, double py, double pz) {
+    double p[3] = {px, py, pz}, s = 0.0;
+    for (int a = 0; a < 3; a++) {
+        double lo = b->lb[a][l] - p[a], hi = p[a] - b->lb[3 + a][l];
+        double g = lo > hi ? lo : hi;
+        g = g > 0.0 ? g : 0.0;
+        s += g * g;
+    }
+    return s;
+}
+
+/* The squared distances b->d2[j] from (px, py, pz) of the points of the block's leaves
+ * whose box is within limit2, and the entries j with d2 <= limit2 into sel (room for
+ * b->n + 3), leaf by leaf: returns their number. dx * dx + dy * dy + dz * dz summed in
+ * that order, every lane as the scalar. key: unused (see block_scan_avx2). */
+static int64_t block_scan(const block_t *b, double px, double py, double pz, double limit2,
+                          int32_t *sel, float *key) {
+    (void)key;
+    int64_t m = 0;
+    double *bd = b->d2;
+    for (int64_t l = 0; l < b->nl; l++) {
+        if (leaf_gap2(b, l, px, py, pz) > limit2) continue;
+        for (int64_t j = b->start[l]; j < b->start[l + 1]; j++) { /* branch-free */
+            double dx = b->x[j] - px, dy = b->y[j] - py, dz = b->z[j] - pz;
+            bd[j] = dx * dx + dy * dy + dz * dz;
+            sel[m] = (int32_t)j;
+            m += bd[j] <= limit2;
+        }
     }
     return m;
 }
 
 #ifdef HAVE_AVX2_PATH
-/* block_scan on 4 lanes (AVX2, no fused multiply-add: the same roundings); the entries
- * kept written branch-free, 4 at a time from a table of the 16 masks. */
+/* block_scan on 4 lanes (AVX2, no fused multiply-add: the same roundings), 4 leaf boxes
+ * at a time; the entries kept written branch-free, 4 at a time from a table of the 16
+ * masks, and beside them their d2 rounded to float in key (for rank_select_avx2). */
 /* scan_pick[mask]: the lanes set in mask, in order (then 0s) */
 static const int32_t scan_pick[16][4] = {
     {0, 0, 0, 0}, {0, 0, 0, 0}, {1, 0, 0, 0}, {0, 1, 0, 0},
@@ -1342,37 +1389,98 @@ static const int32_t scan_pick[16][4] = {
     {3, 0, 0, 0}, {0, 3, 0, 0}, {1, 3, 0, 0}, {0, 1, 3, 0},
     {2, 3, 0, 0}, {0, 2, 3, 0}, {1, 2, 3, 0}, {0, 1, 2, 3}};
 
-__attribute__((target("avx2,popcnt"))) static int64_t block_scan_avx2(const block_t *b, double px,
-                                                                double py, double pz,
-                                                                double limit2, int32_t *sel) {
-    int64_t nb = b->n, m = 0, j = 0;
+__attribute__((target("avx2,popcnt,bmi"))) static int64_t block_scan_avx2(
+    const block_t *b, double px, double py, double pz, double limit2, int32_t *sel, float *key) {
+    int64_t m = 0, nl = b->nl;
+    const double *x = b->x, *y = b->y, *z = b->z;
+    double *const *lb = b->lb;
+    const int32_t *start = b->start;
     double *bd = b->d2;
     __m256d vx = _mm256_set1_pd(px), vy = _mm256_set1_pd(py), vz = _mm256_set1_pd(pz);
-    __m256d lim = _mm256_set1_pd(limit2);
-    for (; j + 4 <= nb; j += 4) {
-        __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(b->x + j), vx);
-        __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(b->y + j), vy);
-        __m256d dz = _mm256_sub_pd(_mm256_loadu_pd(b->z + j), vz);
-        __m256d d = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
-                                  _mm256_mul_pd(dz, dz));
-        _mm256_storeu_pd(bd + j, d);
-        int mask = _mm256_movemask_pd(_mm256_cmp_pd(d, lim, _CMP_LE_OQ));
-        __m128i at = _mm_add_epi32(_mm_loadu_si128((const __m128i *)scan_pick[mask]),
-                                   _mm_set1_epi32((int32_t)j));
-        _mm_storeu_si128((__m128i *)(sel + m), at);
-        m += __builtin_popcount((unsigned)mask);
-    }
-    for (; j < nb; j++) {
-        double dx = b->x[j] - px, dy = b->y[j] - py, dz = b->z[j] - pz;
-        bd[j] = dx * dx + dy * dy + dz * dz;
-        sel[m] = (int32_t)j;
-        m += bd[j] <= limit2;
+    __m256d lim = _mm256_set1_pd(limit2), zero = _mm256_setzero_pd();
+    for (int64_t l0 = 0; l0 < nl; l0 += 4) {
+        __m256d gx = _mm256_max_pd(_mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lb[0] + l0), vx),
+                                                 _mm256_sub_pd(vx, _mm256_loadu_pd(lb[3] + l0))),
+                                   zero);
+        __m256d gy = _mm256_max_pd(_mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lb[1] + l0), vy),
+                                                 _mm256_sub_pd(vy, _mm256_loadu_pd(lb[4] + l0))),
+                                   zero);
+        __m256d gz = _mm256_max_pd(_mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lb[2] + l0), vz),
+                                                 _mm256_sub_pd(vz, _mm256_loadu_pd(lb[5] + l0))),
+                                   zero);
+        __m256d g = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy)),
+                                  _mm256_mul_pd(gz, gz));
+        unsigned near = (unsigned)_mm256_movemask_pd(_mm256_cmp_pd(g, lim, _CMP_LE_OQ));
+        while (near) {
+            int64_t l = l0 + __builtin_ctz(near), end = start[l + 1];
+            near &= near - 1;
+            __m128i at = _mm_set1_epi32(start[l]);
+            for (int64_t j = start[l]; j < end; j += 4) {
+                __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(x + j), vx);
+                __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(y + j), vy);
+                __m256d dz = _mm256_sub_pd(_mm256_loadu_pd(z + j), vz);
+                __m256d d = _mm256_add_pd(
+                    _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                    _mm256_mul_pd(dz, dz));
+                _mm256_storeu_pd(bd + j, d);
+                int mask = _mm256_movemask_pd(_mm256_cmp_pd(d, lim, _CMP_LE_OQ));
+                __m128i pick = _mm_loadu_si128((const __m128i *)scan_pick[mask]);
+                _mm_storeu_si128((__m128i *)(sel + m), _mm_add_epi32(pick, at));
+                _mm_storeu_ps(key + m, _mm_permutevar_ps(_mm256_cvtpd_ps(d), pick));
+                m += __builtin_popcount((unsigned)mask);
+                at = _mm_add_epi32(at, _mm_set1_epi32(4));
+            }
+        }
     }
     return m;
 }
+
+/* The ranks of key[j0 .. j0 + 16) among key[0..m) (two = 0: of key[j0 .. j0 + 8)), as
+ * minus the sum of the comparisons' all-ones lanes. */
+__attribute__((target("avx2"))) static inline __attribute__((always_inline)) void rank_lanes(
+    const float *key, int64_t m, int64_t j0, int two, int32_t *rank) {
+    __m256 k0 = _mm256_loadu_ps(key + j0), k1 = _mm256_loadu_ps(key + j0 + 8);
+    __m256i a0 = _mm256_setzero_si256(), a1 = a0;
+    for (int64_t i = 0; i < m; i += 2) { /* key[m] is +inf: below none */
+        __m256 ki = _mm256_broadcast_ss(key + i), kn = _mm256_broadcast_ss(key + i + 1);
+        __m256i c0 = _mm256_castps_si256(_mm256_cmp_ps(ki, k0, _CMP_LT_OQ));
+        a0 = _mm256_add_epi32(a0, _mm256_castps_si256(_mm256_cmp_ps(kn, k0, _CMP_LT_OQ)));
+        a0 = _mm256_add_epi32(a0, c0);
+        if (two) {
+            __m256i c1 = _mm256_castps_si256(_mm256_cmp_ps(ki, k1, _CMP_LT_OQ));
+            a1 = _mm256_add_epi32(a1, _mm256_castps_si256(_mm256_cmp_ps(kn, k1, _CMP_LT_OQ)));
+            a1 = _mm256_add_epi32(a1, c1);
+        }
+    }
+    _mm256_storeu_si256((__m256i *)(rank + j0), _mm256_sub_epi32(_mm256_setzero_si256(), a0));
+    if (two) {
+        _mm256_storeu_si256((__m256i *)(rank + j0 + 8),
+                            _mm256_sub_epi32(_mm256_setzero_si256(), a1));
+    }
+}
+
+__attribute__((target("avx2"))) static int rank_select_avx2(const block_t *b, const int32_t *sel,
+                                                            float *key, int64_t m, cand_t *out,
+                                                            int32_t *rank) {
+    for (int64_t j = m; j < m + 32; j++) key[j] = INFINITY;
+    for (int64_t j0 = 0; j0 < m; j0 += 16) {
+        if (m - j0 > 8) rank_lanes(key, m, j0, 1, rank);
+        else rank_lanes(key, m, j0, 0, rank);
+    }
+    int64_t sum = 0;
+    for (int64_t j = 0; j < m; j++) {
+        int32_t r = rank[j], s = sel[j];
+        sum += r;
+        out[r].d2 = b->d2[s];
+        out[r].idx = b->idx[s];
+        out[r].pos = b->pos[s];
+    }
+    return sum == m * (m - 1) / 2;
+}
 #endif
 
-typedef int64_t (*block_scan_fn)(const block_t *, double, double, double, double, int32_t *);
+typedef int64_t (*block_scan_fn)(const block_t *, double, double, double, double, int32_t *,
+                                 float *);
 
 /* The block_scan to use: the AVX2 one when use_avx2. */
 static block_scan_fn block_scanner(void) {
@@ -1446,6 +1554,9 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
 /* Squared radius of a leaf's block, relative to the largest k-th squared distance of
  * the previous leaf (radius x 1.25). */
 #define BLOCK_GROW 1.5625
+/* The first bound tried for a point: this times the previous point's k-th squared
+ * distance (radius x 1.095), when below the proven one. */
+#define KNN_GUESS 1.2
 
 /* The exact kNN of points of the tree taken one after the other (in increasing tree
  * position: every one, or a few here and there), each answer into h.c[0..k), sorted by
@@ -1455,22 +1566,27 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  * leaf's box are gathered once for all its points (r: 1.25 times the largest k-th
  * distance found in the previous leaf); a point's k nearest are among them when at
  * least k lie within r. The k-th distance of the previous point plus the distance
- * between the two bounds this point's k-th distance (triangle inequality), which prunes
- * the candidates before the selection. Otherwise (the k-th distance grew, or the block
- * would exceed a few thousand points, as around a far outlier) the point gets a heap
- * search of the tree: O(log n) per point whatever the spatial distribution. */
+ * between the two bounds this point's k-th distance (triangle inequality). A point
+ * first scans the block's leaves within a guess (KNN_GUESS times the previous point's
+ * k-th squared distance), and when fewer than k points lie within it, the leaves within
+ * that bound: at least k points within a bound hold the k nearest. The candidates are
+ * then ranked (rank_select_avx2, or nearest_of_block's selection). Otherwise (the k-th
+ * distance grew, or the block would exceed a few thousand points, as around a far
+ * outlier) the point gets a heap search of the tree: O(log n) per point whatever the
+ * spatial distribution. */
 typedef struct {
     tree_t T;
-    int64_t k, limit;
+    int64_t k;
     heap_t h;
     block_t blk;
-    int32_t *sel;
+    int32_t *sel, *rank;
+    float *key;
     uint8_t *bucket;
     int32_t count[NEAR_BUCKETS + 1];
     block_scan_fn scan;
-    int have_block;
+    int avx2, have_block;
     int64_t leaf_s, leaf_e;
-    double r2, leaf_max, prev_r, prev_p[3];
+    double r2, leaf_max, prev_r, prev_k2, prev_p[3];
 } knn_cursor_t;
 
 /* Returns 0, or -1 out of memory (then knn_cursor_free it all the same). */
@@ -1478,29 +1594,43 @@ static int knn_cursor_init(knn_cursor_t *c, const tree_t *T, int64_t k) {
     memset(c, 0, sizeof *c);
     c->T = *T;
     c->k = k;
-    c->limit = 32 * k + 512;
-    c->h.c = (cand_t *)malloc((size_t)c->limit * sizeof(cand_t));
+    int64_t limit = 32 * k + 512; /* slots of a block */
+    c->h.c = (cand_t *)malloc((size_t)limit * sizeof(cand_t));
     c->h.k = k;
     c->h.tau = INFINITY;
-    c->sel = (int32_t *)malloc((size_t)(c->limit + 3) * sizeof(int32_t));
-    c->bucket = (uint8_t *)malloc((size_t)c->limit);
+    c->sel = (int32_t *)malloc((size_t)(limit + 32) * sizeof(int32_t));
+    c->rank = (int32_t *)malloc((size_t)(limit + 32) * sizeof(int32_t));
+    c->key = (float *)malloc((size_t)(limit + 32) * sizeof(float));
+    c->bucket = (uint8_t *)malloc((size_t)limit);
     c->scan = block_scanner();
+    c->avx2 = use_avx2();
     c->r2 = -1.0;
     c->prev_r = -1.0;
-    return c->h.c && c->sel && c->bucket ? 0 : -1;
+    c->prev_k2 = -1.0;
+    int rc = block_alloc(&c->blk, limit);
+    return !rc && c->h.c && c->sel && c->rank && c->key && c->bucket ? 0 : -1;
 }
 
 static void knn_cursor_free(knn_cursor_t *c) {
     free(c->h.c);
-    free(c->blk.x); free(c->blk.y); free(c->blk.z); free(c->blk.d2);
-    free(c->blk.idx); free(c->blk.pos);
+    block_free(&c->blk);
     free(c->sel);
+    free(c->rank);
+    free(c->key);
     free(c->bucket);
 }
 
+/* The k nearest of the m >= k candidates c->sel (within limit2) into c->h.c[0..k). */
+static void select_block(knn_cursor_t *c, int64_t m, double limit2) {
+#ifdef HAVE_AVX2_PATH
+    if (c->avx2 && rank_select_avx2(&c->blk, c->sel, c->key, m, c->h.c, c->rank)) return;
+#endif
+    nearest_of_block(&c->blk, c->blk.d2, c->sel, m, c->k, limit2, c->h.c, c->bucket, c->count);
+}
+
 /* The k nearest of the point at tree position i into c->h.c[0..k) (fastest with the
- * positions increasing). Returns 0, or -1 out of memory. */
-static int knn_cursor_next(knn_cursor_t *c, int64_t i) {
+ * positions increasing). */
+static void knn_cursor_next(knn_cursor_t *c, int64_t i) {
     const tree_t *T = &c->T;
     const double *pi = T->p + 3 * i;
     int64_t k = c->k;
@@ -1509,22 +1639,18 @@ static int knn_cursor_next(knn_cursor_t *c, int64_t i) {
         int64_t t = leaf_of(T, i, &c->leaf_s, &c->leaf_e);
         if (c->leaf_max > 0.0) c->r2 = c->leaf_max * BLOCK_GROW;
         c->leaf_max = 0.0;
-        c->blk.n = 0;
-        c->have_block = 0;
-        if (c->r2 >= 0.0) {
-            int g = gather(T, T->box + 6 * t, c->r2, 0, 0, T->n, 0, c->limit, &c->blk);
-            if (g < 0) return -1;
-            c->have_block = g == 0;
-        }
+        c->have_block = c->r2 >= 0.0 && gather_block(T, T->box + 6 * t, c->r2, &c->blk) == 0;
     }
     int found = 0;
     if (c->have_block && c->blk.n >= k) {
-        double limit2 = tau < c->r2 ? tau : c->r2;
-        int64_t m = c->scan(&c->blk, pi[0], pi[1], pi[2], limit2, c->sel);
-        if (m >= k) {
-            nearest_of_block(&c->blk, c->blk.d2, c->sel, m, k, limit2, c->h.c, c->bucket,
-                             c->count);
-            found = 1;
+        double limit2 = tau < c->r2 ? tau : c->r2, guess = c->prev_k2 * KNN_GUESS;
+        for (int pass = guess > 0.0 && guess < limit2 ? 0 : 1; pass < 2 && !found; pass++) {
+            double bound = pass ? limit2 : guess;
+            int64_t m = c->scan(&c->blk, pi[0], pi[1], pi[2], bound, c->sel, c->key);
+            if (m >= k) {
+                select_block(c, m, bound);
+                found = 1;
+            }
         }
     }
     if (!found) knn_search(T, pi, k, tau, &c->h);
@@ -1532,8 +1658,8 @@ static int knn_cursor_next(knn_cursor_t *c, int64_t i) {
     if (kth > c->leaf_max) c->leaf_max = kth;
     if (c->r2 < 0.0) c->r2 = kth * BLOCK_GROW; /* the first point */
     c->prev_r = sqrt(kth);
+    c->prev_k2 = kth;
     c->prev_p[0] = pi[0]; c->prev_p[1] = pi[1]; c->prev_p[2] = pi[2];
-    return 0;
 }
 
 /* cloud_out_t: what one pass over the points writes (_ckernels.h). */
@@ -1569,7 +1695,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     }
     for (int64_t i = begin; i < end; i++) {
         const double *pi = p + 3 * i;
-        if (knn_cursor_next(&cur, i)) { rc = -1; goto done; }
+        knn_cursor_next(&cur, i);
         int64_t ci = orig[i], oi = out->tree_order ? i : ci; /* cleaned index, its row */
         if (out->idx != NULL) {
             for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = nb[j].idx;
@@ -1710,8 +1836,8 @@ int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *b
     knn_cursor_t cur;
     int rc = knn_cursor_init(&cur, &T, k);
     for (int64_t r = begin; r < end && rc == 0; r++) {
-        rc = knn_cursor_next(&cur, pos[r]);
-        for (int64_t j = 0; j < k && rc == 0; j++) out_idx[r * k + j] = cur.h.c[j].idx;
+        knn_cursor_next(&cur, pos[r]);
+        for (int64_t j = 0; j < k; j++) out_idx[r * k + j] = cur.h.c[j].idx;
     }
     knn_cursor_free(&cur);
     return rc;
