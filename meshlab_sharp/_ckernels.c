@@ -1263,7 +1263,7 @@ static inline double kth_bound(const double *pi, const double *prev_p, double pr
     return t * t * (1.0 + 1e-9) + 1e-300;
 }
 
-/* The points of a leaf's neighbourhood, as arrays, leaf by leaf: the points of leaf l in
+/* The points of a node's neighbourhood, as arrays, leaf by leaf: the points of leaf l in
  * the slots [start[l], start[l + 1]), padded to a multiple of 4 with NaN coordinates
  * (never within any bound), and its box in lb[0..6)[l] (lo x, y, z, hi x, y, z; rows
  * padded to a multiple of 4 with empty boxes, lo = +inf and hi = -inf). Room for `cap`
@@ -1538,12 +1538,12 @@ static void nearest_of_block(const block_t *b, const double *bd, const int32_t *
     select_sorted(out, m, k);
 }
 
-/* The leaf holding tree position i: its node, and its points [*s, *e). */
-static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
+/* The node at depth d holding tree position i, and its points [*s, *e). */
+static int64_t node_of(const tree_t *T, int64_t i, int d, int64_t *s, int64_t *e) {
     int64_t t = 0;
     *s = 0;
     *e = T->n;
-    for (int d = 0; d < T->depth; d++) {
+    for (int u = 0; u < d; u++) {
         int64_t m = *s + (*e - *s) / 2;
         if (i < m) { t = 2 * t + 1; *e = m; }
         else { t = 2 * t + 2; *s = m; }
@@ -1551,9 +1551,11 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
     return t;
 }
 
-/* Squared radius of a leaf's block, relative to the largest k-th squared distance of
- * the previous leaf (radius x 1.25). */
+/* Squared radius of a block, relative to the largest k-th squared distance of the
+ * previous block's points (radius x 1.25). */
 #define BLOCK_GROW 1.5625
+/* A block serves the points of a node this many levels above the leaves (two leaves). */
+#define BLOCK_UP 1
 /* The first bound tried for a point: this times the previous point's k-th squared
  * distance (radius x 1.095), when below the proven one. */
 #define KNN_GUESS 1.2
@@ -1562,17 +1564,18 @@ static int64_t leaf_of(const tree_t *T, int64_t i, int64_t *s, int64_t *e) {
  * position: every one, or a few here and there), each answer into h.c[0..k), sorted by
  * (d2, idx).
  *
- * Points are taken leaf by leaf. The points of the leaves within a radius r of the
- * leaf's box are gathered once for all its points (r: 1.25 times the largest k-th
- * distance found in the previous leaf); a point's k nearest are among them when at
- * least k lie within r. The k-th distance of the previous point plus the distance
- * between the two bounds this point's k-th distance (triangle inequality). A point
- * first scans the block's leaves within a guess (KNN_GUESS times the previous point's
- * k-th squared distance), and when fewer than k points lie within it, the leaves within
- * that bound: at least k points within a bound hold the k nearest. The candidates are
- * then ranked (rank_select_avx2, or nearest_of_block's selection). Otherwise (the k-th
- * distance grew, or the block would exceed a few thousand points, as around a far
- * outlier) the point gets a heap search of the tree: O(log n) per point whatever the
+ * Points are taken node by node (the nodes BLOCK_UP levels above the leaves). The
+ * points of the leaves within a radius r of the node's box are gathered once for all
+ * its points (r: 1.25 times the largest k-th distance found in the previous node); a
+ * point's k nearest are among them when at least k lie within r. The k-th distance of
+ * the previous point plus the distance between the two bounds this point's k-th
+ * distance (triangle inequality). A point first scans the block's leaves within a guess
+ * (KNN_GUESS times the previous point's k-th squared distance, when below that bound),
+ * then, when fewer than k points lie within the guess, the leaves within the bound: at
+ * least k points within either hold the k nearest. The candidates are then ranked
+ * (rank_select_avx2, or nearest_of_block's selection). Otherwise (the k-th distance
+ * grew, or the block would exceed a few thousand points, as around a far outlier) the
+ * point gets a heap search of the tree: O(log n) per point whatever the
  * spatial distribution. */
 typedef struct {
     tree_t T;
@@ -1585,8 +1588,8 @@ typedef struct {
     int32_t count[NEAR_BUCKETS + 1];
     block_scan_fn scan;
     int avx2, have_block;
-    int64_t leaf_s, leaf_e;
-    double r2, leaf_max, prev_r, prev_k2, prev_p[3];
+    int64_t node_s, node_e; /* the points the block serves */
+    double r2, node_max, prev_r, prev_k2, prev_p[3];
 } knn_cursor_t;
 
 /* Returns 0, or -1 out of memory (then knn_cursor_free it all the same). */
@@ -1635,10 +1638,11 @@ static void knn_cursor_next(knn_cursor_t *c, int64_t i) {
     const double *pi = T->p + 3 * i;
     int64_t k = c->k;
     double tau = kth_bound(pi, c->prev_p, c->prev_r);
-    if (i < c->leaf_s || i >= c->leaf_e) {
-        int64_t t = leaf_of(T, i, &c->leaf_s, &c->leaf_e);
-        if (c->leaf_max > 0.0) c->r2 = c->leaf_max * BLOCK_GROW;
-        c->leaf_max = 0.0;
+    if (i < c->node_s || i >= c->node_e) {
+        int up = T->depth < BLOCK_UP ? T->depth : BLOCK_UP;
+        int64_t t = node_of(T, i, T->depth - up, &c->node_s, &c->node_e);
+        if (c->node_max > 0.0) c->r2 = c->node_max * BLOCK_GROW;
+        c->node_max = 0.0;
         c->have_block = c->r2 >= 0.0 && gather_block(T, T->box + 6 * t, c->r2, &c->blk) == 0;
     }
     int found = 0;
@@ -1655,7 +1659,7 @@ static void knn_cursor_next(knn_cursor_t *c, int64_t i) {
     }
     if (!found) knn_search(T, pi, k, tau, &c->h);
     double kth = c->h.c[k - 1].d2;
-    if (kth > c->leaf_max) c->leaf_max = kth;
+    if (kth > c->node_max) c->node_max = kth;
     if (c->r2 < 0.0) c->r2 = kth * BLOCK_GROW; /* the first point */
     c->prev_r = sqrt(kth);
     c->prev_k2 = kth;
@@ -1828,7 +1832,7 @@ int64_t ms_bit_histogram(const double *v, int64_t begin, int64_t end, int64_t *c
 /* For r in [begin, end): the k nearest of the point at tree position pos[r] into
  * out_idx[r * k ...] (cleaned indices sorted by (squared distance, index), the rows of
  * ms_cloud_pdis's kNN table), by the same knn_cursor_t: rows in increasing tree
- * position share their leaf's block and are pruned by the previous row's k-th
+ * position share their node's block and are pruned by the previous row's k-th
  * distance. Returns 0, or -1 out of memory. */
 int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                 const int64_t *pos, int64_t k, int64_t begin, int64_t end, int64_t *out_idx) {
