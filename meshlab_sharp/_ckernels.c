@@ -1017,6 +1017,23 @@ static void select_axis(double *x, int64_t *idx, int64_t n, int64_t m, int a, ui
 static int64_t split_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
                           int depth, double *box, uint64_t *rng) {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+#ifdef __SSE2__
+    /* (x, y) on two lanes and z: min(v, lo) keeps lo when v is not below it (an equal
+     * value of the other sign, NaN), as the loop below does */
+    __m128d lxy = _mm_loadu_pd(lo), hxy = _mm_loadu_pd(hi);
+    __m128d lz = _mm_load_sd(lo + 2), hz = _mm_load_sd(hi + 2);
+    for (int64_t j = s; j < e; j++) {
+        __m128d vxy = _mm_loadu_pd(x + 3 * j), vz = _mm_load_sd(x + 3 * j + 2);
+        lxy = _mm_min_pd(vxy, lxy);
+        hxy = _mm_max_pd(vxy, hxy);
+        lz = _mm_min_sd(vz, lz);
+        hz = _mm_max_sd(vz, hz);
+    }
+    _mm_storeu_pd(lo, lxy);
+    _mm_storeu_pd(hi, hxy);
+    _mm_store_sd(lo + 2, lz);
+    _mm_store_sd(hi + 2, hz);
+#else
     for (int64_t j = s; j < e; j++) {
         for (int a = 0; a < 3; a++) {
             double v = x[3 * j + a];
@@ -1024,6 +1041,7 @@ static int64_t split_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t
             if (v > hi[a]) hi[a] = v;
         }
     }
+#endif
     if (d <= depth) {
         double *b = box + 6 * t;
         b[0] = lo[0]; b[1] = lo[1]; b[2] = lo[2];
