@@ -1453,37 +1453,41 @@ __attribute__((target("avx2,popcnt,bmi"))) static int64_t block_scan_avx2(
     return m;
 }
 
-/* The ranks of key[j0 .. j0 + 16) among key[0..m) (two = 0: of key[j0 .. j0 + 8)), as
- * minus the sum of the comparisons' all-ones lanes. */
+/* The ranks of key[j0 .. j0 + 8 nv) among key[0..m) (nv <= 4), as minus the sum of the
+ * comparisons' all-ones lanes. */
+#define RANK_ADD(a, ki, kj) \
+    a = _mm256_add_epi32(a, _mm256_castps_si256(_mm256_cmp_ps(ki, kj, _CMP_LT_OQ)))
 __attribute__((target("avx2"))) static inline __attribute__((always_inline)) void rank_lanes(
-    const float *key, int64_t m, int64_t j0, int two, int32_t *rank) {
+    const float *key, int64_t m, int64_t j0, int nv, int32_t *rank) {
     __m256 k0 = _mm256_loadu_ps(key + j0), k1 = _mm256_loadu_ps(key + j0 + 8);
-    __m256i a0 = _mm256_setzero_si256(), a1 = a0;
+    __m256 k2 = _mm256_loadu_ps(key + j0 + 16), k3 = _mm256_loadu_ps(key + j0 + 24);
+    __m256i a0 = _mm256_setzero_si256(), a1 = a0, a2 = a0, a3 = a0;
     for (int64_t i = 0; i < m; i += 2) { /* key[m] is +inf: below none */
         __m256 ki = _mm256_broadcast_ss(key + i), kn = _mm256_broadcast_ss(key + i + 1);
-        __m256i c0 = _mm256_castps_si256(_mm256_cmp_ps(ki, k0, _CMP_LT_OQ));
-        a0 = _mm256_add_epi32(a0, _mm256_castps_si256(_mm256_cmp_ps(kn, k0, _CMP_LT_OQ)));
-        a0 = _mm256_add_epi32(a0, c0);
-        if (two) {
-            __m256i c1 = _mm256_castps_si256(_mm256_cmp_ps(ki, k1, _CMP_LT_OQ));
-            a1 = _mm256_add_epi32(a1, _mm256_castps_si256(_mm256_cmp_ps(kn, k1, _CMP_LT_OQ)));
-            a1 = _mm256_add_epi32(a1, c1);
-        }
+        RANK_ADD(a0, ki, k0);
+        RANK_ADD(a0, kn, k0);
+        if (nv > 1) { RANK_ADD(a1, ki, k1); RANK_ADD(a1, kn, k1); }
+        if (nv > 2) { RANK_ADD(a2, ki, k2); RANK_ADD(a2, kn, k2); }
+        if (nv > 3) { RANK_ADD(a3, ki, k3); RANK_ADD(a3, kn, k3); }
     }
-    _mm256_storeu_si256((__m256i *)(rank + j0), _mm256_sub_epi32(_mm256_setzero_si256(), a0));
-    if (two) {
-        _mm256_storeu_si256((__m256i *)(rank + j0 + 8),
-                            _mm256_sub_epi32(_mm256_setzero_si256(), a1));
+    __m256i acc[4] = {a0, a1, a2, a3};
+    for (int v = 0; v < nv; v++) {
+        _mm256_storeu_si256((__m256i *)(rank + j0 + 8 * v),
+                            _mm256_sub_epi32(_mm256_setzero_si256(), acc[v]));
     }
 }
+#undef RANK_ADD
 
 __attribute__((target("avx2"))) static int rank_select_avx2(const block_t *b, const int32_t *sel,
                                                             float *key, int64_t m, cand_t *out,
                                                             int32_t *rank) {
     for (int64_t j = m; j < m + 32; j++) key[j] = INFINITY;
-    for (int64_t j0 = 0; j0 < m; j0 += 16) {
-        if (m - j0 > 8) rank_lanes(key, m, j0, 1, rank);
-        else rank_lanes(key, m, j0, 0, rank);
+    for (int64_t j0 = 0; j0 < m; j0 += 32) {
+        int64_t left = m - j0;
+        if (left > 24) rank_lanes(key, m, j0, 4, rank);
+        else if (left > 16) rank_lanes(key, m, j0, 3, rank);
+        else if (left > 8) rank_lanes(key, m, j0, 2, rank);
+        else rank_lanes(key, m, j0, 1, rank);
     }
     int64_t sum = 0;
     for (int64_t j = 0; j < m; j++) {
@@ -1615,7 +1619,7 @@ static int knn_cursor_init(knn_cursor_t *c, const tree_t *T, int64_t k) {
     memset(c, 0, sizeof *c);
     c->T = *T;
     c->k = k;
-    int64_t limit = 32 * k + 512; /* slots of a block */
+    int64_t limit = 64 * k + 1024; /* slots of a block */
     c->h.c = (cand_t *)malloc((size_t)limit * sizeof(cand_t));
     c->h.k = k;
     c->h.tau = INFINITY;

@@ -253,6 +253,29 @@ def test_knn_identical_without_the_avx2_scan(name, tmp_path):
     np.testing.assert_array_equal(plain, knn(points, 40))
 
 
+def _grid_near_ties() -> np.ndarray:
+    """A shuffled grid on a cube's faces, each coordinate moved by at most 1e-12 (the
+    spacing is 1/7): its tied squared distances now differ, by far less than a float's
+    precision. (1178, 3)"""
+    p = _shuffled(cube_grid_points(15))
+    return p + np.random.default_rng(4).uniform(-1e-12, 1e-12, p.shape)
+
+
+@pytest.mark.parametrize("plain", [False, True])
+def test_knn_identical_with_near_ties(plain, tmp_path):
+    """Squared distances alike as floats but not as doubles: the compiled kNN, which
+    ranks its candidates by their squared distances rounded to float, falls back on the
+    exact (squared distance, index) order, with the AVX2 paths and without them
+    (``MESHLAB_SHARP_NO_AVX2``); the table is the numpy one."""
+    points = clean(as_geometry(_grid_near_ties()), backend="numpy").vertices
+    if plain:
+        env = {"MESHLAB_SHARP_NO_AVX2": "1"}
+        table = _run_on_points(_COMPILED_KNN, points, tmp_path / "knn.npy", timeout=60, env=env)
+    else:
+        table = KnnNeighbourhoods(points, 40, backend="compiled").indices
+    np.testing.assert_array_equal(table, knn(points, 40))
+
+
 _COMPILED_PASS = """
 import sys
 import numpy as np
