@@ -1478,6 +1478,12 @@ __attribute__((target("avx2"))) static inline __attribute__((always_inline)) voi
 }
 #undef RANK_ADD
 
+/* The m candidates sel (their d2 in b->d2, rounded to float in key: room for m + 32)
+ * put at their ranks in out (room for m): the rank of j is #{i : key[i] < key[j]}, 32
+ * keys at a time and branch-free. Returns 1, or 0 when two keys are equal (a tie in d2,
+ * or d2 closer than a float's precision: the ranks repeat, and their sum falls below
+ * m (m - 1) / 2): then out is to be filled another way. Distinct keys order the d2 as
+ * they do (rounding to float is nondecreasing), so no index is needed. */
 __attribute__((target("avx2"))) static int rank_select_avx2(const block_t *b, const int32_t *sel,
                                                             float *key, int64_t m, cand_t *out,
                                                             int32_t *rank) {
