@@ -1826,7 +1826,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
     /* per scale: the ring's size, its projected distance, l, then o */
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     double *spd = (double *)malloc((size_t)nscales * 3 * sizeof(double));
-    int rc = 0, local = out_relative != NULL;
+    int rc = 0, local = out_relative != NULL, avx2 = use_avx2();
     int64_t rmax = rings[nscales - 1];
     if (!buf[0] || !buf[1] || !buf[2] || !buf[3] || !buf[4] || !mk || !spd) {
         rc = -1;
@@ -1898,7 +1898,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
         double *v = (double *)buf[4], *ell = spd + nscales, score = 0.0;
         const double *d2 = (const double *)buf[2];
         for (int64_t j = 0; j < tail; j++) v[4 * j] = sqrt(d2[j]);
-        local_scale_prefixes(v, mk, nscales, ell, ell + nscales);
+        local_scale_prefixes_on(v, mk, nscales, ell, ell + nscales, avx2);
         for (s = 0; s < nscales; s++) { /* min(x / l, 1) keeps a NaN, as np.minimum */
             double l = ell[s], r = l > 0 ? spd[s] / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
             out_relative[s * n + i] = r > 1.0 ? 1.0 : r;
