@@ -853,6 +853,28 @@ def test_sharp_vertices_identical(noise):
     np.testing.assert_array_equal(mask, ref_mask)
 
 
+@pytest.mark.parametrize("shuffle", [False, True])
+def test_crease_dots_are_the_face_pairs_dots(shuffle):
+    """``ms_crease_dots`` (its face normals through a direct-mapped cache of 8192 faces)
+    gives the dot products of ``ms_two_face_edges`` (each normal computed where it is
+    used), bit for bit, as a multiset: on a noisy mesh of 49,152 faces, in their order and
+    shuffled (neighbouring faces far apart: evictions and collisions in the cache)."""
+    vertices, faces = cube_grid_mesh(6)
+    vertices = vertices + np.random.default_rng(5).normal(0.0, 1e-3, vertices.shape)
+    if shuffle:
+        faces = faces[np.random.default_rng(6).permutation(len(faces))]
+    seen = []
+
+    def keep(dots):
+        seen.append(dots.copy())
+        return dots, np.inf
+
+    _kernels.crease_vertices(vertices, faces, keep)
+    _, expected = _kernels.two_face_edges(faces, vertices)
+    assert len(expected) == len(faces) * 3 // 2
+    assert np.sort(seen[0]).tobytes() == np.sort(expected).tobytes()
+
+
 @pytest.mark.parametrize("n", [1, 2, 1000])
 def test_compiled_extent_is_numpy_ptp(n):
     """``_kernels.extent``, the flat rule's bounding box in one C pass, is numpy's ``ptp``
