@@ -1129,8 +1129,8 @@ class RobustSetup:
         thinning).
     sharp_edges : (m,) bool or None
         A mesh's vertices on its own sharp edges
-        (:func:`meshlab_sharp.creases.sharp_vertices`), found first, while little else
-        is in memory; None for a cloud.
+        (:func:`meshlab_sharp.creases.sharp_vertices`): the ``sharp_edges`` given, or
+        found here before the ring pass's arrays exist; None for a cloud.
     """
 
     def __init__(
