@@ -16,6 +16,7 @@ import pymeshlab
 
 from . import _header, _kernels
 from .cleaning import clean
+from .creases import sharp_vertices
 from .curves import Corners, Curve, extract_curves
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
@@ -368,8 +369,8 @@ def _detect(
         _check_cloud_size(len(geometry.vertices), len(points), max(scales_t), geometry.source)
 
     t = time.perf_counter()
-    neighbourhoods, normals = _neighbourhoods_and_normals(
-        points, cleaned.faces if is_mesh else None, scales_t, workers
+    neighbourhoods, normals, sharp_edges = _neighbourhoods_and_normals(
+        points, cleaned.faces if is_mesh else None, scales_t, workers, mode == "robust"
     )
     robust = None
     work, work_neighbourhoods = points, neighbourhoods
@@ -382,7 +383,9 @@ def _detect(
             workers=workers,
             weighting=weighting,
             keep_normals=return_details,
+            sharp_edges=sharp_edges,
         )
+        del sharp_edges
         work, work_neighbourhoods = robust.points, robust.scale_neighbourhoods
         scales_t = robust.scales
     timings["neighbourhoods"] = time.perf_counter() - t
@@ -445,24 +448,31 @@ def _detect(
 
 
 def _neighbourhoods_and_normals(
-    points: np.ndarray, faces: np.ndarray | None, scales: tuple[int, ...], workers: int
-) -> tuple[KnnNeighbourhoods | RingNeighbourhoods, np.ndarray | None]:
+    points: np.ndarray,
+    faces: np.ndarray | None,
+    scales: tuple[int, ...],
+    workers: int,
+    robust: bool,
+) -> tuple[KnnNeighbourhoods | RingNeighbourhoods, np.ndarray | None, np.ndarray | None]:
     """:func:`build_neighbourhoods` and, on a mesh (``faces`` (m, 3) not None), the
-    face-average normals (n, 3), None on a cloud. Unless ``workers`` is 1 the normals are
-    computed on a second thread meanwhile: with the compiled backend both are
-    single-threaded C calls that release the GIL (the mesh's adjacency, then its
-    normals, took one core each in turn)."""
+    face-average normals (n, 3) and, when ``robust``, the sharp mesh edges' vertices
+    (:func:`meshlab_sharp.creases.sharp_vertices`, (n,) bool); None for each on a cloud.
+    Unless ``workers`` is 1 the normals and the sharp edges are computed on threads
+    meanwhile: with the compiled backend they are single-threaded C calls that release
+    the GIL (the adjacency, the normals and the sharp edges took one core each in turn)."""
     if faces is None:
-        return build_neighbourhoods(points, None, scales, workers=workers), None
+        return build_neighbourhoods(points, None, scales, workers=workers), None, None
     if workers == 1 or _kernels.resolve(None) != "compiled":
         return (
             build_neighbourhoods(points, faces, scales, workers=workers),
             face_average_normals(points, faces),
+            sharp_vertices(points, faces)[0] if robust else None,
         )
-    with ThreadPoolExecutor(max_workers=1) as pool:
+    with ThreadPoolExecutor(max_workers=2) as pool:
         normals = pool.submit(face_average_normals, points, faces)
+        sharp = pool.submit(sharp_vertices, points, faces) if robust else None
         neighbourhoods = build_neighbourhoods(points, faces, scales, workers=workers)
-        return neighbourhoods, normals.result()
+        return neighbourhoods, normals.result(), None if sharp is None else sharp.result()[0]
 
 
 def _add_curves(result: DetectionResult, geometry: Geometry, as_points: bool) -> None:

@@ -1106,6 +1106,10 @@ class RobustSetup:
     keep_normals : bool, default False
         How :func:`meshlab_sharp.multiscale.run_scales` will be called (the compiled
         pass that finds the isolated points and the noise also computes what it needs).
+    sharp_edges : (m,) bool, optional
+        A mesh's :func:`meshlab_sharp.creases.sharp_vertices` mask when the caller has
+        found it already (``detect`` finds it on a thread beside the adjacency); None:
+        found here.
 
     Attributes
     ----------
@@ -1125,8 +1129,8 @@ class RobustSetup:
         thinning).
     sharp_edges : (m,) bool or None
         A mesh's vertices on its own sharp edges
-        (:func:`meshlab_sharp.creases.sharp_vertices`), found first, while little else
-        is in memory; None for a cloud.
+        (:func:`meshlab_sharp.creases.sharp_vertices`): the ``sharp_edges`` given, or
+        found here before the ring pass's arrays exist; None for a cloud.
     """
 
     def __init__(
@@ -1139,6 +1143,7 @@ class RobustSetup:
         workers: int = -1,
         weighting: Weighting = DEFAULT_WEIGHTING,
         keep_normals: bool = False,
+        sharp_edges: np.ndarray | None = None,
     ) -> None:
         self.n = len(points)
         self.faces = faces
@@ -1199,7 +1204,12 @@ class RobustSetup:
                 )
                 self.fused = None
                 self.scale_neighbourhoods = self.neighbourhoods if compiled else self._sheets()
-        self.sharp_edges = None if faces is None else sharp_vertices(points, faces)[0]
+        if faces is None:
+            self.sharp_edges = None
+        elif sharp_edges is None:
+            self.sharp_edges = sharp_vertices(points, faces)[0]
+        else:
+            self.sharp_edges = np.asarray(sharp_edges, bool)
         otsu = otsu_splits(faces is not None, self.noise)
         self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, otsu)
 

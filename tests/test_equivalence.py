@@ -327,6 +327,49 @@ def test_pass_identical_without_the_avx2_paths(name, tmp_path):
         assert fast[key].tobytes() == plain[key].tobytes(), key
 
 
+_COMPILED_RING_PASS = """
+import sys
+import numpy as np
+sys.path.insert(0, "tests")
+from shapes import fold_mesh, noisy_mesh
+from meshlab_sharp import _kernels
+from meshlab_sharp.cleaning import clean
+from meshlab_sharp.io import as_geometry
+from meshlab_sharp.normals import face_average_normals
+vertices, faces, _ = fold_mesh(60.0, 12, 2)
+mesh = clean(as_geometry(*noisy_mesh(vertices, faces, 0.05)))
+points, faces = mesh.vertices, mesh.faces
+adjacency = _kernels.adjacency(faces, len(points))
+out = {}
+for rings in ((1, 2, 3, 4), (1, 3, 5)):
+    for weighting in ("gaussian", "none"):
+        for fixed in (None, face_average_normals(points, faces)):
+            run = _kernels.ring_projected_distances(
+                points, *adjacency, rings, fixed, weighting, keep_normals=True, relative=True
+            )
+            key = f"{len(rings)}_{weighting}_{fixed is not None}"
+            out.update({key + "_normals": run.normals, key + "_relative": run.relative})
+            out[key + "_score"] = run.score
+np.savez(sys.argv[2], **out)
+"""
+
+
+def test_ring_pass_identical_without_the_avx2_paths(tmp_path):
+    """The mesh twin of the test above: the compiled ring pass of robust mode (the local
+    scales' sums on AVX2 lanes, where the CPU has AVX2) and without the AVX2 paths
+    (``MESHLAB_SHARP_NO_AVX2``) gives the same bits: normals, relative distances and
+    scores, both weightings, fixed face normals and PCA, 4 and 3 rings."""
+    points = np.zeros((1, 3))  # the script builds its own mesh
+    fast = _run_on_points(_COMPILED_RING_PASS, points, tmp_path / "fast.npz", timeout=120)
+    env = {"MESHLAB_SHARP_NO_AVX2": "1"}
+    plain = _run_on_points(
+        _COMPILED_RING_PASS, points, tmp_path / "plain.npz", timeout=120, env=env
+    )
+    assert sorted(fast.files) == sorted(plain.files) and len(fast.files) == 24
+    for key in fast.files:
+        assert fast[key].tobytes() == plain[key].tobytes(), key
+
+
 @pytest.mark.parametrize("name", ["grid_cube_ties_shuffled", "rotated_duplicates_shuffled"])
 def test_tree_built_on_threads_is_the_one_call_tree(name):
     """``build_tree`` (the top levels' nodes, then the subtrees, on threads; the plugin
@@ -831,6 +874,28 @@ def test_sharp_vertices_identical(noise):
     assert (threshold > np.radians(CREASE_ANGLE)) == (noise > 0)
     assert ref_mask.any() and not ref_mask.all()
     np.testing.assert_array_equal(mask, ref_mask)
+
+
+@pytest.mark.parametrize("shuffle", [False, True])
+def test_crease_dots_are_the_face_pairs_dots(shuffle):
+    """``ms_crease_dots`` (its face normals through a direct-mapped cache of 8192 faces)
+    gives the dot products of ``ms_two_face_edges`` (each normal computed where it is
+    used), bit for bit, as a multiset: on a noisy mesh of 49,152 faces, in their order and
+    shuffled (neighbouring faces far apart: evictions and collisions in the cache)."""
+    vertices, faces = cube_grid_mesh(6)
+    vertices = vertices + np.random.default_rng(5).normal(0.0, 1e-3, vertices.shape)
+    if shuffle:
+        faces = faces[np.random.default_rng(6).permutation(len(faces))]
+    seen = []
+
+    def keep(dots):
+        seen.append(dots.copy())
+        return dots, np.inf
+
+    _kernels.crease_vertices(vertices, faces, keep)
+    _, expected = _kernels.two_face_edges(faces, vertices)
+    assert len(expected) == len(faces) * 3 // 2
+    assert np.sort(seen[0]).tobytes() == np.sort(expected).tobytes()
 
 
 @pytest.mark.parametrize("n", [1, 2, 1000])
