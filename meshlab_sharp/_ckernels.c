@@ -1540,6 +1540,75 @@ static int knn_cursor_next(knn_cursor_t *c, int64_t i) {
 
 /* kNN of tree positions [begin, end) at k = max(ks) (knn_cursor_t), then what out asks
  * for (see cloud_out_t). Returns 0, or -1 out of memory. */
+/* The offsets q (k, 3) of one kNN list nb (k = mk[nscales - 1]) from the point pi, q_j =
+ * p[nb[j].pos] - pi, their squared lengths d2 (k) = nb[j].d2, and on the way scale_means'
+ * smean and sh2 of the prefixes mk (the same running sums, in the same order). */
+static void offsets_means(const double *p, const double *pi, const cand_t *nb,
+                          const int64_t *mk, int nscales, double *q, double *d2, double *smean,
+                          double *sh2) {
+    double sx = 0, sy = 0, sz = 0, h2 = 0;
+    int64_t j = 0;
+    for (int s = 0; s < nscales; s++) {
+        int64_t m = mk[s];
+        for (; j < m; j++) {
+            const double *pj = p + 3 * nb[j].pos;
+            double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2], dj = nb[j].d2;
+            q[3 * j] = x; q[3 * j + 1] = y; q[3 * j + 2] = z;
+            d2[j] = dj;
+            sx += x; sy += y; sz += z;
+            if (dj > h2) h2 = dj;
+        }
+        smean[3 * s] = sx / (double)m;
+        smean[3 * s + 1] = sy / (double)m;
+        smean[3 * s + 2] = sz / (double)m;
+        sh2[s] = h2;
+    }
+}
+
+#ifdef HAVE_AVX2_PATH
+/* offsets_means with each offset's x, y, z in the lanes of one register (the 4th lane
+ * 0, masked off p and smean; q has room for one more double): the same differences,
+ * sums and quotients, lane by lane. */
+__attribute__((target("avx2"))) static void offsets_means_avx2(const double *p,
+                                                               const double *pi,
+                                                               const cand_t *nb,
+                                                               const int64_t *mk, int nscales,
+                                                               double *q, double *d2,
+                                                               double *smean, double *sh2) {
+    const __m256i xyz = _mm256_setr_epi64x(-1, -1, -1, 0);
+    __m256d vpi = _mm256_maskload_pd(pi, xyz), sum = _mm256_setzero_pd();
+    double h2 = 0;
+    int64_t j = 0;
+    for (int s = 0; s < nscales; s++) {
+        int64_t m = mk[s];
+        for (; j < m; j++) {
+            __m256d v = _mm256_sub_pd(_mm256_maskload_pd(p + 3 * nb[j].pos, xyz), vpi);
+            double dj = nb[j].d2;
+            _mm256_storeu_pd(q + 3 * j, v);
+            d2[j] = dj;
+            sum = _mm256_add_pd(sum, v);
+            if (dj > h2) h2 = dj;
+        }
+        _mm256_maskstore_pd(smean + 3 * s, xyz, _mm256_div_pd(sum, _mm256_set1_pd((double)m)));
+        sh2[s] = h2;
+    }
+}
+#endif
+
+/* offsets_means, on 4 lanes when avx2. */
+static inline void offsets_means_on(const double *p, const double *pi, const cand_t *nb,
+                                    const int64_t *mk, int nscales, double *q, double *d2,
+                                    double *smean, double *sh2, int avx2) {
+#ifdef HAVE_AVX2_PATH
+    if (avx2) {
+        offsets_means_avx2(p, pi, nb, mk, nscales, q, d2, smean, sh2);
+        return;
+    }
+#endif
+    (void)avx2;
+    offsets_means(p, pi, nb, mk, nscales, q, d2, smean, sh2);
+}
+
 int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
                   const cloud_out_t *out) {
@@ -1548,7 +1617,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     knn_cursor_t cur;
     int cur_rc = knn_cursor_init(&cur, &T, kmax);
     const cand_t *nb = cur.h.c;
-    double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
+    double *q = (double *)malloc(((size_t)kmax * 3 + 1) * sizeof(double)); /* +1: see
+                                                                                * offsets_means_avx2 */
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
     pca_lanes_fn pca = pca_lanes();
     /* per scale: mean offset (3), normal (3), largest squared distance (1) */
@@ -1580,22 +1650,14 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             out->kth_idx[oi] = nb[kmax - 1].idx;
         }
         if (out->pdis == NULL && out->relative == NULL && out->noise == NULL) continue;
-        for (int64_t j = 0; j < kmax; j++) {
-            const double *pj = p + 3 * nb[j].pos;
-            q[3 * j] = pj[0] - pi[0];
-            q[3 * j + 1] = pj[1] - pi[1];
-            q[3 * j + 2] = pj[2] - pi[2];
-            d2[j] = nb[j].d2;
-        }
         for (int s = 0; s < nscales; s++) mk[s] = ks[s];
+        offsets_means_on(p, pi, nb, mk, nscales, q, d2, smean, sh2, sheet.avx2);
         /* known: how many of the largest scales have their normal from the sheet filter's
          * PCA (the largest scale's, and the next one's computed beside it): their lists
          * are the same when the filter keeps every neighbour */
-        int known = 0, means = 0; /* means: smean and sh2 hold the lists' */
+        int known = 0, means = 1; /* means: smean and sh2 hold the lists' */
         int pdis_wanted = out->pdis != NULL || out->relative != NULL;
         if (out->sheet_gap > 0.0) {
-            scale_means(q, d2, mk, nscales, smean, sh2);
-            means = 1;
             /* the largest scale's normal for the filter, and the next ones' beside it */
             known = !pdis_wanted ? 1 : nscales < PCA_LANES ? nscales : PCA_LANES;
             pca_scales(pca, q, d2, mk, smean, sh2, nscales - known, nscales, gaussian, snrm);
