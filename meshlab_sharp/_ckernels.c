@@ -703,15 +703,21 @@ static void sheet_cuts(const double *hs, int64_t k, int64_t z, double g, int col
     }
 }
 
-/* Insertion sort of hs (k) in place; returns how many are < 0. */
-static int64_t sort_heights(double *hs, int64_t k) {
+/* Insertion sort of hs (k) in place, order (k) beside it: order[u] is the position before
+ * the sort of the height that ends at u. Returns how many are < 0. */
+static int64_t sort_heights(double *hs, int64_t *order, int64_t k) {
     int64_t z = 0;
     for (int64_t j = 0; j < k; j++) {
         double x = hs[j];
         z += x < 0;
         int64_t u = j;
-        while (u > 0 && hs[u - 1] > x) { hs[u] = hs[u - 1]; u--; }
+        while (u > 0 && hs[u - 1] > x) {
+            hs[u] = hs[u - 1];
+            order[u] = order[u - 1];
+            u--;
+        }
         hs[u] = x;
+        order[u] = j;
     }
     return z;
 }
@@ -737,8 +743,9 @@ __attribute__((target("avx2"))) static inline __m256d rank_cmp(__m256d y, __m256
  * the (stable) insertion sort puts it, so the array is the same, bit for bit (-0.0 and
  * 0.0 included). Branch-free but for the loop; sort_heights itself when some height is
  * NaN (no order) or k > RANK_SORT_MAX. */
-__attribute__((target("avx2"))) static int64_t sort_heights_avx2(double *hs, int64_t k) {
-    if (k > RANK_SORT_MAX) return sort_heights(hs, k);
+__attribute__((target("avx2"))) static int64_t sort_heights_avx2(double *hs, int64_t *order,
+                                                                 int64_t k) {
+    if (k > RANK_SORT_MAX) return sort_heights(hs, order, k);
     double v[RANK_SORT_MAX + 8];
     int64_t z = 0, rank[8];
     int nan = 0;
@@ -747,7 +754,7 @@ __attribute__((target("avx2"))) static int64_t sort_heights_avx2(double *hs, int
         z += v[j] < 0;
         nan |= v[j] != v[j];
     }
-    if (nan) return sort_heights(hs, k);
+    if (nan) return sort_heights(hs, order, k);
     for (int64_t j = k; j < k + 8; j++) v[j] = 0.0;
     for (int64_t j0 = 0; j0 < k; j0 += 8) {
         __m256d x0 = _mm256_loadu_pd(v + j0), x1 = _mm256_loadu_pd(v + j0 + 4);
@@ -771,19 +778,44 @@ __attribute__((target("avx2"))) static int64_t sort_heights_avx2(double *hs, int
         }
         _mm256_storeu_si256((__m256i *)rank, acc0);
         _mm256_storeu_si256((__m256i *)(rank + 4), acc1);
-        for (int l = 0; l < 8 && j0 + l < k; l++) hs[rank[l]] = v[j0 + l];
+        for (int l = 0; l < 8 && j0 + l < k; l++) {
+            hs[rank[l]] = v[j0 + l];
+            order[rank[l]] = j0 + l;
+        }
     }
     return z;
 }
 #endif
 
 /* sort_heights, by ranks when avx2. */
-static inline int64_t sorted_heights(double *hs, int64_t k, int avx2) {
+static inline int64_t sorted_heights(double *hs, int64_t *order, int64_t k, int avx2) {
 #ifdef HAVE_AVX2_PATH
-    if (avx2) return sort_heights_avx2(hs, k);
+    if (avx2) return sort_heights_avx2(hs, order, k);
 #endif
     (void)avx2;
-    return sort_heights(hs, k);
+    return sort_heights(hs, order, k);
+}
+
+/* The column's heights sorted, from all the heights h (k) sorted: hs (k) and order as
+ * sort_heights leaves them, z of them < 0, none NaN. The heights of the column's points
+ * (d2_j - h_j^2 <= c2) keep their order, the others read as 0.0: the column's negative
+ * heights, then those zeros, then its other heights, in place. These are the values that
+ * sorting the column's heights gives, in order; equal values (0.0 and -0.0 among them)
+ * may come in another order, which sheet_cuts' cuts do not see (a difference, a
+ * midpoint or a bound of equal values compares the same). Returns how many are < 0. */
+static int64_t column_heights(double *hs, const int64_t *order, const double *h,
+                              const double *d2, int64_t k, int64_t z, double c2) {
+    int64_t below = 0, above = k;
+    for (int64_t u = 0; u < z; u++) {
+        int64_t j = order[u];
+        if (d2[j] - h[j] * h[j] <= c2) hs[below++] = hs[u];
+    }
+    for (int64_t u = k - 1; u >= z; u--) {
+        int64_t j = order[u];
+        if (d2[j] - h[j] * h[j] <= c2) hs[--above] = hs[u];
+    }
+    for (int64_t u = below; u < above; u++) hs[u] = 0.0;
+    return below;
 }
 
 /* h[j] = q_j . nrm for the offsets q (k, 3), summed as (x n0 + y n1) + z n2; *lo and *hi
@@ -886,22 +918,34 @@ static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int
  * distance t_j, t_j^2 = d2_j - h_j^2, at most sheet_column * a; the others' heights
  * read as 0), gaps > sheet_column_gap * a, a side cut only when its gap is the only
  * one on that side, the cuts in the middle of the gaps, and not when the dropped
- * heights on one side span more than sheet_far_span * a. */
+ * heights on one side span more than sheet_far_span * a; the column's heights sorted
+ * from the list's (column_heights) when none is NaN. order (k) scratch. */
 static int64_t sheet_rules(const double *h, const double *d2, int64_t k, double a,
-                           const sheet_params_t *sp, double *hs, char *keep) {
+                           const sheet_params_t *sp, double *hs, int64_t *order, char *keep) {
     double lo, hi;
-    for (int64_t j = 0; j < k; j++) hs[j] = h[j];
-    sheet_cuts(hs, k, sorted_heights(hs, k, sp->avx2), sp->gap * a, 0, &lo, &hi);
+    int nan = 0;
+    for (int64_t j = 0; j < k; j++) {
+        hs[j] = h[j];
+        nan |= h[j] != h[j];
+    }
+    int64_t z = sorted_heights(hs, order, k, sp->avx2);
+    sheet_cuts(hs, k, z, sp->gap * a, 0, &lo, &hi);
     int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep);
     if (dropped > 0 || sp->column <= 0.0) return dropped;
     double c = sp->column * a, c2 = c * c;
-    for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
-    sheet_cuts(hs, k, sorted_heights(hs, k, sp->avx2), sp->column_gap * a, 1, &lo, &hi);
+    if (nan) {
+        for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
+        z = sorted_heights(hs, order, k, sp->avx2);
+    } else {
+        z = column_heights(hs, order, h, d2, k, z, c2);
+    }
+    sheet_cuts(hs, k, z, sp->column_gap * a, 1, &lo, &hi);
     return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep);
 }
 
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
- * squared lengths d2 (k), the list's normal nrm, the parameters sp; hs (2 k) scratch.
+ * squared lengths d2 (k), the list's normal nrm, the parameters sp; hs (2 k) and order
+ * (k) scratch.
  * Writes keep[j] (1: kept) and returns the number of neighbours dropped (0: every
  * keep[j] is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m = min(6, k - 1),
  * summed in order; sheet_rules on those heights. Pass 2, when they drop none, some
@@ -909,7 +953,7 @@ static int64_t sheet_rules(const double *h, const double *d2, int64_t k, double 
  * the unweighted PCA normal n2 (smallest_eigvec of the scatter, sums in order) of the
  * q_j with |h_j| <= sheet_trim * a, when |n2 . n| >= sheet_trim_cos. */
 static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const double *nrm,
-                          const sheet_params_t *sp, double *hs, char *keep) {
+                          const sheet_params_t *sp, double *hs, int64_t *order, char *keep) {
     for (int64_t j = 0; j < k; j++) keep[j] = 1;
     int64_t m = k - 1 < 6 ? k - 1 : 6;
     if (m < 1) return 0;
@@ -927,7 +971,7 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     if (!nan && hmax - hmin <= g && (sp->column <= 0.0 || hmax - hmin <= g2) &&
         (sp->trim <= 0.0 || hmax - hmin <= t))
         return 0;
-    int64_t dropped = sheet_rules(h, d2, k, a, sp, hs, keep);
+    int64_t dropped = sheet_rules(h, d2, k, a, sp, hs, order, keep);
     if (dropped > 0 || sp->trim <= 0.0) return dropped;
     double sx = 0.0, sy = 0.0, sz = 0.0;
     int64_t count = 0;
@@ -949,7 +993,7 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     if (!(fabs(n2[0] * nrm[0] + n2[1] * nrm[1] + n2[2] * nrm[2]) >= sp->trim_cos)) return 0;
     for (int64_t j = 0; j < k; j++)
         h[j] = q[3 * j] * n2[0] + q[3 * j + 1] * n2[1] + q[3 * j + 2] * n2[2];
-    return sheet_rules(h, d2, k, a, sp, hs, keep);
+    return sheet_rules(h, d2, k, a, sp, hs, order, keep);
 }
 
 /* ------------------------------------------------------------------ kd-tree */
@@ -1627,13 +1671,14 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
     double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
+    int64_t *order = (int64_t *)malloc((size_t)kmax * sizeof(int64_t));
     char *keep = (char *)malloc((size_t)kmax);
     const sheet_params_t sheet = {out->sheet_gap, out->sheet_min, out->sheet_own,
                                   out->sheet_column, out->sheet_column_gap, out->sheet_far_span,
                                   out->sheet_trim, out->sheet_trim_cos, use_avx2()};
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     int rc = 0;
-    if (cur_rc || !q || !d2 || !smean || !soa || !ell || !hs || !keep || !mk) {
+    if (cur_rc || !q || !d2 || !smean || !soa || !ell || !hs || !order || !keep || !mk) {
         rc = -1;
         goto done;
     }
@@ -1661,7 +1706,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             /* the largest scale's normal for the filter, and the next ones' beside it */
             known = !pdis_wanted ? 1 : nscales < PCA_LANES ? nscales : PCA_LANES;
             pca_scales(pca, q, d2, mk, smean, sh2, nscales - known, nscales, gaussian, snrm);
-            if (sheet_keep(q, d2, kmax, snrm + 3 * (nscales - 1), &sheet, hs, keep) > 0) {
+            if (sheet_keep(q, d2, kmax, snrm + 3 * (nscales - 1), &sheet, hs, order, keep) > 0) {
                 known = 0;
                 means = 0;
                 int64_t t = 0, s = 0;
@@ -1713,6 +1758,7 @@ done:
     free(soa);
     free(ell);
     free(hs);
+    free(order);
     free(keep);
     free(mk);
     return rc;
