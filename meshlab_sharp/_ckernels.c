@@ -255,7 +255,7 @@ LANES_INLINE v4d v4_exp(v4d x) {
     for (int i = 1; i < 12; i++) p = v4_fma(p, r, v4_set1(exp_coef[i]));
     p = v4_fma(p, r, v4_set1(1.0));
     p = v4_fma(p, r, v4_set1(1.0));
-    return (v4d)((v4u)p + (((v4u)t - (v4u)shifter) << 52));
+    return (v4d)((v4u)p + ((v4u)t << 52)); /* k in t's low bits, the shifter's are 0 */
 }
 
 /* asin(s) = s + s z P(z) / Q(z), z = s^2 <= 1/4: fdlibm's rational (e_asin.c), P and Q
@@ -330,21 +330,21 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     int64_t mi[PCA_LANES] = {0}, mmax = 0;
     for (int l = 0; l < count; l++) {
         for (int a = 0; a < 3; a++) mm[a][l] = mean[3 * l + a];
-        hh[l] = gaussian && h2[l] > 0.0 ? h2[l] : INFINITY; /* exp(-d2 / inf) = 1 */
+        hh[l] = gaussian && h2[l] > 0.0 ? -h2[l] : -INFINITY; /* exp(d2 / -inf) = 1 */
         mi[l] = m[l];
         if (m[l] > mmax) mmax = m[l];
     }
     v4d mx = {mm[0][0], mm[0][1], mm[0][2], mm[0][3]};
     v4d my = {mm[1][0], mm[1][1], mm[1][2], mm[1][3]};
     v4d mz = {mm[2][0], mm[2][1], mm[2][2], mm[2][3]};
-    v4d vh2 = {hh[0], hh[1], hh[2], hh[3]};
+    v4d vh2 = {hh[0], hh[1], hh[2], hh[3]}; /* -h2: d2 / -h2 = -(d2 / h2), to the bit */
     v4i vm = {mi[0], mi[1], mi[2], mi[3]};
     v4d c00 = v4_set1(0.0), c01 = c00, c02 = c00, c11 = c00, c12 = c00, c22 = c00;
     v4i vj = {0, 0, 0, 0};
     for (int64_t j = 0; j < mmax; j++, vj += 1) {
         /* the weight, 0 past each lane's m (there the exponent may lie outside exp's
          * range: -d2 / h2 is in [-1, 0] only over the lane's own m offsets) */
-        v4d w = (v4d)((v4i)v4_exp(-d2[j] / vh2) & (vj < vm));
+        v4d w = (v4d)((v4i)v4_exp(d2[j] / vh2) & (vj < vm));
         v4d rx = q[3 * j] - mx, ry = q[3 * j + 1] - my, rz = q[3 * j + 2] - mz;
         v4d sx = w * rx, sy = w * ry, sz = w * rz;
         c00 = v4_fma(sx, rx, c00);
