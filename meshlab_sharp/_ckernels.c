@@ -509,13 +509,17 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
  * each neighbour j < max(ks), the 4 values |q_j|, then the x, y and z of q_j (v[4 j + t]);
  * scale s (ks increasing) writes ell[s] and off[s]. The same sums as segment_sum, but
  * the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by the
- * prefixes (the same numbers, added in the same order): O(max(ks)) per point instead
- * of O(sum of ks) for lists of up to 129 points. The 4 sums go side by side (t
- * innermost: the compiler pairs them in SIMD lanes, each lane the scalar arithmetic). */
+ * prefixes (the same numbers, added in the same order), and so are the terms past the
+ * last whole block where two scales end in the same block (the larger's sum goes on from
+ * the smaller's): O(max(ks)) per point instead of O(sum of ks) for lists of up to 129
+ * points. The 4 sums go side by side (t innermost: the compiler pairs them in SIMD
+ * lanes, each lane the scalar arithmetic). */
 static inline __attribute__((always_inline)) void local_scale_prefixes_body(
     const double *v, const int64_t *ks, int nscales, double *ell, double *off) {
     double r[8][4] = {{0.0}}; /* set when first used (i = 0) */
     int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
+    double res[4] = {0.0}; /* the previous scale's pairwise sum: r's blocks up to rb, then */
+    int64_t rb = 0, ru = 0; /* the terms rb + 1 .. ru one by one (rb = 0: none kept) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
         double sum[4];
@@ -529,12 +533,17 @@ static inline __attribute__((always_inline)) void local_scale_prefixes_body(
                 for (int j = 0; j < 8; j++)
                     for (int t = 0; t < 4; t++) r[j][t] += v[4 * (1 + i + j) + t];
             }
-            double res[4];
-            for (int t = 0; t < 4; t++)
-                res[t] = ((r[0][t] + r[1][t]) + (r[2][t] + r[3][t])) +
-                         ((r[4][t] + r[5][t]) + (r[6][t] + r[7][t]));
-            for (int64_t u = nb; u < nn; u++)
+            int64_t u = ru;
+            if (nb != rb || ru > nn) {
+                for (int t = 0; t < 4; t++)
+                    res[t] = ((r[0][t] + r[1][t]) + (r[2][t] + r[3][t])) +
+                             ((r[4][t] + r[5][t]) + (r[6][t] + r[7][t]));
+                u = nb;
+            }
+            for (; u < nn; u++)
                 for (int t = 0; t < 4; t++) res[t] += v[4 * (1 + u) + t];
+            rb = nb;
+            ru = nn;
             for (int t = 0; t < 4; t++) sum[t] = v[t] + res[t];
         } else {
             for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t, m, 4);
