@@ -895,22 +895,81 @@ static inline int heights_of(const double *q, int64_t k, const double *nrm, doub
     return sheet_heights(q, k, nrm, h, lo, hi);
 }
 
-/* keep[j] = lo <= h[j] <= hi; returns the number dropped, or 0 (every keep[j] 1) when
- * fewer than minimum would be, the kept would be fewer than own times the dropped, or
- * the dropped heights on one side span more than span. */
-static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int64_t minimum,
-                           double own, double span, char *keep) {
-    int64_t dropped = 0;
-    double blo = INFINITY, bhi = -INFINITY, alo = INFINITY, ahi = -INFINITY;
-    for (int64_t j = 0; j < k; j++) {
+/* sheet_apply's tally of one list: how many heights are dropped, and the range of those
+ * below lo and of those above hi (empty: lo = inf, hi = -inf). */
+typedef struct {
+    int64_t dropped;
+    double blo, bhi, alo, ahi;
+} sheet_tally_t;
+
+/* keep[j] = lo <= h[j] <= hi for j in [j0, k), into the tally t. */
+static void sheet_marks(const double *h, int64_t j0, int64_t k, double lo, double hi,
+                        char *keep, sheet_tally_t *t) {
+    for (int64_t j = j0; j < k; j++) {
         double v = h[j];
         keep[j] = v >= lo && v <= hi;
-        dropped += !keep[j];
-        if (v < lo) { if (v < blo) blo = v; if (v > bhi) bhi = v; }
-        if (v > hi) { if (v < alo) alo = v; if (v > ahi) ahi = v; }
+        t->dropped += !keep[j];
+        if (v < lo) { if (v < t->blo) t->blo = v; if (v > t->bhi) t->bhi = v; }
+        if (v > hi) { if (v < t->alo) t->alo = v; if (v > t->ahi) t->ahi = v; }
     }
+}
+
+#ifdef HAVE_AVX2_PATH
+/* sheet_marks from j = 0 on 4 lanes (AVX2), then the rest: the same marks, count and
+ * ranges (where equal values of either sign of zero are a range's end, either sign may
+ * be it: the range's test in sheet_apply sees no difference). */
+__attribute__((target("avx2,popcnt"))) static void sheet_marks_avx2(const double *h, int64_t k,
+                                                             double lo, double hi, char *keep,
+                                                             sheet_tally_t *t) {
+    const __m256d vlo = _mm256_set1_pd(lo), vhi = _mm256_set1_pd(hi);
+    const __m256d inf = _mm256_set1_pd(INFINITY), ninf = _mm256_set1_pd(-INFINITY);
+    __m256d blo = inf, bhi = ninf, alo = inf, ahi = ninf;
+    int64_t j = 0, kept = 0;
+    for (; j + 4 <= k; j += 4) {
+        __m256d v = _mm256_loadu_pd(h + j);
+        __m256d below = _mm256_cmp_pd(v, vlo, _CMP_LT_OQ), above = _mm256_cmp_pd(v, vhi, _CMP_GT_OQ);
+        unsigned in = (unsigned)_mm256_movemask_pd(_mm256_and_pd(
+            _mm256_cmp_pd(v, vlo, _CMP_GE_OQ), _mm256_cmp_pd(v, vhi, _CMP_LE_OQ)));
+        uint32_t bytes = (in * 0x204081u) & 0x01010101u; /* bit l to byte l */
+        memcpy(keep + j, &bytes, 4);
+        kept += __builtin_popcount(in);
+        blo = _mm256_min_pd(blo, _mm256_blendv_pd(inf, v, below));
+        bhi = _mm256_max_pd(bhi, _mm256_blendv_pd(ninf, v, below));
+        alo = _mm256_min_pd(alo, _mm256_blendv_pd(inf, v, above));
+        ahi = _mm256_max_pd(ahi, _mm256_blendv_pd(ninf, v, above));
+    }
+    double r[4][4];
+    _mm256_storeu_pd(r[0], blo);
+    _mm256_storeu_pd(r[1], bhi);
+    _mm256_storeu_pd(r[2], alo);
+    _mm256_storeu_pd(r[3], ahi);
+    t->dropped += j - kept;
+    for (int l = 0; l < 4; l++) {
+        if (r[0][l] < t->blo) t->blo = r[0][l];
+        if (r[1][l] > t->bhi) t->bhi = r[1][l];
+        if (r[2][l] < t->alo) t->alo = r[2][l];
+        if (r[3][l] > t->ahi) t->ahi = r[3][l];
+    }
+    sheet_marks(h, j, k, lo, hi, keep, t);
+}
+#endif
+
+/* keep[j] = lo <= h[j] <= hi (on 4 lanes when avx2); returns the number dropped, or 0
+ * (every keep[j] 1) when fewer than minimum would be, the kept would be fewer than own
+ * times the dropped, or the dropped heights on one side span more than span. */
+static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int64_t minimum,
+                           double own, double span, char *keep, int avx2) {
+    sheet_tally_t t = {0, INFINITY, -INFINITY, INFINITY, -INFINITY};
+#ifdef HAVE_AVX2_PATH
+    if (avx2)
+        sheet_marks_avx2(h, k, lo, hi, keep, &t);
+    else
+#endif
+        sheet_marks(h, 0, k, lo, hi, keep, &t);
+    (void)avx2;
+    int64_t dropped = t.dropped;
     if (dropped < minimum || (double)(k - dropped) < own * (double)dropped ||
-        (bhi >= blo && bhi - blo > span) || (ahi >= alo && ahi - alo > span)) {
+        (t.bhi >= t.blo && t.bhi - t.blo > span) || (t.ahi >= t.alo && t.ahi - t.alo > span)) {
         for (int64_t j = 0; j < k; j++) keep[j] = 1;
         return 0;
     }
@@ -939,7 +998,8 @@ static int64_t sheet_rules(const double *h, const double *d2, int64_t k, double 
     }
     int64_t z = sorted_heights(hs, order, k, sp->avx2);
     sheet_cuts(hs, k, z, sp->gap * a, 0, &lo, &hi);
-    int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep);
+    int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep,
+                                   sp->avx2);
     if (dropped > 0 || sp->column <= 0.0) return dropped;
     double c = sp->column * a, c2 = c * c;
     if (nan) {
@@ -949,7 +1009,8 @@ static int64_t sheet_rules(const double *h, const double *d2, int64_t k, double 
         z = column_heights(hs, order, h, d2, k, z, c2);
     }
     sheet_cuts(hs, k, z, sp->column_gap * a, 1, &lo, &hi);
-    return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep);
+    return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep,
+                       sp->avx2);
 }
 
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
