@@ -698,11 +698,19 @@ typedef struct {
  * z, its middle (rule 2, column = 1), else +inf; likewise lo below 0, else -inf. */
 static void sheet_cuts(const double *hs, int64_t k, int64_t z, double g, int column,
                        double *lo, double *hi) {
+    /* up: the first gap's lower end above z, down: the first gap's upper end below z
+     * (read only where there is a gap on that side), counted on the way */
     int64_t up = z, down = z, gaps_up = 0, gaps_down = 0;
-    for (int64_t j = z; j + 1 < k; j++) gaps_up += hs[j + 1] - hs[j] > g;
-    for (int64_t j = z; j > 0; j--) gaps_down += hs[j] - hs[j - 1] > g;
-    while (up + 1 < k && !(hs[up + 1] - hs[up] > g)) up++;
-    while (down > 0 && !(hs[down] - hs[down - 1] > g)) down--;
+    for (int64_t j = z; j + 1 < k; j++) {
+        int gap = hs[j + 1] - hs[j] > g;
+        up = gaps_up == 0 ? j : up;
+        gaps_up += gap;
+    }
+    for (int64_t j = z; j > 0; j--) {
+        int gap = hs[j] - hs[j - 1] > g;
+        down = gaps_down == 0 ? j : down;
+        gaps_down += gap;
+    }
     if (column) {
         *hi = gaps_up != 1 ? INFINITY : 0.5 * (hs[up] + hs[up + 1]);
         *lo = gaps_down != 1 ? -INFINITY : 0.5 * (hs[down - 1] + hs[down]);
