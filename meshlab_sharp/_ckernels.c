@@ -255,7 +255,7 @@ LANES_INLINE v4d v4_exp(v4d x) {
     for (int i = 1; i < 12; i++) p = v4_fma(p, r, v4_set1(exp_coef[i]));
     p = v4_fma(p, r, v4_set1(1.0));
     p = v4_fma(p, r, v4_set1(1.0));
-    return (v4d)((v4u)p + (((v4u)t - (v4u)shifter) << 52));
+    return (v4d)((v4u)p + ((v4u)t << 52)); /* k in t's low bits, the shifter's are 0 */
 }
 
 /* asin(s) = s + s z P(z) / Q(z), z = s^2 <= 1/4: fdlibm's rational (e_asin.c), P and Q
@@ -330,21 +330,21 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     int64_t mi[PCA_LANES] = {0}, mmax = 0;
     for (int l = 0; l < count; l++) {
         for (int a = 0; a < 3; a++) mm[a][l] = mean[3 * l + a];
-        hh[l] = gaussian && h2[l] > 0.0 ? h2[l] : INFINITY; /* exp(-d2 / inf) = 1 */
+        hh[l] = gaussian && h2[l] > 0.0 ? -h2[l] : -INFINITY; /* exp(d2 / -inf) = 1 */
         mi[l] = m[l];
         if (m[l] > mmax) mmax = m[l];
     }
     v4d mx = {mm[0][0], mm[0][1], mm[0][2], mm[0][3]};
     v4d my = {mm[1][0], mm[1][1], mm[1][2], mm[1][3]};
     v4d mz = {mm[2][0], mm[2][1], mm[2][2], mm[2][3]};
-    v4d vh2 = {hh[0], hh[1], hh[2], hh[3]};
+    v4d vh2 = {hh[0], hh[1], hh[2], hh[3]}; /* -h2: d2 / -h2 = -(d2 / h2), to the bit */
     v4i vm = {mi[0], mi[1], mi[2], mi[3]};
     v4d c00 = v4_set1(0.0), c01 = c00, c02 = c00, c11 = c00, c12 = c00, c22 = c00;
     v4i vj = {0, 0, 0, 0};
     for (int64_t j = 0; j < mmax; j++, vj += 1) {
         /* the weight, 0 past each lane's m (there the exponent may lie outside exp's
          * range: -d2 / h2 is in [-1, 0] only over the lane's own m offsets) */
-        v4d w = (v4d)((v4i)v4_exp(-d2[j] / vh2) & (vj < vm));
+        v4d w = (v4d)((v4i)v4_exp(d2[j] / vh2) & (vj < vm));
         v4d rx = q[3 * j] - mx, ry = q[3 * j + 1] - my, rz = q[3 * j + 2] - mz;
         v4d sx = w * rx, sy = w * ry, sz = w * rz;
         c00 = v4_fma(sx, rx, c00);
@@ -509,13 +509,17 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
  * each neighbour j < max(ks), the 4 values |q_j|, then the x, y and z of q_j (v[4 j + t]);
  * scale s (ks increasing) writes ell[s] and off[s]. The same sums as segment_sum, but
  * the 8 partial sums that pairwise_sum keeps over whole blocks of 8 are shared by the
- * prefixes (the same numbers, added in the same order): O(max(ks)) per point instead
- * of O(sum of ks) for lists of up to 129 points. The 4 sums go side by side (t
- * innermost: the compiler pairs them in SIMD lanes, each lane the scalar arithmetic). */
+ * prefixes (the same numbers, added in the same order), and so are the terms past the
+ * last whole block where two scales end in the same block (the larger's sum goes on from
+ * the smaller's): O(max(ks)) per point instead of O(sum of ks) for lists of up to 129
+ * points. The 4 sums go side by side (t innermost: the compiler pairs them in SIMD
+ * lanes, each lane the scalar arithmetic). */
 static inline __attribute__((always_inline)) void local_scale_prefixes_body(
     const double *v, const int64_t *ks, int nscales, double *ell, double *off) {
     double r[8][4] = {{0.0}}; /* set when first used (i = 0) */
     int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
+    double res[4] = {0.0}; /* the previous scale's pairwise sum: r's blocks up to rb, then */
+    int64_t rb = 0, ru = 0; /* the terms rb + 1 .. ru one by one (rb = 0: none kept) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
         double sum[4];
@@ -529,12 +533,17 @@ static inline __attribute__((always_inline)) void local_scale_prefixes_body(
                 for (int j = 0; j < 8; j++)
                     for (int t = 0; t < 4; t++) r[j][t] += v[4 * (1 + i + j) + t];
             }
-            double res[4];
-            for (int t = 0; t < 4; t++)
-                res[t] = ((r[0][t] + r[1][t]) + (r[2][t] + r[3][t])) +
-                         ((r[4][t] + r[5][t]) + (r[6][t] + r[7][t]));
-            for (int64_t u = nb; u < nn; u++)
+            int64_t u = ru;
+            if (nb != rb || ru > nn) {
+                for (int t = 0; t < 4; t++)
+                    res[t] = ((r[0][t] + r[1][t]) + (r[2][t] + r[3][t])) +
+                             ((r[4][t] + r[5][t]) + (r[6][t] + r[7][t]));
+                u = nb;
+            }
+            for (; u < nn; u++)
                 for (int t = 0; t < 4; t++) res[t] += v[4 * (1 + u) + t];
+            rb = nb;
+            ru = nn;
             for (int t = 0; t < 4; t++) sum[t] = v[t] + res[t];
         } else {
             for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t, m, 4);
@@ -689,11 +698,19 @@ typedef struct {
  * z, its middle (rule 2, column = 1), else +inf; likewise lo below 0, else -inf. */
 static void sheet_cuts(const double *hs, int64_t k, int64_t z, double g, int column,
                        double *lo, double *hi) {
+    /* up: the first gap's lower end above z, down: the first gap's upper end below z
+     * (read only where there is a gap on that side), counted on the way */
     int64_t up = z, down = z, gaps_up = 0, gaps_down = 0;
-    for (int64_t j = z; j + 1 < k; j++) gaps_up += hs[j + 1] - hs[j] > g;
-    for (int64_t j = z; j > 0; j--) gaps_down += hs[j] - hs[j - 1] > g;
-    while (up + 1 < k && !(hs[up + 1] - hs[up] > g)) up++;
-    while (down > 0 && !(hs[down] - hs[down - 1] > g)) down--;
+    for (int64_t j = z; j + 1 < k; j++) {
+        int gap = hs[j + 1] - hs[j] > g;
+        up = gaps_up == 0 ? j : up;
+        gaps_up += gap;
+    }
+    for (int64_t j = z; j > 0; j--) {
+        int gap = hs[j] - hs[j - 1] > g;
+        down = gaps_down == 0 ? j : down;
+        gaps_down += gap;
+    }
     if (column) {
         *hi = gaps_up != 1 ? INFINITY : 0.5 * (hs[up] + hs[up + 1]);
         *lo = gaps_down != 1 ? -INFINITY : 0.5 * (hs[down - 1] + hs[down]);
@@ -703,15 +720,21 @@ static void sheet_cuts(const double *hs, int64_t k, int64_t z, double g, int col
     }
 }
 
-/* Insertion sort of hs (k) in place; returns how many are < 0. */
-static int64_t sort_heights(double *hs, int64_t k) {
+/* Insertion sort of hs (k) in place, order (k) beside it: order[u] is the position before
+ * the sort of the height that ends at u. Returns how many are < 0. */
+static int64_t sort_heights(double *hs, int64_t *order, int64_t k) {
     int64_t z = 0;
     for (int64_t j = 0; j < k; j++) {
         double x = hs[j];
         z += x < 0;
         int64_t u = j;
-        while (u > 0 && hs[u - 1] > x) { hs[u] = hs[u - 1]; u--; }
+        while (u > 0 && hs[u - 1] > x) {
+            hs[u] = hs[u - 1];
+            order[u] = order[u - 1];
+            u--;
+        }
         hs[u] = x;
+        order[u] = j;
     }
     return z;
 }
@@ -737,8 +760,9 @@ __attribute__((target("avx2"))) static inline __m256d rank_cmp(__m256d y, __m256
  * the (stable) insertion sort puts it, so the array is the same, bit for bit (-0.0 and
  * 0.0 included). Branch-free but for the loop; sort_heights itself when some height is
  * NaN (no order) or k > RANK_SORT_MAX. */
-__attribute__((target("avx2"))) static int64_t sort_heights_avx2(double *hs, int64_t k) {
-    if (k > RANK_SORT_MAX) return sort_heights(hs, k);
+__attribute__((target("avx2"))) static int64_t sort_heights_avx2(double *hs, int64_t *order,
+                                                                 int64_t k) {
+    if (k > RANK_SORT_MAX) return sort_heights(hs, order, k);
     double v[RANK_SORT_MAX + 8];
     int64_t z = 0, rank[8];
     int nan = 0;
@@ -747,7 +771,7 @@ __attribute__((target("avx2"))) static int64_t sort_heights_avx2(double *hs, int
         z += v[j] < 0;
         nan |= v[j] != v[j];
     }
-    if (nan) return sort_heights(hs, k);
+    if (nan) return sort_heights(hs, order, k);
     for (int64_t j = k; j < k + 8; j++) v[j] = 0.0;
     for (int64_t j0 = 0; j0 < k; j0 += 8) {
         __m256d x0 = _mm256_loadu_pd(v + j0), x1 = _mm256_loadu_pd(v + j0 + 4);
@@ -771,19 +795,44 @@ __attribute__((target("avx2"))) static int64_t sort_heights_avx2(double *hs, int
         }
         _mm256_storeu_si256((__m256i *)rank, acc0);
         _mm256_storeu_si256((__m256i *)(rank + 4), acc1);
-        for (int l = 0; l < 8 && j0 + l < k; l++) hs[rank[l]] = v[j0 + l];
+        for (int l = 0; l < 8 && j0 + l < k; l++) {
+            hs[rank[l]] = v[j0 + l];
+            order[rank[l]] = j0 + l;
+        }
     }
     return z;
 }
 #endif
 
 /* sort_heights, by ranks when avx2. */
-static inline int64_t sorted_heights(double *hs, int64_t k, int avx2) {
+static inline int64_t sorted_heights(double *hs, int64_t *order, int64_t k, int avx2) {
 #ifdef HAVE_AVX2_PATH
-    if (avx2) return sort_heights_avx2(hs, k);
+    if (avx2) return sort_heights_avx2(hs, order, k);
 #endif
     (void)avx2;
-    return sort_heights(hs, k);
+    return sort_heights(hs, order, k);
+}
+
+/* The column's heights sorted, from all the heights h (k) sorted: hs (k) and order as
+ * sort_heights leaves them, z of them < 0, none NaN. The heights of the column's points
+ * (d2_j - h_j^2 <= c2) keep their order, the others read as 0.0: the column's negative
+ * heights, then those zeros, then its other heights, in place. These are the values that
+ * sorting the column's heights gives, in order; equal values (0.0 and -0.0 among them)
+ * may come in another order, which sheet_cuts' cuts do not see (a difference, a
+ * midpoint or a bound of equal values compares the same). Returns how many are < 0. */
+static int64_t column_heights(double *hs, const int64_t *order, const double *h,
+                              const double *d2, int64_t k, int64_t z, double c2) {
+    int64_t below = 0, above = k;
+    for (int64_t u = 0; u < z; u++) {
+        int64_t j = order[u];
+        if (d2[j] - h[j] * h[j] <= c2) hs[below++] = hs[u];
+    }
+    for (int64_t u = k - 1; u >= z; u--) {
+        int64_t j = order[u];
+        if (d2[j] - h[j] * h[j] <= c2) hs[--above] = hs[u];
+    }
+    for (int64_t u = below; u < above; u++) hs[u] = 0.0;
+    return below;
 }
 
 /* h[j] = q_j . nrm for the offsets q (k, 3), summed as (x n0 + y n1) + z n2; *lo and *hi
@@ -854,22 +903,81 @@ static inline int heights_of(const double *q, int64_t k, const double *nrm, doub
     return sheet_heights(q, k, nrm, h, lo, hi);
 }
 
-/* keep[j] = lo <= h[j] <= hi; returns the number dropped, or 0 (every keep[j] 1) when
- * fewer than minimum would be, the kept would be fewer than own times the dropped, or
- * the dropped heights on one side span more than span. */
-static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int64_t minimum,
-                           double own, double span, char *keep) {
-    int64_t dropped = 0;
-    double blo = INFINITY, bhi = -INFINITY, alo = INFINITY, ahi = -INFINITY;
-    for (int64_t j = 0; j < k; j++) {
+/* sheet_apply's tally of one list: how many heights are dropped, and the range of those
+ * below lo and of those above hi (empty: lo = inf, hi = -inf). */
+typedef struct {
+    int64_t dropped;
+    double blo, bhi, alo, ahi;
+} sheet_tally_t;
+
+/* keep[j] = lo <= h[j] <= hi for j in [j0, k), into the tally t. */
+static void sheet_marks(const double *h, int64_t j0, int64_t k, double lo, double hi,
+                        char *keep, sheet_tally_t *t) {
+    for (int64_t j = j0; j < k; j++) {
         double v = h[j];
         keep[j] = v >= lo && v <= hi;
-        dropped += !keep[j];
-        if (v < lo) { if (v < blo) blo = v; if (v > bhi) bhi = v; }
-        if (v > hi) { if (v < alo) alo = v; if (v > ahi) ahi = v; }
+        t->dropped += !keep[j];
+        if (v < lo) { if (v < t->blo) t->blo = v; if (v > t->bhi) t->bhi = v; }
+        if (v > hi) { if (v < t->alo) t->alo = v; if (v > t->ahi) t->ahi = v; }
     }
+}
+
+#ifdef HAVE_AVX2_PATH
+/* sheet_marks from j = 0 on 4 lanes (AVX2), then the rest: the same marks, count and
+ * ranges (where equal values of either sign of zero are a range's end, either sign may
+ * be it: the range's test in sheet_apply sees no difference). */
+__attribute__((target("avx2,popcnt"))) static void sheet_marks_avx2(const double *h, int64_t k,
+                                                             double lo, double hi, char *keep,
+                                                             sheet_tally_t *t) {
+    const __m256d vlo = _mm256_set1_pd(lo), vhi = _mm256_set1_pd(hi);
+    const __m256d inf = _mm256_set1_pd(INFINITY), ninf = _mm256_set1_pd(-INFINITY);
+    __m256d blo = inf, bhi = ninf, alo = inf, ahi = ninf;
+    int64_t j = 0, kept = 0;
+    for (; j + 4 <= k; j += 4) {
+        __m256d v = _mm256_loadu_pd(h + j);
+        __m256d below = _mm256_cmp_pd(v, vlo, _CMP_LT_OQ), above = _mm256_cmp_pd(v, vhi, _CMP_GT_OQ);
+        unsigned in = (unsigned)_mm256_movemask_pd(_mm256_and_pd(
+            _mm256_cmp_pd(v, vlo, _CMP_GE_OQ), _mm256_cmp_pd(v, vhi, _CMP_LE_OQ)));
+        uint32_t bytes = (in * 0x204081u) & 0x01010101u; /* bit l to byte l */
+        memcpy(keep + j, &bytes, 4);
+        kept += __builtin_popcount(in);
+        blo = _mm256_min_pd(blo, _mm256_blendv_pd(inf, v, below));
+        bhi = _mm256_max_pd(bhi, _mm256_blendv_pd(ninf, v, below));
+        alo = _mm256_min_pd(alo, _mm256_blendv_pd(inf, v, above));
+        ahi = _mm256_max_pd(ahi, _mm256_blendv_pd(ninf, v, above));
+    }
+    double r[4][4];
+    _mm256_storeu_pd(r[0], blo);
+    _mm256_storeu_pd(r[1], bhi);
+    _mm256_storeu_pd(r[2], alo);
+    _mm256_storeu_pd(r[3], ahi);
+    t->dropped += j - kept;
+    for (int l = 0; l < 4; l++) {
+        if (r[0][l] < t->blo) t->blo = r[0][l];
+        if (r[1][l] > t->bhi) t->bhi = r[1][l];
+        if (r[2][l] < t->alo) t->alo = r[2][l];
+        if (r[3][l] > t->ahi) t->ahi = r[3][l];
+    }
+    sheet_marks(h, j, k, lo, hi, keep, t);
+}
+#endif
+
+/* keep[j] = lo <= h[j] <= hi (on 4 lanes when avx2); returns the number dropped, or 0
+ * (every keep[j] 1) when fewer than minimum would be, the kept would be fewer than own
+ * times the dropped, or the dropped heights on one side span more than span. */
+static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int64_t minimum,
+                           double own, double span, char *keep, int avx2) {
+    sheet_tally_t t = {0, INFINITY, -INFINITY, INFINITY, -INFINITY};
+#ifdef HAVE_AVX2_PATH
+    if (avx2)
+        sheet_marks_avx2(h, k, lo, hi, keep, &t);
+    else
+#endif
+        sheet_marks(h, 0, k, lo, hi, keep, &t);
+    (void)avx2;
+    int64_t dropped = t.dropped;
     if (dropped < minimum || (double)(k - dropped) < own * (double)dropped ||
-        (bhi >= blo && bhi - blo > span) || (ahi >= alo && ahi - alo > span)) {
+        (t.bhi >= t.blo && t.bhi - t.blo > span) || (t.ahi >= t.alo && t.ahi - t.alo > span)) {
         for (int64_t j = 0; j < k; j++) keep[j] = 1;
         return 0;
     }
@@ -886,22 +994,36 @@ static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int
  * distance t_j, t_j^2 = d2_j - h_j^2, at most sheet_column * a; the others' heights
  * read as 0), gaps > sheet_column_gap * a, a side cut only when its gap is the only
  * one on that side, the cuts in the middle of the gaps, and not when the dropped
- * heights on one side span more than sheet_far_span * a. */
+ * heights on one side span more than sheet_far_span * a; the column's heights sorted
+ * from the list's (column_heights) when none is NaN. order (k) scratch. */
 static int64_t sheet_rules(const double *h, const double *d2, int64_t k, double a,
-                           const sheet_params_t *sp, double *hs, char *keep) {
+                           const sheet_params_t *sp, double *hs, int64_t *order, char *keep) {
     double lo, hi;
-    for (int64_t j = 0; j < k; j++) hs[j] = h[j];
-    sheet_cuts(hs, k, sorted_heights(hs, k, sp->avx2), sp->gap * a, 0, &lo, &hi);
-    int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep);
+    int nan = 0;
+    for (int64_t j = 0; j < k; j++) {
+        hs[j] = h[j];
+        nan |= h[j] != h[j];
+    }
+    int64_t z = sorted_heights(hs, order, k, sp->avx2);
+    sheet_cuts(hs, k, z, sp->gap * a, 0, &lo, &hi);
+    int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep,
+                                   sp->avx2);
     if (dropped > 0 || sp->column <= 0.0) return dropped;
     double c = sp->column * a, c2 = c * c;
-    for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
-    sheet_cuts(hs, k, sorted_heights(hs, k, sp->avx2), sp->column_gap * a, 1, &lo, &hi);
-    return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep);
+    if (nan) {
+        for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
+        z = sorted_heights(hs, order, k, sp->avx2);
+    } else {
+        z = column_heights(hs, order, h, d2, k, z, c2);
+    }
+    sheet_cuts(hs, k, z, sp->column_gap * a, 1, &lo, &hi);
+    return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep,
+                       sp->avx2);
 }
 
 /* robust.sheet_mask of one kNN list: offsets q (k, 3) from the point (itself first),
- * squared lengths d2 (k), the list's normal nrm, the parameters sp; hs (2 k) scratch.
+ * squared lengths d2 (k), the list's normal nrm, the parameters sp; hs (2 k) and order
+ * (k) scratch.
  * Writes keep[j] (1: kept) and returns the number of neighbours dropped (0: every
  * keep[j] is 1). h_j = q_j . n; a = the mean length of q_1 .. q_m, m = min(6, k - 1),
  * summed in order; sheet_rules on those heights. Pass 2, when they drop none, some
@@ -909,7 +1031,7 @@ static int64_t sheet_rules(const double *h, const double *d2, int64_t k, double 
  * the unweighted PCA normal n2 (smallest_eigvec of the scatter, sums in order) of the
  * q_j with |h_j| <= sheet_trim * a, when |n2 . n| >= sheet_trim_cos. */
 static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const double *nrm,
-                          const sheet_params_t *sp, double *hs, char *keep) {
+                          const sheet_params_t *sp, double *hs, int64_t *order, char *keep) {
     for (int64_t j = 0; j < k; j++) keep[j] = 1;
     int64_t m = k - 1 < 6 ? k - 1 : 6;
     if (m < 1) return 0;
@@ -927,7 +1049,7 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     if (!nan && hmax - hmin <= g && (sp->column <= 0.0 || hmax - hmin <= g2) &&
         (sp->trim <= 0.0 || hmax - hmin <= t))
         return 0;
-    int64_t dropped = sheet_rules(h, d2, k, a, sp, hs, keep);
+    int64_t dropped = sheet_rules(h, d2, k, a, sp, hs, order, keep);
     if (dropped > 0 || sp->trim <= 0.0) return dropped;
     double sx = 0.0, sy = 0.0, sz = 0.0;
     int64_t count = 0;
@@ -949,7 +1071,7 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     if (!(fabs(n2[0] * nrm[0] + n2[1] * nrm[1] + n2[2] * nrm[2]) >= sp->trim_cos)) return 0;
     for (int64_t j = 0; j < k; j++)
         h[j] = q[3 * j] * n2[0] + q[3 * j + 1] * n2[1] + q[3 * j + 2] * n2[2];
-    return sheet_rules(h, d2, k, a, sp, hs, keep);
+    return sheet_rules(h, d2, k, a, sp, hs, order, keep);
 }
 
 /* ------------------------------------------------------------------ kd-tree */
@@ -1698,6 +1820,75 @@ static void knn_cursor_next(knn_cursor_t *c, int64_t i) {
 
 /* kNN of tree positions [begin, end) at k = max(ks) (knn_cursor_t), then what out asks
  * for (see cloud_out_t). Returns 0, or -1 out of memory. */
+/* The offsets q (k, 3) of one kNN list nb (k = mk[nscales - 1]) from the point pi, q_j =
+ * p[nb[j].pos] - pi, their squared lengths d2 (k) = nb[j].d2, and on the way scale_means'
+ * smean and sh2 of the prefixes mk (the same running sums, in the same order). */
+static void offsets_means(const double *p, const double *pi, const cand_t *nb,
+                          const int64_t *mk, int nscales, double *q, double *d2, double *smean,
+                          double *sh2) {
+    double sx = 0, sy = 0, sz = 0, h2 = 0;
+    int64_t j = 0;
+    for (int s = 0; s < nscales; s++) {
+        int64_t m = mk[s];
+        for (; j < m; j++) {
+            const double *pj = p + 3 * nb[j].pos;
+            double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2], dj = nb[j].d2;
+            q[3 * j] = x; q[3 * j + 1] = y; q[3 * j + 2] = z;
+            d2[j] = dj;
+            sx += x; sy += y; sz += z;
+            if (dj > h2) h2 = dj;
+        }
+        smean[3 * s] = sx / (double)m;
+        smean[3 * s + 1] = sy / (double)m;
+        smean[3 * s + 2] = sz / (double)m;
+        sh2[s] = h2;
+    }
+}
+
+#ifdef HAVE_AVX2_PATH
+/* offsets_means with each offset's x, y, z in the lanes of one register (the 4th lane
+ * 0, masked off p and smean; q has room for one more double): the same differences,
+ * sums and quotients, lane by lane. */
+__attribute__((target("avx2"))) static void offsets_means_avx2(const double *p,
+                                                               const double *pi,
+                                                               const cand_t *nb,
+                                                               const int64_t *mk, int nscales,
+                                                               double *q, double *d2,
+                                                               double *smean, double *sh2) {
+    const __m256i xyz = _mm256_setr_epi64x(-1, -1, -1, 0);
+    __m256d vpi = _mm256_maskload_pd(pi, xyz), sum = _mm256_setzero_pd();
+    double h2 = 0;
+    int64_t j = 0;
+    for (int s = 0; s < nscales; s++) {
+        int64_t m = mk[s];
+        for (; j < m; j++) {
+            __m256d v = _mm256_sub_pd(_mm256_maskload_pd(p + 3 * nb[j].pos, xyz), vpi);
+            double dj = nb[j].d2;
+            _mm256_storeu_pd(q + 3 * j, v);
+            d2[j] = dj;
+            sum = _mm256_add_pd(sum, v);
+            if (dj > h2) h2 = dj;
+        }
+        _mm256_maskstore_pd(smean + 3 * s, xyz, _mm256_div_pd(sum, _mm256_set1_pd((double)m)));
+        sh2[s] = h2;
+    }
+}
+#endif
+
+/* offsets_means, on 4 lanes when avx2. */
+static inline void offsets_means_on(const double *p, const double *pi, const cand_t *nb,
+                                    const int64_t *mk, int nscales, double *q, double *d2,
+                                    double *smean, double *sh2, int avx2) {
+#ifdef HAVE_AVX2_PATH
+    if (avx2) {
+        offsets_means_avx2(p, pi, nb, mk, nscales, q, d2, smean, sh2);
+        return;
+    }
+#endif
+    (void)avx2;
+    offsets_means(p, pi, nb, mk, nscales, q, d2, smean, sh2);
+}
+
 int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double *box, int depth,
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
                   const cloud_out_t *out) {
@@ -1706,7 +1897,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     knn_cursor_t cur;
     int cur_rc = knn_cursor_init(&cur, &T, kmax);
     const cand_t *nb = cur.h.c;
-    double *q = (double *)malloc((size_t)kmax * 3 * sizeof(double));
+    double *q = (double *)malloc(((size_t)kmax * 3 + 1) * sizeof(double)); /* +1: see
+                                                                                * offsets_means_avx2 */
     double *d2 = (double *)malloc((size_t)kmax * sizeof(double));
     pca_lanes_fn pca = pca_lanes();
     /* per scale: mean offset (3), normal (3), largest squared distance (1) */
@@ -1715,13 +1907,14 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
     double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
+    int64_t *order = (int64_t *)malloc((size_t)kmax * sizeof(int64_t));
     char *keep = (char *)malloc((size_t)kmax);
     const sheet_params_t sheet = {out->sheet_gap, out->sheet_min, out->sheet_own,
                                   out->sheet_column, out->sheet_column_gap, out->sheet_far_span,
                                   out->sheet_trim, out->sheet_trim_cos, use_avx2()};
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     int rc = 0;
-    if (cur_rc || !q || !d2 || !smean || !soa || !ell || !hs || !keep || !mk) {
+    if (cur_rc || !q || !d2 || !smean || !soa || !ell || !hs || !order || !keep || !mk) {
         rc = -1;
         goto done;
     }
@@ -1738,26 +1931,18 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             out->kth_idx[oi] = nb[kmax - 1].idx;
         }
         if (out->pdis == NULL && out->relative == NULL && out->noise == NULL) continue;
-        for (int64_t j = 0; j < kmax; j++) {
-            const double *pj = p + 3 * nb[j].pos;
-            q[3 * j] = pj[0] - pi[0];
-            q[3 * j + 1] = pj[1] - pi[1];
-            q[3 * j + 2] = pj[2] - pi[2];
-            d2[j] = nb[j].d2;
-        }
         for (int s = 0; s < nscales; s++) mk[s] = ks[s];
+        offsets_means_on(p, pi, nb, mk, nscales, q, d2, smean, sh2, sheet.avx2);
         /* known: how many of the largest scales have their normal from the sheet filter's
          * PCA (the largest scale's, and the next one's computed beside it): their lists
          * are the same when the filter keeps every neighbour */
-        int known = 0, means = 0; /* means: smean and sh2 hold the lists' */
+        int known = 0, means = 1; /* means: smean and sh2 hold the lists' */
         int pdis_wanted = out->pdis != NULL || out->relative != NULL;
         if (out->sheet_gap > 0.0) {
-            scale_means(q, d2, mk, nscales, smean, sh2);
-            means = 1;
             /* the largest scale's normal for the filter, and the next ones' beside it */
             known = !pdis_wanted ? 1 : nscales < PCA_LANES ? nscales : PCA_LANES;
             pca_scales(pca, q, d2, mk, smean, sh2, nscales - known, nscales, gaussian, snrm);
-            if (sheet_keep(q, d2, kmax, snrm + 3 * (nscales - 1), &sheet, hs, keep) > 0) {
+            if (sheet_keep(q, d2, kmax, snrm + 3 * (nscales - 1), &sheet, hs, order, keep) > 0) {
                 known = 0;
                 means = 0;
                 int64_t t = 0, s = 0;
@@ -1809,6 +1994,7 @@ done:
     free(soa);
     free(ell);
     free(hs);
+    free(order);
     free(keep);
     free(mk);
     return rc;
