@@ -198,6 +198,31 @@ def _thread_scratch(n: int, dtype: type) -> Callable[[], np.ndarray]:
     return get
 
 
+class _Pool:
+    """The process's worker threads, started at the first parallel call and reused by
+    every later one (an executor per call started two threads each time: about 40 per
+    ``detect``); a forked child starts its own."""
+
+    lock = threading.Lock()
+    executor: ThreadPoolExecutor | None = None
+
+    @classmethod
+    def get(cls) -> ThreadPoolExecutor:
+        with cls.lock:
+            if cls.executor is None:
+                cls.executor = ThreadPoolExecutor(thread_name_prefix="meshlab_sharp")
+            return cls.executor
+
+    @classmethod
+    def forget(cls) -> None:
+        """In a forked child: the parent's threads are not there."""
+        cls.lock = threading.Lock()
+        cls.executor = None
+
+
+os.register_at_fork(after_in_child=_Pool.forget)
+
+
 def _run_chunks(
     n: int,
     workers: int,
@@ -206,15 +231,31 @@ def _run_chunks(
     spans: Sequence[tuple[int, int]] | None = None,
 ) -> None:
     """task(begin, end) over [0, n) (or over each ``[begin, end)`` of ``spans``) in
-    chunks of ``chunk``, on ``workers`` threads."""
+    chunks of ``chunk``, on ``workers`` threads: the calling thread and ``workers - 1``
+    of the process's pool (:class:`_Pool`), each taking the next chunk when it is
+    done with one."""
     spans = [(0, n)] if spans is None else spans
     ranges = [(s, min(s + chunk, e)) for a, e in spans for s in range(a, e, chunk)]
-    w = _workers(workers)
-    if w == 1 or len(ranges) == 1:
-        codes = [task(a, b) for a, b in ranges]
+    w = min(_workers(workers), len(ranges))
+    codes: list[int] = []
+    todo = iter(ranges)  # shared: next() on a list iterator is atomic under the GIL
+
+    def run() -> None:
+        for a, b in todo:
+            codes.append(task(a, b))
+
+    if w <= 1:
+        run()
     else:
-        with ThreadPoolExecutor(max_workers=w) as pool:
-            codes = list(pool.map(lambda r: task(*r), ranges))
+        pool = _Pool.get()
+        helpers = [pool.submit(run) for _ in range(w - 1)]
+        try:
+            run()
+        finally:
+            for _ in todo:  # on an error here, the helpers stop after their chunk
+                pass
+            for f in helpers:
+                f.result()
     if any(c != 0 for c in codes):
         raise MemoryError("out of memory in a compiled kernel")
 

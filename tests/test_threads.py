@@ -1,0 +1,68 @@
+"""The worker threads: one pool for the process, chunks shared out, errors raised."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+
+import pytest
+
+from meshlab_sharp import _kernels
+
+
+def _record(calls: list[tuple[int, int, int]]):
+    def task(a: int, b: int) -> int:
+        calls.append((a, b, threading.get_ident()))
+        return 0
+
+    return task
+
+
+def test_chunks_cover_the_range_once_and_reuse_the_pool_threads():
+    first: list[tuple[int, int, int]] = []
+    _kernels._run_chunks(1000, 3, _record(first), chunk=7)
+    assert sorted((a, b) for a, b, _ in first) == [(s, min(s + 7, 1000)) for s in range(0, 1000, 7)]
+    pool = _kernels._Pool.get()
+    second: list[tuple[int, int, int]] = []
+    _kernels._run_chunks(1000, 3, _record(second), chunk=7, spans=[(10, 20), (500, 503)])
+    assert sorted((a, b) for a, b, _ in second) == [(10, 17), (17, 20), (500, 503)]
+    assert _kernels._Pool.get() is pool
+    # the calling thread and the pool's threads, no thread started per call
+    pool_threads = {t.ident for t in threading.enumerate() if t.name.startswith("meshlab_sharp")}
+    assert {t for *_, t in first + second} <= pool_threads | {threading.get_ident()}
+    assert len(pool_threads) <= os.cpu_count() + 4  # ThreadPoolExecutor's default cap
+
+
+def test_one_worker_runs_on_the_calling_thread():
+    calls: list[tuple[int, int, int]] = []
+    _kernels._run_chunks(100, 1, _record(calls), chunk=10)
+    assert {t for *_, t in calls} == {threading.get_ident()} and len(calls) == 10
+
+
+def test_a_failing_chunk_raises_after_the_others_stop():
+    def task(a: int, b: int) -> int:
+        if a == 40:
+            raise ValueError("chunk 40")
+        return 0
+
+    with pytest.raises(ValueError, match="chunk 40"):
+        _kernels._run_chunks(200, 2, task, chunk=10)
+    with pytest.raises(MemoryError):
+        _kernels._run_chunks(200, 2, lambda a, b: int(a == 100), chunk=10)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork")
+def test_a_forked_child_starts_its_own_threads():
+    _kernels._Pool.get()  # the parent's pool exists before the fork
+    _kernels._run_chunks(100, 2, lambda a, b: 0, chunk=10)
+    pid = os.fork()
+    if pid == 0:  # the child: the parent's threads are not there
+        signal.alarm(20)
+        calls: list[tuple[int, int, int]] = []
+        try:
+            _kernels._run_chunks(100, 2, _record(calls), chunk=10)
+        finally:
+            os._exit(0 if len(calls) == 10 else 1)
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
