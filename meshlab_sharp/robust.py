@@ -77,6 +77,7 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -922,7 +923,29 @@ class RelativeRule:
         return self.otsu, R_MIN
 
 
-def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourhood) -> np.ndarray:
+#: Fewest feature points in one thread's part of support, thinning and the line
+#: directions (below it the threads' start costs more than they save).
+PART_MIN = 2048
+
+
+def _in_parts(rows: np.ndarray, work: Callable[[np.ndarray], None], workers: int) -> None:
+    """``work(part)`` for consecutive parts of ``rows`` (about one per worker, none
+    under ``PART_MIN`` rows) on ``workers`` threads (numpy releases the GIL in the
+    arithmetic, the gathers and ``eigh``). Each row's answer depends on that row alone,
+    so the parts give the answers of one call over all the rows, bit for bit."""
+    w = _kernels._workers(workers)
+    size = max(PART_MIN, -(-len(rows) // w))
+
+    def task(a: int, b: int) -> int:
+        work(rows[a:b])
+        return 0
+
+    _kernels._run_chunks(len(rows), w, task, chunk=size)
+
+
+def line_directions(
+    points: np.ndarray, mask: np.ndarray, direction: Neighbourhood, workers: int = 1
+) -> np.ndarray:
     """Direction of the line of features through each feature point.
 
     Parameters
@@ -932,6 +955,8 @@ def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourho
         Feature points.
     direction : Neighbourhood
         CSR lists (the largest scale; each point's own index included).
+    workers : int, default 1
+        Threads (-1: one per core), the feature points in parts (:func:`_in_parts`).
 
     Returns
     -------
@@ -943,9 +968,18 @@ def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourho
     """
     mask = np.asarray(mask, bool)
     e = np.zeros((len(points), 3))
-    cand = np.flatnonzero(mask)
-    if len(cand) == 0:
-        return e
+
+    def part(cand: np.ndarray) -> None:
+        e[cand] = _line_directions_of(points, mask, direction, cand)
+
+    _in_parts(np.flatnonzero(mask), part, workers)
+    return e
+
+
+def _line_directions_of(
+    points: np.ndarray, mask: np.ndarray, direction: Neighbourhood, cand: np.ndarray
+) -> np.ndarray:
+    """:func:`line_directions` of the feature points ``cand`` (c,): (c, 3) float64."""
     owner, members = _rows(direction, cand)
     use = mask[members]
     owner, members = owner[use], members[use]
@@ -958,17 +992,20 @@ def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourho
     qbar = qsum / safe
     cov = outer - safe[:, :, None] * qbar[:, :, None] * qbar[:, None, :]
     _, vecs = np.linalg.eigh(cov)
-    e[cand] = vecs[:, :, 2]
-    return e
+    return vecs[:, :, 2]
 
 
 def _feature_pairs(
-    points: np.ndarray, mask: np.ndarray, e: np.ndarray, lists: Neighbourhood, cone_cos: float
+    points: np.ndarray,
+    mask: np.ndarray,
+    e: np.ndarray,
+    lists: Neighbourhood,
+    cone_cos: float,
+    cand: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Pairs (i, j) of features, ``j != i`` in ``lists[i]``: the position of ``i`` among
-    the features, ``i``, ``j`` and whether ``d = p_j - p_i`` lies across the line
-    through ``i`` (``|d . e_i| < cone_cos * |d|``)."""
-    cand = np.flatnonzero(mask)
+    """Pairs (i, j) of features, ``i`` in ``cand`` (features), ``j != i`` in
+    ``lists[i]``: the position of ``i`` in ``cand``, ``i``, ``j`` and whether ``d = p_j -
+    p_i`` lies across the line through ``i`` (``|d . e_i| < cone_cos * |d|``)."""
     owner, nb = _rows(lists, cand)
     ci = cand[owner]
     use = mask[nb] & (nb != ci)
@@ -988,6 +1025,7 @@ def supported(
     *,
     cone_cos: float = THIN_CONE_COS,
     exempt: np.ndarray | None = None,
+    workers: int = 1,
 ) -> np.ndarray:
     """Features with at least ``minimum`` other features along their line.
 
@@ -1004,6 +1042,8 @@ def supported(
     cone_cos : float, default THIN_CONE_COS (0.5)
     exempt : (m,) bool, optional
         Features kept whatever their support (:func:`support_exempt`); default none.
+    workers : int, default 1
+        Threads (-1: one per core), the features in parts (:func:`_in_parts`).
 
     Returns
     -------
@@ -1013,16 +1053,18 @@ def supported(
         ``mask[i]`` and ``exempt[i]``.
     """
     mask = np.asarray(mask, bool)
-    cand = np.flatnonzero(mask)
-    if len(cand) == 0:
-        return mask.copy()
-    owner, _, _, across = _feature_pairs(points, mask, e, around, cone_cos)
-    count = np.bincount(owner[~across], minlength=len(cand))
-    weak = count < minimum
-    if exempt is not None:
-        weak &= ~np.asarray(exempt, bool)[cand]
+    free = None if exempt is None else np.asarray(exempt, bool)
     out = mask.copy()
-    out[cand[weak]] = False
+
+    def part(cand: np.ndarray) -> None:
+        owner, _, _, across = _feature_pairs(points, mask, e, around, cone_cos, cand)
+        count = np.bincount(owner[~across], minlength=len(cand))
+        weak = count < minimum
+        if free is not None:
+            weak &= ~free[cand]
+        out[cand[weak]] = False
+
+    _in_parts(np.flatnonzero(mask), part, workers)
     return out
 
 
@@ -1035,6 +1077,7 @@ def thin(
     *,
     cone_cos: float = THIN_CONE_COS,
     between: np.ndarray | None = None,
+    workers: int = 1,
 ) -> np.ndarray:
     """Non-maximum suppression of feature points across the feature line.
 
@@ -1060,6 +1103,8 @@ def thin(
     between : (m,) bool, optional
         The points that part two features whatever their score (:func:`thin_blockers`);
         default none, and then no blocking at all.
+    workers : int, default 1
+        Threads (-1: one per core), the features in parts (:func:`_in_parts`).
 
     Returns
     -------
@@ -1067,23 +1112,25 @@ def thin(
         The thinned mask (a subset of ``mask``).
     """
     mask = np.asarray(mask, bool)
-    cand = np.flatnonzero(mask)
-    if len(cand) == 0:
-        return mask.copy()
-    owner, ci, nb, across = _feature_pairs(points, mask, e, compare, cone_cos)
-    beaten = across & (score[nb] > score[ci])
-    if between is not None:
-        pair = np.flatnonzero(beaten)
-        at, m = _rows(compare, ci[pair])
-        use = np.asarray(between, bool)[m] | (score[m] < score[ci[pair[at]]])
-        at, m = at[use], m[use]
-        a = points[m] - points[ci[pair[at]]]
-        b = points[m] - points[nb[pair[at]]]
-        dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
-        beaten[pair[np.unique(at[dot < 0])]] = False
-    suppressed = np.bincount(owner[beaten], minlength=len(cand)) > 0
+    block = None if between is None else np.asarray(between, bool)
     out = mask.copy()
-    out[cand[suppressed]] = False
+
+    def part(cand: np.ndarray) -> None:
+        owner, ci, nb, across = _feature_pairs(points, mask, e, compare, cone_cos, cand)
+        beaten = across & (score[nb] > score[ci])
+        if block is not None:
+            pair = np.flatnonzero(beaten)
+            at, m = _rows(compare, ci[pair])
+            use = block[m] | (score[m] < score[ci[pair[at]]])
+            at, m = at[use], m[use]
+            a = points[m] - points[ci[pair[at]]]
+            b = points[m] - points[nb[pair[at]]]
+            dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+            beaten[pair[np.unique(at[dot < 0])]] = False
+        suppressed = np.bincount(owner[beaten], minlength=len(cand)) > 0
+        out[cand[suppressed]] = False
+
+    _in_parts(np.flatnonzero(mask), part, workers)
     return out
 
 
@@ -1101,7 +1148,8 @@ class RobustSetup:
     scales : tuple of int
         Increasing scales.
     workers : int, default -1
-        Threads for a kNN query when isolated points are left out.
+        Threads for a kNN query when isolated points are left out, and for support,
+        thinning and the line directions.
     weighting : {"gaussian", "none"}, default "gaussian"
     keep_normals : bool, default False
         How :func:`meshlab_sharp.multiscale.run_scales` will be called (the compiled
@@ -1142,6 +1190,7 @@ class RobustSetup:
     ) -> None:
         self.n = len(points)
         self.faces = faces
+        self.workers = workers
         self.scales = tuple(scales)
         self.keep = np.arange(self.n, dtype=np.int64)
         self.points = points
@@ -1304,7 +1353,8 @@ class RobustSetup:
                 ks = (min(THIN_RING, top), top)
                 around, direction = self._ring_rows(np.flatnonzero(mask), ks)
                 compare = around
-            e = line_directions(self.points, mask, direction)
+            w = self.workers
+            e = line_directions(self.points, mask, direction, w)
             mesh = self.faces is not None
             free = support_exempt(self.rule.score, mesh, self.noise)
             block = thin_blockers(mask, mesh, self.noise)
@@ -1312,7 +1362,14 @@ class RobustSetup:
             if ranking_smoothed(mesh, self.noise):
                 rank = smoothed_ranking(rank, compare, THIN_KNN)
             mask = supported(
-                self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS, exempt=free
+                self.points,
+                mask,
+                e,
+                around,
+                SUPPORT_MIN,
+                cone_cos=THIN_CONE_COS,
+                exempt=free,
+                workers=w,
             )
             mask = thin(
                 self.points,
@@ -1322,6 +1379,7 @@ class RobustSetup:
                 compare,
                 cone_cos=thin_cone(mesh, self.noise),
                 between=block,
+                workers=w,
             )
         if self.sharp_edges is not None:
             mask = mask | self.sharp_edges
