@@ -378,6 +378,15 @@ def _to_cleaned_order(
     _run_chunks(n, w, task, chunk=max(CHUNK, -(-n // w)))
 
 
+def to_cleaned_order(arrays: Sequence[np.ndarray], orig: np.ndarray, workers: int = -1) -> None:
+    """Each of ``arrays`` (n, ...) of 8-byte items, C-contiguous, written at tree
+    positions, moved in place to cleaned order (``orig`` (n,) int64: the cleaned index of
+    each position), one scratch array for all of them."""
+    scratch = np.empty(max((a.nbytes for a in arrays), default=0), np.uint8)
+    for a in arrays:
+        _to_cleaned_order(a, orig, scratch, workers)
+
+
 def _tree_spans(tree: KdTree, rows: np.ndarray) -> list[tuple[int, int]]:
     """Ranges ``[begin, end)`` of tree positions that hold the points ``rows`` (cleaned
     indices), runs less than a leaf apart merged (a few other points come with them)."""
@@ -397,13 +406,15 @@ def _cloud_call(
     gaussian: bool,
     workers: int,
     rows: np.ndarray | None = None,
+    in_tree_order: tuple[str, ...] = (),
     **out: np.ndarray | int | None,
 ) -> None:
     """One pass of ``ms_cloud_pdis`` over the tree's points (only the points ``rows``,
     cleaned indices, and a few near them in the tree, when given) at the scales ``ks``;
     ``out`` names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
     ``noise_k`` and ``sheet_*``. Without the kNN table
-    (``idx``) the pass writes its rows in tree order, moved to cleaned order after."""
+    (``idx``) the pass writes its rows in tree order, moved to cleaned order after,
+    except the arrays named in ``in_tree_order``."""
     lib = _LIB
     assert lib is not None
     t = tree
@@ -428,10 +439,16 @@ def _cloud_call(
     )
     if not tree_order:
         return
-    moved = [r for name, a in arrays.items() for r in (a if name in _PER_SCALE else (a,))]
-    scratch = np.empty(max((r.nbytes for r in moved), default=0), np.uint8)  # one for all
-    for r in moved:
-        _to_cleaned_order(r, t.orig, scratch, workers)
+    to_cleaned_order(
+        [
+            r
+            for name, a in arrays.items()
+            if name not in in_tree_order
+            for r in (a if name in _PER_SCALE else (a,))
+        ],
+        t.orig,
+        workers,
+    )
 
 
 def cloud_knn(
@@ -537,13 +554,17 @@ class ScalePass:
 
     Robust mode (``relative``) gets, instead of the projected distances, what
     :class:`meshlab_sharp.robust.RelativeRule` computes from them, bit for bit: the
-    relative distances and the thinning's score."""
+    relative distances and the thinning's score. With ``order``, the per-scale arrays
+    (``pdis``, ``normals``, ``relative``) are in the kd-tree's order instead, row ``t``
+    being the cleaned point ``order[t]`` (what needs no order, as a histogram, reads them
+    as they are: :func:`to_cleaned_order` moves what is kept)."""
 
     pdis: np.ndarray | None  # (s, n) projected distances (paper mode)
     normals: np.ndarray | None  # (s, n, 3) their normals, when kept
     relative: np.ndarray | None = None  # (s, n) relative distances r (robust mode)
     score: np.ndarray | None = None  # (n,) RelativeRule's score after every scale
     stats: CloudStats | None = None
+    order: np.ndarray | None = None  # (n,) int64 the kd-tree's ``orig``, or None
 
 
 #: Robust mode's sheet filter parameters (:func:`meshlab_sharp.robust.sheet_parameters`):
@@ -563,6 +584,7 @@ def cloud_projected_distances(
     sheet: SheetParameters | None = None,
     workers: int = -1,
     rows: np.ndarray | None = None,
+    tree_order: bool = False,
 ) -> ScalePass:
     """Projected distances (s, n) at every kNN scale (cleaned order), the normals
     (s, n, 3) when ``keep_normals``; with ``relative`` robust mode's relative distances
@@ -573,7 +595,9 @@ def cloud_projected_distances(
     :func:`meshlab_sharp.robust.sheet_mask` first: every
     neighbourhood (the scales', the noise's) is then the kept neighbours among its
     points. One neighbour search at the largest scale. With ``rows`` (cleaned indices),
-    only those points' values are computed (and a few others'); the rest are undefined."""
+    only those points' values are computed (and a few others'); the rest are undefined.
+    With ``tree_order``, the per-scale arrays are left in the kd-tree's order
+    (:attr:`ScalePass.order`)."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
     n, s = tree.n, len(ks)
     keep = not relative if keep_pdis is None else keep_pdis
@@ -602,7 +626,10 @@ def cloud_projected_distances(
             sheet_trim=float(trim),
             sheet_trim_cos=float(trim_cos),
         )
-    _cloud_call(tree, ks, weighting == "gaussian", workers, rows, **fields)
+    kept = _PER_SCALE if tree_order else ()
+    _cloud_call(tree, ks, weighting == "gaussian", workers, rows, kept, **fields)
+    if tree_order:
+        out.order = tree.orig
     return out
 
 
