@@ -284,10 +284,18 @@ class KdTree:
         return len(self.points)
 
 
-def build_tree(points: np.ndarray, workers: int = -1) -> KdTree:
+class TreeStopped(Exception):
+    """A kd-tree build stopped by its ``stop`` (:func:`build_tree`)."""
+
+
+def build_tree(
+    points: np.ndarray, workers: int = -1, stop: Callable[[], bool] | None = None
+) -> KdTree:
     """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points: its
     top :data:`KD_TOP` levels one after the other, the nodes of each on ``workers``
-    threads, then the subtrees below them (the same tree as ``ms_kdtree_build``)."""
+    threads, then the subtrees below them (the same tree as ``ms_kdtree_build``).
+    Raises :class:`TreeStopped` when ``stop()`` turned true: the build stops before
+    its next node (a speculative build, :func:`meshlab_sharp.pipeline._clean_beside_tree`)."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -298,19 +306,24 @@ def build_tree(points: np.ndarray, workers: int = -1) -> KdTree:
     boxes = np.empty((2 ** (depth + 1) - 1, 6))
     tp, to, tb = _ptr(tree_points), _ptr(orig), _ptr(boxes)
     top = min(depth, KD_TOP)
+    stopped = stop if stop is not None else lambda: False
     for level in range(top):
 
         def split(a: int, b: int, level: int = level) -> int:
-            lib.ms_kdtree_build_level(tp, to, n, depth, level, a, b, tb)
+            if not stopped():
+                lib.ms_kdtree_build_level(tp, to, n, depth, level, a, b, tb)
             return 0
 
         _run_chunks(2**level, workers, split, chunk=1)
 
     def task(a: int, b: int) -> int:
-        lib.ms_kdtree_build_subtrees(tp, to, n, depth, a, b, tb)
+        if not stopped():
+            lib.ms_kdtree_build_subtrees(tp, to, n, depth, a, b, tb)
         return 0
 
     _run_chunks(2**top, workers, task, chunk=1)
+    if stopped():
+        raise TreeStopped
     return KdTree(tree_points, orig, boxes, depth)
 
 

@@ -5,9 +5,10 @@ projected distance -> threshold -> decide, with every result in the input's orde
 from __future__ import annotations
 
 import os
+import threading
 import time
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -15,7 +16,7 @@ import numpy as np
 import pymeshlab
 
 from . import _header, _kernels
-from .cleaning import clean
+from .cleaning import CleanGeometry, clean
 from .curves import Corners, Curve, extract_curves
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
@@ -360,7 +361,8 @@ def _detect(
     unit = unit_scale(geometry.vertices)[0]
     faces_in = geometry.faces if is_mesh else None
     same = unit is geometry.vertices and faces_in is geometry.faces
-    cleaned = clean(geometry if same else Geometry(unit, faces_in, geometry.source))
+    to_clean = geometry if same else Geometry(unit, faces_in, geometry.source)
+    cleaned, tree = (clean(to_clean), None) if is_mesh else _clean_beside_tree(to_clean, workers)
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     points = cleaned.vertices
@@ -369,8 +371,9 @@ def _detect(
 
     t = time.perf_counter()
     neighbourhoods, normals = _neighbourhoods_and_normals(
-        points, cleaned.faces if is_mesh else None, scales_t, workers
+        points, cleaned.faces if is_mesh else None, scales_t, workers, tree
     )
+    del tree
     robust = None
     work, work_neighbourhoods = points, neighbourhoods
     if mode == "robust":
@@ -444,16 +447,48 @@ def _detect(
     return result
 
 
+def _clean_beside_tree(
+    geometry: Geometry, workers: int
+) -> tuple[CleanGeometry, Future[_kernels.KdTree] | None]:
+    """:func:`clean` of a cloud and, meanwhile on a thread of its own, the kd-tree of
+    its points (compiled backend, unless ``workers`` is 1): cleaning's duplicate merge
+    is one serial C call, the tree's first levels nearly so, and they took one core each
+    in turn. The tree (a future) is the cleaned cloud's when cleaning merged no point
+    (the same points in the same order: cleaning keeps the order); else None, and the
+    build stops before its next node."""
+    if workers == 1 or _kernels.resolve(None) != "compiled":
+        return clean(geometry), None
+    stop = threading.Event()
+    pool = ThreadPoolExecutor(max_workers=1)
+    tree = pool.submit(_kernels.build_tree, geometry.vertices, workers, stop.is_set)
+    pool.shutdown(wait=False)  # its thread ends with the build
+    try:
+        cleaned = clean(geometry)
+    except BaseException:
+        stop.set()
+        raise
+    if len(cleaned.vertices) == len(geometry.vertices):
+        return cleaned, tree
+    stop.set()
+    return cleaned, None
+
+
 def _neighbourhoods_and_normals(
-    points: np.ndarray, faces: np.ndarray | None, scales: tuple[int, ...], workers: int
+    points: np.ndarray,
+    faces: np.ndarray | None,
+    scales: tuple[int, ...],
+    workers: int,
+    tree: Future[_kernels.KdTree] | None = None,
 ) -> tuple[KnnNeighbourhoods | RingNeighbourhoods, np.ndarray | None]:
     """:func:`build_neighbourhoods` and, on a mesh (``faces`` (m, 3) not None), the
-    face-average normals (n, 3), None on a cloud. Unless ``workers`` is 1 the normals are
+    face-average normals (n, 3), None on a cloud; ``tree``: a cloud's kd-tree, being
+    built (:func:`_clean_beside_tree`). Unless ``workers`` is 1 the normals are
     computed on a second thread meanwhile: with the compiled backend both are
     single-threaded C calls that release the GIL (the mesh's adjacency, then its
     normals, took one core each in turn)."""
     if faces is None:
-        return build_neighbourhoods(points, None, scales, workers=workers), None
+        built = None if tree is None else tree.result()
+        return build_neighbourhoods(points, None, scales, workers=workers, tree=built), None
     if workers == 1 or _kernels.resolve(None) != "compiled":
         return (
             build_neighbourhoods(points, faces, scales, workers=workers),

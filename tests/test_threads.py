@@ -1,6 +1,6 @@
-"""The worker threads: one pool for the process, chunks shared out, errors raised, and
+"""The worker threads: one pool for the process, chunks shared out, errors raised;
 robust mode's support, thinning and line directions in parts on threads giving the
-answers of one call."""
+answers of one call; a cloud's kd-tree built beside its cleaning."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import threading
 import numpy as np
 import pytest
 
-from meshlab_sharp import _kernels, robust
+from meshlab_sharp import _kernels, pipeline, robust
+from meshlab_sharp.io import Geometry
 from meshlab_sharp.neighbourhoods import Neighbourhood, knn
 
 
@@ -96,3 +97,27 @@ def test_parts_on_threads_give_one_calls_answers(monkeypatch):
     # the answers are not trivial: some features dropped by each step, some kept
     assert 0 < kept.sum() < mask.sum() and 0 < thinned.sum() < kept.sum()
     assert (np.abs(one[mask]).sum(axis=1) > 0).all() and (one[~mask] == 0).all()
+
+
+def test_a_stopped_tree_build_raises():
+    points = np.random.default_rng(2).random((5000, 3))
+    with pytest.raises(_kernels.TreeStopped):
+        _kernels.build_tree(points, 2, stop=lambda: True)
+
+
+@pytest.mark.parametrize("duplicates", [0, 3])
+def test_the_tree_built_beside_cleaning_is_the_cleaned_clouds(duplicates):
+    points = np.random.default_rng(3).random((20000, 3))
+    points[:duplicates] = points[-duplicates - 1 : -1] if duplicates else points[:0]
+    cleaned, tree = pipeline._clean_beside_tree(Geometry(points, None, "test"), -1)
+    assert len(cleaned.vertices) == len(points) - duplicates
+    if duplicates:
+        assert tree is None
+        return
+    assert tree is not None
+    got, want = tree.result(), _kernels.build_tree(cleaned.vertices)
+    assert got.depth == want.depth
+    for name in ("points", "orig", "boxes"):
+        assert getattr(got, name).tobytes() == getattr(want, name).tobytes()
+    # one worker: no thread beside cleaning
+    assert pipeline._clean_beside_tree(Geometry(points, None, "test"), 1)[1] is None
