@@ -923,8 +923,8 @@ class RelativeRule:
         return self.otsu, R_MIN
 
 
-#: Fewest feature points in one thread's part of support, thinning and the line
-#: directions (below it the threads' start costs more than they save).
+#: Fewest feature points in one thread's part of the line directions (below it the
+#: threads' start costs more than they save).
 PART_MIN = 2048
 
 
@@ -996,16 +996,12 @@ def _line_directions_of(
 
 
 def _feature_pairs(
-    points: np.ndarray,
-    mask: np.ndarray,
-    e: np.ndarray,
-    lists: Neighbourhood,
-    cone_cos: float,
-    cand: np.ndarray,
+    points: np.ndarray, mask: np.ndarray, e: np.ndarray, lists: Neighbourhood, cone_cos: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Pairs (i, j) of features, ``i`` in ``cand`` (features), ``j != i`` in
-    ``lists[i]``: the position of ``i`` in ``cand``, ``i``, ``j`` and whether ``d = p_j -
-    p_i`` lies across the line through ``i`` (``|d . e_i| < cone_cos * |d|``)."""
+    """Pairs (i, j) of features, ``j != i`` in ``lists[i]``: the position of ``i`` among
+    the features, ``i``, ``j`` and whether ``d = p_j - p_i`` lies across the line
+    through ``i`` (``|d . e_i| < cone_cos * |d|``)."""
+    cand = np.flatnonzero(mask)
     owner, nb = _rows(lists, cand)
     ci = cand[owner]
     use = mask[nb] & (nb != ci)
@@ -1025,7 +1021,6 @@ def supported(
     *,
     cone_cos: float = THIN_CONE_COS,
     exempt: np.ndarray | None = None,
-    workers: int = 1,
 ) -> np.ndarray:
     """Features with at least ``minimum`` other features along their line.
 
@@ -1042,8 +1037,6 @@ def supported(
     cone_cos : float, default THIN_CONE_COS (0.5)
     exempt : (m,) bool, optional
         Features kept whatever their support (:func:`support_exempt`); default none.
-    workers : int, default 1
-        Threads (-1: one per core), the features in parts (:func:`_in_parts`).
 
     Returns
     -------
@@ -1053,18 +1046,16 @@ def supported(
         ``mask[i]`` and ``exempt[i]``.
     """
     mask = np.asarray(mask, bool)
-    free = None if exempt is None else np.asarray(exempt, bool)
+    cand = np.flatnonzero(mask)
+    if len(cand) == 0:
+        return mask.copy()
+    owner, _, _, across = _feature_pairs(points, mask, e, around, cone_cos)
+    count = np.bincount(owner[~across], minlength=len(cand))
+    weak = count < minimum
+    if exempt is not None:
+        weak &= ~np.asarray(exempt, bool)[cand]
     out = mask.copy()
-
-    def part(cand: np.ndarray) -> None:
-        owner, _, _, across = _feature_pairs(points, mask, e, around, cone_cos, cand)
-        count = np.bincount(owner[~across], minlength=len(cand))
-        weak = count < minimum
-        if free is not None:
-            weak &= ~free[cand]
-        out[cand[weak]] = False
-
-    _in_parts(np.flatnonzero(mask), part, workers)
+    out[cand[weak]] = False
     return out
 
 
@@ -1077,7 +1068,6 @@ def thin(
     *,
     cone_cos: float = THIN_CONE_COS,
     between: np.ndarray | None = None,
-    workers: int = 1,
 ) -> np.ndarray:
     """Non-maximum suppression of feature points across the feature line.
 
@@ -1103,8 +1093,6 @@ def thin(
     between : (m,) bool, optional
         The points that part two features whatever their score (:func:`thin_blockers`);
         default none, and then no blocking at all.
-    workers : int, default 1
-        Threads (-1: one per core), the features in parts (:func:`_in_parts`).
 
     Returns
     -------
@@ -1112,25 +1100,23 @@ def thin(
         The thinned mask (a subset of ``mask``).
     """
     mask = np.asarray(mask, bool)
-    block = None if between is None else np.asarray(between, bool)
+    cand = np.flatnonzero(mask)
+    if len(cand) == 0:
+        return mask.copy()
+    owner, ci, nb, across = _feature_pairs(points, mask, e, compare, cone_cos)
+    beaten = across & (score[nb] > score[ci])
+    if between is not None:
+        pair = np.flatnonzero(beaten)
+        at, m = _rows(compare, ci[pair])
+        use = np.asarray(between, bool)[m] | (score[m] < score[ci[pair[at]]])
+        at, m = at[use], m[use]
+        a = points[m] - points[ci[pair[at]]]
+        b = points[m] - points[nb[pair[at]]]
+        dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+        beaten[pair[np.unique(at[dot < 0])]] = False
+    suppressed = np.bincount(owner[beaten], minlength=len(cand)) > 0
     out = mask.copy()
-
-    def part(cand: np.ndarray) -> None:
-        owner, ci, nb, across = _feature_pairs(points, mask, e, compare, cone_cos, cand)
-        beaten = across & (score[nb] > score[ci])
-        if block is not None:
-            pair = np.flatnonzero(beaten)
-            at, m = _rows(compare, ci[pair])
-            use = block[m] | (score[m] < score[ci[pair[at]]])
-            at, m = at[use], m[use]
-            a = points[m] - points[ci[pair[at]]]
-            b = points[m] - points[nb[pair[at]]]
-            dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
-            beaten[pair[np.unique(at[dot < 0])]] = False
-        suppressed = np.bincount(owner[beaten], minlength=len(cand)) > 0
-        out[cand[suppressed]] = False
-
-    _in_parts(np.flatnonzero(mask), part, workers)
+    out[cand[suppressed]] = False
     return out
 
 
@@ -1148,8 +1134,8 @@ class RobustSetup:
     scales : tuple of int
         Increasing scales.
     workers : int, default -1
-        Threads for a kNN query when isolated points are left out, and for support,
-        thinning and the line directions.
+        Threads for a kNN query when isolated points are left out, and for the line
+        directions.
     weighting : {"gaussian", "none"}, default "gaussian"
     keep_normals : bool, default False
         How :func:`meshlab_sharp.multiscale.run_scales` will be called (the compiled
@@ -1354,8 +1340,7 @@ class RobustSetup:
                 ks = (min(THIN_RING, top), top)
                 around, direction = self._ring_rows(np.flatnonzero(mask), ks)
                 compare = around
-            w = self.workers
-            e = line_directions(self.points, mask, direction, w)
+            e = line_directions(self.points, mask, direction, self.workers)
             mesh = self.faces is not None
             free = support_exempt(self.rule.score, mesh, self.noise)
             block = thin_blockers(mask, mesh, self.noise)
@@ -1363,14 +1348,7 @@ class RobustSetup:
             if ranking_smoothed(mesh, self.noise):
                 rank = smoothed_ranking(rank, compare, THIN_KNN)
             mask = supported(
-                self.points,
-                mask,
-                e,
-                around,
-                SUPPORT_MIN,
-                cone_cos=THIN_CONE_COS,
-                exempt=free,
-                workers=w,
+                self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS, exempt=free
             )
             mask = thin(
                 self.points,
@@ -1380,7 +1358,6 @@ class RobustSetup:
                 compare,
                 cone_cos=thin_cone(mesh, self.noise),
                 between=block,
-                workers=w,
             )
         if self.sharp_edges is not None:
             mask = mask | self.sharp_edges
