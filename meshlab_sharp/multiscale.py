@@ -150,9 +150,11 @@ def run_scales(
             used_normals[i] = used
         if on_scale is not None:
             on_scale(scale)
-    if fused is not None and fused.order is not None:  # votes and details were in its order
+    order = None if fused is None else fused.order
+    del fused  # its per-scale arrays (when made here) freed before the move's scratch
+    if order is not None:  # the votes and the details were in the pass's order
         kept = [] if distances is None or used_normals is None else [*distances, *used_normals]
-        _kernels.to_cleaned_order([votes, *kept], fused.order)
+        _kernels.to_cleaned_order([votes, *kept], order)
     return ScaleResults(
         scales=tuple(scales),
         thresholds=thresholds,
