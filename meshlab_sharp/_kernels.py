@@ -198,6 +198,31 @@ def _thread_scratch(n: int, dtype: type) -> Callable[[], np.ndarray]:
     return get
 
 
+class _Pool:
+    """The process's worker threads, started at the first parallel call and reused by
+    every later one (an executor per call started two threads each time: about 40 per
+    ``detect``); a forked child starts its own."""
+
+    lock = threading.Lock()
+    executor: ThreadPoolExecutor | None = None
+
+    @classmethod
+    def get(cls) -> ThreadPoolExecutor:
+        with cls.lock:
+            if cls.executor is None:
+                cls.executor = ThreadPoolExecutor(thread_name_prefix="meshlab_sharp")
+            return cls.executor
+
+    @classmethod
+    def forget(cls) -> None:
+        """In a forked child: the parent's threads are not there."""
+        cls.lock = threading.Lock()
+        cls.executor = None
+
+
+os.register_at_fork(after_in_child=_Pool.forget)
+
+
 def _run_chunks(
     n: int,
     workers: int,
@@ -206,15 +231,31 @@ def _run_chunks(
     spans: Sequence[tuple[int, int]] | None = None,
 ) -> None:
     """task(begin, end) over [0, n) (or over each ``[begin, end)`` of ``spans``) in
-    chunks of ``chunk``, on ``workers`` threads."""
+    chunks of ``chunk``, on ``workers`` threads: the calling thread and ``workers - 1``
+    of the process's pool (:class:`_Pool`), each taking the next chunk when it is
+    done with one."""
     spans = [(0, n)] if spans is None else spans
     ranges = [(s, min(s + chunk, e)) for a, e in spans for s in range(a, e, chunk)]
-    w = _workers(workers)
-    if w == 1 or len(ranges) == 1:
-        codes = [task(a, b) for a, b in ranges]
+    w = min(_workers(workers), len(ranges))
+    codes: list[int] = []
+    todo = iter(ranges)  # shared: next() on a list iterator is atomic under the GIL
+
+    def run() -> None:
+        for a, b in todo:
+            codes.append(task(a, b))
+
+    if w <= 1:
+        run()
     else:
-        with ThreadPoolExecutor(max_workers=w) as pool:
-            codes = list(pool.map(lambda r: task(*r), ranges))
+        pool = _Pool.get()
+        helpers = [pool.submit(run) for _ in range(w - 1)]
+        try:
+            run()
+        finally:
+            for _ in todo:  # on an error here, the helpers stop after their chunk
+                pass
+            for f in helpers:
+                f.result()
     if any(c != 0 for c in codes):
         raise MemoryError("out of memory in a compiled kernel")
 
@@ -243,10 +284,18 @@ class KdTree:
         return len(self.points)
 
 
-def build_tree(points: np.ndarray, workers: int = -1) -> KdTree:
+class TreeStopped(Exception):
+    """A kd-tree build stopped by its ``stop`` (:func:`build_tree`)."""
+
+
+def build_tree(
+    points: np.ndarray, workers: int = -1, stop: Callable[[], bool] | None = None
+) -> KdTree:
     """The kd-tree of ``points`` (n, 3), leaves of at most :data:`KD_LEAF` points: its
     top :data:`KD_TOP` levels one after the other, the nodes of each on ``workers``
-    threads, then the subtrees below them (the same tree as ``ms_kdtree_build``)."""
+    threads, then the subtrees below them (the same tree as ``ms_kdtree_build``).
+    Raises :class:`TreeStopped` when ``stop()`` turned true: the build stops before
+    its next node (a speculative build, :func:`meshlab_sharp.pipeline._clean_beside_tree`)."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -257,19 +306,24 @@ def build_tree(points: np.ndarray, workers: int = -1) -> KdTree:
     boxes = np.empty((2 ** (depth + 1) - 1, 6))
     tp, to, tb = _ptr(tree_points), _ptr(orig), _ptr(boxes)
     top = min(depth, KD_TOP)
+    stopped = stop if stop is not None else lambda: False
     for level in range(top):
 
         def split(a: int, b: int, level: int = level) -> int:
-            lib.ms_kdtree_build_level(tp, to, n, depth, level, a, b, tb)
+            if not stopped():
+                lib.ms_kdtree_build_level(tp, to, n, depth, level, a, b, tb)
             return 0
 
         _run_chunks(2**level, workers, split, chunk=1)
 
     def task(a: int, b: int) -> int:
-        lib.ms_kdtree_build_subtrees(tp, to, n, depth, a, b, tb)
+        if not stopped():
+            lib.ms_kdtree_build_subtrees(tp, to, n, depth, a, b, tb)
         return 0
 
     _run_chunks(2**top, workers, task, chunk=1)
+    if stopped():
+        raise TreeStopped
     return KdTree(tree_points, orig, boxes, depth)
 
 
@@ -337,6 +391,15 @@ def _to_cleaned_order(
     _run_chunks(n, w, task, chunk=max(CHUNK, -(-n // w)))
 
 
+def to_cleaned_order(arrays: Sequence[np.ndarray], orig: np.ndarray, workers: int = -1) -> None:
+    """Each of ``arrays`` (n, ...) of 8-byte items, C-contiguous, written at tree
+    positions, moved in place to cleaned order (``orig`` (n,) int64: the cleaned index of
+    each position), one scratch array for all of them."""
+    scratch = np.empty(max((a.nbytes for a in arrays), default=0), np.uint8)
+    for a in arrays:
+        _to_cleaned_order(a, orig, scratch, workers)
+
+
 def _tree_spans(tree: KdTree, rows: np.ndarray) -> list[tuple[int, int]]:
     """Ranges ``[begin, end)`` of tree positions that hold the points ``rows`` (cleaned
     indices), runs less than a leaf apart merged (a few other points come with them)."""
@@ -356,13 +419,15 @@ def _cloud_call(
     gaussian: bool,
     workers: int,
     rows: np.ndarray | None = None,
+    in_tree_order: tuple[str, ...] = (),
     **out: np.ndarray | int | None,
 ) -> None:
     """One pass of ``ms_cloud_pdis`` over the tree's points (only the points ``rows``,
     cleaned indices, and a few near them in the tree, when given) at the scales ``ks``;
     ``out`` names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
     ``noise_k`` and ``sheet_*``. Without the kNN table
-    (``idx``) the pass writes its rows in tree order, moved to cleaned order after."""
+    (``idx``) the pass writes its rows in tree order, moved to cleaned order after,
+    except the arrays named in ``in_tree_order``."""
     lib = _LIB
     assert lib is not None
     t = tree
@@ -387,10 +452,16 @@ def _cloud_call(
     )
     if not tree_order:
         return
-    moved = [r for name, a in arrays.items() for r in (a if name in _PER_SCALE else (a,))]
-    scratch = np.empty(max((r.nbytes for r in moved), default=0), np.uint8)  # one for all
-    for r in moved:
-        _to_cleaned_order(r, t.orig, scratch, workers)
+    to_cleaned_order(
+        [
+            r
+            for name, a in arrays.items()
+            if name not in in_tree_order
+            for r in (a if name in _PER_SCALE else (a,))
+        ],
+        t.orig,
+        workers,
+    )
 
 
 def cloud_knn(
@@ -496,13 +567,17 @@ class ScalePass:
 
     Robust mode (``relative``) gets, instead of the projected distances, what
     :class:`meshlab_sharp.robust.RelativeRule` computes from them, bit for bit: the
-    relative distances and the thinning's score."""
+    relative distances and the thinning's score. With ``order``, the per-scale arrays
+    (``pdis``, ``normals``, ``relative``) are in the kd-tree's order instead, row ``t``
+    being the cleaned point ``order[t]`` (what needs no order, as a histogram, reads them
+    as they are: :func:`to_cleaned_order` moves what is kept)."""
 
     pdis: np.ndarray | None  # (s, n) projected distances (paper mode)
     normals: np.ndarray | None  # (s, n, 3) their normals, when kept
     relative: np.ndarray | None = None  # (s, n) relative distances r (robust mode)
     score: np.ndarray | None = None  # (n,) RelativeRule's score after every scale
     stats: CloudStats | None = None
+    order: np.ndarray | None = None  # (n,) int64 the kd-tree's ``orig``, or None
 
 
 #: Robust mode's sheet filter parameters (:func:`meshlab_sharp.robust.sheet_parameters`):
@@ -522,6 +597,7 @@ def cloud_projected_distances(
     sheet: SheetParameters | None = None,
     workers: int = -1,
     rows: np.ndarray | None = None,
+    tree_order: bool = False,
 ) -> ScalePass:
     """Projected distances (s, n) at every kNN scale (cleaned order), the normals
     (s, n, 3) when ``keep_normals``; with ``relative`` robust mode's relative distances
@@ -532,7 +608,9 @@ def cloud_projected_distances(
     :func:`meshlab_sharp.robust.sheet_mask` first: every
     neighbourhood (the scales', the noise's) is then the kept neighbours among its
     points. One neighbour search at the largest scale. With ``rows`` (cleaned indices),
-    only those points' values are computed (and a few others'); the rest are undefined."""
+    only those points' values are computed (and a few others'); the rest are undefined.
+    With ``tree_order``, the per-scale arrays are left in the kd-tree's order
+    (:attr:`ScalePass.order`)."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
     n, s = tree.n, len(ks)
     keep = not relative if keep_pdis is None else keep_pdis
@@ -561,7 +639,10 @@ def cloud_projected_distances(
             sheet_trim=float(trim),
             sheet_trim_cos=float(trim_cos),
         )
-    _cloud_call(tree, ks, weighting == "gaussian", workers, rows, **fields)
+    kept = _PER_SCALE if tree_order else ()
+    _cloud_call(tree, ks, weighting == "gaussian", workers, rows, kept, **fields)
+    if tree_order:
+        out.order = tree.orig
     return out
 
 

@@ -106,8 +106,9 @@ def run_scales(
     if fused is None:
         sheet = getattr(rule, "sheet", None) if relative else None
         fused = _compiled_projected_distances(
-            points, neighbourhoods, scales, normals, weighting, keep_details, relative, sheet
-        )
+            points, neighbourhoods, scales, normals, weighting, keep_details, relative, sheet,
+            tree_order=rule is None or relative,  # read by scale_vote only
+        )  # fmt: skip
     # read by the paper's rule only
     flat_span = _flat_span(points, fused is not None) if rule is None else 0.0
     thresholds = np.empty(s)
@@ -129,6 +130,7 @@ def run_scales(
             )
         else:
             if fused is not None and fused.pdis is not None:
+                assert fused.order is None, "a rule reads the distances in cleaned order"
                 pdis = fused.pdis[i]
             else:
                 pdis, used = projected_distances(
@@ -148,6 +150,11 @@ def run_scales(
             used_normals[i] = used
         if on_scale is not None:
             on_scale(scale)
+    order = None if fused is None else fused.order
+    del fused  # its per-scale arrays (when made here) freed before the move's scratch
+    if order is not None:  # the votes and the details were in the pass's order
+        kept = [] if distances is None or used_normals is None else [*distances, *used_normals]
+        _kernels.to_cleaned_order([votes, *kept], order)
     return ScaleResults(
         scales=tuple(scales),
         thresholds=thresholds,
@@ -201,11 +208,15 @@ def _compiled_projected_distances(
     keep_normals: bool,
     relative: bool,
     sheet: _kernels.SheetParameters | None = None,
+    *,
+    tree_order: bool = False,
 ) -> _kernels.ScalePass | None:
     """Projected distances (s, m) and normals (s, m, 3) or None, or (when ``relative``)
     robust mode's relative distances and score instead of the distances,
     of every scale at once with the compiled kernels; None when the neighbourhoods are
-    the numpy ones. ``sheet``: robust mode's sheet filter (``RelativeRule.sheet``)."""
+    the numpy ones. ``sheet``: robust mode's sheet filter (``RelativeRule.sheet``).
+    ``tree_order``: a cloud's per-scale arrays may stay in its kd-tree's order
+    (:attr:`meshlab_sharp._kernels.ScalePass.order`)."""
     if not scales:
         return None
     if list(scales) != sorted(set(scales)):
@@ -221,6 +232,7 @@ def _compiled_projected_distances(
             relative=relative,
             sheet=sheet,
             workers=neighbourhoods.workers,
+            tree_order=tree_order,
         )
     if isinstance(neighbourhoods, RingNeighbourhoods) and neighbourhoods.adjacency is not None:
         if min(scales) < 1:

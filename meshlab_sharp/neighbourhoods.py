@@ -181,10 +181,18 @@ class KnnNeighbourhoods:
         Threads for the kd-tree query.
     backend : {"compiled", "numpy"}, optional
         Default: :func:`meshlab_sharp._kernels.default_backend`.
+    tree : KdTree, optional
+        The compiled backend's kd-tree of ``points``, already built; None: built here.
     """
 
     def __init__(
-        self, points: np.ndarray, k_max: int, *, workers: int = -1, backend: str | None = None
+        self,
+        points: np.ndarray,
+        k_max: int,
+        *,
+        workers: int = -1,
+        backend: str | None = None,
+        tree: _kernels.KdTree | None = None,
     ) -> None:
         n = len(points)
         if not 1 <= k_max <= n:
@@ -198,7 +206,7 @@ class KnnNeighbourhoods:
         #: The kd-tree of the compiled backend (None with numpy).
         self.tree: _kernels.KdTree | None = None
         if self.backend == "compiled":
-            self.tree = _kernels.build_tree(points, workers)
+            self.tree = tree if tree is not None else _kernels.build_tree(points, workers)
         else:
             self._indices = knn(points, k_max, workers=workers)
 
@@ -403,12 +411,15 @@ def build_neighbourhoods(
     *,
     workers: int = -1,
     backend: str | None = None,
+    tree: _kernels.KdTree | None = None,
 ) -> KnnNeighbourhoods | RingNeighbourhoods:
     """kNN neighbourhoods for a cloud (``faces is None``), k-rings for a mesh.
 
     ``backend``: "compiled" or "numpy" (see the module's docstring); default
-    :func:`meshlab_sharp._kernels.default_backend`.
+    :func:`meshlab_sharp._kernels.default_backend`. ``tree``: a cloud's kd-tree, already
+    built (:class:`KnnNeighbourhoods`).
     """
     if faces is None:
-        return KnnNeighbourhoods(points, max(scales), workers=workers, backend=backend)
+        k = max(scales)
+        return KnnNeighbourhoods(points, k, workers=workers, backend=backend, tree=tree)
     return RingNeighbourhoods(faces, len(points), backend=backend)

@@ -5,9 +5,10 @@ projected distance -> threshold -> decide, with every result in the input's orde
 from __future__ import annotations
 
 import os
+import threading
 import time
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -15,7 +16,7 @@ import numpy as np
 import pymeshlab
 
 from . import _header, _kernels
-from .cleaning import clean
+from .cleaning import CleanGeometry, clean
 from .creases import sharp_vertices
 from .curves import Corners, Curve, extract_curves
 from .errors import InputError
@@ -361,7 +362,8 @@ def _detect(
     unit = unit_scale(geometry.vertices)[0]
     faces_in = geometry.faces if is_mesh else None
     same = unit is geometry.vertices and faces_in is geometry.faces
-    cleaned = clean(geometry if same else Geometry(unit, faces_in, geometry.source))
+    to_clean = geometry if same else Geometry(unit, faces_in, geometry.source)
+    cleaned, tree = (clean(to_clean), None) if is_mesh else _clean_beside_tree(to_clean, workers)
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     points = cleaned.vertices
@@ -370,8 +372,9 @@ def _detect(
 
     t = time.perf_counter()
     neighbourhoods, normals, sharp_edges = _neighbourhoods_and_normals(
-        points, cleaned.faces if is_mesh else None, scales_t, workers, mode == "robust"
+        points, cleaned.faces if is_mesh else None, scales_t, workers, mode == "robust", tree
     )
+    del tree
     robust = None
     work, work_neighbourhoods = points, neighbourhoods
     if mode == "robust":
@@ -447,21 +450,51 @@ def _detect(
     return result
 
 
+def _clean_beside_tree(
+    geometry: Geometry, workers: int
+) -> tuple[CleanGeometry, Future[_kernels.KdTree] | None]:
+    """:func:`clean` of a cloud and, meanwhile on a thread of its own, the kd-tree of
+    its points (compiled backend, unless ``workers`` is 1): cleaning's duplicate merge
+    is one serial C call, the tree's first levels nearly so, and they took one core each
+    in turn. The tree (a future) is the cleaned cloud's when cleaning merged no point
+    (the same points in the same order: cleaning keeps the order); else None, and the
+    build stops before its next node."""
+    if workers == 1 or _kernels.resolve(None) != "compiled":
+        return clean(geometry), None
+    stop = threading.Event()
+    pool = ThreadPoolExecutor(max_workers=1)
+    tree = pool.submit(_kernels.build_tree, geometry.vertices, workers, stop.is_set)
+    pool.shutdown(wait=False)  # its thread ends with the build
+    try:
+        cleaned = clean(geometry)
+    except BaseException:
+        stop.set()
+        raise
+    if len(cleaned.vertices) == len(geometry.vertices):
+        return cleaned, tree
+    stop.set()
+    return cleaned, None
+
+
 def _neighbourhoods_and_normals(
     points: np.ndarray,
     faces: np.ndarray | None,
     scales: tuple[int, ...],
     workers: int,
     robust: bool,
+    tree: Future[_kernels.KdTree] | None = None,
 ) -> tuple[KnnNeighbourhoods | RingNeighbourhoods, np.ndarray | None, np.ndarray | None]:
     """:func:`build_neighbourhoods` and, on a mesh (``faces`` (m, 3) not None), the
     face-average normals (n, 3) and, when ``robust``, the sharp mesh edges' vertices
     (:func:`meshlab_sharp.creases.sharp_vertices`, (n,) bool); None for each on a cloud.
-    Unless ``workers`` is 1 the normals and the sharp edges are computed on threads
-    meanwhile: with the compiled backend they are single-threaded C calls that release
-    the GIL (the adjacency, the normals and the sharp edges took one core each in turn)."""
+    ``tree``: a cloud's kd-tree, being built (:func:`_clean_beside_tree`). Unless
+    ``workers`` is 1 the normals and the sharp edges are computed on threads meanwhile:
+    with the compiled backend they are single-threaded C calls that release the GIL (the
+    adjacency, the normals and the sharp edges took one core each in turn)."""
     if faces is None:
-        return build_neighbourhoods(points, None, scales, workers=workers), None, None
+        built = None if tree is None else tree.result()
+        neighbourhoods = build_neighbourhoods(points, None, scales, workers=workers, tree=built)
+        return neighbourhoods, None, None
     if workers == 1 or _kernels.resolve(None) != "compiled":
         return (
             build_neighbourhoods(points, faces, scales, workers=workers),

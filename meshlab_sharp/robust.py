@@ -77,6 +77,7 @@ choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plu
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -922,7 +923,29 @@ class RelativeRule:
         return self.otsu, R_MIN
 
 
-def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourhood) -> np.ndarray:
+#: Fewest feature points in one thread's part of the line directions (below it the
+#: threads' start costs more than they save).
+PART_MIN = 2048
+
+
+def _in_parts(rows: np.ndarray, work: Callable[[np.ndarray], None], workers: int) -> None:
+    """``work(part)`` for consecutive parts of ``rows`` (about one per worker, none
+    under ``PART_MIN`` rows) on ``workers`` threads (numpy releases the GIL in the
+    arithmetic, the gathers and ``eigh``). Each row's answer depends on that row alone,
+    so the parts give the answers of one call over all the rows, bit for bit."""
+    w = _kernels._workers(workers)
+    size = max(PART_MIN, -(-len(rows) // w))
+
+    def task(a: int, b: int) -> int:
+        work(rows[a:b])
+        return 0
+
+    _kernels._run_chunks(len(rows), w, task, chunk=size)
+
+
+def line_directions(
+    points: np.ndarray, mask: np.ndarray, direction: Neighbourhood, workers: int = 1
+) -> np.ndarray:
     """Direction of the line of features through each feature point.
 
     Parameters
@@ -932,6 +955,8 @@ def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourho
         Feature points.
     direction : Neighbourhood
         CSR lists (the largest scale; each point's own index included).
+    workers : int, default 1
+        Threads (-1: one per core), the feature points in parts (:func:`_in_parts`).
 
     Returns
     -------
@@ -943,9 +968,18 @@ def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourho
     """
     mask = np.asarray(mask, bool)
     e = np.zeros((len(points), 3))
-    cand = np.flatnonzero(mask)
-    if len(cand) == 0:
-        return e
+
+    def part(cand: np.ndarray) -> None:
+        e[cand] = _line_directions_of(points, mask, direction, cand)
+
+    _in_parts(np.flatnonzero(mask), part, workers)
+    return e
+
+
+def _line_directions_of(
+    points: np.ndarray, mask: np.ndarray, direction: Neighbourhood, cand: np.ndarray
+) -> np.ndarray:
+    """:func:`line_directions` of the feature points ``cand`` (c,): (c, 3) float64."""
     owner, members = _rows(direction, cand)
     use = mask[members]
     owner, members = owner[use], members[use]
@@ -958,8 +992,7 @@ def line_directions(points: np.ndarray, mask: np.ndarray, direction: Neighbourho
     qbar = qsum / safe
     cov = outer - safe[:, :, None] * qbar[:, :, None] * qbar[:, None, :]
     _, vecs = np.linalg.eigh(cov)
-    e[cand] = vecs[:, :, 2]
-    return e
+    return vecs[:, :, 2]
 
 
 def _feature_pairs(
@@ -1101,7 +1134,8 @@ class RobustSetup:
     scales : tuple of int
         Increasing scales.
     workers : int, default -1
-        Threads for a kNN query when isolated points are left out.
+        Threads for a kNN query when isolated points are left out, and for the line
+        directions.
     weighting : {"gaussian", "none"}, default "gaussian"
     keep_normals : bool, default False
         How :func:`meshlab_sharp.multiscale.run_scales` will be called (the compiled
@@ -1147,6 +1181,7 @@ class RobustSetup:
     ) -> None:
         self.n = len(points)
         self.faces = faces
+        self.workers = workers
         self.scales = tuple(scales)
         self.keep = np.arange(self.n, dtype=np.int64)
         self.points = points
@@ -1235,6 +1270,7 @@ class RobustSetup:
             noise_k=noise_k,
             sheet=sheet,
             workers=self.neighbourhoods.workers,
+            tree_order=True,  # read by scale_vote only
         )
 
     def _candidate_lists(self, rows: np.ndarray, ks: tuple[int, ...]) -> list[Neighbourhood]:
@@ -1314,7 +1350,7 @@ class RobustSetup:
                 ks = (min(THIN_RING, top), top)
                 around, direction = self._ring_rows(np.flatnonzero(mask), ks)
                 compare = around
-            e = line_directions(self.points, mask, direction)
+            e = line_directions(self.points, mask, direction, self.workers)
             mesh = self.faces is not None
             free = support_exempt(self.rule.score, mesh, self.noise)
             block = thin_blockers(mask, mesh, self.noise)

@@ -29,6 +29,7 @@ from shapes import (
 from meshlab_sharp import _kernels, detect
 from meshlab_sharp.cleaning import clean
 from meshlab_sharp.io import as_geometry
+from meshlab_sharp.multiscale import run_scales
 from meshlab_sharp.neighbourhoods import (
     KnnNeighbourhoods,
     Neighbourhood,
@@ -585,6 +586,43 @@ def test_relative_distances_in_the_pass_identical(scales):
             int((r >= threshold).sum()),
         )
     assert np.array_equal(fused.score, rule.score)
+
+
+@pytest.mark.parametrize("relative", [False, True])
+def test_scales_voted_in_tree_order_are_voted_in_cleaned_order(relative):
+    """The pass's per-scale arrays left in the kd-tree's order (``tree_order``, what
+    run_scales asks for) are the cleaned-order arrays permuted by ``order``, and
+    run_scales votes, thresholds and keeps the same details from them: the votes and
+    details moved to cleaned order after."""
+    points = _noisy(box_cylinder_points(3000))
+    scales = (12, 16, 20, 24, 28)
+    lists = KnnNeighbourhoods(points, max(scales))
+    tree = lists.tree
+    assert tree is not None
+    kw = {"keep_normals": True, "relative": relative}
+    cleaned = _kernels.cloud_projected_distances(tree, scales, **kw)
+    moved = _kernels.cloud_projected_distances(tree, scales, tree_order=True, **kw)
+    assert cleaned.order is None and moved.order is tree.orig
+    assert not np.array_equal(tree.orig, np.arange(len(points)))
+    for name in ("pdis", "normals", "relative"):
+        a, b = getattr(cleaned, name), getattr(moved, name)
+        assert (a is None) == (b is None) == (name == ("pdis" if relative else "relative"))
+        if a is not None:
+            assert np.array_equal(a[:, tree.orig], b)
+    if relative:
+        assert np.array_equal(cleaned.score, moved.score)
+    runs = []
+    for fused in (cleaned, moved, None):
+        rule = RelativeRule(points, lists.at, len(scales)) if relative else None
+        how = {"keep_details": True, "rule": rule, "relative": relative, "fused": fused}
+        runs.append(run_scales(points, lists, scales, **how))
+    for got in runs[1:]:
+        assert got.votes.tobytes() == runs[0].votes.tobytes()
+        assert got.thresholds.tobytes() == runs[0].thresholds.tobytes()
+        assert got.candidate_counts.tolist() == runs[0].candidate_counts.tolist()
+        assert got.distances.tobytes() == runs[0].distances.tobytes()
+        assert got.normals.tobytes() == runs[0].normals.tobytes()
+    assert runs[0].votes.max() > 0 and runs[0].votes.min() < len(scales)
 
 
 @pytest.mark.parametrize("name", ["outliers_random_box", "outliers_grid_ties", "noisy_outliers"])

@@ -1,0 +1,116 @@
+"""The worker threads: one pool for the process, chunks shared out, errors raised;
+robust mode's line directions in parts on threads giving the answers of one call; a
+cloud's kd-tree built beside its cleaning."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+
+import numpy as np
+import pytest
+
+from meshlab_sharp import _kernels, pipeline, robust
+from meshlab_sharp.io import Geometry
+from meshlab_sharp.neighbourhoods import Neighbourhood, knn
+
+
+def _record(calls: list[tuple[int, int, int]]):
+    def task(a: int, b: int) -> int:
+        calls.append((a, b, threading.get_ident()))
+        return 0
+
+    return task
+
+
+def test_chunks_cover_the_range_once_and_reuse_the_pool_threads():
+    first: list[tuple[int, int, int]] = []
+    _kernels._run_chunks(1000, 3, _record(first), chunk=7)
+    assert sorted((a, b) for a, b, _ in first) == [(s, min(s + 7, 1000)) for s in range(0, 1000, 7)]
+    pool = _kernels._Pool.get()
+    second: list[tuple[int, int, int]] = []
+    _kernels._run_chunks(1000, 3, _record(second), chunk=7, spans=[(10, 20), (500, 503)])
+    assert sorted((a, b) for a, b, _ in second) == [(10, 17), (17, 20), (500, 503)]
+    assert _kernels._Pool.get() is pool
+    # the calling thread and the pool's threads, no thread started per call
+    pool_threads = {t.ident for t in threading.enumerate() if t.name.startswith("meshlab_sharp")}
+    assert {t for *_, t in first + second} <= pool_threads | {threading.get_ident()}
+    assert len(pool_threads) <= os.cpu_count() + 4  # ThreadPoolExecutor's default cap
+
+
+def test_one_worker_runs_on_the_calling_thread():
+    calls: list[tuple[int, int, int]] = []
+    _kernels._run_chunks(100, 1, _record(calls), chunk=10)
+    assert {t for *_, t in calls} == {threading.get_ident()} and len(calls) == 10
+
+
+def test_a_failing_chunk_raises_after_the_others_stop():
+    def task(a: int, b: int) -> int:
+        if a == 40:
+            raise ValueError("chunk 40")
+        return 0
+
+    with pytest.raises(ValueError, match="chunk 40"):
+        _kernels._run_chunks(200, 2, task, chunk=10)
+    with pytest.raises(MemoryError):
+        _kernels._run_chunks(200, 2, lambda a, b: int(a == 100), chunk=10)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork")
+def test_a_forked_child_starts_its_own_threads():
+    _kernels._Pool.get()  # the parent's pool exists before the fork
+    _kernels._run_chunks(100, 2, lambda a, b: 0, chunk=10)
+    pid = os.fork()
+    if pid == 0:  # the child: the parent's threads are not there
+        signal.alarm(20)
+        calls: list[tuple[int, int, int]] = []
+        try:
+            _kernels._run_chunks(100, 2, _record(calls), chunk=10)
+        finally:
+            os._exit(0 if len(calls) == 10 else 1)
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+
+
+def _features(seed: int) -> tuple[np.ndarray, np.ndarray, Neighbourhood]:
+    rng = np.random.default_rng(seed)
+    points = rng.standard_normal((600, 3))
+    idx = knn(points, 12)
+    lists = Neighbourhood(np.arange(601, dtype=np.int64) * 12, idx.reshape(-1).astype(np.int64))
+    return points, rng.random(600) < 0.6, lists
+
+
+def test_line_directions_in_parts_on_threads_are_one_calls(monkeypatch):
+    points, mask, lists = _features(1)
+    one = robust.line_directions(points, mask, lists)
+    monkeypatch.setattr(robust, "PART_MIN", 5)  # parts of a few hundred features
+    for workers in (2, 3, -1):
+        assert robust.line_directions(points, mask, lists, workers).tobytes() == one.tobytes()
+    # unit directions of the features, zero rows elsewhere
+    np.testing.assert_allclose(np.linalg.norm(one[mask], axis=1), 1.0)
+    assert (one[~mask] == 0).all()
+
+
+def test_a_stopped_tree_build_raises():
+    points = np.random.default_rng(2).random((5000, 3))
+    with pytest.raises(_kernels.TreeStopped):
+        _kernels.build_tree(points, 2, stop=lambda: True)
+
+
+@pytest.mark.parametrize("duplicates", [0, 3])
+def test_the_tree_built_beside_cleaning_is_the_cleaned_clouds(duplicates):
+    points = np.random.default_rng(3).random((20000, 3))
+    points[:duplicates] = points[-duplicates - 1 : -1] if duplicates else points[:0]
+    cleaned, tree = pipeline._clean_beside_tree(Geometry(points, None, "test"), -1)
+    assert len(cleaned.vertices) == len(points) - duplicates
+    if duplicates:
+        assert tree is None
+        return
+    assert tree is not None
+    got, want = tree.result(), _kernels.build_tree(cleaned.vertices)
+    assert got.depth == want.depth
+    for name in ("points", "orig", "boxes"):
+        assert getattr(got, name).tobytes() == getattr(want, name).tobytes()
+    # one worker: no thread beside cleaning
+    assert pipeline._clean_beside_tree(Geometry(points, None, "test"), 1)[1] is None
