@@ -1246,7 +1246,11 @@ class RobustSetup:
         else:
             self.sharp_edges = np.asarray(sharp_edges, bool)
         otsu = otsu_splits(faces is not None, self.noise)
-        self.rule = RelativeRule(self.points, self._lists, len(self.scales), sheet, otsu)
+        # the lists' own method, not one of self: a rule that referred back to this
+        # setup made a reference cycle, so the arrays of every call (the kd-tree, the
+        # pass's outputs: about 55 bytes a point) stayed until the garbage collector ran
+        lists = self.scale_neighbourhoods.at
+        self.rule = RelativeRule(self.points, lists, len(self.scales), sheet, otsu)
 
     def _sheets(self) -> SheetNeighbourhoods:
         """:class:`SheetNeighbourhoods` of ``neighbourhoods`` (numpy kNN lists)."""
@@ -1310,11 +1314,6 @@ class RobustSetup:
             np.cumsum(indptr, out=indptr)
             out.append(Neighbourhood(indptr, ring.indices))
         return out
-
-    def _lists(self, scale: int) -> Neighbourhood:
-        """The lists of ``scale`` for the rule: the ones ``run_scales`` has just listed
-        (a mesh's rings are listed once)."""
-        return self.scale_neighbourhoods.at(scale)
 
     def finish(self, mask: np.ndarray, strength: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Acute tips (clouds without noise), support, thinning and (meshes) the sharp
