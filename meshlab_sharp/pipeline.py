@@ -16,6 +16,7 @@ import numpy as np
 import pymeshlab
 
 from . import _header, _kernels
+from ._pages import small_pages
 from .cleaning import CleanGeometry, clean
 from .creases import sharp_vertices
 from .curves import Corners, Curve, extract_curves
@@ -264,21 +265,22 @@ def detect(
         from .tiles import detect_out_of_core
 
         options = dict(scales=scales, weighting=weighting, as_points=as_points, mode=mode)
-        return detect_out_of_core(
-            source,
-            faces,
-            **options,
-            return_details=return_details,
-            progress=progress,
-            workers=workers,
-            preprocessing=preprocessing,
-            backend=backend,
-            max_memory=max_memory,
-            dask=dask,
-            scratch=scratch,
-            curves=curves,
-        )
-    with _kernels.use_backend(_kernels.resolve(backend)):
+        with small_pages():
+            return detect_out_of_core(
+                source,
+                faces,
+                **options,
+                return_details=return_details,
+                progress=progress,
+                workers=workers,
+                preprocessing=preprocessing,
+                backend=backend,
+                max_memory=max_memory,
+                dask=dask,
+                scratch=scratch,
+                curves=curves,
+            )
+    with _kernels.use_backend(_kernels.resolve(backend)), small_pages():
         return _detect(
             source,
             faces,

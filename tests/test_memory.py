@@ -10,6 +10,7 @@ the collector.
 import gc
 import tracemalloc
 
+import numpy as np
 import pytest
 from shapes import box_cylinder_points, cube_grid_mesh, noisy_box_points, with_outliers
 
@@ -66,3 +67,39 @@ def test_repeated_detect_keeps_no_arrays() -> None:
     # one call's arrays are about 55 bytes a point (1.1 MB here): ten calls kept would
     # be 11 MB; allow a few small caches
     assert growth < 0.2 * 55 * len(points), growth
+
+
+def _hugepage_setting() -> bool:
+    from numpy._core.multiarray import _set_madvise_hugepage
+
+    value = bool(_set_madvise_hugepage(True))
+    _set_madvise_hugepage(value)
+    return value
+
+
+@pytest.mark.parametrize("start", [True, False])
+def test_huge_pages_off_during_detect_and_restored(start: bool, monkeypatch) -> None:
+    from numpy._core.multiarray import _set_madvise_hugepage
+
+    from meshlab_sharp._pages import small_pages
+
+    monkeypatch.delenv("NUMPY_MADVISE_HUGEPAGE", raising=False)
+    before = bool(_set_madvise_hugepage(start))
+    try:
+        with small_pages():
+            assert _hugepage_setting() is False
+            with small_pages():  # nested: the outer block restores
+                assert _hugepage_setting() is False
+            assert _hugepage_setting() is False
+        assert _hugepage_setting() is start
+        ms.detect(box_cylinder_points(2000))
+        assert _hugepage_setting() is start
+        with pytest.raises(ms.InputError):
+            ms.detect(np.full((100, 3), np.nan))
+        assert _hugepage_setting() is start
+        # the user's explicit choice is left alone
+        monkeypatch.setenv("NUMPY_MADVISE_HUGEPAGE", "1")
+        with small_pages():
+            assert _hugepage_setting() is start
+    finally:
+        _set_madvise_hugepage(before)
