@@ -201,7 +201,12 @@ def _thread_scratch(n: int, dtype: type) -> Callable[[], np.ndarray]:
 class _Pool:
     """The process's worker threads, started at the first parallel call and reused by
     every later one (an executor per call started two threads each time: about 40 per
-    ``detect``); a forked child starts its own."""
+    ``detect``); a forked child starts its own. Its tasks never wait on the pool: a task
+    that ran :func:`_run_chunks` there would wait for helpers queued behind it, and a
+    few such tasks at once fill every thread and deadlock (tried and seen: kd-tree
+    builds abandoned by cleaning, in a run of fuzzed detects). Work that calls
+    :func:`_run_chunks` beside the caller runs on a thread of its own
+    (:func:`meshlab_sharp.pipeline._clean_beside_tree`)."""
 
     lock = threading.Lock()
     executor: ThreadPoolExecutor | None = None
