@@ -199,10 +199,6 @@ int ms_knn_rows(const double *p, const int64_t *orig, int64_t n, const double *b
 int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indices, int wide,
                        int64_t begin, int64_t end, double *out_ell, double *out_off);
 
-/* The sum of a[0], a[stride], ... (n terms) as numpy's add.reduceat sums a segment: the
- * first term plus numpy's pairwise sum of the others (0 when n = 0). */
-double ms_segment_sum(const double *a, int64_t n, int64_t stride);
-
 /* 1-ring adjacency of a triangle mesh, CSR: ptr (n + 1), idx (room for 6 m; ptr[n] used),
  * each vertex's neighbours in the order its faces list them, each once. Returns 0, -1 out
  * of memory, or -2 when a face index lies outside [0, n). */
@@ -271,6 +267,50 @@ int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
  * Returns the number of faces kept. */
 int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const int64_t *from_input,
                       int64_t *out, uint8_t *used);
+
+/* Robust mode's finishing steps (robust.RobustSetup.finish; robust.py is the numpy
+ * reference), over candidate slots r in [begin, end): the point rows[r] (cleaned index)
+ * and its lists in an ms_lists_t. f0, f1, f2, between: (n) masks, one byte a point.
+ * Slot r's list: the members idx[first ...], len of them, first = start[r] (start NULL:
+ * r * stride), len = len[r] (len NULL: k); idx int64 when wide, else int32. The lists of
+ * the steps may be views of one table (the k nearest at several k: one stride, several
+ * k) or of one CSR list (a mesh's rings: one start, several len). */
+typedef struct {
+    const void *idx;
+    int64_t wide;
+    const int64_t *start;
+    int64_t stride;
+    const int64_t *len;
+    int64_t k;
+} ms_lists_t;
+
+/* robust.line_directions: e[r] (3) = the unit eigenvector of the largest eigenvalue of
+ * C = sum_j (q_j - qbar)(q_j - qbar)^T, q_j = p_j - p_i, over the j of direction's list
+ * with f0[j] (numpy's sums and lower triangle; the 3x3 solver of the normals, on -C:
+ * within about 1e-16 of numpy's eigh, up to sign). Returns 0, or -1 out of memory.
+ * ms_supported (robust.supported): f1[i] = at least `minimum` points j != i of around's
+ * list with f0[j] and p_j - p_i along the line (not |d . e| < cone |d|), or (score not
+ * NULL) score[i] < free_below (robust.support_exempt). ms_smoothed_ranking
+ * (robust.smoothed_ranking): rank[i] = the mean of score over the first `window` of
+ * compare's list (added in order to 0.0), when it is not empty; the other entries of
+ * rank are the caller's. ms_thin (robust.thin; f1 complete first): f2[i] = f1[i] and no
+ * j != i of compare's list with f1[j], rank[j] > rank[i] and p_j - p_i across the line
+ * (|d . e| < cone |d|), unless (between not NULL) a point m of the list with between[m]
+ * or rank[m] < rank[i] lies between: (p_m - p_i) . (p_m - p_j) < 0. ms_acute_tips
+ * (robust.acute_tips): out[r] = some j != l of the list, both f0 and not i, with
+ * (p_j - p_i) . (p_l - p_i) < 0. Sums over x, y, z in that order, as numpy's. */
+int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
+                       const ms_lists_t *direction, int64_t begin, int64_t end, double *e);
+void ms_supported(const double *p, const uint8_t *f0, const int64_t *rows, const double *e,
+                  const ms_lists_t *around, double cone, int64_t minimum, const double *score,
+                  double free_below, int64_t begin, int64_t end, uint8_t *f1);
+void ms_smoothed_ranking(const double *score, const int64_t *rows, const ms_lists_t *compare,
+                         int64_t window, int64_t begin, int64_t end, double *rank);
+void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const double *e,
+             const ms_lists_t *compare, const double *rank, double cone, const uint8_t *between,
+             int64_t begin, int64_t end, uint8_t *f2);
+void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
+                   const ms_lists_t *lists, int64_t begin, int64_t end, uint8_t *out);
 
 /* Thresholds, the global steps of every path (docs/implementation-notes.md,
  * "Normalisation and Otsu"; threshold.py is the numpy reference).

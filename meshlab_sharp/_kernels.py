@@ -77,6 +77,28 @@ _SIGNATURES = {
         [_c_void_p, _c_void_p, _c_void_p, _i64, _c_void_p, _int, _c_void_p, _c_void_p]
         + [_c_void_p, _c_void_p],
     ),
+    "ms_line_directions": (
+        _int,
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
+    ),
+    "ms_supported": (
+        None,
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _i64, _c_void_p, _f64]
+        + [_i64, _i64, _c_void_p],
+    ),
+    "ms_smoothed_ranking": (
+        None,
+        [_c_void_p, _c_void_p, _c_void_p, _i64, _i64, _i64, _c_void_p],
+    ),
+    "ms_thin": (
+        None,
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _c_void_p]
+        + [_i64, _i64, _c_void_p],
+    ),
+    "ms_acute_tips": (
+        None,
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
+    ),
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
     "ms_keep_faces": (_i64, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
@@ -482,23 +504,42 @@ def cloud_knn(
 
 def cloud_knn_rows(tree: KdTree, rows: np.ndarray, k: int, workers: int = -1) -> np.ndarray:
     """The rows ``rows`` (r,) of :func:`cloud_knn`'s table, (r, k) int64 (for a few
-    rows: the table of every point is not built), searched in tree order as the pass
-    searches them (the rows of one leaf share its block of nearby points)."""
-    lib = _LIB
-    assert lib is not None
+    rows: the table of every point is not built), searched in tree order
+    (:func:`_knn_at`)."""
     t = tree
     where = np.empty(t.n, dtype=np.int64)
     where[t.orig] = np.arange(t.n, dtype=np.int64)
     pos = where[np.asarray(rows, dtype=np.int64)]
     del where
     order = np.argsort(pos, kind="stable")
-    pos = np.ascontiguousarray(pos[order])
-    found = np.empty((len(pos), k), dtype=np.int64)
-    args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(pos), k)
-    _run_chunks(len(pos), workers, lambda a, b: lib.ms_knn_rows(*args, a, b, _ptr(found)))
+    found = _knn_at(tree, np.ascontiguousarray(pos[order]), k, workers)
     out = np.empty_like(found)
     out[order] = found
     return out
+
+
+def cloud_knn_of_mask(
+    tree: KdTree, mask: np.ndarray, k: int, workers: int = -1
+) -> tuple[np.ndarray, np.ndarray]:
+    """The points of ``mask`` (n,) bool (cleaned order) in tree order, their cleaned
+    indices (r,) int64, and the k nearest of each, (r, k) int64 (:func:`cloud_knn`'s
+    rows): :func:`cloud_knn_rows` without the inverse of the tree's order."""
+    pos = np.flatnonzero(np.asarray(mask, dtype=bool)[tree.orig])
+    return tree.orig[pos], _knn_at(tree, pos, k, workers)
+
+
+def _knn_at(tree: KdTree, pos: np.ndarray, k: int, workers: int) -> np.ndarray:
+    """The k nearest (cleaned indices, (r, k) int64) of the points at the tree positions
+    ``pos`` (r,) int64, increasing: searched in tree order as the pass searches them (the
+    rows of one leaf share its block of nearby points)."""
+    lib = _LIB
+    assert lib is not None
+    t = tree
+    pos = np.ascontiguousarray(pos, dtype=np.int64)
+    found = np.empty((len(pos), k), dtype=np.int64)
+    args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(pos), k)
+    _run_chunks(len(pos), workers, lambda a, b: lib.ms_knn_rows(*args, a, b, _ptr(found)))
+    return found
 
 
 @dataclass
@@ -756,41 +797,44 @@ def ring_projected_distances(
     return out
 
 
-def ring_lists(
-    adjacent: tuple[np.ndarray, np.ndarray], rows: np.ndarray, rings: Sequence[int]
-) -> list[tuple[np.ndarray, np.ndarray]]:
+def ring_members(
+    adjacent: tuple[np.ndarray, np.ndarray],
+    rows: np.ndarray,
+    rings: Sequence[int],
+    workers: int = -1,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The k-rings of the vertices ``rows`` (r,) for each k in ``rings`` (increasing), in
     breadth-first order over :func:`adjacency`'s lists (``adjacent``), as
-    :func:`meshlab_sharp.neighbourhoods.grow_rings` lists them: per ring, indptr (r + 1,)
-    int64 and indices int32."""
+    :func:`meshlab_sharp.neighbourhoods.grow_rings` lists them, each ring a prefix of the
+    next: the last ring's members of row ``c`` at ``indices[start[c]:start[c + 1]]``
+    (start (r + 1,) int64, indices int32), the ring ``rings[s]`` their first
+    ``lengths[s, c]`` (lengths (s, r) int64). The rows in chunks on ``workers`` threads,
+    twice: the lengths, then the members."""
     lib = _LIB
     assert lib is not None
     ptr, adj = adjacent
     rows = np.ascontiguousarray(rows, dtype=np.int64)
     rs = np.ascontiguousarray(rings, dtype=np.int64)
     m = len(rows)
-    stamp = np.full(len(ptr) - 1, -1, dtype=np.int32)
+    stamp = _thread_scratch(len(ptr) - 1, np.int32)
     lengths = np.empty((len(rs), m), dtype=np.int64)
     start = np.zeros(m + 1, dtype=np.int64)
     indices = np.empty(0, dtype=np.int32)
-    for fill in (False, True):  # the lengths, then the lists
-        if fill:
-            np.cumsum(lengths[-1], out=start[1:])
-            indices = np.empty(int(start[-1]), dtype=np.int32)
+
+    def search(a: int, b: int, fill: bool) -> int:
+        part = np.empty((len(rs), b - a), dtype=np.int64)  # the chunk's lengths
         rc = lib.ms_ring_lists(
-            _ptr(ptr), _ptr(adj), _ptr(rows), m, _ptr(rs), len(rs), _ptr(stamp),
-            _ptr(lengths), _ptr(start) if fill else None, _ptr(indices) if fill else None,
+            _ptr(ptr), _ptr(adj), _ptr(rows[a:b]), b - a, _ptr(rs), len(rs), _ptr(stamp()),
+            _ptr(part), _ptr(start[a:]) if fill else None, _ptr(indices) if fill else None,
         )  # fmt: skip
-        if rc != 0:
-            raise MemoryError("out of memory listing the rings")
-    position = np.arange(len(indices)) - np.repeat(start[:-1], lengths[-1])
-    owner_length = [np.repeat(length, lengths[-1]) for length in lengths]
-    out = []
-    for length, within in zip(lengths, owner_length, strict=True):
-        indptr = np.zeros(m + 1, dtype=np.int64)
-        np.cumsum(length, out=indptr[1:])
-        out.append((indptr, indices[position < within]))
-    return out
+        lengths[:, a:b] = part
+        return rc
+
+    _slot_chunks(m, workers, lambda a, b: search(a, b, False))
+    np.cumsum(lengths[-1], out=start[1:])
+    indices = np.empty(int(start[-1]), dtype=np.int32)
+    _slot_chunks(m, workers, lambda a, b: search(a, b, True))
+    return start, lengths, indices
 
 
 def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -989,4 +1033,155 @@ def smallest_eigenvectors(cov: np.ndarray) -> np.ndarray:
     c = np.ascontiguousarray(cov[:, [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]], dtype=np.float64)
     out = np.empty((len(c), 3))
     lib.ms_eigvecs(_ptr(c), len(c), _ptr(out))
+    return out
+
+
+# ------------------------------------------------------- robust mode's finishing steps
+
+
+class _Lists(ctypes.Structure):
+    """``ms_lists_t``: the lists of candidate slots (:class:`CandidateLists`)."""
+
+    _fields_ = [
+        ("idx", _c_void_p),
+        ("wide", _i64),
+        ("start", _c_void_p),
+        ("stride", _i64),
+        ("len", _c_void_p),
+        ("k", _i64),
+    ]
+
+
+@dataclass
+class CandidateLists:
+    """One list per candidate slot ``c`` (the point ``rows[c]`` of the finishing steps):
+    the first ``len[c]`` (or ``k``) members of ``idx`` from ``start[c]`` (or ``c *
+    stride``) on. The lists of several steps share ``idx``: a kNN table's first ``k``
+    columns (:meth:`knn`), or a mesh's rings, each a prefix of the next (:meth:`rings`).
+    """
+
+    idx: np.ndarray  # int64 or int32
+    start: np.ndarray | None = None  # (c,) int64
+    stride: int = 0
+    len: np.ndarray | None = None  # (c,) int64
+    k: int = 0
+
+    @classmethod
+    def knn(cls, table: np.ndarray, k: int, slots: np.ndarray | None = None) -> CandidateLists:
+        """The first ``k`` columns of each row of ``table`` (r, K) int64, or of its rows
+        ``slots`` (c,) only."""
+        table = np.ascontiguousarray(table, dtype=np.int64)
+        stride = table.shape[1]
+        start = None if slots is None else np.asarray(slots, dtype=np.int64) * stride
+        return cls(table, start=start, stride=stride, k=k)
+
+    @classmethod
+    def rings(cls, members: tuple[np.ndarray, np.ndarray, np.ndarray]) -> list[CandidateLists]:
+        """Each ring of :func:`ring_members`' ``(start, lengths, indices)``."""
+        start, lengths, indices = members
+        return [cls(indices, start=start, len=np.ascontiguousarray(n)) for n in lengths]
+
+    def spec(self) -> _Lists:
+        """The ``ms_lists_t`` (it refers to these arrays: keep them while it is used)."""
+        wide = self.idx.dtype == np.int64
+        assert wide or self.idx.dtype == np.int32
+        start, length = _ptr(self.start), _ptr(self.len)
+        return _Lists(_ptr(self.idx), int(wide), start, self.stride, length, self.k)
+
+
+def _slot_chunks(c: int, workers: int, task: Callable[[int, int], int]) -> None:
+    """``task`` over the ``c`` candidate slots, about two chunks a thread: a few
+    thousand candidates, a few milliseconds of work."""
+    w = _workers(workers)
+    _run_chunks(c, w, task, chunk=max(256, -(-c // (2 * w))))
+
+
+def acute_tips(
+    points: np.ndarray, mask: np.ndarray, rows: np.ndarray, lists: CandidateLists, workers: int = -1
+) -> np.ndarray:
+    """:func:`meshlab_sharp.robust.acute_tips` of the points ``rows`` (t,) with their
+    lists (the thinning's): (t,) bool, on ``workers`` threads."""
+    lib = _LIB
+    assert lib is not None
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    mask = np.ascontiguousarray(mask, dtype=bool)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.zeros(len(rows), dtype=bool)
+    spec = ctypes.byref(lists.spec())
+    args = (_ptr(points), _ptr(mask), _ptr(rows), spec)
+
+    def task(a: int, b: int) -> int:
+        lib.ms_acute_tips(*args, a, b, _ptr(out))
+        return 0
+
+    _slot_chunks(len(rows), workers, task)
+    return out
+
+
+@dataclass
+class FinishRules:
+    """How robust mode's support and thinning decide (robust.py's rules for the input):
+    support's cone and minimum and the scores it exempts (below ``free_below``; None:
+    none), thinning's cone, its ranking smoothed over the first ``window`` of its lists
+    (0: the score itself), and its blockers ``between`` (n,) bool (None: none)."""
+
+    support_cone: float
+    minimum: int
+    free_below: float | None
+    thin_cone: float
+    window: int
+    between: np.ndarray | None
+
+
+def support_and_thin(
+    points: np.ndarray,
+    mask: np.ndarray,
+    score: np.ndarray,
+    rows: np.ndarray,
+    lists: tuple[CandidateLists, CandidateLists, CandidateLists],
+    rules: FinishRules,
+    workers: int = -1,
+) -> np.ndarray:
+    """Robust mode's finishing steps over the candidates ``rows`` (c,) = the points of
+    ``mask`` (n,) bool, in C: per candidate its line direction, support and (with
+    ``rules.window``) smoothed ranking, then, once every candidate's support is known,
+    thinning (:func:`meshlab_sharp.robust.line_directions`, ``supported``,
+    ``smoothed_ranking``, ``thin``, of which this gives the masks). ``lists``: each
+    candidate's direction, support and comparison lists; ``score`` (n,): the ranking.
+    Returns the thinned mask (n,) bool."""
+    lib = _LIB
+    assert lib is not None
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    mask = np.ascontiguousarray(mask, dtype=bool)
+    score = np.ascontiguousarray(score, dtype=np.float64)
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    c = len(rows)
+    direction, around, compare = (ctypes.byref(x.spec()) for x in lists)
+    e = np.empty((c, 3))
+    supported = np.zeros(len(mask), dtype=bool)
+    rank = score.copy() if rules.window else score
+    free = rules.free_below
+    between = None if rules.between is None else np.ascontiguousarray(rules.between, bool)
+    p, f0, r, f1 = _ptr(points), _ptr(mask), _ptr(rows), _ptr(supported)
+    pe, pr = _ptr(e), _ptr(rank)
+
+    def along(a: int, b: int) -> int:
+        if lib.ms_line_directions(p, f0, r, direction, a, b, pe) != 0:
+            return -1
+        lib.ms_supported(
+            p, f0, r, pe, around, rules.support_cone, rules.minimum,
+            None if free is None else _ptr(score), 0.0 if free is None else free, a, b, f1,
+        )  # fmt: skip
+        if rules.window:
+            lib.ms_smoothed_ranking(_ptr(score), r, compare, rules.window, a, b, pr)
+        return 0
+
+    _slot_chunks(c, workers, along)
+    out = np.zeros(len(mask), dtype=bool)
+
+    def thin(a: int, b: int) -> int:
+        lib.ms_thin(p, f1, r, pe, compare, pr, rules.thin_cone, _ptr(between), a, b, _ptr(out))
+        return 0
+
+    _slot_chunks(c, workers, thin)
     return out

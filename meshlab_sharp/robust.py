@@ -140,6 +140,7 @@ __all__ = [
     "sheet_mask",
     "sheet_parameters",
     "support_exempt",
+    "support_free_score",
     "supported",
     "thin",
     "thin_blockers",
@@ -803,15 +804,23 @@ def smoothed_ranking(score: np.ndarray, compare: Neighbourhood, window: int) -> 
     return out
 
 
+def support_free_score(mesh: bool, noise: float) -> float | None:
+    """The score below which :func:`supported` keeps a point without support:
+    ``SUPPORT_FREE_SCORE`` on a cloud whose noise ratio ``noise`` (as :func:`otsu_splits`
+    takes it) is at most ``NOISE_QUIET``; None (no such score) on meshes and noisier
+    clouds."""
+    return SUPPORT_FREE_SCORE if quiet_cloud(mesh, noise) else None
+
+
 def support_exempt(score: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
-    """The points that :func:`supported` keeps without support: on a cloud whose noise
-    ratio ``noise`` (as :func:`otsu_splits` takes it) is at most ``NOISE_QUIET``, those
-    whose ``score`` (m,) is below ``SUPPORT_FREE_SCORE``; none on meshes and noisier
-    clouds. Returns (m,) bool."""
+    """The points that :func:`supported` keeps without support: those whose ``score``
+    (m,) is below :func:`support_free_score` (none on meshes and noisier clouds).
+    Returns (m,) bool."""
     score = np.asarray(score, np.float64)
-    if not quiet_cloud(mesh, noise):
+    free = support_free_score(mesh, noise)
+    if free is None:
         return np.zeros(len(score), bool)
-    return score < SUPPORT_FREE_SCORE
+    return score < free
 
 
 def acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
@@ -1277,16 +1286,19 @@ class RobustSetup:
             tree_order=True,  # read by scale_vote only
         )
 
+    def _compiled(self) -> bool:
+        """Whether :meth:`finish` runs its steps in C: the neighbourhoods are the compiled
+        backend's (a cloud's kd-tree, a mesh's adjacency)."""
+        lists = self.neighbourhoods
+        if isinstance(lists, KnnNeighbourhoods):
+            return lists.tree is not None
+        return lists.adjacency is not None
+
     def _candidate_lists(self, rows: np.ndarray, ks: tuple[int, ...]) -> list[Neighbourhood]:
         """The kNN lists at each of ``ks`` (at most ``k_max``) for the points ``rows``
-        (increasing) only, the other rows empty: what support and thinning read."""
+        (increasing) only, the other rows empty: what support and thinning read (numpy)."""
         assert isinstance(self.neighbourhoods, KnnNeighbourhoods)
-        tree = self.neighbourhoods.tree
-        top = max(ks)
-        if tree is None:
-            table = np.asarray(self.neighbourhoods.indices)[rows, :top]
-        else:
-            table = _kernels.cloud_knn_rows(tree, rows, top, self.neighbourhoods.workers)
+        table = np.asarray(self.neighbourhoods.indices)[rows, : max(ks)]
         before = np.zeros(len(self.points) + 1, dtype=np.int64)  # rows before each point
         before[np.asarray(rows, dtype=np.int64) + 1] = 1
         np.cumsum(before, out=before)
@@ -1297,27 +1309,32 @@ class RobustSetup:
     def _ring_rows(self, rows: np.ndarray, rings: tuple[int, ...]) -> list[Neighbourhood]:
         """The k-rings, k in ``rings`` (increasing), of the vertices ``rows`` only (the
         other rows empty), each listed as ``RingNeighbourhoods.at(k)`` lists it (a row
-        depends only on its vertex: :func:`meshlab_sharp.neighbourhoods.grow_rings`, or
-        its compiled twin :func:`meshlab_sharp._kernels.ring_lists`)."""
+        depends only on its vertex: :func:`meshlab_sharp.neighbourhoods.grow_rings`)."""
         assert isinstance(self.neighbourhoods, RingNeighbourhoods)
-        adjacency = self.neighbourhoods.adjacency
-        if adjacency is not None:
-            lists = [Neighbourhood(*ring) for ring in _kernels.ring_lists(adjacency, rows, rings)]
-        else:
-            grown = grow_rings(self.neighbourhoods.lists(), rows)
-            listed = dict(zip(range(1, max(rings) + 1), grown, strict=False))
-            lists = [listed[k] for k in rings]
+        grown = grow_rings(self.neighbourhoods.lists(), rows)
+        listed = dict(zip(range(1, max(rings) + 1), grown, strict=False))
         out = []
-        for ring in lists:
+        for k in rings:
             indptr = np.zeros(self.n + 1, dtype=np.int64)  # the sizes, summed in place
-            indptr[np.asarray(rows, dtype=np.int64) + 1] = ring.sizes
+            indptr[np.asarray(rows, dtype=np.int64) + 1] = listed[k].sizes
             np.cumsum(indptr, out=indptr)
-            out.append(Neighbourhood(indptr, ring.indices))
+            out.append(Neighbourhood(indptr, listed[k].indices))
         return out
+
+    def _list_sizes(self) -> tuple[int, int, int]:
+        """The sizes of each candidate's support, comparison and direction lists: the
+        SUPPORT_KNN, thin_knn and k_max nearest (clouds), the THIN_RING-ring twice and
+        the largest ring (meshes)."""
+        top = max(self.scales)
+        if self.faces is not None:
+            return min(THIN_RING, top), min(THIN_RING, top), top
+        return min(SUPPORT_KNN, top), min(thin_knn(self.growth), top), top
 
     def finish(self, mask: np.ndarray, strength: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Acute tips (clouds without noise), support, thinning and (meshes) the sharp
-        mesh edges, on all cleaned points.
+        mesh edges, on all cleaned points: in C with the compiled backend
+        (:meth:`_finish_compiled`), in numpy otherwise (:meth:`_finish_numpy`), the same
+        masks.
 
         Parameters
         ----------
@@ -1336,42 +1353,98 @@ class RobustSetup:
         """
         self.fused = None
         if mask.any():
-            top = max(self.scales)
-            if self.faces is None:
-                ks = (min(SUPPORT_KNN, top), min(thin_knn(self.growth), top), top)
-                tests = acute_tests(self.rule.score, mask, False, self.noise)
-                if len(tests):
-                    (near,) = self._candidate_lists(tests, ks[1:2])
-                    mask = mask.copy()
-                    mask[tests[acute_tips(self.points, mask, tests, near)]] = True
-                around, compare, direction = self._candidate_lists(np.flatnonzero(mask), ks)
-            else:
-                ks = (min(THIN_RING, top), top)
-                around, direction = self._ring_rows(np.flatnonzero(mask), ks)
-                compare = around
-            e = line_directions(self.points, mask, direction, self.workers)
-            mesh = self.faces is not None
-            free = support_exempt(self.rule.score, mesh, self.noise)
-            block = thin_blockers(mask, mesh, self.noise)
-            rank = self.rule.score
-            if ranking_smoothed(mesh, self.noise):
-                rank = smoothed_ranking(rank, compare, THIN_KNN)
-            mask = supported(
-                self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS, exempt=free
-            )
-            mask = thin(
-                self.points,
-                mask,
-                rank,
-                e,
-                compare,
-                cone_cos=thin_cone(mesh, self.noise),
-                between=block,
-            )
+            mask = self._finish_compiled(mask) if self._compiled() else self._finish_numpy(mask)
         if self.sharp_edges is not None:
             mask = mask | self.sharp_edges
             strength = np.where(self.sharp_edges, 1.0, strength)
         return self.expand(mask, False), self.expand(strength, 0.0)
+
+    def _finish_numpy(self, mask: np.ndarray) -> np.ndarray:
+        """:meth:`finish`'s acute tips, support and thinning of ``mask`` (p,) bool in
+        numpy (the reference): the thinned mask (p,) bool."""
+        mesh = self.faces is not None
+        around_k, compare_k, top = self._list_sizes()
+        tests = acute_tests(self.rule.score, mask, mesh, self.noise)
+        if len(tests):
+            (near,) = self._candidate_lists(tests, (compare_k,))
+            mask = mask.copy()
+            mask[tests[acute_tips(self.points, mask, tests, near)]] = True
+        if mesh:
+            around, direction = self._ring_rows(np.flatnonzero(mask), (around_k, top))
+            compare = around
+        else:
+            around, compare, direction = self._candidate_lists(
+                np.flatnonzero(mask), (around_k, compare_k, top)
+            )
+        e = line_directions(self.points, mask, direction, self.workers)
+        free = support_exempt(self.rule.score, mesh, self.noise)
+        block = thin_blockers(mask, mesh, self.noise)
+        rank = self.rule.score
+        if ranking_smoothed(mesh, self.noise):
+            rank = smoothed_ranking(rank, compare, THIN_KNN)
+        mask = supported(
+            self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS, exempt=free
+        )
+        return thin(
+            self.points, mask, rank, e, compare, cone_cos=thin_cone(mesh, self.noise), between=block
+        )
+
+    def _finish_compiled(self, mask: np.ndarray) -> np.ndarray:
+        """:meth:`_finish_numpy` in C (:func:`meshlab_sharp._kernels.acute_tips` and
+        :func:`~meshlab_sharp._kernels.support_and_thin`), the candidates taken in tree
+        order (clouds; each step independent per candidate, the order changes nothing)
+        with their lists from the kd-tree (one table of the k_max nearest of the
+        candidates and the points tested as tips, read at every k) or the adjacency (the
+        largest ring, its THIN_RING-ring a prefix): the same mask."""
+        mesh = self.faces is not None
+        around_k, compare_k, top = self._list_sizes()
+        lists = self.neighbourhoods
+        if isinstance(lists, KnnNeighbourhoods):
+            assert lists.tree is not None
+            tests = acute_tests(self.rule.score, mask, mesh, self.noise)
+            todo = mask
+            if len(tests):
+                todo = mask.copy()
+                todo[tests] = True
+            # one search for the candidates and the points tested as acute tips, in tree
+            # order (no inverse of the tree's order, the rows of a leaf searched together)
+            rows, table = _kernels.cloud_knn_of_mask(lists.tree, todo, top, lists.workers)
+            del todo
+            slots = None  # every row of the table
+            if len(tests):
+                tested = np.flatnonzero(~mask[rows])
+                near = _kernels.CandidateLists.knn(table, compare_k, tested)
+                tips = _kernels.acute_tips(self.points, mask, rows[tested], near, self.workers)
+                mask = mask.copy()
+                mask[rows[tested[tips]]] = True
+                slots = np.flatnonzero(mask[rows])
+                rows = rows[slots]
+            around, compare, direction = (
+                _kernels.CandidateLists.knn(table, k, slots) for k in (around_k, compare_k, top)
+            )
+        else:
+            assert lists.adjacency is not None
+            rows = np.flatnonzero(mask)
+            members = _kernels.ring_members(lists.adjacency, rows, (around_k, top), self.workers)
+            around, direction = _kernels.CandidateLists.rings(members)
+            compare = around
+        rules = _kernels.FinishRules(
+            support_cone=THIN_CONE_COS,
+            minimum=SUPPORT_MIN,
+            free_below=support_free_score(mesh, self.noise),
+            thin_cone=thin_cone(mesh, self.noise),
+            window=THIN_KNN if ranking_smoothed(mesh, self.noise) else 0,
+            between=thin_blockers(mask, mesh, self.noise),
+        )
+        return _kernels.support_and_thin(
+            self.points,
+            mask,
+            self.rule.score,
+            rows,
+            (direction, around, compare),
+            rules,
+            self.workers,
+        )
 
     def expand(self, values: np.ndarray, fill: object) -> np.ndarray:
         """Per-processed-point values (p, ...) to all cleaned points (m, ...), ``fill``

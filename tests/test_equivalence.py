@@ -777,19 +777,22 @@ def test_rings_in_breadth_first_order():
         assert two.indices[two.indptr[1] : two.indptr[2]].tolist() == [1, 0, 2, 3, 4]
 
 
-def test_compiled_ring_lists_identical_to_grow_rings():
-    """_kernels.ring_lists (robust mode's support and thinning lists of the candidates)
-    lists the rings of a few rows as grow_rings does, a ring asked for twice included."""
+def test_compiled_ring_members_identical_to_grow_rings():
+    """_kernels.ring_members (robust mode's support, thinning and direction lists of the
+    candidates) lists the rings of a few rows as grow_rings does, each a prefix of the
+    largest, a ring asked for twice included."""
     vertices, faces = _delaunay_mesh(3000, seed=12)
     adjacency = _kernels.adjacency(faces, len(vertices))
     rows = np.sort(np.random.default_rng(2).choice(len(vertices), 400, replace=False))
-    got = _kernels.ring_lists(adjacency, rows, (2, 2, 4))
+    start, lengths, indices = _kernels.ring_members(adjacency, rows, (2, 2, 4))
     grown = grow_rings(face_order_adjacency(faces, len(vertices)), rows)
     expected = [next(grown) for _ in range(4)]
-    assert len(got) == 3
-    for (indptr, indices), k in zip(got, (2, 2, 4), strict=True):
-        assert np.array_equal(indptr, expected[k - 1].indptr)
-        assert np.array_equal(indices, expected[k - 1].indices)
+    assert lengths.shape == (3, len(rows))
+    for length, k in zip(lengths, (2, 2, 4), strict=True):
+        want = expected[k - 1]
+        assert np.array_equal(length, want.sizes)
+        got = [indices[s : s + n] for s, n in zip(start[:-1], length, strict=True)]
+        assert np.array_equal(np.concatenate(got), want.indices)
 
 
 def _adjacency_with_repeats(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -2,7 +2,7 @@
 // (meshlab_sharp/_ckernels.c), called with the same arguments as meshlab_sharp/_kernels.py
 // calls it, in chunks of MS_CHUNK points on every core; what remains here mirrors the
 // Python modules' global steps: cleaning.py (the compiled path), threshold.py,
-// multiscale.py, robust.py (RobustSetup, line_directions, supported, thin) and
+// multiscale.py, robust.py (RobustSetup; its finishing steps are the kernel's) and
 // creases.py. docs/implementation-notes.md and docs/robust-mode.md ("The arithmetic,
 // pinned down for the plugin") are the contract.
 #include "sharp_core.h"
@@ -263,18 +263,6 @@ CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian
 	return c;
 }
 
-// Lists per candidate point (CSR by candidate slot): the neighbourhoods robust mode's
-// support and thinning read.
-struct Lists {
-	std::vector<Index> ptr{0}, idx;
-	void add(const Index *first, const Index *last) {
-		idx.insert(idx.end(), first, last);
-		ptr.push_back(Index(idx.size()));
-	}
-	const Index *begin(size_t slot) const { return idx.data() + ptr[slot]; }
-	const Index *end(size_t slot) const { return idx.data() + ptr[slot + 1]; }
-};
-
 // A mesh's 1-ring lists in CSR form: ms_adjacency's (each vertex's neighbours in the order
 // of its faces).
 struct Rings {
@@ -294,135 +282,63 @@ Rings adjacency(const Clean &c) {
 }
 
 // The rings `inner` and `outer` (inner <= outer) of the vertices rows, breadth-first as
-// ms_ring_pdis sums them (ms_ring_lists, as _kernels.ring_lists and RobustSetup._ring_rows):
-// into In and Out, one list per row.
-void ringLists(const Rings &adj, const std::vector<Index> &rows, int inner, int outer, Lists &In, Lists &Out) {
+// ms_ring_pdis sums them (ms_ring_lists, as _kernels.ring_members): the outer ring of row
+// r at idx[start[r]...], length[r] of it the inner ring, length[m + r] the outer.
+struct RingRows {
+	std::vector<Index> start, length;
+	std::vector<int32_t> idx;
+	// The ring inner (which = 0) or outer (1) of each row, for the finishing steps.
+	ms_lists_t lists(int which) const {
+		return {idx.data(), 0, start.data(), 0, length.data() + which * (start.size() - 1), 0};
+	}
+};
+
+RingRows ringRows(const Rings &adj, const std::vector<Index> &rows, int inner, int outer) {
 	const Index m = Index(rows.size());
 	const Index rings[2] = {inner, outer};
-	std::vector<int32_t> stamp(adj.ptr.size() - 1, -1), idx;
-	std::vector<Index> length(2 * m), start(m + 1, 0);
-	check(ms_ring_lists(adj.ptr.data(), adj.idx.data(), rows.data(), m, rings, 2, stamp.data(), length.data(),
+	std::vector<int32_t> stamp(adj.ptr.size() - 1, -1);
+	RingRows out{std::vector<Index>(m + 1, 0), std::vector<Index>(2 * m), {}};
+	check(ms_ring_lists(adj.ptr.data(), adj.idx.data(), rows.data(), m, rings, 2, stamp.data(), out.length.data(),
 	                    nullptr, nullptr));
-	for (Index r = 0; r < m; ++r) start[r + 1] = start[r] + length[m + r];
-	idx.resize(start[m]);
-	check(ms_ring_lists(adj.ptr.data(), adj.idx.data(), rows.data(), m, rings, 2, stamp.data(), length.data(),
-	                    start.data(), idx.data()));
-	const std::vector<Index> wide(idx.begin(), idx.end());
-	for (Index r = 0; r < m; ++r) {
-		In.add(wide.data() + start[r], wide.data() + start[r] + length[r]);
-		Out.add(wide.data() + start[r], wide.data() + start[r + 1]);
-	}
+	for (Index r = 0; r < m; ++r) out.start[r + 1] = out.start[r] + out.length[m + r];
+	out.idx.resize(out.start[m]);
+	check(ms_ring_lists(adj.ptr.data(), adj.idx.data(), rows.data(), m, rings, 2, stamp.data(), out.length.data(),
+	                    out.start.data(), out.idx.data()));
+	return out;
 }
 
-// robust.line_directions for a feature point i: the unit eigenvector of the largest
-// eigenvalue of the covariance of p_j - p_i over the features j of D (i included), sums in
-// np.add.reduceat's order; the kernel's 3x3 solver on the negated matrix.
-void lineDirection(const std::vector<double> &p, Index i, const Index *first, const Index *last,
-                   const std::vector<char> &feature, std::vector<double> &col, double e[3]) {
-	col.clear();
-	for (const Index *j = first; j != last; ++j) {
-		if (!feature[*j]) continue;
-		double q[3];
-		for (int a = 0; a < 3; ++a) q[a] = p[3 * *j + a] - p[3 * i + a];
-		col.insert(col.end(), {q[0], q[1], q[2], q[0] * q[0], q[0] * q[1], q[0] * q[2],
-		                       q[1] * q[1], q[1] * q[2], q[2] * q[2]});
-	}
-	const Index m = Index(col.size() / 9);
-	const double count = double(std::max<Index>(m, 1));
-	double qbar[3], sum[6];
-	for (int a = 0; a < 3; ++a) qbar[a] = ms_segment_sum(col.data() + a, m, 9) / count;
-	for (int t = 0; t < 6; ++t) sum[t] = ms_segment_sum(col.data() + 3 + t, m, 9);
-	const int row[6] = {0, 0, 0, 1, 1, 2}, column[6] = {0, 1, 2, 1, 2, 2};
-	double negated[6];
-	for (int t = 0; t < 6; ++t)  // numpy's eigh reads the lower triangle: entry (column, row)
-		negated[t] = -(sum[t] - count * qbar[column[t]] * qbar[row[t]]);
-	ms_eigvecs(negated, 1, e);
-}
+// The kernel's view of a byte mask.
+const uint8_t *bytes(const std::vector<char> &mask) { return reinterpret_cast<const uint8_t *>(mask.data()); }
 
-// Whether d = p_j - p_i lies across the line through i: |d . e| < cone |d|.
-inline bool across(const std::vector<double> &p, Index i, Index j, const double e[3], double cone) {
-	const double dx = p[3 * j] - p[3 * i], dy = p[3 * j + 1] - p[3 * i + 1], dz = p[3 * j + 2] - p[3 * i + 2];
-	return std::fabs(dx * e[0] + dy * e[1] + dz * e[2]) < cone * std::sqrt(dx * dx + dy * dy + dz * dz);
-}
-
-// Whether a point m of [begin, end) that is not in f0, or whose score is below i's (a
-// valley between two ridges), lies between i and j: (p_m - p_i) . (p_m - p_j) < 0
-// (robust.thin's `between`).
-inline bool parted(const std::vector<double> &p, const std::vector<char> &f0, const std::vector<double> &score,
-                   Index i, Index j, const Index *begin, const Index *end) {
-	for (const Index *m = begin; m != end; ++m) {
-		if (f0[*m] && !(score[*m] < score[i])) continue;
-		const double ax = p[3 * *m] - p[3 * i], ay = p[3 * *m + 1] - p[3 * i + 1], az = p[3 * *m + 2] - p[3 * i + 2];
-		const double bx = p[3 * *m] - p[3 * j], by = p[3 * *m + 1] - p[3 * j + 1], bz = p[3 * *m + 2] - p[3 * j + 2];
-		if (ax * bx + ay * by + az * bz < 0) return true;
-	}
-	return false;
-}
-
-// Whether two points j, l of [begin, end), both in f0 and not i, lie on either side of i:
-// (p_j - p_i) . (p_l - p_i) < 0 (robust.acute_tips).
-inline bool between(const std::vector<double> &p, const std::vector<char> &f0, Index i, const Index *begin,
-                    const Index *end) {
-	for (const Index *j = begin; j != end; ++j) {
-		if (*j == i || !f0[*j]) continue;
-		const double ax = p[3 * *j] - p[3 * i], ay = p[3 * *j + 1] - p[3 * i + 1], az = p[3 * *j + 2] - p[3 * i + 2];
-		for (const Index *l = j + 1; l != end; ++l) {
-			if (*l == i || !f0[*l]) continue;
-			const double bx = p[3 * *l] - p[3 * i], by = p[3 * *l + 1] - p[3 * i + 1], bz = p[3 * *l + 2] - p[3 * i + 2];
-			if (ax * bx + ay * by + az * bz < 0) return true;
-		}
-	}
-	return false;
-}
-
-// robust.smoothed_ranking: the score averaged over the first `window` entries of each
-// candidate's K(i) (added in list order to 0.0), the score itself elsewhere.
-std::vector<double> smoothedRanking(const std::vector<double> &score, const std::vector<Index> &rows, const Lists &K,
-                                    int window) {
-	std::vector<double> rank = score;
-	for (size_t c = 0; c < rows.size(); ++c) {
-		const Index *first = K.begin(c), *last = std::min(K.end(c), first + window);
-		if (first == last) continue;
-		double acc = 0.0;
-		for (const Index *j = first; j != last; ++j) acc += score[*j];
-		rank[rows[c]] = acc / double(last - first);
-	}
-	return rank;
-}
-
-// robust.supported then robust.thin for the candidates rows (increasing), with the line
-// directions of f0 computed once; D, S, K: direction, support and comparison lists by
-// candidate slot. F1 = features with at least SUPPORT_MIN other features along their line
-// in S(i) (across: outside the cone THIN_CONE_COS), or a score below `free`
-// (robust.support_exempt: SUPPORT_FREE_SCORE on a cloud without noise, 0 elsewhere); F2 =
-// F1 less the points beaten, across the line (outside the cone `cone`: robust.thin_cone),
-// by a higher score in K(i), unless (`block`: robust.thin_blockers, a cloud without noise)
-// a point of K(i) not in F0, or ranking below i, lies between them.
+// Robust mode's support and thinning of the candidates rows = the points of f0, by the
+// kernel's finishing steps on every core, as _kernels.support_and_thin: per candidate its
+// line direction (lists D), support (lists S; a score below freeBelow exempts, when
+// exempt: robust.support_exempt) and, with smooth, the score averaged over the first
+// THIN_KNN of K (robust.smoothed_ranking); then, every candidate's support known, thinning
+// across the line (cone: robust.thin_cone) over K, the points not in f0 blocking with
+// block (robust.thin_blockers).
 std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
-                                 const Lists &D, const Lists &S, const Lists &K, double free, bool block,
-                                 double cone) {
-	std::vector<double> e(3 * rows.size()), col;
-	std::vector<char> f1(f0.size(), 0);
-	for (size_t c = 0; c < rows.size(); ++c) {
-		const Index i = rows[c];
-		lineDirection(p, i, D.begin(c), D.end(c), f0, col, &e[3 * c]);
-		int along = 0;
-		for (const Index *j = S.begin(c); j != S.end(c); ++j)
-			if (*j != i && f0[*j] && !across(p, i, *j, &e[3 * c], MS_THIN_CONE_COS)) ++along;
-		f1[i] = along >= MS_SUPPORT_MIN || score[i] < free;
-	}
-	std::vector<char> f2 = f1;
-	for (size_t c = 0; c < rows.size(); ++c) {
-		const Index i = rows[c];
-		if (!f1[i]) continue;
-		for (const Index *j = K.begin(c); j != K.end(c); ++j)
-			if (*j != i && f1[*j] && across(p, i, *j, &e[3 * c], cone) && score[*j] > score[i] &&
-			    !(block && parted(p, f0, score, i, *j, K.begin(c), K.end(c)))) {
-				f2[i] = 0;
-				break;
-			}
-	}
+                                 const ms_lists_t &D, const ms_lists_t &S, const ms_lists_t &K, bool exempt,
+                                 double freeBelow, bool smooth, bool block, double cone, Bar &bar, int from, int to) {
+	const Index c = Index(rows.size());
+	std::vector<double> e(3 * c), smoothed(smooth ? score : std::vector<double>());
+	const double *rank = smooth ? smoothed.data() : score.data();
+	std::vector<uint8_t> f1(f0.size(), 0), between(block ? f0.size() : 0);
+	for (size_t i = 0; i < between.size(); ++i) between[i] = !f0[i];
+	chunks(c, [&](unsigned, Index a, Index b) {
+		if (ms_line_directions(p.data(), bytes(f0), rows.data(), &D, a, b, e.data()) != 0) return -1;
+		ms_supported(p.data(), bytes(f0), rows.data(), e.data(), &S, MS_THIN_CONE_COS, MS_SUPPORT_MIN,
+		             exempt ? score.data() : nullptr, freeBelow, a, b, f1.data());
+		if (smooth) ms_smoothed_ranking(score.data(), rows.data(), &K, MS_THIN_KNN, a, b, smoothed.data());
+		return 0;
+	}, bar, from, (from + to) / 2, "support and thinning");
+	std::vector<char> f2(f0.size(), 0);
+	chunks(c, [&](unsigned, Index a, Index b) {
+		ms_thin(p.data(), f1.data(), rows.data(), e.data(), &K, rank, cone, block ? between.data() : nullptr, a,
+		        b, reinterpret_cast<uint8_t *>(f2.data()));
+		return 0;
+	}, bar, (from + to) / 2, to, "support and thinning");
 	return f2;
 }
 
@@ -533,26 +449,28 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 	return d;
 }
 
-// The k nearest of each of rows (_kernels.cloud_knn_rows, searched in tree order): the
-// list of rows[c] at row(c).
-struct KnnRows {
-	std::vector<Index> table, rank;
+// The points of mask in tree order (cleaned indices) and the k nearest of each, at
+// table[c * k ...] (_kernels.cloud_knn_of_mask: searched in tree order, the rows of a leaf
+// together).
+struct KnnOfMask {
+	std::vector<Index> rows, table;
 	int k;
-	const Index *row(size_t c) const { return &table[rank[c] * k]; }
+	// The first `first` of each row, the rows beginning at `starts` in the table.
+	ms_lists_t lists(int first, const std::vector<Index> &starts) const {
+		return {table.data(), 1, starts.data(), k, nullptr, first};
+	}
 };
 
-KnnRows knnRows(const Tree &t, const std::vector<Index> &rows, int k, Bar &bar, int from, int to) {
-	KnnRows out{std::vector<Index>(rows.size() * k), std::vector<Index>(rows.size()), k};
-	std::vector<Index> where(t.n), pos(rows.size());
-	for (Index x = 0; x < t.n; ++x) where[t.orig[x]] = x;
-	for (size_t c = 0; c < rows.size(); ++c) pos[c] = where[rows[c]];
-	// searched in tree order: row c lands at rank[c]
-	std::vector<Index> order(rows.size());
-	std::iota(order.begin(), order.end(), Index(0));
-	std::sort(order.begin(), order.end(), [&](Index a, Index b) { return pos[a] < pos[b]; });
-	for (size_t c = 0; c < rows.size(); ++c) out.rank[order[c]] = Index(c);
-	std::sort(pos.begin(), pos.end());
-	chunks(Index(rows.size()), [&](unsigned, Index a, Index b) {
+KnnOfMask knnOfMask(const Tree &t, const std::vector<char> &mask, int k, Bar &bar, int from, int to) {
+	KnnOfMask out{{}, {}, k};
+	std::vector<Index> pos;
+	for (Index x = 0; x < t.n; ++x)
+		if (mask[t.orig[x]]) {
+			pos.push_back(x);
+			out.rows.push_back(t.orig[x]);
+		}
+	out.table.resize(pos.size() * k);
+	chunks(Index(pos.size()), [&](unsigned, Index a, Index b) {
 		return ms_knn_rows(t.pts.data(), t.orig.data(), t.n, t.box.data(), t.depth, pos.data(), k, a, b,
 		                   out.table.data());
 	}, bar, from, to, "support and thinning");
@@ -561,8 +479,8 @@ KnnRows knnRows(const Tree &t, const std::vector<Index> &rows, int k, Bar &bar, 
 
 // robust.RobustSetup on a cloud: isolated points left out (_isolated_from_stats), scales
 // grown with the noise, then the pass at the final scales; relative distances and score
-// from the kernel (RelativeRule.from_pass); support and thinning on the candidates' kNN
-// rows (_candidate_lists).
+// from the kernel (RelativeRule.from_pass); acute tips, support and thinning by the
+// kernel on the candidates' kNN rows (RobustSetup._finish_compiled).
 Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar) {
 	Decision d;
 	d.toClean.resize(c.size());
@@ -613,35 +531,44 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	decide(votes, S, d);
 	bar.report(85, "support and thinning");
 	const int top = r.scales.back();
-	std::vector<Index> tests;  // robust.acute_tests, then acute_tips
+	// robust.acute_tests: one search for them and the candidates (RobustSetup._finish_compiled)
+	std::vector<char> todo = d.feature;
+	bool tested = false;
 	for (Index i = 0; quiet && i < n; ++i)
-		if (!d.feature[i] && pass.score[i] >= MS_ACUTE_SCORE && pass.score[i] < MS_ACUTE_SCORE_MAX) tests.push_back(i);
-	if (!tests.empty()) {
-		const KnnRows near = knnRows(*tree, tests, std::min(thinKnn, top), bar, 85, 87);
-		std::vector<char> tip(tests.size());
-		for (size_t c = 0; c < tests.size(); ++c)
-			tip[c] = between(pts, d.feature, tests[c], near.row(c), near.row(c) + near.k);
+		if (!d.feature[i] && pass.score[i] >= MS_ACUTE_SCORE && pass.score[i] < MS_ACUTE_SCORE_MAX)
+			todo[i] = tested = true;
+	const KnnOfMask knn = knnOfMask(*tree, todo, top, bar, 85, 90);
+	const int thinK = std::min(thinKnn, top);
+	std::vector<Index> starts, rows;  // the candidates and where their rows begin in the table
+	if (tested) {  // robust.acute_tips
+		std::vector<Index> tests, at;
+		for (size_t c = 0; c < knn.rows.size(); ++c)
+			if (!d.feature[knn.rows[c]]) {
+				tests.push_back(knn.rows[c]);
+				at.push_back(Index(c) * top);
+			}
+		const ms_lists_t near{knn.table.data(), 1, at.data(), 0, nullptr, thinK};
+		std::vector<uint8_t> tip(tests.size());
+		chunks(Index(tests.size()), [&](unsigned, Index a, Index b) {
+			ms_acute_tips(pts.data(), bytes(d.feature), tests.data(), &near, a, b, tip.data());
+			return 0;
+		}, bar, 90, 90, "support and thinning");
 		for (size_t c = 0; c < tests.size(); ++c)
 			if (tip[c]) d.feature[tests[c]] = 1;
 	}
-	std::vector<Index> rows;
-	for (Index i = 0; i < n; ++i)
-		if (d.feature[i]) rows.push_back(i);
+	for (size_t c = 0; c < knn.rows.size(); ++c)
+		if (d.feature[knn.rows[c]]) {
+			starts.push_back(Index(c) * top);
+			rows.push_back(knn.rows[c]);
+		}
 	if (rows.empty()) return d;
-	const KnnRows table = knnRows(*tree, rows, top, bar, 87, 95);
-	Lists D, Sup, K;
-	for (size_t c2 = 0; c2 < rows.size(); ++c2) {
-		const Index *row = table.row(c2);
-		D.add(row, row + top);
-		Sup.add(row, row + std::min(MS_SUPPORT_KNN, top));
-		K.add(row, row + std::min(thinKnn, top));
-	}
 	// robust.ranking_smoothed: where the noise grew the scales to the cap, thinning ranks by
 	// the score averaged over the THIN_KNN nearest (support reads no score there: not quiet)
 	const bool smooth = noise == MS_NOISE_MAX_FACTOR;
-	d.feature = supportAndThin(pts, d.feature, smooth ? smoothedRanking(pass.score, rows, K, MS_THIN_KNN) : pass.score,
-	                           rows, D, Sup, K, quiet ? MS_SUPPORT_FREE_SCORE : 0.0, quiet,
-	                           quiet ? MS_THIN_CONE_COS : MS_THIN_CONE_COS_NOISY);  // robust.thin_cone
+	d.feature = supportAndThin(pts, d.feature, pass.score, rows, knn.lists(top, starts),
+	                           knn.lists(std::min(MS_SUPPORT_KNN, top), starts), knn.lists(thinK, starts), quiet,
+	                           MS_SUPPORT_FREE_SCORE, smooth, quiet,
+	                           quiet ? MS_THIN_CONE_COS : MS_THIN_CONE_COS_NOISY, bar, 90, 95);  // robust.thin_cone
 	return d;
 }
 
@@ -667,9 +594,9 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 	for (Index i = 0; i < n; ++i)
 		if (d.feature[i]) rows.push_back(i);
 	if (!rows.empty()) {
-		Lists D, Sup;
-		ringLists(adj, rows, std::min(MS_THIN_RING, top), top, Sup, D);
-		d.feature = supportAndThin(c.pts, d.feature, score, rows, D, Sup, Sup, 0.0, false, MS_THIN_CONE_COS);
+		const RingRows rings = ringRows(adj, rows, std::min(MS_THIN_RING, top), top);
+		d.feature = supportAndThin(c.pts, d.feature, score, rows, rings.lists(1), rings.lists(0), rings.lists(0), false,
+		                           0.0, false, false, MS_THIN_CONE_COS, bar, 85, 95);
 	}
 	const auto edges = sharpVertices(c.pts, c.faces);
 	for (Index i = 0; i < n; ++i)

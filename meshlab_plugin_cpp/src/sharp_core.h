@@ -2,9 +2,10 @@
 // independent of MeshLab's types: the filter glue around the package's C kernel
 // (meshlab_sharp/_ckernels.c, declared with the method's constants in _ckernels.h). The
 // kernel does the per-point work (kd-tree, neighbours, normals, projected distances,
-// local scales, noise and isolation statistics) on every core; this core does the small
-// global steps, as the Python package does: cleaning map, normalisation, Otsu, the
-// multiscale vote, robust mode's support and thinning, the mesh's sharp edges.
+// local scales, noise and isolation statistics, robust mode's support and thinning of
+// the candidates) on every core; this core does the small global steps, as the Python
+// package does: cleaning map, normalisation, Otsu, the multiscale vote, the mesh's sharp
+// edges.
 #ifndef MESHLAB_SHARP_CORE_H
 #define MESHLAB_SHARP_CORE_H
 
