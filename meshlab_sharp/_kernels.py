@@ -34,6 +34,9 @@ CHUNK = _header.integer("CHUNK")
 KD_LEAF = _header.integer("KD_LEAF")
 #: Levels of the kd-tree built before its subtrees (which are built on threads).
 KD_TOP = _header.integer("KD_TOP")
+#: Rows per chunk of :func:`ring_members`: their rings (a few hundred kilobytes of the
+#: adjacency) stay in the cache from the search of their lengths to that of their members.
+RING_CHUNK = 512
 
 _c_void_p, _i64, _f64, _int = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
 _SIGNATURES = {
@@ -808,8 +811,8 @@ def ring_members(
     :func:`meshlab_sharp.neighbourhoods.grow_rings` lists them, each ring a prefix of the
     next: the last ring's members of row ``c`` at ``indices[start[c]:start[c + 1]]``
     (start (r + 1,) int64, indices int32), the ring ``rings[s]`` their first
-    ``lengths[s, c]`` (lengths (s, r) int64). The rows in chunks on ``workers`` threads,
-    twice: the lengths, then the members."""
+    ``lengths[s, c]`` (lengths (s, r) int64). The rows in chunks of :data:`RING_CHUNK` on
+    ``workers`` threads, each searched twice in a row: the lengths, then the members."""
     lib = _LIB
     assert lib is not None
     ptr, adj = adjacent
@@ -818,22 +821,30 @@ def ring_members(
     m = len(rows)
     stamp = _thread_scratch(len(ptr) - 1, np.int32)
     lengths = np.empty((len(rs), m), dtype=np.int64)
+    members: dict[int, np.ndarray] = {}
+
+    def search(a: int, b: int) -> int:
+        count = np.empty((len(rs), b - a), dtype=np.int64)  # the chunk's lengths
+        at = np.zeros(b - a + 1, dtype=np.int64)
+        found = np.empty(0, dtype=np.int32)
+        for fill in (False, True):  # the lengths, then the members (the rings still cached)
+            if fill:
+                np.cumsum(count[-1], out=at[1:])
+                found = np.empty(int(at[-1]), dtype=np.int32)
+            rc = lib.ms_ring_lists(
+                _ptr(ptr), _ptr(adj), _ptr(rows[a:b]), b - a, _ptr(rs), len(rs), _ptr(stamp()),
+                _ptr(count), _ptr(at) if fill else None, _ptr(found) if fill else None,
+            )  # fmt: skip
+            if rc != 0:
+                return rc
+        lengths[:, a:b] = count
+        members[a] = found
+        return 0
+
+    _run_chunks(m, workers, search, chunk=RING_CHUNK)
     start = np.zeros(m + 1, dtype=np.int64)
-    indices = np.empty(0, dtype=np.int32)
-
-    def search(a: int, b: int, fill: bool) -> int:
-        part = np.empty((len(rs), b - a), dtype=np.int64)  # the chunk's lengths
-        rc = lib.ms_ring_lists(
-            _ptr(ptr), _ptr(adj), _ptr(rows[a:b]), b - a, _ptr(rs), len(rs), _ptr(stamp()),
-            _ptr(part), _ptr(start[a:]) if fill else None, _ptr(indices) if fill else None,
-        )  # fmt: skip
-        lengths[:, a:b] = part
-        return rc
-
-    _slot_chunks(m, workers, lambda a, b: search(a, b, False))
     np.cumsum(lengths[-1], out=start[1:])
-    indices = np.empty(int(start[-1]), dtype=np.int32)
-    _slot_chunks(m, workers, lambda a, b: search(a, b, True))
+    indices = np.concatenate([members[a] for a in sorted(members)] or [np.zeros(0, np.int32)])
     return start, lengths, indices
 
 
