@@ -270,7 +270,9 @@ int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const in
 
 /* Robust mode's finishing steps (robust.RobustSetup.finish; robust.py is the numpy
  * reference), over candidate slots r in [begin, end): the point rows[r] (cleaned index)
- * and its lists in an ms_lists_t. f0, f1, f2, between: (n) masks, one byte a point.
+ * and its lists in an ms_lists_t; below i = rows[r]. f0, f1, f2, between: (n) masks, one
+ * byte a point; e (c, 3) and out (c) per slot; f1, f2 and rank are written at the rows
+ * only (the caller sets the rest).
  * Slot r's list: the members idx[first ...], len of them, first = start[r] (start NULL:
  * r * stride), len = len[r] (len NULL: k); idx int64 when wide, else int32. The lists of
  * the steps may be views of one table (the k nearest at several k: one stride, several
