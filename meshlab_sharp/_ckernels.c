@@ -1925,7 +1925,10 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         if (out->idx != NULL) {
             for (int64_t j = 0; j < kmax; j++) out->idx[oi * kmax + j] = nb[j].idx;
         }
-        if (out->near != NULL) out->near[oi] = kmax > 1 ? nb[1].idx : ci;
+        if (out->near != NULL) { /* tree_order 2: a tree position (ms_isolated_tree) */
+            const cand_t *c = kmax > 1 ? nb + 1 : NULL;
+            out->near[oi] = out->tree_order == 2 ? (c ? c->pos : i) : (c ? c->idx : ci);
+        }
         if (out->kth_d2 != NULL) {
             out->kth_d2[oi] = nb[kmax - 1].d2;
             out->kth_idx[oi] = nb[kmax - 1].idx;
@@ -2013,17 +2016,37 @@ void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, in
     }
 }
 
+/* Whether the point a (cleaned index i) is not among the kmax nearest of its nearest b,
+ * whose kmax-th neighbour has squared distance kth and index kth_idx: (|a - b|^2, i)
+ * comes after (kth, kth_idx) in the lists' order (squared distance, then index). */
+static inline uint8_t isolated_one(const double *a, const double *b, double kth,
+                                   int64_t kth_idx, int64_t i) {
+    double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+    double d2 = dx * dx + dy * dy + dz * dz;
+    return !(d2 < kth || (d2 == kth && i <= kth_idx));
+}
+
 /* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx)
- * for the points [begin, end) of p (n, 3), cleaned order: out[i] = 1 when i is not among
- * the kmax nearest of j = near[i], i.e. when (|p_i - p_j|^2, i) comes after (kth_d2[j],
- * kth_idx[j]) in the lists' order (squared distance, then index). */
+ * for the points [begin, end) of p (n, 3), cleaned order: out[i] = isolated_one of i and
+ * j = near[i]. */
 void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
                  const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out) {
     for (int64_t i = begin; i < end; i++) {
-        const double *a = p + 3 * i, *b = p + 3 * near[i];
-        double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
-        double d2 = dx * dx + dy * dy + dz * dz, kth = kth_d2[near[i]];
-        out[i] = !(d2 < kth || (d2 == kth && i <= kth_idx[near[i]]));
+        int64_t j = near[i];
+        out[i] = isolated_one(p + 3 * i, p + 3 * j, kth_d2[j], kth_idx[j], i);
+    }
+}
+
+/* ms_isolated from a tree_order pass's statistics, for the tree positions [begin, end):
+ * tp (n, 3) the points in tree order, orig their cleaned indices, near[t] the tree
+ * position of the nearest, out[t] per tree position. The nearest lies close by in the
+ * tree: reads near the point's own, where cleaned order reads all over the cloud. */
+void ms_isolated_tree(const double *tp, const int64_t *orig, const int64_t *near,
+                      const double *kth_d2, const int64_t *kth_idx, int64_t begin, int64_t end,
+                      uint8_t *out) {
+    for (int64_t t = begin; t < end; t++) {
+        int64_t u = near[t];
+        out[t] = isolated_one(tp + 3 * t, tp + 3 * u, kth_d2[u], kth_idx[u], orig[t]);
     }
 }
 

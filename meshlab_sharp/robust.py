@@ -1274,7 +1274,7 @@ class RobustSetup:
             noise_k=noise_k,
             sheet=sheet,
             workers=self.neighbourhoods.workers,
-            tree_order=True,  # read by scale_vote only
+            tree_order=True,  # read by scale_vote, isolated_from_stats and a median only
         )
 
     def _candidate_lists(self, rows: np.ndarray, ks: tuple[int, ...]) -> list[Neighbourhood]:
