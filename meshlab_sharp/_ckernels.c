@@ -1179,15 +1179,16 @@ static int64_t split_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t
     return m;
 }
 
-/* Split the points [s, e) of node t (depth d) recursively down to single points
- * (split_node), so that the tree order also orders the points inside a leaf
- * (consecutive points are near each other: see ms_cloud_pdis). The boxes of the nodes
- * down to `depth` go into box. The nodes at depth `stop` are left as they are
+/* Split the points [s, e) of node t (depth d) recursively (split_node) down to the
+ * leaves, and each leaf once more into its two halves, so that the tree order roughly
+ * orders the points inside a leaf too (consecutive points near each other: see
+ * ms_cloud_pdis). Splitting on down to single points cost 18 % of the build's
+ * instructions and saved 0.1 % of the pass's (200k-point cloud). The boxes of the
+ * nodes down to `depth` go into box. The nodes at depth `stop` are left as they are
  * (ms_kdtree_build_subtrees; stop < 0: none). */
 static void build_node(double *x, int64_t *idx, int64_t s, int64_t e, int64_t t, int d,
                        int depth, int stop, double *box, uint64_t *rng) {
-    if (d == stop) return;
-    if (e - s < 2 && d > depth) return;
+    if (d == stop || d > depth) return;
     int64_t m = split_node(x, idx, s, e, t, d, depth, box, rng);
     if (m < 0) return;
     build_node(x, idx, s, m, 2 * t + 1, d + 1, depth, stop, box, rng);
