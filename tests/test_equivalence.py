@@ -396,6 +396,33 @@ def test_tree_built_on_threads_is_the_one_call_tree(name):
     np.testing.assert_array_equal(tree.boxes, boxes)
 
 
+@pytest.mark.parametrize("name", ["grid_cube_ties_shuffled", "rotated_duplicates_shuffled"])
+def test_tree_splits_at_medians_with_tight_boxes(name):
+    """Every node of the kd-tree down to the leaves holds the median halves of its
+    points along one axis (the sampled pivots of large ranges and the median of three
+    of small ones: ties included), each leaf is split once more the same way, and each
+    node's box is the tight box of its points."""
+    points = clean(as_geometry(CLOUDS[name]()), backend="numpy").vertices
+    points = np.concatenate([points, points * 2.0 + 0.5, points[::-1] * 3.0 - 1.0])
+    tree = _kernels.build_tree(points, workers=2)
+    assert tree.depth >= 6 and len(points) >= 2 * 512  # sampled pivots at the top
+    np.testing.assert_array_equal(np.sort(tree.orig), np.arange(len(points)))
+    np.testing.assert_array_equal(tree.points, points[tree.orig])
+    spans = [(0, 0, len(points))]
+    for d in range(tree.depth + 1):
+        deeper = []
+        for t, s, e in spans:
+            part = tree.points[s:e]
+            if d <= tree.depth:
+                np.testing.assert_array_equal(tree.boxes[t], np.r_[part.min(0), part.max(0)])
+            if e - s < 2:
+                continue
+            m = s + (e - s) // 2
+            assert np.any(tree.points[s:m].max(0) <= tree.points[m:e].min(0)), (d, t)
+            deeper += [(2 * t + 1, s, m), (2 * t + 2, m, e)]
+        spans = deeper
+
+
 @pytest.mark.parametrize("name", sorted(SPREADS))
 def test_knn_any_spatial_distribution(name, tmp_path):
     """100k points. A far outlier or distant clusters made the former grid search
