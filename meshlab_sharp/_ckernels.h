@@ -104,9 +104,10 @@ extern "C" {
 #endif
 
 /* What one pass of ms_cloud_pdis writes (each pointer may be NULL), per cleaned index
- * oi = orig[i] (with tree_order = 1: per tree position oi = i, the caller then moving the
- * rows to cleaned order: sequential writes, several times faster on a shuffled cloud;
- * the values, such as near[oi], are cleaned indices either way), s the scale's position
+ * oi = orig[i] (with tree_order = 1 or 2: per tree position oi = i, the caller then moving
+ * the rows to cleaned order: sequential writes, several times faster on a shuffled cloud;
+ * the values are cleaned indices either way, but near[oi] with tree_order = 2: a tree
+ * position, for ms_isolated_tree), s the scale's position
  * in ks:
  *   pdis[s * n + oi]          projected distance; normals[(s * n + oi) * 3] its normal;
  *   idx[oi * kmax + j]        the neighbour indices (kNN table);
@@ -178,6 +179,13 @@ void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, in
  * neighbour in the lists' order). */
 void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
                  const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
+
+/* ms_isolated from a tree_order pass's statistics (per tree position t, near[t] the tree
+ * position of the nearest) for the tree positions [begin, end): tp (n, 3) the points in
+ * tree order, orig their cleaned indices; out[t] per tree position. */
+void ms_isolated_tree(const double *tp, const int64_t *orig, const int64_t *near,
+                      const double *kth_d2, const int64_t *kth_idx, int64_t begin, int64_t end,
+                      uint8_t *out);
 
 /* Counts of v[begin, end) added to counts (32769): +0.0 in counts[0], the others by the
  * top 16 bits b of their bit patterns in counts[b + 1] (the values >= +0.0 and NaN, in

@@ -64,6 +64,10 @@ _SIGNATURES = {
         None,
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
+    "ms_isolated_tree": (
+        None,
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
+    ),
     "ms_bit_histogram": (_i64, [_c_void_p, _i64, _i64, _c_void_p]),
     "ms_local_scale_csr": (
         _int,
@@ -397,6 +401,8 @@ _NUMBERS = (
 )
 #: The arrays of :class:`_CloudOut` with a leading scale axis, (s, n, ...).
 _PER_SCALE = ("pdis", "normals", "relative")
+#: The arrays of :class:`_CloudOut` that make a :class:`CloudStats`.
+_STATS = ("near", "kth_d2", "kth_idx", "noise")
 
 
 def _to_cleaned_order(
@@ -457,7 +463,8 @@ def _cloud_call(
     ``out`` names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
     ``noise_k`` and ``sheet_*``. Without the kNN table
     (``idx``) the pass writes its rows in tree order, moved to cleaned order after,
-    except the arrays named in ``in_tree_order``."""
+    except the arrays named in ``in_tree_order`` (``near`` among them: its values are
+    tree positions too)."""
     lib = _LIB
     assert lib is not None
     t = tree
@@ -472,7 +479,8 @@ def _cloud_call(
         for name, value in out.items()
         if value is not None
     }
-    spec = _CloudOut(**fields, tree_order=int(tree_order))
+    # 2: near as tree positions too, for isolated_from_stats in tree order
+    spec = _CloudOut(**fields, tree_order=tree_order * (2 if "near" in in_tree_order else 1))
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(ks), len(ks))
     _run_chunks(
         t.n,
@@ -548,31 +556,48 @@ def _knn_at(tree: KdTree, pos: np.ndarray, k: int, workers: int) -> np.ndarray:
 @dataclass
 class CloudStats:
     """Per point (cleaned order) what robust mode's set-up reads from the kNN lists at
-    the largest scale ``k``, without the (n, k) table."""
+    the largest scale ``k``, without the (n, k) table. With ``tree``, per position of
+    that kd-tree instead, and ``near`` a tree position: what reads them
+    (:func:`isolated_from_stats`, a median of ``noise``) needs no cleaned order, and
+    reads near each point's own row."""
 
     near: np.ndarray  # (n,) int64 nearest other point (column 1 of the kNN table)
     kth_d2: np.ndarray  # (n,) float64 squared distance of the k-th neighbour
     kth_idx: np.ndarray  # (n,) int64 its index
     noise: np.ndarray  # (n,) float64 noise ratio over the noise_k nearest
+    tree: KdTree | None = None  # the kd-tree whose order the rows follow, or None
 
 
 def isolated_from_stats(points: np.ndarray, stats: CloudStats, workers: int = -1) -> np.ndarray:
     """:func:`meshlab_sharp.robust.isolated_points` from a pass's :class:`CloudStats` at
     ``k_max`` over ``points`` (n, 3) (no kNN table): ``i`` is isolated when ``(|p_i -
     p_j|^2, i)``, ``j = near[i]``, comes after ``j``'s k_max-th neighbour in the lists'
-    order (squared distance, then index). (n,) bool."""
+    order (squared distance, then index). (n,) bool, cleaned order; from statistics in
+    tree order (``stats.tree``) found per tree position, moved only when some point is
+    isolated."""
     lib = _LIB
     assert lib is not None
-    points = np.ascontiguousarray(points, dtype=np.float64)
+    tree = stats.tree
     out = np.empty(len(points), dtype=np.bool_)
-    args = (_ptr(points), _ptr(stats.near), _ptr(stats.kth_d2), _ptr(stats.kth_idx))
+    found = (_ptr(stats.near), _ptr(stats.kth_d2), _ptr(stats.kth_idx))
+    if tree is None:
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        args = (_ptr(points), *found)
+        isolated = lib.ms_isolated
+    else:
+        args = (_ptr(tree.points), _ptr(tree.orig), *found)
+        isolated = lib.ms_isolated_tree
 
     def task(a: int, b: int) -> int:
-        lib.ms_isolated(*args, a, b, _ptr(out))
+        isolated(*args, a, b, _ptr(out))
         return 0
 
     _run_chunks(len(points), workers, task)
-    return out
+    if tree is None or not out.any():
+        return out
+    cleaned = np.empty_like(out)
+    cleaned[tree.orig] = out
+    return cleaned
 
 
 def lower_median(values: np.ndarray, workers: int = -1) -> float | None:
@@ -659,7 +684,7 @@ def cloud_projected_distances(
     points. One neighbour search at the largest scale. With ``rows`` (cleaned indices),
     only those points' values are computed (and a few others'); the rest are undefined.
     With ``tree_order``, the per-scale arrays are left in the kd-tree's order
-    (:attr:`ScalePass.order`)."""
+    (:attr:`ScalePass.order`), and so are the statistics (:attr:`CloudStats.tree`)."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
     n, s = tree.n, len(ks)
     keep = not relative if keep_pdis is None else keep_pdis
@@ -688,10 +713,12 @@ def cloud_projected_distances(
             sheet_trim=float(trim),
             sheet_trim_cos=float(trim_cos),
         )
-    kept = _PER_SCALE if tree_order else ()
+    kept = _PER_SCALE + _STATS if tree_order else ()
     _cloud_call(tree, ks, weighting == "gaussian", workers, rows, kept, **fields)
     if tree_order:
         out.order = tree.orig
+        if out.stats is not None:
+            out.stats.tree = tree
     return out
 
 

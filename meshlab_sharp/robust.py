@@ -1283,7 +1283,7 @@ class RobustSetup:
             noise_k=noise_k,
             sheet=sheet,
             workers=self.neighbourhoods.workers,
-            tree_order=True,  # read by scale_vote only
+            tree_order=True,  # read by scale_vote, isolated_from_stats and a median only
         )
 
     def _compiled(self) -> bool:

@@ -45,10 +45,12 @@ from meshlab_sharp.robust import (
     RelativeRule,
     _isolated_from_stats,
     _noise_factor,
+    _pass_noise_median,
     isolated_points,
     local_scale,
     noise_scale_factor,
     robust_threshold,
+    sheet_parameters,
 )
 from meshlab_sharp.threshold import normalise, otsu_threshold
 
@@ -394,6 +396,33 @@ def test_tree_built_on_threads_is_the_one_call_tree(name):
     np.testing.assert_array_equal(tree.boxes, boxes)
 
 
+@pytest.mark.parametrize("name", ["grid_cube_ties_shuffled", "rotated_duplicates_shuffled"])
+def test_tree_splits_at_medians_with_tight_boxes(name):
+    """Every node of the kd-tree down to the leaves holds the median halves of its
+    points along one axis (the sampled pivots of large ranges and the median of three
+    of small ones: ties included), each leaf is split once more the same way, and each
+    node's box is the tight box of its points."""
+    points = clean(as_geometry(CLOUDS[name]()), backend="numpy").vertices
+    points = np.concatenate([points, points * 2.0 + 0.5, points[::-1] * 3.0 - 1.0])
+    tree = _kernels.build_tree(points, workers=2)
+    assert tree.depth >= 6 and len(points) >= 2 * 512  # sampled pivots at the top
+    np.testing.assert_array_equal(np.sort(tree.orig), np.arange(len(points)))
+    np.testing.assert_array_equal(tree.points, points[tree.orig])
+    spans = [(0, 0, len(points))]
+    for d in range(tree.depth + 1):
+        deeper = []
+        for t, s, e in spans:
+            part = tree.points[s:e]
+            if d <= tree.depth:
+                np.testing.assert_array_equal(tree.boxes[t], np.r_[part.min(0), part.max(0)])
+            if e - s < 2:
+                continue
+            m = s + (e - s) // 2
+            assert np.any(tree.points[s:m].max(0) <= tree.points[m:e].min(0)), (d, t)
+            deeper += [(2 * t + 1, s, m), (2 * t + 2, m, e)]
+        spans = deeper
+
+
 @pytest.mark.parametrize("name", sorted(SPREADS))
 def test_knn_any_spatial_distribution(name, tmp_path):
     """100k points. A far outlier or distant clusters made the former grid search
@@ -641,6 +670,32 @@ def test_isolated_points_and_noise_from_one_search(name):
     assert _noise_factor(fused.stats.noise) == pytest.approx(
         noise_scale_factor(points, table, 7), rel=1e-12
     )
+
+
+@pytest.mark.parametrize(
+    "name", ["outliers_random_box", "outliers_grid_ties", "noisy_outliers", "no_outliers"]
+)
+def test_statistics_left_in_tree_order(name):
+    """The pass's statistics left in the kd-tree's order (``tree_order``, what robust
+    mode's set-up asks for) are the cleaned-order ones permuted by the tree's ``orig``,
+    ``near`` as tree positions; isolated_from_stats gives the same flags from them (ties
+    included, and none when no point is isolated) and the noise median is the same."""
+    cloud = ROBUST_CLOUDS.get(name, lambda: _noisy(box_cylinder_points(3000)))
+    points = np.unique(cloud(), axis=0)
+    tree = _kernels.build_tree(points)
+    kw = {"relative": True, "noise_k": 7, "sheet": sheet_parameters()}
+    cleaned = _kernels.cloud_projected_distances(tree, (12, 24, 40), **kw)
+    moved = _kernels.cloud_projected_distances(tree, (12, 24, 40), tree_order=True, **kw)
+    a, b = cleaned.stats, moved.stats
+    assert a is not None and b is not None and a.tree is None and b.tree is tree
+    assert not np.array_equal(tree.orig, np.arange(len(points)))
+    np.testing.assert_array_equal(tree.orig[b.near], a.near[tree.orig])
+    for field in ("kth_d2", "kth_idx", "noise"):
+        assert getattr(b, field).tobytes() == getattr(a, field)[tree.orig].tobytes()
+    expected = _isolated_from_stats(points, a)
+    assert expected.any() == (name != "no_outliers")
+    np.testing.assert_array_equal(_isolated_from_stats(points, b), expected)
+    assert _pass_noise_median(b.noise) == _pass_noise_median(a.noise)
 
 
 def _median_cases() -> dict[str, np.ndarray]:
