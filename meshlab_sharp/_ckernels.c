@@ -2120,8 +2120,12 @@ static int reserve(void **arrays, const size_t *size, int count, int64_t *cap, i
 
 
 /* One breadth-first level: the members queue[*head .. *tail) on entry each append their
- * neighbours in (ptr, adj) not yet stamped `mark`, branch-free (every neighbour written,
- * kept when first met). The queue is arrays[0], grown with reserve over `count` arrays;
+ * neighbours in (ptr, adj) not yet stamped `mark` (every neighbour written, kept when
+ * first met). A stamp is stored only for a vertex met first: most neighbours were met
+ * before (about 160 of the 222 of a 4-ring on a regular mesh), and storing the same
+ * stamp again for each made the search about 30 % slower than this branch (the stores
+ * and the reloads of just-stored stamps, measured on the 1M-vertex bench mesh and on a
+ * scanned-like mesh). The queue is arrays[0], grown with reserve over `count` arrays;
  * *head and *tail advance. Returns 0, or -1 out of memory (*tail then counts every member
  * stamped so far). */
 static inline int bfs_level(const int64_t *ptr, const int32_t *adj, int32_t *stamp, int32_t mark,
@@ -2140,8 +2144,10 @@ static inline int bfs_level(const int64_t *ptr, const int32_t *adj, int32_t *sta
         for (int64_t t = t0; t < t1; t++) {
             const int32_t w = adj[t];
             queue[t_end] = w;
-            t_end += stamp[w] != mark;
-            stamp[w] = mark;
+            if (stamp[w] != mark) {
+                stamp[w] = mark;
+                t_end++;
+            }
         }
     }
     *tail = t_end;
