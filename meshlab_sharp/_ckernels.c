@@ -2369,10 +2369,11 @@ static inline uint64_t point_hash(const double *x) {
 
 /* Merge exactly equal points (==, so -0.0 equals 0.0) into their first occurrence.
  * table: (tmask + 1) int32 scratch, all -1 (n < 2^31). from_input (n): cleaned index
- * of each input point; to_input (n, first m used): input index of each cleaned point.
- * Returns m. */
+ * of each input point; to_input (n, first m used): input index of each cleaned point;
+ * out (room for n rows) or NULL: the cleaned points (m, 3) when some points merge,
+ * untouched when none does (the cleaned points are then p). Returns m. */
 int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
-                 int64_t *from_input, int64_t *to_input) {
+                 int64_t *from_input, int64_t *to_input, double *out) {
     /* the slots of the next DEDUP_AHEAD points are fetched while this one is probed */
     enum { DEDUP_AHEAD = 16 };
     uint64_t ahead[DEDUP_AHEAD];
@@ -2380,7 +2381,7 @@ int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
         ahead[i] = point_hash(p + 3 * i) & (uint64_t)tmask;
         PREFETCH(table + ahead[i]);
     }
-    int64_t m = 0;
+    int64_t m = 0, same = n; /* the points before `same` are all distinct */
     for (int64_t i = 0; i < n; i++) {
         const double *x = p + 3 * i;
         uint64_t h = ahead[i % DEDUP_AHEAD];
@@ -2393,18 +2394,22 @@ int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
             int64_t t = table[h];
             if (t < 0) {
                 table[h] = (int32_t)i;
+                if (out != NULL && same < n) memcpy(out + 3 * m, x, 3 * sizeof(double));
                 from_input[i] = m;
                 to_input[m++] = i;
                 break;
             }
             const double *y = p + 3 * t;
             if (x[0] == y[0] && x[1] == y[1] && x[2] == y[2]) {
+                if (same == n) same = i;
                 from_input[i] = from_input[t];
                 break;
             }
             h = (h + 1) & (uint64_t)tmask;
         }
     }
+    /* before the first merged point, cleaned row i is input row i */
+    if (out != NULL && same < n) memcpy(out, p, (size_t)same * 3 * sizeof(double));
     return m;
 }
 
