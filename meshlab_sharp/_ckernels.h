@@ -264,9 +264,10 @@ void ms_crease_mask(const int64_t *faces, int64_t n, const int64_t *ptr, const i
 /* Merge exactly equal points into their first occurrence. table: (tmask + 1) int32
  * scratch, all -1, tmask + 1 a power of two >= 2 n; n < 2^31. from_input (n): cleaned
  * index of each input point; to_input (n, first m used): input index of each cleaned
- * point. Returns m. */
+ * point; out (room for n rows) or NULL: the cleaned points (m, 3) when some points
+ * merge, untouched when none does. Returns m. */
 int64_t ms_dedup(const double *p, int64_t n, int32_t *table, int64_t tmask,
-                 int64_t *from_input, int64_t *to_input);
+                 int64_t *from_input, int64_t *to_input, double *out);
 
 /* Cleaning's faces in one pass (cleaning.clean): each face of faces (m, 3) (indices of
  * the input points, mapped through from_input when not NULL) whose double area on p,

@@ -107,7 +107,7 @@ _SIGNATURES = {
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
-    "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p]),
+    "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_keep_faces": (_i64, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_extent": (None, [_c_void_p, _i64, _c_void_p]),
     "ms_scale_vote": (
@@ -951,12 +951,20 @@ def face_average_normals(points: np.ndarray, faces: np.ndarray, zero: float) -> 
     return acc
 
 
+#: Fewest faces that :func:`keep_faces` splits between two threads (65,536 faces are
+#: about 1 ms of one thread; below, handing half to the pool is not worth it).
+_PARALLEL_FACES = 1 << 16
+
+
 def keep_faces(
-    points: np.ndarray, faces: np.ndarray, from_input: np.ndarray | None
+    points: np.ndarray, faces: np.ndarray, from_input: np.ndarray | None, workers: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
     """Cleaning's faces in one C pass (``ms_keep_faces``): ``faces`` (f, 3) mapped
     through ``from_input`` (n,) when not None, those whose double area on ``points``
-    (m, 3) (``|(p1 - p0) x (p2 - p0)|``, as vcg's DoubleArea) is > 0, in order.
+    (m, 3) (``|(p1 - p0) x (p2 - p0)|``, as vcg's DoubleArea) is > 0, in order. With
+    ``workers`` other than 1 and enough faces, the two halves of the faces on two
+    threads, each marking the vertices it uses in an array of its own; the result does
+    not depend on ``workers``.
 
     Returns
     -------
@@ -969,11 +977,29 @@ def keep_faces(
     points = np.ascontiguousarray(points, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     remap = None if from_input is None else np.ascontiguousarray(from_input, dtype=np.int64)
+    parts = 2 if _workers(workers) > 1 and len(faces) >= _PARALLEL_FACES else 1
+    bounds = [len(faces) * part // parts for part in range(parts + 1)]
     out = np.empty_like(faces)
-    used = np.zeros(len(points), dtype=bool)
-    k = lib.ms_keep_faces(_ptr(points), _ptr(faces), len(faces), _ptr(remap), _ptr(out), _ptr(used))
+    used = np.zeros((parts, len(points)), dtype=bool)
+    kept = [0] * parts
+
+    def task(a: int, b: int) -> int:
+        for part in range(a, b):
+            lo, hi = bounds[part], bounds[part + 1]
+            kept[part] = lib.ms_keep_faces(_ptr(points), _ptr(faces[lo:]), hi - lo, _ptr(remap),
+                                           _ptr(out[lo:]), _ptr(used[part]))  # fmt: skip
+        return 0
+
+    _run_chunks(parts, parts, task, chunk=1)
+    k = kept[0]
+    for part in range(1, parts):  # its faces moved to follow the parts' before it
+        lo = bounds[part]
+        if k != lo:
+            out[k : k + kept[part]] = out[lo : lo + kept[part]]  # numpy copes with the overlap
+        k += kept[part]
+        used[0] |= used[part]
     out.resize((k, 3), refcheck=False)
-    return out, used
+    return out, used[0]
 
 
 def extent(points: np.ndarray) -> np.ndarray:
@@ -1038,7 +1064,7 @@ def scale_vote(
     return float(t), int(count.value)
 
 
-def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exactly equal points merged into their first occurrence.
 
     Returns
@@ -1047,6 +1073,9 @@ def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Input index of each distinct point, increasing.
     from_input : (n,) int64
         Distinct index of each input point.
+    distinct : (m, 3) float64
+        The distinct points, ``points[to_input]`` (copied in the same C pass; ``points``
+        itself, contiguous float64, when none merges).
     """
     lib = _LIB
     assert lib is not None
@@ -1058,10 +1087,16 @@ def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     table = np.full(size, -1, dtype=np.int32)
     from_input = np.empty(n, dtype=np.int64)
     to_input = np.empty(n, dtype=np.int64)
-    m = lib.ms_dedup(_ptr(points), n, _ptr(table), size - 1, _ptr(from_input), _ptr(to_input))
+    distinct = np.empty_like(points)  # its pages are touched only if points merge
+    m = lib.ms_dedup(
+        _ptr(points), n, _ptr(table), size - 1, _ptr(from_input), _ptr(to_input), _ptr(distinct)
+    )
     del table
     to_input.resize(m, refcheck=False)  # trimmed in place: no copy
-    return to_input, from_input
+    if m == n:
+        return to_input, from_input, points
+    distinct.resize((m, 3), refcheck=False)
+    return to_input, from_input, distinct
 
 
 def smallest_eigenvectors(cov: np.ndarray) -> np.ndarray:

@@ -88,7 +88,7 @@ def tagged_input_indices(ms: pymeshlab.MeshSet, n_input: int) -> np.ndarray:
     return index
 
 
-def clean(geometry: Geometry, *, backend: str | None = None) -> CleanGeometry:
+def clean(geometry: Geometry, *, backend: str | None = None, workers: int = 1) -> CleanGeometry:
     """Merge exact duplicates, drop zero-area faces and unreferenced vertices.
 
     Parameters
@@ -99,6 +99,9 @@ def clean(geometry: Geometry, *, backend: str | None = None) -> CleanGeometry:
         "numpy": pymeshlab's filters (the reference); "compiled": a hash of the
         coordinates in C and vcg's zero-area test, same survivors, same faces.
         Default: :func:`meshlab_sharp._kernels.default_backend`.
+    workers : int, default 1
+        Threads of the compiled backend's face pass (-1: every core); the result
+        does not depend on it.
 
     Returns
     -------
@@ -110,7 +113,7 @@ def clean(geometry: Geometry, *, backend: str | None = None) -> CleanGeometry:
         A mesh all of whose faces have zero area.
     """
     if _kernels.resolve(backend) == "compiled":
-        return _clean_compiled(geometry)
+        return _clean_compiled(geometry, workers)
     v = geometry.vertices
     ms = pymeshlab.MeshSet()
     if geometry.is_mesh:
@@ -147,7 +150,7 @@ def clean(geometry: Geometry, *, backend: str | None = None) -> CleanGeometry:
     )
 
 
-def _clean_compiled(geometry: Geometry) -> CleanGeometry:
+def _clean_compiled(geometry: Geometry, workers: int) -> CleanGeometry:
     """:func:`clean` without pymeshlab: what its filters do, as vcg does it.
 
     ``meshing_remove_duplicate_vertices`` keeps the first of equal vertices (``==`` on
@@ -155,16 +158,13 @@ def _clean_compiled(geometry: Geometry) -> CleanGeometry:
     faces with ``DoubleArea <= 0`` (a face using a merged vertex twice is one);
     ``meshing_remove_unreferenced_vertices`` then compacts, keeping the order.
     """
-    v = np.ascontiguousarray(geometry.vertices, dtype=np.float64)
-    to_input, from_input = _kernels.merge_duplicates(v)
+    to_input, from_input, merged = _kernels.merge_duplicates(geometry.vertices)
     if not geometry.is_mesh:
-        vertices = v if len(to_input) == len(v) else v[to_input]
-        return CleanGeometry(
-            vertices=vertices, faces=None, to_input=to_input, from_input=from_input
-        )
-    distinct = len(to_input) == len(v)
-    merged = v if distinct else v[to_input]
-    faces, used = _kernels.keep_faces(merged, geometry.faces, None if distinct else from_input)
+        return CleanGeometry(vertices=merged, faces=None, to_input=to_input, from_input=from_input)
+    distinct = len(to_input) == len(from_input)
+    faces, used = _kernels.keep_faces(
+        merged, geometry.faces, None if distinct else from_input, workers
+    )
     if len(faces) == 0:
         raise InputError(
             f"{geometry.source}: every face has zero area; nothing is left of the mesh "

@@ -365,7 +365,11 @@ def _detect(
     faces_in = geometry.faces if is_mesh else None
     same = unit is geometry.vertices and faces_in is geometry.faces
     to_clean = geometry if same else Geometry(unit, faces_in, geometry.source)
-    cleaned, tree = (clean(to_clean), None) if is_mesh else _clean_beside_tree(to_clean, workers)
+    cleaned, tree = (
+        (clean(to_clean, workers=workers), None)
+        if is_mesh
+        else _clean_beside_tree(to_clean, workers)
+    )
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     points = cleaned.vertices

@@ -483,6 +483,57 @@ def test_cleaning_and_face_normals_identical(name):
     assert np.array_equal(a, b)  # bit for bit
 
 
+def _mesh_to_clean() -> tuple[np.ndarray, np.ndarray]:
+    """A box of grids whose faces are stored apart (cleaning welds their seams), with
+    zero-area faces early and late, unreferenced and duplicated vertices, a face using a
+    merged vertex twice."""
+    v, f = cube_grid_mesh(12)
+    rng = np.random.default_rng(3)
+    v = np.concatenate([v, v[:40], rng.normal(size=(5, 3))])  # duplicates, loose vertices
+    n = len(v)
+    dup = n - 45  # a duplicate of vertex 0, used by a face: merged into vertex 0
+    flat = [[0, 1, 0], [2, 2, 3], [dup, 0, 1]]  # zero area (the last after merging)
+    last = [[dup, 5, 6], [n - 5, n - 4, n - 3]]  # the last face's vertices used by it alone
+    f = np.concatenate([flat, f[: len(f) // 3], flat, f[len(f) // 3 :], flat, last])
+    return v, f
+
+
+@pytest.mark.parametrize("smallest", [1, 7, 1 << 16])
+def test_compiled_cleaning_identical_on_two_threads(smallest, monkeypatch):
+    """The face pass split between two threads (its faces moved after the first half's
+    dropped ones, the used vertices of both halves) gives pymeshlab's cleaning; the
+    split is forced on this small mesh by lowering the size that starts it."""
+    monkeypatch.setattr(_kernels, "_PARALLEL_FACES", smallest)
+    g = as_geometry(*_mesh_to_clean())
+    ref = clean(g, backend="numpy")
+    assert len(ref.vertices) < len(g.vertices) and len(ref.faces) < len(g.faces)
+    for workers in (1, 2, -1):
+        fast = clean(g, backend="compiled", workers=workers)
+        for attr in ("vertices", "faces", "to_input", "from_input"):
+            np.testing.assert_array_equal(getattr(fast, attr), getattr(ref, attr))
+
+
+@pytest.mark.parametrize("where", ["none", "second", "middle", "last", "signed zero"])
+def test_merge_duplicates_copies_the_distinct_points(where):
+    """``merge_duplicates``' distinct points (copied in its C pass, the rows before the
+    first merged point at its end) are ``points[to_input]``; with no point merged, the
+    points themselves."""
+    p = np.random.default_rng(5).normal(size=(1000, 3))
+    at = {"second": [1], "middle": [500, 501, 900], "last": [999], "signed zero": [700]}
+    for i in at.get(where, []):
+        p[i] = p[i // 3]
+    if where == "signed zero":
+        p[10] = 0.0
+        p[700] = -0.0
+    to_input, from_input, distinct = _kernels.merge_duplicates(p)
+    assert len(to_input) == 1000 - len(at.get(where, []))
+    np.testing.assert_array_equal(distinct, p[to_input])
+    np.testing.assert_array_equal(
+        to_input[from_input], [np.flatnonzero((p == q).all(1))[0] for q in p]
+    )
+    assert (distinct is p) == (where == "none")
+
+
 def test_cloud_cleaning_identical():
     p = _cad_like_points(3000)
     p[:5] = -0.0  # -0.0 and 0.0 are equal, as for pymeshlab

@@ -133,7 +133,7 @@ def test_neighbourhoods_of_every_tile_are_the_global_ones(tmp_path, share: float
     layout = build_layout(
         len(pts), lambda: iter([pts[:1000], pts[1000:]]), store, tile_points=250, source="t"
     )
-    to_first, _ = _kernels.merge_duplicates(pts)
+    to_first, _, _ = _kernels.merge_duplicates(pts)
     k = 12
     ref = KnnNeighbourhoods(pts[to_first], k).indices
     ids = store.read("ids", 0, len(pts))

@@ -157,12 +157,11 @@ Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool 
 	while (size < 2 * n) size *= 2;
 	std::vector<int32_t> table(size, -1);
 	std::vector<Index> toInput(n), fromInput(n);
-	const Index m = ms_dedup(v.data(), n, table.data(), size - 1, fromInput.data(), toInput.data());
-	toInput.resize(m);
 	Clean c;
+	c.pts.resize(3 * n);
+	const Index m = ms_dedup(v.data(), n, table.data(), size - 1, fromInput.data(), toInput.data(), c.pts.data());
+	if (m == n) std::copy(v.begin(), v.end(), c.pts.begin());
 	c.pts.resize(3 * m);
-	for (Index i = 0; i < m; ++i)
-		for (int a = 0; a < 3; ++a) c.pts[3 * i + a] = v[3 * toInput[i] + a];
 	c.fromInput = fromInput;
 	if (!mesh) return c;
 	c.faces.resize(faces.size());

@@ -155,7 +155,7 @@ def build_layout(
         a, b = int(offsets[t]), int(offsets[t + 1])
         pts = store.read("coords", a, b)
         boxes[t] = bounds(pts)
-        to_first, from_first = _kernels.merge_duplicates(pts)
+        to_first, from_first, _ = _kernels.merge_duplicates(pts)
         store.write("rep", a, a + to_first[from_first])
         n_clean += len(to_first)
     return Layout(n, lo, hi, offsets, boxes, n_clean)
