@@ -98,6 +98,11 @@
 /* The kd-tree is built in two steps: its top MS_KD_TOP levels, then the 2^MS_KD_TOP
  * subtrees below them, each on its own (threads). */
 #define MS_KD_TOP 3
+/* The ring pass renumbers a mesh (ms_bfs_renumber) when more than half of up to
+ * MS_SCATTER_SAMPLES vertices evenly spread lie more than MS_SCATTERED_GAP positions from
+ * their first neighbour. */
+#define MS_SCATTERED_GAP 16384
+#define MS_SCATTER_SAMPLES 4096
 
 #ifdef __cplusplus
 extern "C" {
@@ -212,6 +217,20 @@ int ms_local_scale_csr(const double *p, const int64_t *indptr, const void *indic
  * of memory, or -2 when a face index lies outside [0, n). */
 int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *idx);
 
+/* Whether a mesh's vertex order lacks locality (the rule above): 1 or 0. ptr (n + 1),
+ * adj: ms_adjacency's lists. */
+int ms_scattered(const int64_t *ptr, const int32_t *adj, int64_t n);
+
+/* The mesh (p (n, 3), fixed (n, 3) or NULL, adjacency (ptr, adj)) with its vertices
+ * renumbered in breadth-first order (each component from its lowest vertex not yet met)
+ * for the ring pass's locality: order[k] the vertex numbered k, rank its inverse (both
+ * (n,)), the lists (out_ptr (n + 1), out_adj as adj), row k old row order[k] mapped
+ * through rank in the same order (a search over them meets the same vertices in the same
+ * order), and out_p (out_fixed when fixed is not NULL) the rows in the new order. */
+void ms_bfs_renumber(const int64_t *ptr, const int32_t *adj, int64_t n, const double *p,
+                     const double *fixed, int32_t *order, int32_t *rank, int64_t *out_ptr,
+                     int32_t *out_adj, double *out_p, double *out_fixed);
+
 /* k-rings by breadth-first search over (ptr, adj) for the vertices [begin, end) and the
  * projected distance at every ring of rings (nscales increasing) into
  * out_pdis[s * n + i] when not NULL, normals into out_normals when not NULL. fixed: (n, 3)
@@ -219,11 +238,13 @@ int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32
  * (RingNeighbourhoods.at). With out_relative and out_score not NULL, robust mode's
  * RelativeRule over the same rings (local scales in numpy's summation order): the
  * relative distances (nscales, n) and the score (n). stamp: (n,) int32 scratch of the
- * calling thread, all -1 before its first call. Returns 0, or -1 out of memory. */
+ * calling thread, all -1 before its first call. dest (n,) or NULL: vertex i's results go
+ * to column dest[i] (ms_bfs_renumber's order). Returns 0, or -1 out of memory. */
 int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
                  const double *fixed, const int64_t *rings, int nscales, int gaussian,
-                 int64_t begin, int64_t end, int32_t *stamp, double *out_pdis,
-                 double *out_normals, double *out_relative, double *out_score);
+                 int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
+                 double *out_pdis, double *out_normals, double *out_relative,
+                 double *out_score);
 
 /* The rings of the vertices rows[r] (r < m), breadth-first over (ptr, adj) as
  * ms_ring_pdis lists them (ring k a prefix of ring k + 1): the length of ring rings[s]

@@ -74,10 +74,16 @@ _SIGNATURES = {
         [_c_void_p, _c_void_p, _c_void_p, _int, _i64, _i64, _c_void_p, _c_void_p],
     ),
     "ms_adjacency": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
+    "ms_scattered": (_int, [_c_void_p, _c_void_p, _i64]),
+    "ms_bfs_renumber": (
+        None,
+        [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p]
+        + [_c_void_p, _c_void_p, _c_void_p],
+    ),
     "ms_ring_pdis": (
         _int,
         [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _int, _int, _i64, _i64]
-        + [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
+        + [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
     ),
     "ms_ring_lists": (
         _int,
@@ -782,6 +788,16 @@ def adjacency(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     return ptr, idx
 
 
+def scattered(indptr: np.ndarray, indices: np.ndarray) -> bool:
+    """Whether a mesh's vertex order lacks locality, so that the ring pass renumbers it
+    (``ms_scattered``'s rule: most of a sample of vertices lie more than
+    ``SCATTERED_GAP`` positions from their first neighbour). ``indptr`` (n + 1,) int64,
+    ``indices`` int32: :func:`adjacency`'s lists."""
+    lib = _LIB
+    assert lib is not None
+    return bool(lib.ms_scattered(_ptr(indptr), _ptr(indices), len(indptr) - 1))
+
+
 def ring_projected_distances(
     points: np.ndarray,
     indptr: np.ndarray,
@@ -793,6 +809,7 @@ def ring_projected_distances(
     keep_normals: bool = False,
     relative: bool = False,
     workers: int = -1,
+    renumber: bool | None = None,
 ) -> ScalePass:
     """Projected distances (s, n) at every ring, by breadth-first search over the
     adjacency (``indptr``, ``indices``: :func:`adjacency`); ``normals`` (n, 3) fixed (zero
@@ -800,13 +817,28 @@ def ring_projected_distances(
     ``RingNeighbourhoods.at`` lists it. With ``relative``, robust mode's
     :class:`meshlab_sharp.robust.RelativeRule` in the same walk instead of the projected
     distances: the relative distances (s, n) and the score (n,), bit for bit (the local
-    scales of each ring summed in numpy's order)."""
+    scales of each ring summed in numpy's order). ``renumber``: run the pass over the
+    vertices renumbered breadth-first (``ms_bfs_renumber``: the same rings listed in the
+    same order, so the same outputs bit for bit, read from nearby memory; each vertex's
+    results written back to its own column); None: when the order is :func:`scattered`."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     n = len(points)
     rs = np.ascontiguousarray(rings, dtype=np.int64)
     fixed = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+    dest = None
+    if renumber is None:
+        renumber = scattered(indptr, indices)
+    if renumber:
+        dest, rank = np.empty(n, dtype=np.int32), np.empty(n, dtype=np.int32)
+        ptr, idx = np.empty(n + 1, dtype=np.int64), np.empty(len(indices), dtype=np.int32)
+        at, fixed_at = np.empty_like(points), None if fixed is None else np.empty_like(fixed)
+        lib.ms_bfs_renumber(
+            _ptr(indptr), _ptr(indices), n, _ptr(points), _ptr(fixed), _ptr(dest),
+            _ptr(rank), _ptr(ptr), _ptr(idx), _ptr(at), _ptr(fixed_at),
+        )  # fmt: skip
+        points, fixed, indptr, indices = at, fixed_at, ptr, idx
     out = ScalePass(
         pdis=None if relative else np.empty((len(rs), n)),
         normals=np.empty((len(rs), n, 3)) if keep_normals else None,
@@ -819,7 +851,7 @@ def ring_projected_distances(
     def task(a: int, b: int) -> int:
         return lib.ms_ring_pdis(
             _ptr(points), n, _ptr(indptr), _ptr(indices), _ptr(fixed), _ptr(rs), len(rs),
-            int(weighting == "gaussian"), a, b, _ptr(stamp()), _ptr(out.pdis),
+            int(weighting == "gaussian"), a, b, _ptr(stamp()), _ptr(dest), _ptr(out.pdis),
             _ptr(out.normals), _ptr(out.relative), _ptr(out.score),
         )  # fmt: skip
 

@@ -171,3 +171,15 @@ def noisy_mesh(
     length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).mean()
     moved = vertices + np.random.default_rng(seed).normal(0, noise * length, vertices.shape)
     return moved, faces
+
+
+def shuffled_mesh(
+    vertices: np.ndarray, faces: np.ndarray, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh with its vertices and its faces in random order (a vertex order without
+    locality, as a scanned or remeshed input's). (n, 3), (m, 3)."""
+    rng = np.random.default_rng(seed)
+    perm = rng.permutation(len(vertices))
+    rank = np.empty_like(perm)
+    rank[perm] = np.arange(len(perm))
+    return vertices[perm], rank[faces][rng.permutation(len(faces))]

@@ -408,12 +408,25 @@ std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector
 	if (score) score->assign(n, 0.0);
 	double *pdis = score ? nullptr : out.data(), *relative = score ? out.data() : nullptr;
 	double *scores = score ? score->data() : nullptr;
+	// a scattered vertex order renumbered breadth-first (same rings, same sums), for locality
+	const double *pts = c.pts.data(), *fixed = normals.data();
+	const Index *ptr = adj.ptr.data();
+	const int32_t *idx = adj.idx.data(), *dest = nullptr;
+	std::vector<int32_t> order, rank, idxAt;
+	std::vector<Index> ptrAt;
+	std::vector<double> ptsAt, fixedAt;
+	if (ms_scattered(ptr, idx, n)) {
+		order.resize(n), rank.resize(n), ptrAt.resize(n + 1), idxAt.resize(adj.idx.size());
+		ptsAt.resize(3 * n), fixedAt.resize(3 * n);
+		ms_bfs_renumber(ptr, idx, n, pts, fixed, order.data(), rank.data(), ptrAt.data(), idxAt.data(),
+		                ptsAt.data(), fixedAt.data());
+		pts = ptsAt.data(), fixed = fixedAt.data(), ptr = ptrAt.data(), idx = idxAt.data(), dest = order.data();
+	}
 	std::vector<std::vector<int32_t>> stamps(workers());
 	chunks(n, [&](unsigned w, Index a, Index b) {
 		if (stamps[w].empty()) stamps[w].assign(n, -1);
-		return ms_ring_pdis(c.pts.data(), n, adj.ptr.data(), adj.idx.data(), normals.data(), rings.data(),
-		                    int(rings.size()), int(gaussian), a, b, stamps[w].data(), pdis, nullptr, relative,
-		                    scores);
+		return ms_ring_pdis(pts, n, ptr, idx, fixed, rings.data(), int(rings.size()), int(gaussian), a, b,
+		                    stamps[w].data(), dest, pdis, nullptr, relative, scores);
 	}, bar, from, to, score ? "rings, projected distances and local scales" : "rings and projected distances");
 	return out;
 }
