@@ -2747,8 +2747,6 @@ void ms_crease_mask(const int64_t *faces, int64_t n, const int64_t *ptr, const i
     }
 }
 
-/* segment_sum, for callers outside this file (the plugin's line directions sum as numpy's
- * add.reduceat does). */
 /* ------------------------------------------------ robust mode's finishing steps */
 
 /* Slot r's list in L: its first member's position in L->idx and its length. */
