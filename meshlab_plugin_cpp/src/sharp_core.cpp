@@ -209,8 +209,18 @@ struct Tree {
 	}
 };
 
+// Per-point values v in tree order moved to the cleaned order: v[t] to orig[t]
+// (_kernels.to_cleaned_order).
+template <class T>
+std::vector<T> toCleaned(const std::vector<Index> &orig, const std::vector<T> &v) {
+	std::vector<T> out(v.size());
+	for (size_t t = 0; t < orig.size(); ++t) out[size_t(orig[t])] = v[t];
+	return out;
+}
+
 // What one pass of ms_cloud_pdis computed (_kernels.ScalePass, CloudStats): per scale s
-// and cleaned point i at [s * n + i].
+// and tree position t at [s * n + t] (tree order: the kernel writes its rows one after the
+// other, as _kernels' pass; near holds tree positions, for ms_isolated_tree).
 struct CloudPass {
 	std::vector<double> pdis, relative, score, noise, kthD2;
 	std::vector<Index> near, kthIdx;
@@ -255,6 +265,7 @@ CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian
 		out.kth_d2 = c.kthD2.data();
 		out.kth_idx = c.kthIdx.data();
 	}
+	out.tree_order = noiseK > 0 ? 2 : 1;
 	chunks(t.n, [&](unsigned, Index a, Index b) {
 		return ms_cloud_pdis(t.pts.data(), t.orig.data(), t.n, t.box.data(), t.depth, ks.data(), int(S),
 		                     int(gaussian), a, b, &out);
@@ -437,11 +448,14 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 	const Index n = c.size();
 	const size_t S = r.scales.size();
 	std::vector<double> pdis;
+	std::vector<Index> orig;  // a cloud's tree order: the cleaned index of each row of pdis
 	if (r.mesh) {
 		pdis = ringPdis(c, adjacency(c), r.scales, options.gaussian, nullptr, bar, 0, 90);
 	} else {
 		bar.report(0, "kd-tree");
-		pdis = cloudPass(Tree(c.pts), r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
+		Tree tree(c.pts);
+		pdis = cloudPass(tree, r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
+		orig.swap(tree.orig);
 	}
 	double box[3];
 	ms_extent(c.pts.data(), n, box);
@@ -454,6 +468,7 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 		// values hold 0 and 1, which Otsu's split parts
 		if (vote(&pdis[s * n], n, true, flatSpan, true, 0.0, votes, r) < 1.0) r.allFlat = false;
 	}
+	if (!orig.empty()) votes = toCleaned(orig, votes);
 	Decision d;
 	d.toClean.resize(n);
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
@@ -503,9 +518,13 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	bar.report(0, "kd-tree");
 	auto tree = std::make_unique<Tree>(pts);
 	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
-	std::vector<uint8_t> isolated(tree->n);
-	ms_isolated(pts.data(), pass.near.data(), pass.kthD2.data(), pass.kthIdx.data(), 0, tree->n,
-	            isolated.data());
+	std::vector<uint8_t> isolated(tree->n);  // per tree position (_kernels.isolated_from_stats)
+	chunks(tree->n, [&](unsigned, Index a, Index b) {
+		ms_isolated_tree(tree->pts.data(), tree->orig.data(), pass.near.data(), pass.kthD2.data(),
+		                 pass.kthIdx.data(), a, b, isolated.data());
+		return 0;
+	}, bar, 45, 45, "neighbours and projected distances");
+	isolated = toCleaned(tree->orig, isolated);
 	std::vector<Index> keep;
 	for (Index i = 0; i < tree->n; ++i)
 		if (!isolated[i]) keep.push_back(i);
@@ -540,6 +559,8 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	std::vector<int64_t> votes(n, 0);
 	for (size_t s = 0; s < S; ++s)  // robust.otsu_splits: without noise the floor alone
 		vote(&pass.relative[s * n], n, false, 0.0, !quiet, R_MIN, votes, r);
+	votes = toCleaned(tree->orig, votes);
+	pass.score = toCleaned(tree->orig, pass.score);
 	decide(votes, S, d);
 	bar.report(85, "support and thinning");
 	const int top = r.scales.back();
