@@ -519,11 +519,10 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	auto tree = std::make_unique<Tree>(pts);
 	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
 	std::vector<uint8_t> isolated(tree->n);  // per tree position (_kernels.isolated_from_stats)
-	chunks(tree->n, [&](unsigned, Index a, Index b) {
+	eachIndex((tree->n + MS_CHUNK - 1) / MS_CHUNK, [&](Index u) {
 		ms_isolated_tree(tree->pts.data(), tree->orig.data(), pass.near.data(), pass.kthD2.data(),
-		                 pass.kthIdx.data(), a, b, isolated.data());
-		return 0;
-	}, bar, 45, 45, "neighbours and projected distances");
+		                 pass.kthIdx.data(), u * MS_CHUNK, std::min(tree->n, (u + 1) * MS_CHUNK), isolated.data());
+	});
 	isolated = toCleaned(tree->orig, isolated);
 	std::vector<Index> keep;
 	for (Index i = 0; i < tree->n; ++i)
