@@ -545,6 +545,14 @@ static inline __attribute__((always_inline)) void local_scale_prefixes_body(
             rb = nb;
             ru = nn;
             for (int t = 0; t < 4; t++) sum[t] = v[t] + res[t];
+        } else if (m >= 1 && nn < 8) {
+            /* segment_sum's short form (the first term plus the others in order from
+             * -0.0; m = 1: plus -0.0, which changes no double), the 4 sums side by side:
+             * a 1-ring's 7 points, without 4 calls */
+            for (int t = 0; t < 4; t++) sum[t] = -0.0;
+            for (int64_t u = 1; u <= nn; u++)
+                for (int t = 0; t < 4; t++) sum[t] += v[4 * u + t];
+            for (int t = 0; t < 4; t++) sum[t] = v[t] + sum[t];
         } else {
             for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t, m, 4);
         }
@@ -2266,23 +2274,15 @@ static inline int bfs_level(const int64_t *ptr, const int32_t *adj, int32_t *sta
     return 0;
 }
 
-/* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
- * the projected distance into out_pdis[s * n + i] when not NULL (normals into
- * out_normals when not NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA.
- * stamp: (n,) int32 scratch of this thread, all -1 initially (or left by an earlier
- * call). The members are summed in the order the search meets them: the vertex, then
- * each ring after the last, its vertices in the order met walking the last ring's new
- * members' lists (RingNeighbourhoods.at). With out_relative (and out_score) not NULL,
- * robust mode's RelativeRule in the same walk: the local scales of each ring in numpy's
- * summation order (local_scale_prefixes), out_relative[s * n + i] = min(pdis / l, 1) and
- * out_score[i] = the sum over the scales of min(o / l, 1) / nscales (0 where l = 0).
- * dest (n,) or NULL: vertex i's results go to column dest[i] instead of i (a mesh
- * renumbered by ms_bfs_renumber, dest its order: the caller's numbering). */
-int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
-                 const double *fixed, const int64_t *rings, int nscales, int gaussian,
-                 int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
-                 double *out_pdis, double *out_normals, double *out_relative,
-                 double *out_score) {
+/* ms_ring_pdis (its arguments), its floating point compiled twice: plain and for AVX2
+ * (ring_pdis_avx2), each operation the same correctly rounded one (no fused
+ * multiply-add: -ffp-contract=off, and the target has no FMA), so both give the same
+ * bits. */
+static inline __attribute__((always_inline)) int ring_pdis_body(
+    const double *p, int64_t n, const int64_t *ptr, const int32_t *adj, const double *fixed,
+    const int64_t *rings, int nscales, int gaussian, int64_t begin, int64_t end, int32_t *stamp,
+    const int32_t *dest, double *out_pdis, double *out_normals, double *out_relative,
+    double *out_score) {
     int64_t cap = 1024;
     /* queue (int32), q (3 doubles), d2, mu, |q| and q side by side (4 doubles) */
     void *buf[5] = {malloc((size_t)cap * 4), malloc((size_t)cap * 24), malloc((size_t)cap * 8),
@@ -2291,7 +2291,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
     /* per scale: the ring's size, its projected distance, l, then o */
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     double *spd = (double *)malloc((size_t)nscales * 3 * sizeof(double));
-    int rc = 0, local = out_relative != NULL, avx2 = use_avx2();
+    int rc = 0, local = out_relative != NULL;
     int64_t rmax = rings[nscales - 1];
     if (!buf[0] || !buf[1] || !buf[2] || !buf[3] || !buf[4] || !mk || !spd) {
         rc = -1;
@@ -2364,7 +2364,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
         double *v = (double *)buf[4], *ell = spd + nscales, score = 0.0;
         const double *d2 = (const double *)buf[2];
         for (int64_t j = 0; j < tail; j++) v[4 * j] = sqrt(d2[j]);
-        local_scale_prefixes_on(v, mk, nscales, ell, ell + nscales, avx2);
+        local_scale_prefixes_body(v, mk, nscales, ell, ell + nscales);
         for (s = 0; s < nscales; s++) { /* min(x / l, 1) keeps a NaN, as np.minimum */
             double l = ell[s], r = l > 0 ? spd[s] / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
             out_relative[s * n + io] = r > 1.0 ? 1.0 : r;
@@ -2377,6 +2377,56 @@ done:
     free(mk);
     free(spd);
     return rc;
+}
+
+/* ring_pdis_body for any x86-64 (or other) CPU. */
+static int ring_pdis_plain(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
+                           const double *fixed, const int64_t *rings, int nscales, int gaussian,
+                           int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
+                           double *out_pdis, double *out_normals, double *out_relative,
+                           double *out_score) {
+    return ring_pdis_body(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end, stamp,
+                          dest, out_pdis, out_normals, out_relative, out_score);
+}
+
+#ifdef HAVE_AVX2_PATH
+/* The same compiled for AVX2: the members' lengths 4 square roots an instruction (half
+ * the time of SSE2's 2 here: 61 a vertex in a regular mesh's 4-ring), the local scales'
+ * 4 sums in one register, three-operand instructions. */
+__attribute__((target("avx2"))) static int ring_pdis_avx2(
+    const double *p, int64_t n, const int64_t *ptr, const int32_t *adj, const double *fixed,
+    const int64_t *rings, int nscales, int gaussian, int64_t begin, int64_t end, int32_t *stamp,
+    const int32_t *dest, double *out_pdis, double *out_normals, double *out_relative,
+    double *out_score) {
+    return ring_pdis_body(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end, stamp,
+                          dest, out_pdis, out_normals, out_relative, out_score);
+}
+#endif
+
+/* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
+ * the projected distance into out_pdis[s * n + i] when not NULL (normals into
+ * out_normals when not NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA.
+ * stamp: (n,) int32 scratch of this thread, all -1 initially (or left by an earlier
+ * call). The members are summed in the order the search meets them: the vertex, then
+ * each ring after the last, its vertices in the order met walking the last ring's new
+ * members' lists (RingNeighbourhoods.at). With out_relative (and out_score) not NULL,
+ * robust mode's RelativeRule in the same walk: the local scales of each ring in numpy's
+ * summation order (local_scale_prefixes), out_relative[s * n + i] = min(pdis / l, 1) and
+ * out_score[i] = the sum over the scales of min(o / l, 1) / nscales (0 where l = 0).
+ * dest (n,) or NULL: vertex i's results go to column dest[i] instead of i (a mesh
+ * renumbered by ms_bfs_renumber, dest its order: the caller's numbering). */
+int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
+                 const double *fixed, const int64_t *rings, int nscales, int gaussian,
+                 int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
+                 double *out_pdis, double *out_normals, double *out_relative,
+                 double *out_score) {
+#ifdef HAVE_AVX2_PATH
+    if (use_avx2())
+        return ring_pdis_avx2(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end,
+                              stamp, dest, out_pdis, out_normals, out_relative, out_score);
+#endif
+    return ring_pdis_plain(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end, stamp,
+                           dest, out_pdis, out_normals, out_relative, out_score);
 }
 
 /* The rings of the vertices rows[r] (r < m) in breadth-first order over (ptr, adj), the
