@@ -2274,6 +2274,20 @@ static inline int bfs_level(const int64_t *ptr, const int32_t *adj, int32_t *sta
     return 0;
 }
 
+/* shifted[w] = 1 where vertex w + 1's adjacency list is w's with each neighbour plus
+ * one (the same length), else 0, for w in [begin, end) of the n vertices (w = n - 1: 0).
+ * A mesh numbered along a regular grid (the bench mesh, a height field, a parametric
+ * surface) has it at most vertices; a scan or a remeshed surface almost nowhere. */
+void ms_shifted_lists(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t begin,
+                      int64_t end, uint8_t *shifted) {
+    for (int64_t w = begin; w < end; w++) {
+        int same = w + 1 < n && ptr[w + 2] - ptr[w + 1] == ptr[w + 1] - ptr[w];
+        for (int64_t t = ptr[w], d = ptr[w + 1] - ptr[w]; same && t < ptr[w + 1]; t++)
+            same = adj[t + d] == adj[t] + 1;
+        shifted[w] = (uint8_t)same;
+    }
+}
+
 /* ms_ring_pdis (its arguments), its floating point compiled twice: plain and for AVX2
  * (ring_pdis_avx2), each operation the same correctly rounded one (no fused
  * multiply-add: -ffp-contract=off, and the target has no FMA), so both give the same
@@ -2281,8 +2295,8 @@ static inline int bfs_level(const int64_t *ptr, const int32_t *adj, int32_t *sta
 static inline __attribute__((always_inline)) int ring_pdis_body(
     const double *p, int64_t n, const int64_t *ptr, const int32_t *adj, const double *fixed,
     const int64_t *rings, int nscales, int gaussian, int64_t begin, int64_t end, int32_t *stamp,
-    const int32_t *dest, double *out_pdis, double *out_normals, double *out_relative,
-    double *out_score) {
+    const int32_t *dest, const uint8_t *shifted, double *out_pdis, double *out_normals,
+    double *out_relative, double *out_score) {
     int64_t cap = 1024;
     /* queue (int32), q (3 doubles), d2, mu, |q| and q side by side (4 doubles) */
     void *buf[5] = {malloc((size_t)cap * 4), malloc((size_t)cap * 24), malloc((size_t)cap * 8),
@@ -2293,7 +2307,9 @@ static inline __attribute__((always_inline)) int ring_pdis_body(
     double *spd = (double *)malloc((size_t)nscales * 3 * sizeof(double));
     int rc = 0, local = out_relative != NULL;
     int64_t rmax = rings[nscales - 1];
-    if (!buf[0] || !buf[1] || !buf[2] || !buf[3] || !buf[4] || !mk || !spd) {
+    /* the previous vertex's queue length after each level (level 0: the vertex) */
+    int64_t *ends = (int64_t *)malloc((size_t)(rmax + 1) * sizeof(int64_t));
+    if (!buf[0] || !buf[1] || !buf[2] || !buf[3] || !buf[4] || !mk || !spd || !ends) {
         rc = -1;
         goto done;
     }
@@ -2304,15 +2320,31 @@ static inline __attribute__((always_inline)) int ring_pdis_body(
         if (fn && fn[0] == 0.0 && fn[1] == 0.0 && fn[2] == 0.0) fn = NULL;
         int32_t *queue = (int32_t *)buf[0];
         int64_t head = 0, tail = 0;
-        queue[tail++] = (int32_t)i;
-        stamp[i] = (int32_t)i;
+        /* Vertex i - 1's search, every member plus one, is vertex i's when each list it
+         * walked (levels 0 .. rmax - 1) is shifted: that search over the lists plus one
+         * meets the members plus one in the same order (a grid-numbered mesh: most
+         * vertices). Its stamps are then not stored: a later search's mark is its own
+         * vertex, which no earlier search used. */
+        int same = shifted != NULL && i > begin;
+        for (int64_t j = 0; same && j < ends[rmax - 1]; j++) same = shifted[queue[j]];
+        if (same) {
+            for (int64_t j = 0; j < ends[rmax]; j++) queue[j] += 1;
+        } else {
+            queue[tail++] = (int32_t)i;
+            stamp[i] = (int32_t)i;
+            ends[0] = 1;
+        }
         double sx = 0, sy = 0, sz = 0, h2 = 0;
         int64_t done_j = 0;
         int s = 0;
         for (int64_t ring = 1; ring <= rmax; ring++) {
-            if (bfs_level(ptr, adj, stamp, (int32_t)i, buf, size, 5, &cap, &head, &tail) != 0) {
+            if (same) {
+                tail = ends[ring];
+            } else if (bfs_level(ptr, adj, stamp, (int32_t)i, buf, size, 5, &cap, &head, &tail) != 0) {
                 rc = -1;
                 goto done;
+            } else {
+                ends[ring] = tail;
             }
             queue = (int32_t *)buf[0];
             while (s < nscales && rings[s] == ring && fn != NULL) {
@@ -2376,6 +2408,7 @@ done:
     for (int t = 0; t < 5; t++) free(buf[t]);
     free(mk);
     free(spd);
+    free(ends);
     return rc;
 }
 
@@ -2383,10 +2416,10 @@ done:
 static int ring_pdis_plain(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
                            const double *fixed, const int64_t *rings, int nscales, int gaussian,
                            int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
-                           double *out_pdis, double *out_normals, double *out_relative,
-                           double *out_score) {
+                           const uint8_t *shifted, double *out_pdis, double *out_normals,
+                           double *out_relative, double *out_score) {
     return ring_pdis_body(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end, stamp,
-                          dest, out_pdis, out_normals, out_relative, out_score);
+                          dest, shifted, out_pdis, out_normals, out_relative, out_score);
 }
 
 #ifdef HAVE_AVX2_PATH
@@ -2396,10 +2429,10 @@ static int ring_pdis_plain(const double *p, int64_t n, const int64_t *ptr, const
 __attribute__((target("avx2"))) static int ring_pdis_avx2(
     const double *p, int64_t n, const int64_t *ptr, const int32_t *adj, const double *fixed,
     const int64_t *rings, int nscales, int gaussian, int64_t begin, int64_t end, int32_t *stamp,
-    const int32_t *dest, double *out_pdis, double *out_normals, double *out_relative,
-    double *out_score) {
+    const int32_t *dest, const uint8_t *shifted, double *out_pdis, double *out_normals,
+    double *out_relative, double *out_score) {
     return ring_pdis_body(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end, stamp,
-                          dest, out_pdis, out_normals, out_relative, out_score);
+                          dest, shifted, out_pdis, out_normals, out_relative, out_score);
 }
 #endif
 
@@ -2414,19 +2447,22 @@ __attribute__((target("avx2"))) static int ring_pdis_avx2(
  * summation order (local_scale_prefixes), out_relative[s * n + i] = min(pdis / l, 1) and
  * out_score[i] = the sum over the scales of min(o / l, 1) / nscales (0 where l = 0).
  * dest (n,) or NULL: vertex i's results go to column dest[i] instead of i (a mesh
- * renumbered by ms_bfs_renumber, dest its order: the caller's numbering). */
+ * renumbered by ms_bfs_renumber, dest its order: the caller's numbering). shifted (n,)
+ * or NULL: ms_shifted_lists' flags (a vertex's search then taken from the previous
+ * vertex's where they allow). */
 int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
                  const double *fixed, const int64_t *rings, int nscales, int gaussian,
                  int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
-                 double *out_pdis, double *out_normals, double *out_relative,
-                 double *out_score) {
+                 const uint8_t *shifted, double *out_pdis, double *out_normals,
+                 double *out_relative, double *out_score) {
 #ifdef HAVE_AVX2_PATH
     if (use_avx2())
         return ring_pdis_avx2(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end,
-                              stamp, dest, out_pdis, out_normals, out_relative, out_score);
+                              stamp, dest, shifted, out_pdis, out_normals, out_relative,
+                              out_score);
 #endif
     return ring_pdis_plain(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end, stamp,
-                           dest, out_pdis, out_normals, out_relative, out_score);
+                           dest, shifted, out_pdis, out_normals, out_relative, out_score);
 }
 
 /* The rings of the vertices rows[r] (r < m) in breadth-first order over (ptr, adj), the
