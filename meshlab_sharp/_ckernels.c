@@ -516,18 +516,22 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
  * lanes, each lane the scalar arithmetic). */
 static inline __attribute__((always_inline)) void local_scale_prefixes_body(
     const double *v, const int64_t *ks, int nscales, double *ell, double *off) {
-    double r[8][4] = {{0.0}}; /* set when first used (i = 0) */
-    int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
+    /* terms 1..i of each sum in r, i a multiple of 8: the first 8 copied when some list
+     * has them (cleared first, it cost 2 % of the ring pass's time), else r unused */
+    double r[8][4];
+    int64_t i = 0;
+    if (ks[nscales - 1] > 8) {
+        memcpy(r, v + 4, sizeof r);
+        i = 8;
+    } else {
+        memset(r, 0, sizeof r);
+    }
     double res[4] = {0.0}; /* the previous scale's pairwise sum: r's blocks up to rb, then */
     int64_t rb = 0, ru = 0; /* the terms rb + 1 .. ru one by one (rb = 0: none kept) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
         double sum[4];
         if (nn >= 8 && nn <= 128) {
-            if (i == 0) {
-                memcpy(r, v + 4, sizeof r);
-                i = 8;
-            }
             int64_t nb = nn - nn % 8;
             for (; i < nb; i += 8) {
                 for (int j = 0; j < 8; j++)
@@ -561,10 +565,10 @@ static inline __attribute__((always_inline)) void local_scale_prefixes_body(
             off[s] = 0.0;
             continue;
         }
-        double c = (double)m;
-        ell[s] = sum[0] / c;
-        double cx = sum[1] / c, cy = sum[2] / c, cz = sum[3] / c;
-        off[s] = sqrt(cx * cx + cy * cy + cz * cz);
+        double c = (double)m, mean[4]; /* 4 divisions side by side */
+        for (int t = 0; t < 4; t++) mean[t] = sum[t] / c;
+        ell[s] = mean[0];
+        off[s] = sqrt(mean[1] * mean[1] + mean[2] * mean[2] + mean[3] * mean[3]);
     }
 }
 
