@@ -517,7 +517,8 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
 static inline __attribute__((always_inline)) void local_scale_prefixes_body(
     const double *v, const int64_t *ks, int nscales, double *ell, double *off) {
     /* terms 1..i of each sum in r, i a multiple of 8: the first 8 copied when some list
-     * has them (cleared first, it cost 2 % of the ring pass's time), else r unused */
+     * has them (clearing r first cost 2 % of the ring pass's time); else r is unused,
+     * cleared so that the compiler sees it set */
     double r[8][4];
     int64_t i = 0;
     if (ks[nscales - 1] > 8) {
