@@ -516,18 +516,23 @@ static inline void local_scale_one(const double *q, const double *dist, int64_t 
  * lanes, each lane the scalar arithmetic). */
 static inline __attribute__((always_inline)) void local_scale_prefixes_body(
     const double *v, const int64_t *ks, int nscales, double *ell, double *off) {
-    double r[8][4] = {{0.0}}; /* set when first used (i = 0) */
-    int64_t i = 0; /* terms 1..i of each sum in r, a multiple of 8 (0: r not started) */
+    /* terms 1..i of each sum in r, i a multiple of 8: the first 8 copied when some list
+     * has them (clearing r first cost 2 % of the ring pass's time); else r is unused,
+     * cleared so that the compiler sees it set */
+    double r[8][4];
+    int64_t i = 0;
+    if (ks[nscales - 1] > 8) {
+        memcpy(r, v + 4, sizeof r);
+        i = 8;
+    } else {
+        memset(r, 0, sizeof r);
+    }
     double res[4] = {0.0}; /* the previous scale's pairwise sum: r's blocks up to rb, then */
     int64_t rb = 0, ru = 0; /* the terms rb + 1 .. ru one by one (rb = 0: none kept) */
     for (int s = 0; s < nscales; s++) {
         int64_t m = ks[s], nn = m - 1;
         double sum[4];
         if (nn >= 8 && nn <= 128) {
-            if (i == 0) {
-                memcpy(r, v + 4, sizeof r);
-                i = 8;
-            }
             int64_t nb = nn - nn % 8;
             for (; i < nb; i += 8) {
                 for (int j = 0; j < 8; j++)
@@ -545,6 +550,14 @@ static inline __attribute__((always_inline)) void local_scale_prefixes_body(
             rb = nb;
             ru = nn;
             for (int t = 0; t < 4; t++) sum[t] = v[t] + res[t];
+        } else if (m >= 1 && nn < 8) {
+            /* segment_sum's short form (the first term plus the others in order from
+             * -0.0; m = 1: plus -0.0, which changes no double), the 4 sums side by side:
+             * a 1-ring's 7 points, without 4 calls */
+            for (int t = 0; t < 4; t++) sum[t] = -0.0;
+            for (int64_t u = 1; u <= nn; u++)
+                for (int t = 0; t < 4; t++) sum[t] += v[4 * u + t];
+            for (int t = 0; t < 4; t++) sum[t] = v[t] + sum[t];
         } else {
             for (int t = 0; t < 4; t++) sum[t] = segment_sum(v + t, m, 4);
         }
@@ -553,10 +566,10 @@ static inline __attribute__((always_inline)) void local_scale_prefixes_body(
             off[s] = 0.0;
             continue;
         }
-        double c = (double)m;
-        ell[s] = sum[0] / c;
-        double cx = sum[1] / c, cy = sum[2] / c, cz = sum[3] / c;
-        off[s] = sqrt(cx * cx + cy * cy + cz * cz);
+        double c = (double)m, mean[4]; /* 4 divisions side by side */
+        for (int t = 0; t < 4; t++) mean[t] = sum[t] / c;
+        ell[s] = mean[0];
+        off[s] = sqrt(mean[1] * mean[1] + mean[2] * mean[2] + mean[3] * mean[3]);
     }
 }
 
@@ -2266,23 +2279,29 @@ static inline int bfs_level(const int64_t *ptr, const int32_t *adj, int32_t *sta
     return 0;
 }
 
-/* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
- * the projected distance into out_pdis[s * n + i] when not NULL (normals into
- * out_normals when not NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA.
- * stamp: (n,) int32 scratch of this thread, all -1 initially (or left by an earlier
- * call). The members are summed in the order the search meets them: the vertex, then
- * each ring after the last, its vertices in the order met walking the last ring's new
- * members' lists (RingNeighbourhoods.at). With out_relative (and out_score) not NULL,
- * robust mode's RelativeRule in the same walk: the local scales of each ring in numpy's
- * summation order (local_scale_prefixes), out_relative[s * n + i] = min(pdis / l, 1) and
- * out_score[i] = the sum over the scales of min(o / l, 1) / nscales (0 where l = 0).
- * dest (n,) or NULL: vertex i's results go to column dest[i] instead of i (a mesh
- * renumbered by ms_bfs_renumber, dest its order: the caller's numbering). */
-int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
-                 const double *fixed, const int64_t *rings, int nscales, int gaussian,
-                 int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
-                 double *out_pdis, double *out_normals, double *out_relative,
-                 double *out_score) {
+/* shifted[w] = 1 where vertex w + 1's adjacency list is w's with each neighbour plus
+ * one (the same length), else 0, for w in [begin, end) of the n vertices (w = n - 1: 0).
+ * A mesh numbered along a regular grid (the bench mesh, a height field, a parametric
+ * surface) has it at most vertices; a scan or a remeshed surface almost nowhere. */
+void ms_shifted_lists(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t begin,
+                      int64_t end, uint8_t *shifted) {
+    for (int64_t w = begin; w < end; w++) {
+        int same = w + 1 < n && ptr[w + 2] - ptr[w + 1] == ptr[w + 1] - ptr[w];
+        for (int64_t t = ptr[w], d = ptr[w + 1] - ptr[w]; same && t < ptr[w + 1]; t++)
+            same = adj[t + d] == adj[t] + 1;
+        shifted[w] = (uint8_t)same;
+    }
+}
+
+/* ms_ring_pdis (its arguments), its floating point compiled twice: plain and for AVX2
+ * (ring_pdis_avx2), each operation the same correctly rounded one (no fused
+ * multiply-add: -ffp-contract=off, and the target has no FMA), so both give the same
+ * bits. */
+static inline __attribute__((always_inline)) int ring_pdis_body(
+    const double *p, int64_t n, const int64_t *ptr, const int32_t *adj, const double *fixed,
+    const int64_t *rings, int nscales, int gaussian, int64_t begin, int64_t end, int32_t *stamp,
+    const int32_t *dest, const uint8_t *shifted, double *out_pdis, double *out_normals,
+    double *out_relative, double *out_score) {
     int64_t cap = 1024;
     /* queue (int32), q (3 doubles), d2, mu, |q| and q side by side (4 doubles) */
     void *buf[5] = {malloc((size_t)cap * 4), malloc((size_t)cap * 24), malloc((size_t)cap * 8),
@@ -2291,9 +2310,11 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
     /* per scale: the ring's size, its projected distance, l, then o */
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     double *spd = (double *)malloc((size_t)nscales * 3 * sizeof(double));
-    int rc = 0, local = out_relative != NULL, avx2 = use_avx2();
+    int rc = 0, local = out_relative != NULL;
     int64_t rmax = rings[nscales - 1];
-    if (!buf[0] || !buf[1] || !buf[2] || !buf[3] || !buf[4] || !mk || !spd) {
+    /* the previous vertex's queue length after each level (level 0: the vertex) */
+    int64_t *ends = (int64_t *)malloc((size_t)(rmax + 1) * sizeof(int64_t));
+    if (!buf[0] || !buf[1] || !buf[2] || !buf[3] || !buf[4] || !mk || !spd || !ends) {
         rc = -1;
         goto done;
     }
@@ -2304,15 +2325,31 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
         if (fn && fn[0] == 0.0 && fn[1] == 0.0 && fn[2] == 0.0) fn = NULL;
         int32_t *queue = (int32_t *)buf[0];
         int64_t head = 0, tail = 0;
-        queue[tail++] = (int32_t)i;
-        stamp[i] = (int32_t)i;
+        /* Vertex i - 1's search, every member plus one, is vertex i's when each list it
+         * walked (levels 0 .. rmax - 1) is shifted: that search over the lists plus one
+         * meets the members plus one in the same order (a grid-numbered mesh: most
+         * vertices). Its stamps are then not stored: a later search's mark is its own
+         * vertex, which no earlier search used. */
+        int same = shifted != NULL && i > begin;
+        for (int64_t j = 0; same && j < ends[rmax - 1]; j++) same = shifted[queue[j]];
+        if (same) {
+            for (int64_t j = 0; j < ends[rmax]; j++) queue[j] += 1;
+        } else {
+            queue[tail++] = (int32_t)i;
+            stamp[i] = (int32_t)i;
+            ends[0] = 1;
+        }
         double sx = 0, sy = 0, sz = 0, h2 = 0;
         int64_t done_j = 0;
         int s = 0;
         for (int64_t ring = 1; ring <= rmax; ring++) {
-            if (bfs_level(ptr, adj, stamp, (int32_t)i, buf, size, 5, &cap, &head, &tail) != 0) {
+            if (same) {
+                tail = ends[ring];
+            } else if (bfs_level(ptr, adj, stamp, (int32_t)i, buf, size, 5, &cap, &head, &tail) != 0) {
                 rc = -1;
                 goto done;
+            } else {
+                ends[ring] = tail;
             }
             queue = (int32_t *)buf[0];
             while (s < nscales && rings[s] == ring && fn != NULL) {
@@ -2364,7 +2401,7 @@ int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *
         double *v = (double *)buf[4], *ell = spd + nscales, score = 0.0;
         const double *d2 = (const double *)buf[2];
         for (int64_t j = 0; j < tail; j++) v[4 * j] = sqrt(d2[j]);
-        local_scale_prefixes_on(v, mk, nscales, ell, ell + nscales, avx2);
+        local_scale_prefixes_body(v, mk, nscales, ell, ell + nscales);
         for (s = 0; s < nscales; s++) { /* min(x / l, 1) keeps a NaN, as np.minimum */
             double l = ell[s], r = l > 0 ? spd[s] / l : 0.0, g = l > 0 ? ell[nscales + s] / l : 0.0;
             out_relative[s * n + io] = r > 1.0 ? 1.0 : r;
@@ -2376,7 +2413,61 @@ done:
     for (int t = 0; t < 5; t++) free(buf[t]);
     free(mk);
     free(spd);
+    free(ends);
     return rc;
+}
+
+/* ring_pdis_body for any x86-64 (or other) CPU. */
+static int ring_pdis_plain(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
+                           const double *fixed, const int64_t *rings, int nscales, int gaussian,
+                           int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
+                           const uint8_t *shifted, double *out_pdis, double *out_normals,
+                           double *out_relative, double *out_score) {
+    return ring_pdis_body(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end, stamp,
+                          dest, shifted, out_pdis, out_normals, out_relative, out_score);
+}
+
+#ifdef HAVE_AVX2_PATH
+/* The same compiled for AVX2: the members' lengths 4 square roots an instruction (half
+ * the time of SSE2's 2 here: 61 a vertex in a regular mesh's 4-ring), the local scales'
+ * 4 sums in one register, three-operand instructions. */
+__attribute__((target("avx2"))) static int ring_pdis_avx2(
+    const double *p, int64_t n, const int64_t *ptr, const int32_t *adj, const double *fixed,
+    const int64_t *rings, int nscales, int gaussian, int64_t begin, int64_t end, int32_t *stamp,
+    const int32_t *dest, const uint8_t *shifted, double *out_pdis, double *out_normals,
+    double *out_relative, double *out_score) {
+    return ring_pdis_body(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end, stamp,
+                          dest, shifted, out_pdis, out_normals, out_relative, out_score);
+}
+#endif
+
+/* k-rings by breadth-first search for vertices [begin, end), and for each ring rings[s]
+ * the projected distance into out_pdis[s * n + i] when not NULL (normals into
+ * out_normals when not NULL). fixed: (n, 3) face-average normals, a zero row meaning PCA.
+ * stamp: (n,) int32 scratch of this thread, all -1 initially (or left by an earlier
+ * call). The members are summed in the order the search meets them: the vertex, then
+ * each ring after the last, its vertices in the order met walking the last ring's new
+ * members' lists (RingNeighbourhoods.at). With out_relative (and out_score) not NULL,
+ * robust mode's RelativeRule in the same walk: the local scales of each ring in numpy's
+ * summation order (local_scale_prefixes), out_relative[s * n + i] = min(pdis / l, 1) and
+ * out_score[i] = the sum over the scales of min(o / l, 1) / nscales (0 where l = 0).
+ * dest (n,) or NULL: vertex i's results go to column dest[i] instead of i (a mesh
+ * renumbered by ms_bfs_renumber, dest its order: the caller's numbering). shifted (n,)
+ * or NULL: ms_shifted_lists' flags (a vertex's search then taken from the previous
+ * vertex's where they allow). */
+int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
+                 const double *fixed, const int64_t *rings, int nscales, int gaussian,
+                 int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
+                 const uint8_t *shifted, double *out_pdis, double *out_normals,
+                 double *out_relative, double *out_score) {
+#ifdef HAVE_AVX2_PATH
+    if (use_avx2())
+        return ring_pdis_avx2(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end,
+                              stamp, dest, shifted, out_pdis, out_normals, out_relative,
+                              out_score);
+#endif
+    return ring_pdis_plain(p, n, ptr, adj, fixed, rings, nscales, gaussian, begin, end, stamp,
+                           dest, shifted, out_pdis, out_normals, out_relative, out_score);
 }
 
 /* The rings of the vertices rows[r] (r < m) in breadth-first order over (ptr, adj), the

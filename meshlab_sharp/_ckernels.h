@@ -231,6 +231,13 @@ void ms_bfs_renumber(const int64_t *ptr, const int32_t *adj, int64_t n, const do
                      const double *fixed, int32_t *order, int32_t *rank, int64_t *out_ptr,
                      int32_t *out_adj, double *out_p, double *out_fixed);
 
+/* shifted[w] = 1 where vertex w + 1's list in (ptr, adj) is w's with each neighbour plus
+ * one (the same length), else 0, for w in [begin, end) of the n vertices (w = n - 1: 0):
+ * a grid-numbered mesh's vertices, whose rings ms_ring_pdis takes from the previous
+ * vertex's. */
+void ms_shifted_lists(const int64_t *ptr, const int32_t *adj, int64_t n, int64_t begin,
+                      int64_t end, uint8_t *shifted);
+
 /* k-rings by breadth-first search over (ptr, adj) for the vertices [begin, end) and the
  * projected distance at every ring of rings (nscales increasing) into
  * out_pdis[s * n + i] when not NULL, normals into out_normals when not NULL. fixed: (n, 3)
@@ -239,12 +246,14 @@ void ms_bfs_renumber(const int64_t *ptr, const int32_t *adj, int64_t n, const do
  * RelativeRule over the same rings (local scales in numpy's summation order): the
  * relative distances (nscales, n) and the score (n). stamp: (n,) int32 scratch of the
  * calling thread, all -1 before its first call. dest (n,) or NULL: vertex i's results go
- * to column dest[i] (ms_bfs_renumber's order). Returns 0, or -1 out of memory. */
+ * to column dest[i] (ms_bfs_renumber's order). shifted (n,): ms_shifted_lists' flags over
+ * (ptr, adj), where vertex i's search is vertex i - 1's plus one (no search), or NULL
+ * (every vertex searched); the same outputs either way. Returns 0, or -1 out of memory. */
 int ms_ring_pdis(const double *p, int64_t n, const int64_t *ptr, const int32_t *adj,
                  const double *fixed, const int64_t *rings, int nscales, int gaussian,
                  int64_t begin, int64_t end, int32_t *stamp, const int32_t *dest,
-                 double *out_pdis, double *out_normals, double *out_relative,
-                 double *out_score);
+                 const uint8_t *shifted, double *out_pdis, double *out_normals,
+                 double *out_relative, double *out_score);
 
 /* The rings of the vertices rows[r] (r < m), breadth-first over (ptr, adj) as
  * ms_ring_pdis lists them (ring k a prefix of ring k + 1): the length of ring rings[s]

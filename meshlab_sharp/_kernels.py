@@ -80,10 +80,11 @@ _SIGNATURES = {
         [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p]
         + [_c_void_p, _c_void_p, _c_void_p],
     ),
+    "ms_shifted_lists": (None, [_c_void_p, _c_void_p, _i64, _i64, _i64, _c_void_p]),
     "ms_ring_pdis": (
         _int,
         [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _int, _int, _i64, _i64]
-        + [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
+        + [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
     ),
     "ms_ring_lists": (
         _int,
@@ -798,6 +799,23 @@ def scattered(indptr: np.ndarray, indices: np.ndarray) -> bool:
     return bool(lib.ms_scattered(_ptr(indptr), _ptr(indices), len(indptr) - 1))
 
 
+def shifted_lists(indptr: np.ndarray, indices: np.ndarray, workers: int = -1) -> np.ndarray:
+    """(n,) uint8: 1 where vertex ``w + 1``'s list is vertex ``w``'s with each neighbour
+    plus one (``ms_shifted_lists``; a grid-numbered mesh's vertices), over
+    :func:`adjacency`'s lists (``indptr`` (n + 1,) int64, ``indices`` int32)."""
+    lib = _LIB
+    assert lib is not None
+    n = len(indptr) - 1
+    out = np.empty(n, dtype=np.uint8)
+
+    def task(a: int, b: int) -> int:
+        lib.ms_shifted_lists(_ptr(indptr), _ptr(indices), n, a, b, _ptr(out))
+        return 0
+
+    _run_chunks(n, workers, task, chunk=8 * CHUNK)
+    return out
+
+
 def ring_projected_distances(
     points: np.ndarray,
     indptr: np.ndarray,
@@ -810,6 +828,7 @@ def ring_projected_distances(
     relative: bool = False,
     workers: int = -1,
     renumber: bool | None = None,
+    follow: bool = True,
 ) -> ScalePass:
     """Projected distances (s, n) at every ring, by breadth-first search over the
     adjacency (``indptr``, ``indices``: :func:`adjacency`); ``normals`` (n, 3) fixed (zero
@@ -820,7 +839,10 @@ def ring_projected_distances(
     scales of each ring summed in numpy's order). ``renumber``: run the pass over the
     vertices renumbered breadth-first (``ms_bfs_renumber``: the same rings listed in the
     same order, so the same outputs bit for bit, read from nearby memory; each vertex's
-    results written back to its own column); None: when the order is :func:`scattered`."""
+    results written back to its own column); None: when the order is :func:`scattered`.
+    ``follow``: take a vertex's search from the previous vertex's, every member plus one,
+    where the lists it walked are shifted (:func:`shifted_lists`: a grid-numbered mesh);
+    the same outputs as False (every vertex searched)."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -847,12 +869,13 @@ def ring_projected_distances(
     )
     w = _workers(workers)
     stamp = _thread_scratch(n, np.int32)
+    shifted = shifted_lists(indptr, indices, w) if follow else None
 
     def task(a: int, b: int) -> int:
         return lib.ms_ring_pdis(
             _ptr(points), n, _ptr(indptr), _ptr(indices), _ptr(fixed), _ptr(rs), len(rs),
-            int(weighting == "gaussian"), a, b, _ptr(stamp()), _ptr(dest), _ptr(out.pdis),
-            _ptr(out.normals), _ptr(out.relative), _ptr(out.score),
+            int(weighting == "gaussian"), a, b, _ptr(stamp()), _ptr(dest), _ptr(shifted),
+            _ptr(out.pdis), _ptr(out.normals), _ptr(out.relative), _ptr(out.score),
         )  # fmt: skip
 
     _run_chunks(n, w, task)

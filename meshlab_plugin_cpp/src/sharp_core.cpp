@@ -433,11 +433,14 @@ std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector
 		                ptsAt.data(), fixedAt.data());
 		pts = ptsAt.data(), fixed = fixedAt.data(), ptr = ptrAt.data(), idx = idxAt.data(), dest = order.data();
 	}
+	// where a vertex's search is the previous vertex's plus one (a grid-numbered mesh)
+	std::vector<uint8_t> shifted(n);
+	ms_shifted_lists(ptr, idx, n, 0, n, shifted.data());
 	std::vector<std::vector<int32_t>> stamps(workers());
 	chunks(n, [&](unsigned w, Index a, Index b) {
 		if (stamps[w].empty()) stamps[w].assign(n, -1);
 		return ms_ring_pdis(pts, n, ptr, idx, fixed, rings.data(), int(rings.size()), int(gaussian), a, b,
-		                    stamps[w].data(), dest, pdis, nullptr, relative, scores);
+		                    stamps[w].data(), dest, shifted.data(), pdis, nullptr, relative, scores);
 	}, bar, from, to, score ? "rings, projected distances and local scales" : "rings and projected distances");
 	return out;
 }
