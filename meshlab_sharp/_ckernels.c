@@ -1028,8 +1028,8 @@ static inline uint64_t bucket_bits_on(const double *v, int64_t k, double lo, dou
  * consecutive sorted values lie in buckets with none occupied between them (a value in
  * one would lie between them); when no 4 buckets in a row below b(hi) are empty, theirs
  * are at most 4 apart, and the values differ by less than 5 buckets: exactly, the rounded
- * (x - lo) * s is off by under 63 * 2^-52 buckets, so by less than 0.9 g (1 + 1e-14),
- * and so does their rounded difference (rounding is monotone, g a double). With more
+ * (x - lo) * s is off by under 64 * 2^-52 buckets, so by less than 0.9 g (1 + 1e-14),
+ * and their rounded difference is at most g (rounding is monotone, g a double). With more
  * buckets, or 0.18 g not a normal double (NaN, 0, subnormal: s is not its inverse then):
  * whether hi - lo <= g (no step's rounded difference exceeds that). */
 static int no_gap(const double *v, int64_t k, double lo, double hi, double g, int avx2) {
