@@ -13,6 +13,7 @@
  */
 #include "_ckernels.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -616,25 +617,26 @@ static void local_scale_values_plain(const double *q, const double *d2, int64_t 
 
 #ifdef HAVE_AVX2_PATH
 /* local_scale_values_plain with 4 square roots an instruction (AVX: correctly rounded,
- * as sqrt) and each row one load of q (from the previous row's z) and one store. */
+ * as sqrt) and each row one load of q (from the previous row's z) and one store; the
+ * last rows as one more block of 4 ending at row m - 1, over rows already written (the
+ * same values again), when m - 1 is not a multiple of 4. */
 __attribute__((target("avx2"))) static void local_scale_values_avx2(const double *q,
                                                                     const double *d2, int64_t m,
                                                                     double *v) {
-    if (m < 2) {
+    if (m < 5) {
         local_scale_values_plain(q, d2, m, v);
         return;
     }
     local_scale_values_plain(q, d2, 1, v);
-    int64_t j = 1;
     double r[4];
-    for (; j + 4 <= m; j += 4) {
+    for (int64_t j = 1; j < m; j += 4) {
+        if (j + 4 > m) j = m - 4;
         _mm256_storeu_pd(r, _mm256_sqrt_pd(_mm256_loadu_pd(d2 + j)));
         for (int l = 0; l < 4; l++) {
             __m256d row = _mm256_loadu_pd(q + 3 * (j + l) - 1); /* z of the row before */
             _mm256_storeu_pd(v + 4 * (j + l), _mm256_blend_pd(row, _mm256_broadcast_sd(r + l), 1));
         }
     }
-    local_scale_values_plain(q + 3 * j, d2 + j, m - j, v + 4 * j);
 }
 #endif
 
@@ -997,37 +999,117 @@ static int64_t sheet_apply(const double *h, int64_t k, double lo, double hi, int
     return dropped;
 }
 
-/* Rules 1 and 2 of robust.sheet_mask on the heights h (k) of one list, squared lengths
- * d2 (k), spacing a; hs (k) scratch. Writes keep[j] and returns the number dropped (0:
- * every keep[j] is 1). Rule 1, the whole list: a gap is a step > sheet_gap * a between
- * consecutive sorted h; above 0 (the point's own h) the points beyond the first gap are
- * dropped (whatever lies beyond them); likewise below; not when fewer than sheet_min
- * would be, or the kept would be fewer than sheet_own times the dropped. Rule 2, when
- * rule 1 drops none: the same with the heights of the points of the column (tangential
- * distance t_j, t_j^2 = d2_j - h_j^2, at most sheet_column * a; the others' heights
- * read as 0), gaps > sheet_column_gap * a, a side cut only when its gap is the only
- * one on that side, the cuts in the middle of the gaps, and not when the dropped
- * heights on one side span more than sheet_far_span * a; the column's heights sorted
- * from the list's (column_heights) when none is NaN. order (k) scratch. */
-static int64_t sheet_rules(const double *h, const double *d2, int64_t k, double a,
-                           const sheet_params_t *sp, double *hs, int64_t *order, char *keep) {
-    double lo, hi;
-    int nan = 0;
-    for (int64_t j = 0; j < k; j++) {
-        hs[j] = h[j];
-        nan |= h[j] != h[j];
+/* The set of buckets floor((v[j] - lo) * s) of the values v (k), each in [0, 63): bit b
+ * set when some value falls in bucket b. */
+static uint64_t bucket_bits(const double *v, int64_t k, double lo, double s) {
+    uint64_t seen = 0;
+    for (int64_t j = 0; j < k; j++) seen |= (uint64_t)1 << (int)((v[j] - lo) * s);
+    return seen;
+}
+
+#ifdef HAVE_AVX2_PATH
+/* bucket_bits on 4 lanes (AVX2: the same difference, product and truncation). */
+__attribute__((target("avx2"))) static uint64_t bucket_bits_avx2(const double *v, int64_t k,
+                                                                 double lo, double s) {
+    const __m256d vlo = _mm256_set1_pd(lo), vs = _mm256_set1_pd(s);
+    const __m256i one = _mm256_set1_epi64x(1);
+    __m256i seen = _mm256_setzero_si256();
+    int64_t j = 0;
+    for (; j + 4 <= k; j += 4) {
+        __m128i b = _mm256_cvttpd_epi32(_mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(v + j), vlo), vs));
+        seen = _mm256_or_si256(seen, _mm256_sllv_epi64(one, _mm256_cvtepi32_epi64(b)));
     }
-    int64_t z = sorted_heights(hs, order, k, sp->avx2);
-    sheet_cuts(hs, k, z, sp->gap * a, 0, &lo, &hi);
-    int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep,
-                                   sp->avx2);
-    if (dropped > 0 || sp->column <= 0.0) return dropped;
+    __m128i half = _mm_or_si128(_mm256_castsi256_si128(seen), _mm256_extracti128_si256(seen, 1));
+    return (uint64_t)_mm_cvtsi128_si64(_mm_or_si128(half, _mm_unpackhi_epi64(half, half))) |
+           bucket_bits(v + j, k - j, lo, s);
+}
+#endif
+
+/* bucket_bits, on 4 lanes when avx2. */
+static inline uint64_t bucket_bits_on(const double *v, int64_t k, double lo, double s, int avx2) {
+#ifdef HAVE_AVX2_PATH
+    if (avx2) return bucket_bits_avx2(v, k, lo, s);
+#endif
+    (void)avx2;
+    return bucket_bits(v, k, lo, s);
+}
+
+/* Whether no step between consecutive sorted values of v (k, none NaN; lo and hi their
+ * smallest and largest) exceeds g, shown without sorting them (0: one may). A value x
+ * goes to bucket b(x) = floor((x - lo) * s), s = 1 / (0.18 g) rounded (a bucket about
+ * 0.18 g wide), b(hi) at most 62. b is monotone (each rounded operation is), so two
+ * consecutive sorted values lie in buckets with none occupied between them (a value in
+ * one would lie between them); when no 4 buckets in a row below b(hi) are empty, theirs
+ * are at most 4 apart, and the values differ by less than 5 buckets: exactly, the rounded
+ * (x - lo) * s is off by under 64 * 2^-52 buckets, so by less than 0.9 g (1 + 1e-14),
+ * and their rounded difference is at most g (rounding is monotone, g a double). With more
+ * buckets, or 0.18 g not a normal double (NaN, 0, subnormal: s is not its inverse then):
+ * whether hi - lo <= g (no step's rounded difference exceeds that). */
+static int no_gap(const double *v, int64_t k, double lo, double hi, double g, int avx2) {
+    double w = 0.18 * g, s = 1.0 / w, t = (hi - lo) * s;
+    if (!(w >= DBL_MIN && t < 63.0)) return hi - lo <= g;
+    uint64_t seen = bucket_bits_on(v, k, lo, s, avx2);
+    uint64_t near = seen | seen << 1; /* the buckets at most 3 above an occupied one */
+    near |= near << 2;
+    uint64_t all = ((uint64_t)2 << (int)t) - 1; /* buckets 0 .. b(hi) */
+    return (near & all) == all;
+}
+
+/* The column's heights, unsorted: hs[j] = h[j] where d2[j] - h[j]^2 <= c2, else 0.0,
+ * for the heights h (k) and squared lengths d2 (k); *lo and *hi their smallest and
+ * largest (when none is NaN). */
+static void column_values(const double *h, const double *d2, int64_t k, double c2, double *hs,
+                          double *lo, double *hi) {
+    double vmin = INFINITY, vmax = -INFINITY;
+    for (int64_t j = 0; j < k; j++) {
+        double v = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
+        hs[j] = v;
+        if (v < vmin) vmin = v;
+        if (v > vmax) vmax = v;
+    }
+    *lo = vmin;
+    *hi = vmax;
+}
+
+/* Rules 1 and 2 of robust.sheet_mask on the heights h (k) of one list, squared lengths
+ * d2 (k), spacing a (lo, hi their smallest and largest, nan whether some is NaN, as
+ * heights_of gives them); hs (k) scratch; keep (k) all 1 on entry. Writes keep[j] and returns
+ * the number dropped (0: every keep[j] is 1). Rule 1, the whole list: a gap is a step >
+ * sheet_gap * a between consecutive sorted h; above 0 (the point's own h) the points
+ * beyond the first gap are dropped (whatever lies beyond them); likewise below; not when
+ * fewer than sheet_min would be, or the kept would be fewer than sheet_own times the
+ * dropped. Rule 2, when rule 1 drops none: the same with the heights of the points of
+ * the column (tangential distance t_j, t_j^2 = d2_j - h_j^2, at most sheet_column * a;
+ * the others' heights read as 0), gaps > sheet_column_gap * a, a side cut only when its
+ * gap is the only one on that side, the cuts in the middle of the gaps, and not when the
+ * dropped heights on one side span more than sheet_far_span * a; the column's heights
+ * sorted from the list's (column_heights) when rule 1 sorted them and none is NaN. A
+ * rule that no_gap shows to have no gap drops none, and its heights are not sorted (most
+ * lists past sheet_keep's first test: the points near a crease, heights spread out
+ * without a gap). order (k) scratch. */
+static int64_t sheet_rules(const double *h, double lo, double hi, int nan, const double *d2,
+                           int64_t k, double a, const sheet_params_t *sp, double *hs,
+                           int64_t *order, char *keep) {
     double c = sp->column * a, c2 = c * c;
-    if (nan) {
-        for (int64_t j = 0; j < k; j++) hs[j] = d2[j] - h[j] * h[j] <= c2 ? h[j] : 0.0;
+    int64_t z;
+    if (!nan && no_gap(h, k, lo, hi, sp->gap * a, sp->avx2)) { /* rule 1 drops none */
+        if (sp->column <= 0.0) return 0;
+        column_values(h, d2, k, c2, hs, &lo, &hi);
+        if (no_gap(hs, k, lo, hi, sp->column_gap * a, sp->avx2)) return 0;
         z = sorted_heights(hs, order, k, sp->avx2);
     } else {
-        z = column_heights(hs, order, h, d2, k, z, c2);
+        memcpy(hs, h, (size_t)k * sizeof(double));
+        z = sorted_heights(hs, order, k, sp->avx2);
+        sheet_cuts(hs, k, z, sp->gap * a, 0, &lo, &hi);
+        int64_t dropped = sheet_apply(h, k, lo, hi, sp->minimum, sp->own, INFINITY, keep,
+                                      sp->avx2);
+        if (dropped > 0 || sp->column <= 0.0) return dropped;
+        if (nan) {
+            column_values(h, d2, k, c2, hs, &lo, &hi);
+            z = sorted_heights(hs, order, k, sp->avx2);
+        } else {
+            z = column_heights(hs, order, h, d2, k, z, c2);
+        }
     }
     sheet_cuts(hs, k, z, sp->column_gap * a, 1, &lo, &hi);
     return sheet_apply(h, k, lo, hi, sp->minimum, sp->own, sp->far_span * a, keep,
@@ -1062,7 +1144,7 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     if (!nan && hmax - hmin <= g && (sp->column <= 0.0 || hmax - hmin <= g2) &&
         (sp->trim <= 0.0 || hmax - hmin <= t))
         return 0;
-    int64_t dropped = sheet_rules(h, d2, k, a, sp, hs, order, keep);
+    int64_t dropped = sheet_rules(h, hmin, hmax, nan, d2, k, a, sp, hs, order, keep);
     if (dropped > 0 || sp->trim <= 0.0) return dropped;
     double sx = 0.0, sy = 0.0, sz = 0.0;
     int64_t count = 0;
@@ -1082,9 +1164,41 @@ static int64_t sheet_keep(const double *q, const double *d2, int64_t k, const do
     }
     smallest_eigvec(c[0], c[1], c[2], c[3], c[4], c[5], n2);
     if (!(fabs(n2[0] * nrm[0] + n2[1] * nrm[1] + n2[2] * nrm[2]) >= sp->trim_cos)) return 0;
-    for (int64_t j = 0; j < k; j++)
-        h[j] = q[3 * j] * n2[0] + q[3 * j + 1] * n2[1] + q[3 * j + 2] * n2[2];
-    return sheet_rules(h, d2, k, a, sp, hs, order, keep);
+    nan = heights_of(q, k, n2, h, &hmin, &hmax, sp->avx2);
+    return sheet_rules(h, hmin, hmax, nan, d2, k, a, sp, hs, order, keep);
+}
+
+/* The sheet filter's parameters from a pass's cloud_out_t. */
+static sheet_params_t sheet_params(const cloud_out_t *out) {
+    sheet_params_t sp = {out->sheet_gap, out->sheet_min, out->sheet_own, out->sheet_column,
+                         out->sheet_column_gap, out->sheet_far_span, out->sheet_trim,
+                         out->sheet_trim_cos, use_avx2()};
+    return sp;
+}
+
+int ms_sheet_mask(const double *p, const int64_t *idx, int64_t k, const double *nrm,
+                  const cloud_out_t *params, int64_t begin, int64_t end, char *keep) {
+    const sheet_params_t sp = sheet_params(params);
+    double *q = (double *)malloc((size_t)k * 3 * sizeof(double));
+    double *d2 = (double *)malloc((size_t)k * sizeof(double));
+    double *hs = (double *)malloc((size_t)k * 2 * sizeof(double));
+    int64_t *order = (int64_t *)malloc((size_t)k * sizeof(int64_t));
+    int rc = q && d2 && hs && order ? 0 : -1;
+    for (int64_t i = begin; i < end && rc == 0; i++) {
+        const double *pi = p + 3 * i;
+        for (int64_t j = 0; j < k; j++) {
+            const double *pj = p + 3 * idx[i * k + j];
+            double x = pj[0] - pi[0], y = pj[1] - pi[1], z = pj[2] - pi[2];
+            q[3 * j] = x; q[3 * j + 1] = y; q[3 * j + 2] = z;
+            d2[j] = x * x + y * y + z * z;
+        }
+        sheet_keep(q, d2, k, nrm + 3 * i, &sp, hs, order, keep + i * k);
+    }
+    free(q);
+    free(d2);
+    free(hs);
+    free(order);
+    return rc;
 }
 
 /* ------------------------------------------------------------------ kd-tree */
@@ -1948,9 +2062,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
     int64_t *order = (int64_t *)malloc((size_t)kmax * sizeof(int64_t));
     char *keep = (char *)malloc((size_t)kmax);
-    const sheet_params_t sheet = {out->sheet_gap, out->sheet_min, out->sheet_own,
-                                  out->sheet_column, out->sheet_column_gap, out->sheet_far_span,
-                                  out->sheet_trim, out->sheet_trim_cos, use_avx2()};
+    const sheet_params_t sheet = sheet_params(out);
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     int rc = 0;
     if (cur_rc || !q || !d2 || !smean || !soa || !ell || !hs || !order || !keep || !mk) {

@@ -185,6 +185,14 @@ void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, in
 void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
                  const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
 
+/* robust.sheet_mask, bit for bit, of the rows [begin, end) of the kNN lists idx (n, k)
+ * (the point itself first) of the points p (n, 3) with their normals nrm (n, 3) and the
+ * parameters params' sheet_* (cloud_out_t; sheet_gap > 0): keep[i * k + j] 1 where the
+ * filter keeps idx[i * k + j]. The pass's filter (what ms_cloud_pdis runs with
+ * sheet_gap > 0) on given lists. Returns 0, or -1 out of memory. */
+int ms_sheet_mask(const double *p, const int64_t *idx, int64_t k, const double *nrm,
+                  const cloud_out_t *params, int64_t begin, int64_t end, char *keep);
+
 /* ms_isolated from a tree_order pass's statistics (per tree position t, near[t] the tree
  * position of the nearest) for the tree positions [begin, end): tp (n, 3) the points in
  * tree order, orig their cleaned indices; out[t] per tree position. */

@@ -68,6 +68,10 @@ _SIGNATURES = {
         None,
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
+    "ms_sheet_mask": (
+        _int,
+        [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
+    ),
     "ms_bit_histogram": (_i64, [_c_void_p, _i64, _i64, _c_void_p]),
     "ms_local_scale_csr": (
         _int,
@@ -727,6 +731,41 @@ def cloud_projected_distances(
         if out.stats is not None:
             out.stats.tree = tree
     return out
+
+
+def sheet_mask(
+    points: np.ndarray,
+    indices: np.ndarray,
+    normals: np.ndarray,
+    parameters: SheetParameters,
+    workers: int = -1,
+) -> np.ndarray:
+    """:func:`meshlab_sharp.robust.sheet_mask`, bit for bit, by the filter of the compiled
+    pass (``ms_sheet_mask``): ``points`` (n, 3), ``indices`` (n, k) the kNN lists (the
+    point itself first), ``normals`` (n, 3), ``parameters`` as
+    :func:`meshlab_sharp.robust.sheet_parameters` gives them (gap > 0). Returns the (n, k)
+    bool mask of the kept neighbours."""
+    lib = _LIB
+    assert lib is not None
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    indices = np.ascontiguousarray(indices, dtype=np.int64)
+    normals = np.ascontiguousarray(normals, dtype=np.float64)
+    n, k = indices.shape
+    keep = np.empty((n, k), dtype=np.bool_)
+    gap, minimum, own, column, column_gap, far_span, trim, trim_cos = parameters
+    spec = _CloudOut(
+        sheet_gap=float(gap),
+        sheet_min=int(minimum),
+        sheet_own=float(own),
+        sheet_column=float(column),
+        sheet_column_gap=float(column_gap),
+        sheet_far_span=float(far_span),
+        sheet_trim=float(trim),
+        sheet_trim_cos=float(trim_cos),
+    )
+    args = (_ptr(points), _ptr(indices), k, _ptr(normals), ctypes.byref(spec))
+    _run_chunks(n, workers, lambda a, b: lib.ms_sheet_mask(*args, a, b, _ptr(keep)))
+    return keep
 
 
 def local_scale_csr(

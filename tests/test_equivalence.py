@@ -50,6 +50,7 @@ from meshlab_sharp.robust import (
     local_scale,
     noise_scale_factor,
     robust_threshold,
+    sheet_mask,
     sheet_parameters,
 )
 from meshlab_sharp.threshold import normalise, otsu_threshold
@@ -1070,3 +1071,98 @@ def test_sharp_vertices_identical_on_a_wide_fan():
     assert threshold == ref_threshold
     assert 0 < ref_mask.sum() < len(points)
     np.testing.assert_array_equal(mask, ref_mask)
+
+
+def _no_gap(v: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The compiled filter's ``no_gap`` per row of values v (r, k) with gaps g (r,): whether
+    it shows that no step between sorted values exceeds g without sorting (buckets 0.18 g
+    wide, none 4 in a row empty), and whether it fell back on ``max - min <= g`` (63
+    buckets or more)."""
+    lo, hi = v.min(axis=1), v.max(axis=1)
+    with np.errstate(all="ignore"):
+        s = 1.0 / (0.18 * g)
+        few = (hi - lo) * s < 63.0
+        b = np.where(few[:, None], (v - lo[:, None]) * s[:, None], 0.0).astype(np.int64)
+    close = (np.diff(np.sort(b, axis=1), axis=1) <= 4).all(axis=1)
+    return np.where(few, close, hi - lo <= g), ~few
+
+
+def _sheet_branches(points: np.ndarray, idx: np.ndarray, normals: np.ndarray) -> dict[str, int]:
+    """How many rows of the sheet filter's first pass (heights along ``normals``) take each
+    branch of the compiled filter: kept whole by sheet_keep's first test, by no_gap on
+    both rules (no sort), rule 1 without a gap but the column sorted, rule 1 sorted,
+    no_gap's fallback on the range."""
+    gap, _, _, column, column_gap, _, trim, _ = sheet_parameters()
+    q = points[idx] - points[: len(idx), None, :]
+    h = q[..., 0] * normals[:, 0:1] + q[..., 1] * normals[:, 1:2] + q[..., 2] * normals[:, 2:3]
+    d2 = q[..., 0] * q[..., 0] + q[..., 1] * q[..., 1] + q[..., 2] * q[..., 2]
+    dist = np.sqrt(d2)
+    a = dist[:, 1].copy()
+    for j in range(2, 7):
+        a = a + dist[:, j]
+    a = a / 6
+    span = h.max(axis=1) - h.min(axis=1)
+    first = (span <= gap * a) & (span <= column_gap * a) & (span <= trim * a)
+    rule1, fell1 = _no_gap(h, gap * a)
+    c = column * a
+    col, fell2 = _no_gap(np.where(d2 - h * h <= (c * c)[:, None], h, 0.0), column_gap * a)
+    past = ~first
+    return {
+        "first test": int(first.sum()),
+        "no sort": int((past & rule1 & col).sum()),
+        "column sorted": int((past & rule1 & ~col).sum()),
+        "rule 1 sorted": int((past & ~rule1).sum()),
+        "range fallback": int((past & (fell1 | (rule1 & fell2))).sum()),
+    }
+
+
+def _sheet_cases() -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Clouds with their kNN lists (k = 40) and normals for the sheet filter: the
+    normals of the compiled pass, and (``turned``) the same turned by a random rotation
+    of up to ~30 degrees (heights spread without gaps, lists past every shortcut)."""
+    rng = np.random.default_rng(11)
+    out = {}
+    for name, cloud in (
+        ("parallel_sheets", _parallel_sheets),
+        ("noisy_box_cylinder", ROBUST_CLOUDS["noisy_box_cylinder"]),
+        ("outliers_grid_ties", ROBUST_CLOUDS["outliers_grid_ties"]),
+        ("box_cylinder", CLOUDS["box_cylinder"]),
+    ):
+        points = np.unique(cloud(), axis=0)
+        tree = _kernels.build_tree(points)
+        normals = _kernels.cloud_projected_distances(tree, (40,), keep_normals=True).normals[0]
+        idx = knn(points, 40)
+        out[name] = (points, idx, normals)
+        turned = normals + rng.normal(0.0, 0.3, normals.shape)
+        turned /= np.sqrt((turned * turned).sum(axis=1))[:, None]
+        out[name + "_turned"] = (points, idx, turned)
+    # a column of points along the normal 0.38 apart beside a ring of 6 nearer ones: the
+    # heights span more than 63 of no_gap's buckets without a gap (its range fallback)
+    turn = np.arange(6) / 6 * 2 * np.pi
+    ring = np.column_stack([np.cos(turn), np.sin(turn), np.zeros(6)])
+    line = np.column_stack([np.full(33, 1.2), np.zeros(33), 0.38 * (np.arange(33) - 16.0)])
+    points = np.concatenate([[[0.0, 0.0, 0.0]], ring, line])
+    idx = np.argsort(((points - points[0]) ** 2).sum(axis=1), kind="stable")[None, :]
+    out["column_beside_ring"] = (points, idx, np.array([[0.0, 0.0, 1.0]]))
+    return out
+
+
+def test_sheet_filter_is_numpys():
+    """The compiled pass's sheet filter (``ms_sheet_mask``: sheet_keep, its first test, the
+    no_gap shortcuts that skip sorting the heights, the sorts by ranks) keeps exactly
+    the neighbours that robust.sheet_mask keeps, on lists that take every branch: kept
+    whole by the first test, by no_gap on both rules, the column sorted after rule 1
+    showed no gap, rule 1 sorted (gaps: parallel sheets, ties of a grid, far outliers),
+    no_gap's fallback on the range; rows dropping neighbours and rows kept whole."""
+    totals: dict[str, int] = {}
+    dropping = whole = 0
+    for name, (points, idx, normals) in _sheet_cases().items():
+        expected = sheet_mask(points, idx, normals)
+        got = _kernels.sheet_mask(points, idx, normals, sheet_parameters())
+        np.testing.assert_array_equal(got, expected, err_msg=name)
+        dropping += int((~expected).any(axis=1).sum())
+        whole += int(expected.all(axis=1).sum())
+        for key, count in _sheet_branches(points, idx, normals).items():
+            totals[key] = totals.get(key, 0) + count
+    assert dropping > 0 and whole > 0
+    assert all(count > 0 for count in totals.values()), totals
