@@ -100,8 +100,8 @@ def clean(geometry: Geometry, *, backend: str | None = None, workers: int = 1) -
         coordinates in C and vcg's zero-area test, same survivors, same faces.
         Default: :func:`meshlab_sharp._kernels.default_backend`.
     workers : int, default 1
-        Threads of the compiled backend's face pass (-1: every core); the result
-        does not depend on it.
+        Threads of the compiled backend's duplicate merge and face pass (-1: every
+        core); the result does not depend on it.
 
     Returns
     -------
@@ -158,7 +158,7 @@ def _clean_compiled(geometry: Geometry, workers: int) -> CleanGeometry:
     faces with ``DoubleArea <= 0`` (a face using a merged vertex twice is one);
     ``meshing_remove_unreferenced_vertices`` then compacts, keeping the order.
     """
-    to_input, from_input, merged = _kernels.merge_duplicates(geometry.vertices)
+    to_input, from_input, merged = _kernels.merge_duplicates(geometry.vertices, workers)
     if not geometry.is_mesh:
         return CleanGeometry(vertices=merged, faces=None, to_input=to_input, from_input=from_input)
     distinct = len(to_input) == len(from_input)
