@@ -50,7 +50,12 @@ class CleanGeometry:
         """Scatter per-cleaned-vertex ``values`` (m, ...) to input order (n, ...).
 
         Input vertices merged into a duplicate take its value; dropped ones get ``fill``.
+        When cleaning merged and dropped nothing (m == n: the orders are the same),
+        ``values`` itself, not a copy (a cloud's three outputs gathered through the
+        identity took 9 ms at 1M points).
         """
+        if len(self.to_input) == len(self.from_input):
+            return values
         if len(self.from_input) and self.from_input.min() >= 0:
             return values[self.from_input]  # none dropped: one gather (a third faster)
         out = np.full((len(self.from_input), *values.shape[1:]), fill, dtype=values.dtype)
