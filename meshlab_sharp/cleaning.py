@@ -50,7 +50,12 @@ class CleanGeometry:
         """Scatter per-cleaned-vertex ``values`` (m, ...) to input order (n, ...).
 
         Input vertices merged into a duplicate take its value; dropped ones get ``fill``.
+        When cleaning merged and dropped nothing (m == n: the orders are the same),
+        ``values`` itself, not a copy (a cloud's three outputs gathered through the
+        identity took 9 ms at 1M points).
         """
+        if len(self.to_input) == len(self.from_input):
+            return values
         if len(self.from_input) and self.from_input.min() >= 0:
             return values[self.from_input]  # none dropped: one gather (a third faster)
         out = np.full((len(self.from_input), *values.shape[1:]), fill, dtype=values.dtype)
@@ -100,8 +105,8 @@ def clean(geometry: Geometry, *, backend: str | None = None, workers: int = 1) -
         coordinates in C and vcg's zero-area test, same survivors, same faces.
         Default: :func:`meshlab_sharp._kernels.default_backend`.
     workers : int, default 1
-        Threads of the compiled backend's face pass (-1: every core); the result
-        does not depend on it.
+        Threads of the compiled backend's duplicate merge and face pass (-1: every
+        core); the result does not depend on it.
 
     Returns
     -------
@@ -158,7 +163,7 @@ def _clean_compiled(geometry: Geometry, workers: int) -> CleanGeometry:
     faces with ``DoubleArea <= 0`` (a face using a merged vertex twice is one);
     ``meshing_remove_unreferenced_vertices`` then compacts, keeping the order.
     """
-    to_input, from_input, merged = _kernels.merge_duplicates(geometry.vertices)
+    to_input, from_input, merged = _kernels.merge_duplicates(geometry.vertices, workers)
     if not geometry.is_mesh:
         return CleanGeometry(vertices=merged, faces=None, to_input=to_input, from_input=from_input)
     distinct = len(to_input) == len(from_input)

@@ -87,3 +87,23 @@ def test_the_callers_arrays_are_never_written(kind: str, mode: str) -> None:
     np.testing.assert_array_equal(vertices, before[0])
     if faces is not None:
         np.testing.assert_array_equal(faces, before[1])
+
+
+@pytest.mark.parametrize("backend", ["numpy", "compiled"])
+def test_to_input_order_is_a_gather_through_from_input(backend: str) -> None:
+    """``to_input_order`` is ``values[from_input]`` (``fill`` where dropped): with nothing
+    merged or dropped, ``values`` itself; with merges, with drops, a new array."""
+    vertices, faces = shapes.cube_grid_mesh(4)
+    extra = np.array([[5.0, 5.0, 5.0], [1.0, 1.0, 1.0]])  # isolated; a corner's duplicate
+    cases = {
+        "as is": (vertices, None),
+        "merged": (np.concatenate([vertices, vertices[:7]]), None),
+        "dropped": (np.concatenate([extra, vertices]), faces + len(extra)),
+    }
+    for name, (v, f) in cases.items():
+        c = clean(as_geometry(v, f), backend=backend)
+        values = np.arange(len(c.vertices), dtype=np.float64) * 0.5
+        expected = np.where(c.from_input >= 0, values[c.from_input], -1.0)
+        got = c.to_input_order(values, -1.0)
+        assert got.tobytes() == expected.tobytes(), name
+        assert (got is values) == (name == "as is"), name

@@ -155,8 +155,8 @@ Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool 
 	const Index n = Index(v.size() / 3);
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
-	std::vector<int32_t> table(size, -1);
-	std::vector<Index> toInput(n), fromInput(n);
+	std::vector<uint64_t> table(size);  // scratch (ms_dedup clears it)
+	std::vector<Index> toInput(n), fromInput(n);  // fromInput: all 0, as ms_dedup needs
 	Clean c;
 	c.pts.resize(3 * n);
 	const Index m = ms_dedup(v.data(), n, table.data(), size - 1, fromInput.data(), toInput.data(), c.pts.data());
