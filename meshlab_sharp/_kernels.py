@@ -720,15 +720,7 @@ def cloud_projected_distances(
             near=st.near, kth_d2=st.kth_d2, kth_idx=st.kth_idx, noise=st.noise, noise_k=noise_k
         )
     if sheet is not None:
-        gap, minimum, own, column, column_gap, far_span, trim, trim_cos = sheet
-        fields.update(sheet_gap=float(gap), sheet_min=int(minimum), sheet_own=float(own))
-        fields.update(
-            sheet_column=float(column),
-            sheet_column_gap=float(column_gap),
-            sheet_far_span=float(far_span),
-            sheet_trim=float(trim),
-            sheet_trim_cos=float(trim_cos),
-        )
+        fields.update(_sheet_fields(sheet))
     kept = _PER_SCALE + _STATS if tree_order else ()
     _cloud_call(tree, ks, weighting == "gaussian", workers, rows, kept, **fields)
     if tree_order:
@@ -736,6 +728,22 @@ def cloud_projected_distances(
         if out.stats is not None:
             out.stats.tree = tree
     return out
+
+
+def _sheet_fields(sheet: SheetParameters) -> dict[str, float | int]:
+    """The ``sheet_*`` fields of :class:`_CloudOut` from
+    :func:`meshlab_sharp.robust.sheet_parameters`' tuple."""
+    gap, minimum, own, column, column_gap, far_span, trim, trim_cos = sheet
+    return {
+        "sheet_gap": float(gap),
+        "sheet_min": int(minimum),
+        "sheet_own": float(own),
+        "sheet_column": float(column),
+        "sheet_column_gap": float(column_gap),
+        "sheet_far_span": float(far_span),
+        "sheet_trim": float(trim),
+        "sheet_trim_cos": float(trim_cos),
+    }
 
 
 def sheet_mask(
@@ -757,17 +765,7 @@ def sheet_mask(
     normals = np.ascontiguousarray(normals, dtype=np.float64)
     n, k = indices.shape
     keep = np.empty((n, k), dtype=np.bool_)
-    gap, minimum, own, column, column_gap, far_span, trim, trim_cos = parameters
-    spec = _CloudOut(
-        sheet_gap=float(gap),
-        sheet_min=int(minimum),
-        sheet_own=float(own),
-        sheet_column=float(column),
-        sheet_column_gap=float(column_gap),
-        sheet_far_span=float(far_span),
-        sheet_trim=float(trim),
-        sheet_trim_cos=float(trim_cos),
-    )
+    spec = _CloudOut(**_sheet_fields(parameters))
     args = (_ptr(points), _ptr(indices), k, _ptr(normals), ctypes.byref(spec))
     _run_chunks(n, workers, lambda a, b: lib.ms_sheet_mask(*args, a, b, _ptr(keep)))
     return keep
