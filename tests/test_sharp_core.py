@@ -18,9 +18,11 @@ import shapes
 
 import meshlab_sharp
 from evaluation import groundtruth
-from meshlab_sharp import _header
+from meshlab_sharp import _header, _kernels
+from meshlab_sharp.cleaning import clean
 from meshlab_sharp.cli import parse_scales
 from meshlab_sharp.errors import InputError
+from meshlab_sharp.io.geometry import Geometry
 from meshlab_sharp.pipeline import MIN_KNN_SCALE
 from meshlab_sharp.sample import sample_part
 
@@ -117,6 +119,9 @@ def _case(name: str) -> tuple[np.ndarray, np.ndarray | None, dict[str, object]]:
     if name == "fold-mesh-shuffled":  # 80,601 vertices: the ring pass renumbers them
         v, f, _ = shapes.fold_mesh(90.0, m=200)
         return (*shapes.shuffled_mesh(v, f, seed=6), {})
+    if name == "fold-mesh-grid-numbered":  # the ring pass takes most searches from the last
+        v, f, _ = shapes.fold_mesh(60.0, m=60)
+        return (*shapes.noisy_mesh(v, f, 0.05, seed=4), {})
     if name == "cube-mesh-rings-1-6":
         v, f = shapes.cube_grid_mesh(3)
         return v, f, {"scales": (1, 2, 3, 4, 5, 6)}
@@ -136,6 +141,7 @@ CASES = [
     "fandisk-mesh",
     "cube-mesh-rings-1-6",
     "fold-mesh-shuffled",
+    "fold-mesh-grid-numbered",
 ]
 
 
@@ -173,6 +179,15 @@ def test_the_core_agrees_with_python(driver, tmp_path, case, mode):
     assert expected.n_features > 0
     if case == "noise50" and mode == "robust":
         assert expected.scales[0] > 12
+
+
+def test_the_grid_numbered_case_takes_the_shifted_search():
+    """The agreement case above where the kernel's ring pass takes a vertex's search from
+    the previous vertex's (ms_shifted_lists), which the plugin core asks for too."""
+    vertices, faces, _ = _case("fold-mesh-grid-numbered")
+    cleaned = clean(Geometry(vertices, faces, "fold"))
+    shifted = _kernels.shifted_lists(*_kernels.adjacency(cleaned.faces, len(cleaned.vertices)))
+    assert shifted.mean() > 0.9
 
 
 def test_the_progress_bar_moves(driver, tmp_path):
