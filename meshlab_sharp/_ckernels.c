@@ -344,9 +344,10 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     v4i vm = {mi[0], mi[1], mi[2], mi[3]};
     v4d c00 = v4_set1(0.0), c01 = c00, c02 = c00, c11 = c00, c12 = c00, c22 = c00;
     v4i vj = {0, 0, 0, 0};
-    /* the weights first, then their sums: each exp is a chain of 16 dependent fused
-     * multiply-adds, and a loop of exps alone keeps more of them in flight (the same
-     * operations: 2.2 against 2.9 us a point for the pass's 8 scales, this host) */
+    /* the weights first, then their sums (the same operations): each exp is a chain of
+     * 16 dependent fused multiply-adds, and a loop of exps alone keeps more of them in
+     * flight than one that also holds the sums (the pass's 8 scales: 0.68 against 0.84
+     * us a point, docs/perf-cloud11.md) */
     v4d_mem *w4 = (v4d_mem *)ws;
     for (int64_t j = 0; j < mmax; j++) w4[j] = v4_exp(d2[j] / vh2);
     for (int64_t j = 0; j < mmax; j++, vj += 1) {
