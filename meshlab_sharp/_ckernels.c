@@ -220,6 +220,8 @@ static inline double neighbourhood_pdis(const double *q, const double *d2, int64
 typedef double v4d __attribute__((vector_size(32)));
 typedef int64_t v4i __attribute__((vector_size(32)));
 typedef uint64_t v4u __attribute__((vector_size(32)));
+/* a v4d in memory at any 8-byte alignment (malloc's buffers) */
+typedef double v4d_mem __attribute__((vector_size(32), aligned(8)));
 #define PCA_LANES 4
 #define LANES_INLINE static inline __attribute__((always_inline))
 
@@ -323,10 +325,10 @@ LANES_INLINE v4d v4_eig_scale(v4d a, v4d b, v4d c, v4d d, v4d e, v4d f) {
  * (m, 3) with squared lengths d2, mean mean[3 l ..], weighted by exp(-d2 / h2[l]) when
  * gaussian and h2[l] > 0 (else 1; v4_exp): the weighted scatter summed in order from
  * the first offset with fused multiply-adds, then smallest_eigvec's closed form (its
- * angle by v4_cos_third_acos). */
+ * angle by v4_cos_third_acos). ws: room for 4 max(m) doubles (the weights). */
 LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_t *m,
                                  const double *mean, const double *h2, int count, int gaussian,
-                                 double *nrm) {
+                                 double *ws, double *nrm) {
     double mm[3][PCA_LANES] = {{0}}, hh[PCA_LANES] = {0};
     int64_t mi[PCA_LANES] = {0}, mmax = 0;
     for (int l = 0; l < count; l++) {
@@ -342,10 +344,16 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     v4i vm = {mi[0], mi[1], mi[2], mi[3]};
     v4d c00 = v4_set1(0.0), c01 = c00, c02 = c00, c11 = c00, c12 = c00, c22 = c00;
     v4i vj = {0, 0, 0, 0};
+    /* the weights first, then their sums (the same operations): each exp is a chain of
+     * 16 dependent fused multiply-adds, and a loop of exps alone keeps more of them in
+     * flight than one that also holds the sums (the pass's 8 scales: 0.68 against 0.84
+     * us a point, docs/perf-cloud11.md) */
+    v4d_mem *w4 = (v4d_mem *)ws;
+    for (int64_t j = 0; j < mmax; j++) w4[j] = v4_exp(d2[j] / vh2);
     for (int64_t j = 0; j < mmax; j++, vj += 1) {
         /* the weight, 0 past each lane's m (there the exponent may lie outside exp's
          * range: -d2 / h2 is in [-1, 0] only over the lane's own m offsets) */
-        v4d w = (v4d)((v4i)v4_exp(d2[j] / vh2) & (vj < vm));
+        v4d w = (v4d)((v4i)w4[j] & (vj < vm));
         v4d rx = q[3 * j] - mx, ry = q[3 * j + 1] - my, rz = q[3 * j + 2] - mz;
         v4d sx = w * rx, sy = w * ry, sz = w * rz;
         c00 = v4_fma(sx, rx, c00);
@@ -399,12 +407,12 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
 }
 
 typedef void (*pca_lanes_fn)(const double *, const double *, const int64_t *, const double *,
-                             const double *, int, int, double *);
+                             const double *, int, int, double *, double *);
 
 static void pca_lanes_plain(const double *q, const double *d2, const int64_t *m,
                             const double *mean, const double *h2, int count, int gaussian,
-                            double *nrm) {
-    pca_lanes_body(q, d2, m, mean, h2, count, gaussian, nrm);
+                            double *ws, double *nrm) {
+    pca_lanes_body(q, d2, m, mean, h2, count, gaussian, ws, nrm);
 }
 
 #ifdef HAVE_AVX2_PATH
@@ -413,8 +421,9 @@ __attribute__((target("avx2,fma"))) static void pca_lanes_avx2(const double *q,
                                                                const int64_t *m,
                                                                const double *mean,
                                                                const double *h2, int count,
-                                                               int gaussian, double *nrm) {
-    pca_lanes_body(q, d2, m, mean, h2, count, gaussian, nrm);
+                                                               int gaussian, double *ws,
+                                                               double *nrm) {
+    pca_lanes_body(q, d2, m, mean, h2, count, gaussian, ws, nrm);
 }
 #endif
 
@@ -428,13 +437,14 @@ static pca_lanes_fn pca_lanes(void) {
 }
 
 /* The normals snrm (3 a scale) of the scales [s0, s1) of one point (mk, smean, sh2 as
- * scale_means gives them), PCA_LANES at a time. */
+ * scale_means gives them), PCA_LANES at a time; ws: room for PCA_LANES mk[s1 - 1]
+ * doubles. */
 static void pca_scales(pca_lanes_fn pca, const double *q, const double *d2, const int64_t *mk,
                        const double *smean, const double *sh2, int s0, int s1, int gaussian,
-                       double *snrm) {
+                       double *ws, double *snrm) {
     for (int s = s0; s < s1; s += PCA_LANES) {
         int count = s1 - s < PCA_LANES ? s1 - s : PCA_LANES;
-        pca(q, d2, mk + s, smean + 3 * s, sh2 + s, count, gaussian, snrm + 3 * s);
+        pca(q, d2, mk + s, smean + 3 * s, sh2 + s, count, gaussian, ws, snrm + 3 * s);
     }
 }
 
@@ -2058,6 +2068,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     double *smean = (double *)malloc((size_t)nscales * 7 * sizeof(double));
     double *snrm = smean ? smean + 3 * nscales : NULL, *sh2 = smean ? smean + 6 * nscales : NULL;
     double *soa = (double *)malloc((size_t)kmax * 4 * sizeof(double));
+    double *ws = (double *)malloc((size_t)kmax * PCA_LANES * sizeof(double)); /* weights */
     double *ell = (double *)malloc((size_t)nscales * 2 * sizeof(double)); /* l, then o */
     double *hs = (double *)malloc((size_t)kmax * 2 * sizeof(double));
     int64_t *order = (int64_t *)malloc((size_t)kmax * sizeof(int64_t));
@@ -2065,7 +2076,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
     const sheet_params_t sheet = sheet_params(out);
     int64_t *mk = (int64_t *)malloc((size_t)nscales * sizeof(int64_t));
     int rc = 0;
-    if (cur_rc || !q || !d2 || !smean || !soa || !ell || !hs || !order || !keep || !mk) {
+    if (cur_rc || !q || !d2 || !smean || !soa || !ws || !ell || !hs || !order || !keep || !mk) {
         rc = -1;
         goto done;
     }
@@ -2095,7 +2106,8 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         if (out->sheet_gap > 0.0) {
             /* the largest scale's normal for the filter, and the next ones' beside it */
             known = !pdis_wanted ? 1 : nscales < PCA_LANES ? nscales : PCA_LANES;
-            pca_scales(pca, q, d2, mk, smean, sh2, nscales - known, nscales, gaussian, snrm);
+            pca_scales(pca, q, d2, mk, smean, sh2, nscales - known, nscales, gaussian, ws,
+                       snrm);
             if (sheet_keep(q, d2, kmax, snrm + 3 * (nscales - 1), &sheet, hs, order, keep) > 0) {
                 known = 0;
                 means = 0;
@@ -2123,7 +2135,7 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         double score = 0.0;
         if (!means) scale_means(q, d2, mk, nscales, smean, sh2);
         /* the scales whose normals are still to do, PCA_LANES at a time */
-        pca_scales(pca, q, d2, mk, smean, sh2, 0, nscales - known, gaussian, snrm);
+        pca_scales(pca, q, d2, mk, smean, sh2, 0, nscales - known, gaussian, ws, snrm);
         for (int s = 0; s < nscales; s++) {
             const double *mean = smean + 3 * s, *nv = snrm + 3 * s;
             double pd = fabs(mean[0] * nv[0] + mean[1] * nv[1] + mean[2] * nv[2]);
@@ -2146,6 +2158,7 @@ done:
     free(d2);
     free(smean);
     free(soa);
+    free(ws);
     free(ell);
     free(hs);
     free(order);
