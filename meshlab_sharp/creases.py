@@ -107,11 +107,14 @@ def _angles(dot: np.ndarray) -> np.ndarray:
     where ``dot`` is not ``>= 1``: there it clamps to 1 and ``acos(1)`` is exactly +0
     (C99 Annex F.9.1.1; ``tests/test_robust_steps.py`` checks NumPy's). Two faces in one
     plane mostly give exactly 1 (99.6 % of the 1M bench mesh's 3 M edges), and the arc
-    cosines were most of this function's time (24 ms there, 5 ms now)."""
-    turned = np.flatnonzero(np.logical_not(dot >= 1.0))  # NaN stays NaN, as before
-    angles = np.arccos(np.clip(dot[turned], -1.0, 1.0))
-    dot.fill(0.0)
-    dot[turned] = angles
+    cosines were most of this function's time (24 ms there, 4 ms now). In blocks of
+    ``_BLOCK``: no temporary as long as ``dot`` (fresh pages: 2.5 us each)."""
+    for i in range(0, len(dot), _BLOCK):
+        block = dot[i : i + _BLOCK]
+        turned = np.flatnonzero(np.logical_not(block >= 1.0))  # NaN stays NaN, as before
+        angles = np.arccos(np.clip(block[turned], -1.0, 1.0))
+        block.fill(0.0)
+        block[turned] = angles
     return dot
 
 

@@ -383,13 +383,14 @@ def test_a_point_between_two_candidates_is_an_acute_tip():
 def test_crease_angles_are_numpys_arc_cosines_bit_for_bit():
     """``creases._angles`` takes the arc cosine only below 1 and writes +0 elsewhere: the
     same bits as ``np.arccos(np.clip(dot, -1, 1))`` (acos(1) is +0) on dots of exactly 1,
-    just above and below 1 and -1, beyond both, NaN, and random values; an empty input."""
-    from meshlab_sharp.creases import _angles
+    just above and below 1 and -1, beyond both, NaN, and random values, over several of its
+    blocks; an empty input."""
+    from meshlab_sharp.creases import _BLOCK, _angles
 
     rng = np.random.default_rng(11)
     edge = [1.0, np.nextafter(1.0, 2.0), np.nextafter(1.0, 0.0), 1.5, -1.0, -1.5]
     edge += [np.nextafter(-1.0, 0.0), np.nextafter(-1.0, -2.0), np.nan, 0.0, -0.0]
-    dot = np.concatenate([edge, rng.uniform(-1.2, 1.2, 5000), np.ones(3000)])
+    dot = np.concatenate([edge, rng.uniform(-1.2, 1.2, 5000), np.ones(2 * _BLOCK)])
     dot = dot[rng.permutation(len(dot))]
     expected = np.arccos(np.clip(dot, -1.0, 1.0))
     assert np.signbit(expected[dot >= 1.0]).sum() == 0 and (expected[dot >= 1.0] == 0).all()
