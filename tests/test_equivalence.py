@@ -1228,3 +1228,18 @@ def test_sheet_filter_is_numpys():
             totals[key] = totals.get(key, 0) + count
     assert dropping > 0 and whole > 0
     assert all(count > 0 for count in totals.values()), totals
+
+
+@pytest.mark.parametrize("n_faces", [0, 1, 40])
+def test_adjacency_with_vertices_no_face_lists(n_faces):
+    """ms_adjacency (its cursors kept in the CSR starts themselves, moved up one place
+    after the fill) gives face_order_adjacency's lists where the first, a middle and the
+    last vertex have no face, with no face, one face, and faces of a shuffled grid."""
+    vertices, faces = cube_grid_mesh(3)
+    faces = faces[np.random.default_rng(7).permutation(len(faces))][:n_faces]
+    n = len(vertices) + 3
+    faces = np.where(faces >= len(vertices) // 2, faces + 2, faces + 1)  # 0, mid, n - 1 unused
+    indptr, indices = _kernels.adjacency(faces, n)
+    reference = face_order_adjacency(faces, n)
+    assert np.array_equal(reference[0], indptr) and np.array_equal(reference[1], indices)
+    assert indptr[1] == 0 and indptr[-1] == indptr[-2]
