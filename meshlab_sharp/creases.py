@@ -106,9 +106,10 @@ def _angles(dot: np.ndarray) -> np.ndarray:
     The same bits as ``np.arccos(np.clip(dot, -1, 1))``, with the arc cosine taken only
     where ``dot`` is not ``>= 1``: there it clamps to 1 and ``acos(1)`` is exactly +0
     (C99 Annex F.9.1.1; ``tests/test_robust_steps.py`` checks NumPy's). Two faces in one
-    plane mostly give exactly 1 (99.6 % of the 1M bench mesh's 3 M edges), and the arc
-    cosines were most of this function's time (24 ms there, 4 ms now). In blocks of
-    ``_BLOCK``: no temporary as long as ``dot`` (fresh pages: 2.5 us each)."""
+    plane mostly give exactly 1 (99.6 % of the 1M bench mesh's 3 M edges; the arc cosines
+    of all of them took 24 ms, 4 ms this way; the compiled :func:`sharp_vertices` hands
+    over the others only, :func:`dihedral_angles` all). In blocks of ``_BLOCK``: no
+    temporary as long as ``dot`` (fresh pages: 2.5 us each)."""
     for i in range(0, len(dot), _BLOCK):
         block = dot[i : i + _BLOCK]
         turned = np.flatnonzero(np.logical_not(block >= 1.0))  # NaN stays NaN, as before

@@ -499,10 +499,10 @@ def _neighbourhoods_and_normals(
     ``tree``: a cloud's kd-tree, being built (:func:`_clean_beside_tree`). Unless
     ``workers`` is 1, with the compiled backend (single-threaded C calls that release the
     GIL) the work is split between two threads: in paper mode the normals beside the
-    adjacency; in robust mode the sharp edges (the longest: 0.14 s on the 1M bench mesh)
+    adjacency; in robust mode the sharp edges (the longest: 0.12 s on the 1M bench mesh)
     beside the adjacency and then the normals (0.07 + 0.06 s). Three threads on two
     cores, each call on its own, made the sharp edges share a core for their first
-    0.1 s and end about 15 ms later."""
+    0.1 s and end later (about 10-15 ms)."""
     if faces is None:
         built = None if tree is None else tree.result()
         neighbourhoods = build_neighbourhoods(points, None, scales, workers=workers, tree=built)
