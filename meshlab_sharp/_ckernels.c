@@ -2260,33 +2260,38 @@ int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32
     for (int64_t f = 0; f < 3 * m; f++) {
         if (faces[f] < 0 || faces[f] >= n) return -2;
     }
-    int64_t *fill = (int64_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
-    if (fill == NULL) return -1;
+    /* the last vertex listing each vertex (n < 2^31: idx holds int32 vertices) */
+    int32_t *last = (int32_t *)malloc((size_t)(n > 0 ? n : 1) * sizeof(int32_t));
+    if (last == NULL) return -1;
+    /* ptr[v + 1] counts v's entries, then (summed) is v's end, so ptr[v] is v's start:
+     * the fill moves it to v's end, one place below where the CSR wants it (moved up
+     * after). No fill array beside ptr: 8 bytes a vertex less, and no copy of ptr. */
     memset(ptr, 0, (size_t)(n + 1) * sizeof(int64_t));
     for (int64_t f = 0; f < 3 * m; f++) ptr[faces[f] + 1] += 2;
     for (int64_t v = 0; v < n; v++) ptr[v + 1] += ptr[v];
-    memcpy(fill, ptr, (size_t)n * sizeof(int64_t));
     for (int64_t f = 0; f < m; f++) {
         int64_t a = faces[3 * f], b = faces[3 * f + 1], c = faces[3 * f + 2];
-        idx[fill[a]++] = (int32_t)b; idx[fill[a]++] = (int32_t)c;
-        idx[fill[b]++] = (int32_t)a; idx[fill[b]++] = (int32_t)c;
-        idx[fill[c]++] = (int32_t)a; idx[fill[c]++] = (int32_t)b;
+        idx[ptr[a]++] = (int32_t)b; idx[ptr[a]++] = (int32_t)c;
+        idx[ptr[b]++] = (int32_t)a; idx[ptr[b]++] = (int32_t)c;
+        idx[ptr[c]++] = (int32_t)a; idx[ptr[c]++] = (int32_t)b;
     }
-    /* compact in place, first occurrences only (fill: the last vertex listing each) */
-    for (int64_t v = 0; v < n; v++) fill[v] = -1;
+    memmove(ptr + 1, ptr, (size_t)n * sizeof(int64_t));
+    ptr[0] = 0;
+    /* compact in place, first occurrences only */
+    for (int64_t v = 0; v < n; v++) last[v] = -1;
     int64_t w = 0, start = 0;
     for (int64_t v = 0; v < n; v++) {
         int64_t stop = ptr[v + 1];
         for (int64_t t = start; t < stop; t++) {
             int32_t x = idx[t];
             idx[w] = x;
-            w += fill[x] != v;
-            fill[x] = v;
+            w += last[x] != (int32_t)v;
+            last[x] = (int32_t)v;
         }
         start = stop;
         ptr[v + 1] = w;
     }
-    free(fill);
+    free(last);
     return 0;
 }
 
@@ -2909,11 +2914,13 @@ int ms_vertex_faces(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, in
 
 /* The two-face edges (a, b), a < b, of the vertices a in [a0, a1) of ms_vertex_faces'
  * lists, in the order both crease functions meet them: a increasing, then a's faces in
- * order, then the face's corners after a's; each edge where its first face lists it,
- * numbered from e. With mask NULL, the dot products of the two faces' unit normals
- * (face_normal, the lower face first, as ms_two_face_edges) into dot, and the number of
- * the first edge of each vertex into estart (n + 1); else the vertices of the edges whose
- * angle[e] > threshold marked in mask. Returns the number after the last edge. A vertex's
+ * order, then the face's corners after a's; each edge where its first face lists it.
+ * The dot product of its two faces' unit normals (face_normal, the lower face first, as
+ * ms_two_face_edges) sorts it: turned (not >= 1), numbered from e, or flat (>= 1: an
+ * angle of exactly 0, most of a mesh's edges), counted in *flat and not numbered. With
+ * mask NULL, the turned edges' dot products into dot and the number of the first turned
+ * edge of each vertex into estart (n + 1); else the vertices of the turned edges whose
+ * angle[e] > threshold marked in mask. Returns the number after the last turned edge. A vertex's
  * faces and their two other corners are read once into a small table (a fan of more than
  * CREASE_FAN faces: read from faces). The face normals go through `cache` when not NULL
  * (normal_cache). */
@@ -2943,7 +2950,7 @@ static inline void normal_cache(cached_normal_t *cache, const double *p, const i
 static int64_t crease_walk(const double *p, const int64_t *faces, int64_t a0, int64_t a1,
                            const int64_t *ptr, const int32_t *inc, int64_t e, double *dot,
                            int64_t *estart, const double *angle, double threshold, uint8_t *mask,
-                           cached_normal_t *cache) {
+                           cached_normal_t *cache, int64_t *flat) {
     int64_t other[2 * CREASE_FAN];
     for (int64_t a = a0; a < a1; a++) {
         if (estart != NULL) estart[a] = e;
@@ -2989,16 +2996,21 @@ static int64_t crease_walk(const double *p, const int64_t *faces, int64_t a0, in
                     second = fa[j];
                 }
                 if (seen || count != 2) continue;
+                double u[3], w[3];
+                if (cache != NULL) {
+                    normal_cache(cache, p, faces, fa[i], u);
+                    normal_cache(cache, p, faces, second, w);
+                } else {
+                    face_normal(p, faces, fa[i], u);
+                    face_normal(p, faces, second, w);
+                }
+                const double d = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+                if (d >= 1.0) {
+                    if (flat != NULL) ++*flat;
+                    continue;
+                }
                 if (mask == NULL) {
-                    double u[3], w[3];
-                    if (cache != NULL) {
-                        normal_cache(cache, p, faces, fa[i], u);
-                        normal_cache(cache, p, faces, second, w);
-                    } else {
-                        face_normal(p, faces, fa[i], u);
-                        face_normal(p, faces, second, w);
-                    }
-                    dot[e] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+                    dot[e] = d;
                 } else if (angle[e] > threshold) {
                     mask[a] = 1;
                     mask[b] = 1;
@@ -3012,24 +3024,27 @@ static int64_t crease_walk(const double *p, const int64_t *faces, int64_t a0, in
 }
 
 int64_t ms_crease_dots(const double *p, const int64_t *faces, int64_t n, const int64_t *ptr,
-                       const int32_t *inc, double *dot, int64_t *estart) {
+                       const int32_t *inc, double *dot, int64_t *estart, int64_t *flat) {
     /* without room for the cache (256 KB), each normal is computed where it is used */
     cached_normal_t *cache = (cached_normal_t *)malloc(NORMAL_CACHE * sizeof(cached_normal_t));
     for (int64_t k = 0; cache != NULL && k < NORMAL_CACHE; k++) cache[k].face = -1;
-    const int64_t e = crease_walk(p, faces, 0, n, ptr, inc, 0, dot, estart, NULL, 0.0, NULL, cache);
+    *flat = 0;
+    const int64_t e = crease_walk(p, faces, 0, n, ptr, inc, 0, dot, estart, NULL, 0.0, NULL, cache, flat);
     free(cache);
     return e;
 }
 
-void ms_crease_mask(const int64_t *faces, int64_t n, const int64_t *ptr, const int32_t *inc,
-                    const int64_t *estart, const double *angle, double threshold, uint8_t *mask) {
-    /* only the vertices with an edge above the threshold are walked again */
+void ms_crease_mask(const double *p, const int64_t *faces, int64_t n, const int64_t *ptr,
+                    const int32_t *inc, const int64_t *estart, const double *angle, double threshold,
+                    uint8_t *mask) {
+    /* only the vertices with an edge above the threshold are walked again (their normals
+     * computed again, to tell the turned edges from the flat ones) */
     for (int64_t a = 0; a < n; a++) {
         int64_t k = estart[a];
         while (k < estart[a + 1] && !(angle[k] > threshold)) k++;
         if (k < estart[a + 1])
-            crease_walk(NULL, faces, a, a + 1, ptr, inc, estart[a], NULL, NULL, angle, threshold, mask,
-                        NULL);
+            crease_walk(p, faces, a, a + 1, ptr, inc, estart[a], NULL, NULL, angle, threshold, mask,
+                        NULL, NULL);
     }
 }
 

@@ -289,15 +289,17 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
  * (3 m; m < 2^31); returns 0 or -1 out of memory. ms_crease_dots: the dot products u . v
  * of the unit normals of the two faces of every edge with exactly two faces (the same
  * values as ms_two_face_edges', in another order: the lower vertex increasing, then its
- * faces in order) into dot (room for (3 m + 1) / 2), where each vertex's edges start
- * into estart (n + 1); returns their number. ms_crease_mask: the same edges; both
- * vertices of each edge whose angle[e] > threshold marked 1 in mask (n, zeroed by the
- * caller). */
+ * faces in order), those not >= 1 ("turned") into dot (room for (3 m + 1) / 2), where
+ * each vertex's turned edges start into estart (n + 1), and the number of the others
+ * (flat: their angle acos(min(u . v, 1)) is exactly 0) into *flat; returns the number of
+ * turned edges. ms_crease_mask: the same turned edges; both vertices of each edge whose
+ * angle[e] > threshold marked 1 in mask (n, zeroed by the caller). */
 int ms_vertex_faces(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32_t *inc);
 int64_t ms_crease_dots(const double *p, const int64_t *faces, int64_t n, const int64_t *ptr,
-                       const int32_t *inc, double *dot, int64_t *estart);
-void ms_crease_mask(const int64_t *faces, int64_t n, const int64_t *ptr, const int32_t *inc,
-                    const int64_t *estart, const double *angle, double threshold, uint8_t *mask);
+                       const int32_t *inc, double *dot, int64_t *estart, int64_t *flat);
+void ms_crease_mask(const double *p, const int64_t *faces, int64_t n, const int64_t *ptr,
+                    const int32_t *inc, const int64_t *estart, const double *angle, double threshold,
+                    uint8_t *mask);
 
 /* Merge exactly equal points (==, so -0.0 equals 0.0) into their first occurrence, on one
  * thread. table: (tmask + 1) uint64 scratch, tmask + 1 a power of two >= 2 n and

@@ -134,11 +134,11 @@ _SIGNATURES = {
     "ms_vertex_faces": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_crease_dots": (
         _i64,
-        [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
+        [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p],
     ),
     "ms_crease_mask": (
         None,
-        [_c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _c_void_p],
+        [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _c_void_p],
     ),
 }
 
@@ -997,14 +997,16 @@ def two_face_edges(faces: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, n
 def crease_vertices(
     points: np.ndarray,
     faces: np.ndarray,
-    angles_and_threshold: Callable[[np.ndarray], tuple[np.ndarray, float]],
+    angles_and_threshold: Callable[[np.ndarray, int], tuple[np.ndarray, float]],
 ) -> tuple[np.ndarray, float]:
     """The vertices of the edges with two faces that turn by more than a threshold, in
     less memory than :func:`two_face_edges` (no edge list): ``ms_crease_dots`` gives the
-    dot products (e,) of the edges' unit face normals, ``angles_and_threshold(dots) ->
-    (angles (e,), threshold)`` turns them into angles (it may overwrite ``dots``) and
-    the threshold, and ``ms_crease_mask`` marks the vertices of the edges whose angle
-    exceeds it, walking again only the vertices that have such an edge.
+    dot products (t,) of the turned edges' unit face normals (those not >= 1) and the
+    number of flat edges (their angle is exactly 0: most edges of a mesh, kept nowhere),
+    ``angles_and_threshold(dots, flat) -> (angles (t,), threshold)`` turns them into
+    angles (it may overwrite ``dots``) and the threshold of all the edges' angles, and
+    ``ms_crease_mask`` marks the vertices of the edges whose angle exceeds it, walking
+    again only the vertices that have such an edge.
 
     Returns
     -------
@@ -1022,17 +1024,19 @@ def crease_vertices(
     inc = np.empty(3 * m, dtype=np.int32)
     if lib.ms_vertex_faces(_ptr(faces), m, n, _ptr(ptr), _ptr(inc)) != 0:
         raise MemoryError("out of memory listing the faces of each vertex")
+    # room for every edge; only the turned ones' pages are touched (a CAD mesh: a few)
     dots = np.empty((3 * m + 1) // 2)
     estart = np.empty(n + 1, dtype=np.int64)
+    flat = np.zeros(1, dtype=np.int64)
     e = lib.ms_crease_dots(
-        _ptr(points), _ptr(faces), n, _ptr(ptr), _ptr(inc), _ptr(dots), _ptr(estart)
+        _ptr(points), _ptr(faces), n, _ptr(ptr), _ptr(inc), _ptr(dots), _ptr(estart), _ptr(flat)
     )
-    angles, threshold = angles_and_threshold(dots[:e])
+    angles, threshold = angles_and_threshold(dots[:e], int(flat[0]))
     angles = np.ascontiguousarray(angles, dtype=np.float64)
     mask = np.zeros(n, dtype=bool)
     lib.ms_crease_mask(
-        _ptr(faces), n, _ptr(ptr), _ptr(inc), _ptr(estart), _ptr(angles), float(threshold),
-        _ptr(mask),
+        _ptr(points), _ptr(faces), n, _ptr(ptr), _ptr(inc), _ptr(estart), _ptr(angles),
+        float(threshold), _ptr(mask),
     )  # fmt: skip
     return mask, float(threshold)
 

@@ -105,42 +105,46 @@ def _angles(dot: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(dot, -1.0, 1.0, out=dot), out=dot)
 
 
-def _angles_and_threshold(dot: np.ndarray) -> tuple[np.ndarray, float]:
-    """The angles (e,) of the dot products ``dot`` (overwritten) and their
-    :func:`crease_threshold`."""
+def _angles_and_threshold(dot: np.ndarray, flat: int) -> tuple[np.ndarray, float]:
+    """The angles (t,) of the turned edges' dot products ``dot`` (overwritten) and the
+    :func:`crease_threshold` of all the edges' angles: these and ``flat`` zeros."""
     angles = _angles(dot)
-    return angles, crease_threshold(angles)
+    return angles, crease_threshold(angles, zeros=flat)
 
 
-def crease_threshold(angles: np.ndarray) -> float:
+def crease_threshold(angles: np.ndarray, *, zeros: int = 0) -> float:
     """Radians: ``max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles)``.
 
     Parameters
     ----------
     angles : (e,) float64
         Dihedral angles of the mesh's two-face edges (radians).
+    zeros : int, default 0
+        How many more angles are 0 (edges left out of ``angles``, the compiled
+        :func:`sharp_vertices`' flat ones): the same threshold as with them in.
 
     Returns
     -------
     float
-        The lower quartile is element ``(e - 1) // 4`` of the angles sorted in increasing
-        order (``CREASE_ANGLE`` when there are none).
+        The lower quartile is element ``(e + zeros - 1) // 4`` of all the angles sorted in
+        increasing order (``CREASE_ANGLE`` when there are none).
     """
     floor = math.radians(CREASE_ANGLE)
-    if len(angles) == 0:
+    if len(angles) + zeros == 0:
         return floor
-    at = (len(angles) - 1) // 4
+    at = (len(angles) + zeros - 1) // 4
     # When more than ``at`` angles a give NOISE_FACTOR * a <= floor, so does the quartile
     # (rounding is monotonic) and the floor wins: no partial sort (most of a mesh's edges
-    # are flat).
+    # are flat; the zeros among them). Otherwise the zeros are the ``zeros`` smallest
+    # angles (at most ``at`` of them), and the quartile is among ``angles``.
     # (counted in blocks: no temporary as long as the angles)
-    below = sum(
+    below = zeros + sum(
         int(np.count_nonzero(NOISE_FACTOR * angles[i : i + _BLOCK] <= floor))
         for i in range(0, len(angles), _BLOCK)
     )
     if below > at:
         return floor
-    quartile = float(np.partition(angles, at)[at])
+    quartile = float(np.partition(angles, at - zeros)[at - zeros])
     return max(floor, NOISE_FACTOR * quartile)
 
 

@@ -367,11 +367,11 @@ class RingNeighbourhoods:
     backend : {"compiled", "numpy"}, optional
         Default: :func:`meshlab_sharp._kernels.default_backend`. The compiled backend
         keeps the 1-ring adjacency (``adjacency``) for a breadth-first search in C and
-        lists the rings only if ``at()`` is called.
+        lists the rings only if ``at()`` is called, and then does not keep ``faces``
+        (``detect`` frees them before the scales' pass: 48 bytes a vertex).
     """
 
     def __init__(self, faces: np.ndarray, n: int, *, backend: str | None = None) -> None:
-        self.faces = faces
         self.n = n
         self.backend = _kernels.resolve(backend)
         #: (indptr, indices) 1-ring adjacency, each neighbour once (compiled backend), else
@@ -379,6 +379,8 @@ class RingNeighbourhoods:
         self.adjacency: tuple[np.ndarray, np.ndarray] | None = None
         if self.backend == "compiled" and n < 2**31:
             self.adjacency = _kernels.adjacency(faces, n)
+        #: The faces, where the lists are made from them (numpy backend), else None.
+        self.faces = faces if self.adjacency is None else None
         self._ring = 0
         self._rings: Iterator[Neighbourhood] | None = None
         self._current: Neighbourhood | None = None
@@ -388,6 +390,7 @@ class RingNeighbourhoods:
         ``adjacency``, the same lists, when built)."""
         if self.adjacency is not None:
             return self.adjacency
+        assert self.faces is not None
         return face_order_adjacency(self.faces, self.n)
 
     def at(self, ring: int) -> Neighbourhood:

@@ -1189,7 +1189,8 @@ class RobustSetup:
         sharp_edges: np.ndarray | None = None,
     ) -> None:
         self.n = len(points)
-        self.faces = faces
+        #: A mesh's set-up (the faces themselves are not kept: 48 bytes a vertex).
+        self.mesh = faces is not None
         self.workers = workers
         self.scales = tuple(scales)
         self.keep = np.arange(self.n, dtype=np.int64)
@@ -1326,7 +1327,7 @@ class RobustSetup:
         SUPPORT_KNN, thin_knn and k_max nearest (clouds), the THIN_RING-ring twice and
         the largest ring (meshes)."""
         top = max(self.scales)
-        if self.faces is not None:
+        if self.mesh:
             return min(THIN_RING, top), min(THIN_RING, top), top
         return min(SUPPORT_KNN, top), min(thin_knn(self.growth), top), top
 
@@ -1362,7 +1363,7 @@ class RobustSetup:
     def _finish_numpy(self, mask: np.ndarray) -> np.ndarray:
         """:meth:`finish`'s acute tips, support and thinning of ``mask`` (p,) bool in
         numpy (the reference): the thinned mask (p,) bool."""
-        mesh = self.faces is not None
+        mesh = self.mesh
         around_k, compare_k, top = self._list_sizes()
         tests = acute_tests(self.rule.score, mask, mesh, self.noise)
         if len(tests):
@@ -1396,7 +1397,7 @@ class RobustSetup:
         with their lists from the kd-tree (one table of the k_max nearest of the
         candidates and the points tested as tips, read at every k) or the adjacency (the
         largest ring, its THIN_RING-ring a prefix): the same mask."""
-        mesh = self.faces is not None
+        mesh = self.mesh
         around_k, compare_k, top = self._list_sizes()
         lists = self.neighbourhoods
         if isinstance(lists, KnnNeighbourhoods):

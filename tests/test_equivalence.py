@@ -1087,25 +1087,30 @@ def test_sharp_vertices_identical(noise):
 
 
 @pytest.mark.parametrize("shuffle", [False, True])
-def test_crease_dots_are_the_face_pairs_dots(shuffle):
+@pytest.mark.parametrize("noise", [1e-3, 0.0])
+def test_crease_dots_are_the_face_pairs_dots(shuffle, noise):
     """``ms_crease_dots`` (its face normals through a direct-mapped cache of 8192 faces)
     gives the dot products of ``ms_two_face_edges`` (each normal computed where it is
-    used), bit for bit, as a multiset: on a noisy mesh of 49,152 faces, in their order and
-    shuffled (neighbouring faces far apart: evictions and collisions in the cache)."""
+    used), bit for bit, as a multiset: those not >= 1 listed, the others counted as flat;
+    on a mesh of 49,152 faces (noisy: few flat edges; clean: mostly flat), in their order
+    and shuffled (neighbouring faces far apart: evictions and collisions in the cache)."""
     vertices, faces = cube_grid_mesh(6)
-    vertices = vertices + np.random.default_rng(5).normal(0.0, 1e-3, vertices.shape)
+    vertices = vertices + np.random.default_rng(5).normal(0.0, noise, vertices.shape)
     if shuffle:
         faces = faces[np.random.default_rng(6).permutation(len(faces))]
     seen = []
 
-    def keep(dots):
-        seen.append(dots.copy())
+    def keep(dots, flat):
+        seen.append((dots.copy(), flat))
         return dots, np.inf
 
     _kernels.crease_vertices(vertices, faces, keep)
     _, expected = _kernels.two_face_edges(faces, vertices)
     assert len(expected) == len(faces) * 3 // 2
-    assert np.sort(seen[0]).tobytes() == np.sort(expected).tobytes()
+    dots, flat = seen[0]
+    turned = expected[~(expected >= 1.0)]
+    assert flat == len(expected) - len(turned) and (flat > len(turned)) == (noise == 0)
+    assert np.sort(dots).tobytes() == np.sort(turned).tobytes()
 
 
 @pytest.mark.parametrize("n", [1, 2, 1000])
@@ -1228,3 +1233,18 @@ def test_sheet_filter_is_numpys():
             totals[key] = totals.get(key, 0) + count
     assert dropping > 0 and whole > 0
     assert all(count > 0 for count in totals.values()), totals
+
+
+@pytest.mark.parametrize("n_faces", [0, 1, 40])
+def test_adjacency_with_vertices_no_face_lists(n_faces):
+    """ms_adjacency (its cursors kept in the CSR starts themselves, moved up one place
+    after the fill) gives face_order_adjacency's lists where the first, a middle and the
+    last vertex have no face, with no face, one face, and faces of a shuffled grid."""
+    vertices, faces = cube_grid_mesh(3)
+    faces = faces[np.random.default_rng(7).permutation(len(faces))][:n_faces]
+    n = len(vertices) + 3
+    faces = np.where(faces >= len(vertices) // 2, faces + 2, faces + 1)  # 0, mid, n - 1 unused
+    indptr, indices = _kernels.adjacency(faces, n)
+    reference = face_order_adjacency(faces, n)
+    assert np.array_equal(reference[0], indptr) and np.array_equal(reference[1], indices)
+    assert indptr[1] == 0 and indptr[-1] == indptr[-2]

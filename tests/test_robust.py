@@ -216,6 +216,26 @@ def test_crease_threshold_is_the_quartile_rule_when_the_floor_wins_early(below):
     assert creases.crease_threshold(angles) == max(floor, creases.NOISE_FACTOR * quartile)
 
 
+@pytest.mark.parametrize("zeros", [0, 1, 2, 3, 5, 9, 40])
+def test_crease_threshold_with_the_zeros_left_out_is_the_threshold_with_them(zeros):
+    """``crease_threshold(angles, zeros=z)`` (the compiled path leaves its flat edges'
+    zero angles out) is the threshold of the angles with ``z`` zeros among them: the
+    quartile among the zeros (the floor), just past them, or further; no angle but zeros;
+    angles under the floor's edge (the shortcut) and NaN."""
+    floor = math.radians(creases.CREASE_ANGLE)
+    rng = np.random.default_rng(zeros)
+    for angles in (
+        rng.random(11) * 0.8,
+        np.r_[np.full(4, floor / creases.NOISE_FACTOR), rng.random(7) * 0.5],
+        np.r_[rng.random(6) * 0.9, np.nan],
+        np.zeros(0),
+    ):
+        full = rng.permutation(np.r_[np.zeros(zeros), angles])
+        expected = creases.crease_threshold(full)
+        assert creases.crease_threshold(angles.copy(), zeros=zeros) == expected
+    assert creases.crease_threshold(np.full(3, 0.7), zeros=0) == creases.NOISE_FACTOR * 0.7
+
+
 def test_noisy_mesh_raises_the_threshold_and_still_finds_the_edges():
     part = gt.make_part("box", "mesh", n_points=1500)
     rng = np.random.default_rng(4)

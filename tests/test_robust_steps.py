@@ -378,3 +378,18 @@ def test_a_point_between_two_candidates_is_an_acute_tip():
     assert robust.acute_tips(right, np.array([False, True, True]), rows, lists).tolist() == [False]
     # no points tested: an empty answer
     assert robust.acute_tips(pts, mask, np.array([], np.int64), everything).size == 0
+
+
+def test_flat_edges_left_out_are_numpys_zero_angles():
+    """The compiled sharp edges count the edges whose dot product is >= 1 instead of
+    listing them, as angles of exactly +0 (``crease_threshold(..., zeros=...)``): what
+    ``np.arccos(np.clip(dot, -1, 1))`` gives them, sign included, alone and among other
+    values (NumPy's SIMD loops included); just below 1 the angle is positive."""
+    rng = np.random.default_rng(11)
+    flat = np.array([1.0, np.nextafter(1.0, 2.0), 1.5, np.inf])
+    for dot in (flat, rng.permutation(np.r_[np.tile(flat, 500), rng.uniform(-1.2, 1.0, 3000)])):
+        angles = np.arccos(np.clip(dot, -1.0, 1.0))
+        at_one = angles[dot >= 1.0]
+        assert len(at_one) and (at_one == 0.0).all() and not np.signbit(at_one).any()
+        assert (angles[~(dot >= 1.0)] > 0.0).all()
+    assert np.arccos(np.nextafter(1.0, 0.0)) > 0.0

@@ -361,17 +361,21 @@ std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<
 	std::vector<int32_t> inc(3 * F);
 	check(ms_vertex_faces(faces.data(), F, n, ptr.data(), inc.data()));
 	std::vector<double> angles((3 * F + 1) / 2);
-	angles.resize(ms_crease_dots(p.data(), faces.data(), n, ptr.data(), inc.data(), angles.data(), estart.data()));
+	int64_t flat = 0; // edges whose angle is exactly 0, left out of angles
+	angles.resize(ms_crease_dots(p.data(), faces.data(), n, ptr.data(), inc.data(), angles.data(), estart.data(), &flat));
 	for (double &a : angles) a = std::acos(std::min(1.0, std::max(-1.0, a)));
 	double theta = MS_CREASE_ANGLE * (M_PI / 180.0);
-	if (!angles.empty()) {
+	const size_t all = angles.size() + size_t(flat);
+	// the quartile is element (all - 1) / 4 of all the angles; the flat ones are the
+	// smallest (0: NOISE_FACTOR * 0 leaves theta at the floor)
+	if (all > 0 && (all - 1) / 4 >= size_t(flat)) {
 		std::vector<double> sorted = angles;
-		const size_t at = (sorted.size() - 1) / 4;
+		const size_t at = (all - 1) / 4 - size_t(flat);
 		std::nth_element(sorted.begin(), sorted.begin() + at, sorted.end());
 		theta = std::max(theta, MS_NOISE_FACTOR * sorted[at]);
 	}
 	std::vector<uint8_t> mask(n, 0);
-	ms_crease_mask(faces.data(), n, ptr.data(), inc.data(), estart.data(), angles.data(), theta, mask.data());
+	ms_crease_mask(p.data(), faces.data(), n, ptr.data(), inc.data(), estart.data(), angles.data(), theta, mask.data());
 	return std::vector<char>(mask.begin(), mask.end());
 }
 
