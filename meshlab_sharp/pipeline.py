@@ -17,7 +17,7 @@ import pymeshlab
 
 from . import _header, _kernels
 from ._pages import small_pages
-from .cleaning import CleanGeometry, clean
+from .cleaning import CleanGeometry, clean, in_local_order
 from .creases import sharp_vertices
 from .curves import Corners, Curve, extract_curves
 from .errors import InputError
@@ -365,11 +365,14 @@ def _detect(
     faces_in = geometry.faces if is_mesh else None
     same = unit is geometry.vertices and faces_in is geometry.faces
     to_clean = geometry if same else Geometry(unit, faces_in, geometry.source)
-    cleaned, tree = (
-        (clean(to_clean, workers=workers), None)
-        if is_mesh
-        else _clean_beside_tree(to_clean, workers)
-    )
+    adjacency = None
+    if is_mesh:
+        # renumbered once here when its order is scattered, so that every step reads
+        # nearby memory (the same bits: in_local_order)
+        cleaned, adjacency = in_local_order(clean(to_clean, workers=workers))
+        tree = None
+    else:
+        cleaned, tree = _clean_beside_tree(to_clean, workers)
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     points = cleaned.vertices
@@ -378,9 +381,15 @@ def _detect(
 
     t = time.perf_counter()
     neighbourhoods, normals, sharp_edges = _neighbourhoods_and_normals(
-        points, cleaned.faces if is_mesh else None, scales_t, workers, mode == "robust", tree
+        points,
+        cleaned.faces if is_mesh else None,
+        scales_t,
+        workers,
+        mode == "robust",
+        tree,
+        adjacency,
     )
-    del tree
+    del tree, adjacency
     robust = None
     work, work_neighbourhoods = points, neighbourhoods
     if mode == "robust":
@@ -489,11 +498,13 @@ def _neighbourhoods_and_normals(
     workers: int,
     robust: bool,
     tree: Future[_kernels.KdTree] | None = None,
+    adjacency: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[KnnNeighbourhoods | RingNeighbourhoods, np.ndarray | None, np.ndarray | None]:
     """:func:`build_neighbourhoods` and, on a mesh (``faces`` (m, 3) not None), the
     face-average normals (n, 3) and, when ``robust``, the sharp mesh edges' vertices
     (:func:`meshlab_sharp.creases.sharp_vertices`, (n,) bool); None for each on a cloud.
-    ``tree``: a cloud's kd-tree, being built (:func:`_clean_beside_tree`). Unless
+    ``tree``: a cloud's kd-tree, being built (:func:`_clean_beside_tree`); ``adjacency``:
+    a mesh's, built already (:func:`meshlab_sharp.cleaning.in_local_order`). Unless
     ``workers`` is 1 the normals and the sharp edges are computed on threads meanwhile:
     with the compiled backend they are single-threaded C calls that release the GIL (the
     adjacency, the normals and the sharp edges took one core each in turn)."""
@@ -503,14 +514,16 @@ def _neighbourhoods_and_normals(
         return neighbourhoods, None, None
     if workers == 1 or _kernels.resolve(None) != "compiled":
         return (
-            build_neighbourhoods(points, faces, scales, workers=workers),
+            build_neighbourhoods(points, faces, scales, workers=workers, adjacency=adjacency),
             face_average_normals(points, faces),
             sharp_vertices(points, faces)[0] if robust else None,
         )
     with ThreadPoolExecutor(max_workers=2) as pool:
         normals = pool.submit(face_average_normals, points, faces)
         sharp = pool.submit(sharp_vertices, points, faces) if robust else None
-        neighbourhoods = build_neighbourhoods(points, faces, scales, workers=workers)
+        neighbourhoods = build_neighbourhoods(
+            points, faces, scales, workers=workers, adjacency=adjacency
+        )
         return neighbourhoods, normals.result(), None if sharp is None else sharp.result()[0]
 
 
