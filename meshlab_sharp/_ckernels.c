@@ -2306,13 +2306,14 @@ int ms_scattered(const int64_t *ptr, const int32_t *adj, int64_t n) {
     return 2 * far > seen;
 }
 
-/* ms_scattered's answer from the faces (m, 3) alone, before the adjacency is built: a
- * vertex's first neighbour in ms_adjacency's lists is, in the first face listing it, the
- * second corner when it is the first corner, else the first corner. One read of the faces,
+/* ms_scattered's answer from the faces (m, 3) alone, mapped through remap (NULL: as they
+ * are) into [0, n), before the adjacency is built: a vertex's first neighbour in
+ * ms_adjacency's lists is, in the first face listing it, the second corner when it is
+ * the first corner, else the first corner. One read of the faces,
  * a bit per vertex marking the samples not yet met; it stops once either side holds more
  * than half of all the samples (the samples never met, without neighbours, only shrink
  * the count the answer compares with). */
-int ms_scattered_faces(const int64_t *faces, int64_t m, int64_t n) {
+int ms_scattered_faces(const int64_t *faces, int64_t m, const int64_t *remap, int64_t n) {
     if (n <= MS_SCATTERED_GAP) return 0;
     const int64_t step = scatter_step(n), samples = (n + step - 1) / step;
     uint64_t *unmet = (uint64_t *)calloc((size_t)(n + 63) / 64, sizeof(uint64_t));
@@ -2320,11 +2321,11 @@ int ms_scattered_faces(const int64_t *faces, int64_t m, int64_t n) {
     for (int64_t v = 0; v < n; v += step) unmet[v >> 6] |= (uint64_t)1 << (v & 63);
     int64_t far = 0, seen = 0;
     for (int64_t f = 0; f < 3 * m && 2 * far <= samples && 2 * (seen - far) < samples; f++) {
-        const int64_t v = faces[f];
+        const int64_t v = remap == NULL ? faces[f] : remap[faces[f]];
         if (v < 0 || v >= n || !((unmet[v >> 6] >> (v & 63)) & 1)) continue;
         unmet[v >> 6] &= ~((uint64_t)1 << (v & 63));
-        const int64_t *face = faces + (f - f % 3);
-        far += far_apart(v, f % 3 == 0 ? face[1] : face[0]);
+        const int64_t w = faces[f - f % 3 + (f % 3 == 0)];
+        far += far_apart(v, remap == NULL ? w : remap[w]);
         seen++;
     }
     free(unmet);

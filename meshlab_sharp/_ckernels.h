@@ -229,9 +229,9 @@ int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32
  * adj: ms_adjacency's lists. */
 int ms_scattered(const int64_t *ptr, const int32_t *adj, int64_t n);
 
-/* ms_scattered's answer from the faces (m, 3) alone (indices in [0, n)), before the
- * adjacency is built: 1 or 0. */
-int ms_scattered_faces(const int64_t *faces, int64_t m, int64_t n);
+/* ms_scattered's answer for the faces (m, 3) mapped through remap (NULL: as they are)
+ * into [0, n), from the faces alone, before the adjacency is built: 1 or 0. */
+int ms_scattered_faces(const int64_t *faces, int64_t m, const int64_t *remap, int64_t n);
 
 /* The mesh (p (n, 3), fixed (n, 3) or NULL, adjacency (ptr, adj)) with its vertices
  * renumbered in breadth-first order (each component from its lowest vertex not yet met)

@@ -79,7 +79,7 @@ _SIGNATURES = {
     ),
     "ms_adjacency": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_scattered": (_int, [_c_void_p, _c_void_p, _i64]),
-    "ms_scattered_faces": (_int, [_c_void_p, _i64, _i64]),
+    "ms_scattered_faces": (_int, [_c_void_p, _i64, _c_void_p, _i64]),
     "ms_bfs_renumber": (
         None,
         [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p]
@@ -842,14 +842,16 @@ def scattered(indptr: np.ndarray, indices: np.ndarray) -> bool:
     return bool(lib.ms_scattered(_ptr(indptr), _ptr(indices), len(indptr) - 1))
 
 
-def scattered_faces(faces: np.ndarray, n: int) -> bool:
-    """:func:`scattered` of the mesh's :func:`adjacency`, from its faces (m, 3) int64
-    (indices in ``[0, n)``) alone, before the adjacency is built (``ms_scattered_faces``:
-    one read of the faces, stopped once every sampled vertex is met)."""
+def scattered_faces(faces: np.ndarray, n: int, remap: np.ndarray | None = None) -> bool:
+    """:func:`scattered` of the :func:`adjacency` of ``faces`` (m, 3) int64 mapped
+    through ``remap`` (int64; None: as they are) into ``[0, n)``, from the faces alone,
+    before the adjacency is built (``ms_scattered_faces``: one read of the faces, stopped
+    once the vote is decided)."""
     lib = _LIB
     assert lib is not None
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    return bool(lib.ms_scattered_faces(_ptr(faces), len(faces), n))
+    remap = None if remap is None else np.ascontiguousarray(remap, dtype=np.int64)
+    return bool(lib.ms_scattered_faces(_ptr(faces), len(faces), _ptr(remap), n))
 
 
 @dataclass

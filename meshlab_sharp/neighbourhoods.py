@@ -370,7 +370,7 @@ class RingNeighbourhoods:
         lists the rings only if ``at()`` is called.
     adjacency : (indptr (n + 1,) int64, indices int32), optional
         The compiled backend's adjacency of ``faces``, when the caller has it already
-        (:func:`meshlab_sharp.cleaning.in_local_order`); None: built here.
+        (``meshlab_sharp.cleaning.CleanGeometry.adjacency``); None: built here.
     """
 
     def __init__(

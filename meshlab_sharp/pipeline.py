@@ -17,7 +17,7 @@ import pymeshlab
 
 from . import _header, _kernels
 from ._pages import small_pages
-from .cleaning import CleanGeometry, clean, in_local_order
+from .cleaning import CleanGeometry, clean
 from .creases import sharp_vertices
 from .curves import Corners, Curve, extract_curves
 from .errors import InputError
@@ -365,14 +365,12 @@ def _detect(
     faces_in = geometry.faces if is_mesh else None
     same = unit is geometry.vertices and faces_in is geometry.faces
     to_clean = geometry if same else Geometry(unit, faces_in, geometry.source)
-    adjacency = None
-    if is_mesh:
-        # renumbered once here when its order is scattered, so that every step reads
-        # nearby memory (the same bits: in_local_order)
-        cleaned, adjacency = in_local_order(clean(to_clean, workers=workers))
-        tree = None
-    else:
-        cleaned, tree = _clean_beside_tree(to_clean, workers)
+    cleaned, tree = (
+        # a mesh renumbered when its order is scattered: every step reads nearby memory
+        (clean(to_clean, workers=workers, local_order=True), None)
+        if is_mesh
+        else _clean_beside_tree(to_clean, workers)
+    )
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     points = cleaned.vertices
@@ -387,9 +385,9 @@ def _detect(
         workers,
         mode == "robust",
         tree,
-        adjacency,
+        cleaned.adjacency,
     )
-    del tree, adjacency
+    del tree
     robust = None
     work, work_neighbourhoods = points, neighbourhoods
     if mode == "robust":
@@ -504,7 +502,7 @@ def _neighbourhoods_and_normals(
     face-average normals (n, 3) and, when ``robust``, the sharp mesh edges' vertices
     (:func:`meshlab_sharp.creases.sharp_vertices`, (n,) bool); None for each on a cloud.
     ``tree``: a cloud's kd-tree, being built (:func:`_clean_beside_tree`); ``adjacency``:
-    a mesh's, built already (:func:`meshlab_sharp.cleaning.in_local_order`). Unless
+    a mesh's, built already (by cleaning: ``CleanGeometry.adjacency``). Unless
     ``workers`` is 1 the normals and the sharp edges are computed on threads meanwhile:
     with the compiled backend they are single-threaded C calls that release the GIL (the
     adjacency, the normals and the sharp edges took one core each in turn)."""

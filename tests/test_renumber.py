@@ -1,6 +1,6 @@
 """Vertices renumbered breadth-first (``ms_bfs_renumber``, for memory locality on meshes
 whose vertex order has none): by the ring pass and by ``detect`` right after cleaning
-(``cleaning.in_local_order``), every output bit the same as over the caller's numbering,
+(``clean(..., local_order=True)``), every output bit the same as over the caller's numbering,
 and the rule (``ms_scattered``, ``ms_scattered_faces``) that turns it on."""
 
 from __future__ import annotations
@@ -183,6 +183,24 @@ def test_the_rule_from_the_faces_is_the_rule_on_the_adjacency(name):
     assert _kernels.scattered_faces(faces, n) == _kernels.scattered(*_kernels.adjacency(faces, n))
 
 
+@pytest.mark.parametrize("name", ["grid", "shuffled", "part-0.5-0", "part-0.55-1"])
+def test_the_rule_from_the_faces_maps_them_as_cleaning_merges_duplicates(name):
+    """Faces over an input with duplicates, mapped through ``remap`` (input -> merged
+    vertex) inside the rule: the rule of the mapped faces' adjacency."""
+    faces, n = RULE_CASES[name]
+    rng = np.random.default_rng(5)
+    dup_of = rng.choice(n, n // 3, replace=False)  # vertices with a duplicate n + j
+    duplicate = np.full(n, -1)
+    duplicate[dup_of] = n + np.arange(len(dup_of))
+    faces_in = np.where((duplicate[faces] >= 0) & (rng.random(faces.shape) < 0.5),
+                        duplicate[faces], faces)  # fmt: skip
+    remap = np.concatenate([np.arange(n), dup_of])
+    assert not np.array_equal(faces_in, faces)
+    np.testing.assert_array_equal(remap[faces_in], faces)
+    want = _kernels.scattered(*_kernels.adjacency(faces, n))
+    assert _kernels.scattered_faces(faces_in, n, remap) == want
+
+
 def test_the_rule_cases_fall_on_both_sides():
     answers = {name: _kernels.scattered_faces(*case) for name, case in RULE_CASES.items()}
     assert answers["shuffled"] and answers["faces-shuffled-too"]
@@ -191,19 +209,29 @@ def test_the_rule_cases_fall_on_both_sides():
     assert any(edge) and not all(edge)
 
 
-def _clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> cleaning.CleanGeometry:
-    return cleaning.clean(as_geometry(vertices, faces), backend="compiled")
+def _clean_mesh(
+    vertices: np.ndarray, faces: np.ndarray, local_order: bool
+) -> cleaning.CleanGeometry:
+    return cleaning.clean(
+        as_geometry(vertices, faces), backend="compiled", workers=-1, local_order=local_order
+    )
 
 
-def test_a_scattered_mesh_is_renumbered_once_keeping_its_faces_and_lists_in_order():
+def _bench_mesh_with(dropped: bool) -> tuple[np.ndarray, np.ndarray]:
+    """cad_mesh(80_000) (whose vertices have duplicates) with, when ``dropped``, an
+    unreferenced vertex and a zero-area face more."""
     v, f = cad_mesh(80_000)
-    # duplicates merged, an unreferenced vertex and a zero-area face dropped
-    v = np.concatenate([v, v[:7], [[9.0, 9.0, 9.0]]])
-    f = np.concatenate([f, [[len(v) - 8, 1, 2], [0, 1, 0]]])
-    sv, sf, _ = _vertices_shuffled(v, f, 3)
-    before = _clean_mesh(sv, sf)
-    after, adjacency = cleaning.in_local_order(before)
-    assert after.renumbered and not before.renumbered and adjacency is not None
+    if dropped:
+        v = np.concatenate([v, v[:7], [[9.0, 9.0, 9.0]]])
+        f = np.concatenate([f, [[len(v) - 8, 1, 2], [0, 1, 0]]])
+    return v, f
+
+
+@pytest.mark.parametrize("dropped", [False, True])
+def test_a_scattered_mesh_is_renumbered_keeping_its_faces_and_lists_in_order(dropped):
+    sv, sf, _ = _vertices_shuffled(*_bench_mesh_with(dropped), 3)
+    before, after = _clean_mesh(sv, sf, False), _clean_mesh(sv, sf, True)
+    assert after.renumbered and not before.renumbered and before.adjacency is None
     order = before.from_input[after.to_input]  # new vertex k: old vertex order[k]
     assert sorted(order) == list(range(len(before.vertices)))
     assert after.vertices.tobytes() == before.vertices[order].tobytes()
@@ -214,14 +242,16 @@ def test_a_scattered_mesh_is_renumbered_once_keeping_its_faces_and_lists_in_orde
     kept = before.from_input >= 0
     np.testing.assert_array_equal(after.from_input[kept], rank[before.from_input[kept]])
     np.testing.assert_array_equal(after.from_input[~kept], -1)
-    assert (~kept).sum() == 1
+    assert (~kept).sum() == dropped
     np.testing.assert_array_equal(after.to_input, before.to_input[order])
-    # the lists handed on are the renumbered mesh's own, each in its order
-    for got, want in zip(
-        adjacency, _kernels.adjacency(after.faces, len(after.vertices)), strict=True
-    ):
-        assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
+    adjacency = _kernels.adjacency(after.faces, len(after.vertices))
     assert not _kernels.scattered(*adjacency)  # the ring pass does not renumber again
+    if dropped:  # the lists would not be the faces' own
+        assert after.adjacency is None
+    else:  # the lists handed on are the renumbered mesh's own, each in its order
+        assert after.adjacency is not None
+        for got, want in zip(after.adjacency, adjacency, strict=True):
+            assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
     values = np.arange(len(after.vertices), dtype=float)
     back = after.to_input_order(values, -1.0)
     np.testing.assert_array_equal(back[kept], rank[before.from_input[kept]])
@@ -236,17 +266,22 @@ def test_a_scattered_mesh_is_renumbered_once_keeping_its_faces_and_lists_in_orde
         (shapes.cube_grid_points(21), None),  # a cloud
     ],
 )
-def test_a_local_mesh_or_a_cloud_is_left_alone(mesh):
-    cleaned = cleaning.clean(as_geometry(*mesh), backend="compiled")
-    assert cleaning.in_local_order(cleaned) == (cleaned, None)
-    assert cleaning.in_local_order(cleaned)[0] is cleaned
+def test_a_local_mesh_or_a_cloud_is_cleaned_as_without_the_option(mesh):
+    plain = cleaning.clean(as_geometry(*mesh), backend="compiled")
+    local = cleaning.clean(as_geometry(*mesh), backend="compiled", local_order=True)
+    assert not local.renumbered and local.adjacency is None
+    for field in ("vertices", "faces", "to_input", "from_input"):
+        x, y = getattr(plain, field), getattr(local, field)
+        assert (x is None) == (y is None)
+        if x is not None:
+            assert x.tobytes() == y.tobytes(), field
 
 
 def test_the_numpy_backend_does_not_renumber():
     sv, sf, _ = _vertices_shuffled(*cad_mesh(80_000), 1)
-    cleaned = cleaning.clean(as_geometry(sv, sf), backend="numpy")
-    with _kernels.use_backend("numpy"):
-        assert cleaning.in_local_order(cleaned)[0] is cleaned
+    cleaned = cleaning.clean(as_geometry(sv, sf), backend="numpy", local_order=True)
+    assert not cleaned.renumbered
+    assert np.all(np.diff(cleaned.to_input) > 0)
 
 
 def _detect_inputs() -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -297,14 +332,14 @@ def test_detect_on_the_mesh_shuffled_is_detect_on_the_mesh(monkeypatch, name, mo
     v, f = DETECT_INPUTS[name]
     sv, sf, perm = _vertices_shuffled(v, f, seed)
     renumbered = []
-    local_order = cleaning.in_local_order
+    plain = cleaning.clean
 
-    def spy(cleaned: cleaning.CleanGeometry):
-        out = local_order(cleaned)
-        renumbered.append(out[0].renumbered)
+    def spy(*args, **kwargs) -> cleaning.CleanGeometry:
+        out = plain(*args, **kwargs)
+        renumbered.append(out.renumbered)
         return out
 
-    monkeypatch.setattr(meshlab_sharp.pipeline, "in_local_order", spy)
+    monkeypatch.setattr(meshlab_sharp.pipeline, "clean", spy)
     a = meshlab_sharp.detect(v, f, mode=mode, return_details=True, backend="compiled")
     b = meshlab_sharp.detect(sv, sf, mode=mode, return_details=True, backend="compiled")
     assert renumbered == [False, True]
