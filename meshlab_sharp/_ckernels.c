@@ -2320,13 +2320,14 @@ int ms_scattered_faces(const int64_t *faces, int64_t m, const int64_t *remap, in
     if (unmet == NULL) return 0; /* not renumbered: the same outputs, only slower */
     for (int64_t v = 0; v < n; v += step) unmet[v >> 6] |= (uint64_t)1 << (v & 63);
     int64_t far = 0, seen = 0;
-    for (int64_t f = 0; f < 3 * m && 2 * far <= samples && 2 * (seen - far) < samples; f++) {
+    for (int64_t f = 0; f < 3 * m; f++) {
         const int64_t v = remap == NULL ? faces[f] : remap[faces[f]];
-        if (v < 0 || v >= n || !((unmet[v >> 6] >> (v & 63)) & 1)) continue;
+        if ((uint64_t)v >= (uint64_t)n || !((unmet[v >> 6] >> (v & 63)) & 1)) continue;
         unmet[v >> 6] &= ~((uint64_t)1 << (v & 63));
         const int64_t w = faces[f - f % 3 + (f % 3 == 0)];
         far += far_apart(v, remap == NULL ? w : remap[w]);
         seen++;
+        if (2 * far > samples || 2 * (seen - far) >= samples) break; /* decided */
     }
     free(unmet);
     return 2 * far > seen;
