@@ -127,10 +127,9 @@ def clean(
         Compiled backend: a mesh whose vertex order is scattered
         (:func:`meshlab_sharp._kernels.scattered_faces`) is renumbered breadth-first
         (:func:`meshlab_sharp._kernels.bfs_renumber`) before its faces are tested, its
-        faces and their corners kept in order; every
-        per-vertex list and sum of detection then meets the same faces and neighbours in
-        the same order, so its outputs, mapped back through ``to_input_order``, are the
-        same bit for bit.
+        faces and their corners kept in order; every per-vertex list and sum of
+        detection then meets the same faces and neighbours in the same order, so its
+        outputs, mapped back through ``to_input_order``, are the same bit for bit.
 
     Returns
     -------

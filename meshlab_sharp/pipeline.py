@@ -388,6 +388,7 @@ def _detect(
         cleaned.adjacency,
     )
     del tree
+    cleaned = replace(cleaned, adjacency=None)  # the neighbourhoods' now, freed with them
     robust = None
     work, work_neighbourhoods = points, neighbourhoods
     if mode == "robust":
