@@ -2295,7 +2295,17 @@ int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32
     return 0;
 }
 
-/* Whether the ring pass should renumber a mesh's vertices (ms_bfs_renumber): more than
+/* ms_scattered's sampling: every step-th vertex, up to about MS_SCATTER_SAMPLES. */
+static int64_t scatter_step(int64_t n) {
+    return n / MS_SCATTER_SAMPLES > 1 ? n / MS_SCATTER_SAMPLES : 1;
+}
+
+/* Whether vertex v's first neighbour w lies more than MS_SCATTERED_GAP positions away. */
+static int far_apart(int64_t v, int64_t w) {
+    return w - v > MS_SCATTERED_GAP || v - w > MS_SCATTERED_GAP;
+}
+
+/* Whether a mesh's vertices should be renumbered (ms_bfs_renumber): more than
  * half of up to MS_SCATTER_SAMPLES vertices v evenly spread, among those with neighbours,
  * lie more than MS_SCATTERED_GAP positions from their first neighbour adj[ptr[v]]. A
  * grid-ordered mesh's gap is about its row length (408 on the 1M bench mesh), a scanned
@@ -2304,14 +2314,40 @@ int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32
  * vertex on a local order, 0.4 on a scattered one) would not pay. */
 int ms_scattered(const int64_t *ptr, const int32_t *adj, int64_t n) {
     if (n <= MS_SCATTERED_GAP) return 0;
-    const int64_t step = n / MS_SCATTER_SAMPLES > 1 ? n / MS_SCATTER_SAMPLES : 1;
+    const int64_t step = scatter_step(n);
     int64_t far = 0, seen = 0;
     for (int64_t v = 0; v < n; v += step) {
         if (ptr[v + 1] == ptr[v]) continue;
-        const int64_t gap = (int64_t)adj[ptr[v]] - v;
-        far += gap > MS_SCATTERED_GAP || gap < -MS_SCATTERED_GAP;
+        far += far_apart(v, adj[ptr[v]]);
         seen++;
     }
+    return 2 * far > seen;
+}
+
+/* ms_scattered's answer from the faces (m, 3) alone, mapped through remap (NULL: as they
+ * are) into [0, n), before the adjacency is built: a vertex's first neighbour in
+ * ms_adjacency's lists is, in the first face listing it, the second corner when it is
+ * the first corner, else the first corner. One read of the faces,
+ * a bit per vertex marking the samples not yet met; it stops once either side holds more
+ * than half of all the samples (the samples never met, without neighbours, only shrink
+ * the count the answer compares with). */
+int ms_scattered_faces(const int64_t *faces, int64_t m, const int64_t *remap, int64_t n) {
+    if (n <= MS_SCATTERED_GAP) return 0;
+    const int64_t step = scatter_step(n), samples = (n + step - 1) / step;
+    uint64_t *unmet = (uint64_t *)calloc((size_t)(n + 63) / 64, sizeof(uint64_t));
+    if (unmet == NULL) return 0; /* not renumbered: the same outputs, only slower */
+    for (int64_t v = 0; v < n; v += step) unmet[v >> 6] |= (uint64_t)1 << (v & 63);
+    int64_t far = 0, seen = 0;
+    for (int64_t f = 0; f < 3 * m; f++) {
+        const int64_t v = remap == NULL ? faces[f] : remap[faces[f]];
+        if ((uint64_t)v >= (uint64_t)n || !((unmet[v >> 6] >> (v & 63)) & 1)) continue;
+        unmet[v >> 6] &= ~((uint64_t)1 << (v & 63));
+        const int64_t w = faces[f - f % 3 + (f % 3 == 0)];
+        far += far_apart(v, remap == NULL ? w : remap[w]);
+        seen++;
+        if (2 * far > samples || 2 * (seen - far) >= samples) break; /* decided */
+    }
+    free(unmet);
     return 2 * far > seen;
 }
 

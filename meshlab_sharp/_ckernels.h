@@ -98,9 +98,9 @@
 /* The kd-tree is built in two steps: its top MS_KD_TOP levels, then the 2^MS_KD_TOP
  * subtrees below them, each on its own (threads). */
 #define MS_KD_TOP 3
-/* The ring pass renumbers a mesh (ms_bfs_renumber) when more than half of up to
- * MS_SCATTER_SAMPLES vertices evenly spread lie more than MS_SCATTERED_GAP positions from
- * their first neighbour. */
+/* A mesh is renumbered (ms_bfs_renumber: by detect right after cleaning, by the ring pass
+ * of a caller that did not) when more than half of up to MS_SCATTER_SAMPLES vertices
+ * evenly spread lie more than MS_SCATTERED_GAP positions from their first neighbour. */
 #define MS_SCATTERED_GAP 16384
 #define MS_SCATTER_SAMPLES 4096
 
@@ -228,6 +228,10 @@ int ms_adjacency(const int64_t *faces, int64_t m, int64_t n, int64_t *ptr, int32
 /* Whether a mesh's vertex order lacks locality (the rule above): 1 or 0. ptr (n + 1),
  * adj: ms_adjacency's lists. */
 int ms_scattered(const int64_t *ptr, const int32_t *adj, int64_t n);
+
+/* ms_scattered's answer for the faces (m, 3) mapped through remap (NULL: as they are)
+ * into [0, n), from the faces alone, before the adjacency is built: 1 or 0. */
+int ms_scattered_faces(const int64_t *faces, int64_t m, const int64_t *remap, int64_t n);
 
 /* The mesh (p (n, 3), fixed (n, 3) or NULL, adjacency (ptr, adj)) with its vertices
  * renumbered in breadth-first order (each component from its lowest vertex not yet met)

@@ -79,6 +79,7 @@ _SIGNATURES = {
     ),
     "ms_adjacency": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_scattered": (_int, [_c_void_p, _c_void_p, _i64]),
+    "ms_scattered_faces": (_int, [_c_void_p, _i64, _c_void_p, _i64]),
     "ms_bfs_renumber": (
         None,
         [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p]
@@ -841,6 +842,74 @@ def scattered(indptr: np.ndarray, indices: np.ndarray) -> bool:
     return bool(lib.ms_scattered(_ptr(indptr), _ptr(indices), len(indptr) - 1))
 
 
+def scattered_faces(faces: np.ndarray, n: int, remap: np.ndarray | None = None) -> bool:
+    """:func:`scattered` of the :func:`adjacency` of ``faces`` (m, 3) int64 mapped
+    through ``remap`` (int64; None: as they are) into ``[0, n)``, from the faces alone,
+    before the adjacency is built (``ms_scattered_faces``: one read of the faces, stopped
+    once the vote is decided)."""
+    lib = _LIB
+    assert lib is not None
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    remap = None if remap is None else np.ascontiguousarray(remap, dtype=np.int64)
+    return bool(lib.ms_scattered_faces(_ptr(faces), len(faces), _ptr(remap), n))
+
+
+@dataclass
+class Renumbering:
+    """A mesh's vertices renumbered breadth-first (:func:`bfs_renumber`).
+
+    Attributes
+    ----------
+    order : (n,) int32
+        ``order[k]``: the old number of the vertex numbered ``k``.
+    rank : (n,) int32
+        The inverse: ``rank[order[k]] == k``.
+    adjacency : (indptr (n + 1,) int64, indices int32)
+        The lists in the new numbering: row ``k`` is old row ``order[k]`` mapped through
+        ``rank``, in the same order.
+    points : (n, 3) float64
+        The points in the new order.
+    normals : (n, 3) float64 or None
+        The fixed normals in the new order, when given.
+    """
+
+    order: np.ndarray
+    rank: np.ndarray
+    adjacency: tuple[np.ndarray, np.ndarray]
+    points: np.ndarray
+    normals: np.ndarray | None
+
+
+def bfs_renumber(
+    adjacency: tuple[np.ndarray, np.ndarray], points: np.ndarray, normals: np.ndarray | None = None
+) -> Renumbering:
+    """The mesh's vertices renumbered breadth-first over :func:`adjacency`'s lists (each
+    component from its lowest vertex not yet met, ``ms_bfs_renumber``), so that a search
+    reads nearby memory: a search over the new lists meets the same vertices in the same
+    order, so every ring and every sum over it is the same, bit for bit.
+
+    Parameters
+    ----------
+    adjacency : (indptr (n + 1,) int64, indices int32)
+    points : (n, 3) float64
+    normals : (n, 3) float64, optional
+        Gathered into the new order as well.
+    """
+    lib = _LIB
+    assert lib is not None
+    indptr, indices = adjacency
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    n = len(points)
+    order, rank = np.empty(n, dtype=np.int32), np.empty(n, dtype=np.int32)
+    ptr, idx = np.empty(n + 1, dtype=np.int64), np.empty(len(indices), dtype=np.int32)
+    at, normals_at = np.empty_like(points), None if normals is None else np.empty_like(normals)
+    lib.ms_bfs_renumber(
+        _ptr(indptr), _ptr(indices), n, _ptr(points), _ptr(normals), _ptr(order), _ptr(rank),
+        _ptr(ptr), _ptr(idx), _ptr(at), _ptr(normals_at),
+    )  # fmt: skip
+    return Renumbering(order, rank, (ptr, idx), at, normals_at)
+
+
 def shifted_lists(indptr: np.ndarray, indices: np.ndarray, workers: int = -1) -> np.ndarray:
     """(n,) uint8: 1 where vertex ``w + 1``'s list is vertex ``w``'s with each neighbour
     plus one (``ms_shifted_lists``; a grid-numbered mesh's vertices), over
@@ -895,14 +964,8 @@ def ring_projected_distances(
     if renumber is None:
         renumber = scattered(indptr, indices)
     if renumber:
-        dest, rank = np.empty(n, dtype=np.int32), np.empty(n, dtype=np.int32)
-        ptr, idx = np.empty(n + 1, dtype=np.int64), np.empty(len(indices), dtype=np.int32)
-        at, fixed_at = np.empty_like(points), None if fixed is None else np.empty_like(fixed)
-        lib.ms_bfs_renumber(
-            _ptr(indptr), _ptr(indices), n, _ptr(points), _ptr(fixed), _ptr(dest),
-            _ptr(rank), _ptr(ptr), _ptr(idx), _ptr(at), _ptr(fixed_at),
-        )  # fmt: skip
-        points, fixed, indptr, indices = at, fixed_at, ptr, idx
+        new = bfs_renumber((indptr, indices), points, fixed)
+        dest, points, fixed, (indptr, indices) = new.order, new.points, new.normals, new.adjacency
     out = ScalePass(
         pdis=None if relative else np.empty((len(rs), n)),
         normals=np.empty((len(rs), n, 3)) if keep_normals else None,

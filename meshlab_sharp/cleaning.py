@@ -27,19 +27,29 @@ class CleanGeometry:
     Attributes
     ----------
     vertices : (m, 3) float64
-        Cleaned vertices, in the input's relative order.
+        Cleaned vertices, in the input's relative order (unless ``renumbered``).
     faces : (f, 3) int64 or None
         Cleaned triangles indexing ``vertices``; None for a point cloud.
     to_input : (m,) int64
         Input index of each cleaned vertex (its first occurrence).
     from_input : (n,) int64
         Cleaned index of each input vertex; -1 for a vertex that was dropped.
+    renumbered : bool
+        True when cleaning renumbered the vertices for locality (``clean(...,
+        local_order=True)``; ``to_input`` is then not increasing); False: cleaning kept
+        the input's relative order.
+    adjacency : (indptr (m + 1,) int64, indices int32) or None
+        The faces' :func:`meshlab_sharp._kernels.adjacency` when the renumbering made it
+        (the lists it was made from, renumbered: the same lists) and no face or vertex
+        was dropped after it; else None.
     """
 
     vertices: np.ndarray
     faces: np.ndarray | None
     to_input: np.ndarray
     from_input: np.ndarray
+    renumbered: bool = False
+    adjacency: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def is_mesh(self) -> bool:
@@ -50,11 +60,11 @@ class CleanGeometry:
         """Scatter per-cleaned-vertex ``values`` (m, ...) to input order (n, ...).
 
         Input vertices merged into a duplicate take its value; dropped ones get ``fill``.
-        When cleaning merged and dropped nothing (m == n: the orders are the same),
-        ``values`` itself, not a copy (a cloud's three outputs gathered through the
-        identity took 9 ms at 1M points).
+        When cleaning merged and dropped nothing and nothing was renumbered (m == n: the
+        orders are the same), ``values`` itself, not a copy (a cloud's three outputs
+        gathered through the identity took 9 ms at 1M points).
         """
-        if len(self.to_input) == len(self.from_input):
+        if len(self.to_input) == len(self.from_input) and not self.renumbered:
             return values
         if len(self.from_input) and self.from_input.min() >= 0:
             return values[self.from_input]  # none dropped: one gather (a third faster)
@@ -93,7 +103,13 @@ def tagged_input_indices(ms: pymeshlab.MeshSet, n_input: int) -> np.ndarray:
     return index
 
 
-def clean(geometry: Geometry, *, backend: str | None = None, workers: int = 1) -> CleanGeometry:
+def clean(
+    geometry: Geometry,
+    *,
+    backend: str | None = None,
+    workers: int = 1,
+    local_order: bool = False,
+) -> CleanGeometry:
     """Merge exact duplicates, drop zero-area faces and unreferenced vertices.
 
     Parameters
@@ -107,6 +123,13 @@ def clean(geometry: Geometry, *, backend: str | None = None, workers: int = 1) -
     workers : int, default 1
         Threads of the compiled backend's duplicate merge and face pass (-1: every
         core); the result does not depend on it.
+    local_order : bool, default False
+        Compiled backend: a mesh whose vertex order is scattered
+        (:func:`meshlab_sharp._kernels.scattered_faces`) is renumbered breadth-first
+        (:func:`meshlab_sharp._kernels.bfs_renumber`) before its faces are tested, its
+        faces and their corners kept in order; every per-vertex list and sum of
+        detection then meets the same faces and neighbours in the same order, so its
+        outputs, mapped back through ``to_input_order``, are the same bit for bit.
 
     Returns
     -------
@@ -118,7 +141,7 @@ def clean(geometry: Geometry, *, backend: str | None = None, workers: int = 1) -
         A mesh all of whose faces have zero area.
     """
     if _kernels.resolve(backend) == "compiled":
-        return _clean_compiled(geometry, workers)
+        return _clean_compiled(geometry, workers, local_order)
     v = geometry.vertices
     ms = pymeshlab.MeshSet()
     if geometry.is_mesh:
@@ -155,21 +178,33 @@ def clean(geometry: Geometry, *, backend: str | None = None, workers: int = 1) -
     )
 
 
-def _clean_compiled(geometry: Geometry, workers: int) -> CleanGeometry:
+def _clean_compiled(geometry: Geometry, workers: int, local_order: bool) -> CleanGeometry:
     """:func:`clean` without pymeshlab: what its filters do, as vcg does it.
 
     ``meshing_remove_duplicate_vertices`` keeps the first of equal vertices (``==`` on
     each coordinate) and the order of the others; ``meshing_remove_null_faces`` drops
     faces with ``DoubleArea <= 0`` (a face using a merged vertex twice is one);
     ``meshing_remove_unreferenced_vertices`` then compacts, keeping the order.
+    ``local_order``: the renumbering between the merge and the faces' test.
     """
     to_input, from_input, merged = _kernels.merge_duplicates(geometry.vertices, workers)
     if not geometry.is_mesh:
         return CleanGeometry(vertices=merged, faces=None, to_input=to_input, from_input=from_input)
     distinct = len(to_input) == len(from_input)
-    faces, used = _kernels.keep_faces(
-        merged, geometry.faces, None if distinct else from_input, workers
-    )
+    faces, remap = geometry.faces, None if distinct else from_input
+    n, m = len(merged), len(faces)
+    new = None
+    if local_order and n < 2**31 and _kernels.scattered_faces(faces, n, remap):
+        # Renumbered breadth-first (faces and corners in the same order): the faces' test
+        # and every step of detection after it read nearby memory, where a scattered
+        # order (a scanned or remeshed input's) misses the caches at every read.
+        if remap is not None:
+            faces, remap = remap[faces], None
+        new = _kernels.bfs_renumber(_kernels.adjacency(faces, n), merged)
+        rank = new.rank.astype(np.int64)
+        faces, merged = rank[faces], new.points
+        to_input, from_input = to_input[new.order], rank[from_input]
+    faces, used = _kernels.keep_faces(merged, faces, remap, workers)
     if len(faces) == 0:
         raise InputError(
             f"{geometry.source}: every face has zero area; nothing is left of the mesh "
@@ -183,4 +218,12 @@ def _clean_compiled(geometry: Geometry, workers: int) -> CleanGeometry:
         merged = merged[used]
         to_input = to_input[used]
         from_input = np.where(used[from_input], renumber[from_input], -1)
-    return CleanGeometry(vertices=merged, faces=faces, to_input=to_input, from_input=from_input)
+    return CleanGeometry(
+        vertices=merged,
+        faces=faces,
+        to_input=to_input,
+        from_input=from_input,
+        renumbered=new is not None,
+        # the lists are the faces' own when the test dropped no face and no vertex
+        adjacency=None if new is None or renumber is not None or len(faces) < m else new.adjacency,
+    )

@@ -369,16 +369,26 @@ class RingNeighbourhoods:
         keeps the 1-ring adjacency (``adjacency``) for a breadth-first search in C and
         lists the rings only if ``at()`` is called, and then does not keep ``faces``
         (``detect`` frees them before the scales' pass: 48 bytes a vertex).
+    adjacency : (indptr (n + 1,) int64, indices int32), optional
+        The compiled backend's adjacency of ``faces``, when the caller has it already
+        (``meshlab_sharp.cleaning.CleanGeometry.adjacency``); None: built here.
     """
 
-    def __init__(self, faces: np.ndarray, n: int, *, backend: str | None = None) -> None:
+    def __init__(
+        self,
+        faces: np.ndarray,
+        n: int,
+        *,
+        backend: str | None = None,
+        adjacency: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
         self.n = n
         self.backend = _kernels.resolve(backend)
         #: (indptr, indices) 1-ring adjacency, each neighbour once (compiled backend), else
         #: None.
         self.adjacency: tuple[np.ndarray, np.ndarray] | None = None
         if self.backend == "compiled" and n < 2**31:
-            self.adjacency = _kernels.adjacency(faces, n)
+            self.adjacency = _kernels.adjacency(faces, n) if adjacency is None else adjacency
         #: The faces, where the lists are made from them (numpy backend), else None.
         self.faces = faces if self.adjacency is None else None
         self._ring = 0
@@ -415,14 +425,16 @@ def build_neighbourhoods(
     workers: int = -1,
     backend: str | None = None,
     tree: _kernels.KdTree | None = None,
+    adjacency: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> KnnNeighbourhoods | RingNeighbourhoods:
     """kNN neighbourhoods for a cloud (``faces is None``), k-rings for a mesh.
 
     ``backend``: "compiled" or "numpy" (see the module's docstring); default
     :func:`meshlab_sharp._kernels.default_backend`. ``tree``: a cloud's kd-tree, already
-    built (:class:`KnnNeighbourhoods`).
+    built (:class:`KnnNeighbourhoods`). ``adjacency``: a mesh's compiled adjacency,
+    already built (:class:`RingNeighbourhoods`).
     """
     if faces is None:
         k = max(scales)
         return KnnNeighbourhoods(points, k, workers=workers, backend=backend, tree=tree)
-    return RingNeighbourhoods(faces, len(points), backend=backend)
+    return RingNeighbourhoods(faces, len(points), backend=backend, adjacency=adjacency)

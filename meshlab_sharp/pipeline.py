@@ -366,7 +366,8 @@ def _detect(
     same = unit is geometry.vertices and faces_in is geometry.faces
     to_clean = geometry if same else Geometry(unit, faces_in, geometry.source)
     cleaned, tree = (
-        (clean(to_clean, workers=workers), None)
+        # a mesh renumbered when its order is scattered: every step reads nearby memory
+        (clean(to_clean, workers=workers, local_order=True), None)
         if is_mesh
         else _clean_beside_tree(to_clean, workers)
     )
@@ -378,9 +379,16 @@ def _detect(
 
     t = time.perf_counter()
     neighbourhoods, normals, sharp_edges = _neighbourhoods_and_normals(
-        points, cleaned.faces if is_mesh else None, scales_t, workers, mode == "robust", tree
+        points,
+        cleaned.faces if is_mesh else None,
+        scales_t,
+        workers,
+        mode == "robust",
+        tree,
+        cleaned.adjacency,
     )
     del tree
+    cleaned = replace(cleaned, adjacency=None)  # the neighbourhoods' now, freed with them
     robust = None
     work, work_neighbourhoods = points, neighbourhoods
     if mode == "robust":
@@ -492,11 +500,13 @@ def _neighbourhoods_and_normals(
     workers: int,
     robust: bool,
     tree: Future[_kernels.KdTree] | None = None,
+    adjacency: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[KnnNeighbourhoods | RingNeighbourhoods, np.ndarray | None, np.ndarray | None]:
     """:func:`build_neighbourhoods` and, on a mesh (``faces`` (m, 3) not None), the
     face-average normals (n, 3) and, when ``robust``, the sharp mesh edges' vertices
     (:func:`meshlab_sharp.creases.sharp_vertices`, (n,) bool); None for each on a cloud.
-    ``tree``: a cloud's kd-tree, being built (:func:`_clean_beside_tree`). Unless
+    ``tree``: a cloud's kd-tree, being built (:func:`_clean_beside_tree`); ``adjacency``:
+    a mesh's, built already (by cleaning: ``CleanGeometry.adjacency``). Unless
     ``workers`` is 1, with the compiled backend (single-threaded C calls that release the
     GIL) the work is split between two threads: in paper mode the normals beside the
     adjacency; in robust mode the sharp edges (the longest: 0.12 s on the 1M bench mesh)
@@ -509,18 +519,18 @@ def _neighbourhoods_and_normals(
         return neighbourhoods, None, None
     if workers == 1 or _kernels.resolve(None) != "compiled":
         return (
-            build_neighbourhoods(points, faces, scales, workers=workers),
+            build_neighbourhoods(points, faces, scales, workers=workers, adjacency=adjacency),
             face_average_normals(points, faces),
             sharp_vertices(points, faces)[0] if robust else None,
         )
     with ThreadPoolExecutor(max_workers=1) as pool:
+        side = pool.submit(sharp_vertices if robust else face_average_normals, points, faces)
+        neighbourhoods = build_neighbourhoods(
+            points, faces, scales, workers=workers, adjacency=adjacency
+        )
         if robust:
-            sharp = pool.submit(sharp_vertices, points, faces)
-            neighbourhoods = build_neighbourhoods(points, faces, scales, workers=workers)
-            return neighbourhoods, face_average_normals(points, faces), sharp.result()[0]
-        normals = pool.submit(face_average_normals, points, faces)
-        neighbourhoods = build_neighbourhoods(points, faces, scales, workers=workers)
-        return neighbourhoods, normals.result(), None
+            return neighbourhoods, face_average_normals(points, faces), side.result()[0]
+        return neighbourhoods, side.result(), None
 
 
 def _add_curves(result: DetectionResult, geometry: Geometry, as_points: bool) -> None:
