@@ -347,7 +347,7 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     /* the weights first, then their sums (the same operations): each exp is a chain of
      * 16 dependent fused multiply-adds, and a loop of exps alone keeps more of them in
      * flight than one that also holds the sums (the pass's 8 scales: 0.68 against 0.84
-     * us a point, docs/perf-cloud11.md) */
+     * us a point, docs/benchmark-history.md, "Session 11") */
     v4d_mem *w4 = (v4d_mem *)ws;
     for (int64_t j = 0; j < mmax; j++) w4[j] = v4_exp(d2[j] / vh2);
     for (int64_t j = 0; j < mmax; j++, vj += 1) {

@@ -31,9 +31,9 @@ def vm_bytes():
     with open("/proc/self/status") as f:
         return next(int(l.split()[1]) * 1024 for l in f if l.startswith("VmSize:"))
 
-n = 4_000_000
+n = 16_000_000
 faces = np.array([[0, 1, 2]], dtype=np.int64)
-arrays = (n + 1) * 8 + 6 * 4  # ptr and idx; the kernel then needs n * 8 more
+arrays = (n + 1) * 8 + 6 * 4  # ptr and idx; the kernel then needs n * 4 more (64 MB)
 resource.setrlimit(resource.RLIMIT_AS, (vm_bytes() + arrays + 16 * 2**20,) * 2)
 try:
     _kernels.adjacency(faces, n)
