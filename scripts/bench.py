@@ -21,6 +21,7 @@ every thread: steadier than wall time on a shared machine). The stages are paper
     python3 scripts/bench.py --sizes 100k,1M --repeat 3 --json out/bench.json
     python3 scripts/bench.py --sizes 1M --kind mesh --backend numpy
     python3 scripts/bench.py --sizes 1M --kind points --mode both --repeat 2
+    python3 scripts/bench.py --sizes 1M --kind shuffled --mode both --repeat 4
 
 ``--compare`` runs one size side by side instead (issue 13): the CLI and the MeshLab
 plugin under meshlabserver on the same float PLY, in both modes, with the plugin/CLI
@@ -126,6 +127,17 @@ def cad_cloud(n: int, seed: int = 0) -> np.ndarray:
     return cloud[rng.permutation(len(cloud))[:n]]
 
 
+def shuffled_mesh(n: int, seed: int = 7) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`cad_mesh` with its vertices in a random order (faces kept in order, their
+    corners renumbered): a vertex order without locality, as a scan's or a remesher's,
+    where the grid-numbered bench mesh reads memory in order."""
+    vertices, faces = cad_mesh(n)
+    perm = np.random.default_rng(seed).permutation(len(vertices))
+    rank = np.empty_like(perm)
+    rank[perm] = np.arange(len(vertices))
+    return vertices[perm], rank[faces]
+
+
 def cad_mesh(n: int) -> tuple[np.ndarray, np.ndarray]:
     """A closed box mesh of about ``n`` vertices: each face a regular m x m grid of
     triangles, faces stored separately (their shared edges are merged by cleaning), and
@@ -221,7 +233,7 @@ def run_one(
         vertices, faces = cad_cloud(n), None
         scales = DEFAULT_KNN_SCALES
     else:
-        vertices, faces = cad_mesh(n)
+        vertices, faces = cad_mesh(n) if kind == "mesh" else shuffled_mesh(n)
         scales = DEFAULT_RING_SCALES
     n_in = len(vertices)
     _reset_peak()
@@ -750,7 +762,12 @@ def markdown_compare(r: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", default="100k,1M", help="comma-separated, e.g. 100k,1M,5M,20M")
-    ap.add_argument("--kind", choices=["points", "mesh", "both"], default="both")
+    ap.add_argument(
+        "--kind",
+        choices=["points", "mesh", "shuffled", "both"],
+        default="both",
+        help="shuffled: the bench mesh with its vertices in a random order (not in both)",
+    )
     ap.add_argument("--backend", choices=["compiled", "numpy"], default="compiled")
     ap.add_argument("--mode", choices=["paper", "robust", "both"], default="both")
     ap.add_argument("--repeat", type=int, default=3, help="runs per size (best is reported)")
