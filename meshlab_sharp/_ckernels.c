@@ -2089,11 +2089,11 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
         }
         if (out->near != NULL) { /* tree_order 2: a tree position (ms_isolated_tree) */
             const cand_t *c = kmax > 1 ? nb + 1 : NULL;
-            out->near[oi] = out->tree_order == 2 ? (c ? c->pos : i) : (c ? c->idx : ci);
+            out->near[oi] = (int32_t)(out->tree_order == 2 ? (c ? c->pos : i) : (c ? c->idx : ci));
         }
         if (out->kth_d2 != NULL) {
             out->kth_d2[oi] = nb[kmax - 1].d2;
-            out->kth_idx[oi] = nb[kmax - 1].idx;
+            out->kth_idx[oi] = (int32_t)nb[kmax - 1].idx;
         }
         if (out->pdis == NULL && out->relative == NULL && out->noise == NULL) continue;
         for (int s = 0; s < nscales; s++) mk[s] = ks[s];
@@ -2167,16 +2167,27 @@ done:
     return rc;
 }
 
-/* Rows [begin, end) of src (n rows of `width` 8-byte words, tree order) to their
- * cleaned positions in dst: row i to row orig[i] (the pass's tree_order outputs). */
-void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, int64_t begin,
-                     int64_t end, uint64_t *dst) {
-    if (width == 1) {
-        for (int64_t i = begin; i < end; i++) dst[orig[i]] = src[i];
+/* Rows [begin, end) of src (n rows of `bytes` bytes each, tree order) to their cleaned
+ * positions in dst: row i to row orig[i] (the pass's tree_order outputs: rows of 8-byte
+ * values, and the statistics' int32 indices). */
+void ms_scatter_rows(const int64_t *orig, const void *src, int64_t bytes, int64_t begin,
+                     int64_t end, void *dst) {
+    if (bytes == 8) { /* one value a row: a plain copy, no memcpy call per row */
+        const uint64_t *s = (const uint64_t *)src;
+        uint64_t *d = (uint64_t *)dst;
+        for (int64_t i = begin; i < end; i++) d[orig[i]] = s[i];
         return;
     }
+    if (bytes == 4) {
+        const uint32_t *s = (const uint32_t *)src;
+        uint32_t *d = (uint32_t *)dst;
+        for (int64_t i = begin; i < end; i++) d[orig[i]] = s[i];
+        return;
+    }
+    const char *s = (const char *)src;
+    char *d = (char *)dst;
     for (int64_t i = begin; i < end; i++) {
-        memcpy(dst + orig[i] * width, src + i * width, (size_t)width * sizeof(uint64_t));
+        memcpy(d + orig[i] * bytes, s + i * bytes, (size_t)bytes);
     }
 }
 
@@ -2193,8 +2204,8 @@ static inline uint8_t isolated_one(const double *a, const double *b, double kth,
 /* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx)
  * for the points [begin, end) of p (n, 3), cleaned order: out[i] = isolated_one of i and
  * j = near[i]. */
-void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
-                 const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out) {
+void ms_isolated(const double *p, const int32_t *near, const double *kth_d2,
+                 const int32_t *kth_idx, int64_t begin, int64_t end, uint8_t *out) {
     for (int64_t i = begin; i < end; i++) {
         int64_t j = near[i];
         out[i] = isolated_one(p + 3 * i, p + 3 * j, kth_d2[j], kth_idx[j], i);
@@ -2205,8 +2216,8 @@ void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
  * tp (n, 3) the points in tree order, orig their cleaned indices, near[t] the tree
  * position of the nearest, out[t] per tree position. The nearest lies close by in the
  * tree: reads near the point's own, where cleaned order reads all over the cloud. */
-void ms_isolated_tree(const double *tp, const int64_t *orig, const int64_t *near,
-                      const double *kth_d2, const int64_t *kth_idx, int64_t begin, int64_t end,
+void ms_isolated_tree(const double *tp, const int64_t *orig, const int32_t *near,
+                      const double *kth_d2, const int32_t *kth_idx, int64_t begin, int64_t end,
                       uint8_t *out) {
     for (int64_t t = begin; t < end; t++) {
         int64_t u = near[t];

@@ -136,9 +136,9 @@ typedef struct {
     int64_t *idx;
     double *relative, *score, *noise;
     int64_t noise_k;
-    int64_t *near;
+    int32_t *near; /* n < 2**31 (_kernels.cloud_projected_distances checks) */
     double *kth_d2;
-    int64_t *kth_idx;
+    int32_t *kth_idx;
     double sheet_gap;
     int64_t sheet_min;
     double sheet_own;
@@ -173,17 +173,17 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
                   const int64_t *ks, int nscales, int gaussian, int64_t begin, int64_t end,
                   const cloud_out_t *out);
 
-/* Rows [begin, end) of src (n rows of `width` 8-byte words, tree order) to their
- * cleaned positions in dst: row i to row orig[i]. */
-void ms_scatter_rows(const int64_t *orig, const uint64_t *src, int64_t width, int64_t begin,
-                     int64_t end, uint64_t *dst);
+/* Rows [begin, end) of src (n rows of `bytes` bytes each, tree order) to their cleaned
+ * positions in dst: row i to row orig[i]. */
+void ms_scatter_rows(const int64_t *orig, const void *src, int64_t bytes, int64_t begin,
+                     int64_t end, void *dst);
 
 /* robust.isolated_points from a pass's statistics near, kth_d2, kth_idx (n, cleaned
  * order) for the points [begin, end) of p (n, 3): out[i] = 1 when i is not among the
  * kmax nearest of near[i] ((|p_i - p_near[i]|^2, i) after that point's kmax-th
  * neighbour in the lists' order). */
-void ms_isolated(const double *p, const int64_t *near, const double *kth_d2,
-                 const int64_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
+void ms_isolated(const double *p, const int32_t *near, const double *kth_d2,
+                 const int32_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
 
 /* robust.sheet_mask, bit for bit, of the rows [begin, end) of the kNN lists idx (n, k)
  * (the point itself first) of the points p (n, 3) with their normals nrm (n, 3) and the
@@ -196,8 +196,8 @@ int ms_sheet_mask(const double *p, const int64_t *idx, int64_t k, const double *
 /* ms_isolated from a tree_order pass's statistics (per tree position t, near[t] the tree
  * position of the nearest) for the tree positions [begin, end): tp (n, 3) the points in
  * tree order, orig their cleaned indices; out[t] per tree position. */
-void ms_isolated_tree(const double *tp, const int64_t *orig, const int64_t *near,
-                      const double *kth_d2, const int64_t *kth_idx, int64_t begin, int64_t end,
+void ms_isolated_tree(const double *tp, const int64_t *orig, const int32_t *near,
+                      const double *kth_d2, const int32_t *kth_idx, int64_t begin, int64_t end,
                       uint8_t *out);
 
 /* Counts of v[begin, end) added to counts (32769): +0.0 in counts[0], the others by the

@@ -425,16 +425,15 @@ _STATS = ("near", "kth_d2", "kth_idx", "noise")
 def _to_cleaned_order(
     rows: np.ndarray, orig: np.ndarray, scratch: np.ndarray, workers: int = -1
 ) -> None:
-    """``rows`` (n, ...) of 8-byte items, C-contiguous, written at tree positions, moved
-    in place to cleaned order (``orig``: the cleaned index of each position) on
-    ``workers`` threads; ``scratch``: bytes, at least ``rows.nbytes`` of them."""
+    """``rows`` (n, ...), C-contiguous, written at tree positions, moved in place to
+    cleaned order (``orig``: the cleaned index of each position) on ``workers``
+    threads; ``scratch``: bytes, at least ``rows.nbytes`` of them."""
     lib = _LIB
-    assert lib is not None and rows.itemsize == 8 and rows.flags.c_contiguous
+    assert lib is not None and rows.flags.c_contiguous
     copy = scratch[: rows.nbytes].view(rows.dtype).reshape(rows.shape)
     np.copyto(copy, rows)
     n = len(rows)
-    width = rows.size // n if n else 1
-    args = (_ptr(orig), _ptr(copy), width)
+    args = (_ptr(orig), _ptr(copy), rows.nbytes // n if n else 0)
     w = _workers(workers)
 
     def task(a: int, b: int) -> int:
@@ -445,9 +444,9 @@ def _to_cleaned_order(
 
 
 def to_cleaned_order(arrays: Sequence[np.ndarray], orig: np.ndarray, workers: int = -1) -> None:
-    """Each of ``arrays`` (n, ...) of 8-byte items, C-contiguous, written at tree
-    positions, moved in place to cleaned order (``orig`` (n,) int64: the cleaned index of
-    each position), one scratch array for all of them."""
+    """Each of ``arrays`` (n, ...), C-contiguous, written at tree positions, moved in
+    place to cleaned order (``orig`` (n,) int64: the cleaned index of each position), one
+    scratch array for all of them."""
     scratch = np.empty(max((a.nbytes for a in arrays), default=0), np.uint8)
     for a in arrays:
         _to_cleaned_order(a, orig, scratch, workers)
@@ -578,9 +577,10 @@ class CloudStats:
     (:func:`isolated_from_stats`, a median of ``noise``) needs no cleaned order, and
     reads near each point's own row."""
 
-    near: np.ndarray  # (n,) int64 nearest other point (column 1 of the kNN table)
+    # int32: n < 2**31 (cloud_projected_distances checks), 8 bytes a point less
+    near: np.ndarray  # (n,) int32 nearest other point (column 1 of the kNN table)
     kth_d2: np.ndarray  # (n,) float64 squared distance of the k-th neighbour
-    kth_idx: np.ndarray  # (n,) int64 its index
+    kth_idx: np.ndarray  # (n,) int32 its index
     noise: np.ndarray  # (n,) float64 noise ratio over the noise_k nearest
     tree: KdTree | None = None  # the kd-tree whose order the rows follow, or None
 
@@ -704,6 +704,8 @@ def cloud_projected_distances(
     (:attr:`ScalePass.order`), and so are the statistics (:attr:`CloudStats.tree`)."""
     ks = np.ascontiguousarray(scales, dtype=np.int64)
     n, s = tree.n, len(ks)
+    if noise_k > 0 and n >= 2**31:  # before any (n,) array
+        raise ValueError("the compiled pass's statistics handle fewer than 2**31 points")
     keep = not relative if keep_pdis is None else keep_pdis
     out = ScalePass(
         np.empty((s, n)) if keep else None, np.empty((s, n, 3)) if keep_normals else None
@@ -711,8 +713,8 @@ def cloud_projected_distances(
     if relative:
         out.relative, out.score = np.empty((s, n)), np.empty(n)
     if noise_k > 0:
-        i64 = np.int64
-        out.stats = CloudStats(np.empty(n, i64), np.empty(n), np.empty(n, i64), np.empty(n))
+        i32 = np.int32
+        out.stats = CloudStats(np.empty(n, i32), np.empty(n), np.empty(n, i32), np.empty(n))
     fields: dict[str, np.ndarray | int | None] = {"pdis": out.pdis, "normals": out.normals}
     fields.update(relative=out.relative, score=out.score)
     if out.stats is not None:

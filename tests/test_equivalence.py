@@ -776,6 +776,7 @@ def test_isolated_points_and_noise_from_one_search(name):
     k_max = 40
     fused = _kernels.cloud_projected_distances(_kernels.build_tree(points), (12, k_max), noise_k=7)
     assert fused.stats is not None
+    assert fused.stats.near.dtype == fused.stats.kth_idx.dtype == np.int32  # 8 B a point less
     table = knn(points, k_max)
     np.testing.assert_array_equal(fused.stats.near, table[:, 1])
     expected = isolated_points(table)
@@ -810,6 +811,23 @@ def test_statistics_left_in_tree_order(name):
     assert expected.any() == (name != "no_outliers")
     np.testing.assert_array_equal(_isolated_from_stats(points, b), expected)
     assert _pass_noise_median(b.noise) == _pass_noise_median(a.noise)
+
+
+@pytest.mark.parametrize(
+    ("dtype", "shape"),
+    [(np.int32, ()), (np.float64, ()), (np.float64, (3,)), (np.int32, (3,)), (np.uint8, (5,))],
+)
+def test_to_cleaned_order_moves_rows_of_any_size(dtype, shape):
+    """to_cleaned_order moves rows of 4 bytes (the statistics' int32 indices), 8 bytes
+    and any other size (a normal's 24) to row orig[t], as numpy's scatter does."""
+    rng = np.random.default_rng(3)
+    n = 5000
+    orig = rng.permutation(n).astype(np.int64)
+    rows = rng.integers(-(2**31), 2**31 - 1, size=(n, *shape)).astype(dtype)
+    expected = np.empty_like(rows)
+    expected[orig] = rows
+    _kernels.to_cleaned_order([rows], orig, workers=2)
+    assert rows.tobytes() == expected.tobytes()
 
 
 def _median_cases() -> dict[str, np.ndarray]:

@@ -61,3 +61,12 @@ def test_adjacency_rejects_face_index_outside_vertices(bad):
     faces = np.array([[0, 1, 2], [0, 2, bad]], dtype=np.int64)
     with pytest.raises(InputError, match="outside the 3 vertices"):
         _kernels.adjacency(faces, 3)
+
+
+def test_cloud_statistics_need_fewer_than_2_31_points():
+    """The pass's statistics hold int32 indices: a cloud of 2**31 points is refused
+    before any array is made (a zero-stride view stands in for the points)."""
+    huge = np.broadcast_to(np.zeros(3), (2**31, 3))
+    tree = _kernels.KdTree(huge, np.zeros(0, np.int64), np.zeros((1, 6)), 0)
+    with pytest.raises(ValueError, match=r"fewer than 2\*\*31 points"):
+        _kernels.cloud_projected_distances(tree, (8,), relative=True, noise_k=7)

@@ -220,10 +220,11 @@ std::vector<T> toCleaned(const std::vector<Index> &orig, const std::vector<T> &v
 
 // What one pass of ms_cloud_pdis computed (_kernels.ScalePass, CloudStats): per scale s
 // and tree position t at [s * n + t] (tree order: the kernel writes its rows one after the
-// other, as _kernels' pass; near holds tree positions, for ms_isolated_tree).
+// other, as _kernels' pass; near holds tree positions, for ms_isolated_tree; near and
+// kthIdx int32, as cloud_out_t's: a MeshLab layer counts its vertices in an int).
 struct CloudPass {
 	std::vector<double> pdis, relative, score, noise, kthD2;
-	std::vector<Index> near, kthIdx;
+	std::vector<int32_t> near, kthIdx;
 };
 
 // One pass over the tree's points at the scales ks: projected distances (paper mode) or
