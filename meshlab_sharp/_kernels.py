@@ -1,4 +1,4 @@
-"""The compiled fast path: a small C library (``_ckernels.c``) loaded with ctypes.
+"""The compiled fast path: the native library (``native/``) loaded with ctypes.
 
 ``pip install .`` (or ``pip install -e .``) builds it with the system's C compiler; no
 Python headers are needed, only ``gcc``. Without it, or with the environment variable

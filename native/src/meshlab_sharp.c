@@ -11,7 +11,7 @@
  * the cloud pass's PCA (pca_lanes) writes its fused multiply-adds (fma()) and its own
  * exp, acos and cos, the same bits on every machine (see that page).
  */
-#include "_ckernels.h"
+#include "meshlab_sharp.h"
 
 #include <float.h>
 #include <math.h>
