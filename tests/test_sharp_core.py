@@ -307,29 +307,6 @@ def test_the_header_parser_reads_only_its_forms():
         _header.real("BINS")
 
 
-def test_the_ctypes_signatures_are_the_headers():
-    """Every function Python binds is declared in meshlab_sharp.h with the argument and
-    return types its ctypes signature gives (one ABI for both faces)."""
-    import ctypes
-
-    from meshlab_sharp._kernels import _SIGNATURES
-
-    text = re.sub(r"/\*.*?\*/", "", _header.HEADER.read_text(), flags=re.DOTALL)
-    declared = {
-        name: (ret, [a.strip() for a in args.split(",")])
-        for ret, name, args in re.findall(r"(\w+) (ms_\w+)\(([^)]*)\);", text)
-    }
-    ctype = {"int": ctypes.c_int, "int64_t": ctypes.c_int64, "double": ctypes.c_double}
-    for name, (restype, argtypes) in _SIGNATURES.items():
-        ret, args = declared[name]
-        assert restype is (None if ret == "void" else ctype[ret]), name
-        assert len(args) == len(argtypes), name
-        for arg, given in zip(args, argtypes, strict=True):
-            base = arg.rsplit(" ", 1)[0].replace("const ", "")
-            expected = ctypes.c_void_p if "*" in arg else ctype[base]
-            assert given is expected, (name, arg)
-
-
 SCALE_TEXTS = [
     "12 16 20",
     "20,12, 16",
