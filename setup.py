@@ -1,9 +1,10 @@
-"""Build the native library (native/: plain C, loaded with ctypes; no Python headers).
+"""Build the native library (native/: C kernels and the C++ detection sequence behind a C
+ABI, loaded with ctypes; no Python headers).
 
-The sources native/src/*.c, compiled with the flags native/CMakeLists.txt gives them for
-the MeshLab plugin, into the package's ``_ckernels`` module. Everything else is configured
-in pyproject.toml. ``optional=True``: without a C compiler the package still installs and
-runs the numpy reference path.
+The sources native/src/*.c and *.cpp, compiled with the flags native/CMakeLists.txt gives
+them for the MeshLab plugin, into the package's ``_ckernels`` module. Everything else is
+configured in pyproject.toml. ``optional=True``: without a compiler the package still
+installs and runs the numpy reference path.
 """
 
 import platform
@@ -11,16 +12,41 @@ import sys
 from pathlib import Path
 
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
 
 # glibc's vector math library (exp of two doubles at once) on x86-64 Linux.
 libmvec = sys.platform == "linux" and platform.machine() in ("x86_64", "AMD64")
 # Relative paths, as setuptools wants them.
 native = Path("native")
-sources = sorted(str(path) for path in (native / "src").glob("*.c"))
+sources = sorted(
+    str(path) for pattern in ("*.c", "*.cpp") for path in (native / "src").glob(pattern)
+)
 headers = [str(native / "include" / "meshlab_sharp.h")]
 headers += sorted(str(path) for path in (native / "src").glob("*.h"))
 
+#: Flags by language, as native/CMakeLists.txt gives them.
+LANGUAGE_FLAGS = {
+    ".c": ["-std=c99", "-fno-math-errno"],
+    ".cpp": ["-std=gnu++14", "-Wall", "-Wno-unused-parameter"],
+}
+
+
+class BuildNative(build_ext):
+    """build_ext with each source's language flags (C99 for .c, C++14 for .cpp)."""
+
+    def build_extensions(self) -> None:
+        compile_one = self.compiler._compile
+
+        def compile_with_language(obj, src, ext, cc_args, extra_postargs, pp_opts):
+            flags = [*extra_postargs, *LANGUAGE_FLAGS[Path(src).suffix]]
+            compile_one(obj, src, ext, cc_args, flags, pp_opts)
+
+        self.compiler._compile = compile_with_language
+        super().build_extensions()
+
+
 setup(
+    cmdclass={"build_ext": BuildNative},
     ext_modules=[
         Extension(
             "meshlab_sharp._ckernels",
@@ -29,10 +55,12 @@ setup(
             include_dirs=[str(native / "include")],
             # No fused multiply-add and no fast-math: products and sums rounded as numpy
             # rounds them (docs/implementation-notes.md).
-            extra_compile_args=["-O3", "-ffp-contract=off", "-fno-math-errno", "-std=c99"],
+            extra_compile_args=["-O3", "-ffp-contract=off"],
+            extra_link_args=["-pthread"],
             define_macros=[("MS_LIBMVEC", "1")] if libmvec else [],
             libraries=["mvec", "m"] if libmvec else ["m"],
+            language="c++",
             optional=True,
         )
-    ]
+    ],
 )

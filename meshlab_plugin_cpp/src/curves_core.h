@@ -6,12 +6,12 @@
 #ifndef MESHLAB_SHARP_CURVES_CORE_H
 #define MESHLAB_SHARP_CURVES_CORE_H
 
-#include "sharp_core.h"
-
 #include <array>
 #include <vector>
 
 namespace sharp {
+
+struct Point { double x, y, z; };
 
 using Vec3 = std::array<double, 3>;
 
@@ -32,7 +32,7 @@ struct Curves {
 };
 
 // The feature curves of a detection. vertices: the input, in input order; feature and
-// valid: Result::feature and Result::kept of detect() (per vertex); faces: the
+// valid: the features and the kept vertices of ms_detect (per vertex); faces: the
 // triangles (curves are chains of mesh edges), or empty for a cloud.
 Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char> &feature,
                      const std::vector<char> &valid,

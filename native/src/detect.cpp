@@ -1,11 +1,10 @@
-// See sharp_core.h. The per-point work is the native library
-// (native/src), called with the same arguments as meshlab_sharp/_kernels.py
-// calls it, in chunks of MS_CHUNK points on every core; what remains here mirrors the
-// Python modules' global steps: cleaning.py (the compiled path), threshold.py,
+// See detect.h. The per-point kernels of native/src are called with the same arguments as
+// meshlab_sharp/_kernels.py calls them, in chunks of MS_CHUNK points on every core; what
+// remains here mirrors the Python modules' global steps: cleaning.py (the compiled path), threshold.py,
 // multiscale.py, robust.py (RobustSetup; its finishing steps are the kernel's) and
 // creases.py. docs/implementation-notes.md and docs/robust-mode.md ("The arithmetic,
 // pinned down for the plugin") are the contract.
-#include "sharp_core.h"
+#include "detect.h"
 
 #include <algorithm>
 #include <atomic>
@@ -41,7 +40,7 @@ void check(int status) {
 class Bar {
 public:
 	using Clock = std::chrono::steady_clock;
-	explicit Bar(Progress cb) : cb_(cb), since_(Clock::now()) {}
+	Bar(ms_progress_fn cb, void *ctx) : cb_(cb), ctx_(ctx), since_(Clock::now()) {}
 	void report(int percent, const char *stage) {
 		if (stage_ != stage) {
 			close();
@@ -50,7 +49,7 @@ public:
 		if (!cb_) return;
 		char text[160];
 		std::snprintf(text, sizeof text, "Sharp features: %s %d%%", stage, percent);
-		cb_(percent, text);
+		cb_(percent, text, ctx_);
 	}
 	// Seconds per stage in order of first entry (a stage entered twice adds up).
 	std::vector<std::pair<std::string, double>> times() {
@@ -69,20 +68,26 @@ private:
 		}
 		since_ = now;
 	}
-	Progress cb_;
+	ms_progress_fn cb_;
+	void *ctx_;
 	std::string stage_;
 	Clock::time_point since_;
 	std::vector<std::pair<std::string, double>> times_;
 };
 
-// Threads of a run: one per core this process may use (as _kernels._workers).
-unsigned workers() {
+// One thread per core this process may use (as _kernels._workers).
+unsigned cores() {
 #ifdef __linux__
 	cpu_set_t set;
 	if (sched_getaffinity(0, sizeof set, &set) == 0) return unsigned(std::max(1, CPU_COUNT(&set)));
 #endif
 	return std::max(1u, std::thread::hardware_concurrency());
 }
+
+// Threads of the calling thread's run (Options::threads, or cores()): set by detect().
+thread_local unsigned runThreads = 1;
+
+unsigned workers() { return runThreads; }
 
 // run(t) on min(workers(), max(items, 1)) threads, t = 0 on the calling thread.
 template <class Run>
@@ -132,14 +137,17 @@ void eachIndex(Index count, F f) {
 
 // neighbourhoods.unit_scale: multiply by 2^-e, 2^(e-1) <= max |coordinate| < 2^e, when e is
 // outside (-MS_UNIT_RANGE, MS_UNIT_RANGE]: exact, and no squared distance can then
-// overflow or underflow whatever the unit.
-void unitScale(std::vector<double> &xyz) {
+// overflow or underflow whatever the unit. Returns xyz (n, 3) itself, or its scaled copy
+// in `scaled`.
+const double *unitScale(const double *xyz, Index n, std::vector<double> &scaled) {
 	double big = 0.0;
-	for (double c : xyz) big = std::max(big, std::fabs(c));
+	for (Index i = 0; i < 3 * n; ++i) big = std::max(big, std::fabs(xyz[i]));
 	int e = 0;
 	std::frexp(big, &e);
-	if (big == 0.0 || (-MS_UNIT_RANGE < e && e <= MS_UNIT_RANGE)) return;
-	for (double &c : xyz) c = std::ldexp(c, -e);
+	if (big == 0.0 || (-MS_UNIT_RANGE < e && e <= MS_UNIT_RANGE)) return xyz;
+	scaled.resize(3 * n);
+	for (Index i = 0; i < 3 * n; ++i) scaled[i] = std::ldexp(xyz[i], -e);
+	return scaled.data();
 }
 
 struct Clean {
@@ -150,23 +158,23 @@ struct Clean {
 };
 
 // cleaning._clean_compiled: exact duplicates merged into their first occurrence; for
-// meshes, faces of zero double area dropped, then unreferenced vertices.
-Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool mesh) {
-	const Index n = Index(v.size() / 3);
+// meshes, faces of zero double area dropped, then unreferenced vertices. v (n, 3), faces
+// (F, 3).
+Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
 	std::vector<uint64_t> table(size);  // scratch (ms_dedup clears it)
 	std::vector<Index> toInput(n), fromInput(n);  // fromInput: all 0, as ms_dedup needs
 	Clean c;
 	c.pts.resize(3 * n);
-	const Index m = ms_dedup(v.data(), n, table.data(), size - 1, fromInput.data(), toInput.data(), c.pts.data());
-	if (m == n) std::copy(v.begin(), v.end(), c.pts.begin());
+	const Index m = ms_dedup(v, n, table.data(), size - 1, fromInput.data(), toInput.data(), c.pts.data());
+	if (m == n) std::copy(v, v + 3 * n, c.pts.begin());
 	c.pts.resize(3 * m);
 	c.fromInput = fromInput;
 	if (!mesh) return c;
-	c.faces.resize(faces.size());
+	c.faces.resize(3 * F);
 	std::vector<uint8_t> used(m, 0);
-	const Index nonzero = ms_keep_faces(c.pts.data(), faces.data(), Index(faces.size() / 3), fromInput.data(),
+	const Index nonzero = ms_keep_faces(c.pts.data(), faces, F, fromInput.data(),
 	                                    c.faces.data(), used.data());
 	c.faces.resize(3 * nonzero);
 	if (c.faces.empty()) throw InputError("every face has zero area: nothing is left of the mesh");
@@ -739,31 +747,22 @@ std::string formatScales(const std::vector<int> &scales) {
 	return out;
 }
 
-Result detect(const std::vector<Point> &vertices, const std::vector<std::array<int, 3>> &faces,
-              const Options &options, Progress progress) {
-	Bar bar(progress);
+Result detect(const double *xyz, const Index nIn, const Index *faces, const Index m, const Options &options,
+              ms_progress_fn progress, void *ctx) {
+	runThreads = options.threads > 0 ? options.threads : cores();
+	Bar bar(progress, ctx);
 	bar.report(0, "cleaning");
-	const Index nIn = Index(vertices.size());
 	if (nIn == 0) throw InputError("the layer has no vertices");
-	std::vector<double> xyz(3 * nIn);
-	for (Index i = 0; i < nIn; ++i) {
-		const Point &p = vertices[i];
-		if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-			throw InputError("vertex " + std::to_string(i) + " has a non-finite coordinate (NaN or inf)");
-		xyz[3 * i] = p.x;
-		xyz[3 * i + 1] = p.y;
-		xyz[3 * i + 2] = p.z;
-	}
+	for (Index i = 0; i < 3 * nIn; ++i)
+		if (!std::isfinite(xyz[i]))
+			throw InputError("vertex " + std::to_string(i / 3) + " has a non-finite coordinate (NaN or inf)");
 	Result r;
-	r.mesh = !faces.empty() && !options.asPoints;
-	for (const auto &f : faces)
-		for (int a = 0; a < 3; ++a)
-			if (f[a] < 0 || f[a] >= nIn) throw InputError("a face index is out of range");
-	std::vector<Index> tri;
-	if (r.mesh)
-		for (const auto &f : faces) tri.insert(tri.end(), f.begin(), f.end());
-	unitScale(xyz);
-	const Clean c = clean(xyz, tri, r.mesh);
+	r.mesh = m > 0 && !options.asPoints;
+	for (Index i = 0; i < 3 * m; ++i)
+		if (faces[i] < 0 || faces[i] >= nIn) throw InputError("a face index is out of range");
+	std::vector<double> scaled;
+	const Clean c = clean(unitScale(xyz, nIn, scaled), nIn, faces, r.mesh ? m : 0, r.mesh);
+	scaled = std::vector<double>();
 	r.scales = r.mesh ? options.ringScales : options.knnScales;
 	if (!r.mesh) {
 		const Index n = c.size();
