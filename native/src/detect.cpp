@@ -153,8 +153,9 @@ const double *unitScale(const double *xyz, Index n, std::vector<double> &scaled)
 struct Clean {
 	std::vector<double> pts;     // cleaned vertices (m, 3), input order
 	std::vector<Index> faces;    // cleaned triangles (f, 3)
-	std::vector<Index> fromInput;  // cleaned index of each input vertex or -1
-	Index size() const { return Index(pts.size() / 3); }
+	std::vector<Index> fromInput;  // cleaned index of each input vertex or -1; empty: itself
+	Index n = 0;                 // cleaned vertices (pts may be handed on to a kd-tree)
+	Index size() const { return n; }
 };
 
 // cleaning._clean_compiled: exact duplicates merged into their first occurrence; for
@@ -170,8 +171,13 @@ Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 	const Index m = ms_dedup(v, n, table.data(), size - 1, fromInput.data(), toInput.data(), c.pts.data());
 	if (m == n) std::copy(v, v + 3 * n, c.pts.begin());
 	c.pts.resize(3 * m);
-	c.fromInput = fromInput;
-	if (!mesh) return c;
+	c.n = m;
+	std::vector<uint64_t>().swap(table);
+	std::vector<Index>().swap(toInput);
+	if (!mesh) {
+		if (m < n) c.fromInput = std::move(fromInput);
+		return c;
+	}
 	c.faces.resize(3 * F);
 	std::vector<uint8_t> used(m, 0);
 	const Index nonzero = ms_keep_faces(c.pts.data(), faces, F, fromInput.data(),
@@ -186,8 +192,14 @@ Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 			renumber[i] = kept++;
 		}
 	c.pts.resize(3 * kept);
+	c.n = kept;
 	for (Index &f : c.faces) f = renumber[f];
-	for (Index &i : c.fromInput) i = renumber[i];
+	for (Index &i : fromInput) i = renumber[i];
+	for (Index i = 0; i < n; ++i)  // kept when a vertex moved or was dropped
+		if (fromInput[i] != i) {
+			c.fromInput = std::move(fromInput);
+			break;
+		}
 	return c;
 }
 
@@ -201,7 +213,7 @@ struct Tree {
 
 	// As _kernels.build_tree: the top MS_KD_TOP levels one after the other, the nodes of
 	// each on every core, then the subtrees below them (the same tree as ms_kdtree_build).
-	explicit Tree(const std::vector<double> &p) : pts(p), orig(p.size() / 3), n(Index(p.size() / 3)) {
+	explicit Tree(std::vector<double> p) : pts(std::move(p)), orig(pts.size() / 3), n(Index(pts.size() / 3)) {
 		depth = std::max(0, int(std::ceil(std::log2(double(std::max<Index>(n, 1)) / MS_KD_LEAF))));
 		box.resize(6 * ((Index(2) << depth) - 1));
 		for (Index i = 0; i < n; ++i) orig[size_t(i)] = i;
@@ -223,6 +235,14 @@ template <class T>
 std::vector<T> toCleaned(const std::vector<Index> &orig, const std::vector<T> &v) {
 	std::vector<T> out(v.size());
 	for (size_t t = 0; t < orig.size(); ++t) out[size_t(orig[t])] = v[t];
+	return out;
+}
+
+// The tree's points in the cleaned order (row t to row orig[t]).
+std::vector<double> cleanedPoints(const Tree &t) {
+	std::vector<double> out(t.pts.size());
+	for (Index x = 0; x < t.n; ++x)
+		for (int a = 0; a < 3; ++a) out[3 * t.orig[x] + a] = t.pts[3 * x + a];
 	return out;
 }
 
@@ -422,11 +442,12 @@ void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 // face-average normals fixed (zero rows: PCA), as _kernels.ring_projected_distances; with
 // score not null, robust mode's relative distances (S, n) instead, and the score (n) into
 // *score, from the same walk (relative=True).
-std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector<int> &scales, bool gaussian,
+std::vector<double> ringPdis(Clean &c, const Rings &adj, const std::vector<int> &scales, bool gaussian,
                              std::vector<double> *score, Bar &bar, int from, int to) {
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
 	std::vector<double> normals(3 * n, 0.0);
 	ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data());
+	std::vector<Index>().swap(c.faces);  // no later step reads them (as pipeline.py)
 	const std::vector<Index> rings(scales.begin(), scales.end());
 	std::vector<double> out(rings.size() * n);
 	if (score) score->assign(n, 0.0);
@@ -460,21 +481,21 @@ std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector
 
 // The paper's method (ALGORITHM.md): min-max normalisation with the flat-scale rule,
 // Otsu, candidates at every scale.
-Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) {
+Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = c.size();
 	const size_t S = r.scales.size();
+	double box[3];
+	ms_extent(c.pts.data(), n, box);
 	std::vector<double> pdis;
 	std::vector<Index> orig;  // a cloud's tree order: the cleaned index of each row of pdis
 	if (r.mesh) {
 		pdis = ringPdis(c, adjacency(c), r.scales, options.gaussian, nullptr, bar, 0, 90);
 	} else {
 		bar.report(0, "kd-tree");
-		Tree tree(c.pts);
+		Tree tree(std::move(c.pts));  // no later step reads the points
 		pdis = cloudPass(tree, r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
 		orig.swap(tree.orig);
 	}
-	double box[3];
-	ms_extent(c.pts.data(), n, box);
 	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(box[0] * box[0] + box[1] * box[1] + box[2] * box[2]);
 	bar.report(90, "thresholds");
 	std::vector<int64_t> votes(n, 0);
@@ -484,6 +505,7 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 		// values hold 0 and 1, which Otsu's split parts
 		if (vote(&pdis[s * n], n, true, flatSpan, true, 0.0, votes, r) < 1.0) r.allFlat = false;
 	}
+	std::vector<double>().swap(pdis);
 	if (!orig.empty()) votes = toCleaned(orig, votes);
 	Decision d;
 	d.toClean.resize(n);
@@ -524,15 +546,13 @@ KnnOfMask knnOfMask(const Tree &t, const std::vector<char> &mask, int k, Bar &ba
 // grown with the noise, then the pass at the final scales; relative distances and score
 // from the kernel (RelativeRule.from_pass); acute tips, support and thinning by the
 // kernel on the candidates' kNN rows (RobustSetup._finish_compiled).
-Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar) {
-	Decision d;
-	d.toClean.resize(c.size());
-	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
-	std::vector<double> pts = c.pts;
+Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
+	Decision d;  // its toClean: all cleaned points unless isolated ones are left out
 	const int top0 = r.scales.back();
 	const int k0 = std::min(MS_NOISE_KNN, top0);
 	bar.report(0, "kd-tree");
-	auto tree = std::make_unique<Tree>(pts);
+	auto tree = std::make_unique<Tree>(std::move(c.pts));  // the points in cleaned order: pts below
+	std::vector<double> pts;  // the points processed, in cleaned order once the pass is done
 	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
 	std::vector<uint8_t> isolated(tree->n);  // per tree position (_kernels.isolated_from_stats)
 	eachIndex((tree->n + MS_CHUNK - 1) / MS_CHUNK, [&](Index u) {
@@ -540,24 +560,30 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		                 pass.kthIdx.data(), u * MS_CHUNK, std::min(tree->n, (u + 1) * MS_CHUNK), isolated.data());
 	});
 	isolated = toCleaned(tree->orig, isolated);
-	std::vector<Index> keep;
-	for (Index i = 0; i < tree->n; ++i)
-		if (!isolated[i]) keep.push_back(i);
-	if (Index(keep.size()) < tree->n) {
+	const Index nKeep = tree->n - Index(std::count(isolated.begin(), isolated.end(), uint8_t(1)));
+	if (nKeep < tree->n) {
+		std::vector<Index> keep;
+		keep.reserve(nKeep);
+		for (Index i = 0; i < tree->n; ++i)
+			if (!isolated[i]) keep.push_back(i);
 		if (Index(keep.size()) < top0) throw InputError("too few points are left once isolated points are removed");
-		std::vector<double> kept(3 * keep.size());
-		for (size_t i = 0; i < keep.size(); ++i)
-			for (int a = 0; a < 3; ++a) kept[3 * i + a] = pts[3 * keep[i] + a];
-		pts.swap(kept);
+		pass = CloudPass();
+		{
+			const std::vector<double> all = cleanedPoints(*tree);
+			tree.reset();
+			pts.resize(3 * keep.size());
+			for (size_t i = 0; i < keep.size(); ++i)
+				for (int a = 0; a < 3; ++a) pts[3 * i + a] = all[3 * keep[i] + a];
+		}
 		d.toClean.swap(keep);
 		tree = std::make_unique<Tree>(pts);
 		pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 45, 65);
 	}
 	const Index n = tree->n;
-	std::vector<double> ratio = pass.noise;
 	const Index at = (n - 1) / 2;
-	std::nth_element(ratio.begin(), ratio.begin() + at, ratio.end());
-	const double noise = std::min(std::max(1.0, std::pow(ratio[at] / MS_NOISE_TOLERATED, 2.0)), MS_NOISE_MAX_FACTOR);
+	std::nth_element(pass.noise.begin(), pass.noise.begin() + at, pass.noise.end());
+	const double ratio = pass.noise[at];  // the median noise ratio
+	const double noise = std::min(std::max(1.0, std::pow(ratio / MS_NOISE_TOLERATED, 2.0)), MS_NOISE_MAX_FACTOR);
 	const double factor = std::min(noise, double(n) / double(top0));
 	int thinKnn = MS_THIN_KNN;  // robust.thin_knn: grows with the scales
 	if (factor > 1.0) {
@@ -566,17 +592,25 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		if (r.scales.back() > n)
 			throw InputError("k = " + std::to_string(r.scales.back()) + " nearest neighbours needs at least " +
 			                 std::to_string(r.scales.back()) + " points, got " + std::to_string(n));
+		pass = CloudPass();
 		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85);
 	}
 	bar.report(85, "thresholds");
-	const bool quiet = !(ratio[at] > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
+	const bool quiet = !(ratio > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
 	const size_t S = r.scales.size();
 	std::vector<int64_t> votes(n, 0);
 	for (size_t s = 0; s < S; ++s)  // robust.otsu_splits: without noise the floor alone
 		vote(&pass.relative[s * n], n, false, 0.0, !quiet, R_MIN, votes, r);
+	std::vector<double>().swap(pass.relative);
+	if (d.toClean.empty()) {
+		d.toClean.resize(n);
+		std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
+	}
 	votes = toCleaned(tree->orig, votes);
 	pass.score = toCleaned(tree->orig, pass.score);
 	decide(votes, S, d);
+	std::vector<int64_t>().swap(votes);
+	if (pts.empty()) pts = cleanedPoints(*tree);
 	bar.report(85, "support and thinning");
 	const int top = r.scales.back();
 	// robust.acute_tests: one search for them and the candidates (RobustSetup._finish_compiled)
@@ -623,20 +657,23 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 // Robust mode on a mesh: the relative distances and the score from the kernel's ring pass
 // (the local scales summed in breadth-first order, as RobustSetup), support and thinning
 // over the 2-ring, and the vertices of the mesh's sharp edges (creases.py).
-Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar) {
+Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = c.size();
 	const size_t S = r.scales.size();
 	const int top = r.scales.back();
+	const auto edges = sharpVertices(c.pts, c.faces);  // before the ring pass drops the faces
 	const Rings adj = adjacency(c);
 	std::vector<double> score;
-	const std::vector<double> relative = ringPdis(c, adj, r.scales, options.gaussian, &score, bar, 0, 85);
+	std::vector<double> relative = ringPdis(c, adj, r.scales, options.gaussian, &score, bar, 0, 85);
 	bar.report(85, "thresholds");
 	std::vector<int64_t> votes(n, 0);
 	for (size_t s = 0; s < S; ++s) vote(&relative[s * n], n, false, 0.0, true, R_MIN, votes, r);
+	std::vector<double>().swap(relative);
 	Decision d;
 	d.toClean.resize(n);
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
 	decide(votes, S, d);
+	std::vector<int64_t>().swap(votes);
 	bar.report(85, "support and thinning");
 	std::vector<Index> rows;
 	for (Index i = 0; i < n; ++i)
@@ -646,7 +683,6 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 		d.feature = supportAndThin(c.pts, d.feature, score, rows, rings.lists(1), rings.lists(0), rings.lists(0), false,
 		                           0.0, false, false, MS_THIN_CONE_COS, bar, 85, 95);
 	}
-	const auto edges = sharpVertices(c.pts, c.faces);
 	for (Index i = 0; i < n; ++i)
 		if (edges[i]) {
 			d.feature[i] = 1;
@@ -761,7 +797,7 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	for (Index i = 0; i < 3 * m; ++i)
 		if (faces[i] < 0 || faces[i] >= nIn) throw InputError("a face index is out of range");
 	std::vector<double> scaled;
-	const Clean c = clean(unitScale(xyz, nIn, scaled), nIn, faces, r.mesh ? m : 0, r.mesh);
+	Clean c = clean(unitScale(xyz, nIn, scaled), nIn, faces, r.mesh ? m : 0, r.mesh);
 	scaled = std::vector<double>();
 	r.scales = r.mesh ? options.ringScales : options.knnScales;
 	if (!r.mesh) {
@@ -778,6 +814,7 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	                                   : robustCloud(c, options, r, bar);
 
 	r.timings = bar.times();
+	std::vector<double>().swap(c.pts);
 
 	// Back to the input's order.
 	std::vector<Index> processed(c.size(), -1);
@@ -786,7 +823,7 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	r.feature.assign(nIn, 0);
 	r.kept.assign(nIn, 0);
 	for (Index i = 0; i < nIn; ++i) {
-		const Index ci = c.fromInput[i];
+		const Index ci = c.fromInput.empty() ? i : c.fromInput[i];
 		if (ci < 0 || processed[ci] < 0) continue;
 		const Index pi = processed[ci];
 		r.kept[i] = 1;

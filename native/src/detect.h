@@ -14,9 +14,6 @@
 #include <utility>
 #include <vector>
 
-// Nothing of the C++ sequence is exported: the library's face is its C ABI.
-#pragma GCC visibility push(hidden)
-
 namespace sharp {
 
 struct Options {
@@ -47,6 +44,9 @@ struct InputError : std::runtime_error {
 	explicit InputError(const std::string &what) : std::runtime_error(what) {}
 };
 
+// Nothing of the C++ sequence is exported: the library's face is its C ABI.
+#pragma GCC visibility push(hidden)
+
 // Detect the sharp features of the n vertices xyz (n, 3) (and the m triangles faces
 // (m, 3), unless m is 0 or asPoints), on options.threads threads. progress (may be null)
 // is called by the calling thread only, with ctx, percent done and a message such as
@@ -61,8 +61,8 @@ std::vector<int> parseScales(const std::string &text, int minimum);
 // The scales as parseScales reads them back: "12 16 20".
 std::string formatScales(const std::vector<int> &scales);
 
-}  // namespace sharp
-
 #pragma GCC visibility pop
+
+}  // namespace sharp
 
 #endif

@@ -9,8 +9,7 @@
 #include <memory>
 #include <new>
 
-// Hidden, as the sequence's types it holds.
-struct __attribute__((visibility("hidden"))) ms_detection {
+struct ms_detection {
 	sharp::Result result;
 };
 
