@@ -24,6 +24,9 @@ _TIMINGS = _header.integer("COUNT_TIMINGS")
 _INT_MAX = 2**31 - 1
 _ERROR_BYTES = 512
 
+#: The library's stage names that the report spells as the Python-driven path does.
+_STAGE_NAMES = {"cleaning": "clean"}
+
 #: int (*ms_progress_fn)(int percent, const char *message, void *ctx)
 _PROGRESS = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_int, ctypes.c_char_p, ctypes.c_void_p)
 
@@ -158,7 +161,8 @@ def _results(lib: ctypes.CDLL, handle: ctypes.c_void_p) -> NativeDetection:
     seconds = ctypes.c_double()
     for i in range(int(counts[_TIMINGS])):
         lib.ms_detection_timing(handle, i, name, len(name), ctypes.byref(seconds))
-        timings[name.value.decode()] = seconds.value
+        stage = name.value.decode()
+        timings[_STAGE_NAMES.get(stage, stage)] = seconds.value
     return NativeDetection(
         mask=mask,
         strength=strength,

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cfloat>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -29,6 +30,29 @@ namespace {
 const double R_MIN = (2.0 / M_PI) * std::sin((MS_CREASE_ANGLE / 2.0) * (M_PI / 180.0));
 
 using Index = int64_t;
+
+// An allocator that leaves elements default-initialised (numbers: not written) on
+// resize(n): for the large buffers a kernel fills whole, which zeroing would only slow.
+template <class T>
+struct NoInit : std::allocator<T> {
+	template <class U>
+	struct rebind {
+		using other = NoInit<U>;
+	};
+	NoInit() = default;
+	template <class U>
+	NoInit(const NoInit<U> &) {}
+	template <class U>
+	void construct(U *p) {
+		::new (static_cast<void *>(p)) U;
+	}
+	template <class U, class... A>
+	void construct(U *p, A &&...a) {
+		::new (static_cast<void *>(p)) U(std::forward<A>(a)...);
+	}
+};
+template <class T>
+using Buffer = std::vector<T, NoInit<T>>;
 
 // Throws std::bad_alloc when a kernel ran out of memory (a non-zero status).
 void check(int status) {
@@ -151,8 +175,8 @@ const double *unitScale(const double *xyz, Index n, std::vector<double> &scaled)
 }
 
 struct Clean {
-	std::vector<double> pts;     // cleaned vertices (m, 3), input order
-	std::vector<Index> faces;    // cleaned triangles (f, 3)
+	Buffer<double> pts;          // cleaned vertices (m, 3), input order
+	Buffer<Index> faces;         // cleaned triangles (f, 3)
 	std::vector<Index> fromInput;  // cleaned index of each input vertex or -1; empty: itself
 	Index n = 0;                 // cleaned vertices (pts may be handed on to a kd-tree)
 	Index size() const { return n; }
@@ -164,16 +188,17 @@ struct Clean {
 Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
-	std::vector<uint64_t> table(size);  // scratch (ms_dedup clears it)
-	std::vector<Index> toInput(n), fromInput(n);  // fromInput: all 0, as ms_dedup needs
+	Buffer<uint64_t> table(size);  // scratch (ms_dedup clears it)
+	Buffer<Index> toInput(n);
+	std::vector<Index> fromInput(n);  // all 0, as ms_dedup needs
 	Clean c;
 	c.pts.resize(3 * n);
 	const Index m = ms_dedup(v, n, table.data(), size - 1, fromInput.data(), toInput.data(), c.pts.data());
 	if (m == n) std::copy(v, v + 3 * n, c.pts.begin());
 	c.pts.resize(3 * m);
 	c.n = m;
-	std::vector<uint64_t>().swap(table);
-	std::vector<Index>().swap(toInput);
+	Buffer<uint64_t>().swap(table);
+	Buffer<Index>().swap(toInput);
 	if (!mesh) {
 		if (m < n) c.fromInput = std::move(fromInput);
 		return c;
@@ -193,8 +218,10 @@ Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 		}
 	c.pts.resize(3 * kept);
 	c.n = kept;
-	for (Index &f : c.faces) f = renumber[f];
-	for (Index &i : fromInput) i = renumber[i];
+	if (kept < m) {  // else renumber is the identity
+		for (Index &f : c.faces) f = renumber[f];
+		for (Index &i : fromInput) i = renumber[i];
+	}
 	for (Index i = 0; i < n; ++i)  // kept when a vertex moved or was dropped
 		if (fromInput[i] != i) {
 			c.fromInput = std::move(fromInput);
@@ -205,7 +232,7 @@ Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 
 // The kd-tree of the kernel (_kernels.KdTree).
 struct Tree {
-	std::vector<double> pts;   // (n, 3) in tree order
+	Buffer<double> pts;        // (n, 3) in tree order
 	std::vector<Index> orig;   // cleaned index of each
 	std::vector<double> box;   // node boxes
 	int depth = 0;
@@ -213,7 +240,7 @@ struct Tree {
 
 	// As _kernels.build_tree: the top MS_KD_TOP levels one after the other, the nodes of
 	// each on every core, then the subtrees below them (the same tree as ms_kdtree_build).
-	explicit Tree(std::vector<double> p) : pts(std::move(p)), orig(pts.size() / 3), n(Index(pts.size() / 3)) {
+	explicit Tree(Buffer<double> p) : pts(std::move(p)), orig(pts.size() / 3), n(Index(pts.size() / 3)) {
 		depth = std::max(0, int(std::ceil(std::log2(double(std::max<Index>(n, 1)) / MS_KD_LEAF))));
 		box.resize(6 * ((Index(2) << depth) - 1));
 		for (Index i = 0; i < n; ++i) orig[size_t(i)] = i;
@@ -239,8 +266,8 @@ std::vector<T> toCleaned(const std::vector<Index> &orig, const std::vector<T> &v
 }
 
 // The tree's points in the cleaned order (row t to row orig[t]).
-std::vector<double> cleanedPoints(const Tree &t) {
-	std::vector<double> out(t.pts.size());
+Buffer<double> cleanedPoints(const Tree &t) {
+	Buffer<double> out(t.pts.size());
 	for (Index x = 0; x < t.n; ++x)
 		for (int a = 0; a < 3; ++a) out[3 * t.orig[x] + a] = t.pts[3 * x + a];
 	return out;
@@ -251,7 +278,8 @@ std::vector<double> cleanedPoints(const Tree &t) {
 // other, as _kernels' pass; near holds tree positions, for ms_isolated_tree; near and
 // kthIdx int32, as cloud_out_t's: a MeshLab layer counts its vertices in an int).
 struct CloudPass {
-	std::vector<double> pdis, relative, score, noise, kthD2;
+	Buffer<double> pdis, relative;  // filled whole by the kernel
+	std::vector<double> score, noise, kthD2;
 	std::vector<int32_t> near, kthIdx;
 };
 
@@ -306,7 +334,7 @@ CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian
 // of its faces).
 struct Rings {
 	std::vector<Index> ptr;
-	std::vector<int32_t> idx;
+	Buffer<int32_t> idx;
 };
 
 // ms_adjacency of the cleaned mesh, as _kernels.adjacency.
@@ -356,7 +384,7 @@ const uint8_t *bytes(const std::vector<char> &mask) { return reinterpret_cast<co
 // THIN_KNN of K (robust.smoothed_ranking); then, every candidate's support known, thinning
 // across the line (cone: robust.thin_cone) over K, the points not in f0 blocking with
 // block (robust.thin_blockers).
-std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector<char> &f0,
+std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
                                  const ms_lists_t &D, const ms_lists_t &S, const ms_lists_t &K, bool exempt,
                                  double freeBelow, bool smooth, bool block, double cone, Bar &bar, int from, int to) {
@@ -384,7 +412,7 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 // creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
 // normals turn by more than max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles);
 // the edges and their normals' dot products from the kernel (_kernels.crease_vertices).
-std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<Index> &faces) {
+std::vector<char> sharpVertices(const Buffer<double> &p, const Buffer<Index> &faces) {
 	const Index F = Index(faces.size() / 3), n = Index(p.size() / 3);
 	std::vector<Index> ptr(n + 1), estart(n + 1);
 	std::vector<int32_t> inc(3 * F);
@@ -442,14 +470,14 @@ void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 // face-average normals fixed (zero rows: PCA), as _kernels.ring_projected_distances; with
 // score not null, robust mode's relative distances (S, n) instead, and the score (n) into
 // *score, from the same walk (relative=True).
-std::vector<double> ringPdis(Clean &c, const Rings &adj, const std::vector<int> &scales, bool gaussian,
+Buffer<double> ringPdis(Clean &c, const Rings &adj, const std::vector<int> &scales, bool gaussian,
                              std::vector<double> *score, Bar &bar, int from, int to) {
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
 	std::vector<double> normals(3 * n, 0.0);
 	ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data());
-	std::vector<Index>().swap(c.faces);  // no later step reads them (as pipeline.py)
+	Buffer<Index>().swap(c.faces);  // no later step reads them (as pipeline.py)
 	const std::vector<Index> rings(scales.begin(), scales.end());
-	std::vector<double> out(rings.size() * n);
+	Buffer<double> out(rings.size() * n);  // filled whole by the kernel
 	if (score) score->assign(n, 0.0);
 	double *pdis = score ? nullptr : out.data(), *relative = score ? out.data() : nullptr;
 	double *scores = score ? score->data() : nullptr;
@@ -486,7 +514,7 @@ Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const size_t S = r.scales.size();
 	double box[3];
 	ms_extent(c.pts.data(), n, box);
-	std::vector<double> pdis;
+	Buffer<double> pdis;
 	std::vector<Index> orig;  // a cloud's tree order: the cleaned index of each row of pdis
 	if (r.mesh) {
 		pdis = ringPdis(c, adjacency(c), r.scales, options.gaussian, nullptr, bar, 0, 90);
@@ -505,7 +533,7 @@ Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 		// values hold 0 and 1, which Otsu's split parts
 		if (vote(&pdis[s * n], n, true, flatSpan, true, 0.0, votes, r) < 1.0) r.allFlat = false;
 	}
-	std::vector<double>().swap(pdis);
+	Buffer<double>().swap(pdis);
 	if (!orig.empty()) votes = toCleaned(orig, votes);
 	Decision d;
 	d.toClean.resize(n);
@@ -552,7 +580,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const int k0 = std::min(MS_NOISE_KNN, top0);
 	bar.report(0, "kd-tree");
 	auto tree = std::make_unique<Tree>(std::move(c.pts));  // the points in cleaned order: pts below
-	std::vector<double> pts;  // the points processed, in cleaned order once the pass is done
+	Buffer<double> pts;  // the points processed, in cleaned order once the pass is done
 	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
 	std::vector<uint8_t> isolated(tree->n);  // per tree position (_kernels.isolated_from_stats)
 	eachIndex((tree->n + MS_CHUNK - 1) / MS_CHUNK, [&](Index u) {
@@ -569,7 +597,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 		if (Index(keep.size()) < top0) throw InputError("too few points are left once isolated points are removed");
 		pass = CloudPass();
 		{
-			const std::vector<double> all = cleanedPoints(*tree);
+			const Buffer<double> all = cleanedPoints(*tree);
 			tree.reset();
 			pts.resize(3 * keep.size());
 			for (size_t i = 0; i < keep.size(); ++i)
@@ -601,7 +629,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	std::vector<int64_t> votes(n, 0);
 	for (size_t s = 0; s < S; ++s)  // robust.otsu_splits: without noise the floor alone
 		vote(&pass.relative[s * n], n, false, 0.0, !quiet, R_MIN, votes, r);
-	std::vector<double>().swap(pass.relative);
+	Buffer<double>().swap(pass.relative);
 	if (d.toClean.empty()) {
 		d.toClean.resize(n);
 		std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
@@ -664,11 +692,11 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const auto edges = sharpVertices(c.pts, c.faces);  // before the ring pass drops the faces
 	const Rings adj = adjacency(c);
 	std::vector<double> score;
-	std::vector<double> relative = ringPdis(c, adj, r.scales, options.gaussian, &score, bar, 0, 85);
+	Buffer<double> relative = ringPdis(c, adj, r.scales, options.gaussian, &score, bar, 0, 85);
 	bar.report(85, "thresholds");
 	std::vector<int64_t> votes(n, 0);
 	for (size_t s = 0; s < S; ++s) vote(&relative[s * n], n, false, 0.0, true, R_MIN, votes, r);
-	std::vector<double>().swap(relative);
+	Buffer<double>().swap(relative);
 	Decision d;
 	d.toClean.resize(n);
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
@@ -789,13 +817,16 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	Bar bar(progress, ctx);
 	bar.report(0, "cleaning");
 	if (nIn == 0) throw InputError("the layer has no vertices");
-	for (Index i = 0; i < 3 * nIn; ++i)
+	bool finite = true;  // branch-free checks over the whole input, the culprit found after
+	for (Index i = 0; i < 3 * nIn; ++i) finite &= std::fabs(xyz[i]) <= DBL_MAX;
+	for (Index i = 0; !finite; ++i)
 		if (!std::isfinite(xyz[i]))
 			throw InputError("vertex " + std::to_string(i / 3) + " has a non-finite coordinate (NaN or inf)");
 	Result r;
 	r.mesh = m > 0 && !options.asPoints;
-	for (Index i = 0; i < 3 * m; ++i)
-		if (faces[i] < 0 || faces[i] >= nIn) throw InputError("a face index is out of range");
+	bool inRange = true;
+	for (Index i = 0; i < 3 * m; ++i) inRange &= uint64_t(faces[i]) < uint64_t(nIn);
+	if (!inRange) throw InputError("a face index is out of range");
 	std::vector<double> scaled;
 	Clean c = clean(unitScale(xyz, nIn, scaled), nIn, faces, r.mesh ? m : 0, r.mesh);
 	scaled = std::vector<double>();
@@ -814,9 +845,17 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	                                   : robustCloud(c, options, r, bar);
 
 	r.timings = bar.times();
-	std::vector<double>().swap(c.pts);
+	Buffer<double>().swap(c.pts);
 
 	// Back to the input's order.
+	if (c.fromInput.empty() && Index(d.toClean.size()) == c.size()) {  // every input point, in order
+		r.strength = d.strength;
+		r.feature = d.feature;
+		r.kept.assign(nIn, 1);
+		r.nFeatures = long(std::count(r.feature.begin(), r.feature.end(), 1));
+		bar.report(100, "done");
+		return r;
+	}
 	std::vector<Index> processed(c.size(), -1);
 	for (size_t i = 0; i < d.toClean.size(); ++i) processed[d.toClean[i]] = Index(i);
 	r.strength.assign(nIn, 0.0);
