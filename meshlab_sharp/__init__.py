@@ -13,8 +13,10 @@ from .errors import InputError, MeshlabSharpError
 from .io import Geometry, load, save_features_ply
 from .meshset import detect_meshset
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
-from .pipeline import DEFAULT_MODE, MODES, DetectionResult, detect
+from .options import DEFAULT_MODE, MODES
+from .pipeline import detect
 from .preprocessing import Preprocessing, PreprocessingReport, preprocess
+from .result import DetectionResult
 
 __version__ = "0.1.0"
 

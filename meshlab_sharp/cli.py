@@ -36,10 +36,12 @@ from .io import (
 from .io.writers import HELD_SIGNALS
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
 from .normals import DEFAULT_WEIGHTING, WEIGHTINGS
-from .pipeline import DEFAULT_MODE, MAX_SCALES, MODES, DetectionResult, detect
+from .options import DEFAULT_MODE, MAX_SCALES, MODES
+from .pipeline import detect
 from .plugin import add_plugin_command
 from .preprocessing import Preprocessing
 from .progress import Progress
+from .result import DetectionResult
 
 #: ASCII white space, the only separator of a space-separated list (the plugin's too).
 _SPACE = " \t\n\r\f\v"

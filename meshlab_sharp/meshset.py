@@ -9,7 +9,9 @@ import pymeshlab
 
 from .io import add_vertex_attribute, curve_arrays, select_vertices
 from .normals import DEFAULT_WEIGHTING, Weighting
-from .pipeline import DEFAULT_MODE, DetectionResult, detect
+from .options import DEFAULT_MODE
+from .pipeline import detect
+from .result import DetectionResult
 
 
 def detect_meshset(

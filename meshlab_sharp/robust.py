@@ -904,6 +904,8 @@ class RelativeRule:
         (:class:`SheetNeighbourhoods`): the compiled pass over a cloud then does too.
     otsu : bool, default True
         :func:`robust_threshold`'s ``otsu`` (:func:`otsu_splits`).
+    backend : {"compiled", "numpy"}, optional
+        :func:`local_scale`'s; default :func:`meshlab_sharp._kernels.default_backend`.
     """
 
     points: np.ndarray
@@ -911,13 +913,15 @@ class RelativeRule:
     n_scales: int
     sheet: _kernels.SheetParameters | None = None
     otsu: bool = True
+    backend: str | None = None
 
     def __post_init__(self) -> None:
         self.score = np.zeros(len(self.points))
 
     def __call__(self, i: int, scale: int, pdis: np.ndarray) -> tuple[np.ndarray, float]:
         """Relative distances (m,) and threshold of the i-th scale, ``scale``."""
-        ell, offset = local_scale(self.points, self.lists(scale))  # type: ignore[operator]
+        lists = self.lists(scale)  # type: ignore[operator]
+        ell, offset = local_scale(self.points, lists, backend=self.backend)
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
         return r, robust_threshold(r, self.otsu)
@@ -1198,6 +1202,9 @@ class RobustSetup:
         self.neighbourhoods = neighbourhoods
         self.weighting = weighting
         self.keep_normals = keep_normals
+        #: The neighbourhoods' backend, which every step of the set-up and of
+        #: :meth:`finish` runs with.
+        self.backend = neighbourhoods.backend
         self.fused: _kernels.ScalePass | None = None
         #: How much the noise grew the scales (1: not at all).
         self.growth = 1.0
@@ -1226,7 +1233,7 @@ class RobustSetup:
                 self.keep = np.flatnonzero(~isolated)
                 self.points = np.ascontiguousarray(points[self.keep])
                 self.neighbourhoods = build_neighbourhoods(
-                    self.points, None, self.scales, workers=workers
+                    self.points, None, self.scales, workers=workers, backend=self.backend
                 )
                 if compiled:
                     self.fused = self._pass(k0, sheet)
@@ -1245,14 +1252,14 @@ class RobustSetup:
                 self.growth = factor
                 self.scales = grown_scales(self.scales, factor)
                 self.neighbourhoods = build_neighbourhoods(
-                    self.points, None, self.scales, workers=workers
+                    self.points, None, self.scales, workers=workers, backend=self.backend
                 )
                 self.fused = None
                 self.scale_neighbourhoods = self.neighbourhoods if compiled else self._sheets()
         if faces is None:
             self.sharp_edges = None
         elif sharp_edges is None:
-            self.sharp_edges = sharp_vertices(points, faces)[0]
+            self.sharp_edges = sharp_vertices(points, faces, backend=self.backend)[0]
         else:
             self.sharp_edges = np.asarray(sharp_edges, bool)
         otsu = otsu_splits(faces is not None, self.noise)
@@ -1260,7 +1267,9 @@ class RobustSetup:
         # setup made a reference cycle, so the arrays of every call (the kd-tree, the
         # pass's outputs: about 55 bytes a point) stayed until the garbage collector ran
         lists = self.scale_neighbourhoods.at
-        self.rule = RelativeRule(self.points, lists, len(self.scales), sheet, otsu)
+        self.rule = RelativeRule(
+            self.points, lists, len(self.scales), sheet, otsu, backend=self.backend
+        )
 
     def _sheets(self) -> SheetNeighbourhoods:
         """:class:`SheetNeighbourhoods` of ``neighbourhoods`` (numpy kNN lists)."""

@@ -19,7 +19,7 @@ import numpy as np
 from ..curves import Corners, Curve, extract_curves
 from ..curves.extract import support_radius
 from ..curves.refine import CellGrid
-from ..io.stream import PointSource
+from ..io.source import PointSource
 from .layout import bounds
 
 #: Points per block of the streaming passes.
