@@ -11,11 +11,11 @@ import numpy as np
 from . import _header, _kernels
 from .neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods
 from .normals import DEFAULT_WEIGHTING, Weighting
-from .projected_distance import projected_distances
+from .reference.projected_distance import projected_distances
 from .threshold import FLAT_TOLERANCE, normalise, otsu_threshold
 
 if TYPE_CHECKING:
-    from .robust import SheetNeighbourhoods
+    from .reference.robust import SheetNeighbourhoods
 
 #: Default scales of a point cloud: k nearest neighbours.
 DEFAULT_KNN_SCALES: tuple[int, ...] = _header.integers("DEFAULT_KNN_SCALES")

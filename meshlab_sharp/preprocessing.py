@@ -27,7 +27,7 @@ Every parameter is checked before pymeshlab sees it (some bad values, such as ``
 kill the interpreter).
 
 Each vertex carries its input index through the filters
-(:func:`meshlab_sharp.cleaning.tag_input_indices`), so results are mapped back to the
+(:func:`meshlab_sharp.io.tag_input_indices`), so results are mapped back to the
 input's order and length: removed points are not features (strength 0, ``kept``
 False); vertices added by hole filling have no input index and are left out of the
 mapped results (they are in the processed geometry, which can be saved).
@@ -46,9 +46,8 @@ import numpy as np
 import pymeshlab
 from scipy.spatial import cKDTree
 
-from .cleaning import tag_input_indices, tagged_input_indices
 from .errors import InputError
-from .io import Geometry, as_geometry, quiet_stdout
+from .io import Geometry, as_geometry, quiet_stdout, tag_input_indices, tagged_input_indices
 
 __all__ = [
     "DENOISE_METHODS",

@@ -95,7 +95,9 @@ def test_the_graph_is_read() -> None:
     graph = import_graph()
     assert "meshlab_sharp.pipeline" in graph["meshlab_sharp"]
     assert "meshlab_sharp.reference.neighbourhoods" in graph["meshlab_sharp.neighbourhoods"]
-    assert "evaluation.groundtruth" in graph["evaluation.scoring"]
+    assert "evaluation.scoring" in graph["evaluation.groundtruth"]
+    assert "meshlab_sharp.tiles" in graph["meshlab_sharp.pipeline"]  # inside detect()
+    assert "meshlab_sharp.io.readers" in graph["meshlab_sharp.io.stream"]  # in a function
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b"}, "b": set()}) is None
 

@@ -1,0 +1,17 @@
+"""The numpy reference of every step of the detection: readable, array-shaped code that
+the compiled kernels (:mod:`meshlab_sharp._kernels`) match bit for bit.
+
+It is the oracle of the tests (``tests/test_equivalence.py`` compares the two) and the
+fallback where no compiler is present: ``detect(..., backend="numpy")`` (or
+``MESHLAB_SHARP_BACKEND=numpy``) runs it. The product modules dispatch each step to the
+compiled function or to the reference one here, by the backend of the call; the
+reference imports nothing from them.
+
+Modules, one per step:
+
+* :mod:`.neighbourhoods`: k nearest neighbours, mesh adjacency and k-rings;
+* :mod:`.normals`: face-average normals, weighted PCA normals;
+* :mod:`.projected_distance`: the projected distance of one scale;
+* :mod:`.cleaning`: duplicate merge and zero-area faces, with pymeshlab's filters;
+* :mod:`.creases`: a mesh's dihedral angles and sharp vertices.
+"""
