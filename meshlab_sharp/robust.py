@@ -377,25 +377,11 @@ def _isolated_from_stats(
 def local_scale(
     points: np.ndarray, neighbourhood: Neighbourhood, *, backend: str | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean distance from each point to its neighbourhood, and its centroid's distance.
-
-    Parameters
-    ----------
-    points : (m, 3) float64
-    neighbourhood : Neighbourhood
-        CSR lists (``indptr`` (m + 1,), ``indices``); each point's own index included.
-    backend : {"compiled", "numpy"}, optional
-        Default :func:`meshlab_sharp._kernels.default_backend`. Both give the same bits
-        (:func:`meshlab_sharp.reference.robust.local_scale`).
-
-    Returns
-    -------
-    scale : (m,) float64
-        ``l_i = (1 / |N(i)|) * sum_{j in N(i)} |p_j - p_i|`` (0 for an empty list).
-    offset : (m,) float64
-        ``o_i = |(1 / |N(i)|) * sum_{j in N(i)} (p_j - p_i)|``, the distance from
-        ``p_i`` to the centroid (0 for an empty list); ``o_i <= l_i``.
-    """
+    """Mean distance from each point to its neighbourhood ``l`` (m,) and its centroid's
+    distance ``o`` (m,), as :func:`meshlab_sharp.reference.robust.local_scale` defines
+    them, with ``backend`` (default :func:`meshlab_sharp._kernels.default_backend`; both
+    give the same bits). ``points`` (m, 3) float64; ``neighbourhood`` CSR lists, each
+    point's own index included."""
     if _kernels.resolve(backend) == "compiled":
         return _kernels.local_scale_csr(points, neighbourhood.indptr, neighbourhood.indices)
     return reference.local_scale(points, neighbourhood)

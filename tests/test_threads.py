@@ -15,6 +15,7 @@ import shapes
 from meshlab_sharp import _kernels, pipeline, robust
 from meshlab_sharp.io import Geometry
 from meshlab_sharp.neighbourhoods import Neighbourhood, knn
+from meshlab_sharp.reference import robust as reference_robust
 
 
 def _record(calls: list[tuple[int, int, int]]):
@@ -85,7 +86,7 @@ def _features(seed: int) -> tuple[np.ndarray, np.ndarray, Neighbourhood]:
 def test_line_directions_in_parts_on_threads_are_one_calls(monkeypatch):
     points, mask, lists = _features(1)
     one = robust.line_directions(points, mask, lists)
-    monkeypatch.setattr(robust, "PART_MIN", 5)  # parts of a few hundred features
+    monkeypatch.setattr(reference_robust, "PART_MIN", 5)  # parts of a few hundred features
     for workers in (2, 3, -1):
         assert robust.line_directions(points, mask, lists, workers).tobytes() == one.tobytes()
     # unit directions of the features, zero rows elsewhere
