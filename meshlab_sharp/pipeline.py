@@ -76,7 +76,7 @@ def detect(
         Triangles, when ``source`` is an array. None: a point cloud.
     scales : int or sequence of int, optional
         kNN sizes for clouds (default 12, 16, ..., 40) or rings for meshes (default
-        1, 2, 3, 4); at most :data:`MAX_SCALES`. A single int is one scale.
+        1, 2, 3, 4); at most :data:`~meshlab_sharp.options.MAX_SCALES`. A single int is one scale.
     weighting : {"gaussian", "none"}, default "gaussian"
         Weights of the PCA normals (clouds, and mesh vertices without a face normal).
     as_points : bool, default False
