@@ -117,6 +117,28 @@ def test_the_package_imports_nothing_outside_it() -> None:
     assert not bad
 
 
+def test_the_reference_stands_alone() -> None:
+    """The numpy reference (``meshlab_sharp.reference``) imports none of the product
+    modules that dispatch to it: only other reference modules, the constants, the
+    kernels' thread pool, the errors and the input's types."""
+    allowed = {
+        "meshlab_sharp._header",
+        "meshlab_sharp._kernels",
+        "meshlab_sharp.errors",
+        "meshlab_sharp.io",
+    }
+    graph = import_graph()
+    reference = [name for name in graph if name.startswith("meshlab_sharp.reference")]
+    assert len(reference) >= 7
+    bad = {
+        (name, target)
+        for name in reference
+        for target in graph[name]
+        if not target.startswith("meshlab_sharp.reference") and target not in allowed
+    }
+    assert not bad
+
+
 def test_no_private_numpy_api() -> None:
     """No module of the package reaches into NumPy's private names (``np._x``,
     ``numpy.core._x``)."""
