@@ -6,6 +6,7 @@ counted wherever it stands (module level, inside a function, under ``TYPE_CHECKI
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -50,6 +51,7 @@ def imported(name: str, path: Path) -> set[str]:
     return out
 
 
+@functools.cache
 def import_graph() -> dict[str, set[str]]:
     """Module -> the modules of :data:`PACKAGES` it imports: of each imported name, the
     nearest module that holds it (``from .io import Geometry`` -> ``meshlab_sharp.io``,
