@@ -5,7 +5,8 @@ It is the oracle of the tests (``tests/test_equivalence.py`` compares the two) a
 fallback where no compiler is present: ``detect(..., backend="numpy")`` (or
 ``MESHLAB_SHARP_BACKEND=numpy``) runs it. The product modules dispatch each step to the
 compiled function or to the reference one here, by the backend of the call; the
-reference imports nothing from them.
+reference imports nothing from them (``tests/test_layout.py``). The out-of-core tiles
+run robust mode's finishing steps from here on each tile.
 
 Modules, one per step:
 
@@ -13,5 +14,7 @@ Modules, one per step:
 * :mod:`.normals`: face-average normals, weighted PCA normals;
 * :mod:`.projected_distance`: the projected distance of one scale;
 * :mod:`.cleaning`: duplicate merge and zero-area faces, with pymeshlab's filters;
-* :mod:`.creases`: a mesh's dihedral angles and sharp vertices.
+* :mod:`.creases`: a mesh's dihedral angles and sharp vertices;
+* :mod:`.robust`: robust mode's isolated points, noise ratio, sheet filter, local scale,
+  line directions, support, thinning, acute tips and smoothed ranking.
 """
