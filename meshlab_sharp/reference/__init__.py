@@ -1,5 +1,6 @@
-"""The numpy reference of every step of the detection: readable, array-shaped code that
-the compiled kernels (:mod:`meshlab_sharp._kernels`) match bit for bit.
+"""The numpy reference of the detection's steps: readable, array-shaped code that the
+compiled kernels (:mod:`meshlab_sharp._kernels`) match bit for bit (the thresholds,
+shared by both, are :mod:`meshlab_sharp.threshold`'s).
 
 It is the oracle of the tests (``tests/test_equivalence.py`` compares the two) and the
 fallback where no compiler is present: ``detect(..., backend="numpy")`` (or
