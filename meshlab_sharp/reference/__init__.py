@@ -1,6 +1,6 @@
 """The numpy reference of the detection's steps: readable, array-shaped code that the
-compiled kernels (:mod:`meshlab_sharp._kernels`) match bit for bit (the thresholds,
-shared by both, are :mod:`meshlab_sharp.threshold`'s).
+compiled kernels (:mod:`meshlab_sharp._kernels`) match bit for bit (the normalisation
+and Otsu's threshold stay in :mod:`meshlab_sharp.threshold`, which the tiles use too).
 
 It is the oracle of the tests (``tests/test_equivalence.py`` compares the two) and the
 fallback where no compiler is present: ``detect(..., backend="numpy")`` (or
