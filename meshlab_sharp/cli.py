@@ -310,7 +310,8 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
     if args.curves is not None:
         check_curves_path(args.curves)
     extra = (args.indices, args.report, args.save_processed, args.plot, args.curves)
-    _check_outputs(source, [output, *(Path(p) for p in extra if p is not None)], force=args.force)
+    paths = [output, *(Path(p) for p in extra if p is not None)]
+    _check_outputs(source, paths, outputs, force=args.force)
     steps = _preprocessing_from_args(args)
 
     start = time.perf_counter()
@@ -465,24 +466,18 @@ def _sample_geometry(kind: str) -> Geometry:
     return Geometry(vertices=part.vertices, faces=part.faces, source=f"sample part ({kind})")
 
 
-def _check_outputs(source: Path | None, outputs: list[Path], *, force: bool) -> None:
-    """Before any work: every output's folder exists and is writable, no output is a
-    folder, the input, another output, or (without ``--force``) an existing file."""
-    resolved = [p.resolve() for p in outputs]
+def _check_outputs(
+    source: Path | None, paths: list[Path], outputs: OutputSet, *, force: bool
+) -> None:
+    """Before any work: no output is the input or another output, and ``outputs``
+    claims them all (:meth:`OutputSet.claim`: folders exist and are writable, no output
+    is a folder or, without ``--force``, an existing file)."""
+    resolved = [p.resolve() for p in paths]
     if len(set(resolved)) != len(resolved):
         raise MeshlabSharpError("two outputs have the same path")
     if source is not None and source.exists() and source.resolve() in resolved:
         raise MeshlabSharpError(f"{source}: an output would overwrite the input")
-    for p in outputs:
-        folder = p.parent
-        if not folder.is_dir():
-            raise MeshlabSharpError(f"cannot write {p}: the folder {folder} does not exist")
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise MeshlabSharpError(f"cannot write {p}: the folder {folder} is not writable")
-        if p.is_dir():
-            raise MeshlabSharpError(f"cannot write {p}: it is a folder")
-        if p.exists() and not force:
-            raise MeshlabSharpError(f"{p} exists; use --force to overwrite it")
+    outputs.claim(paths, force=force)
 
 
 def _print_summary(source: str, output: Path, result: DetectionResult) -> None:
