@@ -15,14 +15,15 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
-from typing import NoReturn
+from typing import NoReturn, TextIO
 
 from . import __version__, _kernels
-from .errors import MeshlabSharpError
+from .errors import InputWarning, MeshlabSharpError
 from .io import (
     Geometry,
     OutputSet,
@@ -229,6 +230,30 @@ def _signals_interrupt() -> Iterator[None]:
             signal.signal(s, handler)
 
 
+@contextmanager
+def _warnings_as_lines() -> Iterator[None]:
+    """Print each :class:`InputWarning` as one ``meshlab-sharp: warning: ...`` line while
+    the block runs (other warnings as Python prints them)."""
+    with warnings.catch_warnings():
+        python_way = warnings.showwarning
+
+        def show(
+            message: Warning | str,
+            category: type[Warning],
+            filename: str,
+            lineno: int,
+            file: TextIO | None = None,
+            line: str | None = None,
+        ) -> None:
+            if issubclass(category, InputWarning):
+                print(f"meshlab-sharp: warning: {message}", file=sys.stderr)
+            else:
+                python_way(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``meshlab-sharp`` script; returns the exit status.
 
@@ -236,7 +261,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGINT, SIGTERM and SIGHUP end the command with one line saying what was written,
     and status 128 + the signal's number.
     """
-    with _signals_interrupt():
+    with _signals_interrupt(), _warnings_as_lines():
         try:
             args = build_parser().parse_args(argv)
             return int(args.func(args) or 0)
@@ -384,7 +409,7 @@ def _detect_tiled(
 ) -> int:
     """``detect --max-memory``/``--dask``: the input streamed, the output written in
     blocks (:mod:`meshlab_sharp.io.stream`)."""
-    from .io.stream import PointSource, open_points, write_features_ply
+    from .io.stream import PointSource, mesh_error, open_points, write_features_ply
 
     for flag, given in (
         ("--ascii", args.ascii),
@@ -395,6 +420,8 @@ def _detect_tiled(
             raise MeshlabSharpError(f"{flag} is not available with --max-memory/--dask")
     start = time.perf_counter()
     if source is None:
+        if sample == "mesh" and not args.as_points:
+            raise mesh_error("sample part (mesh)")
         points = PointSource.from_array(_sample_geometry(sample).vertices, "sample part")
     else:
         points = open_points(source, as_points=args.as_points)

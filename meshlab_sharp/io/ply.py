@@ -113,13 +113,7 @@ def read_ply(path: Path, name: str) -> tuple[np.ndarray, np.ndarray | None]:
         outside the vertices, no vertices.
     """
     header = _read_header(path, name)
-    vertex = next((e for e in header.elements if e.name == "vertex"), None)
-    if vertex is None or vertex.count == 0:
-        raise InputError(f"{name}: the file holds no points (no vertex element)")
-    for axis in "xyz":
-        prop = next((p for p in vertex.properties if p.name == axis), None)
-        if prop is None or prop.count_dtype is not None:
-            raise InputError(f"{name}: the vertex element has no scalar '{axis}' property")
+    _vertex_element(header, name)
     _check_size(path, header, name)
     read = _read_ascii if header.order == "" else _read_binary
     columns = read(path, header, name)
@@ -147,6 +141,69 @@ def read_ply(path: Path, name: str) -> tuple[np.ndarray, np.ndarray | None]:
             f"{len(xyz)} vertices"
         )
     return xyz, fan_triangles(faces.corners, faces.sizes)
+
+
+def binary_vertex_layout(path: Path, name: str) -> tuple[int, np.dtype, int, int] | None:
+    """Where a binary PLY's vertices are, to map them without reading the file:
+    (offset of the vertex data, record dtype, vertices, faces).
+
+    None for an ASCII PLY, or when the vertex element is not first or has a list
+    property (then :func:`read_ply` reads the file). The header and the size of the
+    data are checked as :func:`read_ply` checks them, with the same errors: the elements
+    after the vertices are walked (not read) to find where the data ends.
+
+    Raises
+    ------
+    InputError
+        A malformed header, or counts that do not match the data.
+    """
+    header = _read_header(path, name)
+    vertex = _vertex_element(header, name)
+    _check_size(path, header, name)
+    if header.order == "" or header.elements[0] is not vertex:
+        return None
+    if any(p.count_dtype is not None for p in vertex.properties):
+        return None
+    record = np.dtype([(p.name, p.dtype) for p in vertex.properties])
+    size = path.stat().st_size - header.size
+    offset = vertex.count * record.itemsize
+    rest = header.elements[1:]
+    if any(p.count_dtype is not None for e in rest for p in e.properties if e.count):
+        buf = np.memmap(path, dtype=np.uint8, mode="r", offset=header.size, shape=(size,))
+        for element in rest:
+            if element.count and any(p.count_dtype is not None for p in element.properties):
+                offset = _walk_lists(buf, offset, element, [], name)[2]
+            else:
+                offset += element.count * element.min_bytes()
+        del buf
+    else:
+        offset += sum(e.count * e.min_bytes() for e in rest)
+    if offset > size:
+        raise _truncated(name, header.elements[-1])
+    _no_trailing_bytes(size - offset, name)
+    faces = sum(e.count for e in header.elements if e.name == "face")
+    return header.size, record, vertex.count, faces
+
+
+def _vertex_element(header: _Header, name: str) -> _Element:
+    """The vertex element, with scalar ``x``, ``y``, ``z`` and at least one vertex."""
+    vertex = next((e for e in header.elements if e.name == "vertex"), None)
+    if vertex is None or vertex.count == 0:
+        raise InputError(f"{name}: the file holds no points (no vertex element)")
+    for axis in "xyz":
+        prop = next((p for p in vertex.properties if p.name == axis), None)
+        if prop is None or prop.count_dtype is not None:
+            raise InputError(f"{name}: the vertex element has no scalar '{axis}' property")
+    return vertex
+
+
+def _no_trailing_bytes(extra: int, name: str) -> None:
+    """Refuse binary data left after the last element."""
+    if extra:
+        raise InputError(
+            f"{name}: {extra} bytes of data after the last element (the "
+            "header's counts are smaller than the data)"
+        )
 
 
 def _read_header(path: Path, name: str) -> _Header:
@@ -188,12 +245,36 @@ def _read_header(path: Path, name: str) -> _Header:
             raise InputError(f"{name}: header line {number}: cannot read {line.strip()[:40]!r}")
     if order is None:
         raise InputError(f"{name}: the PLY header has no format line")
+    _check_names(elements, name)
     for element in elements:
         for prop in element.properties:
             prop.dtype = prop.dtype.newbyteorder(order or "=")
             if prop.count_dtype is not None:
                 prop.count_dtype = prop.count_dtype.newbyteorder(order or "=")
     return _Header(order, elements, end.end(), len(lines) + 1)
+
+
+def _check_names(elements: list[_Element], name: str) -> None:
+    """Refuse what would be read ambiguously or not at all: an element or a property
+    of one element declared twice, and triangle strips (``tristrips``, which MeshLab
+    reads as faces and meshlab-sharp does not read)."""
+    seen: set[str] = set()
+    for element in elements:
+        if element.name in seen:
+            raise InputError(f"{name}: the PLY header declares element '{element.name}' twice")
+        seen.add(element.name)
+        props = [p.name for p in element.properties]
+        twice = next((n for i, n in enumerate(props) if n in props[:i]), None)
+        if twice is not None:
+            raise InputError(
+                f"{name}: the PLY header declares property '{twice}' of element "
+                f"'{element.name}' twice"
+            )
+        if element.name == "tristrips" and element.count > 0:
+            raise InputError(
+                f"{name}: triangle strips (element 'tristrips') are not read; save the "
+                "mesh with a face element (MeshLab: File > Export Mesh)"
+            )
 
 
 def _dtype(word: str, name: str, number: int) -> np.dtype:
@@ -245,15 +326,23 @@ def _read_binary(path: Path, header: _Header, name: str) -> dict:
                     p.name: items[f"p{i}"] for i, p in enumerate(element.properties)
                 }
             continue
-        starts, sizes, offset = _walk_lists(buf, offset, element, name)
+        props = element.properties
         if element.name == "face":
-            prop = _index_property(element, name)
-            columns["face"] = _Faces(_gather(buf, starts, sizes, prop.dtype), sizes, None)
-    if offset != len(buf):
-        raise InputError(
-            f"{name}: {len(buf) - offset} bytes of data after the last element (the "
-            "header's counts are smaller than the data)"
-        )
+            wanted = [props.index(_index_property(element, name))]
+        elif element.name == "vertex":
+            wanted = [i for i, p in enumerate(props) if p.name in ("x", "y", "z")]
+        else:
+            wanted = []
+        where, sizes, offset = _walk_lists(buf, offset, element, wanted, name)
+        if element.name == "face":
+            i = wanted[0]
+            corners = _gather(buf, where[i], sizes[i], props[i].dtype).astype(np.int64)
+            columns["face"] = _Faces(corners, sizes[i], None)
+        elif element.name == "vertex":
+            columns["vertex"] = {
+                props[i].name: _values(buf, where[i], props[i].dtype) for i in wanted
+            }
+    _no_trailing_bytes(len(buf) - offset, name)
     return columns
 
 
@@ -265,17 +354,17 @@ def _index_property(element: _Element, name: str) -> _Property:
 
 
 def _walk_lists(
-    buf: np.ndarray, offset: int, element: _Element, name: str
-) -> tuple[np.ndarray, np.ndarray, int]:
+    buf: np.ndarray, offset: int, element: _Element, wanted: list[int], name: str
+) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], int]:
     """Walk the binary items of an element with list properties.
 
-    Returns the byte offsets and lengths of its ``vertex_indices`` lists (empty arrays
-    for another element) and the offset after the element. When the element has one
-    list and every item has the first item's list length (all triangles, say) this is
-    one numpy step; otherwise a loop over the items.
+    Returns, for each property index in ``wanted``, the byte offset in every item of
+    its value (a scalar) or of its first list item, and the list lengths (lists only),
+    then the offset after the element. When the element has one list and every item
+    has the first item's list length (all triangles, say) this is one numpy step;
+    otherwise a loop over the items.
     """
     props = element.properties
-    wanted = next((i for i, p in enumerate(props) if p.name in _INDEX_NAMES), -1)
     lists = [i for i, p in enumerate(props) if p.count_dtype is not None]
     if len(lists) == 1 and element.count > 0:
         i, p = lists[0], props[lists[0]]
@@ -290,29 +379,32 @@ def _walk_lists(
             if end <= len(buf):
                 counts = np.frombuffer(buf, dtype, element.count, offset)["n"]
                 if (counts == n).all():
-                    if wanted != i:
-                        return np.empty(0, np.int64), np.empty(0, np.int64), end
-                    step = dtype.itemsize * np.arange(element.count)
-                    starts = offset + dtype.fields["items"][1] + step
-                    return starts, np.full(element.count, n, dtype=np.int64), end
+                    step = offset + dtype.itemsize * np.arange(element.count)
+                    where = {
+                        j: step + dtype.fields["items" if j == i else f"p{j}"][1] for j in wanted
+                    }
+                    sizes = {i: np.full(element.count, n, dtype=np.int64)} if i in wanted else {}
+                    return where, sizes, end
     return _walk_items(buf, offset, element, wanted, name)
 
 
 def _walk_items(
-    buf: np.ndarray, offset: int, element: _Element, wanted: int, name: str
-) -> tuple[np.ndarray, np.ndarray, int]:
+    buf: np.ndarray, offset: int, element: _Element, wanted: list[int], name: str
+) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], int]:
     """The general case of :func:`_walk_lists`: one item at a time."""
     raw = buf.data
     layout = [
         (p.dtype.itemsize, None if p.count_dtype is None else struct.Struct(_struct(p.count_dtype)))
         for p in element.properties
     ]
-    starts = np.empty(element.count if wanted >= 0 else 0, dtype=np.int64)
-    sizes = np.empty_like(starts)
+    where = {i: np.empty(element.count, dtype=np.int64) for i in wanted}
+    sizes = {i: np.empty(element.count, dtype=np.int64) for i in wanted if layout[i][1]}
     pos, end = offset, len(buf)
     for item in range(element.count):
         for i, (size, count) in enumerate(layout):
             if count is None:
+                if i in where:
+                    where[i][item] = pos
                 pos += size
                 continue
             if pos + count.size > end:
@@ -323,12 +415,12 @@ def _walk_items(
                     f"{name}: item {item} of element '{element.name}': negative list length"
                 )
             pos += count.size
-            if i == wanted:
-                starts[item], sizes[item] = pos, n
+            if i in where:
+                where[i][item], sizes[i][item] = pos, n
             pos += n * size
         if pos > end:
             raise _truncated(name, element)
-    return starts, sizes, pos
+    return where, sizes, pos
 
 
 def _struct(dtype: np.dtype) -> str:
@@ -345,8 +437,12 @@ def _gather(buf: np.ndarray, starts: np.ndarray, sizes: np.ndarray, dtype: np.dt
     item = np.repeat(starts, sizes) + dtype.itemsize * (
         np.arange(total) - np.repeat(np.cumsum(sizes) - sizes, sizes)
     )
-    raw = buf[item[:, None] + np.arange(dtype.itemsize)]
-    return raw.view(dtype).ravel().astype(np.int64)
+    return _values(buf, item, dtype)
+
+
+def _values(buf: np.ndarray, where: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """The ``dtype`` values at byte offsets ``where``."""
+    return buf[where[:, None] + np.arange(dtype.itemsize)].view(dtype).ravel()
 
 
 def _truncated(name: str, element: _Element) -> InputError:
