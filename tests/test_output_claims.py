@@ -84,6 +84,29 @@ def test_dev_stdout_receives_the_indices(cloud, expected_indices):
     assert os.path.islink("/dev/stdout")
 
 
+def test_dev_stdout_redirected_to_a_file_writes_into_that_file(tmp_path, cloud):
+    """``--indices /dev/stdout > out.txt``: out.txt (a regular file, existing) receives
+    the indices then the summary, in order, without --force; nothing is replaced."""
+    out = tmp_path / "out.txt"
+    with out.open("w") as fh:
+        proc = subprocess.run(
+            [sys.executable, "-m", "meshlab_sharp", "detect", str(cloud)]
+            + ["--indices", "/dev/stdout", "--scales", "12,16"],
+            stdout=fh,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=120,
+            check=False,
+        )
+    assert (proc.returncode, proc.stderr) == (0, "")
+    expected = meshlab_sharp.detect(CLOUD, scales=[12, 16]).mask
+    indices = "".join(f"{i}\n" for i in np.flatnonzero(expected))
+    text = out.read_text()
+    assert text.startswith(indices)
+    assert text[len(indices) :].startswith("  k =  12: threshold")
+    assert os.path.islink("/dev/stdout")
+
+
 @pytest.mark.skipif(os.geteuid() != 0, reason="mknod of a character device needs root")
 @pytest.mark.parametrize("force", [True, False])
 def test_a_device_node_stays_a_device(tmp_path, cloud, force):

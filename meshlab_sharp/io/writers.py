@@ -13,7 +13,9 @@ so of two runs that want the same new file only one gets it), and the renames re
 the placeholders. An output that exists and is not a regular file (a character device
 such as ``/dev/null``, a FIFO, or a symbolic link to one) is never replaced: its content
 is staged in a temporary file and copied into it after the renames. A symbolic link to a
-regular file stays a link: the file it points to is replaced.
+regular file stays a link: the file it points to is replaced. ``/dev/stdout`` and other
+names of this process's open descriptors are written through the descriptor itself, so
+``--indices /dev/stdout > features.txt`` appends to what the shell opened.
 """
 
 from __future__ import annotations
@@ -23,9 +25,11 @@ import errno
 import fcntl
 import json
 import os
+import re
 import shutil
 import signal
 import stat
+import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -254,13 +258,16 @@ def _target(path: Path) -> Path:
 
 
 def _written_through(path: Path) -> bool:
-    """True if ``path`` is (or links to) a character device or FIFO: written through.
+    """True if ``path`` is (or links to) a character device, a FIFO, or a descriptor of
+    this process (``/dev/stdout``, ``/dev/fd/N``): written through.
 
     Raises
     ------
     OutputError
         ``path`` is a block device or a socket, which meshlab-sharp never writes.
     """
+    if _own_descriptor(path) is not None:
+        return True
     try:
         mode = os.stat(path).st_mode
     except OSError:
@@ -271,6 +278,24 @@ def _written_through(path: Path) -> bool:
         kind = "a block device" if stat.S_ISBLK(mode) else "a socket"
         raise OutputError(f"cannot write {path}: it is {kind}")
     return False
+
+
+#: A descriptor's name: ``/dev/fd/N`` or ``/proc/self/fd/N`` (or ``/proc/PID/fd/N``).
+_DESCRIPTOR = re.compile(r"/(?:dev|proc/(self|thread-self|\d+))/fd/(\d+)")
+
+
+def _own_descriptor(path: Path) -> int | None:
+    """The descriptor of this process that ``path`` names, directly or through links
+    (``/dev/stdout`` links to ``/proc/self/fd/1``), or None."""
+    name = os.path.abspath(path)
+    for _ in range(40):  # the kernel's limit on links followed
+        found = _DESCRIPTOR.fullmatch(name)
+        if found is not None and found.group(1) in (None, "self", "thread-self", str(os.getpid())):
+            return int(found.group(2))
+        if not os.path.islink(name):
+            return None
+        name = os.path.normpath(os.path.join(os.path.dirname(name), os.readlink(name)))
+    return None
 
 
 def _taken(path: Path, target: Path) -> str:
@@ -289,12 +314,19 @@ def _taken(path: Path, target: Path) -> str:
 
 
 def _copy_into(tmp: Path, target: Path) -> None:
-    """Copy ``tmp`` into the device or FIFO ``target`` (opened without creating or
-    truncating anything; a FIFO waits for its reader)."""
-    fd = os.open(target, os.O_WRONLY | os.O_NOCTTY | os.O_CLOEXEC)
+    """Copy ``tmp`` into ``target``: a descriptor of this process (where the file it is
+    open on stands, after what this process printed there), or a device or FIFO
+    (opened without creating or truncating anything; a FIFO waits for its reader)."""
+    own = _own_descriptor(target)
+    if own is not None:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        fd = os.dup(own)
+    else:
+        fd = os.open(target, os.O_WRONLY | os.O_NOCTTY | os.O_CLOEXEC)
     with os.fdopen(fd, "wb") as out:
         mode = os.fstat(fd).st_mode
-        if not (stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)):
+        if own is None and not (stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)):
             raise OSError(errno.EEXIST, "it is no longer a device or FIFO")
         with open(tmp, "rb") as src:
             shutil.copyfileobj(src, out)
