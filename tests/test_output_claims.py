@@ -77,11 +77,16 @@ def test_dev_null_is_written_through_with_or_without_force(cloud, force):
     assert not os.path.islink("/dev/null")
 
 
-def test_dev_stdout_receives_the_indices(cloud, expected_indices):
-    proc = run_detect(cloud, "-q", "--indices", "/dev/stdout")
+@pytest.mark.parametrize("via", ["/dev/stdout", "/dev/fd/1", "link to /proc/self/fd/1"])
+def test_stdout_receives_the_indices(tmp_path, cloud, expected_indices, via):
+    path = Path(via)
+    if via.startswith("link"):
+        path = tmp_path / "out.txt"
+        path.symlink_to("/proc/self/fd/1")
+    proc = run_detect(cloud, "-q", "--indices", path)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout == expected_indices
-    assert os.path.islink("/dev/stdout")
+    assert os.path.islink(path) and os.path.islink("/dev/stdout")
 
 
 def test_dev_stdout_redirected_to_a_file_writes_into_that_file(tmp_path, cloud):
