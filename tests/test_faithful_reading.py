@@ -1,9 +1,11 @@
 """Readers refuse what they cannot read faithfully, and say the same in every path.
 
 A file read "successfully" but differently from what it holds is worse than an error:
-duplicate PLY properties, triangle strips, list properties on vertices, counts that
-disagree with the data (in memory and out of core alike), decimal commas in point
-lists, a mesh sample sent out of core, a truncated 3DS file.
+duplicate PLY properties, list properties on vertices, counts that disagree with the
+data (in memory and out of core alike), decimal commas in point lists, a mesh sample
+sent out of core, a truncated 3DS file. PLY triangle strips are read as MeshLab reads
+them (checked against pymeshlab), and refused where MeshLab refuses or would read
+outside its vertices.
 """
 
 from __future__ import annotations
@@ -66,17 +68,68 @@ def test_an_element_declared_twice_is_refused(tmp_path):
         load(path)
 
 
+#: Triangle strips with restarts (-1) at odd and even places, a list too short for a
+#: triangle, a -1 stepped over (MeshLab reads it so).
+STRIPS = [
+    [0, 1, 2, 3, 4, 5, -1, 6, 7, 8, 9, -1, 10, 11, 12],
+    [13, 14, 15, 16, -1, 17, 18, 19, 20, 21, 22],
+    [1, 2],
+    [4, 5, -1, 6, 7, 8, 9],
+    [0, 1, -1, 3, 4, 5, 6, -1],
+    [0, -1, -1, 3, 4, 5],
+]
+
+
+def _strips_ply(fmt: str, strips: list[list[int]]) -> bytes:
+    v = np.random.default_rng(1).random((30, 3))
+    head = (
+        f"ply\nformat {fmt} 1.0\nelement vertex {len(v)}\nproperty double x\n"
+        "property double y\nproperty double z\n"
+        f"element tristrips {len(strips)}\nproperty list int int vertex_indices\nend_header\n"
+    ).encode()
+    if fmt == "ascii":
+        rows = [b" ".join(b"%r" % float(c) for c in p) for p in v]
+        rows += [b" ".join(b"%d" % x for x in [len(s), *s]) for s in strips]
+        return head + b"\n".join(rows) + b"\n"
+    e = "<" if fmt == "binary_little_endian" else ">"
+    lists = b"".join(struct.pack(f"{e}i{len(s)}i", len(s), *s) for s in strips)
+    return head + v.astype(e + "f8").tobytes() + lists
+
+
 @pytest.mark.parametrize("fmt", FORMATS)
-def test_triangle_strips_are_refused_not_read_as_a_point_cloud(tmp_path, fmt):
-    v, f = MESH
+def test_triangle_strips_are_read_as_meshlab_reads_them(tmp_path, fmt):
     path = tmp_path / "strips.ply"
-    path.write_bytes(malformed.ply(v, f, fmt).replace(b"element face", b"element tristrips"))
-    line = one_error_line(run_detect(path, "-q"))
-    assert line == (
-        f"meshlab-sharp: error: {path}: triangle strips (element 'tristrips') are not read; "
-        "save the mesh with a face element (MeshLab: File > Export Mesh)"
-    )
-    assert not (tmp_path / "strips_sharp.ply").exists()
+    path.write_bytes(_strips_ply(fmt, STRIPS))
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(path))
+    faces = load(path).faces
+    assert faces is not None and len(faces) == 18
+    np.testing.assert_array_equal(faces, ms.current_mesh().face_matrix())
+    assert faces[:3].tolist() == [[0, 1, 2], [2, 1, 3], [2, 3, 4]]  # every second one swapped
+    assert faces[4].tolist() == [6, 7, 8]  # a strip starts unswapped after a -1
+
+
+@pytest.mark.parametrize(
+    ("strip", "bad"), [([0, 1, 2, -1, -1, 3, 4], -1), ([-1, 0, 1, 2], -1), ([30, 1, 2], 30)]
+)
+def test_triangle_strips_meshlab_refuses_are_refused(tmp_path, strip, bad):
+    path = tmp_path / "strips.ply"
+    path.write_bytes(_strips_ply("ascii", [[0, 1, 2], strip]))
+    with pytest.raises(pymeshlab.PyMeshLabException, match="Bad vertex index"):
+        pymeshlab.MeshSet().load_new_mesh(str(path))
+    message = f"tristrips item 1 (line 41) has vertex index {bad} where a triangle needs one"
+    with pytest.raises(InputError, match=re.escape(message)):
+        load(path)
+
+
+@pytest.mark.parametrize(("strip", "bad"), [([0, -1, 2, 3], -1), ([0, 1, 30], 30)])
+def test_what_meshlab_would_read_outside_its_vertices_is_refused(tmp_path, strip, bad):
+    """MeshLab checks only a triangle's first corner: it reads vertex -1 or 30 outside
+    its array (pymeshlab crashes on the second file). Refused here."""
+    path = tmp_path / "strips.ply"
+    path.write_bytes(_strips_ply("binary_little_endian", [strip]))
+    with pytest.raises(InputError, match=f"tristrips item 0 has vertex index {bad} where"):
+        load(path)
 
 
 # ---------------------------------------------------------------- list properties

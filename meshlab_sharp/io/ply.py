@@ -4,10 +4,12 @@ The header is read with a bounded read and checked before any data: every elemen
 count is checked against the size of the file, so a huge count is refused at once. The
 vertex element must have scalar ``x``, ``y``, ``z`` properties; a ``face`` element's
 ``vertex_indices`` (or ``vertex_index``) list gives polygons, which become triangle
-fans. Every element is read (other elements are skipped), and the data must end where
-the header says: a count smaller or larger than the data is an error. A face with fewer
+fans; a ``tristrips`` element's lists give triangle strips, read as MeshLab reads them.
+Every element is read (other elements are skipped), and the data must end where the
+header says: a count smaller or larger than the data is an error. A face with fewer
 than 3 indices is an error: it has no area and MeshLab would read it as a bogus
-triangle.
+triangle. An element, or a property of one element, declared twice is an error (which
+one would be meant?).
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ _TYPES = {
 _FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
 _MAX_HEADER = 1 << 20
 _INDEX_NAMES = ("vertex_indices", "vertex_index")
+#: Elements whose vertex_indices lists give faces: polygons, and triangle strips.
+_FACE_ELEMENTS = ("face", "tristrips")
 _ELEMENT = re.compile(r"element\s+(\S+)\s+(\d+)")
 _SCALAR = re.compile(r"property\s+(\S+)\s+(\S+)")
 _NUMERIC = np.zeros(256, dtype=bool)
@@ -123,24 +127,68 @@ def read_ply(path: Path, name: str) -> tuple[np.ndarray, np.ndarray | None]:
         raise InputError(
             f"{name}: vertex {int(np.argmin(finite))} has a non-finite coordinate (NaN or inf)"
         )
-    faces: _Faces | None = columns.get("face")
-    if faces is None or len(faces.sizes) == 0:
-        return xyz, None
+    parts = []
+    for element in header.elements:
+        found: _Faces | None = columns.get(element.name)
+        if element.name == "face" and found is not None and len(found.sizes):
+            parts.append(_polygon_triangles(found, len(xyz), name))
+        elif element.name == "tristrips" and found is not None and len(found.sizes):
+            parts.append(_strip_triangles(found, len(xyz), name))
+    triangles = np.concatenate(parts) if parts else np.empty((0, 3), np.int64)
+    return xyz, triangles if len(triangles) else None
+
+
+def _polygon_triangles(faces: _Faces, n: int, name: str) -> np.ndarray:
+    """The ``face`` element's polygons as triangle fans, checked: at least 3 indices
+    each, every index one of the ``n`` vertices."""
     few = faces.sizes < 3
     if few.any():
         k = int(np.argmax(few))
         raise InputError(
             f"{name}: {faces.where(k)} has {faces.sizes[k]} vertex indices; a face needs at least 3"
         )
-    bad = (faces.corners < 0) | (faces.corners >= len(xyz))
+    bad = (faces.corners < 0) | (faces.corners >= n)
     if bad.any():
         at = int(np.argmax(bad))
         k = int(np.searchsorted(np.cumsum(faces.sizes), at, side="right"))
         raise InputError(
             f"{name}: {faces.where(k)} has vertex index {faces.corners[at]}, outside the "
-            f"{len(xyz)} vertices"
+            f"{n} vertices"
         )
-    return xyz, fan_triangles(faces.corners, faces.sizes)
+    return fan_triangles(faces.corners, faces.sizes)
+
+
+def _strip_triangles(strips: _Faces, n: int, name: str) -> np.ndarray:
+    """The ``tristrips`` element's triangles, as MeshLab reads them.
+
+    Each list is one or more strips separated by -1: a strip of m indices gives m - 2
+    triangles, every second one with its first two corners swapped so that all turn
+    the same way. MeshLab's reader (vcglib's ``import_ply.h``) is followed step by
+    step, including where it steps over a -1; where it would read outside its vertices
+    (an index out of range, or a -1 inside a triangle) the file is refused.
+    """
+    triangles: list[tuple[int, int, int]] = []
+    bounds = np.cumsum(strips.sizes)
+    for item, (stop, size) in enumerate(zip(bounds.tolist(), strips.sizes.tolist(), strict=True)):
+        v = strips.corners[stop - size : stop].tolist()
+        k, remainder = 0, 0
+        while k < size - 2:
+            a, b, c = v[k : k + 3]
+            corners = (a,) if c == -1 else (a, b, c)  # MeshLab checks a, and reads b, c
+            bad = next((x for x in corners if not 0 <= x < n), None)
+            if bad is not None:
+                line = "" if strips.lines is None else f" (line {strips.lines[item]})"
+                raise InputError(
+                    f"{name}: tristrips item {item}{line} has vertex index {bad} where a "
+                    f"triangle needs one of the {n} vertices"
+                )
+            if c == -1:  # the strip ends: step over the -1
+                k += 2
+                remainder = 0 if k % 2 else 1
+            else:
+                triangles.append((b, a, c) if (k + remainder) % 2 else (a, b, c))
+            k += 1
+    return np.array(triangles, dtype=np.int64).reshape(-1, 3)
 
 
 def binary_vertex_layout(path: Path, name: str) -> tuple[int, np.dtype, int, int] | None:
@@ -181,7 +229,7 @@ def binary_vertex_layout(path: Path, name: str) -> tuple[int, np.dtype, int, int
     if offset > size:
         raise _truncated(name, header.elements[-1])
     _no_trailing_bytes(size - offset, name)
-    faces = sum(e.count for e in header.elements if e.name == "face")
+    faces = sum(e.count for e in header.elements if e.name in _FACE_ELEMENTS)
     return header.size, record, vertex.count, faces
 
 
@@ -255,9 +303,8 @@ def _read_header(path: Path, name: str) -> _Header:
 
 
 def _check_names(elements: list[_Element], name: str) -> None:
-    """Refuse what would be read ambiguously or not at all: an element or a property
-    of one element declared twice, and triangle strips (``tristrips``, which MeshLab
-    reads as faces and meshlab-sharp does not read)."""
+    """Refuse what would be read ambiguously: an element or a property of one element
+    declared twice."""
     seen: set[str] = set()
     for element in elements:
         if element.name in seen:
@@ -269,11 +316,6 @@ def _check_names(elements: list[_Element], name: str) -> None:
             raise InputError(
                 f"{name}: the PLY header declares property '{twice}' of element "
                 f"'{element.name}' twice"
-            )
-        if element.name == "tristrips" and element.count > 0:
-            raise InputError(
-                f"{name}: triangle strips (element 'tristrips') are not read; save the "
-                "mesh with a face element (MeshLab: File > Export Mesh)"
             )
 
 
@@ -319,7 +361,7 @@ def _read_binary(path: Path, header: _Header, name: str) -> dict:
                 raise _truncated(name, element)
             items = np.frombuffer(buf, dtype=dtype, count=element.count, offset=offset)
             offset += need
-            if element.name == "face" and element.count:
+            if element.name in _FACE_ELEMENTS and element.count:
                 _index_property(element, name)  # raises: a face element needs its list
             if element.name == "vertex":
                 columns["vertex"] = {
@@ -327,17 +369,17 @@ def _read_binary(path: Path, header: _Header, name: str) -> dict:
                 }
             continue
         props = element.properties
-        if element.name == "face":
+        if element.name in _FACE_ELEMENTS:
             wanted = [props.index(_index_property(element, name))]
         elif element.name == "vertex":
             wanted = [i for i, p in enumerate(props) if p.name in ("x", "y", "z")]
         else:
             wanted = []
         where, sizes, offset = _walk_lists(buf, offset, element, wanted, name)
-        if element.name == "face":
+        if element.name in _FACE_ELEMENTS:
             i = wanted[0]
             corners = _gather(buf, where[i], sizes[i], props[i].dtype).astype(np.int64)
-            columns["face"] = _Faces(corners, sizes[i], None)
+            columns[element.name] = _Faces(corners, sizes[i], None)
         elif element.name == "vertex":
             columns["vertex"] = {
                 props[i].name: _values(buf, where[i], props[i].dtype) for i in wanted
@@ -349,7 +391,7 @@ def _read_binary(path: Path, header: _Header, name: str) -> dict:
 def _index_property(element: _Element, name: str) -> _Property:
     prop = next((p for p in element.properties if p.name in _INDEX_NAMES and p.count_dtype), None)
     if prop is None or prop.dtype.kind not in "iu":
-        raise InputError(f"{name}: the face element has no integer vertex_indices list")
+        raise InputError(f"{name}: the {element.name} element has no integer vertex_indices list")
     return prop
 
 
@@ -479,7 +521,7 @@ def _read_ascii(path: Path, header: _Header, name: str) -> dict:
                 f"{element.count} lines, {max(len(first) - row, 0)} remain"
             )
         found = _ascii_element(tokens, first[lines], count[lines], element, name)
-        if element.name in ("vertex", "face"):
+        if element.name in ("vertex", *_FACE_ELEMENTS):
             columns[element.name] = found
         row += element.count
     if row != len(first):
@@ -512,7 +554,7 @@ def _ascii_element(
         n = numbers(tokens, pos, np.int64, name)
         if (n < 0).any():
             raise _line_length(tokens, first, n < 0, element, name)
-        if element.name == "face" and p.name in _INDEX_NAMES:
+        if element.name in _FACE_ELEMENTS and p.name in _INDEX_NAMES:
             lists = (pos + 1, n)
         pos = pos + 1 + n
         over = pos > end
@@ -521,15 +563,14 @@ def _ascii_element(
     wrong = pos != end
     if wrong.any():
         raise _line_length(tokens, first, wrong, element, name)
-    if element.name != "face":
+    if element.name not in _FACE_ELEMENTS:
         if element.name != "vertex":
             return {}
         xyz = numbers(tokens, np.stack([scalars[a] for a in "xyz"], axis=1), np.float64, name)
         types = {p.name: p.dtype for p in element.properties}
         return {a: _as_type(xyz[:, k], types[a], first, tokens, name) for k, a in enumerate("xyz")}
     _index_property(element, name)
-    if lists is None:
-        raise InputError(f"{name}: the face element has no integer vertex_indices list")
+    assert lists is not None  # _index_property found the list
     starts, sizes = lists
     total = int(sizes.sum())
     at = np.repeat(starts, sizes) + np.arange(total) - np.repeat(np.cumsum(sizes) - sizes, sizes)
