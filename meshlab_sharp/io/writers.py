@@ -98,8 +98,9 @@ class OutputSet:
         """Check every destination before any work, and claim the new ones.
 
         A destination's folder must exist and be writable, and it must not be a folder,
-        a block device or a socket. An existing character device or FIFO is accepted
-        as it is (with or without ``force``): it is written through, never replaced.
+        a block device or a socket. An existing character device or FIFO, or a name of
+        one of this process's descriptors (``/dev/stdout``), is accepted as it is (with
+        or without ``force``): it is written through, never replaced.
         Without ``force`` no other destination may exist, and each is created as an
         empty placeholder, exclusively and in sorted order, and locked until the set is
         committed or discarded: of two processes claiming the same new file, one gets
@@ -196,8 +197,9 @@ class OutputSet:
 
     def commit(self) -> list[Path]:
         """Rename every staged file into place, with the catchable signals held, then
-        copy the content of those written through into their devices or FIFOs (which
-        may wait for a reader), and remove the placeholders that nothing replaced.
+        copy the content of those written through into their devices, FIFOs (which may
+        wait for a reader) or descriptors, and remove the placeholders that nothing
+        replaced.
 
         Returns
         -------
