@@ -366,12 +366,36 @@ def test_the_sample_checks_its_outputs_before_it_is_built(tmp_path, monkeypatch,
         raise AssertionError("the sample was built before the outputs were checked")
 
     monkeypatch.setattr(sample, "make_part", no_build)
-    (tmp_path / "out").mkdir()
-    (tmp_path / "out" / "sample_part_sharp.ply").write_text("old\n")
-    assert main(["detect", "--sample", "mesh"]) == 1
+    (tmp_path / "ids.txt").write_text("old\n")
+    assert main(["detect", "--sample", "mesh", "--indices", "ids.txt"]) == 1
     assert capsys.readouterr().err == (
-        "meshlab-sharp: error: out/sample_part_sharp.ply exists; use --force to overwrite it\n"
+        "meshlab-sharp: error: ids.txt exists; use --force to overwrite it\n"
     )
+    assert not (tmp_path / "out").exists()
+
+
+def test_sample_reruns_replace_their_own_outputs_and_kinds_do_not_collide(tmp_path, monkeypatch):
+    """The README's first command runs twice; the cloud and the mesh have files of
+    their own; an explicit output still needs --force."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    make_part = sample.make_part
+    monkeypatch.setattr(
+        sample, "make_part", lambda *a, **k: make_part(*a, **{**k, "n_points": 3_000})
+    )
+    out = tmp_path / "out"
+    assert main(["detect", "--sample", "-q"]) == 0
+    (out / "sample_part_sharp.ply").write_bytes(b"stale")
+    assert main(["detect", "--sample", "-q"]) == 0
+    assert (out / "sample_part_sharp.ply").read_bytes().startswith(b"ply\n")
+    assert main(["detect", "--sample", "mesh", "-q"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == [
+        "sample_part_mesh_sharp.ply",
+        "sample_part_sharp.ply",
+    ]
+    assert _read_back(out / "sample_part_sharp.ply")[1] is None
+    assert _read_back(out / "sample_part_mesh_sharp.ply")[1] is not None
+    assert main(["detect", "--sample", "-q", "-o", "out/sample_part_sharp.ply"]) == 1
 
 
 def test_the_sample_writes_into_out(tmp_path, monkeypatch):

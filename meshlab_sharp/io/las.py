@@ -1,18 +1,24 @@
 """LAS and LAZ point clouds through laspy (``pip install 'meshlab-sharp[las]'``, which
 brings ``lazrs`` for LAZ), read in blocks: the coordinates are the scaled ones
-(``X * scale + offset``), in the file's point order."""
+(``X * scale + offset``), in the file's point order.
+
+The detection's result is written back as LAS or LAZ by :func:`save_features_las`:
+every point with every attribute of a LAS/LAZ input, the features classified
+:data:`FEATURE_CLASS`, the strength in the extra-bytes dimension ``sharp_strength``."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import InputError
 from ..extras import require
 from .stream import PointSource
+from .writers import OutputSet, atomic_write
 
 
 def las_points(path: str | os.PathLike[str]) -> PointSource:
@@ -53,3 +59,84 @@ def write_las(path: str | os.PathLike[str], points: np.ndarray, *, scale: float 
     las = laspy.LasData(header)
     las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
     las.write(str(path))
+
+
+#: ASPRS classification of the features in LAS/LAZ output: 64, the first value LAS 1.4
+#: leaves to users (point formats 6-10, which the output always uses).
+FEATURE_CLASS = 64
+#: Name of the extra-bytes dimension (float32) holding the feature strength.
+STRENGTH_DIMENSION = "sharp_strength"
+#: LAS 1.4 point format with the fields of each legacy one (0-5), for 8-bit classes.
+_WIDE_FORMAT = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
+
+
+def save_features_las(
+    path: str | os.PathLike[str],
+    vertices: np.ndarray,
+    strength: np.ndarray,
+    mask: np.ndarray,
+    *,
+    source: str | os.PathLike[str] | None = None,
+    into: OutputSet | None = None,
+) -> Path:
+    """Write the detection's result as LAS (``.las``) or LAZ (``.laz``), LAS 1.4.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination, ``.las`` or ``.laz``.
+    vertices : (n, 3) float64
+        Every input point, in input order.
+    strength : (n,) float64
+        Written as the float32 extra-bytes dimension ``sharp_strength``.
+    mask : (n,) bool
+        The features: classification :data:`FEATURE_CLASS`; the other points keep the
+        input's class (0, never classified, for an input that is not LAS).
+    source : path-like, optional
+        A LAS/LAZ input: every point is written with all its attributes (intensity,
+        returns, colour, GPS time, extra bytes...), scales, offsets and VLRs; point
+        formats 0-5 become their LAS 1.4 counterparts 6-10 (8-bit classes).
+        Otherwise the points are written in point format 6, offset 0, at a scale of
+        1e-8 times the power of ten of their largest coordinate (nine digits).
+    into : OutputSet, optional
+        Only stage the file (see :func:`meshlab_sharp.io.atomic_write`).
+    """
+    laspy = require("laspy", "writing LAS/LAZ", "las")
+    if source is not None:
+        las = _read_whole(laspy, Path(source))
+        if len(las.points) != len(vertices):
+            raise InputError(f"{source}: {len(las.points)} points, the result has {len(vertices)}")
+        if las.header.point_format.id in _WIDE_FORMAT:
+            las = laspy.convert(
+                las, point_format_id=_WIDE_FORMAT[las.header.point_format.id], file_version="1.4"
+            )
+    else:
+        las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
+        pts = np.asarray(vertices, np.float64)
+        extent = float(np.abs(pts).max()) or 1.0
+        las.header.scales = np.full(3, 10.0 ** (np.floor(np.log10(extent)) - 8))
+        las.header.offsets = np.zeros(3)
+        las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
+    if STRENGTH_DIMENSION not in las.point_format.extra_dimension_names:
+        las.add_extra_dim(
+            laspy.ExtraBytesParams(
+                name=STRENGTH_DIMENSION, type=np.float32, description="meshlab-sharp strength"
+            )
+        )
+    las[STRENGTH_DIMENSION] = np.asarray(strength, np.float32)
+    classes = np.array(las.classification)
+    classes[np.asarray(mask, bool)] = FEATURE_CLASS
+    las.classification = classes
+
+    def write(tmp: str) -> None:
+        las.write(tmp)
+
+    return atomic_write(path, write, into=into)
+
+
+def _read_whole(laspy: Any, path: Path) -> Any:
+    """The whole LAS/LAZ file as laspy's LasData; a read failure is an InputError."""
+    try:
+        return laspy.read(path)
+    except Exception as exc:  # laspy raises its own and OS errors
+        raise InputError(f"{path}: cannot read the LAS/LAZ file: {exc}") from None
