@@ -592,8 +592,8 @@ def _check_outputs(
     folder, the input, another output, or (without ``--force``) an existing file.
 
     ``own``: the sample part's default output, the tool's own file: overwritten without
-    ``--force``, and its folder may be missing (it is created) if its parent is
-    writable."""
+    ``--force``; its folder may be missing (it is made, and may hold other outputs) if
+    its parent is writable."""
     resolved = [p.resolve() for p in outputs]
     if len(set(resolved)) != len(resolved):
         raise MeshlabSharpError("two outputs have the same path")
@@ -601,8 +601,8 @@ def _check_outputs(
         raise MeshlabSharpError(f"{source}: an output would overwrite the input")
     for p in outputs:
         folder = p.parent
-        if p == own and not folder.exists():
-            folder = folder.parent
+        if own is not None and folder == own.parent and not folder.exists():
+            folder = folder.parent  # made before the work starts
         if not folder.is_dir():
             raise MeshlabSharpError(f"cannot write {p}: the folder {folder} does not exist")
         if not os.access(folder, os.W_OK | os.X_OK):

@@ -422,3 +422,41 @@ def test_the_interruption_message_says_what_was_written():
     assert _interrupted_message(exc) == "interrupted by SIGHUP; no output was written"
     exc.written = [Path("a.ply"), Path("a.txt")]  # the signal came after the renames
     assert _interrupted_message(exc) == "interrupted by SIGHUP after writing a.ply, a.txt"
+
+
+def test_sample_plot_without_matplotlib_leaves_no_out_folder(tmp_path):
+    """The missing extra is found before out/ is made (matplotlib hidden by a package
+    of the same name that cannot be imported)."""
+    blocker = tmp_path / "site" / "matplotlib"
+    blocker.mkdir(parents=True)
+    (blocker / "__init__.py").write_text("raise ImportError('hidden for the test')\n")
+    work = tmp_path / "work"
+    work.mkdir()
+    env = {"PYTHONPATH": f"{tmp_path / 'site'}{os.pathsep}{ROOT}"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "meshlab_sharp", "detect", "--sample", "--plot", "out/r.png"],
+        env=dict(os.environ, **env),
+        cwd=work,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert proc.returncode == 1
+    assert proc.stderr == (
+        "meshlab-sharp: error: the report picture needs matplotlib: "
+        "pip install 'meshlab-sharp[plot]'\n"
+    )
+    assert list(work.iterdir()) == []
+
+
+def test_the_report_names_the_version_and_curves_twice_is_an_error(tmp_path):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
+    report = tmp_path / "r.json"
+    assert main(["detect", str(src), "-q", "--report", str(report)]) == 0
+    assert json.loads(report.read_text())["version"] == meshlab_sharp.__version__
+    proc = _run(["detect", src, "--curves", tmp_path / "a.ply", "--curves", tmp_path / "b.obj"])
+    out, err = proc.communicate(timeout=60)
+    assert (proc.returncode, out) == (1, "")
+    assert err == ("meshlab-sharp: error: --curves given twice (see meshlab-sharp detect --help)\n")
+    assert not (tmp_path / "a.ply").exists() and not (tmp_path / "b.obj").exists()
