@@ -10,7 +10,7 @@ Numbers measured when these tests were written (they are deterministic):
 - cube mesh with a 72-triangle hole: 24 boundary edges before, 0 after fill_holes
   (26 vertices added when the patch is refined, none by default); no vertex of the
   hole's border is a feature.
-- denoising (docs/preprocessing.md, scripts/evaluate_denoise.py): skipped on clean
+- denoising (docs/preprocessing.md, scripts/evaluate_preprocessing.py): skipped on clean
   inputs (F1 unchanged); Taubin on the box mesh with normal noise of 25 % of the
   spacing: F1 0.963 -> 0.981.
 """
