@@ -41,16 +41,17 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pymeshlab
-from scipy.spatial import cKDTree
 
-from .cleaning import tag_input_indices, tagged_input_indices
 from .defaults import DENOISE_METHODS as DENOISE_METHODS  # re-exported
 from .errors import InputError
-from .io import Geometry, as_geometry, quiet_stdout
+
+if TYPE_CHECKING:  # imported when a step runs: the CLI checks its options without them
+    import pymeshlab
+
+    from .io import Geometry
 
 __all__ = [
     "DENOISE_METHODS",
@@ -261,6 +262,8 @@ def preprocess(
         Invalid parameters, too few points for a filter's neighbourhoods, nothing
         left after outlier removal, or a pymeshlab filter failing.
     """
+    from .io import Geometry, as_geometry
+
     config = as_preprocessing(steps)
     if config is None:
         raise InputError("preprocess: no steps given")
@@ -348,6 +351,10 @@ class _State:
 
     def meshset(self) -> pymeshlab.MeshSet:
         """A fresh MeshSet holding the geometry (mesh 0) with its input indices."""
+        import pymeshlab
+
+        from .cleaning import tag_input_indices
+
         kwargs: dict[str, Any] = {"vertex_matrix": np.ascontiguousarray(self.vertices)}
         if self.faces is not None:
             kwargs["face_matrix"] = np.ascontiguousarray(self.faces, dtype=np.int32)
@@ -360,6 +367,8 @@ class _State:
     def update(self, ms: pymeshlab.MeshSet, *, tagged: bool = True) -> None:
         """Take the current mesh of ``ms``: its vertices, faces and (when the filters
         carried the tags) input indices, which point into this state's input."""
+        from .cleaning import tagged_input_indices
+
         mesh = ms.current_mesh()
         vertices = mesh.vertex_matrix()
         faces = mesh.face_matrix().astype(np.int64) if mesh.face_number() > 0 else None
@@ -529,6 +538,8 @@ def _noise_level(state: _State) -> tuple[float, bool]:
             return 0.0, True
         quartile = float(np.degrees(np.quantile(angles, 0.25)))
         return quartile, quartile <= CLEAN_MESH_ANGLE
+    from scipy.spatial import cKDTree
+
     k = min(NOISE_KNN, state.n)
     _, nearest = cKDTree(state.vertices).query(state.vertices, k)
     ratios = noise_ratios(state.vertices, nearest.reshape(state.n, k), k)
@@ -554,6 +565,8 @@ def _fill_holes(state: _State, config: Preprocessing, record: dict[str, Any]) ->
     params: dict[str, Any] = {"maxholesize": int(max_size), "refinehole": bool(config.refine_holes)}
     record.update(filters=["meshing_close_holes"], parameters=dict(params))
     if config.refine_holes:
+        import pymeshlab
+
         params["refineholeedgelen"] = pymeshlab.PureValue(mean_edge)
         record["parameters"]["refineholeedgelen"] = mean_edge
     ms = state.meshset()
@@ -596,6 +609,8 @@ def _simplify(state: _State, config: Preprocessing, record: dict[str, Any]) -> s
     _apply(ms, "generate_sampling_poisson_disk", **params)
     subset = ms.current_mesh().vertex_matrix()
     # a new layer without our tags, made of input points: find them by position
+    from scipy.spatial import cKDTree
+
     dist, index = cKDTree(state.vertices).query(subset)
     if len(subset) == 0 or np.any(dist > 0.0):
         raise InputError("simplify: pymeshlab returned points that are not input points")
@@ -614,6 +629,8 @@ _STEPS = {
 
 def _apply(ms: pymeshlab.MeshSet, name: str, **params: Any) -> None:
     """Run one pymeshlab filter; its failures become InputError."""
+    from .io import quiet_stdout
+
     try:
         with quiet_stdout():
             getattr(ms, name)(**params)

@@ -374,6 +374,7 @@ def test_the_sample_checks_its_outputs_before_it_is_built(tmp_path, monkeypatch,
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_sample_reruns_replace_their_own_outputs_and_kinds_do_not_collide(tmp_path, monkeypatch):
     """The README's first command runs twice; the cloud and the mesh have files of
     their own; an explicit output still needs --force."""

@@ -66,6 +66,7 @@ def _ply_with_attributes(path: Path, binary: bool) -> dict[str, np.ndarray]:
     return columns
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("binary", [True, False])
 def test_every_input_property_survives_and_no_colour_keeps_the_colours(tmp_path, binary):
     src = tmp_path / "scan.ply"

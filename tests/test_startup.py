@@ -73,3 +73,15 @@ def test_the_library_still_imports_its_names_on_use():
     assert set(meshlab_sharp.__all__) <= set(dir(meshlab_sharp))
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         _ = meshlab_sharp.nothing
+
+
+def test_preprocessing_option_errors_need_no_scipy_or_pymeshlab(tmp_path):
+    """Their checks live with the parameters (numpy only)."""
+    (tmp_path / "c.ply").write_text("ply\n")
+    for flags, message in (
+        (["--simplify", "2"], "--simplify must be a finite number in (0, 1]"),
+        (["--remove-outliers", "--outlier-neighbours", "1"], "--outlier-neighbours must be >= 2"),
+    ):
+        status, heavy, err = _answer(["detect", "c.ply", *flags], tmp_path)
+        assert (status, heavy) == (1, ["numpy"])
+        assert err.startswith(f"meshlab-sharp: error: {message}") and err.count("\n") == 0
