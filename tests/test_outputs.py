@@ -210,3 +210,14 @@ def test_an_unknown_output_format_is_one_line(tmp_path):
         f"meshlab-sharp: error: {tmp_path / 'c.e57x'}: the output must be a .ply, .las or "
         ".laz file\n"
     )
+
+
+def test_las_output_is_refused_out_of_core_before_any_work(tmp_path):
+    src = tmp_path / "c.xyz"
+    np.savetxt(src, shapes.cube_grid_points(5))
+    proc = _cli("detect", src, "--max-memory", "1GB", "-o", tmp_path / "c.las", cwd=tmp_path)
+    assert (proc.returncode, proc.stdout) == (1, "")
+    assert proc.stderr == (
+        "meshlab-sharp: error: a LAS/LAZ output is not available with --max-memory/--dask\n"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.xyz"]
