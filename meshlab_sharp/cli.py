@@ -1,9 +1,10 @@
 """The ``meshlab-sharp`` command line.
 
 ``meshlab-sharp detect INPUT`` writes ``INPUT_sharp.ply`` (every input vertex in input
-order, faces kept, vertex quality = strength, features selected and red), and on
-request the feature indices and a JSON report. ``meshlab-sharp detect`` with no input
-runs on the built-in sample part.
+order with the input's own vertex properties, faces kept, vertex quality = strength,
+features selected and red unless ``--no-colour``) or a LAS/LAZ file, and on request the
+feature indices and a JSON report. ``meshlab-sharp detect`` with no input runs on the
+built-in sample part, whose default outputs in ``out/`` each run replaces.
 """
 
 from __future__ import annotations
@@ -128,8 +129,9 @@ def build_parser() -> argparse.ArgumentParser:
         "detect",
         help="detect sharp features and write a PLY MeshLab shows",
         description="Detect sharp features. Output: a PLY with every input vertex in "
-        "input order (faces kept), vertex quality = feature strength (fraction of "
-        "scales), features selected (PLY flags bit 0x20) and coloured red.",
+        "input order (faces kept, a PLY input's vertex properties kept), vertex quality = "
+        "feature strength (fraction of scales), features selected (PLY flags bit 0x20) "
+        "and coloured red (not with --no-colour); or LAS/LAZ (-o OUT.las).",
     )
     det.add_argument("input", nargs="?", help="mesh or point cloud (PLY, OBJ, OFF, STL, XYZ...)")
     det.add_argument(
