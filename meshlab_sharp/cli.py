@@ -305,7 +305,7 @@ SAMPLE_FOLDER = "out"
 PAUSE_ENV = "MESHLAB_SHARP_TEST_PAUSE"
 #: Extensions of the main output: a PLY MeshLab shows, or LAS/LAZ (the ``las`` extra).
 OUTPUT_FORMATS = (".ply", ".las", ".laz")
-#: Input formats whose per-point attributes a LAS/LAZ output keeps.
+#: LAS/LAZ: an output in these formats keeps an input's per-point attributes.
 _LAS_INPUTS = (".las", ".laz")
 
 
@@ -364,6 +364,10 @@ def _plan(args: argparse.Namespace) -> _Plan:
             f"{output}: the output must be a {', '.join(OUTPUT_FORMATS[:-1])} or "
             f"{OUTPUT_FORMATS[-1]} file"
         )
+    if output.suffix.lower() in _LAS_INPUTS:
+        from .io.las import check_las_output
+
+        check_las_output(output)
     if args.curves is not None:
         from .io.curves import check_curves_path
 

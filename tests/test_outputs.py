@@ -4,6 +4,7 @@ laspy and the package's own PLY reader."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -221,3 +222,27 @@ def test_las_output_is_refused_out_of_core_before_any_work(tmp_path):
         "meshlab-sharp: error: a LAS/LAZ output is not available with --max-memory/--dask\n"
     )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.xyz"]
+
+
+def test_las_output_without_laspy_fails_before_any_work(tmp_path):
+    """laspy hidden by a package of the same name that cannot be imported."""
+    blocker = tmp_path / "site" / "laspy"
+    blocker.mkdir(parents=True)
+    (blocker / "__init__.py").write_text("raise ImportError('hidden for the test')\n")
+    src = tmp_path / "c.xyz"
+    np.savetxt(src, shapes.cube_grid_points(5))
+    root = Path(__file__).resolve().parent.parent
+    proc = subprocess.run(
+        [sys.executable, "-m", "meshlab_sharp", "detect", str(src), "-o", "c.laz"],
+        env={**os.environ, "PYTHONPATH": f"{tmp_path / 'site'}{os.pathsep}{root}"},
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert (proc.returncode, proc.stdout) == (1, "")
+    assert proc.stderr == (
+        "meshlab-sharp: error: writing LAS/LAZ needs laspy: pip install 'meshlab-sharp[las]'\n"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.xyz", "site"]

@@ -70,6 +70,14 @@ STRENGTH_DIMENSION = "sharp_strength"
 _WIDE_FORMAT = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
 
 
+def check_las_output(path: str | os.PathLike[str]) -> None:
+    """Before any work: laspy is there to write ``path``, and for ``.laz`` a LAZ backend
+    (lazrs, which the ``las`` extra brings); else a one-line InputError."""
+    laspy = require("laspy", "writing LAS/LAZ", "las")
+    if Path(path).suffix.lower() == ".laz" and not laspy.LazBackend.detect_available():
+        raise InputError("writing LAZ needs lazrs: pip install 'meshlab-sharp[las]'")
+
+
 def save_features_las(
     path: str | os.PathLike[str],
     vertices: np.ndarray,
