@@ -52,7 +52,7 @@ class Progress:
         self._drawn = False
         self._label = ""
         self._tick = tick
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # close() may run in a signal handler's unwinding
         self._closed = threading.Event()
         self._ticker: threading.Thread | None = None
 
