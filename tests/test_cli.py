@@ -425,6 +425,7 @@ def test_the_interruption_message_says_what_was_written():
     assert _interrupted_message(exc) == "interrupted by SIGHUP after writing a.ply, a.txt"
 
 
+@pytest.mark.slow
 def test_sample_plot_without_matplotlib_leaves_no_out_folder(tmp_path):
     """The missing extra is found before out/ is made (matplotlib hidden by a package
     of the same name that cannot be imported)."""

@@ -154,6 +154,7 @@ def test_detect_meshset_colorize_false_keeps_the_colours():
             np.testing.assert_allclose(got, colours, atol=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".las", ".laz"])
 def test_las_output_keeps_every_point_and_attribute(tmp_path, suffix):
     points = shapes.cube_grid_points(9) * 10.0 + [500.0, 200.0, 30.0]
@@ -187,6 +188,7 @@ def test_las_output_keeps_every_point_and_attribute(tmp_path, suffix):
     np.testing.assert_allclose(back[STRENGTH_DIMENSION], expected.strength, rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_las_output_of_a_point_list_input(tmp_path):
     points = shapes.cube_grid_points(9)
     src = tmp_path / "c.xyz"

@@ -75,6 +75,7 @@ def test_the_library_still_imports_its_names_on_use():
         _ = meshlab_sharp.nothing
 
 
+@pytest.mark.slow
 def test_preprocessing_option_errors_need_no_scipy_or_pymeshlab(tmp_path):
     """Their checks live with the parameters (numpy only)."""
     (tmp_path / "c.ply").write_text("ply\n")
