@@ -398,6 +398,7 @@ def _detect_into(
     if args.max_memory is not None or args.dask is not None:
         return _detect_tiled(args, plan, outputs, progress, steps)
     geometry = _sample_geometry(plan.sample) if source is None else load(source)
+    attributes = _input_attributes(source) if output.suffix.lower() == ".ply" else None
     load_time = time.perf_counter() - start
     with _option_names():
         result = _detect(
@@ -421,7 +422,7 @@ def _detect_into(
             geometry.faces,
             result.strength,
             result.mask,
-            attributes=_input_attributes(source),
+            attributes=attributes,
             colour=args.colour,
             binary=binary,
             into=outputs,

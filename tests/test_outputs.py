@@ -248,3 +248,19 @@ def test_las_output_without_laspy_fails_before_any_work(tmp_path):
         "meshlab-sharp: error: writing LAS/LAZ needs laspy: pip install 'meshlab-sharp[las]'\n"
     )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.xyz", "site"]
+
+
+def test_a_bad_extra_property_is_one_line_before_detection(tmp_path, capsys):
+    from meshlab_sharp.cli import main
+
+    src = tmp_path / "bad.ply"
+    src.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nproperty uchar red\nend_header\n"
+        "0 0 0 1\n1 0 0 300\n0 1 0 3\n0 0 1 4\n"
+    )
+    assert main(["detect", str(src), "-q"]) == 1
+    assert capsys.readouterr().err == (
+        f"meshlab-sharp: error: {src}: line 10: the vertex property 'red' is not a uint8 value\n"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.ply"]

@@ -459,7 +459,7 @@ def _ascii_element(
         values = numbers(tokens, np.stack([scalars[a] for a in names], axis=1), np.float64, name)
         types = {p.name: p.dtype for p in element.properties}
         return {
-            a: _as_type(values[:, k], types[a], first, tokens, name) for k, a in enumerate(names)
+            a: _as_type(values[:, k], types[a], first, tokens, name, a) for k, a in enumerate(names)
         }
     _index_property(element, name)
     if lists is None:
@@ -472,10 +472,16 @@ def _ascii_element(
 
 
 def _as_type(
-    values: np.ndarray, dtype: np.dtype, first: np.ndarray, tokens: Tokens, name: str
+    values: np.ndarray,
+    dtype: np.dtype,
+    first: np.ndarray,
+    tokens: Tokens,
+    name: str,
+    prop: str,
 ) -> np.ndarray:
-    """(n,) float64 ``values`` read from the lines at ``first``, as the declared ``dtype``
-    (a float overflow becomes inf, refused later; an integer must fit its type)."""
+    """(n,) float64 ``values`` of the property ``prop`` read from the lines at ``first``,
+    as the declared ``dtype`` (a float overflow becomes inf, refused later; an integer
+    must fit its type)."""
     if dtype.kind == "f":
         with np.errstate(over="ignore"):
             return values.astype(dtype)
@@ -483,7 +489,8 @@ def _as_type(
     bad = (values != np.floor(values)) | (values < info.min) | (values > info.max)
     if bad.any():
         line = tokens.line[first[np.argmax(bad)]]
-        raise InputError(f"{name}: line {line}: a coordinate is not a {dtype.name} value")
+        what = "a coordinate" if prop in ("x", "y", "z") else f"the vertex property {prop!r}"
+        raise InputError(f"{name}: line {line}: {what} is not a {dtype.name} value")
     return values.astype(dtype)
 
 
