@@ -36,7 +36,7 @@ from .defaults import (
 )
 from .errors import InputError, MeshlabSharpError
 from .plugin import add_plugin_command
-from .progress import Progress
+from .progress import TICK, Progress
 
 if TYPE_CHECKING:  # the heavy modules are imported when work starts
     from .io import OutputSet
@@ -325,6 +325,7 @@ def run_detect(args: argparse.Namespace) -> int:
     progress = Progress(
         len(args.scales or DEFAULT_KNN_SCALES) + 4,
         enabled=not args.quiet and sys.stderr.isatty(),
+        tick=TICK,
     )
     written: list[Path] = []
     try:

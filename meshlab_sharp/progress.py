@@ -3,7 +3,9 @@
 The pipeline reports its stages through a :class:`Progress`; the CLI turns it on when
 stderr is a terminal and ``--quiet`` is not given. The library default is silent.
 While a long stage runs (the neighbourhoods of a large input take seconds in one call),
-the bar names it and its clock keeps moving: a background thread redraws the line.
+the bar names it; with a ``tick`` (the CLI's bar) its clock keeps moving too: a
+background thread redraws the line until :meth:`Progress.close`, which the owner of
+such a bar must call (the CLI does, in a ``finally``).
 """
 
 from __future__ import annotations
@@ -30,8 +32,9 @@ class Progress:
         Where to draw; ``sys.stderr`` by default.
     width : int, default 30
         Width of the bar in characters.
-    tick : float, default TICK
-        Seconds between redraws of the elapsed time while nothing else is reported.
+    tick : float, optional
+        Seconds between redraws of the elapsed time while nothing else is reported
+        (:data:`TICK` for the CLI); None: drawn only when reported to, no thread.
     """
 
     def __init__(
@@ -41,7 +44,7 @@ class Progress:
         enabled: bool = False,
         stream: TextIO | None = None,
         width: int = 30,
-        tick: float = TICK,
+        tick: float | None = None,
     ) -> None:
         self.total = max(int(total), 1)
         self.enabled = enabled
@@ -71,7 +74,7 @@ class Progress:
         with self._lock:
             self._label = label
             self._draw()
-        if self._ticker is None:
+        if self._ticker is None and self._tick is not None:
             self._ticker = threading.Thread(target=self._run_ticker, daemon=True)
             self._ticker.start()
 
@@ -88,6 +91,7 @@ class Progress:
 
     def _run_ticker(self) -> None:
         """Redraw the clock every ``tick`` seconds until :meth:`close`."""
+        assert self._tick is not None
         while not self._closed.wait(self._tick):
             with self._lock:
                 if self.enabled:

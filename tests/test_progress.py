@@ -109,3 +109,18 @@ def test_the_clock_moves_while_a_stage_runs():
     after = stream.getvalue()
     time.sleep(0.1)
     assert stream.getvalue() == after  # closed: no more redraws
+
+
+def test_a_bar_without_a_tick_draws_only_when_told():
+    """The library's own bars have no thread: nothing redraws after an error."""
+    import threading
+    import time
+
+    stream = io.StringIO()
+    before = threading.active_count()
+    bar = Progress(4, enabled=True, stream=stream)
+    bar.stage("neighbourhoods")
+    drawn = stream.getvalue()
+    time.sleep(0.2)
+    assert stream.getvalue() == drawn and threading.active_count() == before
+    bar.close()
