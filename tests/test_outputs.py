@@ -264,3 +264,27 @@ def test_a_bad_extra_property_is_one_line_before_detection(tmp_path, capsys):
         f"meshlab-sharp: error: {src}: line 10: the vertex property 'red' is not a uint8 value\n"
     )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.ply"]
+
+
+def test_attributes_of_types_ply_lacks_are_written_in_one_it_has(tmp_path):
+    out = tmp_path / "a.ply"
+    labels = np.array([0, 1, 2**40, 3, 4], np.int64)
+    meshlab_sharp.save_features_ply(
+        out,
+        np.eye(5, 3),
+        None,
+        np.zeros(5),
+        np.zeros(5, bool),
+        attributes={"label": labels, "ok": np.ones(5, bool), "half": np.full(5, 0.5, np.float16)},
+    )
+    kept = read_ply_properties(out, "a")
+    np.testing.assert_array_equal(kept["label"], labels.astype(np.float64))
+    assert kept["ok"].dtype == np.uint8 and kept["half"].dtype == np.float64
+    assert list(kept) == [
+        "label",
+        "ok",
+        "half",
+        "flags",
+        *("red", "green", "blue", "alpha"),
+        "quality",
+    ]

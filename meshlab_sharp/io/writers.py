@@ -252,7 +252,7 @@ def save_features_ply(
     replaced = (*OWN_PROPERTIES, *(COLOUR_PROPERTIES if colour else ()))
     for name, values in (attributes or {}).items():
         if name not in ("x", "y", "z", *replaced):
-            columns[name] = np.asarray(values)
+            columns[name] = _ply_typed(np.asarray(values))
     mask = np.asarray(mask, bool)
     referenced = np.zeros(n, bool)
     if faces is not None:
@@ -291,6 +291,14 @@ def save_features_ply(
             np.savetxt(fh, tri, fmt="3 %d %d %d")
 
     return atomic_write(path, write, into=into)
+
+
+def _ply_typed(values: np.ndarray) -> np.ndarray:
+    """``values`` in a type PLY has: as they are, or booleans as uchar and the rest
+    (64-bit integers, half floats...) as double."""
+    if values.dtype.str[1:] in _PLY_NAMES:
+        return values
+    return values.astype(np.uint8 if values.dtype.kind == "b" else np.float64)
 
 
 def feature_colors(mask: np.ndarray) -> np.ndarray:
