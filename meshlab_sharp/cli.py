@@ -4,7 +4,7 @@
 order with the input's own vertex properties, faces kept, vertex quality = strength,
 features selected and red unless ``--no-colour``) or a LAS/LAZ file, and on request the
 feature indices and a JSON report. ``meshlab-sharp detect`` with no input runs on the
-built-in sample part, whose default outputs in ``out/`` each run replaces.
+built-in sample part, whose outputs in ``out/`` each run replaces.
 """
 
 from __future__ import annotations
@@ -148,8 +148,8 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"output .ply, or .las/.laz (needs laspy: pip install 'meshlab-sharp[las]'; "
         "features class 64, strength in the extra dimension sharp_strength; a LAS input's "
         f"attributes kept) (default: INPUT_sharp.ply; {SAMPLE_FOLDER}/sample_part_sharp.ply "
-        f"and {SAMPLE_FOLDER}/sample_part_mesh_sharp.ply for the sample part, replaced on "
-        "each run)",
+        f"and {SAMPLE_FOLDER}/sample_part_mesh_sharp.ply for the sample part; the sample's "
+        f"outputs in {SAMPLE_FOLDER}/ are replaced on each run)",
     )
     det.add_argument(
         "--indices", action=_Once, metavar="FILE", help="write 0-based feature indices, one a line"
@@ -315,7 +315,7 @@ class _Plan(NamedTuple):
     source: Path | None  # the input file; None for the sample part
     sample: str | None  # the sample part's kind; None for an input file
     output: Path
-    own: bool  # the output is the sample's default one: overwritten, its folder made
+    own: Path | None  # the sample's folder (out/) when an output is in it: made first
 
 
 def run_detect(args: argparse.Namespace) -> int:
@@ -331,8 +331,8 @@ def run_detect(args: argparse.Namespace) -> int:
     try:
         plan = _plan(args)
         steps = _preprocessing_from_args(args)
-        if plan.own:
-            plan.output.parent.mkdir(exist_ok=True)
+        if plan.own is not None:
+            plan.own.mkdir(exist_ok=True)
         from .io import OutputSet
 
         with OutputSet() as outputs:
@@ -358,7 +358,6 @@ def _plan(args: argparse.Namespace) -> _Plan:
     else:
         source = Path(args.input)
         stem, folder = source.stem, source.parent
-    own = sample is not None and args.output is None
     output = Path(args.output) if args.output else folder / f"{stem}_sharp.ply"
     if output.suffix.lower() not in OUTPUT_FORMATS:
         raise MeshlabSharpError(
@@ -375,8 +374,17 @@ def _plan(args: argparse.Namespace) -> _Plan:
         check_curves_path(args.curves)
     named = (args.indices, args.report, args.save_processed, args.plot, args.curves)
     extra = [Path(p) for p in named if p is not None]
-    _check_outputs(source, [output, *extra], force=args.force, own=output if own else None)
+    paths = [output, *extra]
+    own = Path(SAMPLE_FOLDER) if sample is not None else None
+    _check_outputs(source, paths, force=args.force, own=own)
+    if own is not None and not any(_inside(p, own) for p in paths):
+        own = None
     return _Plan(source, sample, output, own)
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    """Whether ``path`` lies directly in ``folder`` (both may not exist yet)."""
+    return path.parent.resolve() == folder.resolve()
 
 
 def _detect_into(
@@ -599,9 +607,9 @@ def _check_outputs(
     """Before any work: every output's folder exists and is writable, no output is a
     folder, the input, another output, or (without ``--force``) an existing file.
 
-    ``own``: the sample part's default output, the tool's own file: overwritten without
-    ``--force``; its folder may be missing (it is made, and may hold other outputs) if
-    its parent is writable."""
+    ``own``: the sample part's folder (``out/``), the tool's own: the files in it are
+    replaced without ``--force`` (re-runs just work), and it may be missing (it is
+    made) if its parent is writable."""
     resolved = [p.resolve() for p in outputs]
     if len(set(resolved)) != len(resolved):
         raise MeshlabSharpError("two outputs have the same path")
@@ -609,7 +617,8 @@ def _check_outputs(
         raise MeshlabSharpError(f"{source}: an output would overwrite the input")
     for p in outputs:
         folder = p.parent
-        if own is not None and folder == own.parent and not folder.exists():
+        mine = own is not None and _inside(p, own)
+        if mine and not folder.exists():
             folder = folder.parent  # made before the work starts
         if not folder.is_dir():
             raise MeshlabSharpError(f"cannot write {p}: the folder {folder} does not exist")
@@ -617,7 +626,7 @@ def _check_outputs(
             raise MeshlabSharpError(f"cannot write {p}: the folder {folder} is not writable")
         if p.is_dir():
             raise MeshlabSharpError(f"cannot write {p}: it is a folder")
-        if p.exists() and not force and p != own:
+        if p.exists() and not force and not mine:
             raise MeshlabSharpError(f"{p} exists; use --force to overwrite it")
 
 

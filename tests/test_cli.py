@@ -377,7 +377,8 @@ def test_the_sample_checks_its_outputs_before_it_is_built(tmp_path, monkeypatch,
 @pytest.mark.slow
 def test_sample_reruns_replace_their_own_outputs_and_kinds_do_not_collide(tmp_path, monkeypatch):
     """The README's first command runs twice; the cloud and the mesh have files of
-    their own; an explicit output still needs --force."""
+    their own; the sample's outputs in out/ are replaced, an output elsewhere still
+    needs --force."""
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     make_part = sample.make_part
@@ -396,7 +397,15 @@ def test_sample_reruns_replace_their_own_outputs_and_kinds_do_not_collide(tmp_pa
     ]
     assert _read_back(out / "sample_part_sharp.ply")[1] is None
     assert _read_back(out / "sample_part_mesh_sharp.ply")[1] is not None
-    assert main(["detect", "--sample", "-q", "-o", "out/sample_part_sharp.ply"]) == 1
+    # the README's first command (with --plot out/...) runs twice: every output the
+    # sample writes in out/ is its own
+    (out / "ids.txt").write_bytes(b"stale")
+    assert main(["detect", "--sample", "-q", "--indices", "out/ids.txt"]) == 0
+    assert (out / "ids.txt").read_text().split()[0].isdigit()
+    # an output elsewhere still needs --force
+    (tmp_path / "mine.ply").write_bytes(b"mine")
+    assert main(["detect", "--sample", "-q", "-o", "mine.ply"]) == 1
+    assert (tmp_path / "mine.ply").read_bytes() == b"mine"
 
 
 def test_the_sample_writes_into_out(tmp_path, monkeypatch):
