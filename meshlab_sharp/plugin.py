@@ -277,7 +277,7 @@ def ensure_source(source_dir: Path | None, use_apt: bool, *, allow_deb_src: bool
         raise MeshlabSharpError(f"MeshLab headers not found in {target} (and --no-apt given)")
     _ensure_deb_src(allow=allow_deb_src)
     target.parent.mkdir(parents=True, exist_ok=True)
-    say(f"downloading Debian's {SOURCE_PACKAGE} source package (about 30 MB) into {target.parent}")
+    say(f"downloading Debian's {SOURCE_PACKAGE} source package (about 12 MB) into {target.parent}")
     _check_call(["apt-get", "source", "-qq", SOURCE_PACKAGE], cwd=target.parent)
     if not (target / "src" / "common" / "interfaces.h").is_file():
         raise MeshlabSharpError(f"apt-get source {SOURCE_PACKAGE} did not unpack {target}")
