@@ -476,9 +476,16 @@ def _detect(geometry: Any, **options: Any) -> DetectionResult:
 
 
 def _input_attributes(source: Path | None) -> dict[str, Any] | None:
-    """The per-vertex properties of a PLY input that the output PLY keeps (normals,
-    colours, scalar fields); None for other inputs."""
-    if source is None or source.suffix.lower() != ".ply":
+    """The per-vertex properties of a PLY input (normals, colours, scalar fields) or the
+    per-point attributes of a LAS/LAZ input, which the output PLY keeps; None for other
+    inputs."""
+    if source is None:
+        return None
+    if source.suffix.lower() in _LAS_INPUTS:
+        from .io.las import las_attributes
+
+        return las_attributes(source)
+    if source.suffix.lower() != ".ply":
         return None
     from .io.ply import read_ply_properties
 

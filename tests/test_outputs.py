@@ -154,11 +154,10 @@ def test_detect_meshset_colorize_false_keeps_the_colours():
             np.testing.assert_allclose(got, colours, atol=1e-6)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("suffix", [".las", ".laz"])
-def test_las_output_keeps_every_point_and_attribute(tmp_path, suffix):
+def _las_scan(src: Path) -> laspy.LasData:
+    """The cube cloud as a LAS/LAZ scan (point format 3) with intensity, class 2, GPS
+    time and 16-bit red; written to ``src``, returned as written."""
     points = shapes.cube_grid_points(9) * 10.0 + [500.0, 200.0, 30.0]
-    src = tmp_path / f"scan{suffix}"
     header = laspy.LasHeader(point_format=3, version="1.2")
     header.scales = np.full(3, 1e-3)
     header.offsets = points.min(axis=0)
@@ -170,6 +169,15 @@ def test_las_output_keeps_every_point_and_attribute(tmp_path, suffix):
     las.gps_time = np.arange(n) * 0.5
     las.red = np.arange(n, dtype=np.uint16) * 100
     las.write(str(src))
+    return las
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_las_output_keeps_every_point_and_attribute(tmp_path, suffix):
+    src = tmp_path / f"scan{suffix}"
+    las = _las_scan(src)
+    n = len(las.points)
     before = src.read_bytes()
     out = tmp_path / f"features{suffix}"
     proc = _cli("detect", src, "-q", "-o", out, cwd=tmp_path)
@@ -288,3 +296,19 @@ def test_attributes_of_types_ply_lacks_are_written_in_one_it_has(tmp_path):
         *("red", "green", "blue", "alpha"),
         "quality",
     ]
+
+
+@pytest.mark.slow
+def test_a_ply_output_of_a_las_input_keeps_its_attributes(tmp_path):
+    src = tmp_path / "scan.laz"
+    las = _las_scan(src)
+    out = tmp_path / "scan_sharp.ply"
+    assert _cli("detect", src, "-q", "--no-colour", cwd=tmp_path).returncode == 0
+    kept = read_ply_properties(out, "out")
+    np.testing.assert_array_equal(kept["intensity"], las.intensity)
+    np.testing.assert_array_equal(kept["gps_time"], las.gps_time)
+    np.testing.assert_array_equal(kept["classification"], las.classification)
+    np.testing.assert_array_equal(kept["red"], (np.asarray(las.red) >> 8).astype(np.uint8))
+    assert kept["red"].dtype == np.uint8 and "X" not in kept
+    expected = meshlab_sharp.detect(np.column_stack([las.x, las.y, las.z]))
+    np.testing.assert_array_equal(kept["flags"] & 0x20 > 0, expected.mask)

@@ -70,6 +70,30 @@ STRENGTH_DIMENSION = "sharp_strength"
 _WIDE_FORMAT = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
 
 
+#: LAS colour channels: 16 bits, written to a PLY as MeshLab's 8-bit colours.
+_COLOURS = ("red", "green", "blue")
+
+
+def las_attributes(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
+    """Every per-point attribute of a LAS/LAZ file but the coordinates (intensity,
+    returns, classification and its flags, scan angle, user data, point source, GPS
+    time, colour, scalar extra bytes), by laspy's dimension name, in the file's order:
+    what a PLY output keeps. The colour becomes 8 bits (the high byte; as it is when no
+    channel exceeds 255, the 8-bit values many writers store)."""
+    laspy = require("laspy", "reading LAS/LAZ", "las")
+    las = _read_whole(laspy, Path(path))
+    out = {}
+    for name in las.point_format.dimension_names:
+        values = np.asarray(las[name])
+        if name not in ("X", "Y", "Z") and values.ndim == 1:
+            out[name] = values
+    colours = [out[c] for c in _COLOURS if c in out]
+    if colours:
+        shift = 8 if max(int(c.max(initial=0)) for c in colours) > 255 else 0
+        out.update({c: (out[c] >> shift).astype(np.uint8) for c in _COLOURS if c in out})
+    return out
+
+
 def check_las_output(path: str | os.PathLike[str]) -> None:
     """Before any work: laspy is there to write ``path``, and for ``.laz`` a LAZ backend
     (lazrs, which the ``las`` extra brings); else a one-line InputError."""
