@@ -39,7 +39,8 @@ extras="[plot,dxf]"
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".${extras}"
 if [[ $all == 1 ]]; then
-  # MeshLab 2020.09, the plugin's build dependencies and its headers (Debian source package).
-  .venv/bin/meshlab-sharp plugin deps
+  # MeshLab 2020.09, the plugin's build dependencies and its headers (Debian source package;
+  # --allow-deb-src: apt's deb-src entry is added if missing, `plugin uninstall` removes it).
+  .venv/bin/meshlab-sharp plugin deps --allow-deb-src
 fi
 echo "setup: ready: run .venv/bin/meshlab-sharp, or source .venv/bin/activate first for plain meshlab-sharp"

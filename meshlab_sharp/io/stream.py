@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..outputs import OutputSet, atomic_write
 from .ply import binary_vertex_layout
-from .writers import OutputSet, atomic_write, feature_colors
+from .writers import feature_colors
 
 #: Points per block when reading or writing.
 BLOCK = 1 << 20
