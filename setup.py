@@ -1,4 +1,5 @@
-"""Build the compiled kernels (a plain C library loaded with ctypes; no Python headers).
+"""Build the compiled kernels and the native feature curves (plain libraries loaded with
+ctypes; no Python headers).
 
 Everything else is configured in pyproject.toml. ``optional=True``: without a C compiler
 the package still installs and runs the numpy reference path.
@@ -6,6 +7,7 @@ the package still installs and runs the numpy reference path.
 
 import platform
 import sys
+from pathlib import Path
 
 from setuptools import Extension, setup
 
@@ -24,6 +26,21 @@ setup(
             define_macros=[("MS_LIBMVEC", "1")] if libmvec else [],
             libraries=["mvec", "m"] if libmvec else ["m"],
             optional=True,
-        )
+        ),
+        # The feature curves (C++ behind the C ABI of native/include/meshlab_sharp_curves.h),
+        # compiled as the plugin compiles them: the same bits.
+        Extension(
+            "meshlab_sharp._ccurves",
+            sources=sorted(str(p) for p in Path("native/src").glob("curves*.cpp")),
+            depends=[
+                "native/include/meshlab_sharp_curves.h",
+                "native/src/curves.h",
+                "native/src/curves_types.h",
+            ],
+            include_dirs=["native/include"],
+            extra_compile_args=["-std=c++14", "-O3", "-ffp-contract=off", "-fno-math-errno"],
+            language="c++",
+            optional=True,
+        ),
     ]
 )

@@ -3,8 +3,9 @@
 The compiled kernels, the MeshLab plugin (which compiles the same C files) and this
 package share one definition of every constant and default option. Two headers hold
 them: ``_ckernels.h`` (detection: each ``#define MS_NAME value`` line of its constants
-block is ``NAME`` here, see :data:`KERNELS`) and ``curves/_curves.h`` (the feature
-curves: ``#define MS_CURVE_NAME value`` is ``NAME``, see :data:`CURVES`). Reading a
+block is ``NAME`` here, see :data:`KERNELS`) and the native library's
+``meshlab_sharp_curves.h`` (the feature curves: ``#define MS_CURVE_NAME value`` is
+``NAME``, see :data:`CURVES`). Reading a
 header needs no compiler, so the numpy reference path (no compiled library) has the
 same constants.
 """
@@ -105,8 +106,12 @@ class Header:
 
 #: Detection: the constants block of ``_ckernels.h``, shipped beside this module.
 KERNELS = Header(Path(__file__).with_name("_ckernels.h"), "MS_")
-#: The feature curves: ``curves/_curves.h`` (the plugin's curves_core.cpp includes it).
-CURVES = Header(Path(__file__).parent / "curves" / "_curves.h", "MS_CURVE_")
+#: The feature curves: the native library's ``native/include/meshlab_sharp_curves.h``
+#: (beside the package in a checkout).
+CURVES = Header(
+    Path(__file__).resolve().parent.parent / "native" / "include" / "meshlab_sharp_curves.h",
+    "MS_CURVE_",
+)
 
 #: The kernels' header and its constants, by name without the ``MS_`` prefix.
 HEADER = KERNELS.path

@@ -30,6 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 DRIVER = Path(__file__).resolve().parent / "sharp_core_driver.cpp"
 CORE = ROOT / "meshlab_plugin_cpp" / "src" / "sharp_core.cpp"
 KERNEL = ROOT / "meshlab_sharp" / "_ckernels.c"
+NATIVE_SRC = ROOT / "native" / "src"  # curves_types.h
 
 pytestmark = [
     pytest.mark.slow,  # compiles and runs a C++ driver of the plugin's core
@@ -47,6 +48,7 @@ def driver(tmp_path_factory) -> Path:
     exe = out / "driver"
     command = ["g++", "-O3", "-std=c++14", "-ffp-contract=off", "-Wall", "-Werror"]
     command += ["-Wno-unused-parameter", f"-I{KERNEL.parent}", f"-I{CORE.parent}"]
+    command += [f"-I{NATIVE_SRC}"]
     command += [DRIVER, CORE, kernel, "-o", exe, "-lmvec", "-lm", "-pthread"]
     subprocess.run(command, check=True)
     return exe
