@@ -106,12 +106,25 @@ class Header:
 
 #: Detection: the constants block of ``_ckernels.h``, shipped beside this module.
 KERNELS = Header(Path(__file__).with_name("_ckernels.h"), "MS_")
-#: The feature curves: the native library's ``native/include/meshlab_sharp_curves.h``
-#: (beside the package in a checkout).
-CURVES = Header(
-    Path(__file__).resolve().parent.parent / "native" / "include" / "meshlab_sharp_curves.h",
-    "MS_CURVE_",
-)
+
+
+def _curves_header() -> Path:
+    """The native library's ``include/meshlab_sharp_curves.h``: under ``_sources/native``
+    in an installed package (a wheel), or ``native`` beside the package (a checkout)."""
+    package = Path(__file__).resolve().parent
+    candidates = (package / "_sources" / "native", package.parent / "native")
+    for folder in candidates:
+        header = folder / "include" / "meshlab_sharp_curves.h"
+        if header.is_file():
+            return header
+    raise FileNotFoundError(
+        f"meshlab_sharp_curves.h is missing (looked in {' and '.join(map(str, candidates))}); "
+        "reinstall meshlab-sharp"
+    )
+
+
+#: The feature curves: the native library's ``native/include/meshlab_sharp_curves.h``.
+CURVES = Header(_curves_header(), "MS_CURVE_")
 
 #: The kernels' header and its constants, by name without the ``MS_`` prefix.
 HEADER = KERNELS.path

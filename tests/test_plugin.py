@@ -404,10 +404,15 @@ def test_a_wheel_ships_the_sources_and_its_own_build_folder(tmp_path, monkeypatc
     zipfile.ZipFile(wheel).extractall(site)
     shipped = site / "meshlab_sharp" / "plugin_src"
     assert _files(shipped) == _files(checkout / "meshlab_plugin_cpp")
-    for header in ("_ckernels.c", "_ckernels.h", "curves/_curves.h"):  # the build needs them
+    for header in ("_ckernels.c", "_ckernels.h"):  # the build needs them
         assert (site / "meshlab_sharp" / header).read_bytes() == (
             checkout / "meshlab_sharp" / header
         ).read_bytes()
+    native = checkout / "native"  # the curves' sources and header, which the build needs
+    assert _files(site / "meshlab_sharp" / "_sources" / "native") == {
+        str(p.relative_to(native)): p.read_bytes()
+        for p in [*native.glob("src/curves*"), native / "include" / "meshlab_sharp_curves.h"]
+    }
 
     # a configured CMake cache of another source tree (this checkout) in the same cache
     headers = plugin.ensure_source(None, use_apt=False)
