@@ -9,11 +9,10 @@ that its curves are the numpy reference's to the bit.
 from __future__ import annotations
 
 import ctypes
-import importlib.machinery
-from pathlib import Path
 
 import numpy as np
 
+from .._kernels import load_library
 from ..reference.curves import CurveSet
 
 __all__ = ["SIGNATURES", "available", "extract_curves"]
@@ -66,28 +65,7 @@ SIGNATURES: dict[str, tuple[type | None, list[type]]] = {
 _ERRORS = {-1: MemoryError, -2: ValueError}
 
 
-def _load() -> ctypes.CDLL | None:
-    here = Path(__file__).resolve().parent.parent
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        path = here / f"_ccurves{suffix}"
-        if path.is_file():
-            break
-    else:
-        return None
-    try:
-        lib = ctypes.CDLL(str(path))
-    except OSError:
-        return None
-    for name, (restype, argtypes) in SIGNATURES.items():
-        fn = getattr(lib, name, None)
-        if fn is None:
-            return None
-        fn.restype = restype
-        fn.argtypes = argtypes
-    return lib
-
-
-_LIB = _load()
+_LIB = load_library("_ccurves", SIGNATURES)
 
 
 def available() -> bool:

@@ -119,24 +119,8 @@ def extract_curves(
     valid: np.ndarray | None = None,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> CurveSet:
-    """Feature curves and corners of a detection.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-        The input's points (mesh vertices), in input order.
-    mask : (n,) bool
-        Detected features (``DetectionResult.mask``).
-    faces : (m, 3) int, optional
-        Triangles: the curves are chains of mesh edges. None: a cloud.
-    valid : (n,) bool, optional
-        Points that took part in detection (``DetectionResult.kept``); the others are
-        not used to refine positions.
-    bounds : ((3,), (3,)) float64, optional
-        Clouds: bounding box of the whole input when ``vertices`` is only the part of
-        it that the curves read: the features and the valid points in the cells of side
-        :func:`support_radius` around them (out of core,
-        :func:`meshlab_sharp.tiles.curves.curves_out_of_core`). Default: the vertices'.
+    """Feature curves and corners of a detection, unclassified: the arguments of
+    :func:`meshlab_sharp.curves.extract_curves` (but its ``backend``).
 
     Returns
     -------
