@@ -1,8 +1,11 @@
 // meshlab-sharp feature curves: the steps of the numpy reference
-// meshlab_sharp/reference/curves, line for line (see curves.h). Sums, dot products and reductions are evaluated in the order numpy
-// evaluates them (pairwise sums along an array's last axis, sequential sums along the
-// others, einsum's (0, 2, 1) order over three components), so that mesh curves agree
-// exactly and cloud curves to rounding where LAPACK/BLAS are involved.
+// meshlab_sharp/reference/curves, line for line (see curves.h). Sums, dot products and
+// reductions are evaluated in the order numpy evaluates them (pairwise sums along an
+// array's last axis, sequential sums along the others, einsum's (0, 2, 1) order over
+// three components, BLAS's fused order for `@` and the norm of one vector), and exp,
+// acos and atan2 are the caller's (ms_curves_math: numpy's from Python), so that the
+// curves are the reference's to the bit. With the C library's math (the MeshLab plugin)
+// cloud vertices differ from them in the last bits.
 #include "curves.h"
 
 #include "meshlab_sharp_curves.h"
