@@ -112,7 +112,8 @@ typedef struct ms_curves ms_curves;
  * mesh); math: the elementwise functions to use, or NULL (the C library's). On
  * MS_CURVES_OK *out holds the result (free it with ms_curves_free); on an
  * error *out is NULL. MS_CURVES_EINVAL: n < 0, m < 0, out NULL, vertices, feature or
- * (m > 0) faces NULL, face_bytes not 4 or 8, or a face index outside [0, n). */
+ * (m > 0) faces NULL, face_bytes not 4 or 8, a mesh (m > 0) of more than 2^31
+ * vertices, or a face index outside [0, n). */
 int ms_curves_extract(const double *vertices, const uint8_t *feature, const uint8_t *valid,
                       int64_t n, const void *faces, int face_bytes, int64_t m,
                       const double *bounds, const ms_curves_math *math, ms_curves **out);

@@ -9,6 +9,7 @@
 #include <array>
 #include <cstring>
 #include <new>
+#include <stdexcept>
 #include <vector>
 
 struct ms_curves {
@@ -76,6 +77,8 @@ int ms_curves_extract(const double *vertices, const uint8_t *feature, const uint
 	try {
 		return extract(vertices, feature, valid, n, faces, face_bytes, m, bounds, math, out);
 	} catch (const std::bad_alloc &) {
+		return MS_CURVES_ENOMEM;
+	} catch (const std::length_error &) {  // a vector larger than memory could hold
 		return MS_CURVES_ENOMEM;
 	}
 }
