@@ -52,6 +52,7 @@ def driver(tmp_path_factory) -> Path:
     exe = out / "driver"
     command = ["g++", "-O3", "-std=c++14", "-ffp-contract=off", "-Wall", "-Werror"]
     command += ["-Wno-unused-parameter", f"-I{include}", f"-I{CORE.parent}"]
+    command += [f"-I{NATIVE / 'src'}"]  # curves_types.h
     command += [DRIVER, CORE, *objects, "-o", exe, "-lmvec", "-lm", "-pthread"]
     subprocess.run(command, check=True)
     return exe
