@@ -25,6 +25,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 from pathlib import Path
 
@@ -89,7 +90,7 @@ def table(summary: dict) -> str:
     from evaluation.cad.inputs import INPUTS
 
     lines = [
-        "| parts | input | parts | detection F1 | precision | coverage | flagged |",
+        "| class | input | parts | detection F1 | precision | coverage | flagged (%) |",
         "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for cls, per in summary.items():
@@ -106,11 +107,11 @@ def table(summary: dict) -> str:
             lines.append(
                 f"| {cls} | {name} | {s['parts']} | {fmt(s.get('f1', math.nan), target)} | "
                 f"{fmt(s.get('precision', math.nan))} | {fmt(s.get('coverage', math.nan))} | "
-                f"{flagged} % |"
+                f"{flagged} |"
             )
     lines += [
         "",
-        "| parts | input | curve precision | curve coverage | count ratio (median) "
+        "| class | input | curve precision | curve coverage | count ratio (median) "
         "| corners found |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
@@ -216,7 +217,8 @@ def markdown(out: dict, figure: str | None) -> str:
             "the features of the default mode, coloured by strength; right, the feature "
             "curves by kind and their corners.*",
         ]
-    return "\n".join(text) + "\n"
+    wrapped = [t if t.startswith(("|", "!", "#")) else textwrap.fill(t, 88) for t in text]
+    return "\n".join(wrapped) + "\n"
 
 
 def write_section(path: Path, section: str) -> None:
@@ -259,10 +261,6 @@ def main(argv: list[str] | None = None) -> int:
     for out_path in (args.json, args.figure, args.markdown):
         if out_path is not None and not out_path.resolve().parent.is_dir():
             fail(f"{out_path.parent}: no such folder")
-    ensure_packages()
-    import gmsh
-
-    from evaluation.cad.run import evaluate_part, summarise
     from evaluation.cad.sources import PARTS, QUICK_PARTS, missing_sources
 
     names = args.parts or (QUICK_PARTS if args.quick else [p.name for p in PARTS])
@@ -270,6 +268,11 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         fail(f"unknown part {unknown[0]!r} (parts: {', '.join(p.name for p in PARTS)})")
     chosen = tuple(p for p in PARTS if p.name in names)
+    ensure_packages()
+    import gmsh
+
+    from evaluation.cad.run import evaluate_part, summarise
+
     missing = missing_sources(chosen)
     if missing:
         fail(f"{missing[0].path}: not installed ({missing[0].package})")

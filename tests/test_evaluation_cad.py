@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -60,12 +63,9 @@ def test_cylinder_has_two_circles_and_no_corner(occ):
 
 def test_fillet_edges_are_not_sharp(occ):
     box = _box(occ, 2, 2, 1)
-    vertical = [
-        c
-        for _, c in gmsh.model.getEntities(1)
-        if abs(gmsh.model.getValue(1, c, [0])[2] - gmsh.model.getValue(1, c, [1])[2]) > 0.5
-        or gmsh.model.occ.getMass(1, c) == pytest.approx(1.0)
-    ]
+    # the 4 vertical edges are the box's only edges of length 1
+    vertical = [c for _, c in gmsh.model.getEntities(1) if abs(occ.getMass(1, c) - 1.0) < 1e-9]
+    assert len(vertical) == 4
     occ.fillet([box], vertical, [0.3])
     occ.synchronize()
     truth = brep_truth()
@@ -175,3 +175,22 @@ def test_evaluate_part_runs_every_input(tmp_path):
             assert 0 <= r["detection"]["f1"] <= 1
     # a fine mesh's sharp edges are mesh edges: found exactly
     assert row["inputs"]["fine_mesh"]["detection"]["f1"] > 0.99
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--parts", "nosuch"], "unknown part 'nosuch'"),
+        (["--points", "10"], "--points must be at least 1000"),
+        (["--json", "no/such/dir/x.json"], "no/such/dir: no such folder"),
+    ],
+)
+def test_script_bad_options_are_one_line_errors(args, message, tmp_path):
+    script = Path(__file__).resolve().parent.parent / "scripts" / "evaluate_cad.py"
+    run = subprocess.run(
+        [sys.executable, str(script), *args], capture_output=True, text=True, cwd=tmp_path
+    )
+    assert run.returncode == 1
+    lines = run.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("meshlab-sharp: error: ")
+    assert message in lines[0]
