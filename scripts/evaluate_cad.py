@@ -17,6 +17,7 @@ prints the table.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 import os
@@ -50,8 +51,22 @@ def fail(message: str) -> None:
     raise SystemExit(1)
 
 
+GMSH_LIBS = ["libglu1-mesa", "libxcursor1", "libxft2", "libxinerama1"]
+
+
+def apt_install(packages: list[str]) -> None:
+    """``apt-get update`` and install Debian packages (with sudo unless root)."""
+    print(f"evaluate_cad: installing Debian packages: {' '.join(packages)}", file=sys.stderr)
+    sudo = [] if os.geteuid() == 0 else ["sudo"]
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    for cmd in (["apt-get", "update", "-qq"], ["apt-get", "install", "-y", "-qq", *packages]):
+        if subprocess.run(sudo + cmd, check=False, env=env, stdout=subprocess.DEVNULL).returncode:
+            fail(f"could not run {' '.join(cmd)}")
+
+
 def ensure_packages() -> None:
-    """Install the gmsh wheel and the Debian package freecad-common when missing."""
+    """Install the gmsh wheel (and the libraries it loads) and the Debian package
+    freecad-common when missing."""
     try:
         import gmsh  # noqa: F401
     except ImportError:
@@ -59,20 +74,13 @@ def ensure_packages() -> None:
         cmd = [sys.executable, "-m", "pip", "install", "-q", "gmsh>=4.11"]
         if subprocess.run(cmd, check=False).returncode != 0:
             fail("could not install gmsh (pip install 'gmsh>=4.11')")
+        importlib.invalidate_caches()
+    except OSError:  # the wheel's libgmsh needs X and GLU libraries
+        apt_install(GMSH_LIBS)
     from evaluation.cad.sources import FREECAD_DIR
 
     if not (FREECAD_DIR / "Idf").is_dir():
-        print("evaluate_cad: installing the Debian package freecad-common", file=sys.stderr)
-        sudo = [] if os.geteuid() == 0 else ["sudo"]
-        env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-        for cmd in (
-            ["apt-get", "update", "-qq"],
-            ["apt-get", "install", "-y", "-qq", "freecad-common"],
-        ):
-            if subprocess.run(
-                sudo + cmd, check=False, env=env, stdout=subprocess.DEVNULL
-            ).returncode:
-                fail(f"could not run {' '.join(cmd)}: install freecad-common")
+        apt_install(["freecad-common"])
 
 
 def fmt(value: float, target: float | None = None, below: bool = False) -> str:
