@@ -19,6 +19,7 @@ export DEBIAN_FRONTEND=noninteractive
 packages=(libgl1 libopengl0 libgomp1 python3 python3-venv python3-pip python3-dev gcc)
 if [[ $all == 1 ]]; then
   packages+=(xdotool imagemagick)  # the GUI test drives MeshLab and takes screenshots
+  packages+=(libglu1-mesa libxcursor1 libxft2 libxinerama1)  # the gmsh wheel's library (cad extra)
 fi
 missing=()
 for p in "${packages[@]}"; do
@@ -35,7 +36,7 @@ if [[ ! -x .venv/bin/python ]]; then
   "$python" -m venv .venv
 fi
 extras="[plot,dxf]"
-[[ $all == 1 ]] && extras="[plot,dxf,test,las,e57,dask]"
+[[ $all == 1 ]] && extras="[plot,dxf,test,las,e57,dask,cad]"
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".${extras}"
 if [[ $all == 1 ]]; then
