@@ -12,19 +12,12 @@ import numpy as np
 import pymeshlab
 
 from . import _header
+from .defaults import MAX_SCALES, MODES, WEIGHTINGS
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
-from .normals import WEIGHTINGS
 
 Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | pymeshlab.Mesh
 
-#: Detection modes: the paper's method as ALGORITHM.md reads it, or robust mode
-#: (:mod:`meshlab_sharp.robust`, docs/robust-mode.md).
-MODES = ("paper", "robust")
-#: The mode ``detect``, the CLI and the MeshLab plugin use unless told otherwise.
-DEFAULT_MODE = MODES[_header.integer("DEFAULT_MODE")]
-#: The most scales one detection takes (the defaults have 8 and 4).
-MAX_SCALES = _header.integer("MAX_SCALES")
 #: The smallest scales: k nearest neighbours (the point itself and one more) ...
 MIN_KNN_SCALE = _header.integer("MIN_KNN_SCALE")
 #: ... and rings.
@@ -33,7 +26,7 @@ MIN_RING_SCALE = _header.integer("MIN_RING_SCALE")
 
 def check_mode_and_weighting(mode: object, weighting: object) -> None:
     """Raise InputError unless ``mode`` is one of :data:`MODES` and ``weighting`` one of
-    :data:`~meshlab_sharp.normals.WEIGHTINGS`."""
+    :data:`~meshlab_sharp.defaults.WEIGHTINGS`."""
     if weighting not in WEIGHTINGS:
         raise InputError(f"unknown weighting {weighting!r}; choose from {', '.join(WEIGHTINGS)}")
     if not isinstance(mode, str) or mode not in MODES:

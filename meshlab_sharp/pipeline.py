@@ -18,6 +18,7 @@ from . import _kernels
 from .cleaning import CleanGeometry, clean
 from .creases import sharp_vertices
 from .curves import extract_curves
+from .defaults import DEFAULT_MODE
 from .errors import InputError
 from .io import Geometry
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
@@ -28,13 +29,7 @@ from .neighbourhoods import (
     unit_scale,
 )
 from .normals import DEFAULT_WEIGHTING, Weighting, face_average_normals
-from .options import (
-    DEFAULT_MODE,
-    Source,
-    as_input,
-    check_mode_and_weighting,
-    check_scales,
-)
+from .options import Source, as_input, check_mode_and_weighting, check_scales
 from .preprocessing import (
     Preprocessing,
     PreprocessingReport,
@@ -217,7 +212,7 @@ def _detect(
         result = map_to_input(inner, to_input, len(geometry.vertices), report)
         result.timings = {**inner.timings, "load": timings["load"], "preprocess": report.seconds}
         if curves:
-            _add_curves(result, geometry, as_points)
+            _add_curves(result, geometry, as_points, backend)
         result.timings["total"] = time.perf_counter() - t0
         return result
 
@@ -246,6 +241,7 @@ def _detect(
     )
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
+    bar.stage("neighbourhoods")
     points = cleaned.vertices
     if not is_mesh:
         _check_cloud_size(len(geometry.vertices), len(points), max(scales_t), geometry.source)
@@ -334,7 +330,7 @@ def _detect(
         result.normals = np.stack([cleaned.to_input_order(n, np.nan) for n in per_scale.normals])
     timings["decide"] = time.perf_counter() - t
     if curves:
-        _add_curves(result, geometry, as_points)
+        _add_curves(result, geometry, as_points, backend)
     timings["total"] = time.perf_counter() - t0
     bar.step("done")
     if not isinstance(progress, Progress):
@@ -413,12 +409,13 @@ def _neighbourhoods_and_normals(
         return neighbourhoods, side.result(), None
 
 
-def _add_curves(result: DetectionResult, geometry: Geometry, as_points: bool) -> None:
-    """Extract the feature curves of ``result`` on the input geometry (timed)."""
+def _add_curves(result: DetectionResult, geometry: Geometry, as_points: bool, backend: str) -> None:
+    """Extract the feature curves of ``result`` on the input geometry with the
+    detection's ``backend`` (timed)."""
     t = time.perf_counter()
     faces = None if as_points else geometry.faces
     result.curves, result.corners = extract_curves(
-        geometry.vertices, result.mask, faces, result.kept
+        geometry.vertices, result.mask, faces, result.kept, backend=backend
     )
     result.timings["curves"] = time.perf_counter() - t
 

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from .curves import Corners, Curve
-from .options import DEFAULT_MODE
+from .defaults import DEFAULT_MODE
 from .preprocessing import PreprocessingReport
 
 

@@ -52,6 +52,7 @@ def driver(tmp_path_factory) -> Path:
     exe = out / "driver"
     command = ["g++", "-O3", "-std=c++14", "-ffp-contract=off", "-Wall", "-Werror"]
     command += ["-Wno-unused-parameter", f"-I{include}", f"-I{CORE.parent}"]
+    command += [f"-I{NATIVE / 'src'}"]  # curves_types.h
     command += [DRIVER, CORE, *objects, "-o", exe, "-lmvec", "-lm", "-pthread"]
     subprocess.run(command, check=True)
     return exe
@@ -256,13 +257,14 @@ def test_the_option_lists_are_the_headers():
     header's in Python (known values) and in the plugin's filter (its enums take the
     header's default index, and list the same names in the same order as Python); the
     example scripts name the same enums and defaults (a .mlx names every parameter)."""
-    from meshlab_sharp import normals, options
+    from meshlab_sharp import defaults as chosen
+    from meshlab_sharp import options
 
-    assert (options.DEFAULT_MODE, normals.DEFAULT_WEIGHTING) == ("robust", "gaussian")
-    assert (options.MIN_KNN_SCALE, options.MIN_RING_SCALE, options.MAX_SCALES) == (2, 1, 64)
-    assert meshlab_sharp.DetectionResult.mode == options.DEFAULT_MODE
-    lists = {"mode": options.MODES, "weighting": normals.WEIGHTINGS}
-    defaults = {"mode": options.DEFAULT_MODE, "weighting": normals.DEFAULT_WEIGHTING}
+    assert (chosen.DEFAULT_MODE, chosen.DEFAULT_WEIGHTING) == ("robust", "gaussian")
+    assert (options.MIN_KNN_SCALE, options.MIN_RING_SCALE, chosen.MAX_SCALES) == (2, 1, 64)
+    assert meshlab_sharp.DetectionResult.mode == chosen.DEFAULT_MODE
+    lists = {"mode": chosen.MODES, "weighting": chosen.WEIGHTINGS}
+    defaults = {"mode": chosen.DEFAULT_MODE, "weighting": chosen.DEFAULT_WEIGHTING}
     glue = (ROOT / "meshlab_plugin_cpp" / "src" / "filter_sharp_features.cpp").read_text()
     for name, names in lists.items():
         enum = re.search(rf'RichEnum\("{name}", (\w+), QStringList\(\)((?: << "\w+")+)', glue)

@@ -183,3 +183,34 @@ def test_the_default_backend_is_the_environment_s(monkeypatch) -> None:
     monkeypatch.delenv("MESHLAB_SHARP_BACKEND")
     want = "compiled" if _kernels.available() else "numpy"
     assert detect(cloud, mode="paper").backend == want
+
+
+@pytest.mark.parametrize("as_points", [False, True])
+def test_the_curves_run_the_detection_s_backend(monkeypatch, as_points: bool) -> None:
+    """``detect(..., curves=True)`` extracts the curves with the call's backend, not the
+    process's default: the native curves only for "compiled" (the same curves either way)."""
+    from meshlab_sharp import detect
+    from meshlab_sharp.curves import _native
+
+    if not _native.available():
+        pytest.skip("the native curves are not built")
+    native_calls: list[int] = []
+    native = _native.extract_curves
+
+    def counted(*args, **kwargs):
+        native_calls.append(1)
+        return native(*args, **kwargs)
+
+    monkeypatch.setattr(_native, "extract_curves", counted)
+    monkeypatch.delenv("MESHLAB_SHARP_BACKEND", raising=False)
+    vertices, faces = shapes.cube_grid_mesh(3)
+    runs = {}
+    for backend in ("numpy", "compiled"):
+        before = len(native_calls)
+        runs[backend] = detect(vertices, faces, as_points=as_points, backend=backend, curves=True)
+        assert len(native_calls) - before == (backend == "compiled")
+    numpy_run, compiled_run = runs["numpy"], runs["compiled"]
+    assert len(numpy_run.curves) == len(compiled_run.curves) == 12
+    for a, b in zip(numpy_run.curves, compiled_run.curves, strict=True):
+        assert a.points.tobytes() == b.points.tobytes()
+        assert np.array_equal(a.indices, b.indices)

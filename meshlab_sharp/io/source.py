@@ -6,6 +6,8 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
+from ..errors import InputError
+
 
 class PointSource:
     """A point cloud read in blocks.
@@ -23,8 +25,26 @@ class PointSource:
 
     def __init__(self, n: int, blocks: Callable[[int], Iterator[np.ndarray]], name: str) -> None:
         self.n = n
-        self.blocks = blocks
+        self._blocks = blocks
         self.name = name
+
+    def blocks(self, size: int) -> Iterator[np.ndarray]:
+        """The coordinates, (c, 3) float64 blocks of at most ``size`` points, in order.
+
+        Raises
+        ------
+        InputError
+            The file holds more or fewer points than its header says (the same error
+            whoever reads it, in memory or out of core).
+        """
+        seen = 0
+        for block in self._blocks(size):
+            seen += len(block)
+            if seen > self.n:
+                break
+            yield block
+        if seen != self.n:
+            raise InputError(f"{self.name}: {seen} points read, the header says {self.n}")
 
     @classmethod
     def from_array(cls, points: np.ndarray, name: str = "array") -> PointSource:

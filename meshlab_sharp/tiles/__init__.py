@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import _kernels, robust
+from ..defaults import DEFAULT_MODE
 from ..errors import InputError
 from ..extras import require
 from ..io import Geometry
@@ -34,7 +35,7 @@ from ..io.source import PointSource
 from ..io.stream import open_points
 from ..multiscale import DEFAULT_KNN_SCALES
 from ..normals import DEFAULT_WEIGHTING
-from ..options import DEFAULT_MODE, as_input, check_mode_and_weighting, check_scales
+from ..options import as_input, check_mode_and_weighting, check_scales
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
 from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
@@ -342,7 +343,7 @@ def detect_out_of_core(
     found = None
     if curves:
         t = time.perf_counter()
-        found = curves_out_of_core(points, out["mask"], out["kept"])
+        found = curves_out_of_core(points, out["mask"], out["kept"], "compiled")
         timings["curves"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return DetectionResult(
