@@ -1,10 +1,13 @@
-"""Build the native library (native/: C kernels and the C++ detection sequence behind a C
-ABI, loaded with ctypes; no Python headers).
+"""Build the native library (native/: C kernels and C++ behind a C ABI, loaded with ctypes;
+no Python headers).
 
 The sources native/src/*.c and *.cpp, compiled with the flags native/CMakeLists.txt gives
-them for the MeshLab plugin, into the package's ``_ckernels`` module. Everything else is
-configured in pyproject.toml. ``optional=True``: without a compiler the package still
-installs and runs the numpy reference path.
+them for the MeshLab plugin, into two ctypes libraries: ``_ckernels`` (the C kernels and
+the detection sequence behind ms_detect) and ``_ccurves`` (the feature curves,
+native/src/curves*.cpp, behind ms_curves_extract). The C++ is compiled with hidden
+visibility: each library exports its C ABI alone. Everything else is configured in
+pyproject.toml. ``optional=True``: without a compiler the package still installs and runs
+the numpy reference path.
 """
 
 import platform
@@ -18,16 +21,21 @@ from setuptools.command.build_ext import build_ext
 libmvec = sys.platform == "linux" and platform.machine() in ("x86_64", "AMD64")
 # Relative paths, as setuptools wants them.
 native = Path("native")
-sources = sorted(
-    str(path) for pattern in ("*.c", "*.cpp") for path in (native / "src").glob(pattern)
+curves = sorted(str(path) for path in (native / "src").glob("curves*.cpp"))
+kernels = sorted(
+    str(path)
+    for pattern in ("*.c", "*.cpp")
+    for path in (native / "src").glob(pattern)
+    if str(path) not in curves
 )
 headers = [str(native / "include" / "meshlab_sharp.h")]
 headers += sorted(str(path) for path in (native / "src").glob("*.h"))
 
-#: Flags by language, as native/CMakeLists.txt gives them.
+#: Flags by language, as native/CMakeLists.txt gives them; the C++ hidden but for the C ABI
+#: (meshlab_sharp.h declares it with default visibility).
 LANGUAGE_FLAGS = {
-    ".c": ["-std=c99", "-fno-math-errno"],
-    ".cpp": ["-std=gnu++14", "-Wall", "-Wno-unused-parameter"],
+    ".c": ["-std=c99"],
+    ".cpp": ["-std=c++14", "-Wall", "-Wno-unused-parameter", "-fvisibility=hidden"],
 }
 
 
@@ -45,22 +53,28 @@ class BuildNative(build_ext):
         super().build_extensions()
 
 
+def native_library(name: str, sources: list[str]) -> Extension:
+    """One ctypes library of the native sources, linked as C++."""
+    return Extension(
+        name,
+        sources=sources,
+        depends=headers,
+        include_dirs=[str(native / "include")],
+        # No fused multiply-add and no fast-math: products and sums rounded as numpy
+        # rounds them (docs/implementation-notes.md).
+        extra_compile_args=["-O3", "-ffp-contract=off", "-fno-math-errno"],
+        extra_link_args=["-pthread"],
+        define_macros=[("MS_LIBMVEC", "1")] if libmvec else [],
+        libraries=["mvec", "m"] if libmvec else ["m"],
+        language="c++",
+        optional=True,
+    )
+
+
 setup(
     cmdclass={"build_ext": BuildNative},
     ext_modules=[
-        Extension(
-            "meshlab_sharp._ckernels",
-            sources=sources,
-            depends=headers,
-            include_dirs=[str(native / "include")],
-            # No fused multiply-add and no fast-math: products and sums rounded as numpy
-            # rounds them (docs/implementation-notes.md).
-            extra_compile_args=["-O3", "-ffp-contract=off"],
-            extra_link_args=["-pthread"],
-            define_macros=[("MS_LIBMVEC", "1")] if libmvec else [],
-            libraries=["mvec", "m"] if libmvec else ["m"],
-            language="c++",
-            optional=True,
-        )
+        native_library("meshlab_sharp._ckernels", kernels),
+        native_library("meshlab_sharp._ccurves", curves),
     ],
 )

@@ -1,10 +1,10 @@
 // MeshLab glue around meshlab-sharp's native library: parameters to ms_detect's options
 // (the scales read by ms_parse_scales), the current layer to arrays in double, MeshLab's
 // progress callback; back: vertex quality (strength), vertex selection (features) and
-// optional colour, or the feature curves (curves_core) as a new layer of edges.
+// optional colour, or the feature curves (the native library's curves.h) as a new layer of edges.
 #include "filter_sharp_features.h"
 
-#include "curves_core.h"
+#include "curves.h"
 #include "meshlab_sharp.h"
 
 #include <vcg/complex/algorithms/update/bounding.h>
@@ -206,10 +206,11 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 	options.weighting = par.getEnum("weighting");
 	options.mode = par.getEnum("mode");
 	options.as_points = par.getBool("asPoints");
+	// An .mlx script may give an enum any integer: only the listed choices run.
 	if (options.weighting != 0 && options.weighting != 1)
-		return fail(QString("unknown weighting %1; choose 0 (Gaussian) or 1 (None)").arg(options.weighting));
+		return fail(QString("weighting = %1 is not one of the choices 0 (Gaussian) and 1 (None)").arg(options.weighting));
 	if (options.mode != 0 && options.mode != 1)
-		return fail(QString("unknown mode %1; choose 0 (Paper) or 1 (Robust)").arg(options.mode));
+		return fail(QString("mode = %1 is not one of the choices 0 (Paper) and 1 (Robust)").arg(options.mode));
 	const bool robust = options.mode == 1;
 
 	// Live vertices in layer order; faces re-indexed to that order.
