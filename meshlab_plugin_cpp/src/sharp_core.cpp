@@ -223,8 +223,9 @@ std::vector<T> toCleaned(const std::vector<Index> &orig, const std::vector<T> &v
 // other, as _kernels' pass; near and kthIdx hold tree positions, for ms_isolated_tree;
 // near and kthIdx int32, as cloud_out_t's: a MeshLab layer counts its vertices in an int).
 struct CloudPass {
-	std::vector<double> pdis, relative, score, noise, kthD2, nthD2, refD2;
+	std::vector<double> pdis, relative, score, noise, kthD2;
 	std::vector<int32_t> near, kthIdx;
+	std::vector<double> nthD2, refD2;  // isolation's second rule
 };
 
 // One pass over the tree's points at the scales ks: projected distances (paper mode) or
