@@ -21,7 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import InputError
-from .polygons import fan_triangles
+from .polygons import check_corner_limit, fan_triangles
 from .text import Tokens, check_text, line_table, numbers, read_text, tokenize
 
 _TYPES = {
@@ -138,6 +138,7 @@ def read_ply(path: Path, name: str) -> tuple[np.ndarray, np.ndarray | None]:
         raise InputError(
             f"{name}: {faces.where(k)} has {faces.sizes[k]} vertex indices; a face needs at least 3"
         )
+    check_corner_limit(faces.sizes, lambda k: f"{name}: {faces.where(k)}")
     bad = (faces.corners < 0) | (faces.corners >= len(xyz))
     if bad.any():
         at = int(np.argmax(bad))
