@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .. import _kernels
+from .cluster import cluster_failures, completed
 from .layout import Layout
 from .neighbours import neighbours
 from .steps import Partial, Span, Step, combine, finish
@@ -189,7 +190,8 @@ class Runner:
             outcomes = self._local(step, n)
             reduced = combine([o.partial for o in outcomes])
         else:
-            outcomes, reduced = self._dask(step, n)
+            with cluster_failures(step.label):
+                outcomes, reduced = self._dask(step, n)
         for t, o in enumerate(outcomes):
             self.halos[t] = max(self.halos[t], o.halo)
             self.peak = max(self.peak, o.peak)
@@ -228,9 +230,7 @@ class Runner:
         futures += [submit(t) for t in range(len(futures), n)]
         partials = [self.client.submit(_partial, f) for f in futures]
         total = self.client.submit(_combine_all, partials)
-        from dask.distributed import as_completed
-
-        for done, f in enumerate(as_completed(futures), start=1):
+        for done, f in enumerate(completed(self.client, futures), start=1):
             f.result()
             if self.on_tile is not None:
                 self.on_tile(step.label, done, n)
