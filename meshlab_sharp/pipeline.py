@@ -37,7 +37,7 @@ from .preprocessing import (
     map_to_input,
     preprocess,
 )
-from .progress import Progress
+from .progress import Progress, cleared_on_error
 from .robust import RobustSetup
 
 Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | pymeshlab.Mesh
@@ -53,6 +53,11 @@ MAX_SCALES = _header.integer("MAX_SCALES")
 MIN_KNN_SCALE = _header.integer("MIN_KNN_SCALE")
 #: ... and rings.
 MIN_RING_SCALE = _header.integer("MIN_RING_SCALE")
+#: The largest scales, checked before any work: rings (a k-ring's neighbourhoods grow
+#: with k squared: ring 32 of a 25,000-vertex mesh takes about 20 s) ...
+MAX_RING_SCALE = 32
+#: ... and k nearest neighbours (lists of k neighbours per point and scale).
+MAX_KNN_SCALE = 512
 
 
 @dataclass
@@ -265,7 +270,7 @@ def detect(
         from .tiles import detect_out_of_core
 
         options = dict(scales=scales, weighting=weighting, as_points=as_points, mode=mode)
-        with small_pages():
+        with small_pages(), cleared_on_error():
             return detect_out_of_core(
                 source,
                 faces,
@@ -280,7 +285,7 @@ def detect(
                 scratch=scratch,
                 curves=curves,
             )
-    with _kernels.use_backend(_kernels.resolve(backend)), small_pages():
+    with _kernels.use_backend(_kernels.resolve(backend)), small_pages(), cleared_on_error():
         return _detect(
             source,
             faces,
@@ -565,7 +570,9 @@ def _check_scales(
     scales: Sequence[int] | int | None, default: tuple[int, ...], kind: str
 ) -> tuple[int, ...]:
     """Sorted, distinct, positive integer scales (a single int is one scale), at most
-    :data:`MAX_SCALES` of them; the default when None."""
+    :data:`MAX_SCALES` of them, within :data:`MIN_KNN_SCALE`..:data:`MAX_KNN_SCALE`
+    (clouds) or :data:`MIN_RING_SCALE`..:data:`MAX_RING_SCALE` (meshes); the default
+    when None."""
     if scales is None:
         return default
     given: Any = [int(scales)] if isinstance(scales, int | np.integer) else scales
@@ -582,10 +589,14 @@ def _check_scales(
         raise InputError(f"scales must be integers, got {list(given)!r}")
     if not values:
         raise InputError("at least one scale is needed")
-    low = MIN_RING_SCALE if kind == "mesh" else MIN_KNN_SCALE
+    low, high = (
+        (MIN_RING_SCALE, MAX_RING_SCALE) if kind == "mesh" else (MIN_KNN_SCALE, MAX_KNN_SCALE)
+    )
+    what = "rings" if kind == "mesh" else "kNN sizes"
     if values[0] < low:
-        what = "rings" if kind == "mesh" else "kNN sizes"
         raise InputError(f"{what} must be >= {low}, got {values[0]}")
+    if values[-1] > high:
+        raise InputError(f"{what} must be <= {high}, got {values[-1]}")
     return tuple(values)
 
 

@@ -8,7 +8,13 @@ from __future__ import annotations
 
 import sys
 import time
+import weakref
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TextIO
+
+#: The bars whose line is drawn and not yet ended.
+_DRAWN: weakref.WeakSet[Progress] = weakref.WeakSet()
 
 
 class Progress:
@@ -36,6 +42,7 @@ class Progress:
         self.done = 0
         self._start = time.perf_counter()
         self._drawn = False
+        self._width = 0
 
     def step(self, label: str, n: int = 1) -> None:
         """Advance by ``n`` steps and show ``label`` as the current stage."""
@@ -45,9 +52,12 @@ class Progress:
         filled = round(self.width * self.done / self.total)
         elapsed = time.perf_counter() - self._start
         bar = "#" * filled + "." * (self.width - filled)
-        self.stream.write(f"\r{label[:28]:<28} [{bar}] {self.done}/{self.total} {elapsed:6.1f}s")
+        line = f"{label[:28]:<28} [{bar}] {self.done}/{self.total} {elapsed:6.1f}s"
+        self.stream.write(f"\r{line}")
         self.stream.flush()
         self._drawn = True
+        self._width = len(line)
+        _DRAWN.add(self)
 
     def close(self) -> None:
         """End the line of the bar, if one was drawn, and draw no more (a second call
@@ -56,3 +66,24 @@ class Progress:
             self.stream.write("\n")
             self.stream.flush()
         self.enabled = self._drawn = False
+        _DRAWN.discard(self)
+
+    def clear(self) -> None:
+        """Erase the bar's line, if one was drawn, and draw no more."""
+        if self._drawn:
+            self.stream.write("\r" + " " * self._width + "\r")
+            self.stream.flush()
+        self.enabled = self._drawn = False
+        _DRAWN.discard(self)
+
+
+@contextmanager
+def cleared_on_error() -> Iterator[None]:
+    """Erase every bar still drawn when the block ends with an exception (an error,
+    Ctrl-C): the message or the prompt that follows starts on a clean line."""
+    try:
+        yield
+    except BaseException:
+        for bar in list(_DRAWN):
+            bar.clear()
+        raise
