@@ -304,7 +304,8 @@ def _scheduler(workers: int) -> Iterator[tuple[str, subprocess.Popen, list[subpr
     ]
     try:
         with Client(address, timeout=60) as client:
-            client.wait_for_workers(workers, timeout=60)
+            if workers:
+                client.wait_for_workers(workers, timeout=60)
         yield address, scheduler, pool
     finally:
         for p in [*pool, scheduler]:
