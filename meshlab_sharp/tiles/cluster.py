@@ -118,8 +118,16 @@ def cluster_failures(stage: str) -> Iterator[None]:
     :class:`~meshlab_sharp.errors.ClusterError` naming ``stage``."""
     distributed = require("dask.distributed", "--dask", "dask")
     from distributed.client import FutureCancelledError
+    from distributed.comm import CommClosedError
 
-    failures = (distributed.KilledWorker, FutureCancelledError, OSError, TimeoutError)
+    # a task's own OSError (a full scratch disk) is not the cluster's: it passes
+    failures = (
+        distributed.KilledWorker,
+        FutureCancelledError,
+        CommClosedError,
+        ConnectionError,
+        TimeoutError,
+    )
     try:
         yield
     except failures as exc:
