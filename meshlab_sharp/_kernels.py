@@ -1,4 +1,4 @@
-"""The compiled fast path: a small C library (``_ckernels.c``) loaded with ctypes.
+"""The compiled fast path: the native library (``native/``) loaded with ctypes.
 
 ``pip install .`` (or ``pip install -e .``) builds it with the system's C compiler; no
 Python headers are needed, only ``gcc``. Without it, or with the environment variable
@@ -119,6 +119,7 @@ _SIGNATURES = {
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
+    "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_dedup_probe": (
         None,
         [_c_void_p, _i64, _c_void_p, _i64, _i64, _i64, _c_void_p, _c_void_p, _c_void_p],

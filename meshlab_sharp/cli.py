@@ -17,14 +17,15 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from types import FrameType
-from typing import NoReturn
+from typing import NoReturn, TextIO
 
 from . import __version__, _kernels
-from .errors import Interrupted, MeshlabSharpError
+from .errors import InputWarning, Interrupted, MeshlabSharpError
 from .io import (
     Geometry,
     OutputSet,
@@ -238,6 +239,30 @@ def _signals_interrupt() -> Iterator[None]:
             signal.signal(s, handler)
 
 
+@contextmanager
+def _warnings_as_lines() -> Iterator[None]:
+    """Print each :class:`InputWarning` as one ``meshlab-sharp: warning: ...`` line while
+    the block runs (other warnings as Python prints them)."""
+    with warnings.catch_warnings():
+        python_way = warnings.showwarning
+
+        def show(
+            message: Warning | str,
+            category: type[Warning],
+            filename: str,
+            lineno: int,
+            file: TextIO | None = None,
+            line: str | None = None,
+        ) -> None:
+            if issubclass(category, InputWarning):
+                print(f"meshlab-sharp: warning: {message}", file=sys.stderr)
+            else:
+                python_way(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``meshlab-sharp`` script; returns the exit status.
 
@@ -245,7 +270,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGINT, SIGTERM and SIGHUP end the command with one line saying what was written,
     and status 128 + the signal's number.
     """
-    with _signals_interrupt():
+    with _signals_interrupt(), _warnings_as_lines():
         try:
             args = build_parser().parse_args(argv)
             return int(args.func(args) or 0)
@@ -325,7 +350,8 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
     if args.curves is not None:
         check_curves_path(args.curves)
     extra = (args.indices, args.report, args.save_processed, args.plot, args.curves)
-    _check_outputs(source, [output, *(Path(p) for p in extra if p is not None)], force=args.force)
+    paths = [output, *(Path(p) for p in extra if p is not None)]
+    _check_outputs(source, paths, outputs, force=args.force)
     steps = _preprocessing_from_args(args)
 
     start = time.perf_counter()
@@ -399,7 +425,7 @@ def _detect_tiled(
 ) -> int:
     """``detect --max-memory``/``--dask``: the input streamed, the output written in
     blocks (:mod:`meshlab_sharp.io.stream`)."""
-    from .io.stream import PointSource, open_points, write_features_ply
+    from .io.stream import PointSource, mesh_error, open_points, write_features_ply
 
     for flag, given in (
         ("--ascii", args.ascii),
@@ -412,6 +438,8 @@ def _detect_tiled(
     if args.dask is not None and not args.verbose:
         _quiet_dask()
     if source is None:
+        if sample == "mesh" and not args.as_points:
+            raise mesh_error("sample part (mesh)")
         points = PointSource.from_array(_sample_geometry(sample).vertices, "sample part")
     else:
         points = open_points(source, as_points=args.as_points)
@@ -535,30 +563,25 @@ def _sample_geometry(kind: str) -> Geometry:
     return Geometry(vertices=part.vertices, faces=part.faces, source=f"sample part ({kind})")
 
 
-def _check_outputs(source: Path | None, outputs: list[Path], *, force: bool) -> None:
-    """Before any work: every output's folder exists and is writable, no output is a
-    folder, the input, another output, or (without ``--force``) an existing file."""
-    resolved = [p.resolve() for p in outputs]
+def _check_outputs(
+    source: Path | None, paths: list[Path], outputs: OutputSet, *, force: bool
+) -> None:
+    """Before any work: no output is the input or another output, and ``outputs``
+    claims them all (:meth:`OutputSet.claim`: folders exist and are writable, no output
+    is a folder or, without ``--force``, an existing file)."""
+    resolved = [p.resolve() for p in paths]
     if len(set(resolved)) != len(resolved):
         raise MeshlabSharpError("two outputs have the same path")
     if source is not None and source.exists() and source.resolve() in resolved:
         raise MeshlabSharpError(f"{source}: an output would overwrite the input")
-    for p in outputs:
+    for p in paths:
         try:
             str(p).encode("utf-8")
         except UnicodeEncodeError:
             raise MeshlabSharpError(
                 f"cannot write {str(p)!a}: the name is not valid UTF-8; choose another with -o"
             ) from None
-        folder = p.parent
-        if not folder.is_dir():
-            raise MeshlabSharpError(f"cannot write {p}: the folder {folder} does not exist")
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise MeshlabSharpError(f"cannot write {p}: the folder {folder} is not writable")
-        if p.is_dir():
-            raise MeshlabSharpError(f"cannot write {p}: it is a folder")
-        if p.exists() and not force:
-            raise MeshlabSharpError(f"{p} exists; use --force to overwrite it")
+    outputs.claim(paths, force=force)
 
 
 def _print_summary(source: str, output: Path, result: DetectionResult) -> None:

@@ -45,3 +45,8 @@ class Interrupted(BaseException):
         super().__init__(signum)
         self.signum = signum
         self.written: list[Path] | None = None
+
+
+class InputWarning(UserWarning):
+    """The input was read, but likely not as its author meant (decimal commas in a point
+    list, say): the command line prints it as one ``meshlab-sharp: warning:`` line."""

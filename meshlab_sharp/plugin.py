@@ -128,10 +128,14 @@ def default_build_dir(sources: Path) -> Path:
 
 
 def plugin_sources() -> Path:
-    """The plugin's sources: ``plugin_src`` inside the installed package (a wheel), or
-    ``meshlab_plugin_cpp`` beside the package (a git checkout, editable install)."""
+    """The plugin's sources: ``_sources/meshlab_plugin_cpp`` inside the installed package
+    (a wheel), or ``meshlab_plugin_cpp`` beside the package (a git checkout, editable
+    install); the native library's sources lie beside them (``native``)."""
     package = Path(__file__).resolve().parent
-    candidates = (package / "plugin_src", package.parent / "meshlab_plugin_cpp")
+    candidates = (
+        package / "_sources" / "meshlab_plugin_cpp",
+        package.parent / "meshlab_plugin_cpp",
+    )
     for folder in candidates:
         if (folder / "CMakeLists.txt").is_file():
             return folder

@@ -156,7 +156,7 @@ The MeshLab plugin (`meshlab_plugin_cpp/`) has the same extraction as a filter,
 Curves**: it adds a layer `sharp_curves` of vertices and edges (vertex quality: the
 curve's number), like `detect_meshset(ms, curves=True)`. Its C++ (`curves_core.cpp`) is
 a port of `meshlab_sharp/curves` with numpy's order of summation and the same constants
-(it includes `curves/_curves.h`), so the layer holds
+(it includes `meshlab_sharp.h`), so the layer holds
 the same vertices and edges as `result.curves` (`tests/test_plugin_curves.py`). The
 sample mesh's 37 curves, drawn by MeshLab with the part hidden
 (`tests/test_plugin_gui.py`):
@@ -221,7 +221,7 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
         "fitted plane and circle, free-form otherwise.",
         "",
         "The numbers above (and every other constant of the curves) are defined once, as "
-        "`MS_CURVE_` macros in `meshlab_sharp/curves/_curves.h`: the modules read them from "
+        "`MS_CURVE_` macros in `native/include/meshlab_sharp.h`: the modules read them from "
         "it (`meshlab_sharp/_header.py`; the Python name drops the prefix, and the reasons "
         "for each value are documented beside it), and the plugin's `curves_core.cpp` "
         "includes it.",

@@ -5,7 +5,7 @@
 // exactly and cloud curves to rounding where LAPACK/BLAS are involved.
 #include "curves_core.h"
 
-#include "curves/_curves.h"
+#include "meshlab_sharp.h"
 
 #include <algorithm>
 #include <cmath>
@@ -23,7 +23,7 @@
 namespace sharp {
 namespace {
 
-// The constants: MS_CURVE_ in curves/_curves.h, shared with the Python modules.
+// The constants: MS_CURVE_ in meshlab_sharp.h, shared with the Python modules.
 const double TURN_SCALES[] = MS_CURVE_TURN_SCALES;
 constexpr int N_SCALES = int(sizeof TURN_SCALES / sizeof TURN_SCALES[0]);
 

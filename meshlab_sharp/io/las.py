@@ -1,6 +1,8 @@
 """LAS and LAZ point clouds through laspy (``pip install 'meshlab-sharp[las]'``, which
 brings ``lazrs`` for LAZ), read in blocks: the coordinates are the scaled ones
-(``X * scale + offset``), in the file's point order."""
+(``X * scale + offset``), in the file's point order. The header's point count must match
+the records: fewer records is an error when read (:class:`~meshlab_sharp.io.stream.
+PointSource`), more (uncompressed LAS) is an error before."""
 
 from __future__ import annotations
 
@@ -72,9 +74,20 @@ def las_points(path: str | os.PathLike[str]) -> PointSource:
     check_las_header(p, name)
     try:
         with laspy.open(p) as reader:
-            n = int(reader.header.point_count)
+            header = reader.header
+            n = int(header.point_count)
+            records = (int(header.offset_to_point_data), int(header.point_format.size))
+            evlrs = int(header.start_of_first_evlr) if header.number_of_evlrs else 0
     except Exception as exc:  # laspy raises its own and OS errors
         raise InputError(f"{name}: cannot read the LAS/LAZ file: {library_message(exc)}") from None
+    if p.suffix.lower() == ".las":  # uncompressed: the records' size is known
+        start, size = records
+        extra = (evlrs or p.stat().st_size) - (start + n * size)
+        if extra > 0:
+            raise InputError(
+                f"{name}: {extra} bytes of point records after the {n} points the header "
+                "counts (the header's count is smaller than the data)"
+            )
 
     def blocks(size: int) -> Iterator[np.ndarray]:
         with laspy.open(p) as reader:
