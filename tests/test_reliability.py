@@ -385,6 +385,35 @@ def test_dask_scheduler_lost_mid_run_is_one_line(tmp_path, medium_cloud):
 
 
 @pytest.mark.slow
+def test_dask_worker_lost_mid_run_resumes_with_the_same_answer(tmp_path, medium_cloud):
+    """One of two workers killed while the tiles run: its tasks run again on the other,
+    and the output is the run without Dask's, byte for byte."""
+    alone = _cli(
+        "detect", medium_cloud, "-q", "-o", tmp_path / "alone.ply", "--max-memory", "300MB"
+    )
+    assert alone.returncode == 0, alone.stderr
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    with _scheduler(2) as (address, _, workers):
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
+            + ["-o", str(tmp_path / "dask.ply"), "--dask", address, "--max-memory", "300MB"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "TMPDIR": str(scratch)},
+        )
+        _wait_for_scratch(scratch, proc)
+        time.sleep(2.0)  # tile tasks on both workers
+        assert proc.poll() is None, "the run ended before a worker was lost"
+        workers[0].kill()
+        _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert err == ""
+    assert (tmp_path / "dask.ply").read_bytes() == (tmp_path / "alone.ply").read_bytes()
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_a_signal_during_a_dask_run_is_one_line(tmp_path, medium_cloud, signum):
     scratch = tmp_path / "tmp"
