@@ -19,6 +19,7 @@ from typing import Any
 
 from ..errors import ClusterError, InputError
 from ..extras import require
+from ..io.scanner import library_message
 
 #: Seconds to reach a scheduler, and then to wait for its first worker, by default.
 DEFAULT_CONNECT_TIMEOUT = 30.0
@@ -131,8 +132,6 @@ def cluster_failures(stage: str) -> Iterator[None]:
     try:
         yield
     except failures as exc:
-        from ..io.scanner import library_message
-
         raise ClusterError(
             f"--dask: the Dask cluster failed during the tiles' {stage!r} step: "
             f"{library_message(exc)}"
