@@ -283,17 +283,23 @@ def _dask_cli(*args: str) -> list[str]:
 
 
 @contextlib.contextmanager
-def _scheduler(workers: int) -> Iterator[tuple[str, subprocess.Popen, list[subprocess.Popen]]]:
+def _scheduler(
+    workers: int, worker_ttl: str | None = None
+) -> Iterator[tuple[str, subprocess.Popen, list[subprocess.Popen]]]:
     """A real scheduler process on loopback with ``workers`` worker processes, ready
-    (the workers joined); killed afterwards."""
+    (the workers joined); killed afterwards. ``worker_ttl``: how long the scheduler
+    keeps a silent worker (Dask's default: 5 minutes)."""
     pytest.importorskip("distributed")
     from distributed import Client
 
     address = _closed_port()
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     port = address.rsplit(":", 1)[1]
+    ttl = {} if worker_ttl is None else {"DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL": worker_ttl}
     scheduler = subprocess.Popen(
-        _dask_cli("scheduler", "--host", "127.0.0.1", "--port", port, "--no-dashboard"), **quiet
+        _dask_cli("scheduler", "--host", "127.0.0.1", "--port", port, "--no-dashboard"),
+        env={**os.environ, **ttl},
+        **quiet,
     )
     pool = [
         subprocess.Popen(
@@ -411,6 +417,36 @@ def test_dask_worker_lost_mid_run_resumes_with_the_same_answer(tmp_path, medium_
     assert proc.returncode == 0, err
     assert err == ""
     assert (tmp_path / "dask.ply").read_bytes() == (tmp_path / "alone.ply").read_bytes()
+
+
+@pytest.mark.slow
+def test_dask_stopped_worker_is_one_line_once_the_scheduler_drops_it(tmp_path, medium_cloud):
+    """The only worker stopped (SIGSTOP) mid-run: once the scheduler drops it (its
+    worker-ttl, 5 s here) the run waits 30 s for another, then fails in one line."""
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    with _scheduler(1, worker_ttl="5s") as (address, _, workers):
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
+            + ["-o", str(tmp_path / "o.ply"), "--dask", address, "--max-memory", "300MB"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "TMPDIR": str(scratch)},
+        )
+        _wait_for_scratch(scratch, proc)
+        assert proc.poll() is None
+        workers[0].send_signal(signal.SIGSTOP)
+        start = time.monotonic()
+        out, err = proc.communicate(timeout=180)
+        took = time.monotonic() - start
+    _one_error_line(
+        subprocess.CompletedProcess([], proc.returncode, out, err),
+        "no worker left in the Dask cluster for 30 s",
+    )
+    assert took < 120, took
+    assert not (tmp_path / "o.ply").exists()
+    assert _scratch_folders(scratch) == []
 
 
 @pytest.mark.slow

@@ -37,7 +37,7 @@ from ..pipeline import DEFAULT_MODE
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
 from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
-from .cluster import cluster_failures, connect
+from .cluster import cluster_failures, completed, connect
 from .curves import curves_out_of_core
 from .layout import build_layout
 from .neighbours import Query
@@ -215,7 +215,7 @@ def detect_tiled(
         timings["tiles"] = time.perf_counter() - t
         if ready:
             with cluster_failures("start"):
-                client.gather(ready)
+                client.gather(list(completed(client, ready)))
         if layout.n_clean < k_max:
             raise InputError(
                 f"{source.name}: {layout.n_clean} distinct points, fewer than the largest "

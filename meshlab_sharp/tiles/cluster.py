@@ -14,6 +14,7 @@ import socket
 import struct
 import time
 from collections.abc import Iterator, Sequence
+from concurrent.futures import CancelledError
 from contextlib import contextmanager
 from typing import Any
 
@@ -118,13 +119,13 @@ def cluster_failures(stage: str) -> Iterator[None]:
     killed again and again, a connection closed or timed out) into a
     :class:`~meshlab_sharp.errors.ClusterError` naming ``stage``."""
     distributed = require("dask.distributed", "--dask", "dask")
-    from distributed.client import FutureCancelledError
     from distributed.comm import CommClosedError
 
-    # a task's own OSError (a full scratch disk) is not the cluster's: it passes
+    # a task's own OSError (a full scratch disk) is not the cluster's: it passes;
+    # futures cancelled (the scheduler lost) are concurrent.futures' CancelledError
     failures = (
         distributed.KilledWorker,
-        FutureCancelledError,
+        CancelledError,
         CommClosedError,
         ConnectionError,
         TimeoutError,

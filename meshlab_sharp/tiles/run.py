@@ -226,7 +226,7 @@ class Runner:
         futures = []
         if step.query is not None and guess == 0.0 and n > 0:
             futures.append(submit(0))
-            guess = futures[0].result().halo
+            guess = next(completed(self.client, futures)).result().halo
         futures += [submit(t) for t in range(len(futures), n)]
         partials = [self.client.submit(_partial, f) for f in futures]
         total = self.client.submit(_combine_all, partials)
@@ -234,7 +234,7 @@ class Runner:
             f.result()
             if self.on_tile is not None:
                 self.on_tile(step.label, done, n)
-        return self.client.gather(futures), total.result()
+        return self.client.gather(futures), next(completed(self.client, [total])).result()
 
     def _local(self, step: Step, n: int) -> list[Outcome]:
         """The outcomes of ``step`` on the tiles ``0..n-1`` in this process, ``at_once``
