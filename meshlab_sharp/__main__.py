@@ -31,7 +31,7 @@ def run() -> int:
         signal.signal(s, _exit_now)
     from .cli import main
 
-    return main()
+    return main(end_after_out_of_memory=True)
 
 
 if __name__ == "__main__":

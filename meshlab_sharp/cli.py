@@ -25,7 +25,7 @@ from types import FrameType
 from typing import NoReturn, TextIO
 
 from . import __version__, _kernels
-from .errors import InputWarning, Interrupted, MeshlabSharpError
+from .errors import InputWarning, Interrupted, MeshlabSharpError, OutOfMemory
 from .io import (
     Geometry,
     OutputSet,
@@ -263,12 +263,14 @@ def _warnings_as_lines() -> Iterator[None]:
         yield
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, *, end_after_out_of_memory: bool = False) -> int:
     """Entry point of the ``meshlab-sharp`` script; returns the exit status.
 
     Every failure is one line on stderr, ``meshlab-sharp: error: ...``, and status 1;
     SIGINT, SIGTERM and SIGHUP end the command with one line saying what was written,
-    and status 128 + the signal's number.
+    and status 128 + the signal's number. With ``end_after_out_of_memory`` (the
+    script), the process ends right after an out-of-memory line (``os._exit``): a
+    library whose threads could not start may crash while the interpreter shuts down.
     """
     with _signals_interrupt(), _warnings_as_lines():
         try:
@@ -276,6 +278,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return int(args.func(args) or 0)
         except MeshlabSharpError as exc:
             print(f"meshlab-sharp: error: {exc}", file=sys.stderr)
+            if end_after_out_of_memory and isinstance(exc, OutOfMemory):
+                sys.stdout.flush()
+                sys.stderr.flush()
+                os._exit(1)
             return 1
         except OSError as exc:
             where = f"{exc.filename}: " if exc.filename else ""
@@ -315,10 +321,14 @@ def run_detect(args: argparse.Namespace) -> int:
         with outputs:
             return _detect_into(args, outputs, progress)
     except MemoryError:  # numpy's, the compiled kernels', pymeshlab's std::bad_alloc
-        raise MeshlabSharpError(_out_of_memory(args)) from None
+        raise OutOfMemory(_out_of_memory(args)) from None
     except OSError as exc:  # a memory map, a thread or a process that cannot start
         if exc.errno == errno.ENOMEM:
-            raise MeshlabSharpError(_out_of_memory(args)) from None
+            raise OutOfMemory(_out_of_memory(args)) from None
+        raise
+    except RuntimeError as exc:  # threading's, when a thread's stack cannot be mapped
+        if "can't start new thread" in str(exc):
+            raise OutOfMemory(_out_of_memory(args)) from None
         raise
     except Interrupted as exc:
         exc.written = list(outputs.written)
@@ -353,6 +363,7 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
     paths = [output, *(Path(p) for p in extra if p is not None)]
     _check_outputs(source, paths, outputs, force=args.force)
     steps = _preprocessing_from_args(args)
+    _map_blas_buffers()
 
     start = time.perf_counter()
     if args.max_memory is not None or args.dask is not None:
@@ -475,6 +486,16 @@ def _detect_tiled(
     if not args.quiet:
         _print_summary(points.name, output, result)
     return 0
+
+
+def _map_blas_buffers() -> None:
+    """Have OpenBLAS map its threads' buffers now, while memory is free: it maps them at
+    their first matrix product and, when it cannot, ends the process with its own
+    message instead of raising MemoryError."""
+    import numpy as np
+
+    block = np.ones((512, 512))
+    block @ block
 
 
 def _quiet_dask() -> None:

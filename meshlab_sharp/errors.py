@@ -19,6 +19,10 @@ class InputError(MeshlabSharpError, ValueError):
     """The input geometry, file or options cannot be processed as given."""
 
 
+class OutOfMemory(MeshlabSharpError, MemoryError):
+    """Memory ran out (the command line's message says how much the input needs)."""
+
+
 class ClusterError(MeshlabSharpError, RuntimeError):
     """The Dask cluster failed while it ran the tiles (scheduler lost, workers lost
     again and again)."""

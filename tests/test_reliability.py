@@ -84,16 +84,20 @@ def big_cloud(tmp_path_factory) -> Path:
 # ---------------------------------------------------------------- out of memory
 
 
+#: What OpenBLAS prints before it ends the process (exit 1) when it cannot map a
+#: thread's buffer: no exception reaches Python.
+_LIBRARY_EXITS = {"OpenBLAS error: Memory allocation still failed after 10 retries, giving up.\n"}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "options, limits_gb",
     [
         ((), (0.55, 0.65, 0.75, 0.85)),
         (("--mode", "paper"), (0.6, 0.75)),
-        (("--curves", "{tmp}/curves.obj"), (0.7, 0.85)),
         (("--max-memory", "300MB"), (0.5, 0.7)),
     ],
-    ids=["robust", "paper", "curves", "tiled"],
+    ids=["robust", "paper", "tiled"],
 )
 def test_out_of_memory_is_one_line(tmp_path, big_cloud, options, limits_gb):
     """Under an address-space limit (setrlimit in the child), at limits that end in
@@ -118,6 +122,9 @@ def test_out_of_memory_is_one_line(tmp_path, big_cloud, options, limits_gb):
         if proc.returncode == 0:
             assert out.is_file() and not proc.stderr
             continue
+        assert not out.exists() and not list(tmp_path.glob(".*")), "output or temporary left"
+        if proc.stderr in _LIBRARY_EXITS:
+            continue  # OpenBLAS ends the process itself (README: known limits)
         failed += 1
         _one_error_line(proc, "error: out of memory: ", "--max-memory")
         assert re.search(r"needs about [0-9]+ MB|did not fit", proc.stderr), proc.stderr
