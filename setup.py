@@ -1,7 +1,9 @@
-"""Build the native library (native/: plain C, loaded with ctypes; no Python headers).
+"""Build the native library (native/: plain C and C++ behind a C ABI, loaded with ctypes;
+no Python headers).
 
 The sources native/src/*.c, compiled with the flags native/CMakeLists.txt gives them for
-the MeshLab plugin, into the package's ``_ckernels`` module. Everything else is configured
+the MeshLab plugin, into the package's ``_ckernels`` module; the feature curves,
+native/src/curves*.cpp, into ``_ccurves``. Everything else is configured
 in pyproject.toml. ``optional=True``: without a C compiler the package still installs and
 runs the numpy reference path.
 """
@@ -33,6 +35,27 @@ setup(
             define_macros=[("MS_LIBMVEC", "1")] if libmvec else [],
             libraries=["mvec", "m"] if libmvec else ["m"],
             optional=True,
-        )
+        ),
+        # The feature curves (C++ behind the C ABI of native/include/meshlab_sharp.h),
+        # compiled as the plugin compiles them: the same bits.
+        Extension(
+            "meshlab_sharp._ccurves",
+            sources=sorted(str(p) for p in Path("native/src").glob("curves*.cpp")),
+            depends=[
+                "native/include/meshlab_sharp.h",
+                "native/src/curves.h",
+                "native/src/curves_types.h",
+            ],
+            include_dirs=["native/include"],
+            extra_compile_args=[
+                "-std=c++14",
+                "-O3",
+                "-ffp-contract=off",
+                "-fno-math-errno",
+                "-fvisibility=hidden",  # the C ABI alone is exported (curves_api.cpp)
+            ],
+            language="c++",
+            optional=True,
+        ),
     ]
 )

@@ -17,9 +17,9 @@ import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -145,24 +145,20 @@ _SIGNATURES = {
 }
 
 
-def _find_library() -> Path | None:
+def load_library(stem: str, signatures: dict[str, tuple[Any, list[Any]]]) -> ctypes.CDLL | None:
+    """The package's compiled library ``<stem><extension suffix>`` with the functions of
+    ``signatures`` (name -> (return type, argument types)) declared; None when it is not
+    built, does not load, or lacks one of them."""
     here = Path(__file__).parent
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        candidate = here / f"_ckernels{suffix}"
-        if candidate.is_file():
-            return candidate
-    return None
-
-
-def _load() -> ctypes.CDLL | None:
-    path = _find_library()
+    paths = (here / f"{stem}{suffix}" for suffix in importlib.machinery.EXTENSION_SUFFIXES)
+    path = next((p for p in paths if p.is_file()), None)
     if path is None:
         return None
     try:
         lib = ctypes.CDLL(str(path))
     except OSError:
         return None
-    for name, (restype, argtypes) in _SIGNATURES.items():
+    for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name, None)
         if fn is None:
             return None
@@ -171,8 +167,7 @@ def _load() -> ctypes.CDLL | None:
     return lib
 
 
-_LIB = _load()
-_override: list[str] = []
+_LIB = load_library("_ckernels", _SIGNATURES)
 
 
 def available() -> bool:
@@ -181,12 +176,11 @@ def available() -> bool:
 
 
 def default_backend() -> str:
-    """The backend used when none is named: ``MESHLAB_SHARP_BACKEND`` or a
-    :func:`use_backend` block if set, else "compiled" when available, else "numpy".
+    """The backend used when none is named: ``MESHLAB_SHARP_BACKEND`` if set, else
+    "compiled" when available, else "numpy". Every call names its backend or takes this
+    default: no state of the process chooses it.
 
     Raises ValueError when ``MESHLAB_SHARP_BACKEND`` names no backend."""
-    if _override:
-        return _override[-1]
     env = os.environ.get("MESHLAB_SHARP_BACKEND", "").strip().lower()
     if env and env not in BACKENDS:
         raise ValueError(
@@ -208,17 +202,6 @@ def resolve(backend: str | None) -> str:
             "the compiled kernels are not built: reinstall with 'pip install .' (needs gcc)"
         )
     return backend
-
-
-@contextmanager
-def use_backend(backend: str):
-    """Run the enclosed code with ``backend`` as the default (tests, benchmarks)."""
-    resolve(backend)
-    _override.append(backend)
-    try:
-        yield
-    finally:
-        _override.pop()
 
 
 def _ptr(a: np.ndarray | None) -> int | None:

@@ -13,6 +13,7 @@ import subprocess
 import pytest
 
 from meshlab_sharp import _header, _kernels
+from meshlab_sharp.curves import _native as curves_native
 
 #: C scalar types of the ABI and the ctypes type that passes each; any pointer passes as
 #: c_void_p (numpy arrays' addresses, structs by address).
@@ -72,7 +73,11 @@ def mismatches(header: dict[str, Signature], bound: dict[str, Signature]) -> lis
     return problems
 
 
-HEADER = declared(_header.PATH.read_text())
+DECLARED = declared(_header.PATH.read_text())
+#: The feature curves' functions (``ms_curves_``), in their own library (C++ sources).
+CURVES = {name: sig for name, sig in DECLARED.items() if name.startswith("ms_curves_")}
+#: The kernels' functions: the rest.
+HEADER = {name: sig for name, sig in DECLARED.items() if name not in CURVES}
 
 
 def test_the_header_declares_the_abi():
@@ -86,6 +91,7 @@ def test_the_header_declares_the_abi():
 
 def test_every_header_function_is_bound_as_declared():
     assert mismatches(HEADER, _kernels._SIGNATURES) == []
+    assert mismatches(CURVES, curves_native.SIGNATURES) == []
 
 
 def _replace(name: str, ret: type | None = None, args: dict[int, type | None] | None = None):
@@ -142,14 +148,19 @@ def test_the_parser_refuses_an_unknown_type():
     }
 
 
-@pytest.mark.skipif(not _kernels.available(), reason="compiled kernels not built")
 @pytest.mark.skipif(shutil.which("nm") is None, reason="needs nm")
-def test_the_library_exports_exactly_the_header():
-    """The built library's exported functions are the header's: the private helpers of
-    native/src stay hidden, and no declared function is missing."""
-    path = _kernels._find_library()
+@pytest.mark.parametrize(
+    ("library", "functions"),
+    [(_kernels._LIB, HEADER), (curves_native._LIB, CURVES)],
+    ids=["kernels", "curves"],
+)
+def test_the_library_exports_exactly_the_header(library, functions):
+    """Each built library's exported functions are its part of the header: the private
+    helpers of native/src stay hidden, and no declared function is missing."""
+    if library is None:
+        pytest.skip("the compiled library is not built")
     listing = subprocess.run(
-        ["nm", "-D", "--defined-only", path], capture_output=True, text=True, check=True
+        ["nm", "-D", "--defined-only", library._name], capture_output=True, text=True, check=True
     ).stdout
     exported = {line.split()[-1] for line in listing.splitlines() if " T " in line}
-    assert exported == set(HEADER)
+    assert exported == set(functions)

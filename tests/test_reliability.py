@@ -29,7 +29,7 @@ import pytest
 import shapes
 
 import meshlab_sharp
-from meshlab_sharp.io.stream import PointSource
+from meshlab_sharp.io.source import PointSource
 from meshlab_sharp.progress import Progress
 from meshlab_sharp.tiles.layout import build_layout
 from meshlab_sharp.tiles.store import SCRATCH_PREFIX, Store, remove_stale_scratch
@@ -522,7 +522,7 @@ def test_smoothing_steps_above_the_maximum_are_refused(tmp_path):
         + "".join(f"3 {a} {b} {c}\n" for a, b, c in f)
     )
     proc = _cli("detect", path, "-q", "--denoise", "--smoothing-steps", "1000000000")
-    _one_error_line(proc, "smoothing_steps must be <= 1000, got 1000000000")
+    _one_error_line(proc, "--smoothing-steps must be <= 1000, got 1000000000")
 
 
 def _with_far_outliers(n: int, outliers: int) -> np.ndarray:

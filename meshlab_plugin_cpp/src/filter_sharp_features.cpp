@@ -1,9 +1,9 @@
 // MeshLab glue around sharp_core: reads the current layer, runs the detector in double,
 // writes vertex quality (strength), vertex selection (features) and optional colour; or
-// adds the feature curves (curves_core) as a new layer of edges.
+// adds the feature curves (the native library's curves.h) as a new layer of edges.
 #include "filter_sharp_features.h"
 
-#include "curves_core.h"
+#include "curves.h"
 #include "sharp_core.h"
 
 #include <vcg/complex/algorithms/update/bounding.h>

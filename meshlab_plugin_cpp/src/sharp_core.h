@@ -10,6 +10,7 @@
 #define MESHLAB_SHARP_CORE_H
 
 #include "meshlab_sharp.h"
+#include "curves_types.h"  // Point, shared with the curves
 
 #include <array>
 #include <stdexcept>
@@ -18,8 +19,6 @@
 #include <vector>
 
 namespace sharp {
-
-struct Point { double x, y, z; };
 
 struct Options {
 	std::vector<int> knnScales MS_DEFAULT_KNN_SCALES;    // point clouds

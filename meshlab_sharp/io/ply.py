@@ -255,6 +255,26 @@ def _no_trailing_bytes(extra: int, name: str) -> None:
         )
 
 
+def read_ply_properties(path: Path, name: str) -> dict[str, np.ndarray]:
+    """Every scalar vertex property of a PLY file other than ``x``, ``y``, ``z``
+    (normals, colours, quality, scalar fields), by name, in the file's order and types
+    (native byte order); empty when there is none, without reading the data. The file
+    is checked as :func:`read_ply` checks it."""
+    header = _read_header(path, name)
+    vertex = next((e for e in header.elements if e.name == "vertex"), None)
+    wanted = [] if vertex is None else [
+        p for p in vertex.properties if p.count_dtype is None and p.name not in ("x", "y", "z")
+    ]  # fmt: skip
+    if not wanted:
+        return {}
+    _check_size(path, header, name)
+    if header.order == "":
+        columns = _read_ascii(path, header, name, every_scalar=True)["vertex"]
+    else:
+        columns = _read_binary(path, header, name)["vertex"]
+    return {p.name: np.asarray(columns[p.name], p.dtype.newbyteorder("=")) for p in wanted}
+
+
 def _read_header(path: Path, name: str) -> _Header:
     with path.open("rb") as fh:
         raw = fh.read(_MAX_HEADER)
@@ -495,8 +515,9 @@ def _truncated(name: str, element: _Element) -> InputError:
     )
 
 
-def _read_ascii(path: Path, header: _Header, name: str) -> dict:
-    """The columns the reader needs, from ASCII data: one line per item."""
+def _read_ascii(path: Path, header: _Header, name: str, *, every_scalar: bool = False) -> dict:
+    """The columns the reader needs (with ``every_scalar``, every scalar vertex
+    property), from ASCII data: one line per item."""
     data = read_text(path, name, "ASCII PLY", offset=header.size)
     junk = ~_NUMERIC[np.frombuffer(data, dtype=np.uint8)]
     if junk.any():
@@ -521,7 +542,7 @@ def _read_ascii(path: Path, header: _Header, name: str) -> dict:
                 f"{name}: truncated PLY file: element '{element.name}' declares "
                 f"{element.count} lines, {max(len(first) - row, 0)} remain"
             )
-        found = _ascii_element(tokens, first[lines], count[lines], element, name)
+        found = _ascii_element(tokens, first[lines], count[lines], element, name, every_scalar)
         if element.name in ("vertex", *_FACE_ELEMENTS):
             columns[element.name] = found
         row += element.count
@@ -534,11 +555,17 @@ def _read_ascii(path: Path, header: _Header, name: str) -> dict:
 
 
 def _ascii_element(
-    tokens: Tokens, first: np.ndarray, count: np.ndarray, element: _Element, name: str
+    tokens: Tokens,
+    first: np.ndarray,
+    count: np.ndarray,
+    element: _Element,
+    name: str,
+    every_scalar: bool = False,
 ) -> dict[str, np.ndarray] | _Faces:
     """Read the lines of one element, property by property across all its lines.
 
-    Returns the vertex columns (name -> values of the declared type), or the faces.
+    Returns the vertex columns (name -> values of the declared type: ``x``, ``y``,
+    ``z``, or with ``every_scalar`` every scalar property), or the faces.
     """
     pos = first.copy()
     end = first + count
@@ -567,9 +594,12 @@ def _ascii_element(
     if element.name not in _FACE_ELEMENTS:
         if element.name != "vertex":
             return {}
-        xyz = numbers(tokens, np.stack([scalars[a] for a in "xyz"], axis=1), np.float64, name)
+        names = list(scalars) if every_scalar else ["x", "y", "z"]
+        values = numbers(tokens, np.stack([scalars[a] for a in names], axis=1), np.float64, name)
         types = {p.name: p.dtype for p in element.properties}
-        return {a: _as_type(xyz[:, k], types[a], first, tokens, name) for k, a in enumerate("xyz")}
+        return {
+            a: _as_type(values[:, k], types[a], first, tokens, name, a) for k, a in enumerate(names)
+        }
     _index_property(element, name)
     assert lists is not None  # _index_property found the list
     starts, sizes = lists
@@ -580,10 +610,16 @@ def _ascii_element(
 
 
 def _as_type(
-    values: np.ndarray, dtype: np.dtype, first: np.ndarray, tokens: Tokens, name: str
+    values: np.ndarray,
+    dtype: np.dtype,
+    first: np.ndarray,
+    tokens: Tokens,
+    name: str,
+    prop: str,
 ) -> np.ndarray:
-    """(n,) float64 ``values`` read from the lines at ``first``, as the declared ``dtype``
-    (a float overflow becomes inf, refused later; an integer must fit its type)."""
+    """(n,) float64 ``values`` of the property ``prop`` read from the lines at ``first``,
+    as the declared ``dtype`` (a float overflow becomes inf, refused later; an integer
+    must fit its type)."""
     if dtype.kind == "f":
         with np.errstate(over="ignore"):
             return values.astype(dtype)
@@ -591,7 +627,8 @@ def _as_type(
     bad = (values != np.floor(values)) | (values < info.min) | (values > info.max)
     if bad.any():
         line = tokens.line[first[np.argmax(bad)]]
-        raise InputError(f"{name}: line {line}: a coordinate is not a {dtype.name} value")
+        what = "a coordinate" if prop in ("x", "y", "z") else f"the vertex property {prop!r}"
+        raise InputError(f"{name}: line {line}: {what} is not a {dtype.name} value")
     return values.astype(dtype)
 
 

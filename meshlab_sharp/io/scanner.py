@@ -1,7 +1,7 @@
 """Failures of the scanner-file libraries (laspy, lazrs, pye57) as one-line errors.
 
 These libraries raise their own exception types, numpy's, or OS errors, often with
-several lines of debugging context; the blocks of a :class:`~meshlab_sharp.io.stream.
+several lines of debugging context; the blocks of a :class:`~meshlab_sharp.io.source.
 PointSource` are read lazily, so the failure may come long after the file was opened.
 """
 

@@ -2,7 +2,7 @@
 
 :func:`meshlab_sharp.curves.extract_curves` on a cloud reads the feature points and
 the valid points in the grid cells of side
-:func:`~meshlab_sharp.curves.extract.support_radius` around them (for the refinement),
+:func:`~meshlab_sharp.reference.curves.support_radius` around them (for the refinement),
 nothing else. Two streaming passes over the input gather exactly those points (the
 features' coordinates and the cloud's bounding box; then the valid points in the
 features' cells), and ``extract_curves`` runs on them with the whole cloud's bounding
@@ -17,9 +17,9 @@ import dataclasses
 import numpy as np
 
 from ..curves import Corners, Curve, extract_curves
-from ..curves.extract import support_radius
-from ..curves.refine import CellGrid
-from ..io.stream import PointSource
+from ..io.source import PointSource
+from ..reference.curves import support_radius
+from ..reference.curves.refine import CellGrid
 from .layout import bounds
 
 #: Points per block of the streaming passes.
@@ -27,7 +27,7 @@ BLOCK = 1 << 20
 
 
 def curves_out_of_core(
-    source: PointSource, mask: np.ndarray, kept: np.ndarray
+    source: PointSource, mask: np.ndarray, kept: np.ndarray, backend: str
 ) -> tuple[list[Curve], Corners]:
     """The feature curves and corners of a cloud read in blocks.
 
@@ -37,6 +37,8 @@ def curves_out_of_core(
         The cloud, n points.
     mask, kept : (n,) bool
         The detection's features and the points that took part (input order).
+    backend : {"compiled", "numpy"}
+        The detection's backend, which extracts the curves too.
 
     Returns
     -------
@@ -62,7 +64,9 @@ def curves_out_of_core(
             coords.append(block[near])
             start += len(block)
         part, points = np.concatenate(parts), np.concatenate(coords)  # every valid feature too
-    curves, corners = extract_curves(points, mask[part], None, kept[part], bounds=(lo, hi))
+    curves, corners = extract_curves(
+        points, mask[part], None, kept[part], bounds=(lo, hi), backend=backend
+    )
     curves = [dataclasses.replace(c, indices=part[c.indices]) for c in curves]
     return curves, dataclasses.replace(corners, indices=part[corners.indices])
 

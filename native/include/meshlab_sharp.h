@@ -453,6 +453,71 @@ void ms_extent(const double *p, int64_t n, double *out);
 double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
                      double floor_, double *out, int64_t *votes, int64_t *count);
 
+/* Feature curves (native/src/curves.cpp: the steps of the numpy reference
+ * meshlab_sharp/reference/curves, line for line; the MS_CURVE_ constants above). */
+
+/* Status codes of ms_curves_extract. */
+enum {
+	MS_CURVES_OK = 0,
+	MS_CURVES_ENOMEM = -1, /* out of memory */
+	MS_CURVES_EINVAL = -2  /* bad input: see ms_curves_extract */
+};
+
+/* Elementwise math over n doubles: out[i] = f(x[i]), or f(y[i], x[i]). */
+typedef void (*ms_curves_fn1)(const double *x, double *out, int64_t n);
+typedef void (*ms_curves_fn2)(const double *y, const double *x, double *out, int64_t n);
+
+/* The three functions of the curves whose last bits differ between math libraries:
+ * exp (the refinement's weights), acos (turn angles) and atan2 (the arms' directions).
+ * Each is called on many values at once. The Python package passes numpy's, so that the
+ * library reproduces its numpy reference bit for bit; NULL: the C library's. */
+typedef struct ms_curves_math {
+	ms_curves_fn1 exp;
+	ms_curves_fn1 acos;
+	ms_curves_fn2 atan2;
+} ms_curves_math;
+
+/* The curves and corners of one extraction (opaque). */
+typedef struct ms_curves ms_curves;
+
+/* The feature curves of a detection (meshlab_sharp.curves.extract_curves).
+ * vertices: (n, 3) row-major doubles, the input in input order; feature: (n,) 0/1, the
+ * detected features; valid: (n,) 0/1, the points that took part in detection, or NULL
+ * (all); faces: (m, 3) row-major indices into the vertices, int32 (face_bytes 4) or
+ * int64 (face_bytes 8), or NULL (m 0) for a cloud; bounds: {lo x, lo y, lo z, hi x,
+ * hi y, hi z}, the bounding box of the whole cloud when the vertices are only the part
+ * of it near the features (out of core), or NULL (the vertices' box; ignored on a
+ * mesh); math: the elementwise functions to use, or NULL (the C library's). On
+ * MS_CURVES_OK *out holds the result (free it with ms_curves_free); on an
+ * error *out is NULL. MS_CURVES_EINVAL: n < 0, m < 0, out NULL, vertices, feature or
+ * (m > 0) faces NULL, face_bytes not 4 or 8, a mesh (m > 0) of more than 2^31
+ * vertices, or a face index outside [0, n). */
+int ms_curves_extract(const double *vertices, const uint8_t *feature, const uint8_t *valid,
+                      int64_t n, const void *faces, int face_bytes, int64_t m,
+                      const double *bounds, const ms_curves_math *math, ms_curves **out);
+
+/* Curves, their vertices in all, corners; and the spacing the steps are measured in
+ * (0 when there is no curve to measure). */
+int64_t ms_curves_count(const ms_curves *c);
+int64_t ms_curves_vertex_count(const ms_curves *c);
+int64_t ms_curves_corner_count(const ms_curves *c);
+double ms_curves_spacing(const ms_curves *c);
+
+/* The curves, in their order (by first vertex, last vertex, length), into
+ * caller-allocated arrays: sizes (count,) vertices per curve; closed (count,) 0/1
+ * (a loop: its last vertex connects to its first, which is not repeated); lengths
+ * (count,) polyline lengths (the closing segment included); points (vertex_count, 3)
+ * and indices (vertex_count,) the vertices of one curve after the other, with the input
+ * vertex each came from. */
+void ms_curves_copy(const ms_curves *c, int64_t *sizes, uint8_t *closed, double *lengths,
+                    double *points, int64_t *indices);
+
+/* The corners, in coordinate order: points (corner_count, 3) and indices
+ * (corner_count,), the input vertex of each. */
+void ms_curves_copy_corners(const ms_curves *c, double *points, int64_t *indices);
+
+void ms_curves_free(ms_curves *c);
+
 #ifdef __cplusplus
 }
 #endif
