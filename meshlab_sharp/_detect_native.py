@@ -106,12 +106,22 @@ def detect(
     if is_mesh and geometry.faces is not None:
         faces = np.ascontiguousarray(geometry.faces, dtype=np.int64)
 
+    # An exception raised in the callback (KeyboardInterrupt from a signal handler, a
+    # failing bar) would end in ctypes, printed and dropped: kept, and raised once
+    # ms_detect returns.
+    raised: list[BaseException] = []
+
     def report(percent: int, message: bytes, _ctx: int | None) -> int:
         # called by this thread only, inside ms_detect (the library's contract)
-        done = round(bar.total * percent / 100)
-        if done > bar.done:
-            stage = message.decode(errors="replace").removeprefix("Sharp features: ")
-            bar.step(stage.rsplit(" ", 1)[0], done - bar.done)  # less its percentage
+        if raised:
+            return 0
+        try:
+            done = round(bar.total * percent / 100)
+            if done > bar.done:
+                stage = message.decode(errors="replace").removeprefix("Sharp features: ")
+                bar.step(stage.rsplit(" ", 1)[0], done - bar.done)  # less its percentage
+        except BaseException as exc:
+            raised.append(exc)
         return 0
 
     callback = _PROGRESS(report)
@@ -129,6 +139,10 @@ def detect(
         error,
         _ERROR_BYTES,
     )
+    if raised:
+        if status == 0:
+            lib.ms_detection_free(handle)
+        raise raised[0]
     if status == _EINPUT:
         return None
     if status == _ENOMEM:
