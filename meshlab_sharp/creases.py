@@ -19,6 +19,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from . import _header, _kernels
 
@@ -27,6 +29,7 @@ __all__ = [
     "NOISE_FACTOR",
     "crease_threshold",
     "dihedral_angles",
+    "face_windings",
     "sharp_vertices",
 ]
 
@@ -63,9 +66,10 @@ def dihedral_angles(
         face (boundaries) or more than two (non-manifold) are left out.
     angles : (e,) float64
         Radians in [0, pi]: ``acos(clamp(u . v, -1, 1))`` of the two unit face normals
-        ``u = cross(p1 - p0, p2 - p0) / |.|`` (``|.|`` = sqrt of the sum of squares).
-        The orientation of the faces does not matter for a consistently oriented mesh;
-        an edge between faces of opposite orientation gets the supplementary angle.
+        ``u = cross(p1 - p0, p2 - p0) / |.|`` (``|.|`` = sqrt of the sum of squares),
+        ``v`` negated where the two faces go the same way along the edge (one of them is
+        wound the other way round): the angle is the same whatever the faces' winding,
+        and only the line of each normal counts.
     """
     faces = np.asarray(faces, np.int64)
     if len(faces) == 0:
@@ -77,22 +81,85 @@ def dihedral_angles(
     fn = np.cross(p1 - p0, p2 - p0)
     length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
     fn = fn / np.where(length > 0, length, 1.0)[:, None]
+    edges, first, second, same = _two_face_edges(faces, len(points))
+    u, v = fn[first], fn[second]
+    dot = u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] + u[:, 2] * v[:, 2]
+    dot = np.where(same, -dot, dot)
+    return edges, np.arccos(np.clip(dot, -1.0, 1.0))
+
+
+def _two_face_edges(
+    faces: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The edges (e, 2) with exactly two faces, as :func:`dihedral_angles` lists them;
+    their two faces (e,) and (e,), the lower first; and whether the two go the same way
+    along the edge (e,) bool: one of them wound the other way round."""
     # the 3 edges of each face in turn, so that owners never decrease: a stable sort of
     # the edge codes lo * n + hi (< 2**63 for n < 3e9) orders equal edges by owner
     pairs = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    n = np.int64(len(points))
-    code = np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1])
+    n64 = np.int64(n)
+    code = np.minimum(pairs[:, 0], pairs[:, 1]) * n64 + np.maximum(pairs[:, 0], pairs[:, 1])
     order = np.argsort(code, kind="stable")
     code, owner = code[order], order // 3
+    up = (pairs[:, 0] < pairs[:, 1])[order]
     new = np.ones(len(code), bool)
     new[1:] = code[1:] != code[:-1]
     starts = np.flatnonzero(new)
     counts = np.diff(np.append(starts, len(code)))
     two = starts[counts == 2]
-    u, v = fn[owner[two]], fn[owner[two + 1]]
-    dot = u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] + u[:, 2] * v[:, 2]
-    edges = np.stack([code[two] // n, code[two] % n], axis=1)
-    return edges, np.arccos(np.clip(dot, -1.0, 1.0))
+    edges = np.stack([code[two] // n64, code[two] % n64], axis=1)
+    return edges, owner[two], owner[two + 1], up[two] == up[two + 1]
+
+
+def face_windings(
+    faces: np.ndarray, n: int, *, backend: str | None = None
+) -> tuple[np.ndarray, int]:
+    """Which faces to turn so that every face is wound as its neighbours are.
+
+    Faces are joined through the edges with exactly two faces; two joined faces are
+    wound alike when they go opposite ways along their edge. In each part so joined the
+    lowest face keeps its winding, and the others are turned where they are wound the
+    other way round from it. Only the line of each face's normal then counts, never the
+    winding a file gave it.
+
+    Parameters
+    ----------
+    faces : (m, 3) int
+        Triangles over ``n`` vertices (three distinct vertices each).
+    n : int
+        Number of vertices.
+    backend : {"compiled", "numpy"}, optional
+        Default :func:`meshlab_sharp._kernels.default_backend`; the same result.
+
+    Returns
+    -------
+    flip : (m,) bool
+        True where the face is turned (none on a consistently wound mesh).
+    unoriented : int
+        Faces in parts with no consistent winding (non-orientable, a Moebius strip),
+        left as they are wound.
+    """
+    faces = np.asarray(faces, np.int64)
+    if _kernels.resolve(backend) == "compiled":
+        return _kernels.face_windings(faces, n)
+    m = len(faces)
+    if m == 0:
+        return np.zeros(0, bool), 0
+    _, first, second, same = _two_face_edges(faces, n)
+    # the double cover: node 2 f + s is face f turned (s = 1) or not; joined faces'
+    # nodes joined as their windings agree
+    s = same.astype(np.int64)
+    rows = np.concatenate([2 * first, 2 * first + 1])
+    cols = np.concatenate([2 * second + s, 2 * second + 1 - s])
+    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(2 * m, 2 * m))
+    label = connected_components(graph, directed=False)[1]
+    kept, turned = label[0::2], label[1::2]
+    odd = kept == turned  # both windings of a face joined: no consistent one
+    part = np.minimum(kept, turned)
+    lowest = np.full(2 * m, m, np.int64)
+    np.minimum.at(lowest, part, np.arange(m))
+    flip = (kept != kept[lowest[part]]) & ~odd
+    return flip, int(np.count_nonzero(odd))
 
 
 #: Angles per block of crease_threshold's count.

@@ -5,13 +5,16 @@ Only the orientation of a normal matters to the projected distance, never its si
 
 from __future__ import annotations
 
+import warnings
 from typing import Literal
 
 import numpy as np
 
 from . import _header, _kernels
+from .creases import face_windings
 from .defaults import DEFAULT_WEIGHTING as _DEFAULT_WEIGHTING
 from .defaults import WEIGHTINGS as WEIGHTINGS  # re-exported
+from .errors import InputWarning
 from .neighbourhoods import squared_distances
 
 Weighting = Literal["gaussian", "none"]
@@ -38,22 +41,36 @@ def face_average_normals(
         Unit normals; a zero row where a vertex has no face or the sum vanishes
         (``|sum| <= ZERO_NORMAL``), to be replaced by a PCA normal.
 
-    The compiled backend (default when built) gives the same bits: same products, sums
-    in the same order.
+    Each face's normal is turned where :func:`meshlab_sharp.creases.face_windings` turns
+    the face, so that the faces' winding does not change the normals' lines; faces in a
+    part with no consistent winding (non-orientable) are summed as they are wound, with an
+    :class:`~meshlab_sharp.errors.InputWarning`. The compiled backend (default when
+    built) gives the same bits: same products, sums in the same order.
     """
     if _kernels.resolve(backend) == "compiled":
-        return _kernels.face_average_normals(points, faces, ZERO_NORMAL)
-    p0, p1, p2 = (points[faces[:, c]] for c in range(3))
-    fn = np.cross(p1 - p0, p2 - p0)
-    length = np.sqrt(squared_distances(fn, 0.0))
-    fn /= np.where(length > 0, length, 1.0)[:, None]
-    acc = np.zeros_like(points)
-    for c in range(3):
-        np.add.at(acc, faces[:, c], fn)
-    norm = np.sqrt(squared_distances(acc, 0.0))
-    ok = norm > ZERO_NORMAL
-    acc[ok] /= norm[ok, None]
-    acc[~ok] = 0.0
+        acc, unoriented = _kernels.face_average_normals(points, faces, ZERO_NORMAL)
+    else:
+        flip, unoriented = face_windings(faces, len(points), backend="numpy")
+        p0, p1, p2 = (points[faces[:, c]] for c in range(3))
+        fn = np.cross(p1 - p0, p2 - p0)
+        length = np.sqrt(squared_distances(fn, 0.0))
+        fn /= np.where(length > 0, length, 1.0)[:, None]
+        fn[flip] *= -1.0
+        acc = np.zeros_like(points)
+        for c in range(3):
+            np.add.at(acc, faces[:, c], fn)
+        norm = np.sqrt(squared_distances(acc, 0.0))
+        ok = norm > ZERO_NORMAL
+        acc[ok] /= norm[ok, None]
+        acc[~ok] = 0.0
+    if unoriented:
+        warnings.warn(
+            InputWarning(
+                f"{unoriented} faces lie in parts with no consistent winding "
+                "(non-orientable): their vertex normals are summed as the faces are wound"
+            ),
+            stacklevel=2,
+        )
     return acc
 
 

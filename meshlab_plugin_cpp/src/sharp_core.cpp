@@ -418,7 +418,7 @@ std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector
                              std::vector<double> *score, Bar &bar, int from, int to) {
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
 	std::vector<double> normals(3 * n, 0.0);
-	ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data());
+	check(ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data()) < 0);
 	const std::vector<Index> rings(scales.begin(), scales.end());
 	std::vector<double> out(rings.size() * n);
 	if (score) score->assign(n, 0.0);
