@@ -22,6 +22,11 @@ DEFAULT_WEIGHTING: Weighting = _DEFAULT_WEIGHTING  # type: ignore[assignment]
 
 #: A vertex whose summed face normals are shorter than this is treated as a point.
 ZERO_NORMAL = _header.real("ZERO_NORMAL")
+#: Where the smallest eigenvalue of a covariance is triple or double, and the unit vector
+#: that picks its eigenvector then (:func:`smallest_eigenvectors`).
+EIG_TRIPLE_ROOT = _header.real("EIG_TRIPLE_ROOT")
+EIG_DOUBLE_ROOT = _header.real("EIG_DOUBLE_ROOT")
+EIG_TIE_DIRECTION = np.array(_header.reals("EIG_TIE_DIRECTION"))
 
 
 def face_average_normals(
@@ -118,5 +123,88 @@ def weighted_pca_normals(
         for b in range(a, 3):
             cov[:, a, b] = np.add.reduceat(mu * r[:, a] * r[:, b], starts)
             cov[:, b, a] = cov[:, a, b]
-    _, vectors = np.linalg.eigh(cov)
-    return vectors[:, :, 0]
+    return smallest_eigenvectors(cov)
+
+
+def smallest_eigenvectors(cov: np.ndarray) -> np.ndarray:
+    """Unit eigenvectors of the smallest eigenvalues of symmetric 3x3 matrices, one line
+    chosen the same way by every path where that eigenvalue is not single.
+
+    Parameters
+    ----------
+    cov : (c, 3, 3) float64
+        Symmetric (covariances).
+
+    Returns
+    -------
+    (c, 3) float64
+        LAPACK's (``np.linalg.eigh``) eigenvector; where the smallest eigenvalue is double
+        or triple (``EIG_DOUBLE_ROOT``, ``EIG_TRIPLE_ROOT``) the vector of its eigenspace
+        that the header names (``EIG_TIE_DIRECTION``), else on a diagonal matrix the unit
+        vector of the smallest diagonal entry (the first of equals), as the
+        native library's closed form chooses them: a grid's symmetric neighbourhoods get
+        the same normals in memory, out of core and with numpy.
+    """
+    return _extreme_eigenvectors(cov, 0)
+
+
+def largest_eigenvectors(cov: np.ndarray) -> np.ndarray:
+    """:func:`smallest_eigenvectors` of ``-cov``, from ``np.linalg.eigh(cov)``: unit
+    eigenvectors (c, 3) of the largest eigenvalues of ``cov`` (c, 3, 3)."""
+    return _extreme_eigenvectors(cov, 2)
+
+
+def _extreme_eigenvectors(cov: np.ndarray, column: int) -> np.ndarray:
+    """LAPACK's eigenvectors of the smallest (``column`` 0) or largest (2) eigenvalues
+    of ``cov`` (c, 3, 3), the native library's choice where those are not single."""
+    vectors = np.linalg.eigh(cov)[1]
+    out = vectors[:, :, column].copy()
+    sign = 1.0 if column == 0 else -1.0
+    a, d, f = (sign * cov[:, i, i] for i in range(3))
+    b, c, e = sign * cov[:, 0, 1], sign * cov[:, 0, 2], sign * cov[:, 1, 2]
+    scale = np.abs(a) + np.abs(b) + np.abs(c) + np.abs(d) + np.abs(e) + np.abs(f)
+    out[scale == 0.0] = (1.0, 0.0, 0.0)
+    rest = np.flatnonzero(scale != 0.0)
+    # the closed form's p, q and r (on entries scaled to O(1): the same ratios)
+    a, b, c, d, e, f = (x[rest] / scale[rest] for x in (a, b, c, d, e, f))
+    diagonal = (b * b + c * c + e * e) == 0.0
+    q = (a + d + f) / 3.0
+    p = np.sqrt(((a - q) ** 2 + (d - q) ** 2 + (f - q) ** 2 + 2.0 * (b * b + c * c + e * e)) / 6.0)
+    with np.errstate(divide="ignore", invalid="ignore"):  # p = 0: a multiple of I
+        b00, b11, b22, b01, b02, b12 = (x / p for x in (a - q, d - q, f - q, b, c, e))
+        r = 0.5 * (
+            b00 * (b11 * b22 - b12 * b12)
+            - b01 * (b01 * b22 - b12 * b02)
+            + b02 * (b01 * b12 - b11 * b02)
+        )
+    triple = p <= EIG_TRIPLE_ROOT * np.abs(q)
+    double = ~triple & (1.0 - r <= EIG_DOUBLE_ROOT)
+    diagonal &= ~triple & ~double
+    out[rest[triple]] = EIG_TIE_DIRECTION
+    if double.any():
+        v = vectors[rest[double], :, 2 - column]  # the single eigenvalue's line
+        w = EIG_TIE_DIRECTION - (v @ EIG_TIE_DIRECTION)[:, None] * v
+        out[rest[double]] = w / np.sqrt(squared_distances(w, 0.0))[:, None]
+    # a diagonal matrix: the axis of its smallest entry (the first of equals)
+    axes = np.argmin(np.stack([a, d, f], axis=1)[diagonal], axis=1)
+    out[rest[diagonal]] = np.eye(3)[axes]
+    return out
+    # the closed form's p, q and r (on entries scaled to O(1): the same ratios)
+    scale = (np.abs(a) + np.abs(b) + np.abs(c) + np.abs(d) + np.abs(e) + np.abs(f))[rest]
+    a, b, c, d, e, f = (x[rest] / scale for x in (a, b, c, d, e, f))
+    q = (a + d + f) / 3.0
+    p = np.sqrt(((a - q) ** 2 + (d - q) ** 2 + (f - q) ** 2 + 2.0 * (b * b + c * c + e * e)) / 6.0)
+    b00, b11, b22, b01, b02, b12 = (a - q) / p, (d - q) / p, (f - q) / p, b / p, c / p, e / p
+    r = 0.5 * (
+        b00 * (b11 * b22 - b12 * b12)
+        - b01 * (b01 * b22 - b12 * b02)
+        + b02 * (b01 * b12 - b11 * b02)
+    )
+    triple = p <= EIG_TRIPLE_ROOT * np.abs(q)
+    double = ~triple & (1.0 - r <= EIG_DOUBLE_ROOT)
+    out[rest[triple]] = EIG_TIE_DIRECTION
+    if double.any():
+        v = vectors[rest[double], :, 2 - column]  # the single eigenvalue's line
+        w = EIG_TIE_DIRECTION - (v @ EIG_TIE_DIRECTION)[:, None] * v
+        out[rest[double]] = w / np.sqrt(squared_distances(w, 0.0))[:, None]
+    return out

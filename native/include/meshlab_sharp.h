@@ -19,7 +19,7 @@
 
 /* ---------------------------------------------------------------- constants
  * One `#define MS_NAME value` a line: a number, a quotient of two numbers in
- * parentheses, or a brace list of integers. meshlab_sharp/_header.py parses exactly
+ * parentheses, or a brace list of integers or of floating-point numbers. meshlab_sharp/_header.py parses exactly
  * these forms; the Python names drop the MS_ prefix. */
 
 /* Default scales: k nearest neighbours on a point cloud, k-rings on a mesh. */
@@ -42,6 +42,19 @@
 #define MS_FLAT_TOLERANCE 1e-6
 /* A face-average normal shorter than this is no normal (normals.ZERO_NORMAL). */
 #define MS_ZERO_NORMAL 1e-12
+/* The PCA normal where the covariance's smallest eigenvalue is not single (a
+ * neighbourhood as symmetric as a grid's): the eigenvector is no longer one line, and
+ * every path takes the same one in its eigenspace (normals.smallest_eigenvectors). With
+ * p = sqrt(tr((A - q I)^2) / 6), q = tr(A) / 3 and r = det((A - q I) / p) / 2 (the
+ * closed form's angle acos(r) / 3): triple where p <= EIG_TRIPLE_ROOT * |q|, the unit
+ * vector EIG_TIE_DIRECTION itself; else double where 1 - r <= EIG_DOUBLE_ROOT (the two
+ * smallest eigenvalues within about 1.6e-4 p; r is that accurate for p > EIG_TRIPLE_ROOT
+ * |q|), EIG_TIE_DIRECTION less its part along the largest eigenvalue's eigenvector,
+ * normalised; else a diagonal matrix's smallest entry's axis (the first of equals). The
+ * direction (cos 72, 1/2, cos 36 degrees) is on no line of a grid's symmetries. */
+#define MS_EIG_TRIPLE_ROOT 1e-5
+#define MS_EIG_DOUBLE_ROOT 1e-8
+#define MS_EIG_TIE_DIRECTION {0.30901699437494745, 0.5, 0.8090169943749475}
 /* Coordinates whose largest magnitude lies outside [2^-100, 2^100) are scaled by a
  * power of two first (neighbourhoods.UNIT_RANGE). */
 #define MS_UNIT_RANGE 100
