@@ -24,6 +24,7 @@ import numpy as np
 
 from .. import _kernels
 from ..errors import InputError
+from ..neighbourhoods import unit_exponent
 from .store import Store
 
 #: Cells per axis of the grid the tiles are made of.
@@ -110,6 +111,12 @@ def build_layout(
         seen += len(block)
     if seen != n:
         raise InputError(f"{source}: {seen} points read, the header says {n}")
+    # the store holds the coordinates in the unit of an in-memory run (unit_scale): the
+    # same neighbourhoods and decisions whatever the input's unit (1e-300 to 1e300)
+    e = unit_exponent(max(float(np.abs(lo).max()), float(np.abs(hi).max())))
+    if e:
+        lo, hi = np.ldexp(lo, -e), np.ldexp(hi, -e)
+        chunks = _scaled(chunks, e)
     cells = np.zeros(GRID**3, np.int64)
     store.create("cell", (n,), np.uint32)
     start = 0
@@ -159,6 +166,13 @@ def build_layout(
         store.write("rep", a, a + to_first[from_first])
         n_clean += len(to_first)
     return Layout(n, lo, hi, offsets, boxes, n_clean)
+
+
+def _scaled(
+    chunks: Callable[[], Iterator[np.ndarray]], e: int
+) -> Callable[[], Iterator[np.ndarray]]:
+    """``chunks`` with every block multiplied by ``2**-e`` (exact)."""
+    return lambda: (np.ldexp(block, -e) for block in chunks())
 
 
 def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
