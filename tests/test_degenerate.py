@@ -110,3 +110,19 @@ def test_grid_normals_and_distances_equal_in_both_paths() -> None:
     lines = np.abs(np.sum(fast.normals * ref.normals, axis=2))[ok]
     assert np.allclose(lines, 1.0, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(fast.candidate_counts, ref.candidate_counts)
+
+
+@compiled
+@pytest.mark.slow
+def test_grid_features_equal_in_memory_out_of_core_and_numpy() -> None:
+    # a shuffled 16^3 grid: 260 features on every path (ties everywhere: the normals of
+    # most interior points are chosen in a plane or all of space)
+    points = _shuffled_grid(16)
+    masks = {}
+    for backend in ("numpy", "compiled"):
+        with _kernels.use_backend(backend):
+            masks[backend] = detect(points).mask
+    masks["tiled"] = detect(points, max_memory="200MB").mask
+    assert int(masks["compiled"].sum()) == 260
+    np.testing.assert_array_equal(masks["numpy"], masks["compiled"])
+    np.testing.assert_array_equal(masks["tiled"], masks["compiled"])
