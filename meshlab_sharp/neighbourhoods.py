@@ -135,18 +135,37 @@ def far_points(points: np.ndarray) -> np.ndarray | None:
         the bounds decides it).
     """
     n = len(points)
-    if n == 0:
+    bulk = far_reach(points[:: far_step(n)])
+    if bulk is None:
         return None
-    sample = points[:: max(1, -(-n // FAR_SAMPLE))]
-    low, median, high = np.quantile(sample, [0.25, 0.5, 0.75], axis=0)
-    reach = FAR_SPREADS * float((high - low).max())
-    if reach == 0.0:
-        return None  # most points in one place: no spread to measure against
+    median, reach = bulk
     lo = np.array([points[:, i].min() for i in range(3)])
     hi = np.array([points[:, i].max() for i in range(3)])
     if max(float((hi - median).max()), float((median - lo).max())) <= reach:
         return None
-    far = np.zeros(n, bool)
+    return is_far(points, median, reach)
+
+
+def far_step(n: int) -> int:
+    """The step between the points :func:`far_points` measures the bulk on (n points:
+    every ``far_step(n)``-th from the first, at most ``FAR_SAMPLE``)."""
+    return max(1, -(-n // FAR_SAMPLE))
+
+
+def far_reach(sample: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """The bulk's median (3,) and how far from it a point is far, from the
+    :func:`far_step` sample (s, 3); None when the sample has no spread (or no point)."""
+    if len(sample) == 0:
+        return None
+    low, median, high = np.quantile(sample, [0.25, 0.5, 0.75], axis=0)
+    reach = FAR_SPREADS * float((high - low).max())
+    return None if reach == 0.0 else (median, reach)
+
+
+def is_far(points: np.ndarray, median: np.ndarray, reach: float) -> np.ndarray:
+    """(n,) bool: the points (n, 3) with a coordinate further than ``reach`` from the
+    ``median``'s."""
+    far = np.zeros(len(points), bool)
     for i in range(3):
         far |= np.abs(points[:, i] - median[i]) > reach
     return far

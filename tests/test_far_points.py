@@ -90,3 +90,17 @@ def test_uniform_scaling_out_of_core(scale: float) -> None:
         in_memory = detect(box * scale)
     np.testing.assert_array_equal(tiled.mask, base.mask)
     np.testing.assert_array_equal(in_memory.mask, base.mask)
+
+
+@pytest.mark.skipif(not _kernels.available(), reason="out of core needs the compiled kernels")
+@pytest.mark.parametrize("mode", ["robust", "paper"])
+def test_far_points_out_of_core(mode: str) -> None:
+    box = random_box_points(4000)
+    base = detect(box, mode=mode)
+    for far in (1e200, 1.7e308):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            got = detect(
+                _with(box, (far, -far, far), (-far, 0.0, 1.0)), mode=mode, max_memory="200MB"
+            )
+        _check_same(got, base, len(box))

@@ -24,7 +24,7 @@ import numpy as np
 
 from .. import _kernels
 from ..errors import InputError
-from ..neighbourhoods import unit_exponent
+from ..neighbourhoods import far_reach, far_step, is_far, unit_exponent
 from .store import Store
 
 #: Cells per axis of the grid the tiles are made of.
@@ -79,8 +79,10 @@ def build_layout(
     tile_points: int,
     source: str,
 ) -> Layout:
-    """Sort the input into tiles; fills the store's ``coords`` (n, 3), ``ids`` (n,) and
-    ``rep`` (n,) (position of each point's first occurrence) in tile order.
+    """Sort the input into tiles; fills the store's ``coords`` (m, 3), ``ids`` (m,) and
+    ``rep`` (m,) (position of each point's first occurrence) in tile order: the m points
+    that are not far (:func:`meshlab_sharp.neighbourhoods.far_points`), coordinates in
+    the unit of an in-memory run (:func:`meshlab_sharp.neighbourhoods.unit_scale`).
 
     Parameters
     ----------
@@ -100,6 +102,8 @@ def build_layout(
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     seen = 0
+    step = far_step(n)
+    samples = []
     for block in chunks():
         # a NaN or an infinity shows in the block's minimum or maximum
         blo, bhi = bounds(block)
@@ -108,21 +112,45 @@ def build_layout(
             raise InputError(f"{source}: point {bad} has a non-finite coordinate")
         lo = np.minimum(lo, blo)
         hi = np.maximum(hi, bhi)
+        samples.append(block[(-seen) % step :: step])
         seen += len(block)
     if seen != n:
         raise InputError(f"{source}: {seen} points read, the header says {n}")
+    # far points (neighbourhoods.far_points) are left out of every tile, as the
+    # in-memory run drops them: no tile holds them, the outputs leave them out
+    bulk = far_reach(np.concatenate(samples))
+    del samples
+    if bulk is not None and max(float((hi - bulk[0]).max()), float((bulk[0] - lo).max())) > bulk[1]:
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for block in chunks():
+            near = block[~is_far(block, *bulk)]
+            if len(near):
+                blo, bhi = bounds(near)
+                lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
+    else:
+        bulk = None
+
+    def near_of(block: np.ndarray) -> np.ndarray | slice:
+        """The points of ``block`` that are not far (all: a slice, no copy)."""
+        return slice(None) if bulk is None else np.flatnonzero(~is_far(block, *bulk))
+
     # the store holds the coordinates in the unit of an in-memory run (unit_scale): the
     # same neighbourhoods and decisions whatever the input's unit (1e-300 to 1e300)
     e = unit_exponent(max(float(np.abs(lo).max()), float(np.abs(hi).max())))
-    if e:
-        lo, hi = np.ldexp(lo, -e), np.ldexp(hi, -e)
-        chunks = _scaled(chunks, e)
+    lo, hi = np.ldexp(lo, -e), np.ldexp(hi, -e)
+
+    def unit(block: np.ndarray) -> np.ndarray:
+        """``block`` in the store's unit."""
+        return np.ldexp(block, -e) if e else block
+
     cells = np.zeros(GRID**3, np.int64)
     store.create("cell", (n,), np.uint32)
     start = 0
     for block in chunks():
-        cell = _cells(block, lo, hi)
-        cells += np.bincount(cell, minlength=GRID**3)
+        near = near_of(block)
+        cell = np.zeros(len(block), np.int64)
+        cell[near] = _cells(unit(block[near]), lo, hi)
+        cells += np.bincount(cell[near], minlength=GRID**3)
         store.write("cell", start, cell.astype(np.uint32))
         start += len(block)
     leaves = _split(cells.reshape(GRID, GRID, GRID), tile_points)
@@ -138,17 +166,21 @@ def build_layout(
         sizes.append(int(grid_counts[box].sum()))
     table = table.reshape(-1)
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-    store.create("coords", (n, 3), np.float64)
-    store.create("ids", (n,), np.int64)
-    store.create("rep", (n,), np.int64)
+    kept = int(offsets[-1])
+    store.create("coords", (kept, 3), np.float64)
+    store.create("ids", (kept,), np.int64)
+    store.create("rep", (kept,), np.int64)
     cursor = offsets[:-1].copy()
     start = 0
     for block in chunks():
-        tile = table[store.read("cell", start, start + len(block))]
+        near = near_of(block)
+        tile = table[store.read("cell", start, start + len(block))[near]]
         order = np.argsort(tile, kind="stable")
+        if bulk is not None:
+            order = near[order]
         per = np.bincount(tile, minlength=len(sizes))
         runs = np.concatenate([[0], np.cumsum(per)])
-        xyz, ids = block[order], start + order
+        xyz, ids = unit(block[order]), start + order
         for t in np.flatnonzero(per):
             a, b = runs[t], runs[t + 1]
             store.write("coords", int(cursor[t]), xyz[a:b])
@@ -166,13 +198,6 @@ def build_layout(
         store.write("rep", a, a + to_first[from_first])
         n_clean += len(to_first)
     return Layout(n, lo, hi, offsets, boxes, n_clean)
-
-
-def _scaled(
-    chunks: Callable[[], Iterator[np.ndarray]], e: int
-) -> Callable[[], Iterator[np.ndarray]]:
-    """``chunks`` with every block multiplied by ``2**-e`` (exact)."""
-    return lambda: (np.ldexp(block, -e) for block in chunks())
 
 
 def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
