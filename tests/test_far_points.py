@@ -49,7 +49,6 @@ def test_far_points_found_only_far() -> None:
     assert far_points(np.zeros((10, 3))) is None  # no spread: nothing to measure
 
 
-@pytest.mark.slow
 def test_one_far_point_leaves_the_box_features() -> None:
     box = random_box_points(20000)
     with _kernels.use_backend(BACKENDS[-1]):
