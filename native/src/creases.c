@@ -57,36 +57,60 @@ int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *fl
     if (m >= ((int64_t)1 << 31)) return -1;
     int64_t *ptr = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
     int32_t *inc = (int32_t *)malloc((size_t)(3 * m) * sizeof(int32_t));
-    winding_sets w = {(int32_t *)malloc((size_t)m * sizeof(int32_t)),
-                      (uint8_t *)calloc((size_t)m, 1), (uint8_t *)calloc((size_t)m, 1)};
-    int64_t unoriented = -1;
-    if (!ptr || !inc || !w.parent || !w.parity || !w.odd || ms_vertex_faces(faces, m, n, ptr, inc))
-        goto done;
-    for (int64_t f = 0; f < m; f++) w.parent[f] = (int32_t)f;
+    winding_sets w = {NULL, NULL, NULL};
+    int64_t unoriented = -1, cap = 0;
+    int64_t *other = NULL;
+    if (!ptr || !inc || ms_vertex_faces(faces, m, n, ptr, inc)) goto done;
     /* each edge (a, b), a < b, with exactly two faces, at a: the faces of a's fan that
-     * hold b */
-    for (int64_t a = 0; a < n; a++) {
-        const int32_t *fa = inc + ptr[a];
-        const int64_t deg = ptr[a + 1] - ptr[a];
-        for (int64_t i = 0; i < deg; i++) {
-            const int64_t *c = faces + 3 * (int64_t)fa[i];
-            const int at = c[0] == a ? 0 : c[1] == a ? 1 : 2;
-            for (int k = 1; k <= 2; k++) {
-                const int64_t b = c[(at + k) % 3];
-                if (b < a) continue;
-                int64_t count = 1, second = -1, seen = 0;
-                for (int64_t j = 0; j < deg && !seen; j++) {
-                    const int64_t *d = faces + 3 * (int64_t)fa[j];
-                    if (j == i || !(d[0] == b || d[1] == b || d[2] == b)) continue;
-                    seen = j < i;
-                    count++;
-                    second = fa[j];
-                }
-                if (seen || count != 2) continue;
-                /* the same way along the edge: wound opposite ways round */
-                const int same = (k == 1) == walks_up(faces, second, a, b);
-                winding_join(&w, fa[i], (int32_t)second, (uint8_t)same);
+     * hold b, read from a table of each face's corners after and before a; first only
+     * whether some two go the same way along their edge (none: a consistently wound
+     * mesh, nothing to turn), then the parts joined */
+    for (int join = 0; join < 2; join++) {
+        int same_seen = 0;
+        for (int64_t a = 0; a < n && !(same_seen && !join); a++) {
+            const int32_t *fa = inc + ptr[a];
+            const int64_t deg = ptr[a + 1] - ptr[a];
+            if (2 * deg > cap) {
+                cap = 4 * deg;
+                int64_t *grown = (int64_t *)realloc(other, (size_t)cap * sizeof(int64_t));
+                if (!grown) goto done;
+                other = grown;
             }
+            for (int64_t i = 0; i < deg; i++) {
+                const int64_t *c = faces + 3 * (int64_t)fa[i];
+                const int at = c[0] == a ? 0 : c[1] == a ? 1 : 2;
+                other[2 * i] = c[(at + 1) % 3];     /* the face goes a -> other[2 i] */
+                other[2 * i + 1] = c[(at + 2) % 3]; /* and other[2 i + 1] -> a */
+            }
+            for (int64_t i = 0; i < deg; i++)
+                for (int k = 0; k < 2; k++) {
+                    const int64_t b = other[2 * i + k];
+                    if (b < a) continue;
+                    int64_t count = 1, second = -1, seen = 0, up = 0;
+                    for (int64_t j = 0; j < deg && !seen; j++) {
+                        if (j == i || (other[2 * j] != b && other[2 * j + 1] != b)) continue;
+                        seen = j < i;
+                        count++;
+                        second = j;
+                        up = other[2 * j] == b;
+                    }
+                    if (seen || count != 2) continue;
+                    /* the same way along the edge: wound opposite ways round */
+                    const int same = (k == 0) == up;
+                    same_seen |= same;
+                    if (join) winding_join(&w, fa[i], fa[second], (uint8_t)same);
+                }
+        }
+        if (!join && !same_seen) { /* consistently wound: no face turned */
+            unoriented = 0;
+            goto done;
+        }
+        if (!join) {
+            w.parent = (int32_t *)malloc((size_t)m * sizeof(int32_t));
+            w.parity = (uint8_t *)calloc((size_t)m, 1);
+            w.odd = (uint8_t *)calloc((size_t)m, 1);
+            if (!w.parent || !w.parity || !w.odd) goto done;
+            for (int64_t f = 0; f < m; f++) w.parent[f] = (int32_t)f;
         }
     }
     /* each set's lowest face keeps its winding (faces in order: the first of its set
@@ -108,6 +132,7 @@ int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *fl
         flip[f] = par ^ (uint8_t)base[r];
     }
 done:
+    free(other);
     free(ptr);
     free(inc);
     free(w.parent);
