@@ -37,8 +37,8 @@ UNIT_RANGE = _header.integer("UNIT_RANGE")
 #: points up to this far are used as they are: the unit then stays within UNIT_RANGE
 #: of the bulk's); the spread is measured on at most FAR_SAMPLE points
 #: (:func:`far_points`).
-FAR_SPREADS = 2.0**40
-FAR_SAMPLE = 65536
+FAR_SPREADS = _header.real("FAR_SPREADS")  # 2**40
+FAR_SAMPLE = _header.integer("FAR_SAMPLE")
 
 
 @dataclass(frozen=True)

@@ -143,13 +143,11 @@ void unitScale(std::vector<double> &xyz) {
 }
 
 // neighbourhoods.far_points: the points of a cloud (xyz, n x 3) further from its median
-// than FAR_SPREADS of its spreads on some axis (the median and interquartile ranges of
-// at most FAR_SAMPLE points evenly spread through it, numpy's linear quantiles); empty
+// than MS_FAR_SPREADS of its spreads on some axis (the median and interquartile ranges of
+// at most MS_FAR_SAMPLE points evenly spread through it, numpy's linear quantiles); empty
 // when there are none.
 std::vector<char> farPoints(const std::vector<double> &xyz) {
-	const double farSpreads = 1099511627776.0;  // 2^40
-	const Index farSample = 65536;
-	const Index n = Index(xyz.size() / 3), step = std::max<Index>(1, (n + farSample - 1) / farSample);
+	const Index n = Index(xyz.size() / 3), step = std::max<Index>(1, (n + MS_FAR_SAMPLE - 1) / MS_FAR_SAMPLE);
 	double median[3], reach = 0.0;
 	for (int a = 0; a < 3; ++a) {
 		std::vector<double> x;
@@ -165,7 +163,7 @@ std::vector<char> farPoints(const std::vector<double> &xyz) {
 		median[a] = quantile(0.5);
 		reach = std::max(reach, quantile(0.75) - quantile(0.25));
 	}
-	reach *= farSpreads;
+	reach *= MS_FAR_SPREADS;
 	std::vector<char> far;
 	if (n == 0 || reach == 0.0) return far;
 	for (Index i = 0; i < n; ++i)

@@ -55,6 +55,11 @@
 #define MS_EIG_TRIPLE_ROOT 1e-5
 #define MS_EIG_DOUBLE_ROOT 1e-8
 #define MS_EIG_TIE_DIRECTION {0.30901699437494745, 0.5, 0.8090169943749475}
+/* A cloud's point further from its median than FAR_SPREADS of its spreads (the largest
+ * interquartile range of a coordinate), both measured on at most FAR_SAMPLE points evenly
+ * spread through it, is far: dropped before the unit is chosen (neighbourhoods.far_points). */
+#define MS_FAR_SPREADS 1099511627776.0
+#define MS_FAR_SAMPLE 65536
 /* Coordinates whose largest magnitude lies outside [2^-100, 2^100) are scaled by a
  * power of two first (neighbourhoods.UNIT_RANGE). */
 #define MS_UNIT_RANGE 100
