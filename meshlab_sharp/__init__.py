@@ -25,7 +25,7 @@ _EXPORTS = {
     "DEFAULT_MODE": "defaults",
     "DEFAULT_RING_SCALES": "defaults",
     "MODES": "defaults",
-    "DetectionResult": "pipeline",
+    "DetectionResult": "result",
     "Geometry": "io",
     "InputError": "errors",
     "MeshlabSharpError": "errors",

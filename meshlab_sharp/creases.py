@@ -19,10 +19,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from . import _header, _kernels
+from .reference import creases as reference
 
 __all__ = [
     "CREASE_ANGLE",
@@ -32,6 +31,7 @@ __all__ = [
     "face_windings",
     "sharp_vertices",
 ]
+
 
 #: Degrees: the smallest turn of the surface that counts as a sharp edge (the ground
 #: truth's crease angle, ``meshlab_sharp.parts.CREASE_ANGLE``).
@@ -77,44 +77,14 @@ def dihedral_angles(
     if _kernels.resolve(backend) == "compiled":
         edges, dot = _kernels.two_face_edges(faces, points)
         return edges, _angles(dot)
-    p0, p1, p2 = (points[faces[:, c]] for c in range(3))
-    fn = np.cross(p1 - p0, p2 - p0)
-    length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
-    fn = fn / np.where(length > 0, length, 1.0)[:, None]
-    edges, first, second, same = _two_face_edges(faces, len(points))
-    u, v = fn[first], fn[second]
-    dot = u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] + u[:, 2] * v[:, 2]
-    dot = np.where(same, -dot, dot)
-    return edges, np.arccos(np.clip(dot, -1.0, 1.0))
-
-
-def _two_face_edges(
-    faces: np.ndarray, n: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The edges (e, 2) with exactly two faces, as :func:`dihedral_angles` lists them;
-    their two faces (e,) and (e,), the lower first; and whether the two go the same way
-    along the edge (e,) bool: one of them wound the other way round."""
-    # the 3 edges of each face in turn, so that owners never decrease: a stable sort of
-    # the edge codes lo * n + hi (< 2**63 for n < 3e9) orders equal edges by owner
-    pairs = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    n64 = np.int64(n)
-    code = np.minimum(pairs[:, 0], pairs[:, 1]) * n64 + np.maximum(pairs[:, 0], pairs[:, 1])
-    order = np.argsort(code, kind="stable")
-    code, owner = code[order], order // 3
-    up = (pairs[:, 0] < pairs[:, 1])[order]
-    new = np.ones(len(code), bool)
-    new[1:] = code[1:] != code[:-1]
-    starts = np.flatnonzero(new)
-    counts = np.diff(np.append(starts, len(code)))
-    two = starts[counts == 2]
-    edges = np.stack([code[two] // n64, code[two] % n64], axis=1)
-    return edges, owner[two], owner[two + 1], up[two] == up[two + 1]
+    return reference.dihedral_angles(points, faces)
 
 
 def face_windings(
     faces: np.ndarray, n: int, *, backend: str | None = None
 ) -> tuple[np.ndarray, int]:
-    """Which faces to turn so that every face is wound as its neighbours are.
+    """Which faces to turn so that every face is wound as its neighbours are
+    (:func:`meshlab_sharp.reference.creases.face_windings`).
 
     Faces are joined through the edges with exactly two faces; two joined faces are
     wound alike when they go opposite ways along their edge. In each part so joined the
@@ -142,28 +112,7 @@ def face_windings(
     faces = np.asarray(faces, np.int64)
     if _kernels.resolve(backend) == "compiled":
         return _kernels.face_windings(faces, n)
-    m = len(faces)
-    if m == 0:
-        return np.zeros(0, bool), 0
-    _, first, second, same = _two_face_edges(faces, n)
-    # the double cover: node 2 f + s is face f turned (s = 1) or not; joined faces'
-    # nodes joined as their windings agree
-    s = same.astype(np.int64)
-    rows = np.concatenate([2 * first, 2 * first + 1])
-    cols = np.concatenate([2 * second + s, 2 * second + 1 - s])
-    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(2 * m, 2 * m))
-    label = connected_components(graph, directed=False)[1]
-    kept, turned = label[0::2], label[1::2]
-    odd = kept == turned  # both windings of a face joined: no consistent one
-    part = np.minimum(kept, turned)
-    lowest = np.full(2 * m, m, np.int64)
-    np.minimum.at(lowest, part, np.arange(m))
-    flip = (kept != kept[lowest[part]]) & ~odd
-    return flip, int(np.count_nonzero(odd))
-
-
-#: Angles per block of crease_threshold's count.
-_BLOCK = 1 << 16
+    return reference.face_windings(faces, n)
 
 
 def _angles(dot: np.ndarray) -> np.ndarray:
@@ -177,6 +126,10 @@ def _angles_and_threshold(dot: np.ndarray, flat: int) -> tuple[np.ndarray, float
     :func:`crease_threshold` of all the edges' angles: these and ``flat`` zeros."""
     angles = _angles(dot)
     return angles, crease_threshold(angles, zeros=flat)
+
+
+#: Angles per block of crease_threshold's count.
+_BLOCK = 1 << 16
 
 
 def crease_threshold(angles: np.ndarray, *, zeros: int = 0) -> float:
@@ -239,8 +192,4 @@ def sharp_vertices(
     faces = np.asarray(faces, np.int64)
     if _kernels.resolve(backend) == "compiled":
         return _kernels.crease_vertices(points, faces, _angles_and_threshold)
-    edges, angles = dihedral_angles(points, faces, backend="numpy")
-    threshold = crease_threshold(angles)
-    mask = np.zeros(len(points), bool)
-    mask[edges[angles > threshold].reshape(-1)] = True
-    return mask, threshold
+    return reference.sharp_vertices(points, faces, crease_threshold)

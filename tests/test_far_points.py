@@ -51,31 +51,30 @@ def test_far_points_found_only_far() -> None:
 
 def test_one_far_point_leaves_the_box_features() -> None:
     box = random_box_points(20000)
-    with _kernels.use_backend(BACKENDS[-1]):
-        base = detect(box)
-        assert base.n_features == 779
-        for far in FAR:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error")
-                got = detect(_with(box, (far, 0.5 * far, -far)))
-            _check_same(got, base, len(box))
-        got = detect(_with(box, (1.7e308, 1.7e308, 1.7e308), (-1.7e308, -1.7e308, -1.7e308)))
+    backend = BACKENDS[-1]
+    base = detect(box, backend=backend)
+    assert base.n_features == 779
+    for far in FAR:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            got = detect(_with(box, (far, 0.5 * far, -far)), backend=backend)
         _check_same(got, base, len(box))
+    both = _with(box, (1.7e308, 1.7e308, 1.7e308), (-1.7e308, -1.7e308, -1.7e308))
+    _check_same(detect(both, backend=backend), base, len(box))
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_far_points_same_in_both_paths(backend: str) -> None:
     box = random_box_points(3000)
-    with _kernels.use_backend(backend):
-        base = detect(box)
-        for far in (1e100, 1e200, 1.7e308):
-            with warnings.catch_warnings():
-                warnings.simplefilter("error")
-                got = detect(_with(box, (far, -far, far)), mode="robust")
-            _check_same(got, base, len(box))
-        paper = detect(box, mode="paper")
-        got = detect(_with(box, (1e250, 0.0, 0.0)), mode="paper")
-        _check_same(got, paper, len(box))
+    base = detect(box, backend=backend)
+    for far in (1e100, 1e200, 1.7e308):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            got = detect(_with(box, (far, -far, far)), mode="robust", backend=backend)
+        _check_same(got, base, len(box))
+    paper = detect(box, mode="paper", backend=backend)
+    got = detect(_with(box, (1e250, 0.0, 0.0)), mode="paper", backend=backend)
+    _check_same(got, paper, len(box))
 
 
 @pytest.mark.skipif(not _kernels.available(), reason="out of core needs the compiled kernels")
