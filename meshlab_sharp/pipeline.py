@@ -38,7 +38,7 @@ from .preprocessing import (
     map_to_input,
     preprocess,
 )
-from .progress import Progress
+from .progress import Progress, cleared_on_error
 from .result import DetectionResult
 from .robust import RobustSetup
 
@@ -135,34 +135,36 @@ def detect(
         from .tiles import detect_out_of_core
 
         options = dict(scales=scales, weighting=weighting, as_points=as_points, mode=mode)
-        return detect_out_of_core(
+        with cleared_on_error():
+            return detect_out_of_core(
+                source,
+                faces,
+                **options,
+                return_details=return_details,
+                progress=progress,
+                workers=workers,
+                preprocessing=preprocessing,
+                backend=backend,
+                max_memory=max_memory,
+                dask=dask,
+                scratch=scratch,
+                curves=curves,
+            )
+    with cleared_on_error():
+        return _detect(
             source,
             faces,
-            **options,
+            scales=scales,
+            weighting=weighting,
+            as_points=as_points,
             return_details=return_details,
             progress=progress,
             workers=workers,
             preprocessing=preprocessing,
+            mode=mode,
             backend=backend,
-            max_memory=max_memory,
-            dask=dask,
-            scratch=scratch,
             curves=curves,
         )
-    return _detect(
-        source,
-        faces,
-        scales=scales,
-        weighting=weighting,
-        as_points=as_points,
-        return_details=return_details,
-        progress=progress,
-        workers=workers,
-        preprocessing=preprocessing,
-        mode=mode,
-        backend=backend,
-        curves=curves,
-    )
 
 
 def _detect(
