@@ -136,3 +136,4 @@ CONSTANTS = KERNELS.constants
 integer = KERNELS.integer
 real = KERNELS.real
 integers = KERNELS.integers
+reals = KERNELS.reals

@@ -26,6 +26,7 @@ from .neighbourhoods import (
     KnnNeighbourhoods,
     RingNeighbourhoods,
     build_neighbourhoods,
+    far_points,
     unit_scale,
 )
 from .normals import DEFAULT_WEIGHTING, Weighting, face_average_normals
@@ -256,10 +257,15 @@ def _detect(
             return _finish(result, geometry, as_points, curves, bar, progress, t0)
 
     t = time.perf_counter()
+    # A cloud's far points (a corrupted coordinate) are dropped first, as isolated points
+    # are: kept, they would set the unit of the rest.
+    far = None if is_mesh else far_points(geometry.vertices)
+    near = None if far is None else np.flatnonzero(~far)
+    del far
     # Exact power-of-two scaling to O(1) where needed: the answer does not depend on the
     # unit (every output is unit-free), no squared distance or area underflows or
     # overflows.
-    unit = unit_scale(geometry.vertices)[0]
+    unit = unit_scale(geometry.vertices if near is None else geometry.vertices[near])[0]
     faces_in = geometry.faces if is_mesh else None
     same = unit is geometry.vertices and faces_in is geometry.faces
     to_clean = geometry if same else Geometry(unit, faces_in, geometry.source)
@@ -269,6 +275,12 @@ def _detect(
         if is_mesh
         else _clean_beside_tree(to_clean, workers, backend)
     )
+    if near is not None:  # the maps to the input, the far points dropped
+        from_input = np.full(len(geometry.vertices), -1, np.int64)
+        from_input[near] = cleaned.from_input
+        cleaned = CleanGeometry.with_maps(
+            cleaned.vertices, None, near[cleaned.to_input], from_input
+        )
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     bar.stage("neighbourhoods")

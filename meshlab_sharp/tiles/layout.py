@@ -29,6 +29,7 @@ import numpy as np
 
 from .. import _kernels
 from ..errors import InputError
+from ..neighbourhoods import far_reach, far_step, is_far, unit_exponent
 from .store import Store
 
 #: Cells per axis of the grid the tiles are made of.
@@ -52,7 +53,7 @@ class Layout:
     n : int
         Input points.
     lo, hi : (3,) float64
-        Bounding box of all points.
+        Bounding box of the points that are not far, in the store's unit.
     offsets : (t + 1,) int64
         Tile ``i`` holds positions ``offsets[i]:offsets[i + 1]`` of the store's arrays.
     boxes : (t, 2, 3) float64
@@ -91,8 +92,10 @@ def build_layout(
     tile_points: int,
     source: str,
 ) -> Layout:
-    """Sort the input into tiles; fills the store's ``coords`` (n, 3), ``ids`` (n,) and
-    ``rep`` (n,) (position of each point's first occurrence) in tile order.
+    """Sort the input into tiles; fills the store's ``coords`` (m, 3), ``ids`` (m,) and
+    ``rep`` (m,) (position of each point's first occurrence) in tile order: the m points
+    that are not far (:func:`meshlab_sharp.neighbourhoods.far_points`), coordinates in
+    the unit of an in-memory run (:func:`meshlab_sharp.neighbourhoods.unit_scale`).
 
     Parameters
     ----------
@@ -100,7 +103,7 @@ def build_layout(
         Number of input points.
     chunks : callable
         ``chunks()`` yields the input's coordinates, (c, 3) float64 blocks in order;
-        called three times.
+        called once per pass (three to six times).
     store : Store
     tile_points : int
         Most points of a tile (a tile that is one grid cell may hold more).
@@ -112,6 +115,8 @@ def build_layout(
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     seen = 0
+    step = far_step(n)
+    samples = []
     every = max(1, -(-n // SAMPLE))
     sample = []
     for block in chunks():
@@ -122,13 +127,44 @@ def build_layout(
             raise InputError(f"{source}: point {bad} has a non-finite coordinate")
         lo = np.minimum(lo, blo)
         hi = np.maximum(hi, bhi)
+        samples.append(block[(-seen) % step :: step])
         sample.append(block[(-seen) % every :: every])
         seen += len(block)
     if seen != n:
         raise InputError(f"{source}: {seen} points read, the header says {n}")
-    store.create("cell", (n,), np.uint32)
-    cells = _count_cells(chunks, store, lo, hi)
+    # far points (neighbourhoods.far_points) are left out of every tile, as the
+    # in-memory run drops them: no tile holds them, the outputs leave them out
+    bulk = far_reach(np.concatenate(samples))
+    del samples
     picked = np.concatenate(sample)
+    del sample
+    if bulk is not None and max(float((hi - bulk[0]).max()), float((bulk[0] - lo).max())) > bulk[1]:
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for block in chunks():
+            near = block[~is_far(block, *bulk)]
+            if len(near):
+                blo, bhi = bounds(near)
+                lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
+        picked = picked[~is_far(picked, *bulk)]
+    else:
+        bulk = None
+
+    def near_of(block: np.ndarray) -> np.ndarray | slice:
+        """The points of ``block`` that are not far (all: a slice, no copy)."""
+        return slice(None) if bulk is None else np.flatnonzero(~is_far(block, *bulk))
+
+    # the store holds the coordinates in the unit of an in-memory run (unit_scale): the
+    # same neighbourhoods and decisions whatever the input's unit (1e-300 to 1e300)
+    e = unit_exponent(max(float(np.abs(lo).max()), float(np.abs(hi).max())))
+    lo, hi = np.ldexp(lo, -e), np.ldexp(hi, -e)
+
+    def unit(block: np.ndarray) -> np.ndarray:
+        """``block`` in the store's unit."""
+        return np.ldexp(block, -e) if e else block
+
+    picked = unit(picked)
+    store.create("cell", (n,), np.uint32)
+    cells = _count_cells(chunks, store, lo, hi, near_of, unit)
     for tail in TAILS:
         if cells[: GRID**3].max() <= tile_points:
             break
@@ -136,7 +172,7 @@ def build_layout(
         margin = MARGIN * (q_hi - q_lo)
         g_lo, g_hi = np.maximum(q_lo - margin, lo), np.minimum(q_hi + margin, hi)
         if (g_lo > lo).any() or (g_hi < hi).any():
-            cells = _count_cells(chunks, store, g_lo, g_hi)
+            cells = _count_cells(chunks, store, g_lo, g_hi, near_of, unit)
     grid_counts = cells[: GRID**3].reshape(GRID, GRID, GRID)
     leaves = _split(grid_counts, tile_points)
     outer = np.flatnonzero(cells[GRID**3 :])
@@ -154,17 +190,21 @@ def build_layout(
         table[GRID**3 + region] = len(sizes)
         sizes.append(int(cells[GRID**3 + region]))
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-    store.create("coords", (n, 3), np.float64)
-    store.create("ids", (n,), np.int64)
-    store.create("rep", (n,), np.int64)
+    kept = int(offsets[-1])
+    store.create("coords", (kept, 3), np.float64)
+    store.create("ids", (kept,), np.int64)
+    store.create("rep", (kept,), np.int64)
     cursor = offsets[:-1].copy()
     start = 0
     for block in chunks():
-        tile = table[store.read("cell", start, start + len(block))]
+        near = near_of(block)
+        tile = table[store.read("cell", start, start + len(block))[near]]
         order = np.argsort(tile, kind="stable")
+        if bulk is not None:
+            order = near[order]
         per = np.bincount(tile, minlength=len(sizes))
         runs = np.concatenate([[0], np.cumsum(per)])
-        xyz, ids = block[order], start + order
+        xyz, ids = unit(block[order]), start + order
         for t in np.flatnonzero(per):
             a, b = runs[t], runs[t + 1]
             store.write("coords", int(cursor[t]), xyz[a:b])
@@ -194,15 +234,24 @@ def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _count_cells(
-    chunks: Callable[[], Iterator[np.ndarray]], store: Store, lo: np.ndarray, hi: np.ndarray
+    chunks: Callable[[], Iterator[np.ndarray]],
+    store: Store,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    near_of: Callable[[np.ndarray], np.ndarray | slice],
+    unit: Callable[[np.ndarray], np.ndarray],
 ) -> np.ndarray:
     """Points per cell of the grid over the box ``[lo, hi]`` and of its 27 outer cells
-    (:func:`_cells`), (GRID**3 + 27,) int64; every point's cell in the store's ``cell``."""
+    (:func:`_cells`), (GRID**3 + 27,) int64; every point's cell in the store's ``cell``.
+    Only the points ``near_of(block)`` count, at their coordinates ``unit(...)`` (the
+    others are in no tile: their cell is read nowhere)."""
     cells = np.zeros(GRID**3 + 27, np.int64)
     start = 0
     for block in chunks():
-        cell = _cells(block, lo, hi)
-        cells += np.bincount(cell, minlength=len(cells))
+        near = near_of(block)
+        cell = np.zeros(len(block), np.int64)
+        cell[near] = _cells(unit(block[near]), lo, hi)
+        cells += np.bincount(cell[near], minlength=len(cells))
         store.write("cell", start, cell.astype(np.uint32))
         start += len(block)
     return cells

@@ -174,6 +174,39 @@ const double *unitScale(const double *xyz, Index n, std::vector<double> &scaled)
 	return scaled.data();
 }
 
+// neighbourhoods.far_points: the points of a cloud (xyz, n x 3) further from its median
+// than MS_FAR_SPREADS of its spreads on some axis (the median and interquartile ranges of
+// at most MS_FAR_SAMPLE points evenly spread through it, numpy's linear quantiles); empty
+// when there are none.
+std::vector<char> farPoints(const double *xyz, const Index n) {
+	const Index step = std::max<Index>(1, (n + MS_FAR_SAMPLE - 1) / MS_FAR_SAMPLE);
+	double median[3], reach = 0.0;
+	for (int a = 0; a < 3; ++a) {
+		std::vector<double> x;
+		for (Index i = 0; i < n; i += step) x.push_back(xyz[3 * i + a]);
+		std::sort(x.begin(), x.end());
+		auto quantile = [&](double q) {
+			const double h = double(x.size() - 1) * q;
+			const size_t lo = size_t(std::floor(h));
+			const double t = h - double(lo), below = x[lo], above = x[std::min(lo + 1, x.size() - 1)];
+			const double diff = above - below;
+			return t >= 0.5 ? above - diff * (1.0 - t) : below + diff * t;
+		};
+		median[a] = quantile(0.5);
+		reach = std::max(reach, quantile(0.75) - quantile(0.25));
+	}
+	reach *= MS_FAR_SPREADS;
+	std::vector<char> far;
+	if (n == 0 || reach == 0.0) return far;
+	for (Index i = 0; i < n; ++i)
+		for (int a = 0; a < 3; ++a)
+			if (std::fabs(xyz[3 * i + a] - median[a]) > reach) {
+				if (far.empty()) far.assign(n, 0);
+				far[i] = 1;
+			}
+	return far;
+}
+
 struct Clean {
 	Buffer<double> pts;          // cleaned vertices (m, 3), input order
 	Buffer<Index> faces;         // cleaned triangles (f, 3)
@@ -481,7 +514,7 @@ Buffer<double> ringPdis(Clean &c, const Rings &adj, const std::vector<int> &scal
                              std::vector<double> *score, Bar &bar, int from, int to) {
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
 	std::vector<double> normals(3 * n, 0.0);
-	ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data());
+	check(ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data()) < 0);
 	Buffer<Index>().swap(c.faces);  // no later step reads them (as pipeline.py)
 	const std::vector<Index> rings(scales.begin(), scales.end());
 	Buffer<double> out(rings.size() * n);  // filled whole by the kernel
@@ -835,9 +868,29 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	bool inRange = true;
 	for (Index i = 0; i < 3 * m; ++i) inRange &= uint64_t(faces[i]) < uint64_t(nIn);
 	if (!inRange) throw InputError("a face index is out of range");
+	// a cloud's far points dropped first (as pipeline.py): kept, they would set the unit
+	const std::vector<char> far = r.mesh ? std::vector<char>() : farPoints(xyz, nIn);
+	std::vector<Index> near;
+	std::vector<double> rest;
+	if (!far.empty()) {
+		for (Index i = 0; i < nIn; ++i)
+			if (!far[i]) {
+				near.push_back(i);
+				rest.insert(rest.end(), xyz + 3 * i, xyz + 3 * i + 3);
+			}
+	}
+	const Index nNear = far.empty() ? nIn : Index(near.size());
 	std::vector<double> scaled;
-	Clean c = clean(unitScale(xyz, nIn, scaled), nIn, faces, r.mesh ? m : 0, r.mesh);
+	Clean c = clean(unitScale(far.empty() ? xyz : rest.data(), nNear, scaled), nNear, faces, r.mesh ? m : 0,
+	                r.mesh);
 	scaled = std::vector<double>();
+	rest = std::vector<double>();
+	if (!far.empty()) {  // the map from the input, the far points dropped
+		std::vector<Index> fromInput(nIn, -1);
+		for (size_t j = 0; j < near.size(); ++j)
+			fromInput[near[j]] = c.fromInput.empty() ? Index(j) : c.fromInput[j];
+		c.fromInput.swap(fromInput);
+	}
 	r.scales = r.mesh ? options.ringScales : options.knnScales;
 	if (!r.mesh) {
 		const Index n = c.size();
