@@ -127,7 +127,7 @@ PATH = header_path()
 #: Detection: the ``MS_`` constants (the curves' ``MS_CURVE_`` ones among them, as
 #: ``CURVE_NAME``).
 KERNELS = Header(PATH, "MS_")
-#: The feature curves: the ``MS_CURVE_`` constants (the plugin's curves_core.cpp uses them).
+#: The feature curves: the ``MS_CURVE_`` constants (native/src/curves.cpp uses them).
 CURVES = Header(PATH, "MS_CURVE_")
 
 #: The kernels' header and its constants, by name without the ``MS_`` prefix.

@@ -154,7 +154,7 @@ layer's wire colour and edge width set in the layer dialog):
 The MeshLab plugin (`meshlab_plugin_cpp/`) has the same extraction as a filter,
 **Filters > Remeshing, Simplification and Reconstruction > Extract Sharp Feature
 Curves**: it adds a layer `sharp_curves` of vertices and edges (vertex quality: the
-curve's number), like `detect_meshset(ms, curves=True)`. Its C++ (`curves_core.cpp`) is
+curve's number), like `detect_meshset(ms, curves=True)`. Its C++ (`native/src/curves.cpp`) is
 a port of `meshlab_sharp/curves` with numpy's order of summation and the same constants
 (it includes `meshlab_sharp.h`), so the layer holds
 the same vertices and edges as `result.curves` (`tests/test_plugin_curves.py`). The
@@ -223,8 +223,8 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
         "The numbers above (and every other constant of the curves) are defined once, as "
         "`MS_CURVE_` macros in `native/include/meshlab_sharp.h`: the modules read them from "
         "it (`meshlab_sharp/_header.py`; the Python name drops the prefix, and the reasons "
-        "for each value are documented beside it), and the plugin's `curves_core.cpp` "
-        "includes it.",
+        "for each value are documented beside it), and the native library's "
+        "`native/src/curves.cpp` includes it.",
         "",
         *IN_MESHLAB.splitlines(),
         "",

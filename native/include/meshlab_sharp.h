@@ -4,7 +4,7 @@
  * Three users: the library itself (native/src); the Python package, which loads the
  * library with ctypes (meshlab_sharp/_kernels.py) and reads the MS_ constants below from
  * this file (meshlab_sharp/_header.py); and the MeshLab plugin
- * (meshlab_plugin_cpp/src/sharp_core.cpp, curves_core.cpp), which links the same library
+ * (meshlab_plugin_cpp/src/filter_sharp_features.cpp), which links the same library
  * and calls the same functions. Plain C99: no Python, Qt, MeshLab or vcg types.
  *
  * Conventions: points are (n, 3) row-major doubles; "tree positions" index the points
@@ -132,7 +132,7 @@
 /* ---------------------------------------------------------------- the feature curves
  * The constants of the feature curves: the Python package's curves modules
  * (meshlab_sharp/curves: graph.py, trace.py, extract.py, refine.py, fit.py) read them
- * (meshlab_sharp/_header.py), and the MeshLab plugin's curves (curves_core.cpp) use the
+ * (meshlab_sharp/_header.py), and the library's curves (native/src/curves.cpp) use the
  * macros. What each constant does and why it has its value is documented beside its
  * Python name (the name without the MS_CURVE_ prefix) in the module named above its
  * group. Lengths are in point spacings, angles in degrees. One `#define MS_CURVE_NAME
