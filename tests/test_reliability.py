@@ -664,6 +664,15 @@ class _Tripwire(io.StringIO):
 
 
 def test_an_interrupt_in_detect_clears_the_progress_bar():
+    # Python's own Ctrl-C (KeyboardInterrupt), whatever handler an earlier test left
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _interrupt_detect()
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+def _interrupt_detect() -> None:
     stream = _Tripwire()
     bar = Progress(12, enabled=True, stream=stream)
     with pytest.raises(KeyboardInterrupt):
