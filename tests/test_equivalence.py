@@ -451,7 +451,7 @@ np.savez(sys.argv[2], **masks)
 
 
 def test_detect_with_a_far_outlier_both_modes(tmp_path):
-    """The issue's case end to end: a scan with one stray point at 1e12, both modes
+    """A scan with one stray point at 1e12, end to end, both modes
     (robust mode searches neighbours again for thinning), with the numpy reference's
     answer, in a subprocess with a time limit against a hang (the former grid search
     was quadratic here; test_knn_any_spatial_distribution measures that at 100k)."""

@@ -125,7 +125,7 @@ cloud = np.concatenate([cloud + rng.normal(scale=0.003, size=cloud.shape), [[5.0
 inputs = {"cloud": (cloud, None), "mesh": shapes.cube_grid_mesh(3)}
 # pymeshlab's point-cloud normals + RIMLS projection (the cloud's denoise) can give a
 # different projection on its first call in a process (about 1 process in 20 under
-# load, session 9's note; our compiled code has not run yet then): one call first, so
+# load, before any compiled code of this package has run): one call first, so
 # that this test compares units, not that.
 meshlab_sharp.detect(cloud, None, preprocessing=steps["cloud"][1])
 out = {}
