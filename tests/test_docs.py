@@ -17,6 +17,7 @@ import re
 import shutil
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -301,3 +302,20 @@ def test_site_builds_strict(tmp_path):
     reference = (tmp_path / "reference" / "index.html").read_text()
     for name in ("detect", "detect_meshset", "DetectionResult", "Preprocessing"):
         assert f'id="meshlab_sharp.{name}"' in reference, name
+
+
+def test_meshlab_page_script_is_the_shipped_example():
+    """The filter script the MeshLab page shows names every parameter of the shipped
+    example, with the same values (meshlabserver aborts on a script that leaves one out)."""
+    page = blocks(DOCS / "meshlab.md")
+    shown = [b for b in page if b.lang == "xml"]
+    assert len(shown) == 1
+
+    def params(text: str) -> dict[str, str]:
+        return {p.get("name"): p.get("value") for p in ET.fromstring(text).iter("Param")}
+
+    text = shown[0].code.split("\n", 1)[1]  # after the <!DOCTYPE> line
+    example = ROOT / "meshlab_plugin_cpp" / "examples" / "sharp_features_default.mlx"
+    expected = params(example.read_text().split("\n", 1)[1])
+    assert params(text) == expected
+    assert len(expected) == 6
