@@ -162,6 +162,19 @@ def _check(block: Block, code: int, output: str) -> None:
         )
 
 
+def _run(argv: list[str], work: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
+    """Run ``argv`` in ``work``, stdout and stderr together, as a terminal shows them."""
+    return subprocess.run(
+        argv,
+        cwd=work,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        timeout=600,
+    )
+
+
 PYTHON_DRIVER = """
 import json, sys
 ns = {"__name__": "__main__"}
@@ -181,29 +194,13 @@ def test_page_blocks_run_and_print_what_the_page_says(page, inputs, tmp_path):
     assert runnable, f"{page.name}: no runnable block"
     work, env = _workdir(inputs, tmp_path)
     for block in (b for b in runnable if b.lang == "bash"):
-        proc = subprocess.run(
-            ["bash", "-euo", "pipefail", "-c", block.code],
-            cwd=work,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            timeout=600,
-        )
+        proc = _run(["bash", "-euo", "pipefail", "-c", block.code], work, env)
         _check(block, proc.returncode, proc.stdout)
     python = [b for b in runnable if b.lang == "python"]
     if not python:
         return
     (tmp_path / "blocks.json").write_text(json.dumps([b.code for b in python]))
-    proc = subprocess.run(
-        [sys.executable, "-c", PYTHON_DRIVER, str(tmp_path / "blocks.json")],
-        cwd=work,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        timeout=600,
-    )
+    proc = _run([sys.executable, "-c", PYTHON_DRIVER, str(tmp_path / "blocks.json")], work, env)
     outputs = proc.stdout.split("\x00block ")[1:]
     for i, block in enumerate(python):
         if i >= len(outputs):
