@@ -118,7 +118,7 @@ def test_huge_pages_off_during_detect_and_restored(start: bool, monkeypatch) -> 
 @pytest.mark.parametrize("mode", ["robust", "paper"])
 def test_cleaned_faces_freed_before_the_scales_pass(mode: str, monkeypatch) -> None:
     """The cleaned faces (48 bytes a vertex, a copy of the input's) are gone by the time
-    the scales' pass runs, where the peak memory was: neither the ring neighbourhoods
+    the scales' pass runs, where the peak memory is: neither the ring neighbourhoods
     (compiled: their adjacency only) nor robust mode's set-up keeps them."""
     if not _kernels.available():
         pytest.skip("compiled kernel not built")
