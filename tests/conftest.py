@@ -1,10 +1,34 @@
 import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
+
+import xserver  # tests/ is on the path from here on
+
+#: The run's own temporary folder: TMPDIR for the tests and every process they start,
+#: removed at the end so that the suite leaves nothing in the system's temporary folder.
+_RUN_TMP: Path | None = None
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config):
+    """Point TMPDIR (and pytest's tmp_path) at a folder of this run's own."""
+    global _RUN_TMP
+    _RUN_TMP = Path(tempfile.mkdtemp(prefix="meshlab-sharp-tests-"))
+    os.environ["TMPDIR"] = str(_RUN_TMP)
+    tempfile.tempdir = str(_RUN_TMP)
+
+
+def pytest_unconfigure(config):
+    """End the shared Xvfb server and remove the run's temporary folder."""
+    xserver.stop()
+    if _RUN_TMP is not None:
+        shutil.rmtree(_RUN_TMP, ignore_errors=True)
 
 
 @pytest.hookimpl(hookwrapper=True)

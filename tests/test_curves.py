@@ -398,6 +398,7 @@ def test_truth_curves_and_perfect_scores_of_the_exact_edges():
     assert n == 2 and len(corners) == 0
 
 
+@pytest.mark.slow
 def test_report_picture_draws_the_curves(tmp_path):
     pytest.importorskip("matplotlib")
     from meshlab_sharp.io import Geometry

@@ -312,6 +312,7 @@ def _parallel_sheets() -> np.ndarray:
     return _shuffled(np.concatenate([lower, upper]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["parallel_sheets", "noisy_box_cylinder", "outliers_grid_ties"])
 def test_pass_identical_without_the_avx2_paths(name, tmp_path):
     """The compiled cloud pass with its AVX2 paths (where the CPU has AVX2, FMA and
@@ -424,6 +425,7 @@ def test_tree_splits_at_medians_with_tight_boxes(name):
         spans = deeper
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SPREADS))
 def test_knn_any_spatial_distribution(name, tmp_path):
     """100k points. A far outlier or distant clusters made the former grid search
@@ -450,6 +452,7 @@ np.savez(sys.argv[2], **masks)
 """
 
 
+@pytest.mark.slow
 def test_detect_with_a_far_outlier_both_modes(tmp_path):
     """A scan with one stray point at 1e12, end to end, both modes
     (robust mode searches neighbours again for thinning), with the numpy reference's
@@ -917,6 +920,7 @@ def _delaunay_mesh(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return vertices[order], new_index[faces]
 
 
+@pytest.mark.slow
 def test_compiled_ring_pass_local_scales_identical_on_irregular_valences():
     """The ring pass's relative distances and score equal the reference's (numpy's ring
     lists and sums) bit for bit on an irregular mesh in random vertex order, over

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from evaluation.scoring import evaluate
 from meshlab_sharp.io import load
@@ -15,6 +16,7 @@ from meshlab_sharp.sample import sample_part
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
+@pytest.mark.slow
 def test_pymeshlab_pipeline_finds_the_edges_of_its_stand_in_scan(tmp_path):
     """At its default size (20,000 points, 10 % noise, 1 % far outliers), with the default
     mode, the features lie on the sample part's exact edges and cover them."""

@@ -61,6 +61,7 @@ INPUTS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", INPUTS)
 def test_compiled_finish_is_the_numpy_finish(monkeypatch, name):
     """Acute tips, support and thinning in C give numpy's mask, bit for bit, with the

@@ -67,6 +67,7 @@ def _run(case: malformed.Case, folder: Path) -> str | None:
     return f"{case.name}: exit {proc.returncode}, {'; '.join(problems)}: {proc.stderr[-300:]!r}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("group", GROUPS)
 def test_malformed_files_through_the_cli(tmp_path, group):
     """Each case in its own process; two at a time (CI has two cores)."""

@@ -64,6 +64,7 @@ def test_missing_matplotlib_is_a_one_line_error(monkeypatch):
         require_matplotlib()
 
 
+@pytest.mark.slow
 def test_cli_plot_with_preprocessing(tmp_path, capsys):
     import pymeshlab
 

@@ -32,9 +32,12 @@ from meshlab_sharp.sample import sample_part
 
 #: In CI a skip here is a failure (conftest.py): set-up installs MeshLab there.
 REQUIRED_IN_CI = True
-pytestmark = pytest.mark.skipif(
-    shutil.which("dpkg-query") is None, reason="the plugin targets Debian's MeshLab 2020.09"
-)
+pytestmark = [
+    pytest.mark.slow,  # builds and runs the MeshLab plugin
+    pytest.mark.skipif(
+        shutil.which("dpkg-query") is None, reason="the plugin targets Debian's MeshLab 2020.09"
+    ),
+]
 
 EXAMPLE = "sharp_feature_curves_default.mlx"
 _SUMMARY = re.compile(

@@ -12,6 +12,8 @@ from test_plugin import MODES, read_back, run_meshlabserver
 import meshlab_sharp
 from meshlab_sharp.errors import InputError
 
+pytestmark = pytest.mark.slow  # builds and runs the MeshLab plugin
+
 CASES = {name: (v, f) for name, v, f in hostile_geometries()}
 #: In CI a skip here is a failure (conftest.py): set-up installs MeshLab there.
 REQUIRED_IN_CI = True

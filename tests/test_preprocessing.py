@@ -95,6 +95,7 @@ def noisy_sample_mesh():
     return part, add_noise(part, 0.3, seed=1)
 
 
+@pytest.mark.slow
 def test_denoise_raises_precision_on_noisy_sample_mesh(noisy_sample_mesh):
     from evaluation.scoring import evaluate
 

@@ -8,6 +8,7 @@ import pty
 import subprocess
 import sys
 
+import pytest
 import shapes
 from files import write_ply
 
@@ -56,6 +57,7 @@ def _run_with_terminal_stderr(args):
     return proc.returncode, b"".join(chunks).decode()
 
 
+@pytest.mark.slow
 def test_cli_draws_the_bar_on_a_terminal_unless_quiet(tmp_path):
     src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
     code, err = _run_with_terminal_stderr(["detect", str(src)])

@@ -347,6 +347,7 @@ def test_detect_on_the_mesh_shuffled_is_detect_on_the_mesh(monkeypatch, name, mo
     assert a.n_features > 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["paper", "robust"])
 @pytest.mark.parametrize("name", ["noisy", "duplicates"])
 def test_detect_on_the_mesh_shuffled_is_the_numpy_reference(name, mode):

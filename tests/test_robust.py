@@ -315,6 +315,7 @@ def test_noise_grows_the_scales():
     assert meshlab_sharp.detect(part.vertices, mode="paper").scales == defaults
 
 
+@pytest.mark.slow
 def test_backends_agree_with_grown_scales():
     part = gt.add_noise(gt.make_part("fandisk", n_points=N, seed=1), 0.5, seed=2)
     compiled = meshlab_sharp.detect(part.vertices, mode="robust", backend="compiled")

@@ -417,6 +417,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_robust_mode_matches_an_independent_reading_of_its_doc(case):
     points, faces = CASES[case]()

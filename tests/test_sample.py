@@ -103,6 +103,7 @@ def test_truth_edges_on_part(points):
     assert d.max() < 1e-6
 
 
+@pytest.mark.slow
 def test_mesh_watertight_and_isotropic(mesh):
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces))
@@ -129,6 +130,7 @@ def test_mesh_on_surface_and_edges_are_mesh_edges(mesh):
     assert d.max() < 0.1 * mesh.spacing
 
 
+@pytest.mark.slow
 def test_mesh_deterministic():
     a = sample_part("mesh", n_points=5_000, seed=1)
     b = sample_part("mesh", n_points=5_000, seed=99)
@@ -155,6 +157,7 @@ def _same(a, b) -> bool:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("kind", "n"), [("points", 2_000), ("mesh", 1_000)])
 def test_the_cache_keeps_the_part(tmp_path, monkeypatch, kind, n):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))

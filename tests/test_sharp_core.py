@@ -31,7 +31,10 @@ DRIVER = Path(__file__).resolve().parent / "sharp_core_driver.cpp"
 CORE = ROOT / "meshlab_plugin_cpp" / "src" / "sharp_core.cpp"
 KERNEL = ROOT / "meshlab_sharp" / "_ckernels.c"
 
-pytestmark = pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++")
+pytestmark = [
+    pytest.mark.slow,  # compiles and runs a C++ driver of the plugin's core
+    pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++"),
+]
 
 
 @pytest.fixture(scope="module")

@@ -131,6 +131,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_matches_independent_reading_of_the_spec(case):
     points, faces, weighting = CASES[case]()

@@ -190,6 +190,7 @@ def test_max_memory_api_and_cli_output(tmp_path) -> None:
     assert (tmp_path / "a.ply.txt").read_text() == (tmp_path / "b.ply.txt").read_text()
 
 
+@pytest.mark.slow
 def test_dask_equals_in_memory() -> None:
     """--dask local:2 (paper) and --dask tcp://127.0.0.1:PORT (robust, a running
     cluster of 2 worker processes on the loopback)."""
@@ -461,6 +462,7 @@ def _detect_in_child(tmp_path, pts: np.ndarray, options: str, prints: str) -> li
     return [int(v) for v in proc.stdout.split()]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["robust", "paper"])
 def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
     """A fresh process reading a 400k-point binary PLY with --max-memory 300MB peaks
@@ -487,6 +489,7 @@ def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
     assert reported <= peak  # the summary's peak is the same measure, taken earlier
 
 
+@pytest.mark.slow
 def test_peak_memory_stays_under_the_limit_when_the_noise_grows_the_scales(tmp_path) -> None:
     """The tiles are sized for two at a time at the given scales; when the noise grows
     robust mode's scales threefold (more memory per point than the sizing's scales),
@@ -520,6 +523,7 @@ def test_tile_size_known_answers() -> None:
     assert tile_size(10**9, (100,), "robust", 2) == 10**9 // ((700 + 2400 + 16) * 2.5)
 
 
+@pytest.mark.slow
 def test_tiles_run_two_at_once_until_the_scales_grow(monkeypatch) -> None:
     """Without Dask two tiles run at a time (each search's first tile alone, for the
     halo guess); once the noise grows robust mode's scales, one at a time (the tiles
