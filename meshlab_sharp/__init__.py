@@ -7,32 +7,50 @@ histogram; at several scales; a point is a feature if it is a candidate at every
 >>> import meshlab_sharp
 >>> result = meshlab_sharp.detect("part.ply")          # doctest: +SKIP
 >>> result.mask, result.strength, result.thresholds      # doctest: +SKIP
+
+The public names are imported on first use, so that the command line answers
+``--version``, ``--help`` and option errors without loading numpy, scipy or pymeshlab.
 """
 
-from .errors import InputError, MeshlabSharpError
-from .io import Geometry, load, save_features_ply
-from .meshset import detect_meshset
-from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
-from .pipeline import DEFAULT_MODE, MODES, DetectionResult, detect
-from .preprocessing import Preprocessing, PreprocessingReport, preprocess
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "DEFAULT_KNN_SCALES",
-    "DEFAULT_MODE",
-    "DEFAULT_RING_SCALES",
-    "MODES",
-    "DetectionResult",
-    "Geometry",
-    "InputError",
-    "MeshlabSharpError",
-    "Preprocessing",
-    "PreprocessingReport",
-    "__version__",
-    "detect",
-    "detect_meshset",
-    "load",
-    "preprocess",
-    "save_features_ply",
-]
+#: Public name -> the submodule that defines it.
+_EXPORTS = {
+    "DEFAULT_KNN_SCALES": "defaults",
+    "DEFAULT_MODE": "defaults",
+    "DEFAULT_RING_SCALES": "defaults",
+    "MODES": "defaults",
+    "DetectionResult": "pipeline",
+    "Geometry": "io",
+    "InputError": "errors",
+    "MeshlabSharpError": "errors",
+    "Preprocessing": "preprocessing",
+    "PreprocessingReport": "preprocessing",
+    "detect": "pipeline",
+    "detect_meshset": "meshset",
+    "load": "io",
+    "preprocess": "preprocessing",
+    "save_features_ply": "io",
+}
+
+__all__ = sorted([*_EXPORTS, "__version__"])
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name's submodule on first use (PEP 562)."""
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'meshlab_sharp' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    """The module's names, the lazily imported public ones included."""
+    return sorted({*globals(), *_EXPORTS})

@@ -1,12 +1,12 @@
-"""The method's constants, read from the C headers where they are defined.
+"""The method's constants, read from the native library's header where they are defined.
 
-The compiled kernels, the MeshLab plugin (which compiles the same C files) and this
-package share one definition of every constant and default option. Two headers hold
-them: ``_ckernels.h`` (detection: each ``#define MS_NAME value`` line of its constants
-block is ``NAME`` here, see :data:`KERNELS`) and ``curves/_curves.h`` (the feature
-curves: ``#define MS_CURVE_NAME value`` is ``NAME``, see :data:`CURVES`). Reading a
-header needs no compiler, so the numpy reference path (no compiled library) has the
-same constants.
+The native library, the MeshLab plugin (which links the same library) and this package
+share one definition of every constant and default option: the public header
+``native/include/meshlab_sharp.h`` (:data:`PATH`). Each ``#define MS_NAME value`` line of
+its detection constants is ``NAME`` here (see :data:`KERNELS`), each ``#define
+MS_CURVE_NAME value`` line of the feature curves' constants ``NAME`` of :data:`CURVES`.
+Reading a header needs no compiler, so the numpy reference path (no compiled library) has
+the same constants.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def _value(node: ast.expr, known: dict[str, Value], where: str) -> Value:
     raise ValueError(f"{where}: unsupported constant {ast.unparse(node)!r}")
 
 
-def parse(text: str, prefix: str = "MS_", where: str = "_ckernels.h") -> dict[str, Value]:
+def parse(text: str, prefix: str = "MS_", where: str = "meshlab_sharp.h") -> dict[str, Value]:
     """The constants ``<prefix>NAME`` of a header's text, by name without the prefix.
 
     A value is a C number, an earlier constant (its full name, prefix included),
@@ -103,10 +103,28 @@ class Header:
         return tuple(self._typed(name, tuple, float))  # type: ignore[arg-type]
 
 
-#: Detection: the constants block of ``_ckernels.h``, shipped beside this module.
-KERNELS = Header(Path(__file__).with_name("_ckernels.h"), "MS_")
-#: The feature curves: ``curves/_curves.h`` (the plugin's curves_core.cpp includes it).
-CURVES = Header(Path(__file__).parent / "curves" / "_curves.h", "MS_CURVE_")
+def header_path() -> Path:
+    """The native library's public header: under ``_sources/native`` in an installed
+    package (a wheel), or ``native`` beside the package (a checkout, editable install)."""
+    package = Path(__file__).resolve().parent
+    candidates = (package / "_sources" / "native", package.parent / "native")
+    for folder in candidates:
+        header = folder / "include" / "meshlab_sharp.h"
+        if header.is_file():
+            return header
+    raise FileNotFoundError(
+        f"meshlab_sharp.h is missing (looked in {' and '.join(map(str, candidates))}); "
+        "reinstall meshlab-sharp"
+    )
+
+
+#: The native library's public header, ``native/include/meshlab_sharp.h``.
+PATH = header_path()
+#: Detection: the ``MS_`` constants (the curves' ``MS_CURVE_`` ones among them, as
+#: ``CURVE_NAME``).
+KERNELS = Header(PATH, "MS_")
+#: The feature curves: the ``MS_CURVE_`` constants (the plugin's curves_core.cpp uses them).
+CURVES = Header(PATH, "MS_CURVE_")
 
 #: The kernels' header and its constants, by name without the ``MS_`` prefix.
 HEADER = KERNELS.path

@@ -1,4 +1,4 @@
-"""The compiled fast path: a small C library (``_ckernels.c``) loaded with ctypes.
+"""The compiled fast path: the native library (``native/``) loaded with ctypes.
 
 ``pip install .`` (or ``pip install -e .``) builds it with the system's C compiler; no
 Python headers are needed, only ``gcc``. Without it, or with the environment variable
@@ -20,6 +20,7 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -119,6 +120,7 @@ _SIGNATURES = {
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
     "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
+    "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_dedup_probe": (
         None,
         [_c_void_p, _i64, _c_void_p, _i64, _i64, _i64, _c_void_p, _c_void_p, _c_void_p],
@@ -144,24 +146,20 @@ _SIGNATURES = {
 }
 
 
-def _find_library() -> Path | None:
+def load_library(stem: str, signatures: dict[str, tuple[Any, list[Any]]]) -> ctypes.CDLL | None:
+    """The package's compiled library ``<stem><extension suffix>`` with the functions of
+    ``signatures`` (name -> (return type, argument types)) declared; None when it is not
+    built, does not load, or lacks one of them."""
     here = Path(__file__).parent
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        candidate = here / f"_ckernels{suffix}"
-        if candidate.is_file():
-            return candidate
-    return None
-
-
-def _load() -> ctypes.CDLL | None:
-    path = _find_library()
+    paths = (here / f"{stem}{suffix}" for suffix in importlib.machinery.EXTENSION_SUFFIXES)
+    path = next((p for p in paths if p.is_file()), None)
     if path is None:
         return None
     try:
         lib = ctypes.CDLL(str(path))
     except OSError:
         return None
-    for name, (restype, argtypes) in _SIGNATURES.items():
+    for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name, None)
         if fn is None:
             return None
@@ -170,7 +168,7 @@ def _load() -> ctypes.CDLL | None:
     return lib
 
 
-_LIB = _load()
+_LIB = load_library("_ckernels", _SIGNATURES)
 _override: list[str] = []
 
 

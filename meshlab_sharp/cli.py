@@ -1,9 +1,10 @@
 """The ``meshlab-sharp`` command line.
 
 ``meshlab-sharp detect INPUT`` writes ``INPUT_sharp.ply`` (every input vertex in input
-order, faces kept, vertex quality = strength, features selected and red), and on
-request the feature indices and a JSON report. ``meshlab-sharp detect`` with no input
-runs on the built-in sample part.
+order with the input's own vertex properties, faces kept, vertex quality = strength,
+features selected and red unless ``--no-colour``) or a LAS/LAZ file, and on request the
+feature indices and a JSON report. ``meshlab-sharp detect`` with no input runs on the
+built-in sample part, whose outputs in ``out/`` each run replaces.
 """
 
 from __future__ import annotations
@@ -15,31 +16,34 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
-from typing import NoReturn
+from typing import TYPE_CHECKING, Any, NamedTuple, NoReturn, TextIO
 
-from . import __version__, _kernels
-from .errors import MeshlabSharpError
-from .io import (
-    Geometry,
-    OutputSet,
-    check_curves_path,
-    load,
-    save_curves,
-    save_features_ply,
-    save_indices,
-    save_json,
+from . import __version__
+from .defaults import (
+    DEFAULT_KNN_SCALES,
+    DEFAULT_MODE,
+    DEFAULT_RING_SCALES,
+    DEFAULT_WEIGHTING,
+    DENOISE_METHODS,
+    HELD_SIGNALS,
+    MAX_SCALES,
+    MODES,
+    WEIGHTINGS,
 )
-from .io.writers import HELD_SIGNALS
-from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
-from .normals import DEFAULT_WEIGHTING, WEIGHTINGS
-from .pipeline import DEFAULT_MODE, MAX_SCALES, MODES, DetectionResult, detect
+from .errors import InputError, InputWarning, MeshlabSharpError
+from .outputs import OutputSet
 from .plugin import add_plugin_command
-from .preprocessing import Preprocessing
-from .progress import Progress
+from .progress import TICK, Progress
+
+if TYPE_CHECKING:  # the heavy modules are imported when work starts
+    from .io.geometry import Geometry
+    from .pipeline import DetectionResult
+    from .preprocessing import Preprocessing
 
 #: ASCII white space, the only separator of a space-separated list (the plugin's too).
 _SPACE = " \t\n\r\f\v"
@@ -95,6 +99,22 @@ class _Parser(argparse.ArgumentParser):
         self.exit(1, f"meshlab-sharp: error: {message} (see {self.prog} --help)\n")
 
 
+class _Once(argparse.Action):
+    """An option naming an output, which may be given only once (given twice, which
+    one was meant is unknown: an error, not the last one silently)."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        if getattr(namespace, self.dest) is not None:
+            parser.error(f"{'/'.join(self.option_strings)} given twice")
+        setattr(namespace, self.dest, values)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand."""
     parser = _Parser(
@@ -110,8 +130,9 @@ def build_parser() -> argparse.ArgumentParser:
         "detect",
         help="detect sharp features and write a PLY MeshLab shows",
         description="Detect sharp features. Output: a PLY with every input vertex in "
-        "input order (faces kept), vertex quality = feature strength (fraction of "
-        "scales), features selected (PLY flags bit 0x20) and coloured red.",
+        "input order (faces kept, a PLY input's vertex properties kept), vertex quality = "
+        "feature strength (fraction of scales), features selected (PLY flags bit 0x20) "
+        "and coloured red (not with --no-colour); or LAS/LAZ (-o OUT.las).",
     )
     det.add_argument("input", nargs="?", help="mesh or point cloud (PLY, OBJ, OFF, STL, XYZ...)")
     det.add_argument(
@@ -124,13 +145,22 @@ def build_parser() -> argparse.ArgumentParser:
     det.add_argument(
         "-o",
         "--output",
-        help=f"output PLY (default: INPUT_sharp.ply; {SAMPLE_FOLDER}/sample_part_sharp.ply "
-        "for the sample part)",
+        action=_Once,
+        help=f"output .ply, or .las/.laz (needs laspy: pip install 'meshlab-sharp[las]'; "
+        "features class 64, strength in the extra dimension sharp_strength; a LAS input's "
+        f"attributes kept) (default: INPUT_sharp.ply; {SAMPLE_FOLDER}/sample_part_sharp.ply "
+        f"and {SAMPLE_FOLDER}/sample_part_mesh_sharp.ply for the sample part; the sample's "
+        f"outputs in {SAMPLE_FOLDER}/ are replaced on each run)",
     )
-    det.add_argument("--indices", metavar="FILE", help="write 0-based feature indices, one a line")
-    det.add_argument("--report", metavar="FILE", help="write counts, thresholds, timings as JSON")
+    det.add_argument(
+        "--indices", action=_Once, metavar="FILE", help="write 0-based feature indices, one a line"
+    )
+    det.add_argument(
+        "--report", action=_Once, metavar="FILE", help="write counts, thresholds, timings as JSON"
+    )
     det.add_argument(
         "--curves",
+        action=_Once,
         metavar="FILE",
         help="write the feature curves: .ply (edge mesh MeshLab opens), .obj (l lines) or "
         ".dxf (3D polylines; needs ezdxf: pip install 'meshlab-sharp[dxf]')",
@@ -176,6 +206,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder for the tiles' arrays (with --dask on several machines: shared)",
     )
     det.add_argument("--ascii", action="store_true", help="write an ASCII PLY (default binary)")
+    det.add_argument(
+        "--no-colour",
+        dest="colour",
+        action="store_false",
+        help="do not colour the features red and the rest grey: keep the input's own "
+        "colours (the selection and the quality still mark the features)",
+    )
     det.add_argument("--force", action="store_true", help="overwrite existing outputs")
     det.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
     _add_preprocessing_arguments(det)
@@ -229,6 +266,30 @@ def _signals_interrupt() -> Iterator[None]:
             signal.signal(s, handler)
 
 
+@contextmanager
+def _warnings_as_lines() -> Iterator[None]:
+    """Print each :class:`InputWarning` as one ``meshlab-sharp: warning: ...`` line while
+    the block runs (other warnings as Python prints them)."""
+    with warnings.catch_warnings():
+        python_way = warnings.showwarning
+
+        def show(
+            message: Warning | str,
+            category: type[Warning],
+            filename: str,
+            lineno: int,
+            file: TextIO | None = None,
+            line: str | None = None,
+        ) -> None:
+            if issubclass(category, InputWarning):
+                print(f"meshlab-sharp: warning: {message}", file=sys.stderr)
+            else:
+                python_way(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``meshlab-sharp`` script; returns the exit status.
 
@@ -236,7 +297,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGINT, SIGTERM and SIGHUP end the command with one line saying what was written,
     and status 128 + the signal's number.
     """
-    with _signals_interrupt():
+    with _signals_interrupt(), _warnings_as_lines():
         try:
             args = build_parser().parse_args(argv)
             return int(args.func(args) or 0)
@@ -267,80 +328,143 @@ SAMPLE_FOLDER = "out"
 #: Test hook: when set to a path, ``detect`` creates that file once every output is
 #: staged and waits (at most a minute) until it is removed before renaming them.
 PAUSE_ENV = "MESHLAB_SHARP_TEST_PAUSE"
+#: Extensions of the main output: a PLY MeshLab shows, or LAS/LAZ (the ``las`` extra).
+OUTPUT_FORMATS = (".ply", ".las", ".laz")
+#: LAS/LAZ: an output in these formats keeps an input's per-point attributes.
+_LAS_INPUTS = (".las", ".laz")
+
+
+class _Plan(NamedTuple):
+    """What ``detect`` reads and writes, checked before any heavy import."""
+
+    source: Path | None  # the input file; None for the sample part
+    sample: str | None  # the sample part's kind; None for an input file
+    output: Path
+    own: Path | None  # the sample's folder (out/) when an output is in it: made first
+    paths: list[Path]  # every output
 
 
 def run_detect(args: argparse.Namespace) -> int:
-    """``meshlab-sharp detect``: every output is checked before any computation, and
-    written all or nothing (:class:`meshlab_sharp.io.OutputSet`)."""
-    outputs = OutputSet()
+    """``meshlab-sharp detect``: every option and output is checked before numpy, scipy
+    or pymeshlab is imported and before any computation, and the outputs are written
+    all or nothing (:class:`meshlab_sharp.io.OutputSet`)."""
     progress = Progress(
         len(args.scales or DEFAULT_KNN_SCALES) + 4,
         enabled=not args.quiet and sys.stderr.isatty(),
+        tick=TICK,
     )
+    written: list[Path] = []
     try:
-        with outputs:
-            return _detect_into(args, outputs, progress)
+        plan = _plan(args)
+        steps = _preprocessing_from_args(args)
+        with OutputSet() as outputs:
+            written = outputs.written
+            mine = [p for p in plan.paths if plan.own is not None and _inside(p, plan.own)]
+            outputs.claim([p for p in plan.paths if p not in mine], force=args.force)
+            if plan.own is not None:
+                plan.own.mkdir(exist_ok=True)
+            outputs.claim(mine, force=True)  # the sample's own outputs: replaced
+            return _detect_into(args, plan, steps, outputs, progress)
     except Interrupted as exc:
-        exc.written = list(outputs.written)
+        exc.written = list(written)
         raise
     finally:
         progress.close()  # an error message starts on a line of its own
 
 
-def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progress) -> int:
-    """:func:`run_detect`, staging every file in ``outputs`` and committing them."""
+def _plan(args: argparse.Namespace) -> _Plan:
+    """The input and the outputs, checked (:func:`_check_outputs`); no heavy import."""
     if args.input is not None and args.sample is not None:
         raise MeshlabSharpError("give either INPUT or --sample, not both")
-    try:
-        _kernels.resolve(None)  # a bad MESHLAB_SHARP_BACKEND fails before any work
-    except (ValueError, RuntimeError) as exc:
-        raise MeshlabSharpError(str(exc)) from None
     sample = (args.sample or "points") if args.input is None else None
     source: Path | None = None
     if sample is not None:
-        stem, folder = "sample_part", Path(SAMPLE_FOLDER)
-        if args.output is None:
-            folder.mkdir(exist_ok=True)
+        # each kind its own file, so that --sample and --sample mesh do not collide
+        stem = "sample_part" if sample == "points" else f"sample_part_{sample}"
+        folder = Path(SAMPLE_FOLDER)
     else:
         source = Path(args.input)
         stem, folder = source.stem, source.parent
     output = Path(args.output) if args.output else folder / f"{stem}_sharp.ply"
-    if output.suffix.lower() != ".ply":
-        raise MeshlabSharpError(f"{output}: the output must be a .ply file")
-    if args.curves is not None:
-        check_curves_path(args.curves)
-    extra = (args.indices, args.report, args.save_processed, args.plot, args.curves)
-    _check_outputs(source, [output, *(Path(p) for p in extra if p is not None)], force=args.force)
-    steps = _preprocessing_from_args(args)
+    if output.suffix.lower() not in OUTPUT_FORMATS:
+        raise MeshlabSharpError(
+            f"{output}: the output must be a {', '.join(OUTPUT_FORMATS[:-1])} or "
+            f"{OUTPUT_FORMATS[-1]} file"
+        )
+    if output.suffix.lower() in _LAS_INPUTS:
+        from .io.las import check_las_output
 
+        check_las_output(output)
+    if args.curves is not None:
+        from .io.curves import check_curves_path
+
+        check_curves_path(args.curves)
+    named = (args.indices, args.report, args.save_processed, args.plot, args.curves)
+    extra = [Path(p) for p in named if p is not None]
+    paths = [output, *extra]
+    own = Path(SAMPLE_FOLDER) if sample is not None else None
+    if own is not None and not any(_inside(p, own) for p in paths):
+        own = None
+    _check_outputs(source, paths, own=own)
+    return _Plan(source, sample, output, own, paths)
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    """Whether ``path`` lies directly in ``folder`` (both may not exist yet)."""
+    return path.parent.resolve() == folder.resolve()
+
+
+def _detect_into(
+    args: argparse.Namespace,
+    plan: _Plan,
+    steps: Preprocessing | None,
+    outputs: OutputSet,
+    progress: Progress,
+) -> int:
+    """:func:`run_detect`'s work, staging every file in ``outputs`` and committing them."""
+    from . import _kernels
+    from .io import load, save_features_ply, save_indices
+
+    try:
+        _kernels.resolve(None)  # a bad MESHLAB_SHARP_BACKEND fails before any work
+    except (ValueError, RuntimeError) as exc:
+        raise MeshlabSharpError(str(exc)) from None
+    source, output = plan.source, plan.output
     start = time.perf_counter()
     if args.max_memory is not None or args.dask is not None:
-        return _detect_tiled(args, source, sample, output, outputs, progress, steps)
-    geometry = _sample_geometry(sample) if source is None else load(source)
+        return _detect_tiled(args, plan, outputs, progress, steps)
+    geometry = _sample_geometry(plan.sample) if source is None else load(source)
+    attributes = _input_attributes(source) if output.suffix.lower() == ".ply" else None
     load_time = time.perf_counter() - start
-    result = detect(
-        geometry,
-        scales=args.scales,
-        weighting=args.weighting,
-        mode=args.mode,
-        as_points=args.as_points,
-        progress=progress,
-        preprocessing=steps,
-        return_details=args.plot is not None,
-        curves=args.curves is not None,
-    )
+    with _option_names():
+        result = _detect(
+            geometry,
+            scales=args.scales,
+            weighting=args.weighting,
+            mode=args.mode,
+            as_points=args.as_points,
+            progress=progress,
+            preprocessing=steps,
+            return_details=args.plot is not None,
+            curves=args.curves is not None,
+        )
     result.timings["load"] = load_time
     t = time.perf_counter()
     binary = not args.ascii
-    save_features_ply(
-        output,
-        geometry.vertices,
-        geometry.faces,
-        result.strength,
-        result.mask,
-        binary=binary,
-        into=outputs,
-    )
+    if output.suffix.lower() == ".ply":
+        save_features_ply(
+            output,
+            geometry.vertices,
+            geometry.faces,
+            result.strength,
+            result.mask,
+            attributes=attributes,
+            colour=args.colour,
+            binary=binary,
+            into=outputs,
+        )
+    else:
+        _save_las(output, source, geometry.vertices, result, outputs)
     if args.indices:
         save_indices(args.indices, result.mask, into=outputs)
     if args.save_processed and result.preprocessing is not None:
@@ -355,9 +479,7 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
             binary=binary,
             into=outputs,
         )
-    if args.curves:
-        assert result.curves is not None
-        save_curves(args.curves, result.curves, into=outputs)
+    _save_curves(args, result, outputs)
     if args.plot:
         from .plot import save_report
 
@@ -365,6 +487,7 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
     _commit(args, result, geometry.source, output, outputs, start=start, saving=t)
     progress.step("saved")
     progress.close()
+    _print_warnings(result)
     if not args.quiet:
         if result.preprocessing is not None:
             _print_preprocessing(result)
@@ -372,32 +495,80 @@ def _detect_into(args: argparse.Namespace, outputs: OutputSet, progress: Progres
     return 0
 
 
+def _detect(geometry: Any, **options: Any) -> DetectionResult:
+    """:func:`meshlab_sharp.detect`, imported when the work starts."""
+    from .pipeline import detect
+
+    return detect(geometry, **options)
+
+
+def _input_attributes(source: Path | None) -> dict[str, Any] | None:
+    """The per-vertex properties of a PLY input (normals, colours, scalar fields) or the
+    per-point attributes of a LAS/LAZ input, which the output PLY keeps; None for other
+    inputs."""
+    if source is None:
+        return None
+    if source.suffix.lower() in _LAS_INPUTS:
+        from .io.las import las_attributes
+
+        return las_attributes(source)
+    if source.suffix.lower() != ".ply":
+        return None
+    from .io.ply import read_ply_properties
+
+    return read_ply_properties(source, str(source)) or None
+
+
+def _save_las(
+    output: Path, source: Path | None, vertices: Any, result: DetectionResult, outputs: OutputSet
+) -> None:
+    """Stage the LAS/LAZ output: a LAS/LAZ input's points with all their attributes."""
+    from .io.las import save_features_las
+
+    keep = source if source is not None and source.suffix.lower() in _LAS_INPUTS else None
+    save_features_las(output, vertices, result.strength, result.mask, source=keep, into=outputs)
+
+
+def _save_curves(args: argparse.Namespace, result: DetectionResult, outputs: OutputSet) -> None:
+    """Stage the ``--curves`` file when asked for."""
+    if args.curves:
+        from .io import save_curves
+
+        assert result.curves is not None
+        save_curves(args.curves, result.curves, into=outputs)
+
+
 def _detect_tiled(
     args: argparse.Namespace,
-    source: Path | None,
-    sample: str | None,
-    output: Path,
+    plan: _Plan,
     outputs: OutputSet,
     progress: Progress,
     steps: Preprocessing | None,
 ) -> int:
     """``detect --max-memory``/``--dask``: the input streamed, the output written in
     blocks (:mod:`meshlab_sharp.io.stream`)."""
-    from .io.stream import PointSource, open_points, write_features_ply
+    from .io import save_indices
+    from .io.stream import PointSource, mesh_error, open_points, write_features_ply
 
+    source, output = plan.source, plan.output
     for flag, given in (
         ("--ascii", args.ascii),
         ("--plot", args.plot),
         ("--save-processed", args.save_processed),
+        ("--no-colour", not args.colour),
+        ("a LAS/LAZ output", output.suffix.lower() != ".ply"),
     ):
         if given:
             raise MeshlabSharpError(f"{flag} is not available with --max-memory/--dask")
     start = time.perf_counter()
     if source is None:
-        points = PointSource.from_array(_sample_geometry(sample).vertices, "sample part")
+        assert plan.sample is not None
+        if plan.sample == "mesh" and not args.as_points:
+            raise mesh_error("sample part (mesh)")
+        points = PointSource.from_array(_sample_geometry(plan.sample).vertices, "sample part")
     else:
         points = open_points(source, as_points=args.as_points)
-    result = detect(
+    result = _detect(
         points,
         scales=args.scales,
         weighting=args.weighting,
@@ -413,9 +584,7 @@ def _detect_tiled(
     write_features_ply(output, points, result.strength, result.mask, into=outputs)
     if args.indices:
         save_indices(args.indices, result.mask, into=outputs)
-    if args.curves:
-        assert result.curves is not None
-        save_curves(args.curves, result.curves, into=outputs)
+    _save_curves(args, result, outputs)
     _commit(args, result, points.name, output, outputs, start=start, saving=t)
     progress.close()
     if not args.quiet:
@@ -438,7 +607,9 @@ def _commit(
     result.timings["save"] = time.perf_counter() - saving
     result.timings["total"] = time.perf_counter() - start
     if args.report:
-        report = result.summary()
+        from .io import save_json
+
+        report = {"version": __version__, **result.summary()}
         report["input"] = source
         report["outputs"] = {"ply": str(output), "indices": args.indices, "curves": args.curves}
         save_json(args.report, report, into=outputs)
@@ -459,30 +630,29 @@ def _pause_for_tests() -> None:
 
 def _sample_geometry(kind: str) -> Geometry:
     """The built-in sample part as a Geometry (built once, then read from the cache)."""
+    from .io import Geometry
     from .sample import sample_part
 
     part = sample_part(kind, cache=True)
     return Geometry(vertices=part.vertices, faces=part.faces, source=f"sample part ({kind})")
 
 
-def _check_outputs(source: Path | None, outputs: list[Path], *, force: bool) -> None:
-    """Before any work: every output's folder exists and is writable, no output is a
-    folder, the input, another output, or (without ``--force``) an existing file."""
+def _check_outputs(source: Path | None, outputs: list[Path], *, own: Path | None = None) -> None:
+    """Before any work and any heavy import: no output is the input or another output,
+    and the sample part's folder (``out/``, ``own``), if it is missing, can be made.
+
+    The rest is checked when the outputs are claimed (:meth:`OutputSet.claim`): every
+    folder exists and is writable, no output is a folder or, without ``--force``, an
+    existing file (the files in ``own`` are the tool's own: replaced without it)."""
     resolved = [p.resolve() for p in outputs]
     if len(set(resolved)) != len(resolved):
         raise MeshlabSharpError("two outputs have the same path")
     if source is not None and source.exists() and source.resolve() in resolved:
         raise MeshlabSharpError(f"{source}: an output would overwrite the input")
-    for p in outputs:
-        folder = p.parent
-        if not folder.is_dir():
-            raise MeshlabSharpError(f"cannot write {p}: the folder {folder} does not exist")
+    if own is not None and not own.exists():
+        folder = own.resolve().parent
         if not os.access(folder, os.W_OK | os.X_OK):
-            raise MeshlabSharpError(f"cannot write {p}: the folder {folder} is not writable")
-        if p.is_dir():
-            raise MeshlabSharpError(f"cannot write {p}: it is a folder")
-        if p.exists() and not force:
-            raise MeshlabSharpError(f"{p} exists; use --force to overwrite it")
+            raise MeshlabSharpError(f"cannot make {own}: the folder {folder} is not writable")
 
 
 def _print_summary(source: str, output: Path, result: DetectionResult) -> None:
@@ -514,8 +684,6 @@ def _print_summary(source: str, output: Path, result: DetectionResult) -> None:
 
 def _add_preprocessing_arguments(det: argparse.ArgumentParser) -> None:
     """Preprocessing flags (pymeshlab filters, applied in a fixed order) and the picture."""
-    from .preprocessing import DENOISE_METHODS
-
     pre = det.add_argument_group(
         "preprocessing",
         "pymeshlab filters run before detection, always in this order: remove outliers, "
@@ -545,10 +713,12 @@ def _add_preprocessing_arguments(det: argparse.ArgumentParser) -> None:
         "--denoise",
         nargs="?",
         const="auto",
-        choices=DENOISE_METHODS,
+        type=_denoise_method,
         metavar="METHOD",
-        help="smooth before detection: meshes taubin (default) or two_steps; point clouds "
-        "rimls (default) or apss MLS projection",
+        help="smooth before detection, unless the input looks clean (skipped with a "
+        "warning): meshes taubin (default) or two_steps; point clouds rimls (default) or "
+        "apss MLS projection (a warning says when a method did not help in the measured "
+        "cases: docs/preprocessing.md)",
     )
     pre.add_argument(
         "--smoothing-steps",
@@ -572,32 +742,83 @@ def _add_preprocessing_arguments(det: argparse.ArgumentParser) -> None:
     )
     pre.add_argument(
         "--save-processed",
+        action=_Once,
         metavar="FILE.ply",
         help="write the processed geometry (quality = strength, features selected)",
     )
     det.add_argument(
         "--plot",
+        action=_Once,
         metavar="FILE.png",
         help="write the report picture: histograms with thresholds, views with the "
         "features (needs matplotlib: pip install 'meshlab-sharp[plot]')",
     )
 
 
+def _denoise_method(text: str) -> str:
+    """``--denoise``'s optional METHOD; a file name there (``--denoise part.ply``, the
+    input read as the method) gets a message saying how to write it."""
+    if text in DENOISE_METHODS:
+        return text
+    if Path(text).suffix or os.sep in text:
+        raise argparse.ArgumentTypeError(
+            f"'{text}' is not a denoising method but looks like a file: give the input "
+            f"before --denoise (detect {text} --denoise), or a method: "
+            f"{', '.join(DENOISE_METHODS)}"
+        )
+    raise argparse.ArgumentTypeError(
+        f"unknown denoising method '{text}'; choose from {', '.join(DENOISE_METHODS)}"
+    )
+
+
+#: Preprocessing parameters and the options that set them, for messages.
+_OPTION_NAMES = {
+    "outlier_probability": "--outlier-probability",
+    "outlier_neighbours": "--outlier-neighbours",
+    "remove_outliers": "--remove-outliers",
+    "smoothing_steps": "--smoothing-steps",
+    "denoise_method": "--denoise",
+    "max_hole_size": "--max-hole-size",
+    "fill_holes": "--fill-holes",
+    "simplify": "--simplify",
+    "denoise": "--denoise",
+}
+_OPTION_NAME = re.compile(
+    r"(?<![\w-])(" + "|".join(sorted(_OPTION_NAMES, key=len, reverse=True)) + r")(?![\w-])"
+)
+
+
+@contextmanager
+def _option_names() -> Iterator[None]:
+    """Errors of the preprocessing parameters, worded with the options that set them
+    (``--denoise 'rimls' is for point clouds``, not ``denoise_method``)."""
+    try:
+        yield
+    except InputError as exc:
+        text = _OPTION_NAME.sub(lambda m: _OPTION_NAMES[m.group(1)], str(exc))
+        raise InputError(text.removeprefix("preprocessing: ")) from None
+
+
 def _preprocessing_from_args(args: argparse.Namespace) -> Preprocessing | None:
     """The Preprocessing the flags ask for (None when none); checks the extra outputs."""
-    steps = Preprocessing(
-        remove_outliers=args.remove_outliers,
-        outlier_probability=args.outlier_probability,
-        outlier_neighbours=args.outlier_neighbours,
-        denoise=args.denoise is not None,
-        denoise_method=args.denoise or "auto",
-        smoothing_steps=args.smoothing_steps,
-        fill_holes=args.fill_holes,
-        max_hole_size=args.max_hole_size,
-        simplify=args.simplify,
-    )
+    steps = None
+    if args.remove_outliers or args.denoise or args.fill_holes or args.simplify is not None:
+        from .preprocessing import Preprocessing
+
+        with _option_names():
+            steps = Preprocessing(
+                remove_outliers=args.remove_outliers,
+                outlier_probability=args.outlier_probability,
+                outlier_neighbours=args.outlier_neighbours,
+                denoise=args.denoise is not None,
+                denoise_method=args.denoise or "auto",
+                smoothing_steps=args.smoothing_steps,
+                fill_holes=args.fill_holes,
+                max_hole_size=args.max_hole_size,
+                simplify=args.simplify,
+            )
     if args.save_processed is not None:
-        if not steps.active:
+        if steps is None:
             raise MeshlabSharpError(
                 "--save-processed needs a preprocessing step (--remove-outliers, --denoise, "
                 "--fill-holes or --simplify)"
@@ -610,7 +831,15 @@ def _preprocessing_from_args(args: argparse.Namespace) -> Preprocessing | None:
         from .plot import require_matplotlib
 
         require_matplotlib()
-    return steps if steps.active else None
+    return steps
+
+
+def _print_warnings(result: DetectionResult) -> None:
+    """The preprocessing steps' warnings, one line each on stderr."""
+    if result.preprocessing is not None:
+        for step in result.preprocessing.steps:
+            if "warning" in step:
+                print(f"meshlab-sharp: warning: {step['warning']}", file=sys.stderr)
 
 
 def _print_preprocessing(result: DetectionResult) -> None:

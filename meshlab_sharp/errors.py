@@ -18,3 +18,8 @@ class InputError(MeshlabSharpError, ValueError):
 class OutputError(MeshlabSharpError, OSError):
     """An output file cannot be written; the message names the destination, not the
     hidden temporary file."""
+
+
+class InputWarning(UserWarning):
+    """The input was read, but likely not as its author meant (decimal commas in a point
+    list, say): the command line prints it as one ``meshlab-sharp: warning:`` line."""

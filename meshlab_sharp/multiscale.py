@@ -8,7 +8,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import _header, _kernels
+from . import _kernels
+from .defaults import DEFAULT_KNN_SCALES as DEFAULT_KNN_SCALES  # re-exported
+from .defaults import DEFAULT_RING_SCALES as DEFAULT_RING_SCALES
 from .neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods
 from .normals import DEFAULT_WEIGHTING, Weighting
 from .projected_distance import projected_distances
@@ -16,11 +18,6 @@ from .threshold import FLAT_TOLERANCE, normalise, otsu_threshold
 
 if TYPE_CHECKING:
     from .robust import SheetNeighbourhoods
-
-#: Default scales of a point cloud: k nearest neighbours.
-DEFAULT_KNN_SCALES: tuple[int, ...] = _header.integers("DEFAULT_KNN_SCALES")
-#: Default scales of a mesh: k-rings.
-DEFAULT_RING_SCALES: tuple[int, ...] = _header.integers("DEFAULT_RING_SCALES")
 
 
 @dataclass

@@ -10,12 +10,12 @@ from typing import Literal
 import numpy as np
 
 from . import _header, _kernels
+from .defaults import DEFAULT_WEIGHTING as _DEFAULT_WEIGHTING
+from .defaults import WEIGHTINGS as WEIGHTINGS  # re-exported
 from .neighbourhoods import squared_distances
 
 Weighting = Literal["gaussian", "none"]
-WEIGHTINGS: tuple[str, ...] = ("gaussian", "none")
-#: The weighting ``detect``, the CLI and the MeshLab plugin use unless told otherwise.
-DEFAULT_WEIGHTING: Weighting = WEIGHTINGS[_header.integer("DEFAULT_WEIGHTING")]  # type: ignore[assignment]
+DEFAULT_WEIGHTING: Weighting = _DEFAULT_WEIGHTING  # type: ignore[assignment]
 
 #: A vertex whose summed face normals are shorter than this is treated as a point.
 ZERO_NORMAL = _header.real("ZERO_NORMAL")

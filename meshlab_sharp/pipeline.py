@@ -20,6 +20,9 @@ from ._pages import small_pages
 from .cleaning import CleanGeometry, clean
 from .creases import sharp_vertices
 from .curves import Corners, Curve, extract_curves
+from .defaults import DEFAULT_MODE as DEFAULT_MODE  # re-exported
+from .defaults import MAX_SCALES as MAX_SCALES
+from .defaults import MODES as MODES
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
@@ -42,13 +45,6 @@ from .robust import RobustSetup
 
 Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | pymeshlab.Mesh
 
-#: Detection modes: the paper's method as ALGORITHM.md reads it, or robust mode
-#: (:mod:`meshlab_sharp.robust`, docs/robust-mode.md).
-MODES = ("paper", "robust")
-#: The mode ``detect``, the CLI and the MeshLab plugin use unless told otherwise.
-DEFAULT_MODE = MODES[_header.integer("DEFAULT_MODE")]
-#: The most scales one detection takes (the defaults have 8 and 4).
-MAX_SCALES = _header.integer("MAX_SCALES")
 #: The smallest scales: k nearest neighbours (the point itself and one more) ...
 MIN_KNN_SCALE = _header.integer("MIN_KNN_SCALE")
 #: ... and rings.
@@ -373,6 +369,7 @@ def _detect(
     )
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
+    bar.stage("neighbourhoods")
     points = cleaned.vertices
     if not is_mesh:
         _check_cloud_size(len(geometry.vertices), len(points), max(scales_t), geometry.source)

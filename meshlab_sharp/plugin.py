@@ -6,6 +6,11 @@ built with CMake against Debian's ``libmeshlab-common.so`` and installed into De
 plugin folder, or into a private MeshLab root (copies of ``meshlab`` and
 ``meshlabserver`` beside links to the system plugins and ours), which needs no write
 access to the system once the Debian packages are there.
+
+Every step says what it does on stderr (``plugin: ...`` lines), and nothing on the
+system changes without a line saying so. The apt sources are changed only on request
+(``--allow-deb-src``: a deb-src entry, needed when apt has none, to fetch the headers),
+and ``meshlab-sharp plugin uninstall`` takes the plugin and that entry away again.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 from .cache import cache_dir
@@ -42,11 +48,14 @@ SYSTEM_LIB = Path("/usr/lib/x86_64-linux-gnu/meshlab")
 PLUGIN_FILE = "libfilter_sharp_features.so"
 FILTER_NAME = "Select Sharp Features (Projected Distance)"
 CURVES_FILTER_NAME = "Extract Sharp Feature Curves"
-_DEB_SRC = Path("/etc/apt/sources.list.d/meshlab-sharp-src.sources")
+_APT_LISTS = Path("/etc/apt/sources.list.d")
+_APT_LEGACY = Path("/etc/apt/sources.list")
+_DEB_SRC = _APT_LISTS / "meshlab-sharp-src.sources"
 
 
 def add_plugin_command(subparsers: argparse._SubParsersAction) -> None:
-    """Register ``meshlab-sharp plugin {install,deps}`` on the CLI's subparsers."""
+    """Register ``meshlab-sharp plugin {install,deps,uninstall,examples}`` on the CLI's
+    subparsers."""
     plugin = subparsers.add_parser(
         "plugin",
         help="build and install the MeshLab 2020.09 filter plugin",
@@ -75,6 +84,23 @@ def add_plugin_command(subparsers: argparse._SubParsersAction) -> None:
     )
     _add_build_options(deps)
     deps.set_defaults(func=_run_deps)
+    uninstall = sub.add_parser(
+        "uninstall",
+        help="remove the installed plugin (and the deb-src entry --allow-deb-src added)",
+        description=f"Remove {SYSTEM_LIB}/plugins/{PLUGIN_FILE} and {_DEB_SRC} if present, "
+        "or with --root the private MeshLab root's files. The Debian packages stay.",
+    )
+    uninstall.add_argument(
+        "--root", metavar="DIR", help="remove the private MeshLab root made at DIR instead"
+    )
+    uninstall.set_defaults(func=_run_uninstall)
+    examples = sub.add_parser(
+        "examples",
+        help="print the folder of the example MeshLab scripts (.mlx)",
+        description="Print the folder holding the example .mlx filter scripts, one line per "
+        "script, and how meshlabserver runs one.",
+    )
+    examples.set_defaults(func=_run_examples)
 
 
 def _add_build_options(parser: argparse.ArgumentParser) -> None:
@@ -91,33 +117,90 @@ def _add_build_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-apt", action="store_true", help="do not run apt-get; fail if a package is missing"
     )
+    parser.add_argument(
+        "--allow-deb-src",
+        action="store_true",
+        help=f"when apt has no deb-src entry for MeshLab's headers, add {_DEB_SRC} (plugin "
+        "uninstall removes it); without it the apt sources are never changed",
+    )
 
 
 def _run_deps(args: argparse.Namespace) -> int:
     ensure_packages(use_apt=not args.no_apt)
-    source = ensure_source(Path(args.source_dir) if args.source_dir else None, not args.no_apt)
+    source = ensure_source(
+        Path(args.source_dir) if args.source_dir else None,
+        not args.no_apt,
+        allow_deb_src=args.allow_deb_src,
+    )
     print(f"plugin: Debian packages present; MeshLab headers in {source}")
     return 0
 
 
 def _run_install(args: argparse.Namespace) -> int:
     ensure_packages(use_apt=not args.no_apt)
-    source = ensure_source(Path(args.source_dir) if args.source_dir else None, not args.no_apt)
+    source = ensure_source(
+        Path(args.source_dir) if args.source_dir else None,
+        not args.no_apt,
+        allow_deb_src=args.allow_deb_src,
+    )
     sources = plugin_sources()
     build_dir = Path(args.build_dir) if args.build_dir else default_build_dir(sources)
     library = build(source, build_dir, sources)
     if args.root:
+        say(f"making the private MeshLab root {Path(args.root).resolve()}")
         root = make_private_root(Path(args.root), library)
         print(f"plugin: installed into the private MeshLab root {root}")
         print(f"plugin: run {root / 'bin' / 'meshlab'} or {root / 'bin' / 'meshlabserver'}")
     else:
+        say(f"copying the plugin into {SYSTEM_LIB / 'plugins'}")
         dest = install_system(library)
         print(f"plugin: installed {dest}; Debian's meshlab and meshlabserver now list")
         print(f"plugin: Filters > Selection > {FILTER_NAME}")
         print(
             f"plugin: Filters > Remeshing, Simplification and Reconstruction > {CURVES_FILTER_NAME}"
         )
+    print("plugin: example scripts: meshlab-sharp plugin examples; undo: meshlab-sharp plugin "
+          f"uninstall{' --root ' + str(args.root) if args.root else ''}")  # fmt: skip
     return 0
+
+
+def _run_uninstall(args: argparse.Namespace) -> int:
+    removed = remove_private_root(Path(args.root)) if args.root else uninstall_system()
+    for path in removed:
+        print(f"plugin: removed {path}")
+    if not removed:
+        print("plugin: nothing to remove: the plugin is not installed there")
+    if not args.root:
+        print("plugin: the Debian packages stay installed (remove them with apt-get if unwanted)")
+    return 0
+
+
+def _run_examples(args: argparse.Namespace) -> int:
+    folder = examples_dir()
+    print(folder)
+    for script in sorted(folder.glob("*.mlx")):
+        print(f"  {script.name}")
+    print(
+        f"run one: xvfb-run -a meshlabserver -i in.ply -o out.ply -m vq vf vc -s "
+        f"{folder / 'sharp_features_default.mlx'}"
+    )
+    print(
+        "meshlabserver may print 'no additional memory available!!!': MeshLab's GPU memory "
+        "budget for drawing, read from the settings the MeshLab GUI writes on its first "
+        "start, is 0 until then; nothing is drawn and the results are not affected"
+    )
+    return 0
+
+
+def say(message: str) -> None:
+    """One progress line on stderr, ``plugin: message``, flushed at once."""
+    print(f"plugin: {message}", file=sys.stderr, flush=True)
+
+
+def examples_dir() -> Path:
+    """The folder of the example ``.mlx`` scripts, in the installed package or the
+    checkout (the only place that knows where they are shipped)."""
+    return plugin_sources() / "examples"
 
 
 def default_build_dir(sources: Path) -> Path:
@@ -128,10 +211,14 @@ def default_build_dir(sources: Path) -> Path:
 
 
 def plugin_sources() -> Path:
-    """The plugin's sources: ``plugin_src`` inside the installed package (a wheel), or
-    ``meshlab_plugin_cpp`` beside the package (a git checkout, editable install)."""
+    """The plugin's sources: ``_sources/meshlab_plugin_cpp`` inside the installed package
+    (a wheel), or ``meshlab_plugin_cpp`` beside the package (a git checkout, editable
+    install); the native library's sources lie beside them (``native``)."""
     package = Path(__file__).resolve().parent
-    candidates = (package / "plugin_src", package.parent / "meshlab_plugin_cpp")
+    candidates = (
+        package / "_sources" / "meshlab_plugin_cpp",
+        package.parent / "meshlab_plugin_cpp",
+    )
     for folder in candidates:
         if (folder / "CMakeLists.txt").is_file():
             return folder
@@ -165,7 +252,7 @@ def ensure_packages(*, use_apt: bool) -> None:
         return
     if not use_apt:
         raise MeshlabSharpError(f"missing Debian packages: {' '.join(missing)}")
-    print(f"plugin: installing Debian packages: {' '.join(missing)}", file=sys.stderr)
+    say(f"installing Debian packages with apt-get (apt-get update first): {' '.join(missing)}")
     _apt(["update", "-qq"])
     _apt(["install", "-y", "-qq", "--no-install-recommends", *missing])
 
@@ -180,8 +267,9 @@ def _apt(arguments: list[str]) -> None:
     _check_call(command, env=env)
 
 
-def ensure_source(source_dir: Path | None, use_apt: bool) -> Path:
-    """The unpacked MeshLab 2020.09 source package, fetched into the cache if absent."""
+def ensure_source(source_dir: Path | None, use_apt: bool, *, allow_deb_src: bool = False) -> Path:
+    """The unpacked MeshLab 2020.09 source package, fetched into the cache if absent
+    (adding a deb-src entry to apt's sources first only when ``allow_deb_src``)."""
     if source_dir is not None:
         if not (source_dir / "src" / "common" / "interfaces.h").is_file():
             raise MeshlabSharpError(f"{source_dir}: not an unpacked MeshLab 2020.09 source tree")
@@ -191,32 +279,37 @@ def ensure_source(source_dir: Path | None, use_apt: bool) -> Path:
         return target
     if not use_apt:
         raise MeshlabSharpError(f"MeshLab headers not found in {target} (and --no-apt given)")
-    _ensure_deb_src()
+    _ensure_deb_src(allow=allow_deb_src)
     target.parent.mkdir(parents=True, exist_ok=True)
-    print(f"plugin: fetching Debian's {SOURCE_PACKAGE} source package into {target.parent}")
+    say(f"downloading Debian's {SOURCE_PACKAGE} source package (about 12 MB) into {target.parent}")
     _check_call(["apt-get", "source", "-qq", SOURCE_PACKAGE], cwd=target.parent)
     if not (target / "src" / "common" / "interfaces.h").is_file():
         raise MeshlabSharpError(f"apt-get source {SOURCE_PACKAGE} did not unpack {target}")
     return target
 
 
-def _ensure_deb_src() -> None:
-    """Add a deb-src entry beside Debian 12's debian.sources, unless one exists."""
-    lists = Path("/etc/apt/sources.list.d")
+def _ensure_deb_src(*, allow: bool, lists: Path = _APT_LISTS, legacy: Path = _APT_LEGACY) -> None:
+    """Add a deb-src entry beside Debian 12's debian.sources, unless one exists; only
+    when ``allow`` (``--allow-deb-src``): otherwise a missing entry is an error saying
+    so."""
     texts = [p.read_text(errors="replace") for p in lists.glob("*.sources")]
-    legacy = Path("/etc/apt/sources.list")
     if legacy.is_file():
         texts.append(legacy.read_text(errors="replace"))
     if any("deb-src" in t for t in texts):
         return
+    if not allow:
+        raise MeshlabSharpError(
+            "MeshLab's headers come from Debian's source package, and apt has no deb-src "
+            f"entry: rerun with --allow-deb-src to add {_DEB_SRC} (plugin uninstall removes "
+            "it), or give --source-dir DIR (an unpacked meshlab source package)"
+        )
     debian = lists / "debian.sources"
     if not debian.is_file():
-        raise MeshlabSharpError(
-            "no deb-src entry and no /etc/apt/sources.list.d/debian.sources to derive one from"
-        )
+        raise MeshlabSharpError(f"no deb-src entry and no {debian} to derive one from")
     entry = debian.read_text().replace("Types: deb\n", "Types: deb-src\n")
     if os.geteuid() != 0:
         raise MeshlabSharpError(f"run as root to add {_DEB_SRC} (a deb-src entry)")
+    say(f"adding the deb-src entry {_DEB_SRC} (--allow-deb-src) and running apt-get update")
     _DEB_SRC.write_text(entry)
     _apt(["update", "-qq"])
 
@@ -227,6 +320,7 @@ def build(source: Path, build_dir: Path, sources: Path) -> Path:
     ``source``: the unpacked MeshLab source package (headers); ``sources``: the plugin's
     sources (:func:`plugin_sources`)."""
     build_dir.mkdir(parents=True, exist_ok=True)
+    say(f"configuring the build with CMake in {build_dir}")
     _check_call(
         [
             "cmake",
@@ -238,7 +332,10 @@ def build(source: Path, build_dir: Path, sources: Path) -> Path:
             "-DCMAKE_BUILD_TYPE=Release",
         ],
     )
+    say("compiling (a minute or two the first time)")
+    started = time.monotonic()
     _check_call(["cmake", "--build", str(build_dir), "-j", str(min(os.cpu_count() or 1, 2))])
+    say(f"compiled in {time.monotonic() - started:.0f} s")
     library = build_dir / PLUGIN_FILE
     if not library.is_file():
         raise MeshlabSharpError(f"the build did not produce {library}")
@@ -280,6 +377,53 @@ def make_private_root(root: Path, library: Path) -> Path:
             _relink(plugins / system_plugin.name, system_plugin)
     shutil.copy2(library, plugins / PLUGIN_FILE)
     return root
+
+
+def uninstall_system() -> list[Path]:
+    """Remove the plugin from Debian's MeshLab plugin folder and the deb-src entry that
+    ``--allow-deb-src`` added (then ``apt-get update``); returns what was removed."""
+    removed = []
+    for path in (SYSTEM_LIB / "plugins" / PLUGIN_FILE, _DEB_SRC):
+        if path.exists():
+            if not os.access(path.parent, os.W_OK):
+                raise MeshlabSharpError(f"cannot remove {path}: run as root")
+            path.unlink()
+            removed.append(path)
+    if _DEB_SRC in removed:
+        say("apt-get update (the deb-src entry is gone)")
+        _apt(["update", "-qq"])
+    return removed
+
+
+def remove_private_root(root: Path) -> list[Path]:
+    """Remove what :func:`make_private_root` made at ``root`` (the copied binaries, the
+    links, our plugin, then the folders left empty); returns the files removed.
+
+    Raises
+    ------
+    MeshlabSharpError
+        ``root`` is not a private MeshLab root (no plugin in it): nothing is removed.
+    """
+    root = root.resolve()
+    bindir = root / "bin"
+    libdir = root / "lib" / "x86_64-linux-gnu" / "meshlab"
+    plugins = libdir / "plugins"
+    if not (plugins / PLUGIN_FILE).is_file():
+        raise MeshlabSharpError(
+            f"{root}: not a private MeshLab root made by plugin install (no "
+            f"{plugins.relative_to(root) / PLUGIN_FILE}); nothing removed"
+        )
+    ours = [bindir / "meshlab", bindir / "meshlabserver", plugins / PLUGIN_FILE]
+    ours += [p for p in [libdir / "libmeshlab-common.so", *plugins.glob("*.so")] if p.is_symlink()]
+    removed = []
+    for path in ours:
+        if path.is_symlink() or path.is_file():
+            path.unlink()
+            removed.append(path)
+    for folder in (plugins, libdir, libdir.parent, libdir.parent.parent, bindir, root):
+        if folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+    return removed
 
 
 def _relink(link: Path, target: Path) -> None:

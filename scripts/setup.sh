@@ -19,6 +19,7 @@ export DEBIAN_FRONTEND=noninteractive
 packages=(libgl1 libopengl0 libgomp1 python3 python3-venv python3-pip python3-dev gcc)
 if [[ $all == 1 ]]; then
   packages+=(xdotool imagemagick)  # the GUI test drives MeshLab and takes screenshots
+  packages+=(libglu1-mesa libxcursor1 libxft2 libxinerama1)  # the gmsh wheel's library (cad extra)
 fi
 missing=()
 for p in "${packages[@]}"; do
@@ -35,11 +36,12 @@ if [[ ! -x .venv/bin/python ]]; then
   "$python" -m venv .venv
 fi
 extras="[plot,dxf]"
-[[ $all == 1 ]] && extras="[plot,dxf,test,las,e57,dask,docs]"
+[[ $all == 1 ]] && extras="[plot,dxf,test,las,e57,dask,docs,cad]"
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".${extras}"
 if [[ $all == 1 ]]; then
-  # MeshLab 2020.09, the plugin's build dependencies and its headers (Debian source package).
-  .venv/bin/meshlab-sharp plugin deps
+  # MeshLab 2020.09, the plugin's build dependencies and its headers (Debian source package;
+  # --allow-deb-src: apt's deb-src entry is added if missing, `plugin uninstall` removes it).
+  .venv/bin/meshlab-sharp plugin deps --allow-deb-src
 fi
 echo "setup: ready: run .venv/bin/meshlab-sharp, or source .venv/bin/activate first for plain meshlab-sharp"

@@ -39,7 +39,8 @@ class Case:
 def ply(
     v: np.ndarray, f: np.ndarray | None, fmt: str = "ascii", lists: list[list[int]] | None = None
 ) -> bytes:
-    """A PLY of float x y z and (optionally) int vertex_indices lists."""
+    """A PLY of float x y z and (optionally) int vertex_indices lists (more columns of
+    ``v`` are written as data; the caller declares them in the header)."""
     lists = [list(t) for t in f] if lists is None and f is not None else lists or []
     head = (
         f"ply\nformat {fmt} 1.0\ncomment fuzz\nelement vertex {len(v)}\n"
@@ -47,7 +48,7 @@ def ply(
         f"element face {len(lists)}\nproperty list uchar int vertex_indices\nend_header\n"
     ).encode()
     if fmt == "ascii":
-        rows = [b"%r %r %r" % tuple(map(float, p)) for p in v.astype(np.float32)]
+        rows = [b" ".join(b"%r" % float(c) for c in p) for p in v.astype(np.float32)]
         rows += [b" ".join(b"%d" % x for x in [len(t), *t]) for t in lists]
         return head + b"\n".join(rows) + b"\n"
     e = "<" if fmt == "binary_little_endian" else ">"
@@ -193,6 +194,40 @@ def _ply_cases(v: np.ndarray, f: np.ndarray) -> Iterator[Case]:
     yield Case("ply-no-end-header", ".ply", no_end, "error")
     bad_type = ply(v, f).replace(b"property float x", b"property float128 x")
     yield Case("ply-bad-type", ".ply", bad_type, "error")
+    for fmt in ("ascii", "binary_little_endian"):
+        good = ply(v, f, fmt)
+        twice = ply(np.c_[v, v[:, 0] + 1], f, fmt).replace(
+            b"property float z\n", b"property float z\nproperty float x\n"
+        )
+        yield Case(f"ply-{fmt[:10]}-property-twice", ".ply", twice, "error")
+        strips = good.replace(b"element face", b"element tristrips")
+        yield Case(f"ply-{fmt[:10]}-tristrips", ".ply", strips, "ok")
+        yield Case(f"ply-{fmt[:10]}-vertex-list", ".ply", vertex_list_ply(v, f, fmt), "ok")
+
+
+def vertex_list_ply(v: np.ndarray, f: np.ndarray, fmt: str) -> bytes:
+    """A PLY whose vertex element has a list property between y and z (lengths 0, 1,
+    2, 0, ...), with double z: a reader must skip the lists to find z."""
+    head = (
+        f"ply\nformat {fmt} 1.0\nelement vertex {len(v)}\nproperty float x\n"
+        "property float y\nproperty list uchar short extra\nproperty double z\n"
+        f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
+    ).encode()
+    lengths = np.arange(len(v)) % 3
+    xy = v[:, :2].astype(np.float32)
+    if fmt == "ascii":
+        rows = [
+            b" ".join([b"%r %r %d" % (float(x), float(y), k), *[b"7"] * k, b"%r" % float(z)])
+            for (x, y), z, k in zip(xy, v[:, 2], lengths, strict=True)
+        ]
+        rows += [b"3 %d %d %d" % tuple(t) for t in f]
+        return head + b"\n".join(rows) + b"\n"
+    e = "<" if fmt == "binary_little_endian" else ">"
+    body = b"".join(
+        struct.pack(f"{e}ffB{k}hd", x, y, k, *[7] * k, z)
+        for (x, y), z, k in zip(xy, v[:, 2], lengths, strict=True)
+    )
+    return head + body + b"".join(struct.pack(f"{e}B3i", 3, *t) for t in f)
 
 
 def _obj_cases(v: np.ndarray, f: np.ndarray) -> Iterator[Case]:

@@ -1,6 +1,6 @@
 // A command-line driver of the plugin's core without MeshLab (tests/test_sharp_core.py
-// builds it with g++ from meshlab_plugin_cpp/src/sharp_core.cpp and
-// meshlab_sharp/_ckernels.c alone):
+// builds it with gcc and g++ from meshlab_plugin_cpp/src/sharp_core.cpp and the native
+// library native/src/*.c alone):
 //   sharp_core_driver IN OUT MODE KNN_SCALES RING_SCALES WEIGHTING AS_POINTS
 // IN: int64 n, int64 m, n x 3 float64 vertices, m x 3 int32 faces (little endian).
 // OUT: n float64 strengths, then n uint8 features. MODE "paper" or "robust", WEIGHTING

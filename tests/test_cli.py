@@ -23,7 +23,7 @@ from meshlab_sharp import sample
 from meshlab_sharp.cli import PAUSE_ENV, Interrupted, _interrupted_message, main, parse_scales
 from meshlab_sharp.errors import OutputError
 from meshlab_sharp.io import OutputSet, mesh_arrays
-from meshlab_sharp.io.writers import _umask
+from meshlab_sharp.outputs import _umask
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -366,12 +366,46 @@ def test_the_sample_checks_its_outputs_before_it_is_built(tmp_path, monkeypatch,
         raise AssertionError("the sample was built before the outputs were checked")
 
     monkeypatch.setattr(sample, "make_part", no_build)
-    (tmp_path / "out").mkdir()
-    (tmp_path / "out" / "sample_part_sharp.ply").write_text("old\n")
-    assert main(["detect", "--sample", "mesh"]) == 1
+    (tmp_path / "ids.txt").write_text("old\n")
+    assert main(["detect", "--sample", "mesh", "--indices", "ids.txt"]) == 1
     assert capsys.readouterr().err == (
-        "meshlab-sharp: error: out/sample_part_sharp.ply exists; use --force to overwrite it\n"
+        "meshlab-sharp: error: ids.txt exists; use --force to overwrite it\n"
     )
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_sample_reruns_replace_their_own_outputs_and_kinds_do_not_collide(tmp_path, monkeypatch):
+    """The README's first command runs twice; the cloud and the mesh have files of
+    their own; the sample's outputs in out/ are replaced, an output elsewhere still
+    needs --force."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    make_part = sample.make_part
+    monkeypatch.setattr(
+        sample, "make_part", lambda *a, **k: make_part(*a, **{**k, "n_points": 3_000})
+    )
+    out = tmp_path / "out"
+    assert main(["detect", "--sample", "-q"]) == 0
+    (out / "sample_part_sharp.ply").write_bytes(b"stale")
+    assert main(["detect", "--sample", "-q"]) == 0
+    assert (out / "sample_part_sharp.ply").read_bytes().startswith(b"ply\n")
+    assert main(["detect", "--sample", "mesh", "-q"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == [
+        "sample_part_mesh_sharp.ply",
+        "sample_part_sharp.ply",
+    ]
+    assert _read_back(out / "sample_part_sharp.ply")[1] is None
+    assert _read_back(out / "sample_part_mesh_sharp.ply")[1] is not None
+    # the README's first command (with --plot out/...) runs twice: every output the
+    # sample writes in out/ is its own
+    (out / "ids.txt").write_bytes(b"stale")
+    assert main(["detect", "--sample", "-q", "--indices", "out/ids.txt"]) == 0
+    assert (out / "ids.txt").read_text().split()[0].isdigit()
+    # an output elsewhere still needs --force
+    (tmp_path / "mine.ply").write_bytes(b"mine")
+    assert main(["detect", "--sample", "-q", "-o", "mine.ply"]) == 1
+    assert (tmp_path / "mine.ply").read_bytes() == b"mine"
 
 
 def test_the_sample_writes_into_out(tmp_path, monkeypatch):
@@ -398,3 +432,42 @@ def test_the_interruption_message_says_what_was_written():
     assert _interrupted_message(exc) == "interrupted by SIGHUP; no output was written"
     exc.written = [Path("a.ply"), Path("a.txt")]  # the signal came after the renames
     assert _interrupted_message(exc) == "interrupted by SIGHUP after writing a.ply, a.txt"
+
+
+@pytest.mark.slow
+def test_sample_plot_without_matplotlib_leaves_no_out_folder(tmp_path):
+    """The missing extra is found before out/ is made (matplotlib hidden by a package
+    of the same name that cannot be imported)."""
+    blocker = tmp_path / "site" / "matplotlib"
+    blocker.mkdir(parents=True)
+    (blocker / "__init__.py").write_text("raise ImportError('hidden for the test')\n")
+    work = tmp_path / "work"
+    work.mkdir()
+    env = {"PYTHONPATH": f"{tmp_path / 'site'}{os.pathsep}{ROOT}"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "meshlab_sharp", "detect", "--sample", "--plot", "out/r.png"],
+        env=dict(os.environ, **env),
+        cwd=work,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert proc.returncode == 1
+    assert proc.stderr == (
+        "meshlab-sharp: error: the report picture needs matplotlib: "
+        "pip install 'meshlab-sharp[plot]'\n"
+    )
+    assert list(work.iterdir()) == []
+
+
+def test_the_report_names_the_version_and_curves_twice_is_an_error(tmp_path):
+    src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
+    report = tmp_path / "r.json"
+    assert main(["detect", str(src), "-q", "--report", str(report)]) == 0
+    assert json.loads(report.read_text())["version"] == meshlab_sharp.__version__
+    proc = _run(["detect", src, "--curves", tmp_path / "a.ply", "--curves", tmp_path / "b.obj"])
+    out, err = proc.communicate(timeout=60)
+    assert (proc.returncode, out) == (1, "")
+    assert err == ("meshlab-sharp: error: --curves given twice (see meshlab-sharp detect --help)\n")
+    assert not (tmp_path / "a.ply").exists() and not (tmp_path / "b.obj").exists()

@@ -25,11 +25,11 @@ from evaluation.scoring import evaluate_curves, truth_curves
 from meshlab_sharp import _header
 from meshlab_sharp.cli import main
 from meshlab_sharp.curves import classify, extract_curves
-from meshlab_sharp.curves.graph import nearest
-from meshlab_sharp.curves.refine import line_fit_positions
-from meshlab_sharp.curves.trace import Piece, join_pieces, piece_lengths
 from meshlab_sharp.errors import InputError, MeshlabSharpError
 from meshlab_sharp.io import curve_arrays, require_ezdxf, save_curves
+from meshlab_sharp.reference.curves.graph import nearest
+from meshlab_sharp.reference.curves.refine import line_fit_positions
+from meshlab_sharp.reference.curves.trace import Piece, join_pieces, piece_lengths
 
 MODES = ("paper", "robust")
 CUBE_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
@@ -433,23 +433,29 @@ def test_piece_lengths_in_one_pass_match_each_piece() -> None:
         assert length == piece_lengths([pc])[0] == pc.length
 
 
-CURVE_MODULES = ("graph", "trace", "extract", "refine", "fit")
-CURVES_CORE = (
-    Path(__file__).resolve().parent.parent / "meshlab_plugin_cpp" / "src" / "curves_core.cpp"
-)
-#: The constants the plugin has no use for: it does not classify the curves (fit.py).
+#: The modules that read the curves' constants: the numpy reference's, and fit.py.
+CURVE_MODULES = {
+    name: Path(meshlab_sharp.reference.curves.__file__).with_name(f"{name}.py")
+    for name in ("graph", "trace", "extract", "refine")
+} | {"fit": Path(meshlab_sharp.curves.__file__).with_name("fit.py")}
+CURVES_CPP = Path(__file__).resolve().parent.parent / "native" / "src" / "curves.cpp"
+#: The constants the native library has no use for: it does not classify the curves
+#: (fit.py).
 PYTHON_ONLY = {"FIT_TOLERANCE", "FIT_MAX", "MAX_RADIUS_RATIO"}
+#: curves.cpp's upper-case constants that tune nothing: pi, infinity, the C library's
+#: math table, and how many vertices share one call of the math functions (no result
+#: depends on it).
+NOT_TUNING = {"PI", "INF", "C_MATH", "REFINE_BATCH"}
 
 
 def test_the_curves_constants_are_typed_only_in_their_header():
-    """Every upper-case name the curves modules assign is read from curves/_curves.h
-    (``NAME = CURVES.<kind>("NAME")``) unless it holds no number (fit.KINDS), and every
-    header constant is read by one of them; curves_core.cpp uses the header's
-    ``MS_CURVE_`` macros and gives no upper-case constant a number of its own (only
-    pi and infinity, which are no tuning)."""
+    """Every upper-case name the curves modules assign is read from
+    meshlab_sharp.h (``NAME = CURVES.<kind>("NAME")``) unless it holds no number
+    (fit.KINDS), and every header constant is read by one of them; the native
+    curves.cpp uses the header's ``MS_CURVE_`` macros and gives no upper-case constant
+    a number of its own (only NOT_TUNING)."""
     read: dict[str, str] = {}
-    for name in CURVE_MODULES:
-        path = Path(meshlab_sharp.curves.__file__).with_name(f"{name}.py")
+    for name, path in CURVE_MODULES.items():
         for node in ast.parse(path.read_text()).body:
             if not isinstance(node, ast.Assign | ast.AnnAssign) or node.value is None:
                 continue
@@ -472,7 +478,7 @@ def test_the_curves_constants_are_typed_only_in_their_header():
                 read[target.id] = name
     assert set(read) == set(_header.CURVES.constants)
 
-    text = CURVES_CORE.read_text()
+    text = CURVES_CPP.read_text()
     typed = re.findall(
         r"^\s*(?:static\s+)?(?:constexpr|const)\s+[\w:<> ]+?\s"  # a type
         r"([A-Z][A-Z0-9_]*)(?:\[\])?\s*=\s*(.+);",
@@ -480,7 +486,7 @@ def test_the_curves_constants_are_typed_only_in_their_header():
         re.MULTILINE,
     )
     for name, value in typed:
-        assert name in ("PI", "INF") or "MS_CURVE_" in value or "sizeof" in value, (name, value)
+        assert name in NOT_TUNING or "MS_CURVE_" in value or "sizeof" in value, (name, value)
     assert not re.search(r"^\s*#\s*define\s", text, re.MULTILINE)
     used = set(re.findall(r"\bMS_CURVE_([A-Z0-9_]+)", text))
     header = _header.CURVES.path.read_text()
@@ -499,7 +505,8 @@ def test_the_curves_use_the_headers_values():
     definitions say, the same numbers in every module that names them, and in C++ (the
     header compiled with g++) the same values and the same integer or floating types as
     the Python parser reads."""
-    from meshlab_sharp.curves import extract, fit, graph, refine, trace
+    from meshlab_sharp.curves import fit
+    from meshlab_sharp.reference.curves import extract, graph, refine, trace
 
     c = _header.CURVES.constants
     assert (graph.LINK_NEIGHBOURS, graph.LINK_RADIUS, graph.PRUNE_ROUNDS) == (8, 2.5, 4)
@@ -517,7 +524,7 @@ def test_the_curves_use_the_headers_values():
     if shutil.which("g++") is None:
         pytest.skip("needs g++")
     lines = ["#include <cstdio>", "#include <initializer_list>", "#include <type_traits>"]
-    lines += ['#include "curves/_curves.h"', "int main() {"]
+    lines += ['#include "meshlab_sharp.h"', "int main() {"]
     for name, value in c.items():
         if isinstance(value, tuple):
             lines.append(f"{{ for (auto x : MS_CURVE_{name})")
@@ -533,8 +540,8 @@ def test_the_curves_use_the_headers_values():
     with tempfile.TemporaryDirectory() as tmp:
         source, exe = Path(tmp) / "curves.cpp", Path(tmp) / "curves"
         source.write_text("\n".join(lines))
-        package = Path(meshlab_sharp.__file__).parent
-        subprocess.run(["g++", "-std=c++14", f"-I{package}", source, "-o", exe], check=True)
+        include = _header.PATH.parent
+        subprocess.run(["g++", "-std=c++14", f"-I{include}", source, "-o", exe], check=True)
         out = subprocess.run([exe], capture_output=True, text=True, check=True).stdout
     seen: dict[str, list] = {}
     for line in out.splitlines():

@@ -1,8 +1,8 @@
 """The compiled kernels report a failed allocation or a bad index as a Python error.
 
-Each allocation in ``_ckernels.c`` is checked: the kernel returns an error code and the
-wrapper raises MemoryError (or InputError for a face index outside the vertices)
-instead of writing through a null pointer. Memory is made to run out in a subprocess
+Each allocation in the native library (``native/src``) is checked: the library returns an
+error code and the wrapper raises MemoryError (or InputError for a face index outside the
+vertices) instead of writing through a null pointer. Memory is made to run out in a subprocess
 whose address space is limited just above what the wrapper's numpy arrays need, so
 that only the kernel's own allocation (the mesh adjacency's fill pointers) fails.
 """

@@ -402,12 +402,10 @@ def test_a_wheel_ships_the_sources_and_its_own_build_folder(tmp_path, monkeypatc
     (wheel,) = wheels.glob("*.whl")
     site = tmp_path / "site"
     zipfile.ZipFile(wheel).extractall(site)
-    shipped = site / "meshlab_sharp" / "plugin_src"
+    shipped = site / "meshlab_sharp" / "_sources" / "meshlab_plugin_cpp"
     assert _files(shipped) == _files(checkout / "meshlab_plugin_cpp")
-    for header in ("_ckernels.c", "_ckernels.h", "curves/_curves.h"):  # the build needs them
-        assert (site / "meshlab_sharp" / header).read_bytes() == (
-            checkout / "meshlab_sharp" / header
-        ).read_bytes()
+    # the build needs the native library beside them, as in a checkout
+    assert _files(shipped.parent / "native") == _files(checkout / "native")
 
     # a configured CMake cache of another source tree (this checkout) in the same cache
     headers = plugin.ensure_source(None, use_apt=False)
@@ -434,3 +432,79 @@ def test_a_wheel_ships_the_sources_and_its_own_build_folder(tmp_path, monkeypatc
     assert (
         root / "lib" / "x86_64-linux-gnu" / "meshlab" / "plugins" / plugin.PLUGIN_FILE
     ).is_file()
+    # it says what it does while it builds, and where the examples are after pip install
+    said = [line for line in proc.stderr.splitlines() if line.startswith("plugin: ")]
+    assert said[0].startswith("plugin: configuring the build with CMake in ")
+    assert said[1:3] == ["plugin: compiling (a minute or two the first time)", said[2]]
+    assert said[2].startswith("plugin: compiled in ")
+    examples = subprocess.run(
+        [sys.executable, "-m", "meshlab_sharp", "plugin", "examples"],
+        env=dict(os.environ, PYTHONPATH=str(site)),
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    ).stdout.splitlines()
+    assert Path(examples[0]) == shipped / "examples"
+    assert (Path(examples[0]) / examples[1].strip()).is_file()
+
+
+def _fake_install(root: Path, tmp_path: Path) -> Path:
+    """A private root as ``plugin install --root`` makes it, with a stand-in library."""
+    library = tmp_path / plugin.PLUGIN_FILE
+    library.write_bytes(b"not a real plugin")
+    return plugin.make_private_root(root, library)
+
+
+def test_uninstall_removes_a_private_root_and_nothing_else(tmp_path, capsys):
+    keep = tmp_path / "keep.txt"
+    keep.write_text("mine")
+    root = _fake_install(tmp_path / "root", tmp_path)
+    plugins = root / "lib" / "x86_64-linux-gnu" / "meshlab" / "plugins"
+    linked = [p for p in plugins.iterdir() if p.is_symlink()]
+    assert linked and all(p.resolve().parent == plugin.SYSTEM_LIB / "plugins" for p in linked)
+    system_before = sorted((plugin.SYSTEM_LIB / "plugins").iterdir())
+    assert main(["plugin", "uninstall", "--root", str(root)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert f"plugin: removed {root / 'bin' / 'meshlabserver'}" in out
+    assert f"plugin: removed {plugins / plugin.PLUGIN_FILE}" in out
+    assert len(out) == 3 + 1 + len(linked)  # 2 binaries, ours, libmeshlab-common, links
+    assert not root.exists() and keep.read_text() == "mine"
+    assert sorted((plugin.SYSTEM_LIB / "plugins").iterdir()) == system_before
+    # a folder that is not a private root: an error, nothing removed
+    (tmp_path / "other" / "bin").mkdir(parents=True)
+    (tmp_path / "other" / "bin" / "meshlab").write_text("x")
+    assert main(["plugin", "uninstall", "--root", str(tmp_path / "other")]) == 1
+    assert "not a private MeshLab root made by plugin install" in capsys.readouterr().err
+    assert (tmp_path / "other" / "bin" / "meshlab").read_text() == "x"
+
+
+def test_uninstall_keeps_files_the_user_added_to_the_root(tmp_path):
+    root = _fake_install(tmp_path / "root", tmp_path)
+    (root / "bin" / "notes.txt").write_text("mine")
+    plugin.remove_private_root(root)
+    assert (root / "bin" / "notes.txt").read_text() == "mine"
+    assert not (root / "lib").exists()
+
+
+def test_examples_prints_the_scripts_folder(capsys):
+    assert main(["plugin", "examples"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert Path(lines[0]) == EXAMPLE
+    assert sorted(line.strip() for line in lines[1:3]) == sorted(
+        p.name for p in EXAMPLE.glob("*.mlx")
+    )
+    assert "no additional memory available!!!" in lines[-1]
+
+
+def test_no_deb_src_entry_is_an_error_without_the_flag(tmp_path):
+    lists = tmp_path / "sources.list.d"
+    lists.mkdir()
+    (lists / "debian.sources").write_text("Types: deb\nURIs: http://deb.debian.org/debian\n")
+    before = sorted(lists.iterdir())
+    with pytest.raises(meshlab_sharp.MeshlabSharpError, match="rerun with --allow-deb-src"):
+        plugin._ensure_deb_src(allow=False, lists=lists, legacy=tmp_path / "sources.list")
+    assert sorted(lists.iterdir()) == before
+    (lists / "src.sources").write_text("Types: deb-src\n")
+    plugin._ensure_deb_src(allow=False, lists=lists, legacy=tmp_path / "sources.list")

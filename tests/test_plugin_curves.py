@@ -6,8 +6,8 @@ MeshLab stores the layer's vertices in float: the layer is saved twice, as binar
 (its vertices, exact; meshlabserver cannot ask the PLY writer for edges) and as OBJ (its
 ``l`` edges), and compared with Python's vertices in float. On meshes the C++ curves are
 identical to Python's (mesh vertices); on clouds the double-precision vertices differ by
-at most 3e-14 (the sample and the evaluation's parts; the corners' 3x3 solve is the same
-elimination in both), far below float's resolution.
+at most 3e-14 (the sample and the evaluation's parts: the plugin's exp, acos and atan2
+are the C library's, Python's are numpy's), far below float's resolution.
 """
 
 from __future__ import annotations

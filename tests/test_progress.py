@@ -87,3 +87,40 @@ def test_close_without_drawing_writes_nothing_and_twice_once():
     bar.close()
     bar.close()
     assert stream.getvalue().count("\n") == 1
+
+
+def test_the_clock_moves_while_a_stage_runs():
+    """The neighbourhood stage is one long call: the bar names it and redraws its clock
+    instead of sitting at the last finished step."""
+    import time
+
+    stream = io.StringIO()
+    bar = Progress(12, enabled=True, stream=stream, tick=0.02)
+    bar.step("cleaned")
+    bar.stage("neighbourhoods")
+    time.sleep(0.3)
+    bar.close()
+    frames = stream.getvalue().split("\r")[1:]
+    running = [f for f in frames if f.startswith("neighbourhoods...")]
+    assert frames[0].startswith("cleaned") and len(running) >= 3
+    clocks = [float(f.split()[-1].rstrip("s\n")) for f in running]
+    assert clocks == sorted(clocks) and clocks[-1] > clocks[0]
+    assert all(" 1/12 " in f for f in running)
+    after = stream.getvalue()
+    time.sleep(0.1)
+    assert stream.getvalue() == after  # closed: no more redraws
+
+
+def test_a_bar_without_a_tick_draws_only_when_told():
+    """The library's own bars have no thread: nothing redraws after an error."""
+    import threading
+    import time
+
+    stream = io.StringIO()
+    before = threading.active_count()
+    bar = Progress(4, enabled=True, stream=stream)
+    bar.stage("neighbourhoods")
+    drawn = stream.getvalue()
+    time.sleep(0.2)
+    assert stream.getvalue() == drawn and threading.active_count() == before
+    bar.close()

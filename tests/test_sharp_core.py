@@ -1,5 +1,5 @@
 """The MeshLab plugin's core without MeshLab: ``meshlab_plugin_cpp/src/sharp_core.cpp`` and
-the package's C kernel ``meshlab_sharp/_ckernels.c``, built with g++ alone into a small
+the native library ``native/src/*.c``, built with gcc and g++ alone into a small
 driver (``tests/sharp_core_driver.cpp``), against :func:`meshlab_sharp.detect` on the same
 float64 arrays: the same scales, thresholds, candidate counts, features and strengths.
 Runs wherever g++ is (no MeshLab sources, no Qt)."""
@@ -29,7 +29,7 @@ from meshlab_sharp.sample import sample_part
 ROOT = Path(__file__).resolve().parent.parent
 DRIVER = Path(__file__).resolve().parent / "sharp_core_driver.cpp"
 CORE = ROOT / "meshlab_plugin_cpp" / "src" / "sharp_core.cpp"
-KERNEL = ROOT / "meshlab_sharp" / "_ckernels.c"
+NATIVE = ROOT / "native"
 
 pytestmark = [
     pytest.mark.slow,  # compiles and runs a C++ driver of the plugin's core
@@ -39,15 +39,21 @@ pytestmark = [
 
 @pytest.fixture(scope="module")
 def driver(tmp_path_factory) -> Path:
-    """The driver, compiled with the flags the plugin's CMakeLists.txt gives each file."""
+    """The driver, compiled with the flags the plugin's CMakeLists.txt (and native's) give
+    each file."""
     out = tmp_path_factory.mktemp("core")
-    kernel = out / "ckernels.o"
+    include = NATIVE / "include"
     flags = ["-O3", "-ffp-contract=off", "-fno-math-errno", "-DMS_LIBMVEC=1", "-fPIC"]
-    subprocess.run(["gcc", "-c", "-std=c99", *flags, KERNEL, "-o", kernel], check=True)
+    objects = []
+    for source in sorted((NATIVE / "src").glob("*.c")):
+        objects.append(out / f"{source.stem}.o")
+        command = ["gcc", "-c", "-std=c99", *flags, f"-I{include}", source, "-o", objects[-1]]
+        subprocess.run(command, check=True)
     exe = out / "driver"
     command = ["g++", "-O3", "-std=c++14", "-ffp-contract=off", "-Wall", "-Werror"]
-    command += ["-Wno-unused-parameter", f"-I{KERNEL.parent}", f"-I{CORE.parent}"]
-    command += [DRIVER, CORE, kernel, "-o", exe, "-lmvec", "-lm", "-pthread"]
+    command += ["-Wno-unused-parameter", f"-I{include}", f"-I{CORE.parent}"]
+    command += [f"-I{NATIVE / 'src'}"]  # curves_types.h
+    command += [DRIVER, CORE, *objects, "-o", exe, "-lmvec", "-lm", "-pthread"]
     subprocess.run(command, check=True)
     return exe
 
@@ -303,29 +309,6 @@ def test_the_header_parser_reads_only_its_forms():
         _header.parse("#define MS_A sqrt(2.0)\n")
     with pytest.raises(TypeError, match="MS_BINS is 256, not float"):
         _header.real("BINS")
-
-
-def test_the_ctypes_signatures_are_the_headers():
-    """Every function Python binds is declared in _ckernels.h with the argument and
-    return types its ctypes signature gives (one ABI for both faces)."""
-    import ctypes
-
-    from meshlab_sharp._kernels import _SIGNATURES
-
-    text = re.sub(r"/\*.*?\*/", "", _header.HEADER.read_text(), flags=re.DOTALL)
-    declared = {
-        name: (ret, [a.strip() for a in args.split(",")])
-        for ret, name, args in re.findall(r"(\w+) (ms_\w+)\(([^)]*)\);", text)
-    }
-    ctype = {"int": ctypes.c_int, "int64_t": ctypes.c_int64, "double": ctypes.c_double}
-    for name, (restype, argtypes) in _SIGNATURES.items():
-        ret, args = declared[name]
-        assert restype is (None if ret == "void" else ctype[ret]), name
-        assert len(args) == len(argtypes), name
-        for arg, given in zip(args, argtypes, strict=True):
-            base = arg.rsplit(" ", 1)[0].replace("const ", "")
-            expected = ctypes.c_void_p if "*" in arg else ctype[base]
-            assert given is expected, (name, arg)
 
 
 SCALE_TEXTS = [

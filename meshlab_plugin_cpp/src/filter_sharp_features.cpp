@@ -1,9 +1,9 @@
 // MeshLab glue around sharp_core: reads the current layer, runs the detector in double,
 // writes vertex quality (strength), vertex selection (features) and optional colour; or
-// adds the feature curves (curves_core) as a new layer of edges.
+// adds the feature curves (the native library's curves.h) as a new layer of edges.
 #include "filter_sharp_features.h"
 
-#include "curves_core.h"
+#include "curves.h"
 #include "sharp_core.h"
 
 #include <vcg/complex/algorithms/update/bounding.h>
@@ -185,9 +185,16 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 	} catch (const sharp::InputError &e) {
 		return fail(e.what());
 	}
-	options.gaussian = par.getEnum("weighting") == 0;
+	// An .mlx script may give an enum any integer: only the listed choices run.
+	const int weighting = par.getEnum("weighting");
+	const int mode = par.getEnum("mode");
+	if (weighting != 0 && weighting != 1)
+		return fail(QString("weighting = %1 is not one of the choices 0 (Gaussian) and 1 (None)").arg(weighting));
+	if (mode != 0 && mode != 1)
+		return fail(QString("mode = %1 is not one of the choices 0 (Paper) and 1 (Robust)").arg(mode));
+	options.gaussian = weighting == 0;
 	options.asPoints = par.getBool("asPoints");
-	options.robust = par.getEnum("mode") == 1;
+	options.robust = mode == 1;
 
 	// Live vertices in layer order; faces re-indexed to that order.
 	std::vector<CMeshO::VertexPointer> live;

@@ -1,5 +1,5 @@
-// See sharp_core.h. The per-point work is the Python package's compiled kernel
-// (meshlab_sharp/_ckernels.c), called with the same arguments as meshlab_sharp/_kernels.py
+// See sharp_core.h. The per-point work is the native library
+// (native/src), called with the same arguments as meshlab_sharp/_kernels.py
 // calls it, in chunks of MS_CHUNK points on every core; what remains here mirrors the
 // Python modules' global steps: cleaning.py (the compiled path), threshold.py,
 // multiscale.py, robust.py (RobustSetup; its finishing steps are the kernel's) and

@@ -1,7 +1,7 @@
 // meshlab-sharp: the projected-distance sharp feature detector (Tran et al. 2014),
-// independent of MeshLab's types: the filter glue around the package's C kernel
-// (meshlab_sharp/_ckernels.c, declared with the method's constants in _ckernels.h). The
-// kernel does the per-point work (kd-tree, neighbours, normals, projected distances,
+// independent of MeshLab's types: the filter glue around meshlab-sharp's native library
+// (native/, its ABI and the method's constants in native/include/meshlab_sharp.h). The
+// library does the per-point work (kd-tree, neighbours, normals, projected distances,
 // local scales, noise and isolation statistics, robust mode's support and thinning of
 // the candidates) on every core; this core does the small global steps, as the Python
 // package does: cleaning map, normalisation, Otsu, the multiscale vote, the mesh's sharp
@@ -9,7 +9,8 @@
 #ifndef MESHLAB_SHARP_CORE_H
 #define MESHLAB_SHARP_CORE_H
 
-#include "_ckernels.h"
+#include "meshlab_sharp.h"
+#include "curves_types.h"  // Point, shared with the curves
 
 #include <array>
 #include <stdexcept>
@@ -18,8 +19,6 @@
 #include <vector>
 
 namespace sharp {
-
-struct Point { double x, y, z; };
 
 struct Options {
 	std::vector<int> knnScales MS_DEFAULT_KNN_SCALES;    // point clouds

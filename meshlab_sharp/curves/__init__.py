@@ -4,9 +4,10 @@
 >>> [(c.kind, c.closed, len(c.points)) for c in result.curves]  # doctest: +SKIP
 
 Built from a detection's mask and the geometry (:func:`extract_curves`): the feature
-graph and its skeleton (:mod:`.graph`), traced into polylines cut at corners and joined
-across gaps (:mod:`.trace`), positions refined below the spacing on clouds
-(:mod:`.refine`), and each curve classified (:mod:`.fit`). Deterministic.
+graph and its skeleton, traced into polylines cut at corners and joined across gaps,
+positions refined below the spacing on clouds (the native library's
+native/src/curves.cpp, or its numpy reference :mod:`meshlab_sharp.reference.curves`,
+which gives the same bits), and each curve classified (:mod:`.fit`). Deterministic.
 """
 
 from .extract import Corners, Curve, extract_curves

@@ -1,5 +1,6 @@
 """Feature curves from a detection: the skeleton of the feature points, traced into
-polylines, refined (clouds), cut and joined at corners, and classified.
+polylines, refined (clouds), cut and joined at corners (the native library, or its numpy
+reference :mod:`meshlab_sharp.reference.curves`), and classified (:mod:`.fit`).
 """
 
 from __future__ import annotations
@@ -8,75 +9,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from .._header import CURVES
+from .. import _kernels
+from ..reference import curves as reference
+from . import _native
 from .fit import classify
-from .graph import (
-    SPUR_LENGTH,
-    MeshPaths,
-    close_loops,
-    cloud_graph,
-    mesh_graph,
-    prune_spurs,
-    spanning_forest,
-)
-from .refine import (
-    cell_neighbourhood,
-    line_fit_positions,
-    plane_intersection_positions,
-    refine_neighbours,
-)
-from .trace import (
-    CORNER_SCALE,
-    GAP_LENGTH,
-    LONG_GAP,
-    LOOP_LENGTH,
-    Bridge,
-    Piece,
-    batch_tangents,
-    cut_at_turns,
-    end_clusters,
-    join_pieces,
-    meeting_clusters,
-    piece_lengths,
-    split_at_touches,
-    trace_paths,
-)
 
-__all__ = ["MIN_CURVE_LENGTH", "Corners", "Curve", "extract_curves", "support_radius"]
-
-# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
-#: An open curve shorter than this, in spacings (GAP_LENGTH), is dropped: what is left of a spur
-#: between two junctions, or a blob of false detections.
-MIN_CURVE_LENGTH = CURVES.real("MIN_CURVE_LENGTH")
-#: A piece shorter than this, in spacings (twice GAP_LENGTH), from a junction of three
-#: or more curve ends to a free end is a spur (noise beside a line) and is dropped.
-SPUR_PIECE = CURVES.real("SPUR_PIECE")
-#: A skeleton piece of a cloud is dropped when at more than this share of its vertices
-#: the two surfaces fitted around it meet at less than the crease angle: false
-#: detections on a smooth or noisy surface (near corners the fit fails otherwise and
-#: does not count).
-MAX_FLAT_SHARE = CURVES.real("MAX_FLAT_SHARE")
-#: Side of the grid cells, in feature spacings, that select the points near the curves
-#: for the refinement (3x3x3 cells around each feature hold its REFINE_NEIGHBOURS).
-CELL_SPACINGS = CURVES.real("CELL_SPACINGS")
-#: Cloud vertices closer than this along the curve's direction to the previous vertex
-#: kept, in spacings, are dropped after refinement (a skeleton that zigzags across a
-#: wide band of features leaves vertices that double back once refined).
-MIN_ADVANCE = CURVES.real("MIN_ADVANCE")
-#: Vertices on each side of a vertex in the fallback line fit (2 spacings or so).
-LINE_FIT_HALF = CURVES.integer("LINE_FIT_HALF")
-#: Half-width, in spacings of arc, of the chord giving the skeleton's direction at a
-#: vertex, across which the vertex is refined (clouds): twice TANGENT_WINDOW.
-RAW_TANGENT_WINDOW = CURVES.real("RAW_TANGENT_WINDOW")
-#: A curve end farther than this, in spacings, from its corner gets the corner as an
-#: extra vertex; a nearer one moves onto the corner (clouds).
-SNAP = CURVES.real("SNAP")
-#: The corner where curve ends meet is the least-squares meeting point of their lines
-#: only where that 3x3 system's condition number is below this (lines not nearly
-#: parallel).
-MAX_CORNER_CONDITION = CURVES.real("MAX_CORNER_CONDITION")
+__all__ = ["Corners", "Curve", "extract_curves"]
 
 
 @dataclass
@@ -152,6 +91,8 @@ def extract_curves(
     faces: np.ndarray | None = None,
     valid: np.ndarray | None = None,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    *,
+    backend: str | None = None,
 ) -> tuple[list[Curve], Corners]:
     """Feature curves and corners of a detection.
 
@@ -169,8 +110,12 @@ def extract_curves(
     bounds : ((3,), (3,)) float64, optional
         Clouds: bounding box of the whole input when ``vertices`` is only the part of
         it that the curves read: the features and the valid points in the cells of side
-        :func:`support_radius` around them (out of core,
+        :func:`meshlab_sharp.reference.curves.support_radius` around them (out of core,
         :func:`meshlab_sharp.tiles.curves.curves_out_of_core`). Default: the vertices'.
+    backend : {"compiled", "numpy"}, optional
+        "compiled": the native library, where it is built (else the numpy reference,
+        which gives the same bits); "numpy": the reference. Default: the detection's
+        backend (:func:`meshlab_sharp._kernels.default_backend`).
 
     Returns
     -------
@@ -178,328 +123,14 @@ def extract_curves(
         In a deterministic order (by first vertex), independent of the input's order.
     corners : Corners
     """
-    pts = np.asarray(vertices, np.float64)
-    feat_mask = np.asarray(mask, bool)
-    ok = np.ones(len(pts), bool) if valid is None else np.asarray(valid, bool)
-    feat = np.flatnonzero(feat_mask & ok)
-    # nodes: distinct feature positions in coordinate order (independent of input order)
-    fp = pts[feat]
-    order = np.lexsort((feat, fp[:, 2], fp[:, 1], fp[:, 0]))
-    feat, fp = feat[order], fp[order]
-    if len(fp):
-        first = np.ones(len(fp), bool)
-        first[1:] = (fp[1:] != fp[:-1]).any(axis=1)
-        feat, fp = feat[first], fp[first]
-    empty = Corners(np.zeros((0, 3)), np.zeros(0, np.int64))
-    if len(feat) < 2:
-        return [], empty
-    paths: MeshPaths | None = None
-    if faces is None:
-        pieces, spacing = _cloud_pieces(pts, feat_mask, ok, feat, fp, bounds)
-    else:
-        pieces, spacing = _mesh_pieces(pts, np.asarray(faces), feat_mask & ok, feat, fp)
-        paths = MeshPaths(pts, np.asarray(faces), feat_mask & ok)
-    if spacing <= 0:
-        return [], empty
-    bridge = None if paths is None else _bridge(pts, paths, spacing)
-    pieces = _drop_short(cut_at_turns(pieces, spacing), spacing)
-    pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
-    pieces = join_pieces(pieces, spacing, bridge)
-    # joining may have run a curve round a corner whose vertex was near a piece's end
-    pieces = cut_at_turns(pieces, spacing)
-    pieces = split_at_touches(pieces, spacing)
-    if paths is None:
-        pieces = _drop_isolated(pieces, spacing)
-    pieces, corners = _corners(pieces, spacing, pts, paths)
-    curves = [_curve(pc, spacing) for pc in pieces if len(pc.points) >= 2]
-    curves.sort(key=lambda c: (*c.points[0], *c.points[-1], c.length))
-    return curves, corners
-
-
-def _skeleton_pieces(
-    n: int, edges: np.ndarray, weights: np.ndarray, positions: np.ndarray, spacing: float
-) -> list[np.ndarray]:
-    forest = spanning_forest(n, edges, weights)
-    forest = close_loops(n, forest, edges, positions, LOOP_LENGTH * GAP_LENGTH * spacing)
-    forest = prune_spurs(n, forest, positions, SPUR_LENGTH * spacing)
-    return trace_paths(n, forest)
-
-
-def support_radius(features: np.ndarray) -> float:
-    """Side of the grid cells around the features whose valid points the refinement of
-    a cloud's curves reads: CELL_SPACINGS times the median distance from a feature to
-    the nearest other one.
-
-    Parameters
-    ----------
-    features : (f, 3) float64
-        The distinct feature positions, any order, f >= 2.
-    """
-    d, _ = cKDTree(features).query(features, k=2, workers=-1)
-    return CELL_SPACINGS * float(np.median(d[:, 1]))
-
-
-def _cloud_pieces(
-    pts: np.ndarray,
-    mask: np.ndarray,
-    ok: np.ndarray,
-    feat: np.ndarray,
-    fp: np.ndarray,
-    bounds: tuple[np.ndarray, np.ndarray] | None,
-) -> tuple[list[Piece], float]:
-    """Skeleton polylines of a cloud's features, refined; and the spacing."""
-    near = cell_neighbourhood(pts, ok, fp, support_radius(fp), bounds)
-    near_pts = pts[near]
-    order = np.lexsort((near_pts[:, 2], near_pts[:, 1], near_pts[:, 0]))
-    near, near_pts = near[order], near_pts[order]
-    tree = cKDTree(near_pts)
-    d, _ = tree.query(fp, k=2, workers=-1)
-    spacing = float(np.median(d[:, 1]))
-    edges, lengths = cloud_graph(fp, spacing)
-    paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
-    pieces = []
-    for path in paths:
-        closed = len(path) > 2 and path[0] == path[-1]
-        nodes = path[:-1] if closed else path
-        pieces.append(Piece(nodes, fp[nodes], closed))
-    if not pieces:
-        return [], spacing
-    # refine every vertex at once, across the skeleton's directions over a wide window
-    # (the skeleton zigzags across the band of features)
-    raw = np.concatenate([pc.points for pc in pieces])
-    neighbours = refine_neighbours(tree, raw)
-    dirs = batch_tangents(pieces, RAW_TANGENT_WINDOW * spacing)
-    moved, fitted, flat = plane_intersection_positions(
-        raw, dirs, neighbours, near_pts, mask[near], spacing
-    )
-    sizes = np.array([len(pc.points) for pc in pieces])
-    closed = np.array([pc.closed for pc in pieces])
-    # where the fit failed, onto the line of the curve's own vertices; then smoothed
-    # along the curve: each vertex onto the line of its neighbours
-    line = line_fit_positions(raw, dirs, sizes, closed, LINE_FIT_HALF)
-    smooth = line_fit_positions(
-        np.where(fitted[:, None], moved, line), dirs, sizes, closed, LINE_FIT_HALF
-    )
-    ends = np.cumsum(sizes).tolist()
-    n_flat = np.add.reduceat(flat.astype(np.int64), [0, *ends[:-1]]).tolist()
-    out = []
-    for pc, stop, size, n_no_edge in zip(pieces, ends, sizes.tolist(), n_flat, strict=True):
-        if n_no_edge / size > MAX_FLAT_SHARE:
-            continue  # not an edge between two surfaces: false detections
-        p, d = smooth[stop - size : stop], dirs[stop - size : stop]
-        keep = _advancing(p, d, spacing)
-        out.append(Piece(feat[pc.nodes[keep]], p[keep], pc.closed))
-    return out, spacing
-
-
-def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
-    """Indices of the vertices that advance by at least MIN_ADVANCE spacings along the
-    curve's direction from the previous one kept (the last vertex always kept)."""
-    rows, dirs = list(p), list(t)  # row views made at once
-    keep, last = [0], rows[0]
-    step = MIN_ADVANCE * spacing
-    for i in range(1, len(p) - 1):
-        if float((rows[i] - last) @ dirs[i]) >= step:
-            keep.append(i)
-            last = rows[i]
-    if len(p) > 1:
-        keep.append(len(p) - 1)
-    return np.array(keep, np.int64)
-
-
-def _mesh_pieces(
-    pts: np.ndarray, faces: np.ndarray, mask: np.ndarray, feat: np.ndarray, fp: np.ndarray
-) -> tuple[list[Piece], float]:
-    """Chains of mesh edges between feature vertices; and the spacing (median length
-    of the edges around the features)."""
-    edges, weights, around = mesh_graph(pts, faces, mask)
-    if len(edges) == 0:
-        return [], 0.0
-    spacing = float(np.median(around))
-    node = np.full(len(pts), -1, np.int64)
-    node[feat] = np.arange(len(feat))
-    local = node[edges]
-    keep = (local >= 0).all(axis=1)  # duplicated positions keep one vertex
-    paths = _skeleton_pieces(len(feat), local[keep], weights[keep], fp, spacing)
-    pieces = []
-    for path in paths:
-        closed = len(path) > 2 and path[0] == path[-1]
-        nodes = path[:-1] if closed else path
-        pieces.append(Piece(feat[nodes], fp[nodes], closed))
-    return pieces, spacing
-
-
-def _bridge(pts: np.ndarray, paths: MeshPaths, spacing: float) -> Bridge:
-    """Mesh vertices between two curve vertices: the shortest path along the mesh edges
-    near the features (none when longer than twice GAP_LENGTH spacings)."""
-
-    def bridge(a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
-        inner = paths.path(a, b, 2 * GAP_LENGTH * spacing)
-        inner = np.zeros(0, np.int64) if inner is None else inner
-        return inner, pts[inner]
-
-    return bridge
-
-
-def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
-    """Leave out open pieces shorter than MIN_CURVE_LENGTH spacings, and spurs: pieces
-    shorter than SPUR_PIECE spacings with one end free and the other where three or
-    more ends meet."""
-    ends, clusters = end_clusters(pieces, spacing)
-    size = np.ones(len(ends.piece), np.int64)
-    for c in clusters:
-        size[c] = len(c)
-    spur = set()
-    for i in range(0, len(ends.piece), 2):  # the two ends of one piece are consecutive
-        if sorted((size[i], size[i + 1]))[0] == 1 and max(size[i], size[i + 1]) >= 3:
-            spur.add(int(ends.piece[i]))
-    lengths = piece_lengths(pieces).tolist()
-    return [
-        pc
-        for i, (pc, length) in enumerate(zip(pieces, lengths, strict=True))
-        if pc.closed
-        or (
-            length >= MIN_CURVE_LENGTH * spacing
-            and (i not in spur or length >= SPUR_PIECE * spacing)
-        )
+    chosen = _kernels.default_backend() if backend is None else backend
+    if chosen not in _kernels.BACKENDS:
+        raise ValueError(f"unknown backend {chosen!r}; choose from {', '.join(_kernels.BACKENDS)}")
+    native = chosen == "compiled" and _native.available()
+    run = _native.extract_curves if native else reference.extract_curves
+    found = run(vertices, mask, faces, valid, bounds)
+    curves = [
+        Curve(points, indices, closed, *classify(points, closed, found.spacing))
+        for points, indices, closed, _ in found.curves
     ]
-
-
-def _drop_isolated(pieces: list[Piece], spacing: float) -> list[Piece]:
-    """Leave out open pieces shorter than SPUR_PIECE spacings whose two ends are free (no
-    other end within GAP_LENGTH spacings, nor one whose line meets theirs at a corner):
-    fragments of detections along noisy edges (clouds)."""
-    ends, clusters = end_clusters(pieces, spacing)
-    joined = np.zeros(len(pieces), bool)
-    for c in meeting_clusters(ends, clusters, spacing):
-        joined[ends.piece[c]] = True
-    lengths = piece_lengths(pieces)
-    return [
-        pc
-        for i, pc in enumerate(pieces)
-        if pc.closed or joined[i] or lengths[i] >= SPUR_PIECE * spacing
-    ]
-
-
-def _corners(
-    pieces: list[Piece], spacing: float, pts: np.ndarray, paths: MeshPaths | None
-) -> tuple[list[Piece], Corners]:
-    """Corners where curve ends meet (not as one continuing curve), and the ends brought
-    onto them. The corner is the point nearest the lines of the ends (least squares).
-    On a cloud the ends whose lines meet across a wider gap join the corner too
-    (:func:`meshlab_sharp.curves.trace.meeting_clusters`), and the lines are the end
-    chords at CORNER_SCALE; on a mesh, the lines of the last edges, and the corner is
-    the mesh vertex nearest their meeting point, reached from each end along mesh
-    edges (``paths``)."""
-    ends, clusters = end_clusters(pieces, spacing)
-    # clouds: the end lines 2-8 spacings back (noise bends the last vertices), which
-    # may meet far from the ends; meshes: the lines of the last mesh edges
-    if paths is None:
-        clusters = meeting_clusters(ends, clusters, spacing)
-        out, through = ends.out[CORNER_SCALE], ends.anchor[CORNER_SCALE]
-    else:
-        out, through = ends.out[0], ends.point
-    points, indices = [], []
-    pieces = [Piece(pc.nodes.copy(), pc.points.copy(), pc.closed) for pc in pieces]
-    for c in clusters:
-        a = np.zeros((3, 3))
-        b = np.zeros(3)
-        for i in c:
-            proj = np.eye(3) - np.outer(out[i], out[i])
-            a += proj
-            b += proj @ through[i]
-        mean = ends.point[c].mean(axis=0)
-        corner = mean
-        if np.linalg.cond(a) < MAX_CORNER_CONDITION:
-            x = _solve3(a, b)
-            if paths is None:  # within LONG_GAP spacings of every end
-                near = np.linalg.norm(ends.point[c] - x, axis=1).max() <= LONG_GAP * spacing
-            else:
-                near = np.linalg.norm(x - mean) <= GAP_LENGTH * spacing
-            if near:
-                corner = x
-        if paths is None:
-            nearest = int(c[np.argmin(np.linalg.norm(ends.point[c] - corner, axis=1))])
-            pc0 = pieces[ends.piece[nearest]]
-            index = int(pc0.nodes[0] if ends.side[nearest] == 0 else pc0.nodes[-1])
-        else:
-            index = paths.nearest(corner)
-            corner = pts[index].copy()
-        points.append(corner)
-        indices.append(index)
-        for i in c:
-            pc = pieces[ends.piece[i]]
-            at = 0 if ends.side[i] == 0 else len(pc.nodes) - 1
-            here = int(pc.nodes[at])
-            if here == index or (
-                paths is None and np.linalg.norm(pc.points[at] - corner) <= SNAP * spacing
-            ):
-                pc.points[at] = corner
-                continue
-            inner = None if paths is None else paths.path(here, index, 2 * GAP_LENGTH * spacing)
-            add = np.append(np.zeros(0, np.int64) if inner is None else inner, index)
-            add_points = np.vstack([pts[add[:-1]], corner])
-            if ends.side[i] == 0:
-                pc.nodes = np.concatenate([add[::-1], pc.nodes])
-                pc.points = np.vstack([add_points[::-1], pc.points])
-            else:
-                pc.nodes = np.concatenate([pc.nodes, add])
-                pc.points = np.vstack([pc.points, add_points])
-    # a short piece with both ends brought onto one corner is a knot of detections there
-    short = LOOP_LENGTH * GAP_LENGTH * spacing
-    pieces = [
-        pc
-        for pc in pieces
-        if pc.closed or not np.array_equal(pc.points[0], pc.points[-1]) or pc.length >= short
-    ]
-    if not points:
-        return pieces, Corners(np.zeros((0, 3)), np.zeros(0, np.int64))
-    p = np.array(points)
-    order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
-    return pieces, Corners(p[order], np.array(indices, np.int64)[order])
-
-
-def _solve3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """x with a x = b for a (3, 3) non-singular: Gaussian elimination with partial
-    pivoting in plain floats, the plugin's arithmetic (``solve3`` in curves_core.cpp),
-    so that both place a corner on the same bits (on a regular grid, corners tie in
-    a coordinate and their order is decided by the last bits). Shape (3,)."""
-    m = [[float(v) for v in row] for row in a]
-    y = [float(v) for v in b]
-    for c in range(3):
-        piv = max(range(c, 3), key=lambda r: (abs(m[r][c]), -r))  # the first largest
-        m[c], m[piv] = m[piv], m[c]
-        y[c], y[piv] = y[piv], y[c]
-        for r in range(c + 1, 3):
-            f = m[r][c] / m[c][c]
-            for k in range(c, 3):
-                m[r][k] -= f * m[c][k]
-            y[r] -= f * y[c]
-    x = [0.0, 0.0, 0.0]
-    for r in (2, 1, 0):
-        s = y[r]
-        for k in range(r + 1, 3):
-            s -= m[r][k] * x[k]
-        x[r] = s / m[r][r]
-    return np.array(x)
-
-
-def _curve(pc: Piece, spacing: float) -> Curve:
-    """The final curve in canonical orientation, classified."""
-    p, n = pc.points, pc.nodes
-    if pc.closed:
-        start = int(np.lexsort(p.T[::-1])[0])
-        p, n = np.roll(p, -start, axis=0), np.roll(n, -start)
-        if len(p) > 2 and tuple(p[-1]) < tuple(p[1]):
-            p = np.vstack([p[:1], p[:0:-1]])
-            n = np.concatenate([n[:1], n[:0:-1]])
-    elif tuple(p[-1]) < tuple(p[0]):
-        p, n = p[::-1], n[::-1]
-    kind, params = classify(p, pc.closed, spacing)
-    return Curve(
-        np.ascontiguousarray(p),
-        np.ascontiguousarray(n, dtype=np.int64),
-        bool(pc.closed),
-        kind,
-        params,
-    )
+    return curves, Corners(found.corner_points, found.corner_indices)

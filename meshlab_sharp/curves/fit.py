@@ -20,7 +20,7 @@ __all__ = ["FIT_MAX", "FIT_TOLERANCE", "KINDS", "classify"]
 
 #: Curve kinds.
 KINDS = ("line", "arc", "freeform")
-# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
+# The numbers are defined once, in native/include/meshlab_sharp.h.
 #: RMS distance to the fitted line or circle, in spacings, up to which it fits: a
 #: refined cloud curve lies within about 0.3 spacing of its edge (docs/curves.md), and a
 #: mesh curve's vertices lie on the edge.

@@ -1,13 +1,12 @@
 """Input and output: the Geometry type, guarded readers, atomic writers."""
 
+from ..outputs import OutputSet, atomic_write
 from .curves import CURVE_FORMATS, check_curves_path, curve_arrays, require_ezdxf, save_curves
 from .geometry import Geometry, as_geometry, mesh_arrays
 from .quiet import quiet_stdout
 from .readers import POINT_LIST_EXTENSIONS, load
 from .writers import (
-    OutputSet,
     add_vertex_attribute,
-    atomic_write,
     feature_colors,
     feature_meshset,
     save_features_ply,

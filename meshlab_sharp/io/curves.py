@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..extras import require
-from .writers import OutputSet, atomic_write
+from ..outputs import OutputSet, atomic_write
 
 __all__ = ["CURVE_FORMATS", "check_curves_path", "curve_arrays", "require_ezdxf", "save_curves"]
 

@@ -1,17 +1,25 @@
 """LAS and LAZ point clouds through laspy (``pip install 'meshlab-sharp[las]'``, which
 brings ``lazrs`` for LAZ), read in blocks: the coordinates are the scaled ones
-(``X * scale + offset``), in the file's point order."""
+(``X * scale + offset``), in the file's point order. The header's point count must match
+the records: fewer records is an error when read (:class:`~meshlab_sharp.io.stream.
+PointSource`), more (uncompressed LAS) is an error before.
+
+The detection's result is written back as LAS or LAZ by :func:`save_features_las`:
+every point with every attribute of a LAS/LAZ input, the features classified
+:data:`FEATURE_CLASS`, the strength in the extra-bytes dimension ``sharp_strength``."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import InputError
 from ..extras import require
+from ..outputs import OutputSet, atomic_write
 from .stream import PointSource
 
 
@@ -21,9 +29,20 @@ def las_points(path: str | os.PathLike[str]) -> PointSource:
     p = Path(path)
     try:
         with laspy.open(p) as reader:
-            n = int(reader.header.point_count)
+            header = reader.header
+            n = int(header.point_count)
+            records = (int(header.offset_to_point_data), int(header.point_format.size))
+            evlrs = int(header.start_of_first_evlr) if header.number_of_evlrs else 0
     except Exception as exc:  # laspy raises its own and OS errors
         raise InputError(f"{p}: cannot read the LAS/LAZ file: {exc}") from None
+    if p.suffix.lower() == ".las":  # uncompressed: the records' size is known
+        start, size = records
+        extra = (evlrs or p.stat().st_size) - (start + n * size)
+        if extra > 0:
+            raise InputError(
+                f"{p}: {extra} bytes of point records after the {n} points the header "
+                "counts (the header's count is smaller than the data)"
+            )
 
     def blocks(size: int) -> Iterator[np.ndarray]:
         with laspy.open(p) as reader:
@@ -53,3 +72,116 @@ def write_las(path: str | os.PathLike[str], points: np.ndarray, *, scale: float 
     las = laspy.LasData(header)
     las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
     las.write(str(path))
+
+
+#: ASPRS classification of the features in LAS/LAZ output: 64, the first value LAS 1.4
+#: leaves to users (point formats 6-10, which the output always uses).
+FEATURE_CLASS = 64
+#: Name of the extra-bytes dimension (float32) holding the feature strength.
+STRENGTH_DIMENSION = "sharp_strength"
+#: LAS 1.4 point format with the fields of each legacy one (0-5), for 8-bit classes.
+_WIDE_FORMAT = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
+
+
+#: LAS colour channels: 16 bits, written to a PLY as MeshLab's 8-bit colours.
+_COLOURS = ("red", "green", "blue")
+
+
+def las_attributes(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
+    """Every per-point attribute of a LAS/LAZ file but the coordinates (intensity,
+    returns, classification and its flags, scan angle, user data, point source, GPS
+    time, colour, scalar extra bytes), by laspy's dimension name, in the file's order:
+    what a PLY output keeps. The colour becomes 8 bits (the high byte; as it is when no
+    channel exceeds 255, the 8-bit values many writers store)."""
+    laspy = require("laspy", "reading LAS/LAZ", "las")
+    las = _read_whole(laspy, Path(path))
+    out = {}
+    for name in las.point_format.dimension_names:
+        values = np.asarray(las[name])
+        if name not in ("X", "Y", "Z") and values.ndim == 1:
+            out[name] = values
+    colours = [out[c] for c in _COLOURS if c in out]
+    if colours:
+        shift = 8 if max(int(c.max(initial=0)) for c in colours) > 255 else 0
+        out.update({c: (out[c] >> shift).astype(np.uint8) for c in _COLOURS if c in out})
+    return out
+
+
+def check_las_output(path: str | os.PathLike[str]) -> None:
+    """Before any work: laspy is there to write ``path``, and for ``.laz`` a LAZ backend
+    (lazrs, which the ``las`` extra brings); else a one-line InputError."""
+    laspy = require("laspy", "writing LAS/LAZ", "las")
+    if Path(path).suffix.lower() == ".laz" and not laspy.LazBackend.detect_available():
+        raise InputError("writing LAZ needs lazrs: pip install 'meshlab-sharp[las]'")
+
+
+def save_features_las(
+    path: str | os.PathLike[str],
+    vertices: np.ndarray,
+    strength: np.ndarray,
+    mask: np.ndarray,
+    *,
+    source: str | os.PathLike[str] | None = None,
+    into: OutputSet | None = None,
+) -> Path:
+    """Write the detection's result as LAS (``.las``) or LAZ (``.laz``), LAS 1.4.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination, ``.las`` or ``.laz``.
+    vertices : (n, 3) float64
+        Every input point, in input order.
+    strength : (n,) float64
+        Written as the float32 extra-bytes dimension ``sharp_strength``.
+    mask : (n,) bool
+        The features: classification :data:`FEATURE_CLASS`; the other points keep the
+        input's class (0, never classified, for an input that is not LAS).
+    source : path-like, optional
+        A LAS/LAZ input: every point is written with all its attributes (intensity,
+        returns, colour, GPS time, extra bytes...), scales, offsets and VLRs; point
+        formats 0-5 become their LAS 1.4 counterparts 6-10 (8-bit classes).
+        Otherwise the points are written in point format 6, offset 0, at a scale of
+        1e-8 times the power of ten of their largest coordinate (nine digits).
+    into : OutputSet, optional
+        Only stage the file (see :func:`meshlab_sharp.io.atomic_write`).
+    """
+    laspy = require("laspy", "writing LAS/LAZ", "las")
+    if source is not None:
+        las = _read_whole(laspy, Path(source))
+        if len(las.points) != len(vertices):
+            raise InputError(f"{source}: {len(las.points)} points, the result has {len(vertices)}")
+        if las.header.point_format.id in _WIDE_FORMAT:
+            las = laspy.convert(
+                las, point_format_id=_WIDE_FORMAT[las.header.point_format.id], file_version="1.4"
+            )
+    else:
+        las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
+        pts = np.asarray(vertices, np.float64)
+        extent = float(np.abs(pts).max()) or 1.0
+        las.header.scales = np.full(3, 10.0 ** (np.floor(np.log10(extent)) - 8))
+        las.header.offsets = np.zeros(3)
+        las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
+    if STRENGTH_DIMENSION not in las.point_format.extra_dimension_names:
+        las.add_extra_dim(
+            laspy.ExtraBytesParams(
+                name=STRENGTH_DIMENSION, type=np.float32, description="meshlab-sharp strength"
+            )
+        )
+    las[STRENGTH_DIMENSION] = np.asarray(strength, np.float32)
+    classes = np.array(las.classification)
+    classes[np.asarray(mask, bool)] = FEATURE_CLASS
+    las.classification = classes
+
+    def write(tmp: str) -> None:
+        las.write(tmp)
+
+    return atomic_write(path, write, into=into)
+
+
+def _read_whole(laspy: Any, path: Path) -> Any:
+    """The whole LAS/LAZ file as laspy's LasData; a read failure is an InputError."""
+    try:
+        return laspy.read(path)
+    except Exception as exc:  # laspy raises its own and OS errors
+        raise InputError(f"{path}: cannot read the LAS/LAZ file: {exc}") from None

@@ -4,10 +4,12 @@ The header is read with a bounded read and checked before any data: every elemen
 count is checked against the size of the file, so a huge count is refused at once. The
 vertex element must have scalar ``x``, ``y``, ``z`` properties; a ``face`` element's
 ``vertex_indices`` (or ``vertex_index``) list gives polygons, which become triangle
-fans. Every element is read (other elements are skipped), and the data must end where
-the header says: a count smaller or larger than the data is an error. A face with fewer
+fans; a ``tristrips`` element's lists give triangle strips, read as MeshLab reads them.
+Every element is read (other elements are skipped), and the data must end where the
+header says: a count smaller or larger than the data is an error. A face with fewer
 than 3 indices is an error: it has no area and MeshLab would read it as a bogus
-triangle.
+triangle. An element, or a property of one element, declared twice is an error (which
+one would be meant?).
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ _TYPES = {
 _FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
 _MAX_HEADER = 1 << 20
 _INDEX_NAMES = ("vertex_indices", "vertex_index")
+#: Elements whose vertex_indices lists give faces: polygons, and triangle strips.
+_FACE_ELEMENTS = ("face", "tristrips")
 _ELEMENT = re.compile(r"element\s+(\S+)\s+(\d+)")
 _SCALAR = re.compile(r"property\s+(\S+)\s+(\S+)")
 _NUMERIC = np.zeros(256, dtype=bool)
@@ -113,13 +117,7 @@ def read_ply(path: Path, name: str) -> tuple[np.ndarray, np.ndarray | None]:
         outside the vertices, no vertices.
     """
     header = _read_header(path, name)
-    vertex = next((e for e in header.elements if e.name == "vertex"), None)
-    if vertex is None or vertex.count == 0:
-        raise InputError(f"{name}: the file holds no points (no vertex element)")
-    for axis in "xyz":
-        prop = next((p for p in vertex.properties if p.name == axis), None)
-        if prop is None or prop.count_dtype is not None:
-            raise InputError(f"{name}: the vertex element has no scalar '{axis}' property")
+    _vertex_element(header, name)
     _check_size(path, header, name)
     read = _read_ascii if header.order == "" else _read_binary
     columns = read(path, header, name)
@@ -129,24 +127,151 @@ def read_ply(path: Path, name: str) -> tuple[np.ndarray, np.ndarray | None]:
         raise InputError(
             f"{name}: vertex {int(np.argmin(finite))} has a non-finite coordinate (NaN or inf)"
         )
-    faces: _Faces | None = columns.get("face")
-    if faces is None or len(faces.sizes) == 0:
-        return xyz, None
+    parts = []
+    for element in header.elements:
+        found: _Faces | None = columns.get(element.name)
+        if element.name == "face" and found is not None and len(found.sizes):
+            parts.append(_polygon_triangles(found, len(xyz), name))
+        elif element.name == "tristrips" and found is not None and len(found.sizes):
+            parts.append(_strip_triangles(found, len(xyz), name))
+    triangles = np.concatenate(parts) if parts else np.empty((0, 3), np.int64)
+    return xyz, triangles if len(triangles) else None
+
+
+def _polygon_triangles(faces: _Faces, n: int, name: str) -> np.ndarray:
+    """The ``face`` element's polygons as triangle fans, checked: at least 3 indices
+    each, every index one of the ``n`` vertices."""
     few = faces.sizes < 3
     if few.any():
         k = int(np.argmax(few))
         raise InputError(
             f"{name}: {faces.where(k)} has {faces.sizes[k]} vertex indices; a face needs at least 3"
         )
-    bad = (faces.corners < 0) | (faces.corners >= len(xyz))
+    bad = (faces.corners < 0) | (faces.corners >= n)
     if bad.any():
         at = int(np.argmax(bad))
         k = int(np.searchsorted(np.cumsum(faces.sizes), at, side="right"))
         raise InputError(
             f"{name}: {faces.where(k)} has vertex index {faces.corners[at]}, outside the "
-            f"{len(xyz)} vertices"
+            f"{n} vertices"
         )
-    return xyz, fan_triangles(faces.corners, faces.sizes)
+    return fan_triangles(faces.corners, faces.sizes)
+
+
+def _strip_triangles(strips: _Faces, n: int, name: str) -> np.ndarray:
+    """The ``tristrips`` element's triangles, as MeshLab reads them.
+
+    Each list is one or more strips separated by -1: a strip of m indices gives m - 2
+    triangles, every second one with its first two corners swapped so that all turn
+    the same way. MeshLab's reader (vcglib's ``import_ply.h``) is followed step by
+    step, including where it steps over a -1; where it would read outside its vertices
+    (an index out of range, or a -1 inside a triangle) the file is refused.
+    """
+    triangles: list[tuple[int, int, int]] = []
+    bounds = np.cumsum(strips.sizes)
+    for item, (stop, size) in enumerate(zip(bounds.tolist(), strips.sizes.tolist(), strict=True)):
+        v = strips.corners[stop - size : stop].tolist()
+        k, remainder = 0, 0
+        while k < size - 2:
+            a, b, c = v[k : k + 3]
+            corners = (a,) if c == -1 else (a, b, c)  # MeshLab checks a, and reads b, c
+            bad = next((x for x in corners if not 0 <= x < n), None)
+            if bad is not None:
+                line = "" if strips.lines is None else f" (line {strips.lines[item]})"
+                raise InputError(
+                    f"{name}: tristrips item {item}{line} has vertex index {bad} where a "
+                    f"triangle needs one of the {n} vertices"
+                )
+            if c == -1:  # the strip ends: step over the -1
+                k += 2
+                remainder = 0 if k % 2 else 1
+            else:
+                triangles.append((b, a, c) if (k + remainder) % 2 else (a, b, c))
+            k += 1
+    return np.array(triangles, dtype=np.int64).reshape(-1, 3)
+
+
+def binary_vertex_layout(path: Path, name: str) -> tuple[int, np.dtype, int, int] | None:
+    """Where a binary PLY's vertices are, to map them without reading the file:
+    (offset of the vertex data, record dtype, vertices, faces).
+
+    None for an ASCII PLY, or when the vertex element is not first or has a list
+    property (then :func:`read_ply` reads the file). The header and the size of the
+    data are checked as :func:`read_ply` checks them, with the same errors: the elements
+    after the vertices are walked (not read) to find where the data ends.
+
+    Raises
+    ------
+    InputError
+        A malformed header, or counts that do not match the data.
+    """
+    header = _read_header(path, name)
+    vertex = _vertex_element(header, name)
+    _check_size(path, header, name)
+    if header.order == "" or header.elements[0] is not vertex:
+        return None
+    if any(p.count_dtype is not None for p in vertex.properties):
+        return None
+    record = np.dtype([(p.name, p.dtype) for p in vertex.properties])
+    size = path.stat().st_size - header.size
+    offset = vertex.count * record.itemsize
+    rest = header.elements[1:]
+    if any(p.count_dtype is not None for e in rest for p in e.properties if e.count):
+        buf = np.memmap(path, dtype=np.uint8, mode="r", offset=header.size, shape=(size,))
+        for element in rest:
+            if element.count and any(p.count_dtype is not None for p in element.properties):
+                offset = _walk_lists(buf, offset, element, [], name)[2]
+            else:
+                offset += element.count * element.min_bytes()
+        del buf
+    else:
+        offset += sum(e.count * e.min_bytes() for e in rest)
+    if offset > size:
+        raise _truncated(name, header.elements[-1])
+    _no_trailing_bytes(size - offset, name)
+    faces = sum(e.count for e in header.elements if e.name in _FACE_ELEMENTS)
+    return header.size, record, vertex.count, faces
+
+
+def _vertex_element(header: _Header, name: str) -> _Element:
+    """The vertex element, with scalar ``x``, ``y``, ``z`` and at least one vertex."""
+    vertex = next((e for e in header.elements if e.name == "vertex"), None)
+    if vertex is None or vertex.count == 0:
+        raise InputError(f"{name}: the file holds no points (no vertex element)")
+    for axis in "xyz":
+        prop = next((p for p in vertex.properties if p.name == axis), None)
+        if prop is None or prop.count_dtype is not None:
+            raise InputError(f"{name}: the vertex element has no scalar '{axis}' property")
+    return vertex
+
+
+def _no_trailing_bytes(extra: int, name: str) -> None:
+    """Refuse binary data left after the last element."""
+    if extra:
+        raise InputError(
+            f"{name}: {extra} bytes of data after the last element (the "
+            "header's counts are smaller than the data)"
+        )
+
+
+def read_ply_properties(path: Path, name: str) -> dict[str, np.ndarray]:
+    """Every scalar vertex property of a PLY file other than ``x``, ``y``, ``z``
+    (normals, colours, quality, scalar fields), by name, in the file's order and types
+    (native byte order); empty when there is none, without reading the data. The file
+    is checked as :func:`read_ply` checks it."""
+    header = _read_header(path, name)
+    vertex = next((e for e in header.elements if e.name == "vertex"), None)
+    wanted = [] if vertex is None else [
+        p for p in vertex.properties if p.count_dtype is None and p.name not in ("x", "y", "z")
+    ]  # fmt: skip
+    if not wanted:
+        return {}
+    _check_size(path, header, name)
+    if header.order == "":
+        columns = _read_ascii(path, header, name, every_scalar=True)["vertex"]
+    else:
+        columns = _read_binary(path, header, name)["vertex"]
+    return {p.name: np.asarray(columns[p.name], p.dtype.newbyteorder("=")) for p in wanted}
 
 
 def _read_header(path: Path, name: str) -> _Header:
@@ -188,12 +313,30 @@ def _read_header(path: Path, name: str) -> _Header:
             raise InputError(f"{name}: header line {number}: cannot read {line.strip()[:40]!r}")
     if order is None:
         raise InputError(f"{name}: the PLY header has no format line")
+    _check_names(elements, name)
     for element in elements:
         for prop in element.properties:
             prop.dtype = prop.dtype.newbyteorder(order or "=")
             if prop.count_dtype is not None:
                 prop.count_dtype = prop.count_dtype.newbyteorder(order or "=")
     return _Header(order, elements, end.end(), len(lines) + 1)
+
+
+def _check_names(elements: list[_Element], name: str) -> None:
+    """Refuse what would be read ambiguously: an element or a property of one element
+    declared twice."""
+    seen: set[str] = set()
+    for element in elements:
+        if element.name in seen:
+            raise InputError(f"{name}: the PLY header declares element '{element.name}' twice")
+        seen.add(element.name)
+        props = [p.name for p in element.properties]
+        twice = next((n for i, n in enumerate(props) if n in props[:i]), None)
+        if twice is not None:
+            raise InputError(
+                f"{name}: the PLY header declares property '{twice}' of element "
+                f"'{element.name}' twice"
+            )
 
 
 def _dtype(word: str, name: str, number: int) -> np.dtype:
@@ -238,44 +381,52 @@ def _read_binary(path: Path, header: _Header, name: str) -> dict:
                 raise _truncated(name, element)
             items = np.frombuffer(buf, dtype=dtype, count=element.count, offset=offset)
             offset += need
-            if element.name == "face" and element.count:
+            if element.name in _FACE_ELEMENTS and element.count:
                 _index_property(element, name)  # raises: a face element needs its list
             if element.name == "vertex":
                 columns["vertex"] = {
                     p.name: items[f"p{i}"] for i, p in enumerate(element.properties)
                 }
             continue
-        starts, sizes, offset = _walk_lists(buf, offset, element, name)
-        if element.name == "face":
-            prop = _index_property(element, name)
-            columns["face"] = _Faces(_gather(buf, starts, sizes, prop.dtype), sizes, None)
-    if offset != len(buf):
-        raise InputError(
-            f"{name}: {len(buf) - offset} bytes of data after the last element (the "
-            "header's counts are smaller than the data)"
-        )
+        props = element.properties
+        if element.name in _FACE_ELEMENTS:
+            wanted = [props.index(_index_property(element, name))]
+        elif element.name == "vertex":
+            wanted = [i for i, p in enumerate(props) if p.name in ("x", "y", "z")]
+        else:
+            wanted = []
+        where, sizes, offset = _walk_lists(buf, offset, element, wanted, name)
+        if element.name in _FACE_ELEMENTS:
+            i = wanted[0]
+            corners = _gather(buf, where[i], sizes[i], props[i].dtype).astype(np.int64)
+            columns[element.name] = _Faces(corners, sizes[i], None)
+        elif element.name == "vertex":
+            columns["vertex"] = {
+                props[i].name: _values(buf, where[i], props[i].dtype) for i in wanted
+            }
+    _no_trailing_bytes(len(buf) - offset, name)
     return columns
 
 
 def _index_property(element: _Element, name: str) -> _Property:
     prop = next((p for p in element.properties if p.name in _INDEX_NAMES and p.count_dtype), None)
     if prop is None or prop.dtype.kind not in "iu":
-        raise InputError(f"{name}: the face element has no integer vertex_indices list")
+        raise InputError(f"{name}: the {element.name} element has no integer vertex_indices list")
     return prop
 
 
 def _walk_lists(
-    buf: np.ndarray, offset: int, element: _Element, name: str
-) -> tuple[np.ndarray, np.ndarray, int]:
+    buf: np.ndarray, offset: int, element: _Element, wanted: list[int], name: str
+) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], int]:
     """Walk the binary items of an element with list properties.
 
-    Returns the byte offsets and lengths of its ``vertex_indices`` lists (empty arrays
-    for another element) and the offset after the element. When the element has one
-    list and every item has the first item's list length (all triangles, say) this is
-    one numpy step; otherwise a loop over the items.
+    Returns, for each property index in ``wanted``, the byte offset in every item of
+    its value (a scalar) or of its first list item, and the list lengths (lists only),
+    then the offset after the element. When the element has one list and every item
+    has the first item's list length (all triangles, say) this is one numpy step;
+    otherwise a loop over the items.
     """
     props = element.properties
-    wanted = next((i for i, p in enumerate(props) if p.name in _INDEX_NAMES), -1)
     lists = [i for i, p in enumerate(props) if p.count_dtype is not None]
     if len(lists) == 1 and element.count > 0:
         i, p = lists[0], props[lists[0]]
@@ -290,29 +441,32 @@ def _walk_lists(
             if end <= len(buf):
                 counts = np.frombuffer(buf, dtype, element.count, offset)["n"]
                 if (counts == n).all():
-                    if wanted != i:
-                        return np.empty(0, np.int64), np.empty(0, np.int64), end
-                    step = dtype.itemsize * np.arange(element.count)
-                    starts = offset + dtype.fields["items"][1] + step
-                    return starts, np.full(element.count, n, dtype=np.int64), end
+                    step = offset + dtype.itemsize * np.arange(element.count)
+                    where = {
+                        j: step + dtype.fields["items" if j == i else f"p{j}"][1] for j in wanted
+                    }
+                    sizes = {i: np.full(element.count, n, dtype=np.int64)} if i in wanted else {}
+                    return where, sizes, end
     return _walk_items(buf, offset, element, wanted, name)
 
 
 def _walk_items(
-    buf: np.ndarray, offset: int, element: _Element, wanted: int, name: str
-) -> tuple[np.ndarray, np.ndarray, int]:
+    buf: np.ndarray, offset: int, element: _Element, wanted: list[int], name: str
+) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], int]:
     """The general case of :func:`_walk_lists`: one item at a time."""
     raw = buf.data
     layout = [
         (p.dtype.itemsize, None if p.count_dtype is None else struct.Struct(_struct(p.count_dtype)))
         for p in element.properties
     ]
-    starts = np.empty(element.count if wanted >= 0 else 0, dtype=np.int64)
-    sizes = np.empty_like(starts)
+    where = {i: np.empty(element.count, dtype=np.int64) for i in wanted}
+    sizes = {i: np.empty(element.count, dtype=np.int64) for i in wanted if layout[i][1]}
     pos, end = offset, len(buf)
     for item in range(element.count):
         for i, (size, count) in enumerate(layout):
             if count is None:
+                if i in where:
+                    where[i][item] = pos
                 pos += size
                 continue
             if pos + count.size > end:
@@ -323,12 +477,12 @@ def _walk_items(
                     f"{name}: item {item} of element '{element.name}': negative list length"
                 )
             pos += count.size
-            if i == wanted:
-                starts[item], sizes[item] = pos, n
+            if i in where:
+                where[i][item], sizes[i][item] = pos, n
             pos += n * size
         if pos > end:
             raise _truncated(name, element)
-    return starts, sizes, pos
+    return where, sizes, pos
 
 
 def _struct(dtype: np.dtype) -> str:
@@ -345,8 +499,12 @@ def _gather(buf: np.ndarray, starts: np.ndarray, sizes: np.ndarray, dtype: np.dt
     item = np.repeat(starts, sizes) + dtype.itemsize * (
         np.arange(total) - np.repeat(np.cumsum(sizes) - sizes, sizes)
     )
-    raw = buf[item[:, None] + np.arange(dtype.itemsize)]
-    return raw.view(dtype).ravel().astype(np.int64)
+    return _values(buf, item, dtype)
+
+
+def _values(buf: np.ndarray, where: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """The ``dtype`` values at byte offsets ``where``."""
+    return buf[where[:, None] + np.arange(dtype.itemsize)].view(dtype).ravel()
 
 
 def _truncated(name: str, element: _Element) -> InputError:
@@ -356,8 +514,9 @@ def _truncated(name: str, element: _Element) -> InputError:
     )
 
 
-def _read_ascii(path: Path, header: _Header, name: str) -> dict:
-    """The columns the reader needs, from ASCII data: one line per item."""
+def _read_ascii(path: Path, header: _Header, name: str, *, every_scalar: bool = False) -> dict:
+    """The columns the reader needs (with ``every_scalar``, every scalar vertex
+    property), from ASCII data: one line per item."""
     data = read_text(path, name, "ASCII PLY", offset=header.size)
     junk = ~_NUMERIC[np.frombuffer(data, dtype=np.uint8)]
     if junk.any():
@@ -382,8 +541,8 @@ def _read_ascii(path: Path, header: _Header, name: str) -> dict:
                 f"{name}: truncated PLY file: element '{element.name}' declares "
                 f"{element.count} lines, {max(len(first) - row, 0)} remain"
             )
-        found = _ascii_element(tokens, first[lines], count[lines], element, name)
-        if element.name in ("vertex", "face"):
+        found = _ascii_element(tokens, first[lines], count[lines], element, name, every_scalar)
+        if element.name in ("vertex", *_FACE_ELEMENTS):
             columns[element.name] = found
         row += element.count
     if row != len(first):
@@ -395,11 +554,17 @@ def _read_ascii(path: Path, header: _Header, name: str) -> dict:
 
 
 def _ascii_element(
-    tokens: Tokens, first: np.ndarray, count: np.ndarray, element: _Element, name: str
+    tokens: Tokens,
+    first: np.ndarray,
+    count: np.ndarray,
+    element: _Element,
+    name: str,
+    every_scalar: bool = False,
 ) -> dict[str, np.ndarray] | _Faces:
     """Read the lines of one element, property by property across all its lines.
 
-    Returns the vertex columns (name -> values of the declared type), or the faces.
+    Returns the vertex columns (name -> values of the declared type: ``x``, ``y``,
+    ``z``, or with ``every_scalar`` every scalar property), or the faces.
     """
     pos = first.copy()
     end = first + count
@@ -416,7 +581,7 @@ def _ascii_element(
         n = numbers(tokens, pos, np.int64, name)
         if (n < 0).any():
             raise _line_length(tokens, first, n < 0, element, name)
-        if element.name == "face" and p.name in _INDEX_NAMES:
+        if element.name in _FACE_ELEMENTS and p.name in _INDEX_NAMES:
             lists = (pos + 1, n)
         pos = pos + 1 + n
         over = pos > end
@@ -425,15 +590,17 @@ def _ascii_element(
     wrong = pos != end
     if wrong.any():
         raise _line_length(tokens, first, wrong, element, name)
-    if element.name != "face":
+    if element.name not in _FACE_ELEMENTS:
         if element.name != "vertex":
             return {}
-        xyz = numbers(tokens, np.stack([scalars[a] for a in "xyz"], axis=1), np.float64, name)
+        names = list(scalars) if every_scalar else ["x", "y", "z"]
+        values = numbers(tokens, np.stack([scalars[a] for a in names], axis=1), np.float64, name)
         types = {p.name: p.dtype for p in element.properties}
-        return {a: _as_type(xyz[:, k], types[a], first, tokens, name) for k, a in enumerate("xyz")}
+        return {
+            a: _as_type(values[:, k], types[a], first, tokens, name, a) for k, a in enumerate(names)
+        }
     _index_property(element, name)
-    if lists is None:
-        raise InputError(f"{name}: the face element has no integer vertex_indices list")
+    assert lists is not None  # _index_property found the list
     starts, sizes = lists
     total = int(sizes.sum())
     at = np.repeat(starts, sizes) + np.arange(total) - np.repeat(np.cumsum(sizes) - sizes, sizes)
@@ -442,10 +609,16 @@ def _ascii_element(
 
 
 def _as_type(
-    values: np.ndarray, dtype: np.dtype, first: np.ndarray, tokens: Tokens, name: str
+    values: np.ndarray,
+    dtype: np.dtype,
+    first: np.ndarray,
+    tokens: Tokens,
+    name: str,
+    prop: str,
 ) -> np.ndarray:
-    """(n,) float64 ``values`` read from the lines at ``first``, as the declared ``dtype``
-    (a float overflow becomes inf, refused later; an integer must fit its type)."""
+    """(n,) float64 ``values`` of the property ``prop`` read from the lines at ``first``,
+    as the declared ``dtype`` (a float overflow becomes inf, refused later; an integer
+    must fit its type)."""
     if dtype.kind == "f":
         with np.errstate(over="ignore"):
             return values.astype(dtype)
@@ -453,7 +626,8 @@ def _as_type(
     bad = (values != np.floor(values)) | (values < info.min) | (values > info.max)
     if bad.any():
         line = tokens.line[first[np.argmax(bad)]]
-        raise InputError(f"{name}: line {line}: a coordinate is not a {dtype.name} value")
+        what = "a coordinate" if prop in ("x", "y", "z") else f"the vertex property {prop!r}"
+        raise InputError(f"{name}: line {line}: {what} is not a {dtype.name} value")
     return values.astype(dtype)
 
 

@@ -19,17 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .writers import OutputSet, atomic_write, feature_colors
+from ..outputs import OutputSet, atomic_write
+from .ply import binary_vertex_layout
+from .writers import feature_colors
 
 #: Points per block when reading or writing.
 BLOCK = 1 << 20
-
-_PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}  # fmt: skip
 
 
 class PointSource:
@@ -48,8 +43,26 @@ class PointSource:
 
     def __init__(self, n: int, blocks: Callable[[int], Iterator[np.ndarray]], name: str) -> None:
         self.n = n
-        self.blocks = blocks
+        self._blocks = blocks
         self.name = name
+
+    def blocks(self, size: int) -> Iterator[np.ndarray]:
+        """The coordinates, (c, 3) float64 blocks of at most ``size`` points, in order.
+
+        Raises
+        ------
+        InputError
+            The file holds more or fewer points than its header says (the same error
+            whoever reads it, in memory or out of core).
+        """
+        seen = 0
+        for block in self._blocks(size):
+            seen += len(block)
+            if seen > self.n:
+                break
+            yield block
+        if seen != self.n:
+            raise InputError(f"{self.name}: {seen} points read, the header says {self.n}")
 
     @classmethod
     def from_array(cls, points: np.ndarray, name: str = "array") -> PointSource:
@@ -62,54 +75,22 @@ class PointSource:
         return cls(len(points), blocks, name)
 
 
-def ply_vertex_layout(path: str | os.PathLike[str]) -> tuple[int, np.dtype, int, int] | None:
-    """Where a binary PLY's vertices are: (header bytes, record dtype, vertices, faces).
-
-    None for an ASCII PLY, or when the vertex element is not first or has a list
-    property (then it cannot be mapped as a plain array).
-    """
-    with open(path, "rb") as fh:
-        head = fh.read(1 << 16)
-    end = head.find(b"end_header")
-    if not head.startswith(b"ply") or end < 0:
-        return None
-    stop = head.find(b"\n", end) + 1
-    lines = head[:stop].decode("ascii", "replace").splitlines()
-    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format ")), "")
-    if fmt not in ("binary_little_endian", "binary_big_endian"):
-        return None
-    order = "<" if fmt == "binary_little_endian" else ">"
-    elements: list[tuple[str, int, list[tuple[str, str]]]] = []
-    for ln in lines:
-        parts = ln.split()
-        if parts[:1] == ["element"] and len(parts) == 3:
-            elements.append((parts[1], int(parts[2]), []))
-        elif parts[:1] == ["property"] and elements:
-            if parts[1] == "list":
-                elements[-1][2].append(("list", ""))
-            elif len(parts) == 3 and parts[1] in _PLY_TYPES:
-                elements[-1][2].append((parts[2], order + _PLY_TYPES[parts[1]]))
-            else:
-                return None
-    if not elements or elements[0][0] != "vertex":
-        return None
-    _, n, props = elements[0]
-    names = [p[0] for p in props]
-    if "list" in names or not {"x", "y", "z"} <= set(names):
-        return None
-    faces = sum(count for name, count, _ in elements if name == "face")
-    return stop, np.dtype(props), n, faces
-
-
-def ply_points(path: str | os.PathLike[str]) -> PointSource | None:
+def ply_points(path: str | os.PathLike[str], *, as_points: bool = False) -> PointSource | None:
     """A binary PLY's vertices through a memory map; None when it is not one
-    (:func:`ply_vertex_layout`)."""
-    layout = ply_vertex_layout(path)
+    (:func:`meshlab_sharp.io.ply.binary_vertex_layout`, which checks the file as the
+    in-memory reader does).
+
+    Raises
+    ------
+    InputError
+        A malformed file, or a mesh (faces) without ``as_points``.
+    """
+    layout = binary_vertex_layout(Path(path), str(path))
     if layout is None:
         return None
-    offset, dtype, n, _ = layout
-    if Path(path).stat().st_size < offset + n * dtype.itemsize:
-        raise InputError(f"{path}: the file is truncated ({n} vertices announced)")
+    offset, dtype, n, faces = layout
+    if faces and not as_points:
+        raise mesh_error(str(path))
 
     def blocks(size: int) -> Iterator[np.ndarray]:
         for s in range(0, n, size):
@@ -144,25 +125,22 @@ def open_points(path: str | os.PathLike[str], *, as_points: bool = False) -> Poi
         from .e57 import e57_points
 
         return e57_points(p)
-    if ext == ".ply":
-        layout = ply_vertex_layout(p)
-        if layout is not None and layout[3] > 0 and not as_points:
-            raise _mesh_error(p)
-        if layout is not None:
-            source = ply_points(p)
-            assert source is not None
+    if ext == ".ply" and p.stat().st_size > 0:
+        source = ply_points(p, as_points=as_points)
+        if source is not None:
             return source
     from .readers import load
 
     geometry = load(p, as_points=as_points)
     if geometry.is_mesh:
-        raise _mesh_error(p)
+        raise mesh_error(str(p))
     return PointSource.from_array(geometry.vertices, str(p))
 
 
-def _mesh_error(path: Path) -> InputError:
+def mesh_error(name: str) -> InputError:
+    """The error for a mesh given to out-of-core detection (``name``: the input)."""
     return InputError(
-        f"{path}: a mesh; out-of-core detection (--max-memory, --dask) handles point "
+        f"{name}: a mesh; out-of-core detection (--max-memory, --dask) handles point "
         "clouds only: add --as-points, or run without --max-memory"
     )
 

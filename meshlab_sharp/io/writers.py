@@ -1,189 +1,29 @@
-"""Writing results atomically: temporary siblings, then renames.
-
-Every file written here goes to a hidden temporary sibling (``.NAME.XXXX.part.EXT``) in
-the destination's folder first and is renamed into place only when its content is
-complete. An :class:`OutputSet` does this for several files at once: all of them are
-written to temporary siblings, and only then renamed, one after the other, with the
-catchable signals blocked; anything that stops the set before the renames removes every
-temporary file, so an output set is all or nothing.
-"""
+"""Writers of the results: the feature PLY (every input vertex property kept), the
+indices, the JSON report, and the MeshSet MeshLab shows. Each writes through
+:mod:`meshlab_sharp.outputs` (temporary siblings, then renames)."""
 
 from __future__ import annotations
 
-import contextlib
-import errno
 import json
 import os
-import signal
-import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Mapping
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
 import pymeshlab
 
-from ..errors import OutputError
-from .quiet import quiet_stdout
+from ..outputs import OutputSet, atomic_write
 
-#: Signals held back while an output set creates a temporary file or renames its files.
-HELD_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
-
-
-@contextlib.contextmanager
-def signals_held() -> Iterator[None]:
-    """Delay :data:`HELD_SIGNALS` until the block ends (they are delivered then)."""
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-class OutputSet:
-    """Files written to hidden temporary siblings, renamed into place together.
-
-    ``stage`` writes one file's content to a temporary sibling of its destination;
-    ``commit`` renames every staged file into place; ``discard`` (also run on leaving a
-    ``with`` block) removes the temporary files that were not renamed.
-
-    Attributes
-    ----------
-    written : list of Path
-        Destinations renamed into place so far, in order.
-    """
-
-    def __init__(self) -> None:
-        self._staged: list[tuple[Path, Path]] = []
-        self.written: list[Path] = []
-
-    def __enter__(self) -> OutputSet:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.discard()
-
-    def stage(self, path: str | os.PathLike[str], write: Callable[[str], None]) -> Path:
-        """Write one file's content to a temporary sibling of ``path``.
-
-        Parameters
-        ----------
-        path : path-like
-            Destination. Its folder must exist.
-        write : callable
-            ``write(tmp_path)`` creates the content at ``tmp_path`` (same extension as
-            ``path``, so format-sniffing writers such as pymeshlab's work).
-
-        Returns
-        -------
-        Path
-            The destination.
-
-        Raises
-        ------
-        OutputError
-            The folder is missing, or writing failed (disk full, no permission...): the
-            message names ``path``.
-        """
-        dest = Path(path)
-        folder = dest.parent if str(dest.parent) else Path(".")
-        if not folder.is_dir():
-            raise OutputError(f"cannot write {dest}: the folder {folder} does not exist")
-        try:
-            with signals_held():  # the temporary file is always recorded for discard
-                fd, tmp = tempfile.mkstemp(
-                    prefix=f".{dest.stem}.", suffix=f".part{dest.suffix}", dir=folder
-                )
-                self._staged.append((Path(tmp), dest))
-            os.close(fd)
-            write(tmp)
-            os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
-        except OSError as exc:
-            raise OutputError(f"cannot write {dest}: {exc.strerror or exc}") from None
-        return dest
-
-    def commit(self) -> list[Path]:
-        """Rename every staged file into place, with the catchable signals held.
-
-        Returns
-        -------
-        list of Path
-            The destinations, in the order staged.
-
-        Raises
-        ------
-        OutputError
-            A rename failed; the message says which files were written before it.
-        """
-        with signals_held():
-            while self._staged:
-                tmp, dest = self._staged[0]
-                try:
-                    os.replace(tmp, dest)
-                except OSError as exc:
-                    done = ", ".join(map(str, self.written))
-                    note = f" (written: {done}; the others were not)" if done else ""
-                    raise OutputError(f"cannot write {dest}: {exc.strerror or exc}{note}") from None
-                self._staged.pop(0)
-                self.written.append(dest)
-        return list(self.written)
-
-    def discard(self) -> None:
-        """Remove the temporary files not renamed into place."""
-        with signals_held():
-            for tmp, _ in self._staged:
-                with contextlib.suppress(FileNotFoundError):
-                    os.unlink(tmp)
-            self._staged.clear()
-
-
-def atomic_write(
-    path: str | os.PathLike[str],
-    write: Callable[[str], None],
-    *,
-    into: OutputSet | None = None,
-) -> Path:
-    """Write a file through a temporary sibling and rename it into place.
-
-    Parameters
-    ----------
-    path : path-like
-        Destination. Its folder must exist.
-    write : callable
-        ``write(tmp_path)`` creates the content at ``tmp_path`` (same extension as
-        ``path``, so format-sniffing writers such as pymeshlab's work).
-    into : OutputSet, optional
-        Only stage the file in this set; its ``commit`` renames it into place.
-
-    Returns
-    -------
-    Path
-        The destination.
-
-    Raises
-    ------
-    OutputError
-        See :meth:`OutputSet.stage`.
-    """
-    if into is not None:
-        return into.stage(path, write)
-    with OutputSet() as single:
-        dest = single.stage(path, write)
-        single.commit()
-    return dest
-
-
-def _umask() -> int:
-    """The process's file-creation mask (reading it means setting it, so set it back)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+#: Vertex properties the output PLY sets itself; an input property of the same name is
+#: replaced (the colour ones only when the features are coloured).
+OWN_PROPERTIES = ("flags", "quality")
+COLOUR_PROPERTIES = ("red", "green", "blue", "alpha")
+#: PLY ``flags``: MeshLab's selection bit, and the bit MeshLab leaves on a vertex that
+#: no face references (every vertex of a point cloud): the same bytes as MeshLab writes.
+_SELECTED, _UNREFERENCED = 0x20, 0x10
+_PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int",
+              "u4": "uint", "f4": "float", "f8": "double"}  # fmt: skip
 
 
 def save_features_ply(
@@ -194,10 +34,18 @@ def save_features_ply(
     mask: np.ndarray,
     *,
     normals: np.ndarray | None = None,
+    attributes: Mapping[str, np.ndarray] | None = None,
+    colour: bool = True,
     binary: bool = True,
     into: OutputSet | None = None,
 ) -> Path:
     """Write a PLY that MeshLab shows: quality = strength, selection = features.
+
+    The vertex element holds ``x y z`` (double), then ``nx ny nz`` when ``normals`` are
+    given, then every property of ``attributes`` in its order and type, then ``flags``
+    (int, selection bit 0x20 on the features), ``red green blue alpha`` (uchar; features
+    red, the rest grey) unless ``colour`` is False, and ``quality`` (double) = strength.
+    An attribute named like one of these last ones is replaced by it.
 
     Parameters
     ----------
@@ -210,11 +58,18 @@ def save_features_ply(
     strength : (n,) float64
         Written as vertex quality.
     mask : (n,) bool
-        Written as vertex selection (PLY ``flags`` bit 0x20) and as red colour.
+        Written as vertex selection (PLY ``flags`` bit 0x20) and, with ``colour``, as
+        red colour.
     normals : (n, 3) float64, optional
         Written as vertex normals when given.
+    attributes : mapping of str to (n,) arrays, optional
+        Other per-vertex properties to keep (the input's normals, colours, scalar
+        fields), numeric scalars each; ``x``, ``y`` and ``z`` are ignored.
+    colour : bool, default True
+        Colour the features red and the rest grey; False keeps the colour properties of
+        ``attributes`` (if any) as they are.
     binary : bool, default True
-        Binary or ASCII PLY.
+        Binary (little endian) or ASCII PLY.
     into : OutputSet, optional
         Only stage the file in this set (see :func:`atomic_write`).
 
@@ -223,43 +78,60 @@ def save_features_ply(
     OutputError
         The file cannot be written (the message names ``path`` and the reason).
     """
-    ms = feature_meshset(vertices, faces, strength, mask, normals=normals)
+    n = len(vertices)
+    columns: dict[str, np.ndarray] = {a: vertices[:, i] for i, a in enumerate("xyz")}
+    if normals is not None:
+        columns.update({a: normals[:, i] for i, a in enumerate(("nx", "ny", "nz"))})
+    replaced = (*OWN_PROPERTIES, *(COLOUR_PROPERTIES if colour else ()))
+    for name, values in (attributes or {}).items():
+        if name not in ("x", "y", "z", *replaced):
+            columns[name] = _ply_typed(np.asarray(values))
+    mask = np.asarray(mask, bool)
+    referenced = np.zeros(n, bool)
+    if faces is not None:
+        referenced[np.asarray(faces).ravel()] = True
+    columns["flags"] = (np.where(referenced, 0, _UNREFERENCED) | _SELECTED * mask).astype(np.int32)
+    if colour:
+        rgba = (feature_colors(mask) * 255).astype(np.uint8)
+        columns.update({c: rgba[:, i] for i, c in enumerate(COLOUR_PROPERTIES)})
+    columns["quality"] = np.asarray(strength, np.float64)
+    record = np.dtype([(k, v.dtype.newbyteorder("<")) for k, v in columns.items()])
+    header = "".join(
+        [
+            f"ply\nformat {'binary_little_endian' if binary else 'ascii'} 1.0\n",
+            f"comment VCGLIB generated\nelement vertex {n}\n",
+            *(f"property {_PLY_NAMES[record[k].str[1:]]} {k}\n" for k in columns),
+            f"element face {0 if faces is None else len(faces)}\n",
+            "property list uchar int vertex_indices\nend_header\n",
+        ]
+    )
 
     def write(tmp: str) -> None:
-        try:
-            with quiet_stdout():
-                ms.save_current_mesh(
-                    tmp,
-                    binary=binary,
-                    save_vertex_quality=True,
-                    save_vertex_flag=True,
-                    save_vertex_color=True,
-                    save_vertex_normal=normals is not None,
-                    save_face_color=False,
-                )
-        except pymeshlab.PyMeshLabException as exc:
-            raise _write_failure(tmp, exc) from None
+        table = np.empty(n, record)
+        for k, v in columns.items():
+            table[k] = v
+        tri = np.asarray(np.zeros((0, 3)) if faces is None else faces, np.int32)
+        with open(tmp, "wb") as fh:
+            fh.write(header.encode("ascii"))
+            if binary:
+                fh.write(table.tobytes())
+                packed = np.empty(len(tri), [("n", "u1"), ("v", "<i4", (3,))])
+                packed["n"], packed["v"] = 3, tri
+                fh.write(packed.tobytes())
+                return
+            formats = " ".join("%.17g" if record[k].kind == "f" else "%d" for k in columns)
+            np.savetxt(fh, table, fmt=formats)
+            np.savetxt(fh, tri, fmt="3 %d %d %d")
 
     return atomic_write(path, write, into=into)
 
 
-#: Bytes appended to a file pymeshlab failed to write, to learn why (disk full...).
-_PROBE_BYTES = 1 << 20
-
-
-def _write_failure(tmp: str, exc: Exception) -> OSError:
-    """The OSError behind a failed pymeshlab save, which reports only "Output Stream
-    Error": append and sync :data:`_PROBE_BYTES` to the file, which fails with the
-    system's reason (no space, quota, I/O error) when the file system is the cause."""
-    try:
-        with open(tmp, "ab") as fh:
-            fh.write(bytes(_PROBE_BYTES))
-            fh.flush()
-            os.fsync(fh.fileno())
-    except OSError as probe:
-        return probe
-    reason = str(exc).splitlines()[-1].strip() or "unknown error"
-    return OSError(errno.EIO, f"pymeshlab could not write the file ({reason})")
+def _ply_typed(values: np.ndarray) -> np.ndarray:
+    """``values`` in a type PLY has: as they are, or booleans as uchar and the rest
+    (64-bit integers, half floats...) as double."""
+    if values.dtype.str[1:] in _PLY_NAMES:
+        return values
+    return values.astype(np.uint8 if values.dtype.kind == "b" else np.float64)
 
 
 def feature_colors(mask: np.ndarray) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 :func:`meshlab_sharp.curves.extract_curves` on a cloud reads the feature points and
 the valid points in the grid cells of side
-:func:`~meshlab_sharp.curves.extract.support_radius` around them (for the refinement),
+:func:`~meshlab_sharp.reference.curves.support_radius` around them (for the refinement),
 nothing else. Two streaming passes over the input gather exactly those points (the
 features' coordinates and the cloud's bounding box; then the valid points in the
 features' cells), and ``extract_curves`` runs on them with the whole cloud's bounding
@@ -17,9 +17,9 @@ import dataclasses
 import numpy as np
 
 from ..curves import Corners, Curve, extract_curves
-from ..curves.extract import support_radius
-from ..curves.refine import CellGrid
 from ..io.stream import PointSource
+from ..reference.curves import support_radius
+from ..reference.curves.refine import CellGrid
 from .layout import bounds
 
 #: Points per block of the streaming passes.

@@ -17,8 +17,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial import cKDTree
 
-from .._header import CURVES
-from ..neighbourhoods import squared_distances
+from ..._header import CURVES
+from ...neighbourhoods import squared_distances
 
 __all__ = [
     "LINK_NEIGHBOURS",
@@ -34,7 +34,7 @@ __all__ = [
     "spanning_forest",
 ]
 
-# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
+# The numbers are defined once, in native/include/meshlab_sharp.h.
 #: Feature neighbours a cloud feature point is linked to, at most: enough for a band
 #: three points wide (the paper mode's lines) to stay connected along its length.
 LINK_NEIGHBOURS = CURVES.integer("LINK_NEIGHBOURS")
@@ -86,7 +86,7 @@ def cloud_graph(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndar
 def nearest(tree: cKDTree, queries: np.ndarray, k: int, bound: float = math.inf) -> np.ndarray:
     """The ``k`` nearest of the tree's points to each query, nearer than ``bound``, ordered
     by squared distance, ties by the lower index (whatever order the kd-tree returns tied
-    points in: the MeshLab plugin's order, and the same on a regular grid).
+    points in: the native library's order, and the same on a regular grid).
 
     Parameters
     ----------
@@ -414,7 +414,7 @@ class MeshPaths:
         Dijkstra with a heap of (distance, vertex): of equally near vertices the lowest
         is settled first, and a vertex's predecessor is the first settled vertex that
         reaches it at its final distance; so among equally short paths (a regular grid)
-        the one taken is fixed, and the same in the MeshLab plugin.
+        the one taken is fixed, and the same in the native library.
         """
         ia, ib = (int(i) for i in np.searchsorted(self.ids, [a, b]))
         if ia >= len(self.ids) or ib >= len(self.ids) or self.ids[ia] != a or self.ids[ib] != b:

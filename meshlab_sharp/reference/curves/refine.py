@@ -16,7 +16,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .._header import CURVES
+from ..._header import CURVES
 from .graph import nearest
 
 __all__ = [
@@ -30,7 +30,7 @@ __all__ = [
     "refine_neighbours",
 ]
 
-# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
+# The numbers are defined once, in native/include/meshlab_sharp.h.
 #: Points near a vertex that the two arms are fitted to (before the features among
 #: them are left out): a disc of about 3.5 spacings' radius.
 REFINE_NEIGHBOURS = CURVES.integer("REFINE_NEIGHBOURS")
@@ -284,7 +284,7 @@ def line_fit_positions(
     total = np.zeros_like(points)
     for j in range(-half, half + 1):
         k = np.where(loop, (local + j) % m, np.clip(local + j, 0, m - 1))
-        total = total + points[starts[piece] + k]  # in order, like the plugin
+        total = total + points[starts[piece] + k]  # in order, like the native library
     mean = total / (2 * half + 1)
     rel = points - mean
     out = mean + np.einsum("ij,ij->i", rel, directions)[:, None] * directions

@@ -1,12 +1,15 @@
-// meshlab-sharp: feature curves from a detection (the polylines along the sharp
-// features), independent of MeshLab's types. The same steps and the same arithmetic as
-// the Python package's meshlab_sharp/curves (extract.py, graph.py, trace.py, refine.py):
+// meshlab-sharp native library: feature curves from a detection (the polylines along
+// the sharp features), independent of MeshLab's types (internal C++ header; the C ABI
+// is native/include/meshlab_sharp.h). The same steps and the same arithmetic as
+// the Python package's numpy reference, meshlab_sharp/reference/curves (extract.py,
+// graph.py, trace.py, refine.py):
 // on meshes, chains of the mesh's own sharp edges; on clouds, the skeleton of the
 // feature points refined onto the intersection of the surfaces on each side. In double.
-#ifndef MESHLAB_SHARP_CURVES_CORE_H
-#define MESHLAB_SHARP_CURVES_CORE_H
+#ifndef MESHLAB_SHARP_CURVES_INTERNAL_H
+#define MESHLAB_SHARP_CURVES_INTERNAL_H
 
-#include "sharp_core.h"
+#include "curves_types.h"
+#include "meshlab_sharp.h"
 
 #include <array>
 #include <vector>
@@ -33,10 +36,15 @@ struct Curves {
 
 // The feature curves of a detection. vertices: the input, in input order; feature and
 // valid: Result::feature and Result::kept of detect() (per vertex); faces: the
-// triangles (curves are chains of mesh edges), or empty for a cloud.
+// triangles (curves are chains of mesh edges), or empty for a cloud; bounds: a cloud's
+// grid box {lo, hi} when the vertices are only the part of a larger cloud near the
+// features (out of core), or null (the vertices' bounding box); math: the elementwise
+// exp, acos and atan2 to use, or null (the C library's).
 Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char> &feature,
                      const std::vector<char> &valid,
-                     const std::vector<std::array<int, 3>> &faces);
+                     const std::vector<std::array<int, 3>> &faces,
+                     const std::array<Vec3, 2> *bounds = nullptr,
+                     const ms_curves_math *math = nullptr);
 
 }  // namespace sharp
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .._header import CURVES
+from ..._header import CURVES
 from .graph import adjacency
 
 __all__ = [
@@ -33,7 +33,7 @@ __all__ = [
     "trace_paths",
 ]
 
-# The numbers are defined once, in _curves.h (the plugin's curves_core.cpp includes it).
+# The numbers are defined once, in native/include/meshlab_sharp.h.
 #: Degrees: a curve turning by more than this at a vertex has a corner there; two curve
 #: ends meeting at more than this meet at a corner (less: one curve continues into the
 #: other). The turn at a vertex is the angle between the chords of the curve from

@@ -1,11 +1,14 @@
-// meshlab-sharp feature curves: a line-for-line port of meshlab_sharp/curves (see
-// curves_core.h). Sums, dot products and reductions are evaluated in the order numpy
-// evaluates them (pairwise sums along an array's last axis, sequential sums along the
-// others, einsum's (0, 2, 1) order over three components), so that mesh curves agree
-// exactly and cloud curves to rounding where LAPACK/BLAS are involved.
-#include "curves_core.h"
+// meshlab-sharp feature curves: the steps of the numpy reference
+// meshlab_sharp/reference/curves, line for line (see curves.h). Sums, dot products and
+// reductions are evaluated in the order numpy evaluates them (pairwise sums along an
+// array's last axis, sequential sums along the others, einsum's (0, 2, 1) order over
+// three components, BLAS's fused order for `@` and the norm of one vector), and exp,
+// acos and atan2 are the caller's (ms_curves_math: numpy's from Python), so that the
+// curves are the reference's to the bit. With the C library's math (the MeshLab plugin)
+// cloud vertices differ from them in the last bits.
+#include "curves.h"
 
-#include "curves/_curves.h"
+#include "meshlab_sharp.h"
 
 #include <algorithm>
 #include <cmath>
@@ -23,7 +26,7 @@
 namespace sharp {
 namespace {
 
-// The constants: MS_CURVE_ in curves/_curves.h, shared with the Python modules.
+// The constants: MS_CURVE_ in meshlab_sharp.h, shared with the Python modules.
 const double TURN_SCALES[] = MS_CURVE_TURN_SCALES;
 constexpr int N_SCALES = int(sizeof TURN_SCALES / sizeof TURN_SCALES[0]);
 
@@ -41,10 +44,18 @@ Vec3 neg(const Vec3 &a) { return {-a[0], -a[1], -a[2]}; }
 // np.linalg.norm along an axis of length 3 (and scipy's squared distances)
 double sq(const Vec3 &a) { return (a[0] * a[0] + a[1] * a[1]) + a[2] * a[2]; }
 double norm(const Vec3 &a) { return std::sqrt(sq(a)); }
-// a @ b of two 3-vectors
-double dot(const Vec3 &a, const Vec3 &b) { return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]; }
 // np.einsum("ij,ij->i") over 3 components
 double edot(const Vec3 &a, const Vec3 &b) { return (a[0] * b[0] + a[2] * b[2]) + a[1] * b[1]; }
+// a @ b of two (3,) arrays and np.linalg.norm of one (sqrt(a @ a)): numpy hands them to
+// BLAS (ddot), whose x86-64 kernels (OpenBLAS, Haswell and later) fuse the products
+// into the sum in this order
+double bdot(const Vec3 &a, const Vec3 &b) { return std::fma(a[2], b[2], std::fma(a[1], b[1], a[0] * b[0])); }
+double bnorm(const Vec3 &a) { return std::sqrt(bdot(a, a)); }
+// one row of a (3, 3) @ (3,) product (BLAS dgemv), in that kernel's order
+double gemvRow(const std::array<double, 3> &row, const Vec3 &x)
+{
+	return std::fma(row[2], x[2], std::fma(row[0], x[0], row[1] * x[1]));
+}
 Vec3 cross(const Vec3 &a, const Vec3 &b)
 {
 	return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
@@ -160,6 +171,21 @@ Vec3 solve3(std::array<std::array<double, 3>, 3> a, Vec3 b)
 	}
 	return x;
 }
+
+// The C library's exp, acos and atan2, element by element (the default ms_curves_math)
+void cExp(const double *x, double *out, int64_t n)
+{
+	for (int64_t i = 0; i < n; ++i) out[i] = std::exp(x[i]);
+}
+void cAcos(const double *x, double *out, int64_t n)
+{
+	for (int64_t i = 0; i < n; ++i) out[i] = std::acos(x[i]);
+}
+void cAtan2(const double *y, const double *x, double *out, int64_t n)
+{
+	for (int64_t i = 0; i < n; ++i) out[i] = std::atan2(y[i], x[i]);
+}
+const ms_curves_math C_MATH = {cExp, cAcos, cAtan2};
 
 // ---------------------------------------------------------------- k nearest neighbours
 
@@ -612,7 +638,23 @@ std::vector<Vec3> batchTangents(const std::vector<Piece> &pieces, double window)
 	return out;
 }
 
-std::vector<double> turnAngles(const Piece &pc, double spacing)
+// One scale of trace._least_turn: the turn between the chords before and after each
+// vertex where neither is empty (numpy's arccos of all the vertices at once: math.acos)
+void addTurns(const std::vector<Vec3> &before, const std::vector<Vec3> &after, const ms_curves_math &math,
+              std::vector<double> &least, std::vector<int> &valid)
+{
+	const size_t m = before.size();
+	std::vector<double> cs(m), angle(m);
+	for (size_t i = 0; i < m; ++i) cs[i] = std::max(-1.0, std::min(1.0, edot(before[i], after[i])));
+	math.acos(cs.data(), angle.data(), int64_t(m));
+	for (size_t i = 0; i < m; ++i) {
+		if (!(norm(before[i]) > 0 && norm(after[i]) > 0)) continue;
+		valid[i]++;
+		least[i] = std::min(least[i], degrees(angle[i]));
+	}
+}
+
+std::vector<double> turnAngles(const Piece &pc, double spacing, const ms_curves_math &math)
 {
 	const long m = long(pc.points.size());
 	const long pad = pc.closed ? m : 0;
@@ -621,6 +663,7 @@ std::vector<double> turnAngles(const Piece &pc, double spacing)
 	const long last = long(p.size()) - 1;
 	std::vector<double> least(m, INF);
 	std::vector<int> valid(m, 0);
+	std::vector<Vec3> before(m), after(m);
 	for (int s = 0; s < N_SCALES; ++s) {
 		const double scale = TURN_SCALES[s] * spacing;
 		for (long i = 0; i < m; ++i) {
@@ -629,13 +672,10 @@ std::vector<double> turnAngles(const Piece &pc, double spacing)
 			const long nearB = clip(searchRight(cum, c + -MS_CURVE_TURN_INNER * scale) - 1, 0, last);
 			const long farA = clip(searchLeft(cum, c + MS_CURVE_TURN_OUTER * scale), 0, last);
 			const long nearA = clip(searchLeft(cum, c + MS_CURVE_TURN_INNER * scale), 0, last);
-			const Vec3 before = unit(sub(p[nearB], p[farB]));
-			const Vec3 after = unit(sub(p[farA], p[nearA]));
-			if (!(norm(before) > 0 && norm(after) > 0)) continue;
-			valid[i]++;
-			const double cs = std::max(-1.0, std::min(1.0, edot(before, after)));
-			least[i] = std::min(least[i], degrees(std::acos(cs)));
+			before[i] = unit(sub(p[nearB], p[farB]));
+			after[i] = unit(sub(p[farA], p[nearA]));
 		}
+		addTurns(before, after, math, least, valid);
 	}
 	std::vector<double> angle(m);
 	for (long i = 0; i < m; ++i) angle[i] = valid[i] >= MS_CURVE_MIN_TURN_SCALES ? least[i] : 0.0;
@@ -644,7 +684,8 @@ std::vector<double> turnAngles(const Piece &pc, double spacing)
 
 // trace._open_turn_angles: turnAngles of many open pieces in one pass over their batch
 // (arc lengths and chords as in ends()), one vector per piece
-std::vector<std::vector<double>> openTurnAngles(const std::vector<const Piece *> &pieces, double spacing)
+std::vector<std::vector<double>> openTurnAngles(const std::vector<const Piece *> &pieces, double spacing,
+                                                const ms_curves_math &math)
 {
 	std::vector<std::vector<double>> out;
 	if (pieces.empty()) return out;
@@ -655,6 +696,7 @@ std::vector<std::vector<double>> openTurnAngles(const std::vector<const Piece *>
 	const size_t total = key.size();
 	std::vector<double> least(total, INF);
 	std::vector<int> valid(total, 0);
+	std::vector<Vec3> before(total), after(total);
 	for (int s = 0; s < N_SCALES; ++s) {
 		const double scale = TURN_SCALES[s] * spacing;
 		for (size_t i = 0; i < total; ++i) {
@@ -664,13 +706,10 @@ std::vector<std::vector<double>> openTurnAngles(const std::vector<const Piece *>
 			const long nearB = clip(searchRight(key, c + -MS_CURVE_TURN_INNER * scale) - 1, lo, hi);
 			const long farA = clip(searchLeft(key, c + MS_CURVE_TURN_OUTER * scale), lo, hi);
 			const long nearA = clip(searchLeft(key, c + MS_CURVE_TURN_INNER * scale), lo, hi);
-			const Vec3 before = unit(sub(b.points[nearB], b.points[farB]));
-			const Vec3 after = unit(sub(b.points[farA], b.points[nearA]));
-			if (!(norm(before) > 0 && norm(after) > 0)) continue;
-			valid[i]++;
-			const double cs = std::max(-1.0, std::min(1.0, edot(before, after)));
-			least[i] = std::min(least[i], degrees(std::acos(cs)));
+			before[i] = unit(sub(b.points[nearB], b.points[farB]));
+			after[i] = unit(sub(b.points[farA], b.points[nearA]));
 		}
+		addTurns(before, after, math, least, valid);
 	}
 	for (size_t k = 0; k < pieces.size(); ++k) {
 		std::vector<double> angle;
@@ -808,10 +847,10 @@ bool continues(const Ends &e, long a, long b, double spacing)
 {
 	for (int s = 0; s < N_SCALES; ++s) {
 		const Vec3 &oa = e.out[s][a], &ob = e.out[s][b];
-		if (-dot(oa, ob) < std::cos(radians(MS_CURVE_CORNER_TURN))) continue;
+		if (-bdot(oa, ob) < std::cos(radians(MS_CURVE_CORNER_TURN))) continue;
 		for (const Vec3 &gap : {sub(e.point[b], e.point[a]), sub(e.anchor[s][b], e.anchor[s][a])}) {
-			const double offA = norm(sub(gap, mul(dot(gap, oa), oa)));
-			const double offB = norm(sub(gap, mul(dot(gap, ob), ob)));
+			const double offA = bnorm(sub(gap, mul(bdot(gap, oa), oa)));
+			const double offB = bnorm(sub(gap, mul(bdot(gap, ob), ob)));
 			if (std::max(offA, offB) <= MS_CURVE_LATERAL_OFFSET * spacing) return true;
 		}
 	}
@@ -846,16 +885,16 @@ std::vector<std::vector<long>> meetingClusters(const Ends &e, const std::vector<
 	const double turn = std::cos(radians(MS_CURVE_CORNER_TURN));
 	for (const Pair &p : pairs) {
 		const long a = p.a, b = p.b;
-		const double c = dot(out[a], out[b]);
+		const double c = bdot(out[a], out[b]);
 		if (std::abs(c) > turn) continue;
 		const Vec3 w = sub(anchor[a], anchor[b]);
-		const double da = dot(out[a], w), db = dot(out[b], w);
+		const double da = bdot(out[a], w), db = bdot(out[b], w);
 		const double det = 1.0 - c * c;
 		const double sa = (c * db - da) / det, sb = (db - c * da) / det;
 		const Vec3 xa = add(anchor[a], mul(sa, out[a])), xb = add(anchor[b], mul(sb, out[b]));
-		if (norm(sub(xa, xb)) > MS_CURVE_LATERAL_OFFSET * spacing) continue;
+		if (bnorm(sub(xa, xb)) > MS_CURVE_LATERAL_OFFSET * spacing) continue;
 		const Vec3 meet = mul(0.5, add(xa, xb));
-		const double aheadA = dot(sub(meet, e.point[a]), out[a]), aheadB = dot(sub(meet, e.point[b]), out[b]);
+		const double aheadA = bdot(sub(meet, e.point[a]), out[a]), aheadB = bdot(sub(meet, e.point[b]), out[b]);
 		if (std::min(aheadA, aheadB) < -MS_CURVE_LATERAL_OFFSET * spacing || std::max(aheadA, aheadB) > MS_CURVE_LONG_GAP * spacing)
 			continue;
 		const long ra = root(a), rb = root(b);
@@ -872,8 +911,8 @@ std::vector<std::vector<long>> meetingClusters(const Ends &e, const std::vector<
 bool facesGap(const Ends &e, long a, long b)
 {
 	const Vec3 gap = sub(e.point[b], e.point[a]);
-	const double limit = std::cos(radians(MS_CURVE_CORNER_TURN)) * norm(gap);
-	return dot(gap, e.out[N_SCALES - 1][a]) >= limit && dot(neg(gap), e.out[N_SCALES - 1][b]) >= limit;
+	const double limit = std::cos(radians(MS_CURVE_CORNER_TURN)) * bnorm(gap);
+	return bdot(gap, e.out[N_SCALES - 1][a]) >= limit && bdot(neg(gap), e.out[N_SCALES - 1][b]) >= limit;
 }
 
 using Bridge = std::function<Piece(long, long)>;
@@ -1000,7 +1039,7 @@ std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spaci
 		double bestD = INF;
 		for (long j : tree.ball(e.point[q], reach)) {
 			if (owner[j] == e.piece[q]) continue;
-			const double d = norm(sub(data[j], e.point[q]));
+			const double d = bnorm(sub(data[j], e.point[q]));
 			if (d < bestD) bestD = d, best = j;
 		}
 		if (best < 0) continue;
@@ -1202,11 +1241,16 @@ std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<st
 // ---------------------------------------------------------------- clouds (refine.py)
 
 std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vector<char> &valid,
-                                    const std::vector<Vec3> &centres, double radius)
+                                    const std::vector<Vec3> &centres, double radius,
+                                    const std::array<Vec3, 2> *bounds)
 {
 	Vec3 lo{INF, INF, INF}, hi{-INF, -INF, -INF};
-	for (const Vec3 &p : pts)
-		for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], p[d]), hi[d] = std::max(hi[d], p[d]);
+	if (bounds != nullptr) {
+		lo = (*bounds)[0], hi = (*bounds)[1];
+	} else {
+		for (const Vec3 &p : pts)
+			for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], p[d]), hi[d] = std::max(hi[d], p[d]);
+	}
 	long dims[3];
 	for (int d = 0; d < 3; ++d) dims[d] = long(std::floor((hi[d] - lo[d]) / radius)) + 3;
 	auto cell = [&](const Vec3 &p, int d) { return long(std::floor((p[d] - lo[d]) / radius)) + 1; };
@@ -1224,12 +1268,13 @@ std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vec
 	return out;
 }
 
-struct ArmLine { double c[2], a[2], rms, total; };
+// _arm_lines up to numpy's arctan2: the weight total, the centroid and the second moments
+struct ArmSums { double total, c[2], sxx, syy, sxy; };
 
-ArmLine armLine(const std::vector<std::array<double, 2>> &xy, const std::vector<double> &w)
+ArmSums armSums(const std::vector<std::array<double, 2>> &xy, const std::vector<double> &w)
 {
 	const size_t k = xy.size();
-	ArmLine r{};
+	ArmSums r{};
 	r.total = pairwiseSum(w);
 	const double safe = r.total > 0 ? r.total : 1.0;
 	for (int j = 0; j < 2; ++j) {
@@ -1244,8 +1289,22 @@ ArmLine armLine(const std::vector<std::array<double, 2>> &xy, const std::vector<
 		yy[i] = w[i] * (d1 * d1);
 		xyv[i] = (w[i] * d0) * d1;
 	}
-	const double sxx = pairwiseSum(xx), syy = pairwiseSum(yy), sxy = pairwiseSum(xyv);
-	const double theta = 0.5 * std::atan2(2 * sxy, sxx - syy);
+	r.sxx = pairwiseSum(xx), r.syy = pairwiseSum(yy), r.sxy = pairwiseSum(xyv);
+	return r;
+}
+
+struct ArmLine { double c[2], a[2], rms, total; };
+
+// _arm_lines from the sums and atan2(2 sxy, sxx - syy)
+ArmLine armLine(const std::vector<std::array<double, 2>> &xy, const std::vector<double> &w,
+                const ArmSums &sums, double angle)
+{
+	const size_t k = xy.size();
+	ArmLine r{};
+	r.total = sums.total;
+	r.c[0] = sums.c[0], r.c[1] = sums.c[1];
+	const double safe = r.total > 0 ? r.total : 1.0;
+	const double theta = 0.5 * angle;
 	r.a[0] = std::cos(theta), r.a[1] = std::sin(theta);
 	std::vector<double> off2(k);
 	for (size_t i = 0; i < k; ++i) {
@@ -1263,62 +1322,112 @@ double lineOffset(const std::array<double, 2> &p, const ArmLine &l)
 	return std::fabs(d0 * l.a[1] - d1 * l.a[0]);
 }
 
-struct Refined { Vec3 position; bool ok, flat; };
+// One curve vertex's neighbours in the plane across the curve (plane_intersection_positions).
+struct Across {
+	Vec3 u, w;
+	std::vector<std::array<double, 2>> xy, unitv;
+	std::vector<double> weight, w1, w2;
+	std::vector<char> use, side;
+	ArmLine l1, l2;
+};
 
-Refined planeIntersection(const Vec3 &vertex, const Vec3 &t, const std::vector<long> &nbrs,
-                          const std::vector<Vec3> &treePts, const std::vector<char> &treeFeature,
-                          double spacing)
+// Vertices refined together: numpy's exp and arctan2 (math.exp, math.atan2) take each
+// batch's values at once.
+constexpr size_t REFINE_BATCH = 4096;
+
+// refine.plane_intersection_positions of the vertices [first, last): moved, fitted, flat.
+void planeIntersections(size_t first, size_t last, const std::vector<Vec3> &vertices,
+                        const std::vector<Vec3> &dirs, const std::vector<std::vector<long>> &nbrs,
+                        const std::vector<Vec3> &treePts, const std::vector<char> &treeFeature,
+                        double spacing, const ms_curves_math &math, std::vector<Vec3> &moved,
+                        std::vector<char> &fitted, std::vector<char> &flat)
 {
-	const Vec3 helper = std::fabs(t[0]) < MS_CURVE_FRAME_SWITCH ? Vec3{1.0, 0.0, 0.0} : Vec3{0.0, 1.0, 0.0};
-	Vec3 u = cross(t, helper);
-	const double un = norm(u);
-	u = {u[0] / un, u[1] / un, u[2] / un};
-	const Vec3 w = cross(t, u);
-	const size_t k = nbrs.size();
-	std::vector<std::array<double, 2>> xy(k), unitv(k);
-	std::vector<double> weight(k);
-	std::vector<char> use(k);
-	for (size_t i = 0; i < k; ++i) {
-		const Vec3 d = sub(treePts[nbrs[i]], vertex);
-		xy[i] = {edot(d, u), edot(d, w)};
-		const double along = edot(d, t) / (MS_CURVE_SLAB * spacing);
-		weight[i] = std::exp(-0.5 * (along * along));
-		const double r = std::sqrt(xy[i][0] * xy[i][0] + xy[i][1] * xy[i][1]);
-		use[i] = !treeFeature[nbrs[i]] && r > MS_CURVE_ZERO_OFFSET * spacing;
-		const double rr = r > 0 ? r : 1.0;
-		unitv[i] = {xy[i][0] / rr, xy[i][1] / rr};
-	}
-	double bis[2];
-	for (int j = 0; j < 2; ++j) {
-		double s = unitv[0][j] * double(use[0]);
-		for (size_t i = 1; i < k; ++i) s += unitv[i][j] * double(use[i]);
-		bis[j] = s;
-	}
-	std::vector<char> side(k);
-	for (size_t i = 0; i < k; ++i) side[i] = (bis[0] * unitv[i][1] - bis[1] * unitv[i][0]) > 0;
-	ArmLine l1{}, l2{};
-	std::vector<double> w1(k), w2(k);
-	for (int it = 0; it < MS_CURVE_ARM_ITERATIONS; ++it) {
+	const size_t nv = last - first;
+	std::vector<Across> across(nv);
+	std::vector<double> arg;  // exp's argument, vertex after vertex
+	for (size_t v = 0; v < nv; ++v) {
+		Across &x = across[v];
+		const Vec3 &vertex = vertices[first + v], &t = dirs[first + v];
+		const Vec3 helper = std::fabs(t[0]) < MS_CURVE_FRAME_SWITCH ? Vec3{1.0, 0.0, 0.0} : Vec3{0.0, 1.0, 0.0};
+		x.u = cross(t, helper);
+		const double un = norm(x.u);
+		x.u = {x.u[0] / un, x.u[1] / un, x.u[2] / un};
+		x.w = cross(t, x.u);
+		const std::vector<long> &nb = nbrs[first + v];
+		const size_t k = nb.size();
+		x.xy.resize(k), x.unitv.resize(k), x.use.resize(k);
 		for (size_t i = 0; i < k; ++i) {
-			w1[i] = (use[i] && side[i]) ? weight[i] : 0.0;
-			w2[i] = (use[i] && !side[i]) ? weight[i] : 0.0;
+			const Vec3 d = sub(treePts[nb[i]], vertex);
+			x.xy[i] = {edot(d, x.u), edot(d, x.w)};
+			const double along = edot(d, t) / (MS_CURVE_SLAB * spacing);
+			arg.push_back(-0.5 * (along * along));
+			const double r = std::sqrt(x.xy[i][0] * x.xy[i][0] + x.xy[i][1] * x.xy[i][1]);
+			x.use[i] = !treeFeature[nb[i]] && r > MS_CURVE_ZERO_OFFSET * spacing;
+			const double rr = r > 0 ? r : 1.0;
+			x.unitv[i] = {x.xy[i][0] / rr, x.xy[i][1] / rr};
 		}
-		l1 = armLine(xy, w1);
-		l2 = armLine(xy, w2);
-		for (size_t i = 0; i < k; ++i) side[i] = lineOffset(xy[i], l1) <= lineOffset(xy[i], l2);
 	}
-	const double crossA = l1.a[0] * l2.a[1] - l1.a[1] * l2.a[0];
-	const double safe = std::fabs(crossA) > 0 ? crossA : 1.0;
-	const double diff0 = l2.c[0] - l1.c[0], diff1 = l2.c[1] - l1.c[1];
-	const double s = (diff0 * l2.a[1] - diff1 * l2.a[0]) / safe;
-	const double hit0 = l1.c[0] + s * l1.a[0], hit1 = l1.c[1] + s * l1.a[1];
-	const bool fitted = l1.total >= MS_CURVE_MIN_ARM_POINTS && l2.total >= MS_CURVE_MIN_ARM_POINTS &&
-	                    std::max(l1.rms, l2.rms) <= MS_CURVE_MAX_ARM_RMS * spacing;
-	const bool crease = std::fabs(crossA) >= std::sin(radians(MS_CURVE_MIN_ARM_ANGLE));
-	const bool ok = fitted && crease && std::sqrt(bis[0] * bis[0] + bis[1] * bis[1]) > 0 &&
-	                std::sqrt(hit0 * hit0 + hit1 * hit1) <= MS_CURVE_MAX_SHIFT * spacing;
-	const Vec3 moved = add(add(vertex, mul(hit0, u)), mul(hit1, w));
-	return {ok ? moved : vertex, ok, fitted && !crease};
+	std::vector<double> weight(arg.size());
+	math.exp(arg.data(), weight.data(), int64_t(arg.size()));
+	size_t at = 0;
+	std::vector<double> bisector(2 * nv);
+	for (size_t v = 0; v < nv; ++v) {
+		Across &x = across[v];
+		const size_t k = x.xy.size();
+		x.weight.assign(weight.begin() + at, weight.begin() + at + k);
+		at += k;
+		double *bis = &bisector[2 * v];
+		for (int j = 0; j < 2; ++j) {
+			double s = x.unitv[0][j] * double(x.use[0]);
+			for (size_t i = 1; i < k; ++i) s += x.unitv[i][j] * double(x.use[i]);
+			bis[j] = s;
+		}
+		x.side.resize(k);
+		for (size_t i = 0; i < k; ++i) x.side[i] = (bis[0] * x.unitv[i][1] - bis[1] * x.unitv[i][0]) > 0;
+	}
+	std::vector<ArmSums> sums(2 * nv);
+	std::vector<double> ys(2 * nv), xs(2 * nv), angles(2 * nv);
+	for (int it = 0; it < MS_CURVE_ARM_ITERATIONS; ++it) {
+		for (size_t v = 0; v < nv; ++v) {
+			Across &x = across[v];
+			const size_t k = x.xy.size();
+			x.w1.resize(k), x.w2.resize(k);
+			for (size_t i = 0; i < k; ++i) {
+				x.w1[i] = (x.use[i] && x.side[i]) ? x.weight[i] : 0.0;
+				x.w2[i] = (x.use[i] && !x.side[i]) ? x.weight[i] : 0.0;
+			}
+			sums[2 * v] = armSums(x.xy, x.w1);
+			sums[2 * v + 1] = armSums(x.xy, x.w2);
+		}
+		for (size_t j = 0; j < 2 * nv; ++j) ys[j] = 2 * sums[j].sxy, xs[j] = sums[j].sxx - sums[j].syy;
+		math.atan2(ys.data(), xs.data(), angles.data(), int64_t(2 * nv));
+		for (size_t v = 0; v < nv; ++v) {
+			Across &x = across[v];
+			x.l1 = armLine(x.xy, x.w1, sums[2 * v], angles[2 * v]);
+			x.l2 = armLine(x.xy, x.w2, sums[2 * v + 1], angles[2 * v + 1]);
+			for (size_t i = 0; i < x.xy.size(); ++i) x.side[i] = lineOffset(x.xy[i], x.l1) <= lineOffset(x.xy[i], x.l2);
+		}
+	}
+	for (size_t v = 0; v < nv; ++v) {
+		const Across &x = across[v];
+		const ArmLine &l1 = x.l1, &l2 = x.l2;
+		const double *bis = &bisector[2 * v];
+		const double crossA = l1.a[0] * l2.a[1] - l1.a[1] * l2.a[0];
+		const double safe = std::fabs(crossA) > 0 ? crossA : 1.0;
+		const double diff0 = l2.c[0] - l1.c[0], diff1 = l2.c[1] - l1.c[1];
+		const double s = (diff0 * l2.a[1] - diff1 * l2.a[0]) / safe;
+		const double hit0 = l1.c[0] + s * l1.a[0], hit1 = l1.c[1] + s * l1.a[1];
+		const bool isFitted = l1.total >= MS_CURVE_MIN_ARM_POINTS && l2.total >= MS_CURVE_MIN_ARM_POINTS &&
+		                      std::max(l1.rms, l2.rms) <= MS_CURVE_MAX_ARM_RMS * spacing;
+		const bool crease = std::fabs(crossA) >= std::sin(radians(MS_CURVE_MIN_ARM_ANGLE));
+		const bool ok = isFitted && crease && std::sqrt(bis[0] * bis[0] + bis[1] * bis[1]) > 0 &&
+		                std::sqrt(hit0 * hit0 + hit1 * hit1) <= MS_CURVE_MAX_SHIFT * spacing;
+		const Vec3 &vertex = vertices[first + v];
+		const Vec3 there = add(add(vertex, mul(hit0, x.u)), mul(hit1, x.w));
+		moved[first + v] = ok ? there : vertex;
+		fitted[first + v] = ok;
+		flat[first + v] = isFitted && !crease;
+	}
 }
 
 std::vector<Vec3> lineFitPositions(const std::vector<Vec3> &points, const std::vector<Vec3> &dirs,
@@ -1345,20 +1454,21 @@ std::vector<long> advancing(const std::vector<Vec3> &p, const std::vector<Vec3> 
 	Vec3 last = p[0];
 	const double step = MS_CURVE_MIN_ADVANCE * spacing;
 	for (size_t i = 1; i + 1 < p.size(); ++i)
-		if (dot(sub(p[i], last), t[i]) >= step) keep.push_back(long(i)), last = p[i];
+		if (bdot(sub(p[i], last), t[i]) >= step) keep.push_back(long(i)), last = p[i];
 	if (p.size() > 1) keep.push_back(long(p.size()) - 1);
 	return keep;
 }
 
 std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<char> &mask,
                                const std::vector<char> &ok, const std::vector<long> &feat,
-                               const std::vector<Vec3> &fp, double &spacing)
+                               const std::vector<Vec3> &fp, const std::array<Vec3, 2> *bounds,
+                               const ms_curves_math &math, double &spacing)
 {
 	const KdTree fpTree(fp);
 	std::vector<double> d1(fp.size());
 	for (size_t i = 0; i < fp.size(); ++i) d1[i] = std::sqrt(fpTree.query(fp[i], 2)[1].first);
 	const double featureSpacing = median(d1);
-	std::vector<long> near = cellNeighbourhood(pts, ok, fp, MS_CURVE_CELL_SPACINGS * featureSpacing);
+	std::vector<long> near = cellNeighbourhood(pts, ok, fp, MS_CURVE_CELL_SPACINGS * featureSpacing, bounds);
 	std::stable_sort(near.begin(), near.end(), [&](long a, long b) { return lexLess(pts[a], pts[b]); });
 	std::vector<Vec3> nearPts;
 	std::vector<char> nearFeature;
@@ -1388,10 +1498,9 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	const std::vector<Vec3> dirs = batchTangents(pieces, MS_CURVE_RAW_TANGENT_WINDOW * spacing);
 	std::vector<Vec3> moved(raw.size());
 	std::vector<char> fitted(raw.size()), flat(raw.size());
-	for (size_t i = 0; i < raw.size(); ++i) {
-		const Refined r = planeIntersection(raw[i], dirs[i], nbrs[i], nearPts, nearFeature, spacing);
-		moved[i] = r.position, fitted[i] = r.ok, flat[i] = r.flat;
-	}
+	for (size_t first = 0; first < raw.size(); first += REFINE_BATCH)
+		planeIntersections(first, std::min(raw.size(), first + REFINE_BATCH), raw, dirs, nbrs, nearPts,
+		                   nearFeature, spacing, math, moved, fitted, flat);
 	std::vector<Piece> out;
 	size_t at = 0;
 	for (const Piece &pc : pieces) {
@@ -1458,21 +1567,21 @@ std::vector<Piece> dropIsolated(const std::vector<Piece> &pieces, double spacing
 }
 
 // trace.cut_at_turns: open pieces shorter than MS_CURVE_SHORTEST_CUT spacings are not cut
-std::vector<Piece> cutAll(const std::vector<Piece> &pieces, double spacing)
+std::vector<Piece> cutAll(const std::vector<Piece> &pieces, double spacing, const ms_curves_math &math)
 {
 	std::vector<const Piece *> longOpen;
 	std::vector<long> slot(pieces.size(), -1);
 	for (size_t i = 0; i < pieces.size(); ++i)
 		if (!pieces[i].closed && pieces[i].length() >= MS_CURVE_SHORTEST_CUT * spacing)
 			slot[i] = long(longOpen.size()), longOpen.push_back(&pieces[i]);
-	const std::vector<std::vector<double>> angles = openTurnAngles(longOpen, spacing);
+	const std::vector<std::vector<double>> angles = openTurnAngles(longOpen, spacing, math);
 	std::vector<Piece> out;
 	for (size_t i = 0; i < pieces.size(); ++i) {
 		if (!pieces[i].closed && slot[i] < 0) {
 			out.push_back(pieces[i]);  // too short to hold two curves
 			continue;
 		}
-		const std::vector<double> angle = pieces[i].closed ? turnAngles(pieces[i], spacing) : angles[slot[i]];
+		const std::vector<double> angle = pieces[i].closed ? turnAngles(pieces[i], spacing, math) : angles[slot[i]];
 		for (Piece &q : cutAtTurns(pieces[i], angle, spacing)) out.push_back(q);
 	}
 	return out;
@@ -1501,7 +1610,7 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 				for (int k = 0; k < 3; ++k) proj[r][k] = (r == k ? 1.0 : 0.0) - o[r] * o[k];
 			for (int r = 0; r < 3; ++r)
 				for (int k = 0; k < 3; ++k) a[r][k] += proj[r][k];
-			for (int r = 0; r < 3; ++r) b[r] += dot(proj[r], through[i]);
+			for (int r = 0; r < 3; ++r) b[r] += gemvRow(proj[r], through[i]);
 		}
 		Vec3 sum = e.point[c[0]];
 		for (size_t j = 1; j < c.size(); ++j) sum = add(sum, e.point[c[j]]);
@@ -1514,7 +1623,7 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 			if (cloud) {  // within MS_CURVE_LONG_GAP spacings of every end
 				for (long i : c) near = near && norm(sub(e.point[i], x)) <= MS_CURVE_LONG_GAP * spacing;
 			} else {
-				near = norm(sub(x, mean)) <= MS_CURVE_GAP_LENGTH * spacing;
+				near = bnorm(sub(x, mean)) <= MS_CURVE_GAP_LENGTH * spacing;
 			}
 			if (near) corner = x;
 		}
@@ -1538,7 +1647,7 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 			Piece &pc = pieces[e.piece[i]];
 			const size_t at = e.side[i] == 0 ? 0 : pc.nodes.size() - 1;
 			const long here = pc.nodes[at];
-			if (here == index || (paths == nullptr && norm(sub(pc.points[at], corner)) <= MS_CURVE_SNAP * spacing)) {
+			if (here == index || (paths == nullptr && bnorm(sub(pc.points[at], corner)) <= MS_CURVE_SNAP * spacing)) {
 				pc.points[at] = corner;
 				continue;
 			}
@@ -1599,8 +1708,10 @@ Curve finalCurve(const Piece &pc)
 }  // namespace
 
 Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char> &feature,
-                     const std::vector<char> &valid, const std::vector<std::array<int, 3>> &faces)
+                     const std::vector<char> &valid, const std::vector<std::array<int, 3>> &faces,
+                     const std::array<Vec3, 2> *bounds, const ms_curves_math *vectorMath)
 {
+	const ms_curves_math math = vectorMath != nullptr ? *vectorMath : C_MATH;
 	Curves result;
 	const size_t n = vertices.size();
 	std::vector<Vec3> pts(n);
@@ -1624,7 +1735,7 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	if (faces.empty()) {
 		std::vector<char> mask(n);
 		for (size_t i = 0; i < n; ++i) mask[i] = feature[i] != 0;
-		pieces = cloudPieces(pts, mask, ok, feat, fp, spacing);
+		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing);
 	} else {
 		pieces = meshPieces(pts, faces, both, feat, fp, spacing);
 		paths.reset(new MeshPaths(pts, faces, both));
@@ -1639,10 +1750,10 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 		return mid;
 	};
 	const Bridge *bridge = paths ? &bridgeFn : nullptr;
-	pieces = dropShort(cutAll(pieces, spacing), spacing);
+	pieces = dropShort(cutAll(pieces, spacing, math), spacing);
 	pieces = dropShort(joinPieces(pieces, spacing, bridge), spacing);
 	pieces = joinPieces(pieces, spacing, bridge);
-	pieces = cutAll(pieces, spacing);
+	pieces = cutAll(pieces, spacing, math);
 	pieces = splitAtTouches(pieces, spacing);
 	if (!paths) pieces = dropIsolated(pieces, spacing);
 	pieces = corners(pieces, spacing, pts, paths.get(), result);

@@ -1,0 +1,209 @@
+"""The inputs made from a CAD part loaded in gmsh: meshes, clouds and a scan.
+
+- **fine mesh**: gmsh's Frontal-Delaunay mesh, edge ``h`` for about ``n`` vertices,
+  refined where the surface curves (at least :data:`FINE_PER_TURN` elements per turn);
+  the B-rep curves are mesh edges. It is also the surface the clouds are drawn from.
+- **STL-like**: :data:`COARSE_PER_TURN` segments per turn, no size limit otherwise and
+  no sizes carried from the boundary into the faces: long thin triangles, vertices
+  only on the curves of planar faces.
+- **blue noise**: Poisson-disk points (``meshlab_sharp.parts``' sampler) on the fine
+  mesh; **noise 25 %**: the same moved along the true normal by N(0, (0.25 s)^2);
+  **iid**: points drawn independently, uniform over the area;
+- **scan**: ``evaluation.scan`` from four positions around the fine mesh.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from evaluation.groundtruth import (
+    SCAN_NOISE,
+    SamplePart,
+    add_noise,
+    expected_spacing,
+    visible_edges,
+    weld,
+)
+from evaluation.scan import scan, scanner_positions
+from evaluation.scoring import density_spacing, distance_to_segments
+from meshlab_sharp.parts import _f32, _mesh_spacing, _sample_surface, _vertex_normals
+
+__all__ = [
+    "COARSE_PER_TURN",
+    "FINE_PER_TURN",
+    "INPUTS",
+    "gmsh_mesh",
+    "make_inputs",
+    "surface_area",
+]
+
+#: Elements per turn of a curved surface in the fine mesh.
+FINE_PER_TURN = 48
+#: Segments per turn in the STL-like tessellation.
+COARSE_PER_TURN = 24
+#: The inputs, in table order.
+INPUTS = ("fine_mesh", "stl_like", "blue_noise", "noise25", "iid", "scan")
+
+
+def surface_area() -> float:
+    """Total area of the loaded model's surfaces."""
+    import gmsh
+
+    return float(sum(gmsh.model.occ.getMass(2, s) for _, s in gmsh.model.getEntities(2)))
+
+
+def gmsh_mesh(size: float, per_turn: int, *, extend: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate the loaded model's surfaces; identical nodes welded.
+
+    Parameters
+    ----------
+    size : float
+        Largest element size.
+    per_turn : int
+        Elements per turn on curved curves and surfaces (0: off).
+    extend : bool
+        Carry the curves' element sizes into the faces (False: planar faces get
+        long thin triangles between their boundary nodes).
+
+    Returns
+    -------
+    vertices : (n, 3) float64, faces : (m, 3) int64
+    """
+    import gmsh
+
+    gmsh.model.mesh.clear()
+    for key, value in (
+        ("Mesh.MeshSizeMin", 0.0),
+        ("Mesh.MeshSizeMax", size),
+        ("Mesh.MeshSizeFromCurvature", per_turn),
+        ("Mesh.MeshSizeExtendFromBoundary", int(extend)),
+        ("Mesh.MeshSizeFromPoints", 0),
+        ("Mesh.MeshSizeFactor", 1.0),
+        ("Mesh.Algorithm", 6 if extend else 1),
+        ("General.NumThreads", 1),
+    ):
+        gmsh.option.setNumber(key, value)
+    gmsh.model.mesh.generate(2)
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    index = np.zeros(int(tags.max()) + 1, np.int64)
+    index[tags.astype(np.int64)] = np.arange(len(tags))
+    _, nodes = gmsh.model.mesh.getElementsByType(2)
+    faces = index[np.asarray(nodes, np.int64)].reshape(-1, 3)
+    verts = np.asarray(coords, np.float64).reshape(-1, 3)
+    used = np.unique(faces)
+    remap = np.zeros(len(verts), np.int64)
+    remap[used] = np.arange(len(used))
+    verts, faces = weld(_f32(verts[used]), remap[faces])
+    return verts, faces
+
+
+def _part(
+    name: str,
+    verts: np.ndarray,
+    faces: np.ndarray | None,
+    normals: np.ndarray,
+    edges: np.ndarray,
+    spacing: float,
+    reference: tuple,
+    **extra: object,
+) -> SamplePart:
+    return SamplePart(
+        name=name,
+        vertices=_f32(verts),
+        faces=faces,
+        edges=edges,
+        spacing=spacing,
+        normals=normals,
+        outliers=np.zeros(len(verts), bool),
+        kind="points" if faces is None else "mesh",
+        extra={"reference": reference, **extra},
+    )
+
+
+def _iid(verts: np.ndarray, faces: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """n points drawn independently, uniform over the mesh's area, and their face normals."""
+    rng = np.random.default_rng(seed)
+    cross = np.cross(
+        verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]]
+    )
+    area = np.linalg.norm(cross, axis=1)
+    f = rng.choice(len(faces), size=n, p=area / area.sum())
+    r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
+    v = verts[faces[f]]
+    pts = (
+        (1 - r1)[:, None] * v[:, 0]
+        + (r1 * (1 - r2))[:, None] * v[:, 1]
+        + (r1 * r2)[:, None] * v[:, 2]
+    )
+    return pts, cross[f] / np.maximum(area[f], 1e-300)[:, None]
+
+
+def make_inputs(
+    name: str, edges: np.ndarray, n: int, *, seed: int = 0, which: tuple[str, ...] = INPUTS
+) -> dict[str, SamplePart]:
+    """The inputs of the part loaded in gmsh.
+
+    Parameters
+    ----------
+    name : str
+    edges : (e, 2, 3) float
+        The exact sharp edges (``BrepTruth.segments``).
+    n : int
+        Points per cloud and about the fine mesh's vertex count.
+    seed : int
+    which : tuple of str
+        Names from :data:`INPUTS`.
+
+    Returns
+    -------
+    dict of str to SamplePart
+        ``stl_like``'s ``spacing`` is the blue-noise spacing (its curves are scored at
+        the clouds' tolerance); ``fine_mesh``'s is its mean edge length.
+    """
+    area = surface_area()
+    h = expected_spacing(area, n, "mesh")
+    s = expected_spacing(area, n, "points")
+    fv, ff = gmsh_mesh(h, FINE_PER_TURN)
+    ref = (fv, ff)
+    out: dict[str, SamplePart] = {}
+    if "fine_mesh" in which:
+        out["fine_mesh"] = _part(
+            name, fv, ff, _vertex_normals(fv, ff), edges, _mesh_spacing(fv, ff), ref
+        )
+    if {"blue_noise", "noise25"} & set(which):
+        pts, nrm = _sample_surface(fv, ff, n, seed)
+        blue = _part(name, pts, None, nrm, edges, s, ref)
+        out["blue_noise"] = blue
+        out["noise25"] = add_noise(blue, 0.25, seed=seed + 1)
+    if "iid" in which:
+        pts, nrm = _iid(fv, ff, n, seed + 2)
+        out["iid"] = _part(name, pts, None, nrm, edges, s, ref)
+    if "scan" in which:
+        res = scan(fv, ff, scanner_positions(fv), n_points=n, noise=SCAN_NOISE, seed=seed + 3)
+        local = density_spacing(_f32(res.points))
+        seen = visible_edges(fv, ff, res.surface, res.normals, local)
+        # the exact edges' pieces the scan saw: those near a seen crease of the mesh
+        mid = edges.mean(axis=1)
+        near = (
+            distance_to_segments(mid, seen, step=s / 4) <= s / 2
+            if len(seen)
+            else np.zeros(len(mid), bool)
+        )
+        out["scan"] = _part(
+            name,
+            res.points,
+            None,
+            res.normals,
+            edges,
+            float(local.mean()),
+            ref,
+            local_spacing=local,
+            visible_edges=edges[near],
+        )
+    if "stl_like" in which:
+        diag = math.dist(fv.min(axis=0), fv.max(axis=0))
+        cv, cf = gmsh_mesh(diag, COARSE_PER_TURN, extend=False)
+        out["stl_like"] = _part(name, cv, cf, _vertex_normals(cv, cf), edges, s, ref)
+    return {k: out[k] for k in which}

@@ -1,0 +1,185 @@
+/* Robust mode's finishing steps (robust.RobustSetup.finish): isolation, line
+ * directions, support, the smoothed ranking, thinning, acute tips.
+ * Part of meshlab-sharp's native library (meshlab_sharp.h). */
+#include "internal.h"
+
+/* Slot r's list in L: its first member's position in L->idx and its length. */
+static inline void list_span(const ms_lists_t *L, int64_t r, int64_t *first, int64_t *len) {
+    *first = L->start ? L->start[r] : r * L->stride;
+    *len = L->len ? L->len[r] : L->k;
+}
+
+/* The t-th member of L->idx. */
+static inline int64_t list_member(const ms_lists_t *L, int64_t t) {
+    return L->wide ? ((const int64_t *)L->idx)[t] : ((const int32_t *)L->idx)[t];
+}
+
+/* Whether d = p_j - p_i lies across the line through p_i of direction e:
+ * |d . e| < cone |d|, each sum over x, y, z in that order (robust._feature_pairs). */
+static inline int across_line(const double *pi, const double *pj, const double *e, double cone) {
+    const double dx = pj[0] - pi[0], dy = pj[1] - pi[1], dz = pj[2] - pi[2];
+    return fabs(dx * e[0] + dy * e[1] + dz * e[2]) < cone * sqrt(dx * dx + dy * dy + dz * dz);
+}
+
+/* (a - b) . (a - c), summed over x, y, z in that order: negative when a lies inside the
+ * ball on b c as a diameter. */
+static inline double ball_dot(const double *a, const double *b, const double *c) {
+    return (a[0] - b[0]) * (a[0] - c[0]) + (a[1] - b[1]) * (a[1] - c[1]) +
+           (a[2] - b[2]) * (a[2] - c[2]);
+}
+
+/* robust._line_directions_of for one point pi: col (m, 9) holds, per feature j of its
+ * list, q = p_j - p_i and the products q0 q0, q0 q1, q0 q2, q1 q1, q1 q2, q2 q2. The
+ * covariance C = sum q q^T - m qbar qbar^T as numpy forms it (sums in add.reduceat's
+ * order, the lower triangle that eigh reads: entry (b, a) = outer_ba - (m qbar_b) qbar_a),
+ * negated, to the 3x3 solver: the eigenvector of C's largest eigenvalue into e. */
+static void line_direction(const double *col, int64_t m, double *e) {
+    const double count = (double)(m > 1 ? m : 1);
+    double qbar[3], neg[6];
+    static const int row[6] = {0, 1, 2, 1, 2, 2}, column[6] = {0, 0, 0, 1, 1, 2};
+    for (int a = 0; a < 3; a++) qbar[a] = segment_sum(col + a, m, 9) / count;
+    for (int t = 0; t < 6; t++)
+        neg[t] = -(segment_sum(col + 3 + t, m, 9) - count * qbar[row[t]] * qbar[column[t]]);
+    smallest_eigvec(neg[0], neg[1], neg[2], neg[3], neg[4], neg[5], e);
+}
+
+int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
+                       const ms_lists_t *direction, int64_t begin, int64_t end, double *e) {
+    int64_t cap = 0;
+    for (int64_t r = begin; r < end; r++) {
+        int64_t first, len;
+        list_span(direction, r, &first, &len);
+        cap = len > cap ? len : cap;
+    }
+    double *col = (double *)malloc((size_t)(cap > 0 ? cap : 1) * 9 * sizeof(double));
+    if (!col) return -1;
+    for (int64_t r = begin; r < end; r++) {
+        const double *pi = p + 3 * rows[r];
+        int64_t first, len, m = 0;
+        list_span(direction, r, &first, &len);
+        for (int64_t t = first; t < first + len; t++) {
+            const int64_t j = list_member(direction, t);
+            if (!f0[j]) continue;
+            double *c = col + 9 * m++;
+            for (int a = 0; a < 3; a++) c[a] = p[3 * j + a] - pi[a];
+            c[3] = c[0] * c[0]; c[4] = c[0] * c[1]; c[5] = c[0] * c[2];
+            c[6] = c[1] * c[1]; c[7] = c[1] * c[2]; c[8] = c[2] * c[2];
+        }
+        line_direction(col, m, e + 3 * r);
+    }
+    free(col);
+    return 0;
+}
+
+void ms_supported(const double *p, const uint8_t *f0, const int64_t *rows, const double *e,
+                  const ms_lists_t *around, double cone, int64_t minimum, const double *score,
+                  double free_below, int64_t begin, int64_t end, uint8_t *f1) {
+    for (int64_t r = begin; r < end; r++) {
+        const int64_t i = rows[r];
+        int64_t first, len, along = 0;
+        list_span(around, r, &first, &len);
+        for (int64_t t = first; t < first + len; t++) {
+            const int64_t j = list_member(around, t);
+            along += j != i && f0[j] && !across_line(p + 3 * i, p + 3 * j, e + 3 * r, cone);
+        }
+        f1[i] = along >= minimum || (score != NULL && score[i] < free_below);
+    }
+}
+
+void ms_smoothed_ranking(const double *score, const int64_t *rows, const ms_lists_t *compare,
+                         int64_t window, int64_t begin, int64_t end, double *rank) {
+    for (int64_t r = begin; r < end; r++) {
+        int64_t first, len;
+        list_span(compare, r, &first, &len);
+        const int64_t take = len < window ? len : window;
+        if (take == 0) continue;
+        double acc = 0.0;
+        for (int64_t t = first; t < first + take; t++) acc += score[list_member(compare, t)];
+        rank[rows[r]] = acc / (double)take;
+    }
+}
+
+/* Whether a point m of slot r's compare list with between[m], or ranking below i, lies
+ * between p_i and p_j: (p_m - p_i) . (p_m - p_j) < 0 (robust.thin's blocking). */
+static int parted(const double *p, const ms_lists_t *compare, int64_t first, int64_t len,
+                  const double *rank, const uint8_t *between, int64_t i, int64_t j) {
+    for (int64_t t = first; t < first + len; t++) {
+        const int64_t m = list_member(compare, t);
+        if ((between[m] || rank[m] < rank[i]) && ball_dot(p + 3 * m, p + 3 * i, p + 3 * j) < 0)
+            return 1;
+    }
+    return 0;
+}
+
+void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const double *e,
+             const ms_lists_t *compare, const double *rank, double cone, const uint8_t *between,
+             int64_t begin, int64_t end, uint8_t *f2) {
+    for (int64_t r = begin; r < end; r++) {
+        const int64_t i = rows[r];
+        int keep = f1[i];
+        int64_t first, len;
+        list_span(compare, r, &first, &len);
+        for (int64_t t = first; keep && t < first + len; t++) {
+            const int64_t j = list_member(compare, t);
+            if (j != i && f1[j] && rank[j] > rank[i] &&
+                across_line(p + 3 * i, p + 3 * j, e + 3 * r, cone) &&
+                !(between != NULL && parted(p, compare, first, len, rank, between, i, j)))
+                keep = 0;
+        }
+        f2[i] = (uint8_t)keep;
+    }
+}
+
+void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
+                   const ms_lists_t *lists, int64_t begin, int64_t end, uint8_t *out) {
+    for (int64_t r = begin; r < end; r++) {
+        const int64_t i = rows[r];
+        const double *pi = p + 3 * i;
+        int64_t first, len;
+        int tip = 0;
+        list_span(lists, r, &first, &len);
+        for (int64_t t = first; !tip && t < first + len; t++) {
+            const int64_t j = list_member(lists, t);
+            if (j == i || !f0[j]) continue;
+            for (int64_t u = t + 1; !tip && u < first + len; u++) {
+                const int64_t l = list_member(lists, u);
+                tip = l != i && f0[l] && ball_dot(pi, p + 3 * j, p + 3 * l) < 0;
+            }
+        }
+        out[r] = (uint8_t)tip;
+    }
+}
+
+/* Whether the point a (cleaned index i) is not among the kmax nearest of its nearest b,
+ * whose kmax-th neighbour has squared distance kth and index kth_idx: (|a - b|^2, i)
+ * comes after (kth, kth_idx) in the lists' order (squared distance, then index). */
+static inline uint8_t isolated_one(const double *a, const double *b, double kth,
+                                   int64_t kth_idx, int64_t i) {
+    double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+    double d2 = dx * dx + dy * dy + dz * dz;
+    return !(d2 < kth || (d2 == kth && i <= kth_idx));
+}
+
+/* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx)
+ * for the points [begin, end) of p (n, 3), cleaned order: out[i] = isolated_one of i and
+ * j = near[i]. */
+void ms_isolated(const double *p, const int32_t *near, const double *kth_d2,
+                 const int32_t *kth_idx, int64_t begin, int64_t end, uint8_t *out) {
+    for (int64_t i = begin; i < end; i++) {
+        int64_t j = near[i];
+        out[i] = isolated_one(p + 3 * i, p + 3 * j, kth_d2[j], kth_idx[j], i);
+    }
+}
+
+/* ms_isolated from a tree_order pass's statistics, for the tree positions [begin, end):
+ * tp (n, 3) the points in tree order, orig their cleaned indices, near[t] the tree
+ * position of the nearest, out[t] per tree position. The nearest lies close by in the
+ * tree: reads near the point's own, where cleaned order reads all over the cloud. */
+void ms_isolated_tree(const double *tp, const int64_t *orig, const int32_t *near,
+                      const double *kth_d2, const int32_t *kth_idx, int64_t begin, int64_t end,
+                      uint8_t *out) {
+    for (int64_t t = begin; t < end; t++) {
+        int64_t u = near[t];
+        out[t] = isolated_one(tp + 3 * t, tp + 3 * u, kth_d2[u], kth_idx[u], orig[t]);
+    }
+}

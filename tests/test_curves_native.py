@@ -1,0 +1,189 @@
+"""The native library's feature curves (native/src/curves.cpp behind the C ABI of
+native/include/meshlab_sharp.h): the ctypes binding against the header, the
+curves to the bit of the numpy reference (meshlab_sharp.reference.curves) on small
+clouds and meshes, and the C ABI's refusals."""
+
+from __future__ import annotations
+
+import ctypes
+import re
+
+import numpy as np
+import pytest
+import shapes
+
+import meshlab_sharp
+from meshlab_sharp import _header
+from meshlab_sharp.curves import _native, extract_curves
+from meshlab_sharp.reference import curves as reference
+
+pytestmark = pytest.mark.skipif(not _native.available(), reason="the native curves are not built")
+
+HEADER = _header.CURVES.path
+#: C types of the header's prototypes, as ctypes declares them.
+C_TYPES = {
+    "void": None,
+    "int": ctypes.c_int,
+    "int64_t": ctypes.c_int64,
+    "double": ctypes.c_double,
+}
+
+
+def _ctype(declaration: str) -> type | None:
+    """The ctypes type of a C parameter or return declaration (its name dropped)."""
+    words = declaration.replace("const ", "").strip()
+    if "*" in words:
+        return ctypes.c_void_p
+    return C_TYPES[words.split()[0]]
+
+
+def test_the_binding_declares_the_headers_prototypes():
+    """Every ``ms_curves_`` function of the header is in _native.SIGNATURES with the
+    header's return and argument types, and nothing else is; the math table's fields
+    are the header's, in its order."""
+    text = re.sub(r"/\*.*?\*/", "", HEADER.read_text(), flags=re.S)
+    found = {}
+    for ret, name, args in re.findall(r"^([\w ]+?\**)\s*\b(ms_curves_\w+)\(([^)]*)\);", text, re.M):
+        params = [a for a in (p.strip() for p in args.split(",")) if a and a != "void"]
+        found[name] = (_ctype(ret), [_ctype(p) for p in params])
+    assert len(found) == 8
+    assert found == _native.SIGNATURES
+    struct = re.search(r"typedef struct ms_curves_math \{(.*?)\}", text, re.S)
+    assert struct is not None
+    fields = re.findall(r"ms_curves_fn\d (\w+);", struct.group(1))
+    assert fields == [name for name, _ in _native._Math._fields_] == ["exp", "acos", "atan2"]
+
+
+def _assert_same(got: reference.CurveSet, want: reference.CurveSet) -> None:
+    """The same curves and corners to the bit."""
+    assert got.spacing == want.spacing
+    assert len(got.curves) == len(want.curves)
+    for (p, i, c, length), (wp, wi, wc, wlength) in zip(got.curves, want.curves, strict=True):
+        assert p.tobytes() == np.ascontiguousarray(wp).tobytes() and p.shape == wp.shape
+        np.testing.assert_array_equal(i, wi)
+        assert (c, np.float64(length).tobytes()) == (wc, np.float64(wlength).tobytes())
+    assert got.corner_points.tobytes() == want.corner_points.tobytes()
+    np.testing.assert_array_equal(got.corner_indices, want.corner_indices)
+
+
+def _cloud(case: str) -> tuple[np.ndarray, str]:
+    """A small cloud with edges and corners, and the mode to detect it in."""
+    if case == "cube-grid":  # a regular grid: neighbours at equal distances
+        return shapes.cube_grid_points(15), "robust"
+    if case == "random-box":
+        return shapes.random_box_points(4000, seed=2), "robust"
+    if case == "box-cylinder":
+        return shapes.box_cylinder_points(4000, seed=3), "paper"
+    if case == "noisy-box":
+        return shapes.noisy_box_points(8000, 0.01, seed=4), "robust"
+    if case == "iid":  # no surface: false detections everywhere
+        return np.random.default_rng(11).random((4000, 3)), "robust"
+    raise AssertionError(case)
+
+
+@pytest.mark.parametrize("case", ["cube-grid", "random-box", "box-cylinder", "noisy-box", "iid"])
+def test_cloud_curves_are_the_references_to_the_bit(case):
+    """Refined positions, indices, loops, lengths, corners and their order: the same
+    bits as the numpy reference, and some curves to compare."""
+    vertices, mode = _cloud(case)
+    result = meshlab_sharp.detect(vertices, mode=mode)
+    want = reference.extract_curves(vertices, result.mask, None, result.kept)
+    got = _native.extract_curves(vertices, result.mask, None, result.kept, None)
+    assert want.curves
+    _assert_same(got, want)
+    if case == "cube-grid":  # one curve per edge of the cube, from corner to corner
+        assert len(got.curves) == 12 and len(got.corner_points) == 8
+
+
+def test_a_larger_grid_box_gives_the_references_curves():
+    """``bounds`` (out of core: the whole cloud's box) lays the refinement's grid over
+    the given box, in the library as in the reference: with a box larger than the
+    points' the curves are still the reference's to the bit."""
+    vertices, _ = _cloud("random-box")
+    result = meshlab_sharp.detect(vertices)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    for box in ((lo, hi), (lo - 0.37, hi + 1.3)):
+        want = reference.extract_curves(vertices, result.mask, None, result.kept, box)
+        _assert_same(_native.extract_curves(vertices, result.mask, None, result.kept, box), want)
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_mesh_curves_are_the_references_to_the_bit(dtype):
+    """Mesh curves (chains of the mesh's edges; faces int32 or int64): the reference's,
+    12 edges and 8 corners on a cube."""
+    vertices, faces = shapes.cube_grid_mesh(4)
+    result = meshlab_sharp.detect(vertices, faces)
+    want = reference.extract_curves(vertices, result.mask, faces, result.kept)
+    got = _native.extract_curves(vertices, result.mask, faces.astype(dtype), result.kept, None)
+    _assert_same(got, want)
+    assert len(got.curves) == 12 and len(got.corner_points) == 8
+    moved, moved_faces = shapes.shuffled_mesh(*shapes.noisy_mesh(vertices, faces, 0.05))
+    result = meshlab_sharp.detect(moved, moved_faces)
+    want = reference.extract_curves(moved, result.mask, moved_faces, result.kept)
+    _assert_same(_native.extract_curves(moved, result.mask, moved_faces, result.kept, None), want)
+
+
+def test_the_public_curves_do_not_depend_on_the_backend(monkeypatch):
+    """``extract_curves`` with either backend, and without the built library: the same
+    Curve objects (kind and parameters included), each ``length`` the library's."""
+    vertices, _ = _cloud("box-cylinder")
+    result = meshlab_sharp.detect(vertices, mode="paper")
+    args = (vertices, result.mask, None, result.kept)
+    runs = [extract_curves(*args, backend=b) for b in ("compiled", "numpy")]
+    monkeypatch.setattr(_native, "_LIB", None)
+    runs.append(extract_curves(*args, backend="compiled"))
+    monkeypatch.undo()
+    native = _native.extract_curves(*args, None)
+    (curves, corners), *others = runs
+    assert [c.length for c in curves] == [length for *_, length in native.curves]
+    for other, other_corners in others:
+        assert len(other) == len(curves)
+        for a, b in zip(curves, other, strict=True):
+            assert a.points.tobytes() == b.points.tobytes()
+            np.testing.assert_array_equal(a.indices, b.indices)
+            assert (a.closed, a.kind, a.params.keys()) == (b.closed, b.kind, b.params.keys())
+            for key, value in a.params.items():
+                np.testing.assert_array_equal(value, b.params[key])
+        assert corners.points.tobytes() == other_corners.points.tobytes()
+        np.testing.assert_array_equal(corners.indices, other_corners.indices)
+    with pytest.raises(ValueError, match="unknown backend 'fast'"):
+        extract_curves(*args, backend="fast")
+
+
+def test_too_few_features_give_no_curve():
+    """None, one, or two features at one position: no curve, no corner, spacing 0."""
+    vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    for mask in ([0, 0, 0], [0, 1, 0], [1, 0, 1]):
+        got = _native.extract_curves(vertices, np.array(mask, bool), None, None, None)
+        assert (got.curves, len(got.corner_points), got.spacing) == ([], 0, 0.0)
+    got = _native.extract_curves(np.zeros((0, 3)), np.zeros(0, bool), None, None, None)
+    assert (got.curves, len(got.corner_points)) == ([], 0)
+
+
+def test_the_c_abi_refuses_bad_input():
+    """A face index outside the vertices, an unknown face index size, a null result
+    pointer or a negative count: MS_CURVES_EINVAL (-2), no result."""
+    lib = _native._LIB
+    vertices = np.zeros((3, 3))
+    feature = np.ones(3, np.uint8)
+    handle = ctypes.c_void_p()
+
+    def extract(faces: np.ndarray | None, size: int, n: int = 3, no_out: bool = False) -> int:
+        m = 0 if faces is None else len(faces)
+        ptr = None if faces is None else faces.ctypes.data
+        vp, fp = vertices.ctypes.data, feature.ctypes.data
+        out = None if no_out else ctypes.byref(handle)
+        return lib.ms_curves_extract(vp, fp, None, n, ptr, size, m, None, None, out)
+
+    for bad in ([[0, 1, 3]], [[0, -1, 2]]):
+        assert extract(np.array(bad, np.int64), 8) == -2
+        assert handle.value is None
+        assert extract(np.array(bad, np.int32), 4) == -2
+    assert extract(np.array([[0, 1, 2]], np.int64), 2) == -2
+    assert extract(None, 8, n=-1) == -2
+    assert extract(None, 8, no_out=True) == -2
+    assert extract(np.array([[0, 1, 2]], np.int64), 8) == 0
+    assert lib.ms_curves_count(handle) == 0
+    lib.ms_curves_free(handle)
+    with pytest.raises(ValueError, match=r"ms_curves_extract failed \(status -2\)"):
+        _native.extract_curves(vertices, feature.astype(bool), np.array([[0, 1, 5]]), None, None)
