@@ -30,7 +30,7 @@ setup(
             depends=headers,
             include_dirs=[str(native / "include")],
             # No fused multiply-add and no fast-math: products and sums rounded as numpy
-            # rounds them (docs/implementation-notes.md).
+            # rounds them (docs/contributing.md).
             extra_compile_args=["-O3", "-ffp-contract=off", "-fno-math-errno", "-std=c99"],
             define_macros=[("MS_LIBMVEC", "1")] if libmvec else [],
             libraries=["mvec", "m"] if libmvec else ["m"],
