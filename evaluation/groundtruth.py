@@ -1,4 +1,4 @@
-"""The evaluation's ground truth: the parts of :mod:`meshlab_sharp.parts` (whose sharp
+"""The evaluation's ground truth: the parts of :mod:`evaluation.parts` (whose sharp
 edges are known exactly), thin-walled parts, CAD tessellations, a simulated scan, and
 corruptions of them.
 
@@ -29,20 +29,13 @@ import pymeshlab
 from scipy.spatial import cKDTree
 
 from meshlab_sharp.parts import (
-    ACUTE_PARTS,
-    COARSE_SEGMENTS,
     CREASE_ANGLE,
     DEFAULT_POINTS,
-    PARTS,
-    ROUND_PARTS,
     SEGMENTS,
-    SHARP_PARTS,
-    SMOOTH_PARTS,
     Mesh,
     SamplePart,
     _box,
     _check_kind_and_count,
-    _convex_hull,
     _crease_edges,
     _cylinder,
     _f32,
@@ -54,11 +47,20 @@ from meshlab_sharp.parts import (
     _union,
     _vertex_normals,
     crease_segments,
+)
+
+from .parts import (
+    ACUTE_PARTS,
+    COARSE_SEGMENTS,
+    PARTS,
+    ROUND_PARTS,
+    SHARP_PARTS,
+    SMOOTH_PARTS,
+    _convex_hull,
     make_part,
     part_names,
     reference_surface,
 )
-
 from .scan import scan, scanner_positions
 from .scoring import POISSON_NN, density_spacing
 

@@ -39,7 +39,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 if TYPE_CHECKING:
-    from .groundtruth import SamplePart
+    from meshlab_sharp.parts import SamplePart
 
 __all__ = [
     "POISSON_NN",
@@ -321,7 +321,7 @@ def score_part(part: SamplePart, mask: np.ndarray) -> Scores:
 
     Parameters
     ----------
-    part : groundtruth.SamplePart
+    part : meshlab_sharp.parts.SamplePart
     mask : (n,) bool
 
     Returns

@@ -21,8 +21,9 @@ if TYPE_CHECKING:  # the public functions and classes, for type checkers and the
     from .errors import InputError, MeshlabSharpError  # noqa: F401
     from .io import Geometry, load, save_features_ply  # noqa: F401
     from .meshset import detect_meshset  # noqa: F401
-    from .pipeline import DetectionResult, detect  # noqa: F401
+    from .pipeline import detect  # noqa: F401
     from .preprocessing import Preprocessing, PreprocessingReport, preprocess  # noqa: F401
+    from .result import DetectionResult  # noqa: F401
 
 __version__ = "0.1.0"
 
@@ -32,7 +33,7 @@ _EXPORTS = {
     "DEFAULT_MODE": "defaults",
     "DEFAULT_RING_SCALES": "defaults",
     "MODES": "defaults",
-    "DetectionResult": "pipeline",
+    "DetectionResult": "result",
     "Geometry": "io",
     "InputError": "errors",
     "MeshlabSharpError": "errors",

@@ -17,7 +17,6 @@ import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -169,7 +168,6 @@ def load_library(stem: str, signatures: dict[str, tuple[Any, list[Any]]]) -> cty
 
 
 _LIB = load_library("_ckernels", _SIGNATURES)
-_override: list[str] = []
 
 
 def available() -> bool:
@@ -178,12 +176,11 @@ def available() -> bool:
 
 
 def default_backend() -> str:
-    """The backend used when none is named: ``MESHLAB_SHARP_BACKEND`` or a
-    :func:`use_backend` block if set, else "compiled" when available, else "numpy".
+    """The backend used when none is named: ``MESHLAB_SHARP_BACKEND`` if set, else
+    "compiled" when available, else "numpy". Every call names its backend or takes this
+    default: no state of the process chooses it.
 
     Raises ValueError when ``MESHLAB_SHARP_BACKEND`` names no backend."""
-    if _override:
-        return _override[-1]
     env = os.environ.get("MESHLAB_SHARP_BACKEND", "").strip().lower()
     if env and env not in BACKENDS:
         raise ValueError(
@@ -205,17 +202,6 @@ def resolve(backend: str | None) -> str:
             "the compiled kernels are not built: reinstall with 'pip install .' (needs gcc)"
         )
     return backend
-
-
-@contextmanager
-def use_backend(backend: str):
-    """Run the enclosed code with ``backend`` as the default (tests, benchmarks)."""
-    resolve(backend)
-    _override.append(backend)
-    try:
-        yield
-    finally:
-        _override.pop()
 
 
 def _ptr(a: np.ndarray | None) -> int | None:

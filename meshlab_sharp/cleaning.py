@@ -1,9 +1,9 @@
-"""Cleaning as ALGORITHM.md requires, with pymeshlab's filters and a map back to the input.
+"""Cleaning as ALGORITHM.md requires, and the maps back to the input.
 
 Exact duplicate vertices are merged into their first occurrence; for meshes, zero-area
-faces and then unreferenced vertices are dropped. pymeshlab's cleaning filters compact
-and renumber the mesh without telling where each vertex came from, so every vertex
-carries its input index in a custom attribute through the filters.
+faces and then unreferenced vertices are dropped: with the compiled kernels (a hash of
+the coordinates, vcg's zero-area test) or with pymeshlab's filters, the reference
+(:mod:`meshlab_sharp.reference.cleaning`), the same survivors and faces.
 """
 
 from __future__ import annotations
@@ -11,13 +11,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pymeshlab
 
 from . import _kernels
 from .errors import InputError
-from .io import Geometry, mesh_arrays
-
-_SOURCE_INDEX = "meshlab_sharp_input_index"
+from .io import Geometry
+from .reference import cleaning as reference
 
 
 @dataclass(frozen=True)
@@ -106,35 +104,6 @@ class CleanGeometry:
         return out
 
 
-def tag_input_indices(mesh: pymeshlab.Mesh, indices: np.ndarray | None = None) -> None:
-    """Tag each vertex of ``mesh`` with an input index that pymeshlab's filters carry.
-
-    pymeshlab's filters compact and renumber vertices without saying where each came
-    from, but they move custom per-vertex attributes along with the vertices. The index
-    is stored plus one, so that a vertex a filter adds (attribute 0) can be told apart.
-
-    Parameters
-    ----------
-    mesh : pymeshlab.Mesh
-        Not yet added to a MeshSet (``add_mesh`` stores a copy).
-    indices : (n,) int, optional
-        Input index of each vertex (-1: not an input vertex). Default: 0..n-1.
-    """
-    n = mesh.vertex_number()
-    values = np.arange(n) if indices is None else np.asarray(indices, dtype=np.int64)
-    mesh.add_vertex_custom_scalar_attribute(values.astype(np.float64) + 1.0, _SOURCE_INDEX)
-
-
-def tagged_input_indices(ms: pymeshlab.MeshSet, n_input: int) -> np.ndarray:
-    """Input index of each vertex of the current mesh of ``ms``, tagged by
-    :func:`tag_input_indices`; -1 for a vertex a filter added (its tag is not an index
-    in ``0..n_input-1``). Shape (m,) int64."""
-    raw = ms.current_mesh().vertex_custom_scalar_attribute_array(_SOURCE_INDEX)
-    index = np.rint(raw).astype(np.int64) - 1
-    index[(raw != np.rint(raw)) | (index < 0) | (index >= n_input)] = -1
-    return index
-
-
 def clean(
     geometry: Geometry,
     *,
@@ -149,7 +118,8 @@ def clean(
     geometry : Geometry
         Validated input (finite coordinates, valid face indices).
     backend : {"compiled", "numpy"}, optional
-        "numpy": pymeshlab's filters (the reference); "compiled": a hash of the
+        "numpy": pymeshlab's filters (:func:`meshlab_sharp.reference.cleaning.clean`);
+        "compiled": a hash of the
         coordinates in C and vcg's zero-area test, same survivors, same faces.
         Default: :func:`meshlab_sharp._kernels.default_backend`.
     workers : int, default 1
@@ -174,38 +144,7 @@ def clean(
     """
     if _kernels.resolve(backend) == "compiled":
         return _clean_compiled(geometry, workers, local_order)
-    v = geometry.vertices
-    ms = pymeshlab.MeshSet()
-    if geometry.is_mesh:
-        mesh = pymeshlab.Mesh(vertex_matrix=v, face_matrix=geometry.faces.astype(np.int32))
-    else:
-        mesh = pymeshlab.Mesh(vertex_matrix=v)
-    tag_input_indices(mesh)
-    ms.add_mesh(mesh)
-    ms.meshing_remove_duplicate_vertices()
-    if geometry.is_mesh:
-        ms.meshing_remove_null_faces()
-        ms.meshing_remove_unreferenced_vertices()
-    to_input = tagged_input_indices(ms, len(v))
-    _, faces = mesh_arrays(ms)
-    del ms
-    if geometry.is_mesh and faces is None:
-        raise InputError(
-            f"{geometry.source}: every face has zero area; nothing is left of the mesh "
-            "(use --as-points to treat its vertices as a point cloud)"
-        )
-
-    # Input vertex -> its first occurrence (pymeshlab keeps the first of equal vertices).
-    _, first, group = np.unique(v, axis=0, return_index=True, return_inverse=True)
-    survivor = first[group.reshape(-1)]
-    cleaned_of_input = np.full(len(v), -1, dtype=np.int64)
-    cleaned_of_input[to_input] = np.arange(len(to_input))
-    from_input = cleaned_of_input[survivor]
-    if not np.all(np.diff(to_input) > 0) or np.any(
-        from_input[to_input] != np.arange(len(to_input))
-    ):
-        raise RuntimeError("internal error: pymeshlab reordered vertices while cleaning")
-    return CleanGeometry.with_maps(v[to_input], faces, to_input, from_input)
+    return CleanGeometry.with_maps(*reference.clean(geometry))
 
 
 def _clean_compiled(geometry: Geometry, workers: int, local_order: bool) -> CleanGeometry:

@@ -42,8 +42,8 @@ from .progress import TICK, Progress
 
 if TYPE_CHECKING:  # the heavy modules are imported when work starts
     from .io.geometry import Geometry
-    from .pipeline import DetectionResult
     from .preprocessing import Preprocessing
+    from .result import DetectionResult
 
 #: ASCII white space, the only separator of a space-separated list (the plugin's too).
 _SPACE = " \t\n\r\f\v"
@@ -548,7 +548,8 @@ def _detect_tiled(
     """``detect --max-memory``/``--dask``: the input streamed, the output written in
     blocks (:mod:`meshlab_sharp.io.stream`)."""
     from .io import save_indices
-    from .io.stream import PointSource, mesh_error, open_points, write_features_ply
+    from .io.source import PointSource
+    from .io.stream import mesh_error, open_points, write_features_ply
 
     source, output = plan.source, plan.output
     for flag, given in (

@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from . import _header, _kernels
+from .reference import creases as reference
 
 __all__ = [
     "CREASE_ANGLE",
@@ -29,6 +30,7 @@ __all__ = [
     "dihedral_angles",
     "sharp_vertices",
 ]
+
 
 #: Degrees: the smallest turn of the surface that counts as a sharp edge (the ground
 #: truth's crease angle, ``meshlab_sharp.parts.CREASE_ANGLE``).
@@ -73,30 +75,7 @@ def dihedral_angles(
     if _kernels.resolve(backend) == "compiled":
         edges, dot = _kernels.two_face_edges(faces, points)
         return edges, _angles(dot)
-    p0, p1, p2 = (points[faces[:, c]] for c in range(3))
-    fn = np.cross(p1 - p0, p2 - p0)
-    length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
-    fn = fn / np.where(length > 0, length, 1.0)[:, None]
-    # the 3 edges of each face in turn, so that owners never decrease: a stable sort of
-    # the edge codes lo * n + hi (< 2**63 for n < 3e9) orders equal edges by owner
-    pairs = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    n = np.int64(len(points))
-    code = np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1])
-    order = np.argsort(code, kind="stable")
-    code, owner = code[order], order // 3
-    new = np.ones(len(code), bool)
-    new[1:] = code[1:] != code[:-1]
-    starts = np.flatnonzero(new)
-    counts = np.diff(np.append(starts, len(code)))
-    two = starts[counts == 2]
-    u, v = fn[owner[two]], fn[owner[two + 1]]
-    dot = u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] + u[:, 2] * v[:, 2]
-    edges = np.stack([code[two] // n, code[two] % n], axis=1)
-    return edges, np.arccos(np.clip(dot, -1.0, 1.0))
-
-
-#: Angles per block of crease_threshold's count.
-_BLOCK = 1 << 16
+    return reference.dihedral_angles(points, faces)
 
 
 def _angles(dot: np.ndarray) -> np.ndarray:
@@ -110,6 +89,10 @@ def _angles_and_threshold(dot: np.ndarray, flat: int) -> tuple[np.ndarray, float
     :func:`crease_threshold` of all the edges' angles: these and ``flat`` zeros."""
     angles = _angles(dot)
     return angles, crease_threshold(angles, zeros=flat)
+
+
+#: Angles per block of crease_threshold's count.
+_BLOCK = 1 << 16
 
 
 def crease_threshold(angles: np.ndarray, *, zeros: int = 0) -> float:
@@ -172,8 +155,4 @@ def sharp_vertices(
     faces = np.asarray(faces, np.int64)
     if _kernels.resolve(backend) == "compiled":
         return _kernels.crease_vertices(points, faces, _angles_and_threshold)
-    edges, angles = dihedral_angles(points, faces, backend="numpy")
-    threshold = crease_threshold(angles)
-    mask = np.zeros(len(points), bool)
-    mask[edges[angles > threshold].reshape(-1)] = True
-    return mask, threshold
+    return reference.sharp_vertices(points, faces, crease_threshold)

@@ -7,9 +7,11 @@ from collections.abc import Sequence
 import numpy as np
 import pymeshlab
 
+from .defaults import DEFAULT_MODE
 from .io import add_vertex_attribute, curve_arrays, select_vertices
 from .normals import DEFAULT_WEIGHTING, Weighting
-from .pipeline import DEFAULT_MODE, DetectionResult, detect
+from .pipeline import detect
+from .result import DetectionResult
 
 
 def detect_meshset(

@@ -13,11 +13,11 @@ from .defaults import DEFAULT_KNN_SCALES as DEFAULT_KNN_SCALES  # re-exported
 from .defaults import DEFAULT_RING_SCALES as DEFAULT_RING_SCALES
 from .neighbourhoods import KnnNeighbourhoods, RingNeighbourhoods
 from .normals import DEFAULT_WEIGHTING, Weighting
-from .projected_distance import projected_distances
+from .reference.projected_distance import projected_distances
 from .threshold import FLAT_TOLERANCE, normalise, otsu_threshold
 
 if TYPE_CHECKING:
-    from .robust import SheetNeighbourhoods
+    from .reference.robust import SheetNeighbourhoods
 
 
 @dataclass

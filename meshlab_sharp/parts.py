@@ -1,6 +1,6 @@
 """Generated CAD-like parts whose sharp edges are known exactly: the built-in sample
-(``meshlab_sharp.sample``) is one of them, and the evaluation (``evaluation/`` in the
-source tree, not installed) builds its conditions on them.
+(``meshlab_sharp.sample``) is built here, and the evaluation's other parts
+(``evaluation/parts.py`` in the source tree, not installed) are built the same way.
 
 Every part is built the same way:
 
@@ -22,32 +22,26 @@ Every part is built the same way:
 Coordinates are rounded to float32 (MeshLab stores float) and returned as float64.
 
 >>> from meshlab_sharp.parts import make_part
->>> part = make_part("drilled_plate", n_points=20_000, seed=1)   # doctest: +SKIP
+>>> part = make_part("fandisk", n_points=20_000, seed=1)   # doctest: +SKIP
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 import pymeshlab
-from scipy.spatial import ConvexHull, cKDTree
+from scipy.spatial import cKDTree
 
 __all__ = [
-    "ACUTE_PARTS",
-    "COARSE_SEGMENTS",
     "CREASE_ANGLE",
-    "PARTS",
-    "ROUND_PARTS",
-    "SHARP_PARTS",
-    "SMOOTH_PARTS",
+    "SAMPLE_PARTS",
     "SamplePart",
     "crease_segments",
     "make_part",
-    "part_names",
     "reference_surface",
 ]
 
@@ -64,6 +58,9 @@ DEFAULT_MESH_VERTICES = 25_000
 Mesh = tuple[np.ndarray, np.ndarray]
 """(vertices (n, 3) float64, faces (m, 3) int64), closed and outward oriented."""
 
+Builder = Callable[[int], Mesh]
+"""A part's reference surface, given the segments per turn of its round surfaces."""
+
 
 @dataclass(frozen=True, eq=False)
 class SamplePart:
@@ -72,7 +69,7 @@ class SamplePart:
     Attributes
     ----------
     name : str
-        Part name (a key of ``PARTS``).
+        Part name (a key of the ``parts`` it was made from).
     vertices : (n, 3) float64
         Points or mesh vertices, float32-representable.
     faces : (m, 3) int64 or None
@@ -195,88 +192,6 @@ def _halfspace_cutter(point: np.ndarray, normal: np.ndarray, size: float = 1000.
     return _loft(loop, loop + 2 * size * n)
 
 
-def _convex_hull(points: np.ndarray) -> Mesh:
-    """Outward-oriented triangulated convex hull of (k, 3) points."""
-    pts = np.asarray(points, float)
-    hull = ConvexHull(pts)
-    faces = hull.simplices.astype(np.int64).copy()
-    v = pts[faces]
-    nrm = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-    outward = np.einsum("ij,ij->i", nrm, v[:, 0] - pts.mean(0)) > 0
-    faces[~outward] = faces[~outward][:, ::-1]
-    used, faces = np.unique(faces, return_inverse=True)
-    return pts[used], faces.reshape(-1, 3).astype(np.int64)
-
-
-def _torus(R: float, r: float, nu: int = SEGMENTS, nv: int = SEGMENTS // 2) -> Mesh:
-    """Torus around z, major radius R, minor radius r, (nu x nv) quad grid."""
-    u = 2 * np.pi * np.arange(nu) / nu
-    v = 2 * np.pi * np.arange(nv) / nv
-    uu, vv = np.meshgrid(u, v, indexing="ij")
-    rho = R + r * np.cos(vv)
-    verts = np.stack([rho * np.cos(uu), rho * np.sin(uu), r * np.sin(vv)], -1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
-    a = i * nv + j
-    b = ((i + 1) % nu) * nv + j
-    c = ((i + 1) % nu) * nv + (j + 1) % nv
-    d = i * nv + (j + 1) % nv
-    faces = np.vstack(
-        [np.c_[a.ravel(), b.ravel(), c.ravel()], np.c_[a.ravel(), c.ravel(), d.ravel()]]
-    )
-    return verts, faces.astype(np.int64)
-
-
-def _rounded_box(
-    half: tuple[float, float, float], r: float, n_flat: int = 24, segments: int = SEGMENTS
-) -> Mesh:
-    """Box of half-sizes ``half`` with every edge and corner rounded by radius r.
-
-    A cube's surface grid is mapped onto the offset surface of the inner box: a grid
-    point v goes to ``clip(v) + r * (v - clip(v)) / |v - clip(v)|``; grid lines past the
-    inner box sit at ``tan(theta)`` so the 90-degree roundings get uniform angle steps.
-    """
-    steps = segments // 8  # 45 degrees on each of the two cube faces a rounding spans
-    theta = (np.arange(1, steps + 1) / steps) * (np.pi / 4)
-    axes = []
-    for h in half:
-        inner = h - r
-        flat = np.linspace(-inner, inner, max(2, round(n_flat * inner / max(half)) + 1))
-        axes.append(np.concatenate([-inner - np.tan(theta[::-1]), flat, inner + np.tan(theta)]))
-    verts_list, faces_list, offset = [], [], 0
-    for ax in range(3):
-        u_ax, v_ax = [a for a in range(3) if a != ax]
-        for sign in (-1.0, 1.0):
-            uu, vv = np.meshgrid(axes[u_ax], axes[v_ax], indexing="ij")
-            g = np.zeros(uu.shape + (3,))
-            g[..., ax] = sign * axes[ax][-1]
-            g[..., u_ax] = uu
-            g[..., v_ax] = vv
-            nu, nv = uu.shape
-            i, j = np.meshgrid(np.arange(nu - 1), np.arange(nv - 1), indexing="ij")
-            a = (i * nv + j).ravel()
-            b = ((i + 1) * nv + j).ravel()
-            c = ((i + 1) * nv + j + 1).ravel()
-            d = (i * nv + j + 1).ravel()
-            f = np.vstack([np.c_[a, b, c], np.c_[a, c, d]])
-            # (u, v, ax) right-handed for ax=0 (y,z,x), ax=1 (x,z,y) is left-handed
-            right_handed = ax != 1
-            if (sign > 0) != right_handed:
-                f = f[:, ::-1]
-            verts_list.append(g.reshape(-1, 3))
-            faces_list.append(f + offset)
-            offset += nu * nv
-    grid = np.vstack(verts_list)
-    faces = np.vstack(faces_list)
-    grid_r = np.round(grid, 9)
-    uniq, inv = np.unique(grid_r, axis=0, return_inverse=True)
-    faces = inv.reshape(-1)[faces]
-    inner = np.array(half) - r
-    clip = np.clip(uniq, -inner, inner)
-    d = uniq - clip
-    verts = clip + r * d / np.linalg.norm(d, axis=1, keepdims=True)
-    return verts, faces.astype(np.int64)
-
-
 def _boolean(op: str, a: Mesh, b: Mesh) -> Mesh:
     """Exact mesh boolean of two closed meshes with pymeshlab ("union", "difference",
     "intersection")."""
@@ -368,155 +283,9 @@ def _part_fandisk(segments: int = SEGMENTS) -> Mesh:
     return _minus(solid, chamfer, slope, hole, countersink)
 
 
-def _part_box(segments: int = SEGMENTS) -> Mesh:
-    """Box 60 x 40 x 30: twelve 90-degree edges (no round surface: ``segments`` unused)."""
-    return _box((0, 0, 0), (60, 40, 30))
-
-
-def _part_chamfered_box(segments: int = SEGMENTS) -> Mesh:
-    """Box 60 x 40 x 30 whose four top edges carry a 6-wide 45-degree chamfer (no round
-    surface: ``segments`` unused)."""
-    a, b, h, c = 30.0, 20.0, 30.0, 6.0
-    pts = []
-    for sx in (-1, 1):
-        for sy in (-1, 1):
-            pts += [(sx * a, sy * b, 0), (sx * a, sy * b, h - c), (sx * (a - c), sy * (b - c), h)]
-    return _convex_hull(np.array(pts))
-
-
-def _part_cylinder(segments: int = SEGMENTS) -> Mesh:
-    """Cylinder r = 20, height 40: two circular 90-degree edges."""
-    return _cylinder((0, 0), 20, 0, 40, segments)
-
-
-def _part_cone(segments: int = SEGMENTS) -> Mesh:
-    """Truncated cone r = 25 at the base to r = 10 at height 35 (23-degree half-angle):
-    a 67-degree edge at the base circle, a 113-degree one at the top."""
-    return _frustum((0, 0), 25, 10, 0, 35, segments)
-
-
-def _part_drilled_plate(segments: int = SEGMENTS) -> Mesh:
-    """Plate 80 x 50 x 12 with three through holes (r = 5, 7, 9): rims at 90 degrees."""
-    plate = _box((0, 0, 0), (80, 50, 12))
-    holes = [
-        _cylinder(c, r, -1, 13, segments) for c, r in (((16, 25), 5), ((38, 25), 7), ((62, 25), 9))
-    ]
-    return _minus(plate, *holes)
-
-
-def _part_concave_steps(segments: int = SEGMENTS) -> Mesh:
-    """Three-step staircase 60 x 40 (steps 20 deep, 10 high): two concave 90-degree edges
-    between the treads and the risers, and the convex nosings (``segments`` unused)."""
-    return _union(
-        _box((0, 0, 0), (60, 40, 10)),
-        _box((0, 0, 0), (40, 40, 20)),
-        _box((0, 0, 0), (20, 40, 30)),
-    )
-
-
-def _part_star_prism(segments: int = SEGMENTS) -> Mesh:
-    """Five-pointed star prism (R = 30, height 20) with 45-degree tips: the vertical
-    tip edges are acute (the faces turn by 135 degrees), the five inner ones concave
-    (``segments`` unused)."""
-    n, big = 5, 30.0
-    t22 = math.tan(math.radians(22.5))
-    small = big * t22 / (math.sin(math.pi / n) + t22 * math.cos(math.pi / n))
-    ang = np.pi / 2 + np.pi * np.arange(2 * n) / n
-    rad = np.where(np.arange(2 * n) % 2 == 0, big, small)
-    return _prism(np.c_[rad * np.cos(ang), rad * np.sin(ang)], 0, 20)
-
-
-def _part_sphere(segments: int = SEGMENTS) -> Mesh:
-    """Smooth control: sphere r = 25 (icosphere, 10242 vertices; ``segments`` unused)."""
-    ms = pymeshlab.MeshSet()
-    ms.create_sphere(radius=25.0, subdiv=5)
-    m = ms.current_mesh()
-    return m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64)
-
-
-def _part_torus(segments: int = SEGMENTS) -> Mesh:
-    """Smooth control: torus R = 25, r = 10."""
-    return _torus(25.0, 10.0, segments, segments // 2)
-
-
-def _part_rounded_box(segments: int = SEGMENTS) -> Mesh:
-    """Smooth control: box 60 x 40 x 30 with every edge rounded (r = 8)."""
-    return _rounded_box((30.0, 20.0, 15.0), 8.0, segments=segments)
-
-
-def _wedge(angle: float) -> Mesh:
-    """Triangular prism (height 30) whose apex edge has an interior dihedral angle of
-    ``angle`` degrees: isosceles cross-section, legs 50 long; the two base edges have
-    ``(180 - angle) / 2`` degrees, the end caps 90."""
-    half = math.radians(angle) / 2
-    tri = np.array([[0.0, 0.0], [50 * math.cos(half), -50 * math.sin(half)]])
-    tri = np.vstack([tri, [50 * math.cos(half), 50 * math.sin(half)]])
-    return _prism(tri, 0.0, 30.0)
-
-
-def _part_wedge30(segments: int = SEGMENTS) -> Mesh:
-    """Acute wedge: a 30-degree apex edge (``segments`` unused)."""
-    return _wedge(30.0)
-
-
-def _part_wedge45(segments: int = SEGMENTS) -> Mesh:
-    """Acute wedge: a 45-degree apex edge (``segments`` unused)."""
-    return _wedge(45.0)
-
-
-def _part_wedge60(segments: int = SEGMENTS) -> Mesh:
-    """Acute wedge: a 60-degree apex edge (``segments`` unused)."""
-    return _wedge(60.0)
-
-
-PARTS: dict[str, Callable[[int], Mesh]] = {
-    "fandisk": _part_fandisk,
-    "box": _part_box,
-    "chamfered_box": _part_chamfered_box,
-    "cylinder": _part_cylinder,
-    "cone": _part_cone,
-    "drilled_plate": _part_drilled_plate,
-    "concave_steps": _part_concave_steps,
-    "star_prism": _part_star_prism,
-    "wedge30": _part_wedge30,
-    "wedge45": _part_wedge45,
-    "wedge60": _part_wedge60,
-    "sphere": _part_sphere,
-    "torus": _part_torus,
-    "rounded_box": _part_rounded_box,
-}
+SAMPLE_PARTS: dict[str, Builder] = {"fandisk": _part_fandisk}
 """Part name -> builder of its reference surface, given the segments per turn of its
-round surfaces."""
-
-SMOOTH_PARTS = ("sphere", "torus", "rounded_box")
-"""Smooth controls: no sharp edges."""
-
-SHARP_PARTS = (
-    "fandisk",
-    "box",
-    "chamfered_box",
-    "cylinder",
-    "cone",
-    "drilled_plate",
-    "concave_steps",
-    "star_prism",
-)
-"""The parts of the standard conditions (clean, noise, outliers, density, mesh, CAD)."""
-
-ACUTE_PARTS = ("wedge30", "wedge45", "wedge60", "star_prism")
-"""Parts with acute edges (30, 45, 60 degrees; the star's tips are 45 degrees)."""
-
-ROUND_PARTS = ("fandisk", "cylinder", "cone", "drilled_plate")
-"""Sharp parts with round surfaces: they have a coarse CAD tessellation."""
-
-COARSE_SEGMENTS = 24
-"""Segments per turn of a coarse CAD tessellation: facets turn by 15 degrees, below
-``CREASE_ANGLE``, so the coarse part's exact edges are still its round rims."""
-
-
-def part_names(*, smooth: bool | None = None) -> list[str]:
-    """Names of the parts; ``smooth=True`` only the smooth controls, False only the others."""
-    return [n for n in PARTS if smooth is None or (n in SMOOTH_PARTS) == smooth]
+round surfaces: the sample's part (``evaluation/parts.py`` holds the others)."""
 
 
 # ----------------------------------------------------------------------------------
@@ -584,13 +353,13 @@ def crease_segments(
 
 
 def reference_surface(
-    name: str, segments: int = SEGMENTS
+    name: str, segments: int = SEGMENTS, *, parts: Mapping[str, Builder] = SAMPLE_PARTS
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The exact part ``name``: reference mesh and its sharp edges (kept in memory
-    after the first call; the arrays are read-only).
+    """The exact part ``name`` of ``parts``: reference mesh and its sharp edges (kept in
+    memory after the first call; the arrays are read-only).
 
     ``segments`` (per turn of the round surfaces) must keep facets below the crease
-    angle (at least 18); ``COARSE_SEGMENTS`` gives the coarse CAD tessellation.
+    angle (at least 18).
 
     Returns
     -------
@@ -598,16 +367,16 @@ def reference_surface(
     faces : (m, 3) int64
     edges : (e, 2, 3) float64
     """
-    if name not in PARTS:
-        raise KeyError(f"unknown part {name!r}; known: {', '.join(PARTS)}")
+    if name not in parts:
+        raise KeyError(f"unknown part {name!r}; known: {', '.join(parts)}")
     if segments * CREASE_ANGLE <= 360.0:
         raise ValueError(f"{segments} segments per turn make facets turn by crease angles")
-    return _reference_cached(name, int(segments))
+    return _reference_cached(parts[name], int(segments))
 
 
 @functools.cache
-def _reference_cached(name: str, segments: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    verts, faces = PARTS[name](segments)
+def _reference_cached(builder: Builder, segments: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    verts, faces = builder(segments)
     out = (verts, faces, crease_segments(verts, faces))
     for a in out:
         a.setflags(write=False)
@@ -811,13 +580,14 @@ def make_part(
     *,
     n_points: int | None = None,
     seed: int = 0,
+    parts: Mapping[str, Builder] = SAMPLE_PARTS,
 ) -> SamplePart:
     """Generate part ``name`` as a point cloud or a mesh, with its exact sharp edges.
 
     Parameters
     ----------
     name : str
-        One of ``part_names()``.
+        A key of ``parts``.
     kind : {"points", "mesh"}
         Poisson-disk points on the surface, or an isotropic watertight mesh whose
         sharp edges are mesh edges.
@@ -827,10 +597,12 @@ def make_part(
         for meshes.
     seed : int
         Seed of the point sampling (a mesh does not depend on it).
+    parts : mapping of str to builder, default ``SAMPLE_PARTS``
+        The parts known (``evaluation/parts.py``: every part of the evaluation).
 
     Returns
     -------
     SamplePart
     """
     n = _check_kind_and_count(kind, n_points)
-    return _sampled(name, reference_surface(name), kind, n, seed)
+    return _sampled(name, reference_surface(name, parts=parts), kind, n, seed)

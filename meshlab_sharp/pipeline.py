@@ -9,22 +9,18 @@ import threading
 import time
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
-import pymeshlab
 
-from . import _header, _kernels
-from ._pages import small_pages
+from . import _kernels
 from .cleaning import CleanGeometry, clean
 from .creases import sharp_vertices
-from .curves import Corners, Curve, extract_curves
-from .defaults import DEFAULT_MODE as DEFAULT_MODE  # re-exported
-from .defaults import MAX_SCALES as MAX_SCALES
-from .defaults import MODES as MODES
+from .curves import extract_curves
+from .defaults import DEFAULT_MODE
 from .errors import InputError
-from .io import Geometry, as_geometry, load, mesh_arrays
+from .io import Geometry
 from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
 from .neighbourhoods import (
     KnnNeighbourhoods,
@@ -32,7 +28,8 @@ from .neighbourhoods import (
     build_neighbourhoods,
     unit_scale,
 )
-from .normals import DEFAULT_WEIGHTING, WEIGHTINGS, Weighting, face_average_normals
+from .normals import DEFAULT_WEIGHTING, Weighting, face_average_normals
+from .options import Source, as_input, check_mode_and_weighting, check_scales
 from .preprocessing import (
     Preprocessing,
     PreprocessingReport,
@@ -41,132 +38,8 @@ from .preprocessing import (
     preprocess,
 )
 from .progress import Progress
+from .result import DetectionResult
 from .robust import RobustSetup
-
-Source = str | os.PathLike[str] | np.ndarray | Geometry | pymeshlab.MeshSet | pymeshlab.Mesh
-
-#: The smallest scales: k nearest neighbours (the point itself and one more) ...
-MIN_KNN_SCALE = _header.integer("MIN_KNN_SCALE")
-#: ... and rings.
-MIN_RING_SCALE = _header.integer("MIN_RING_SCALE")
-
-
-@dataclass
-class DetectionResult:
-    """Sharp features of one input, every per-vertex array in the input's order.
-
-    Attributes
-    ----------
-    mask : (n,) bool
-        True for the sharp feature points (candidates at every scale).
-    strength : (n,) float64
-        Fraction of scales at which the point was a candidate, in [0, 1].
-    kind : {"points", "mesh"}
-        How the input was processed: kNN neighbourhoods or k-rings.
-    scales : tuple of int
-        The scales used (k of kNN, or rings).
-    thresholds : (s,) float64
-        Otsu's threshold at each scale.
-    candidate_counts : (s,) int64
-        Candidates at each scale (cleaned points; merged duplicates count once).
-    kept : (n,) bool
-        Input vertices that took part (False for unreferenced mesh vertices, which are
-        dropped by cleaning, and in robust mode for isolated points, which are left
-        out; neither is ever a feature). The MeshLab plugin reports the same.
-    weighting : str
-        The PCA weighting.
-    n_clean : int
-        Number of distinct points processed.
-    timings : dict of str to float
-        Seconds per stage.
-    distances : (s, n) float64 or None
-        Normalised projected distances per scale (``return_details=True``); NaN for
-        dropped vertices.
-    normals : (s, n, 3) float64 or None
-        Unit normals used at each scale (``return_details=True``); NaN for dropped
-        vertices. Their sign is arbitrary.
-    preprocessing : PreprocessingReport or None
-        With ``detect(..., preprocessing=...)``: the steps run, the processed geometry,
-        its map to the input and the detection in its order.
-    mode : str
-        "paper" or "robust".
-    curves : list of Curve or None
-        With ``detect(..., curves=True)``: the feature curves (:mod:`meshlab_sharp.curves`),
-        each with ``points`` (m, 3), ``indices`` (m,) of the input points, ``closed``,
-        ``kind`` ("line", "arc", "freeform") and ``params``.
-    corners : Corners or None
-        With ``curves=True``: ``points`` (c, 3) and ``indices`` (c,) of the corners.
-    tiling : dict or None
-        Out of core (``max_memory``/``dask``): tiles, tasks, halo and peak memory.
-    """
-
-    mask: np.ndarray
-    strength: np.ndarray
-    kind: str
-    scales: tuple[int, ...]
-    thresholds: np.ndarray
-    candidate_counts: np.ndarray
-    kept: np.ndarray
-    weighting: str
-    n_clean: int
-    timings: dict[str, float] = field(default_factory=dict)
-    distances: np.ndarray | None = None
-    normals: np.ndarray | None = None
-    preprocessing: PreprocessingReport | None = None
-    mode: str = DEFAULT_MODE
-    curves: list[Curve] | None = None
-    corners: Corners | None = None
-    tiling: dict[str, Any] | None = None
-
-    @property
-    def indices(self) -> np.ndarray:
-        """0-based input indices of the features, shape (f,)."""
-        return np.flatnonzero(self.mask)
-
-    @property
-    def n_features(self) -> int:
-        """Number of feature points."""
-        return int(self.mask.sum())
-
-    def summary(self) -> dict[str, Any]:
-        """A JSON-ready summary: counts, per-scale thresholds, options and timings."""
-        return {
-            "kind": self.kind,
-            "n_input": len(self.mask),
-            "n_clean": self.n_clean,
-            "n_dropped": int((~self.kept).sum()),
-            "n_features": self.n_features,
-            "options": {
-                "scales": list(self.scales),
-                "weighting": self.weighting,
-                "mode": self.mode,
-            },
-            "scales": [
-                {"scale": int(s), "threshold": float(t), "candidates": int(c)}
-                for s, t, c in zip(self.scales, self.thresholds, self.candidate_counts, strict=True)
-            ],
-            "timings_s": {k: round(v, 6) for k, v in self.timings.items()},
-            **(
-                {}
-                if self.preprocessing is None
-                else {"preprocessing": self.preprocessing.summary()}
-            ),
-            **({} if self.curves is None else _curves_summary(self.curves, self.corners)),
-            **({} if self.tiling is None else {"tiling": self.tiling}),
-        }
-
-
-def _curves_summary(curves: list[Curve], corners: Corners | None) -> dict[str, Any]:
-    """The ``curves`` part of :meth:`DetectionResult.summary`."""
-    kinds = [c.kind for c in curves]
-    return {
-        "curves": {
-            "n_curves": len(curves),
-            "n_corners": 0 if corners is None else len(corners),
-            "kinds": {k: kinds.count(k) for k in sorted(set(kinds))},
-            "list": [c.summary() for c in curves],
-        }
-    }
 
 
 def detect(
@@ -198,7 +71,7 @@ def detect(
         Triangles, when ``source`` is an array. None: a point cloud.
     scales : int or sequence of int, optional
         kNN sizes for clouds (default 12, 16, ..., 40) or rings for meshes (default
-        1, 2, 3, 4); at most :data:`MAX_SCALES`. A single int is one scale.
+        1, 2, 3, 4); at most :data:`~meshlab_sharp.options.MAX_SCALES`. A single int is one scale.
     weighting : {"gaussian", "none"}, default "gaussian"
         Weights of the PCA normals (clouds, and mesh vertices without a face normal).
     as_points : bool, default False
@@ -254,42 +127,41 @@ def detect(
         result has no features.
     """
     try:
-        _kernels.resolve(backend)
+        backend = _kernels.resolve(backend)
     except (ValueError, RuntimeError) as exc:
         raise InputError(str(exc)) from None
     if max_memory is not None or dask is not None:
         from .tiles import detect_out_of_core
 
         options = dict(scales=scales, weighting=weighting, as_points=as_points, mode=mode)
-        with small_pages():
-            return detect_out_of_core(
-                source,
-                faces,
-                **options,
-                return_details=return_details,
-                progress=progress,
-                workers=workers,
-                preprocessing=preprocessing,
-                backend=backend,
-                max_memory=max_memory,
-                dask=dask,
-                scratch=scratch,
-                curves=curves,
-            )
-    with _kernels.use_backend(_kernels.resolve(backend)), small_pages():
-        return _detect(
+        return detect_out_of_core(
             source,
             faces,
-            scales=scales,
-            weighting=weighting,
-            as_points=as_points,
+            **options,
             return_details=return_details,
             progress=progress,
             workers=workers,
             preprocessing=preprocessing,
-            mode=mode,
+            backend=backend,
+            max_memory=max_memory,
+            dask=dask,
+            scratch=scratch,
             curves=curves,
         )
+    return _detect(
+        source,
+        faces,
+        scales=scales,
+        weighting=weighting,
+        as_points=as_points,
+        return_details=return_details,
+        progress=progress,
+        workers=workers,
+        preprocessing=preprocessing,
+        mode=mode,
+        backend=backend,
+        curves=curves,
+    )
 
 
 def _detect(
@@ -304,16 +176,15 @@ def _detect(
     workers: int,
     preprocessing: Preprocessing | dict[str, Any] | None,
     mode: str,
+    backend: str,
     curves: bool = False,
 ) -> DetectionResult:
-    """:func:`detect` under the chosen backend."""
-    if weighting not in WEIGHTINGS:
-        raise InputError(f"unknown weighting {weighting!r}; choose from {', '.join(WEIGHTINGS)}")
-    if not isinstance(mode, str) or mode not in MODES:
-        raise InputError(f"unknown mode {mode!r}; choose from {', '.join(MODES)}")
+    """:func:`detect` in memory, every step with ``backend`` (resolved: "compiled" or
+    "numpy")."""
+    check_mode_and_weighting(mode, weighting)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    geometry = _as_input(source, faces, as_points)
+    geometry = as_input(source, faces, as_points)
     timings["load"] = time.perf_counter() - t0
     steps = as_preprocessing(preprocessing)
     if steps is not None and steps.active:
@@ -336,17 +207,18 @@ def _detect(
             progress=progress,
             workers=workers,
             mode=mode,
+            backend=backend,
         )
         result = map_to_input(inner, to_input, len(geometry.vertices), report)
         result.timings = {**inner.timings, "load": timings["load"], "preprocess": report.seconds}
         if curves:
-            _add_curves(result, geometry, as_points)
+            _add_curves(result, geometry, as_points, backend)
         result.timings["total"] = time.perf_counter() - t0
         return result
 
     is_mesh = geometry.is_mesh and not as_points
     kind = "mesh" if is_mesh else "points"
-    scales_t = _check_scales(scales, DEFAULT_RING_SCALES if is_mesh else DEFAULT_KNN_SCALES, kind)
+    scales_t = check_scales(scales, DEFAULT_RING_SCALES if is_mesh else DEFAULT_KNN_SCALES, kind)
     bar = (
         progress
         if isinstance(progress, Progress)
@@ -363,9 +235,9 @@ def _detect(
     to_clean = geometry if same else Geometry(unit, faces_in, geometry.source)
     cleaned, tree = (
         # a mesh renumbered when its order is scattered: every step reads nearby memory
-        (clean(to_clean, workers=workers, local_order=True), None)
+        (clean(to_clean, backend=backend, workers=workers, local_order=True), None)
         if is_mesh
-        else _clean_beside_tree(to_clean, workers)
+        else _clean_beside_tree(to_clean, workers, backend)
     )
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
@@ -380,6 +252,7 @@ def _detect(
         cleaned.faces if is_mesh else None,
         scales_t,
         workers,
+        backend,
         mode == "robust",
         tree,
         cleaned.adjacency,
@@ -448,6 +321,7 @@ def _detect(
         n_clean=len(points),
         timings=timings,
         mode=mode,
+        backend=neighbourhoods.backend,
     )
     if per_scale.distances is not None and per_scale.normals is not None:
         result.distances = np.stack(
@@ -456,7 +330,7 @@ def _detect(
         result.normals = np.stack([cleaned.to_input_order(n, np.nan) for n in per_scale.normals])
     timings["decide"] = time.perf_counter() - t
     if curves:
-        _add_curves(result, geometry, as_points)
+        _add_curves(result, geometry, as_points, backend)
     timings["total"] = time.perf_counter() - t0
     bar.step("done")
     if not isinstance(progress, Progress):
@@ -465,22 +339,22 @@ def _detect(
 
 
 def _clean_beside_tree(
-    geometry: Geometry, workers: int
+    geometry: Geometry, workers: int, backend: str
 ) -> tuple[CleanGeometry, Future[_kernels.KdTree] | None]:
-    """:func:`clean` of a cloud and, meanwhile on a thread of its own, the kd-tree of
-    its points (compiled backend, unless ``workers`` is 1): cleaning's duplicate merge
-    is one serial C call, the tree's first levels nearly so, and they took one core each
-    in turn. The tree (a future) is the cleaned cloud's when cleaning merged no point
-    (the same points in the same order: cleaning keeps the order); else None, and the
-    build stops before its next node."""
-    if workers == 1 or _kernels.resolve(None) != "compiled":
-        return clean(geometry), None
+    """:func:`clean` of a cloud with ``backend`` and, meanwhile on a thread of its own,
+    the kd-tree of its points (``backend`` "compiled", unless ``workers`` is 1):
+    cleaning's duplicate merge is one serial C call, the tree's first levels nearly so,
+    and they took one core each in turn. The tree (a future) is the cleaned cloud's
+    when cleaning merged no point (the same points in the same order: cleaning keeps the
+    order); else None, and the build stops before its next node."""
+    if workers == 1 or backend != "compiled":
+        return clean(geometry, backend=backend), None
     stop = threading.Event()
     pool = ThreadPoolExecutor(max_workers=1)
     tree = pool.submit(_kernels.build_tree, geometry.vertices, workers, stop.is_set)
     pool.shutdown(wait=False)  # its thread ends with the build
     try:
-        cleaned = clean(geometry)
+        cleaned = clean(geometry, backend=backend)
     except BaseException:
         stop.set()
         raise
@@ -495,6 +369,7 @@ def _neighbourhoods_and_normals(
     faces: np.ndarray | None,
     scales: tuple[int, ...],
     workers: int,
+    backend: str,
     robust: bool,
     tree: Future[_kernels.KdTree] | None = None,
     adjacency: tuple[np.ndarray, np.ndarray] | None = None,
@@ -503,87 +378,46 @@ def _neighbourhoods_and_normals(
     face-average normals (n, 3) and, when ``robust``, the sharp mesh edges' vertices
     (:func:`meshlab_sharp.creases.sharp_vertices`, (n,) bool); None for each on a cloud.
     ``tree``: a cloud's kd-tree, being built (:func:`_clean_beside_tree`); ``adjacency``:
-    a mesh's, built already (by cleaning: ``CleanGeometry.adjacency``). Unless
-    ``workers`` is 1, with the compiled backend (single-threaded C calls that release the
-    GIL) the work is split between two threads: in paper mode the normals beside the
-    adjacency; in robust mode the sharp edges (the longest: 0.12 s on the 1M bench mesh)
-    beside the adjacency and then the normals (0.07 + 0.06 s). Three threads on two
-    cores, each call on its own, made the sharp edges share a core for their first
-    0.1 s and end later (about 10-15 ms)."""
+    a mesh's, built already (by cleaning: ``CleanGeometry.adjacency``). Every step runs
+    with ``backend``. Unless ``workers`` is 1, with the compiled backend (single-threaded C
+    calls that release the GIL) the work is split between two threads: in paper mode the
+    normals beside the adjacency; in robust mode the sharp edges (the longest: 0.12 s on
+    the 1M bench mesh) beside the adjacency and then the normals (0.07 + 0.06 s). Three
+    threads on two cores, each call on its own, made the sharp edges share a core for
+    their first 0.1 s and end later (about 10-15 ms)."""
     if faces is None:
         built = None if tree is None else tree.result()
-        neighbourhoods = build_neighbourhoods(points, None, scales, workers=workers, tree=built)
+        neighbourhoods = build_neighbourhoods(
+            points, None, scales, workers=workers, backend=backend, tree=built
+        )
         return neighbourhoods, None, None
-    if workers == 1 or _kernels.resolve(None) != "compiled":
+    lists = dict(workers=workers, backend=backend, adjacency=adjacency)
+    if workers == 1 or backend != "compiled":
         return (
-            build_neighbourhoods(points, faces, scales, workers=workers, adjacency=adjacency),
-            face_average_normals(points, faces),
-            sharp_vertices(points, faces)[0] if robust else None,
+            build_neighbourhoods(points, faces, scales, **lists),
+            face_average_normals(points, faces, backend=backend),
+            sharp_vertices(points, faces, backend=backend)[0] if robust else None,
         )
     with ThreadPoolExecutor(max_workers=1) as pool:
-        side = pool.submit(sharp_vertices if robust else face_average_normals, points, faces)
-        neighbourhoods = build_neighbourhoods(
-            points, faces, scales, workers=workers, adjacency=adjacency
+        side = pool.submit(
+            sharp_vertices if robust else face_average_normals, points, faces, backend=backend
         )
+        neighbourhoods = build_neighbourhoods(points, faces, scales, **lists)
         if robust:
-            return neighbourhoods, face_average_normals(points, faces), side.result()[0]
+            normals = face_average_normals(points, faces, backend=backend)
+            return neighbourhoods, normals, side.result()[0]
         return neighbourhoods, side.result(), None
 
 
-def _add_curves(result: DetectionResult, geometry: Geometry, as_points: bool) -> None:
-    """Extract the feature curves of ``result`` on the input geometry (timed)."""
+def _add_curves(result: DetectionResult, geometry: Geometry, as_points: bool, backend: str) -> None:
+    """Extract the feature curves of ``result`` on the input geometry with the
+    detection's ``backend`` (timed)."""
     t = time.perf_counter()
     faces = None if as_points else geometry.faces
     result.curves, result.corners = extract_curves(
-        geometry.vertices, result.mask, faces, result.kept
+        geometry.vertices, result.mask, faces, result.kept, backend=backend
     )
     result.timings["curves"] = time.perf_counter() - t
-
-
-def _as_input(source: Source, faces: np.ndarray | None, as_points: bool) -> Geometry:
-    """Turn whatever the caller gave into a validated Geometry."""
-    if isinstance(source, Geometry):
-        return source
-    if isinstance(source, pymeshlab.MeshSet):
-        if source.mesh_number() == 0:
-            raise InputError("the MeshSet holds no mesh")
-        return as_geometry(*mesh_arrays(source), source="MeshSet current mesh")
-    if isinstance(source, pymeshlab.Mesh):
-        mesh_faces = source.face_matrix() if source.face_number() > 0 else None
-        return as_geometry(source.vertex_matrix(), mesh_faces, source="pymeshlab Mesh")
-    if isinstance(source, str | os.PathLike):
-        if faces is not None:
-            raise InputError("faces are taken from the file; do not pass faces with a path")
-        return load(source, as_points=as_points)
-    return as_geometry(source, faces, source="array")
-
-
-def _check_scales(
-    scales: Sequence[int] | int | None, default: tuple[int, ...], kind: str
-) -> tuple[int, ...]:
-    """Sorted, distinct, positive integer scales (a single int is one scale), at most
-    :data:`MAX_SCALES` of them; the default when None."""
-    if scales is None:
-        return default
-    given: Any = [int(scales)] if isinstance(scales, int | np.integer) else scales
-    if isinstance(scales, bool | str | bytes) or not hasattr(given, "__len__"):
-        raise InputError(f"scales must be a sequence of integers, e.g. [12, 16], got {scales!r}")
-    if len(given) > MAX_SCALES:
-        raise InputError(f"{len(given)} scales given; at most {MAX_SCALES} are allowed")
-    try:
-        values = sorted({int(s) for s in given})
-        exact = all(float(s) == int(s) for s in given)
-    except (TypeError, ValueError, OverflowError):
-        exact = False
-    if not exact:
-        raise InputError(f"scales must be integers, got {list(given)!r}")
-    if not values:
-        raise InputError("at least one scale is needed")
-    low = MIN_RING_SCALE if kind == "mesh" else MIN_KNN_SCALE
-    if values[0] < low:
-        what = "rings" if kind == "mesh" else "kNN sizes"
-        raise InputError(f"{what} must be >= {low}, got {values[0]}")
-    return tuple(values)
 
 
 def _check_cloud_size(n_input: int, n_clean: int, k_max: int, source: str) -> None:

@@ -28,7 +28,7 @@ Every parameter is checked before pymeshlab sees it (some bad values, such as ``
 kill the interpreter).
 
 Each vertex carries its input index through the filters
-(:func:`meshlab_sharp.cleaning.tag_input_indices`), so results are mapped back to the
+(:func:`meshlab_sharp.io.tag_input_indices`), so results are mapped back to the
 input's order and length: removed points are not features (strength 0, ``kept``
 False); vertices added by hole filling have no input index and are left out of the
 mapped results (they are in the processed geometry, which can be saved).
@@ -353,7 +353,7 @@ class _State:
         """A fresh MeshSet holding the geometry (mesh 0) with its input indices."""
         import pymeshlab
 
-        from .cleaning import tag_input_indices
+        from .io import tag_input_indices
 
         kwargs: dict[str, Any] = {"vertex_matrix": np.ascontiguousarray(self.vertices)}
         if self.faces is not None:
@@ -367,7 +367,7 @@ class _State:
     def update(self, ms: pymeshlab.MeshSet, *, tagged: bool = True) -> None:
         """Take the current mesh of ``ms``: its vertices, faces and (when the filters
         carried the tags) input indices, which point into this state's input."""
-        from .cleaning import tagged_input_indices
+        from .io import tagged_input_indices
 
         mesh = ms.current_mesh()
         vertices = mesh.vertex_matrix()

@@ -240,103 +240,101 @@ def run_one(
     baseline = _rss_bytes()
     out: dict = {"kind": kind, "n": n_in, "backend": backend, "workers": _kernels._workers(-1)}
 
-    with _kernels.use_backend(backend):
-        # End to end on in-memory arrays, the modes back to back in each repeat: the
-        # first call is cold (page faults, thread pool, first use of the library).
-        walls: dict[str, list[float]] = {m: [] for m in modes}
-        cpus: dict[str, list[float]] = {m: [] for m in modes}
-        systems: dict[str, list[float]] = {m: [] for m in modes}
-        peak_detect = 0
-        out["detect"] = {}
-        for _ in range(repeat):
-            for mode in modes:
-                t, c, k = time.perf_counter(), _cpu_seconds(), _system_seconds()
-                result = detect(vertices, faces, mode=mode)
-                walls[mode].append(time.perf_counter() - t)
-                cpus[mode].append(_cpu_seconds() - c)
-                systems[mode].append(_system_seconds() - k)
-                peak_detect = max(peak_detect, _rss_bytes())
-                out["detect"][mode] = {
-                    "n_features": int(result.n_features),
-                    "scales": list(result.scales),
-                    "thresholds": [float(t) for t in result.thresholds],
-                }
-                del result
+    # End to end on in-memory arrays, the modes back to back in each repeat: the
+    # first call is cold (page faults, thread pool, first use of the library).
+    walls: dict[str, list[float]] = {m: [] for m in modes}
+    cpus: dict[str, list[float]] = {m: [] for m in modes}
+    systems: dict[str, list[float]] = {m: [] for m in modes}
+    peak_detect = 0
+    out["detect"] = {}
+    for _ in range(repeat):
         for mode in modes:
-            totals = walls[mode]
-            warm = min(totals[1:]) if len(totals) > 1 else totals[0]
-            out["detect"][mode].update(
-                cold_s=totals[0],
-                warm_s=warm,
-                cpu_s=min(cpus[mode]),
-                points_per_s=n_in / warm,
-                walls_s=totals,
-                system_s=systems[mode],
-            )
-        out["peak_bytes_above_input"] = peak_detect - baseline
-        out["peak_bytes_per_point"] = (peak_detect - baseline) / n_in
-
-        # Stage by stage (best of the repeats).
-        import pymeshlab
-
-        path = workdir / f"in_{kind}_{n_in}.ply"
-        ms = pymeshlab.MeshSet()
-        ms.add_mesh(
-            pymeshlab.Mesh(vertex_matrix=vertices)
-            if faces is None
-            else pymeshlab.Mesh(vertex_matrix=vertices, face_matrix=faces.astype(np.int32))
+            t, c, k = time.perf_counter(), _cpu_seconds(), _system_seconds()
+            result = detect(vertices, faces, mode=mode, backend=backend)
+            walls[mode].append(time.perf_counter() - t)
+            cpus[mode].append(_cpu_seconds() - c)
+            systems[mode].append(_system_seconds() - k)
+            peak_detect = max(peak_detect, _rss_bytes())
+            out["detect"][mode] = {
+                "n_features": int(result.n_features),
+                "scales": list(result.scales),
+                "thresholds": [float(t) for t in result.thresholds],
+            }
+            del result
+    for mode in modes:
+        totals = walls[mode]
+        warm = min(totals[1:]) if len(totals) > 1 else totals[0]
+        out["detect"][mode].update(
+            cold_s=totals[0],
+            warm_s=warm,
+            cpu_s=min(cpus[mode]),
+            points_per_s=n_in / warm,
+            walls_s=totals,
+            system_s=systems[mode],
         )
-        ms.save_current_mesh(str(path), binary=True)
-        del ms
-        stages: dict[str, list[float]] = {}
+    out["peak_bytes_above_input"] = peak_detect - baseline
+    out["peak_bytes_per_point"] = (peak_detect - baseline) / n_in
 
-        def timed(name, fn):
-            t = time.perf_counter()
-            value = fn()
-            stages.setdefault(name, []).append(time.perf_counter() - t)
-            return value
+    # Stage by stage (best of the repeats).
+    import pymeshlab
 
-        for _ in range(repeat):
-            geometry = timed("load", lambda: load(path))
-            g = geometry if faces is not None else Geometry(geometry.vertices, None, "bench")
-            cleaned = timed("clean", lambda g=g: clean(g))
-            pts = cleaned.vertices
+    path = workdir / f"in_{kind}_{n_in}.ply"
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(
+        pymeshlab.Mesh(vertex_matrix=vertices)
+        if faces is None
+        else pymeshlab.Mesh(vertex_matrix=vertices, face_matrix=faces.astype(np.int32))
+    )
+    ms.save_current_mesh(str(path), binary=True)
+    del ms
+    stages: dict[str, list[float]] = {}
 
-            def neighbourhoods(pts=pts, cleaned=cleaned):
-                nb = build_neighbourhoods(pts, cleaned.faces, scales)
-                nrm = None if cleaned.faces is None else face_average_normals(pts, cleaned.faces)
-                return nb, nrm
+    def timed(name, fn):
+        t = time.perf_counter()
+        value = fn()
+        stages.setdefault(name, []).append(time.perf_counter() - t)
+        return value
 
-            nb, nrm = timed("neighbourhoods", neighbourhoods)
+    for _ in range(repeat):
+        geometry = timed("load", lambda: load(path))
+        g = geometry if faces is not None else Geometry(geometry.vertices, None, "bench")
+        cleaned = timed("clean", lambda g=g: clean(g, backend=backend))
+        pts = cleaned.vertices
 
-            pdis = timed(
-                "normals_projected_distance",
-                lambda pts=pts, nb=nb, nrm=nrm: projected_distances_all(
-                    pts, nb, scales, normals=nrm
-                ),
-            )
-            flat = FLAT_TOLERANCE * float(np.linalg.norm(np.ptp(pts, axis=0)))
+        def neighbourhoods(pts=pts, cleaned=cleaned):
+            nb = build_neighbourhoods(pts, cleaned.faces, scales, backend=backend)
+            tri = cleaned.faces
+            nrm = None if tri is None else face_average_normals(pts, tri, backend=backend)
+            return nb, nrm
 
-            def threshold(pdis=pdis, flat=flat, m=pts.shape[0]):
-                votes = np.zeros(m, dtype=np.int64)
-                for raw in pdis:
-                    v = normalise(raw, flat_span=flat)
-                    votes += v >= otsu_threshold(v)
-                return decide(votes, len(scales))
+        nb, nrm = timed("neighbourhoods", neighbourhoods)
 
-            mask, strength = timed("threshold", threshold)
-            result_mask = cleaned.to_input_order(mask, False)
-            result_strength = cleaned.to_input_order(strength, 0.0)
+        pdis = timed(
+            "normals_projected_distance",
+            lambda pts=pts, nb=nb, nrm=nrm: projected_distances_all(pts, nb, scales, normals=nrm),
+        )
+        flat = FLAT_TOLERANCE * float(np.linalg.norm(np.ptp(pts, axis=0)))
 
-            timed(
-                "save",
-                lambda geometry=geometry, m=result_mask, s=result_strength: save_features_ply(
-                    workdir / "out.ply", geometry.vertices, geometry.faces, s, m
-                ),
-            )
-            del nb, pdis
-        out["stages_s"] = {k: min(v) for k, v in stages.items()}
-        out["stages_points_per_s"] = {k: n_in / max(v, 1e-9) for k, v in out["stages_s"].items()}
+        def threshold(pdis=pdis, flat=flat, m=pts.shape[0]):
+            votes = np.zeros(m, dtype=np.int64)
+            for raw in pdis:
+                v = normalise(raw, flat_span=flat)
+                votes += v >= otsu_threshold(v)
+            return decide(votes, len(scales))
+
+        mask, strength = timed("threshold", threshold)
+        result_mask = cleaned.to_input_order(mask, False)
+        result_strength = cleaned.to_input_order(strength, 0.0)
+
+        timed(
+            "save",
+            lambda geometry=geometry, m=result_mask, s=result_strength: save_features_ply(
+                workdir / "out.ply", geometry.vertices, geometry.faces, s, m
+            ),
+        )
+        del nb, pdis
+    out["stages_s"] = {k: min(v) for k, v in stages.items()}
+    out["stages_points_per_s"] = {k: n_in / max(v, 1e-9) for k, v in out["stages_s"].items()}
     out["peak_bytes_per_point_all_stages"] = (_rss_bytes() - baseline) / n_in
     return out
 

@@ -73,7 +73,7 @@ def _generator_hash() -> str:
     h = hashlib.sha256()
     tools = ROOT / "evaluation"
     files = [ROOT / "meshlab_sharp" / "parts.py"]
-    files += [tools / "groundtruth.py", tools / "scan.py", tools / "scoring.py"]
+    files += [tools / n for n in ("parts.py", "groundtruth.py", "scan.py", "scoring.py")]
     files += sorted(gt.OPENSCAD_DIR.glob("*.stl"))
     for f in files:
         h.update(f.read_bytes())
@@ -325,7 +325,7 @@ def _target_value(v: dict) -> str:
 
 METHOD = """## How the inputs are made and scored
 
-**Parts** (`meshlab_sharp/parts.py`; conditions: `evaluation/groundtruth.py`): closed
+**Parts** (`evaluation/parts.py`; conditions: `evaluation/groundtruth.py`): closed
 triangle meshes of exact solids, built from numpy primitives and pymeshlab's exact mesh
 booleans; round surfaces have 128 segments per turn (facets turn by 2.8 degrees). The
 **truth** is every edge of that mesh whose faces turn by more than 20 degrees, as

@@ -64,8 +64,7 @@ pytestmark = pytest.mark.skipif(
 def _both(vertices, faces=None, **options):
     out = {}
     for backend in ("numpy", "compiled"):
-        with _kernels.use_backend(backend):
-            out[backend] = detect(vertices, faces, return_details=True, **options)
+        out[backend] = detect(vertices, faces, backend=backend, return_details=True, **options)
     return out["numpy"], out["compiled"]
 
 

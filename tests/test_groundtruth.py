@@ -12,6 +12,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from evaluation import groundtruth as gt
+from evaluation import parts as evaluation_parts
 from evaluation import scan
 from meshlab_sharp import parts
 
@@ -24,7 +25,7 @@ def _circles(r: float) -> float:
 
 
 def _star_length() -> float:
-    v = parts._part_star_prism()[0][:10, :2]
+    v = evaluation_parts._part_star_prism()[0][:10, :2]
     return 2 * np.linalg.norm(v - np.roll(v, 1, axis=0), axis=1).sum() + 10 * 20
 
 
@@ -95,7 +96,7 @@ def test_deterministic_and_seeded():
 
 
 def test_star_tips_are_45_degrees():
-    v = parts._part_star_prism()[0][:10, :2]
+    v = evaluation_parts._part_star_prism()[0][:10, :2]
     tip, left, right = v[0], v[9], v[1]
     u, w = left - tip, right - tip
     ang = math.degrees(math.acos(u @ w / np.linalg.norm(u) / np.linalg.norm(w)))

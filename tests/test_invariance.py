@@ -91,12 +91,13 @@ def test_answer_does_not_depend_on_the_unit(unit_shapes, kind, mode, backend):
     if backend == "compiled" and not _kernels.available():
         pytest.skip("compiled kernels not built")
     vertices, faces = unit_shapes[kind]
-    with _kernels.use_backend(backend), warnings.catch_warnings(), np.errstate(all="raise"):
+    options = dict(mode=mode, backend=backend, return_details=True)
+    with warnings.catch_warnings(), np.errstate(all="raise"):
         warnings.simplefilter("error")
-        ref = meshlab_sharp.detect(vertices, faces, mode=mode, return_details=True)
+        ref = meshlab_sharp.detect(vertices, faces, **options)
         assert ref.n_features > 50
         for unit in UNITS:
-            got = meshlab_sharp.detect(vertices * unit, faces, mode=mode, return_details=True)
+            got = meshlab_sharp.detect(vertices * unit, faces, **options)
             msg = f"unit {unit}"
             np.testing.assert_array_equal(got.mask, ref.mask, err_msg=msg)
             np.testing.assert_array_equal(got.strength, ref.strength, err_msg=msg)

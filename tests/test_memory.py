@@ -44,8 +44,7 @@ def test_detect_leaves_no_reference_cycles(case: str, mode: str, backend: str) -
     _settle()
     gc.disable()
     try:
-        with _kernels.use_backend(backend):
-            result = ms.detect(*args, mode=mode, return_details=True)
+        result = ms.detect(*args, mode=mode, backend=backend, return_details=True)
         assert result.mask.any()
         del result
         gc.set_debug(gc.DEBUG_SAVEALL)
@@ -79,42 +78,6 @@ def test_repeated_detect_keeps_no_arrays() -> None:
     assert growth < 0.2 * 55 * len(points), growth
 
 
-def _hugepage_setting() -> bool:
-    from numpy._core.multiarray import _set_madvise_hugepage
-
-    value = bool(_set_madvise_hugepage(True))
-    _set_madvise_hugepage(value)
-    return value
-
-
-@pytest.mark.parametrize("start", [True, False])
-def test_huge_pages_off_during_detect_and_restored(start: bool, monkeypatch) -> None:
-    from numpy._core.multiarray import _set_madvise_hugepage
-
-    from meshlab_sharp._pages import small_pages
-
-    monkeypatch.delenv("NUMPY_MADVISE_HUGEPAGE", raising=False)
-    before = bool(_set_madvise_hugepage(start))
-    try:
-        with small_pages():
-            assert _hugepage_setting() is False
-            with small_pages():  # nested: the outer block restores
-                assert _hugepage_setting() is False
-            assert _hugepage_setting() is False
-        assert _hugepage_setting() is start
-        ms.detect(box_cylinder_points(2000))
-        assert _hugepage_setting() is start
-        with pytest.raises(ms.InputError):
-            ms.detect(np.full((100, 3), np.nan))
-        assert _hugepage_setting() is start
-        # the user's explicit choice is left alone
-        monkeypatch.setenv("NUMPY_MADVISE_HUGEPAGE", "1")
-        with small_pages():
-            assert _hugepage_setting() is start
-    finally:
-        _set_madvise_hugepage(before)
-
-
 @pytest.mark.parametrize("mode", ["robust", "paper"])
 def test_cleaned_faces_freed_before_the_scales_pass(mode: str, monkeypatch) -> None:
     """The cleaned faces (48 bytes a vertex, a copy of the input's) are gone by the time
@@ -144,7 +107,6 @@ def test_cleaned_faces_freed_before_the_scales_pass(mode: str, monkeypatch) -> N
 
     monkeypatch.setattr(pipeline, "clean", spy_clean)
     monkeypatch.setattr(pipeline, "run_scales", spy_run_scales)
-    with _kernels.use_backend("compiled"):
-        result = ms.detect(vertices, faces, mode=mode)
+    result = ms.detect(vertices, faces, mode=mode, backend="compiled")
     assert result.mask.any()
     assert alive == [False]

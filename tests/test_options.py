@@ -8,7 +8,7 @@ import pytest
 import shapes
 
 import meshlab_sharp
-from meshlab_sharp.pipeline import MAX_SCALES
+from meshlab_sharp.options import MAX_SCALES
 
 CUBE = shapes.cube_grid_points(11)
 

@@ -256,7 +256,7 @@ def test_sheet_neighbourhoods_keep_the_prefixes_of_the_kept_points():
     other = [(x + 0.5, y + 0.5, 1.0) for x in range(-2, 2) for y in range(-2, 2)]
     points = np.array(own + other)
     base = KnnNeighbourhoods(points, len(points), backend="numpy")
-    sheets = robust.SheetNeighbourhoods(points, base, "gaussian")
+    sheets = robust.SheetNeighbourhoods(points, base, "gaussian", robust.sheet_parameters())
     centre = 12  # the point (0, 0, 0)
     mine = set(np.flatnonzero(points[:, 2] == 0.0))
     row = base.indices[centre]

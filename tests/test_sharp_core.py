@@ -23,7 +23,7 @@ from meshlab_sharp.cleaning import clean
 from meshlab_sharp.cli import parse_scales
 from meshlab_sharp.errors import InputError
 from meshlab_sharp.io.geometry import Geometry
-from meshlab_sharp.pipeline import MIN_KNN_SCALE
+from meshlab_sharp.options import MIN_KNN_SCALE
 from meshlab_sharp.sample import sample_part
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -257,13 +257,14 @@ def test_the_option_lists_are_the_headers():
     header's in Python (known values) and in the plugin's filter (its enums take the
     header's default index, and list the same names in the same order as Python); the
     example scripts name the same enums and defaults (a .mlx names every parameter)."""
-    from meshlab_sharp import normals, pipeline
+    from meshlab_sharp import defaults as chosen
+    from meshlab_sharp import options
 
-    assert (pipeline.DEFAULT_MODE, normals.DEFAULT_WEIGHTING) == ("robust", "gaussian")
-    assert (pipeline.MIN_KNN_SCALE, pipeline.MIN_RING_SCALE, pipeline.MAX_SCALES) == (2, 1, 64)
-    assert meshlab_sharp.DetectionResult.mode == pipeline.DEFAULT_MODE
-    lists = {"mode": pipeline.MODES, "weighting": normals.WEIGHTINGS}
-    defaults = {"mode": pipeline.DEFAULT_MODE, "weighting": normals.DEFAULT_WEIGHTING}
+    assert (chosen.DEFAULT_MODE, chosen.DEFAULT_WEIGHTING) == ("robust", "gaussian")
+    assert (options.MIN_KNN_SCALE, options.MIN_RING_SCALE, chosen.MAX_SCALES) == (2, 1, 64)
+    assert meshlab_sharp.DetectionResult.mode == chosen.DEFAULT_MODE
+    lists = {"mode": chosen.MODES, "weighting": chosen.WEIGHTINGS}
+    defaults = {"mode": chosen.DEFAULT_MODE, "weighting": chosen.DEFAULT_WEIGHTING}
     glue = (ROOT / "meshlab_plugin_cpp" / "src" / "filter_sharp_features.cpp").read_text()
     for name, names in lists.items():
         enum = re.search(rf'RichEnum\("{name}", (\w+), QStringList\(\)((?: << "\w+")+)', glue)

@@ -71,6 +71,10 @@ def test_the_library_still_imports_its_names_on_use():
 
     assert callable(meshlab_sharp.detect) and meshlab_sharp.MODES == ("paper", "robust")
     assert set(meshlab_sharp.__all__) <= set(dir(meshlab_sharp))
+    from meshlab_sharp.result import DetectionResult
+
+    assert meshlab_sharp.DetectionResult is DetectionResult
+    assert all(getattr(meshlab_sharp, name) is not None for name in meshlab_sharp.__all__)
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         _ = meshlab_sharp.nothing
 

@@ -10,10 +10,12 @@ import threading
 
 import numpy as np
 import pytest
+import shapes
 
 from meshlab_sharp import _kernels, pipeline, robust
 from meshlab_sharp.io import Geometry
 from meshlab_sharp.neighbourhoods import Neighbourhood, knn
+from meshlab_sharp.reference import robust as reference_robust
 
 
 def _record(calls: list[tuple[int, int, int]]):
@@ -84,7 +86,7 @@ def _features(seed: int) -> tuple[np.ndarray, np.ndarray, Neighbourhood]:
 def test_line_directions_in_parts_on_threads_are_one_calls(monkeypatch):
     points, mask, lists = _features(1)
     one = robust.line_directions(points, mask, lists)
-    monkeypatch.setattr(robust, "PART_MIN", 5)  # parts of a few hundred features
+    monkeypatch.setattr(reference_robust, "PART_MIN", 5)  # parts of a few hundred features
     for workers in (2, 3, -1):
         assert robust.line_directions(points, mask, lists, workers).tobytes() == one.tobytes()
     # unit directions of the features, zero rows elsewhere
@@ -102,7 +104,7 @@ def test_a_stopped_tree_build_raises():
 def test_the_tree_built_beside_cleaning_is_the_cleaned_clouds(duplicates):
     points = np.random.default_rng(3).random((20000, 3))
     points[:duplicates] = points[-duplicates - 1 : -1] if duplicates else points[:0]
-    cleaned, tree = pipeline._clean_beside_tree(Geometry(points, None, "test"), -1)
+    cleaned, tree = pipeline._clean_beside_tree(Geometry(points, None, "test"), -1, "compiled")
     assert len(cleaned.vertices) == len(points) - duplicates
     if duplicates:
         assert tree is None
@@ -113,4 +115,102 @@ def test_the_tree_built_beside_cleaning_is_the_cleaned_clouds(duplicates):
     for name in ("points", "orig", "boxes"):
         assert getattr(got, name).tobytes() == getattr(want, name).tobytes()
     # one worker: no thread beside cleaning
-    assert pipeline._clean_beside_tree(Geometry(points, None, "test"), 1)[1] is None
+    assert pipeline._clean_beside_tree(Geometry(points, None, "test"), 1, "compiled")[1] is None
+
+
+def _same_result(got, want) -> None:
+    for name in ("mask", "strength", "kept", "thresholds", "candidate_counts"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+    np.testing.assert_array_equal(got.distances, want.distances)
+    np.testing.assert_array_equal(got.normals, want.normals)
+    assert got.scales == want.scales
+
+
+@pytest.mark.skipif(not _kernels.available(), reason="needs the compiled kernels")
+@pytest.mark.parametrize("mode", ["robust", "paper"])
+@pytest.mark.parametrize("kind", ["cloud", "mesh"])
+def test_each_thread_runs_the_backend_it_names(kind: str, mode: str) -> None:
+    """``detect(backend=...)`` on two threads at once, one "numpy" and one "compiled":
+    each call runs its own backend all through (``result.backend`` is the backend its
+    neighbourhoods were built with) and gives the bits it gives alone. The compiled
+    thread runs call after call until the numpy one is done, so they overlap."""
+    from meshlab_sharp import detect
+
+    if kind == "cloud":
+        args = (shapes.with_outliers(shapes.box_cylinder_points(3000, seed=3), 20, seed=4), None)
+    else:
+        args = shapes.noisy_mesh(*shapes.cube_grid_mesh(5), 0.05, seed=5)
+    options = dict(mode=mode, return_details=True)
+    alone = {b: detect(*args, backend=b, **options) for b in _kernels.BACKENDS}
+    assert {b: r.backend for b, r in alone.items()} == {b: b for b in _kernels.BACKENDS}
+    start, numpy_done = threading.Barrier(2), threading.Event()
+    got: dict[str, list] = {b: [] for b in _kernels.BACKENDS}
+    errors: list[BaseException] = []
+
+    def run(backend: str) -> None:
+        try:
+            start.wait()
+            while True:
+                got[backend].append(detect(*args, backend=backend, **options))
+                if backend == "numpy" or numpy_done.is_set() or len(got[backend]) >= 10:
+                    break
+        except BaseException as exc:  # reported by the test's thread
+            errors.append(exc)
+        finally:
+            if backend == "numpy":
+                numpy_done.set()
+
+    threads = [threading.Thread(target=run, args=(b,)) for b in _kernels.BACKENDS]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors, errors
+    assert len(got["numpy"]) == 1 and len(got["compiled"]) >= 2
+    for backend, results in got.items():
+        for result in results:
+            assert result.backend == backend
+            _same_result(result, alone[backend])
+
+
+def test_the_default_backend_is_the_environment_s(monkeypatch) -> None:
+    """``backend=None``: ``MESHLAB_SHARP_BACKEND``, read at each call."""
+    from meshlab_sharp import detect
+
+    cloud = shapes.random_box_points(500, seed=2)
+    monkeypatch.setenv("MESHLAB_SHARP_BACKEND", "numpy")
+    assert detect(cloud, mode="paper").backend == "numpy"
+    monkeypatch.delenv("MESHLAB_SHARP_BACKEND")
+    want = "compiled" if _kernels.available() else "numpy"
+    assert detect(cloud, mode="paper").backend == want
+
+
+@pytest.mark.parametrize("as_points", [False, True])
+def test_the_curves_run_the_detection_s_backend(monkeypatch, as_points: bool) -> None:
+    """``detect(..., curves=True)`` extracts the curves with the call's backend, not the
+    process's default: the native curves only for "compiled" (the same curves either way)."""
+    from meshlab_sharp import detect
+    from meshlab_sharp.curves import _native
+
+    if not _native.available():
+        pytest.skip("the native curves are not built")
+    native_calls: list[int] = []
+    native = _native.extract_curves
+
+    def counted(*args, **kwargs):
+        native_calls.append(1)
+        return native(*args, **kwargs)
+
+    monkeypatch.setattr(_native, "extract_curves", counted)
+    monkeypatch.delenv("MESHLAB_SHARP_BACKEND", raising=False)
+    vertices, faces = shapes.cube_grid_mesh(3)
+    runs = {}
+    for backend in ("numpy", "compiled"):
+        before = len(native_calls)
+        runs[backend] = detect(vertices, faces, as_points=as_points, backend=backend, curves=True)
+        assert len(native_calls) - before == (backend == "compiled")
+    numpy_run, compiled_run = runs["numpy"], runs["compiled"]
+    assert len(numpy_run.curves) == len(compiled_run.curves) == 12
+    for a, b in zip(numpy_run.curves, compiled_run.curves, strict=True):
+        assert a.points.tobytes() == b.points.tobytes()
+        assert np.array_equal(a.indices, b.indices)

@@ -402,7 +402,7 @@ def test_curves_out_of_core_equal_in_memory(monkeypatch, mode: str) -> None:
     """Curves after a tiled run, from the points near the features gathered in blocks
     (many small blocks here), are the in-memory curves and corners, input indices
     included; a cloud without features has none."""
-    from meshlab_sharp.io.stream import PointSource
+    from meshlab_sharp.io.source import PointSource
     from meshlab_sharp.tiles import curves as tiled_curves
 
     monkeypatch.setattr(tiled_curves, "BLOCK", 777)

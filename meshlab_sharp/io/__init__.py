@@ -2,7 +2,13 @@
 
 from ..outputs import OutputSet, atomic_write
 from .curves import CURVE_FORMATS, check_curves_path, curve_arrays, require_ezdxf, save_curves
-from .geometry import Geometry, as_geometry, mesh_arrays
+from .geometry import (
+    Geometry,
+    as_geometry,
+    mesh_arrays,
+    tag_input_indices,
+    tagged_input_indices,
+)
 from .quiet import quiet_stdout
 from .readers import POINT_LIST_EXTENSIONS, load
 from .writers import (
@@ -36,4 +42,6 @@ __all__ = [
     "save_indices",
     "save_json",
     "select_vertices",
+    "tag_input_indices",
+    "tagged_input_indices",
 ]

@@ -12,11 +12,11 @@ import numpy as np
 
 from ..errors import InputError
 from ..extras import require
-from .stream import PointSource
+from .source import PointSource
 
 
 def e57_points(path: str | os.PathLike[str]) -> PointSource:
-    """An E57 file's points as a :class:`~meshlab_sharp.io.stream.PointSource`."""
+    """An E57 file's points as a :class:`~meshlab_sharp.io.source.PointSource`."""
     pye57 = require("pye57", "reading E57", "e57")
     p = Path(path)
     try:

@@ -117,3 +117,36 @@ def mesh_arrays(ms: pymeshlab.MeshSet) -> tuple[np.ndarray, np.ndarray | None]:
     vertices = mesh.vertex_matrix()
     faces = mesh.face_matrix().astype(np.int64) if mesh.face_number() > 0 else None
     return vertices, faces
+
+
+#: The custom per-vertex attribute that carries input indices through pymeshlab.
+_SOURCE_INDEX = "meshlab_sharp_input_index"
+
+
+def tag_input_indices(mesh: pymeshlab.Mesh, indices: np.ndarray | None = None) -> None:
+    """Tag each vertex of ``mesh`` with an input index that pymeshlab's filters carry.
+
+    pymeshlab's filters compact and renumber vertices without saying where each came
+    from, but they move custom per-vertex attributes along with the vertices. The index
+    is stored plus one, so that a vertex a filter adds (attribute 0) can be told apart.
+
+    Parameters
+    ----------
+    mesh : pymeshlab.Mesh
+        Not yet added to a MeshSet (``add_mesh`` stores a copy).
+    indices : (n,) int, optional
+        Input index of each vertex (-1: not an input vertex). Default: 0..n-1.
+    """
+    n = mesh.vertex_number()
+    values = np.arange(n) if indices is None else np.asarray(indices, dtype=np.int64)
+    mesh.add_vertex_custom_scalar_attribute(values.astype(np.float64) + 1.0, _SOURCE_INDEX)
+
+
+def tagged_input_indices(ms: pymeshlab.MeshSet, n_input: int) -> np.ndarray:
+    """Input index of each vertex of the current mesh of ``ms``, tagged by
+    :func:`tag_input_indices`; -1 for a vertex a filter added (its tag is not an index
+    in ``0..n_input-1``). Shape (m,) int64."""
+    raw = ms.current_mesh().vertex_custom_scalar_attribute_array(_SOURCE_INDEX)
+    index = np.rint(raw).astype(np.int64) - 1
+    index[(raw != np.rint(raw)) | (index < 0) | (index >= n_input)] = -1
+    return index

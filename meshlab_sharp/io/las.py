@@ -20,11 +20,11 @@ import numpy as np
 from ..errors import InputError
 from ..extras import require
 from ..outputs import OutputSet, atomic_write
-from .stream import PointSource
+from .source import PointSource
 
 
 def las_points(path: str | os.PathLike[str]) -> PointSource:
-    """A LAS/LAZ file's points as a :class:`~meshlab_sharp.io.stream.PointSource`."""
+    """A LAS/LAZ file's points as a :class:`~meshlab_sharp.io.source.PointSource`."""
     laspy = require("laspy", "reading LAS/LAZ", "las")
     p = Path(path)
     try:

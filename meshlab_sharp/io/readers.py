@@ -23,10 +23,14 @@ from .obj import read_obj
 from .off import read_off
 from .ply import read_ply
 from .pointlist import read_point_list
+from .source import PointSource
 from .stl import read_stl
 
 #: Extensions read as plain-text point lists (one point per line).
 POINT_LIST_EXTENSIONS = frozenset({".xyz", ".pts", ".asc", ".txt"})
+
+#: Scanners' formats, read in blocks by laspy and pye57.
+SCANNER_EXTENSIONS = (".las", ".laz", ".e57")
 
 _Reader = Callable[[Path, str], tuple[np.ndarray, np.ndarray | None]]
 _READERS: dict[str, _Reader] = {
@@ -36,17 +40,25 @@ _READERS: dict[str, _Reader] = {
     ".stl": read_stl,
     **dict.fromkeys(POINT_LIST_EXTENSIONS, read_point_list),
     **dict.fromkeys(CHILD_EXTENSIONS, read_with_pymeshlab),
-    **dict.fromkeys((".las", ".laz", ".e57"), lambda p, name: _read_scanner(p)),
+    **dict.fromkeys(SCANNER_EXTENSIONS, lambda p, name: _read_scanner(p)),
 }
 
 
-def _read_scanner(path: Path) -> tuple[np.ndarray, None]:
-    """A LAS/LAZ (laspy) or E57 (pye57) scan, read in blocks; the optional extras ``las``
-    and ``e57``."""
-    from .stream import open_points
+def scanner_points(path: Path) -> PointSource:
+    """A LAS/LAZ (laspy) or E57 (pye57) scan as a :class:`PointSource` (read in blocks);
+    the optional extras ``las`` and ``e57``."""
+    if path.suffix.lower() == ".e57":
+        from .e57 import e57_points
 
-    source = open_points(path)
-    return np.concatenate(list(source.blocks(1 << 20))), None
+        return e57_points(path)
+    from .las import las_points
+
+    return las_points(path)
+
+
+def _read_scanner(path: Path) -> tuple[np.ndarray, None]:
+    """A scanner's file (:func:`scanner_points`), read whole."""
+    return np.concatenate(list(scanner_points(path).blocks(1 << 20))), None
 
 
 def load(path: str | os.PathLike[str], *, as_points: bool = False) -> Geometry:

@@ -1,6 +1,7 @@
 """Point clouds read and written in blocks, for inputs larger than memory.
 
-* :class:`PointSource`: a cloud read block by block, as often as needed.
+* :class:`~meshlab_sharp.io.source.PointSource`: a cloud read block by block, as often
+  as needed.
 * :func:`open_points`: binary PLY through a memory map (no copy of the file),
   LAS/LAZ through laspy (:mod:`meshlab_sharp.io.las`, extra ``las``), E57 through pye57
   (:mod:`meshlab_sharp.io.e57`, extra ``e57``); any other format is loaded whole by
@@ -13,7 +14,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -21,58 +22,11 @@ import numpy as np
 from ..errors import InputError
 from ..outputs import OutputSet, atomic_write
 from .ply import binary_vertex_layout
+from .source import PointSource
 from .writers import feature_colors
 
 #: Points per block when reading or writing.
 BLOCK = 1 << 20
-
-
-class PointSource:
-    """A point cloud read in blocks.
-
-    Parameters
-    ----------
-    n : int
-        Number of points.
-    blocks : callable
-        ``blocks(size)`` yields the coordinates, (c, 3) float64 blocks of at most
-        ``size`` points, in order; it may be called several times.
-    name : str
-        For messages.
-    """
-
-    def __init__(self, n: int, blocks: Callable[[int], Iterator[np.ndarray]], name: str) -> None:
-        self.n = n
-        self._blocks = blocks
-        self.name = name
-
-    def blocks(self, size: int) -> Iterator[np.ndarray]:
-        """The coordinates, (c, 3) float64 blocks of at most ``size`` points, in order.
-
-        Raises
-        ------
-        InputError
-            The file holds more or fewer points than its header says (the same error
-            whoever reads it, in memory or out of core).
-        """
-        seen = 0
-        for block in self._blocks(size):
-            seen += len(block)
-            if seen > self.n:
-                break
-            yield block
-        if seen != self.n:
-            raise InputError(f"{self.name}: {seen} points read, the header says {self.n}")
-
-    @classmethod
-    def from_array(cls, points: np.ndarray, name: str = "array") -> PointSource:
-        """A source over an (n, 3) array already in memory."""
-
-        def blocks(size: int) -> Iterator[np.ndarray]:
-            for s in range(0, len(points), size):
-                yield np.ascontiguousarray(points[s : s + size], dtype=np.float64)
-
-        return cls(len(points), blocks, name)
 
 
 def ply_points(path: str | os.PathLike[str], *, as_points: bool = False) -> PointSource | None:
@@ -106,7 +60,8 @@ def ply_points(path: str | os.PathLike[str], *, as_points: bool = False) -> Poin
 
 
 def open_points(path: str | os.PathLike[str], *, as_points: bool = False) -> PointSource:
-    """A point cloud file as a :class:`PointSource`, streamed where the format allows.
+    """A point cloud file as a :class:`~meshlab_sharp.io.source.PointSource`, streamed
+    where the format allows.
 
     Raises
     ------
@@ -117,20 +72,14 @@ def open_points(path: str | os.PathLike[str], *, as_points: bool = False) -> Poi
     ext = p.suffix.lower()
     if not p.is_file():
         raise InputError(f"{p}: no such file")
-    if ext in (".las", ".laz"):
-        from .las import las_points
+    from .readers import SCANNER_EXTENSIONS, load, scanner_points
 
-        return las_points(p)
-    if ext == ".e57":
-        from .e57 import e57_points
-
-        return e57_points(p)
+    if ext in SCANNER_EXTENSIONS:
+        return scanner_points(p)
     if ext == ".ply" and p.stat().st_size > 0:
         source = ply_points(p, as_points=as_points)
         if source is not None:
             return source
-    from .readers import load
-
     geometry = load(p, as_points=as_points)
     if geometry.is_mesh:
         raise mesh_error(str(p))

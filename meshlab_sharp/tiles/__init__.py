@@ -27,13 +27,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import _kernels, robust
+from ..defaults import DEFAULT_MODE
 from ..errors import InputError
 from ..extras import require
 from ..io import Geometry
-from ..io.stream import PointSource, open_points
+from ..io.source import PointSource
+from ..io.stream import open_points
 from ..multiscale import DEFAULT_KNN_SCALES
-from ..normals import DEFAULT_WEIGHTING, WEIGHTINGS
-from ..pipeline import DEFAULT_MODE
+from ..normals import DEFAULT_WEIGHTING
+from ..options import as_input, check_mode_and_weighting, check_scales
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
 from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
@@ -62,7 +64,7 @@ from .steps import (
 from .store import Store
 
 if TYPE_CHECKING:
-    from ..pipeline import DetectionResult
+    from ..result import DetectionResult
 
 __all__ = ["PointSource", "detect_out_of_core", "detect_tiled", "parse_memory", "tile_size"]
 
@@ -284,12 +286,9 @@ def detect_out_of_core(
     """:func:`meshlab_sharp.detect` with ``max_memory`` or ``dask``: checks what the
     tiled run supports and returns its :class:`~meshlab_sharp.DetectionResult` (with
     ``curves``, the feature curves: :func:`meshlab_sharp.tiles.curves.curves_out_of_core`)."""
-    from ..pipeline import MODES, DetectionResult, _as_input, _check_scales
+    from ..result import DetectionResult
 
-    if weighting not in WEIGHTINGS:
-        raise InputError(f"unknown weighting {weighting!r}; choose from {', '.join(WEIGHTINGS)}")
-    if not isinstance(mode, str) or mode not in MODES:
-        raise InputError(f"unknown mode {mode!r}; choose from {', '.join(MODES)}")
+    check_mode_and_weighting(mode, weighting)
     if return_details:
         raise InputError(
             "return_details keeps per-scale arrays in memory: not with max_memory/dask"
@@ -309,14 +308,14 @@ def detect_out_of_core(
             raise InputError("faces are taken from the file; do not pass faces with a path")
         points = open_points(source, as_points=as_points)
     else:
-        geometry = _as_input(source, faces, as_points)
+        geometry = as_input(source, faces, as_points)
         if geometry.is_mesh and not as_points:
             raise InputError(
                 f"{geometry.source}: a mesh; out-of-core detection (max_memory, dask) "
                 "handles point clouds only: pass as_points=True, or no max_memory"
             )
         points = PointSource.from_array(geometry.vertices, geometry.source)
-    scales_t = _check_scales(scales, DEFAULT_KNN_SCALES, "points")
+    scales_t = check_scales(scales, DEFAULT_KNN_SCALES, "points")
     bar = progress if isinstance(progress, Progress) else Progress(1, enabled=bool(progress))
 
     sized: list[bool] = []
@@ -327,25 +326,24 @@ def detect_out_of_core(
             sized.append(True)
         bar.step(f"{label} {done}/{total}")
 
-    with _kernels.use_backend("compiled"):
-        out = detect_tiled(
-            points,
-            scales=scales_t,
-            weighting=weighting,
-            mode=mode,
-            max_memory=max_memory,
-            dask=dask,
-            scratch=scratch,
-            on_tile=on_tile,
-            workers=workers,
-        )
+    out = detect_tiled(
+        points,
+        scales=scales_t,
+        weighting=weighting,
+        mode=mode,
+        max_memory=max_memory,
+        dask=dask,
+        scratch=scratch,
+        on_tile=on_tile,
+        workers=workers,
+    )
     if not isinstance(progress, Progress):
         bar.close()
     timings = {"load": 0.0, **out["timings"]}
     found = None
     if curves:
         t = time.perf_counter()
-        found = curves_out_of_core(points, out["mask"], out["kept"])
+        found = curves_out_of_core(points, out["mask"], out["kept"], "compiled")
         timings["curves"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return DetectionResult(
@@ -363,6 +361,7 @@ def detect_out_of_core(
         tiling=out["tiling"],
         curves=None if found is None else found[0],
         corners=None if found is None else found[1],
+        backend="compiled",
     )
 
 

@@ -17,7 +17,7 @@ import dataclasses
 import numpy as np
 
 from ..curves import Corners, Curve, extract_curves
-from ..io.stream import PointSource
+from ..io.source import PointSource
 from ..reference.curves import support_radius
 from ..reference.curves.refine import CellGrid
 from .layout import bounds
@@ -27,7 +27,7 @@ BLOCK = 1 << 20
 
 
 def curves_out_of_core(
-    source: PointSource, mask: np.ndarray, kept: np.ndarray
+    source: PointSource, mask: np.ndarray, kept: np.ndarray, backend: str
 ) -> tuple[list[Curve], Corners]:
     """The feature curves and corners of a cloud read in blocks.
 
@@ -37,6 +37,8 @@ def curves_out_of_core(
         The cloud, n points.
     mask, kept : (n,) bool
         The detection's features and the points that took part (input order).
+    backend : {"compiled", "numpy"}
+        The detection's backend, which extracts the curves too.
 
     Returns
     -------
@@ -62,7 +64,9 @@ def curves_out_of_core(
             coords.append(block[near])
             start += len(block)
         part, points = np.concatenate(parts), np.concatenate(coords)  # every valid feature too
-    curves, corners = extract_curves(points, mask[part], None, kept[part], bounds=(lo, hi))
+    curves, corners = extract_curves(
+        points, mask[part], None, kept[part], bounds=(lo, hi), backend=backend
+    )
     curves = [dataclasses.replace(c, indices=part[c.indices]) for c in curves]
     return curves, dataclasses.replace(corners, indices=part[corners.indices])
 

@@ -69,7 +69,6 @@ def tile_task(
     halo: float,
     most_points: int,
     workers: int,
-    backend: str,
     sharing: Mapping[str, int] | None = None,
 ) -> Outcome:
     """Run ``step`` on one tile with ``workers`` threads; on a Dask worker (``sharing``
@@ -83,16 +82,15 @@ def tile_task(
         worker = get_worker()
         share = sharing.get(get_address_host(worker.address), worker.state.nthreads)
         workers = task_threads(_kernels._workers(-1), share)
-    with _kernels.use_backend(backend):
-        if step.query is None:
-            a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
-            partial = step.fn(Span(store, a, b), **step.params)
-            used, gathered, streamed = halo, b - a, 0
-        else:
-            contexts, used, gathered, streamed = neighbours(
-                store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
-            )
-            partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
+    if step.query is None:
+        a, b = int(layout.offsets[tile]), int(layout.offsets[tile + 1])
+        partial = step.fn(Span(store, a, b), **step.params)
+        used, gathered, streamed = halo, b - a, 0
+    else:
+        contexts, used, gathered, streamed = neighbours(
+            store, layout, tile, step.query, halo=halo, most_points=most_points, workers=workers
+        )
+        partial = combine([step.fn(ctx, **step.params) for ctx in contexts])
     seconds = time.perf_counter() - started
     return Outcome(partial, used, gathered, streamed, peak_rss(), seconds, workers)
 
@@ -177,7 +175,6 @@ class Runner:
         self.task_seconds: dict[str, float] = {}
         #: Counts a mode reports in the summary (robust mode: ``redone``).
         self.notes: dict[str, int] = {}
-        self.backend = _kernels.default_backend()
         #: Threads of the workers per machine (Dask), for :func:`task_threads`.
         self.sharing = None if client is None else machine_threads(client)
 
@@ -213,7 +210,7 @@ class Runner:
         (a first search step), the first tile runs alone and its halo is every other
         tile's guess (a tile started with no halo searches twice)."""
         assert self.client is not None
-        args = (self.most_points, self.workers, self.backend, self.sharing)
+        args = (self.most_points, self.workers, self.sharing)
         guess = float(self.halos.max(initial=0.0))
 
         def submit(t: int) -> Any:
@@ -244,7 +241,7 @@ class Runner:
         done so far (or its own from an earlier step): a guess, proven per point either
         way; without any, the first tile runs alone and gives one."""
         threads = max(1, _kernels._workers(self.workers) // self.at_once)
-        args = (self.most_points, threads, self.backend)
+        args = (self.most_points, threads)
         outcomes: dict[int, Outcome] = {}
         guess = float(self.halos.max(initial=0.0))
 

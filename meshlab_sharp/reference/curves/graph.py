@@ -18,7 +18,7 @@ from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial import cKDTree
 
 from ..._header import CURVES
-from ...neighbourhoods import squared_distances
+from ..neighbourhoods import squared_distances
 
 __all__ = [
     "LINK_NEIGHBOURS",

@@ -1,5 +1,7 @@
-"""The projected distance: how far a point lies from its neighbourhood's centroid,
-measured along its normal (Tran et al., Eq. 1).
+"""The projected distance, the numpy reference: how far a point lies from its
+neighbourhood's centroid, measured along its normal (Tran et al., Eq. 1), one scale at
+a time. The compiled pass (:func:`meshlab_sharp._kernels.cloud_projected_distances`,
+:func:`~meshlab_sharp._kernels.ring_projected_distances`) gives the same bits.
 """
 
 from __future__ import annotations
