@@ -62,11 +62,11 @@ _SIGNATURES = {
     "ms_scatter_rows": (None, [_c_void_p, _c_void_p, _i64, _i64, _i64, _c_void_p]),
     "ms_isolated": (
         None,
-        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
+        [_c_void_p] * 6 + [ctypes.c_double, _i64, _i64, _c_void_p],
     ),
     "ms_isolated_tree": (
         None,
-        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
+        [_c_void_p] * 7 + [ctypes.c_double, _i64, _i64, _c_void_p],
     ),
     "ms_sheet_mask": (
         _int,
@@ -376,6 +376,10 @@ class _CloudOut(ctypes.Structure):
         ("near", _c_void_p),
         ("kth_d2", _c_void_p),
         ("kth_idx", _c_void_p),
+        ("nth_d2", _c_void_p),
+        ("ref_d2", _c_void_p),
+        ("isolated_nth", _i64),
+        ("isolated_ref", _i64),
         ("sheet_gap", ctypes.c_double),
         ("sheet_min", _i64),
         ("sheet_own", ctypes.c_double),
@@ -391,6 +395,8 @@ class _CloudOut(ctypes.Structure):
 #: The fields of :class:`_CloudOut` that are numbers, not arrays.
 _NUMBERS = (
     "noise_k",
+    "isolated_nth",
+    "isolated_ref",
     "sheet_gap",
     "sheet_min",
     "sheet_own",
@@ -403,7 +409,7 @@ _NUMBERS = (
 #: The arrays of :class:`_CloudOut` with a leading scale axis, (s, n, ...).
 _PER_SCALE = ("pdis", "normals", "relative")
 #: The arrays of :class:`_CloudOut` that make a :class:`CloudStats`.
-_STATS = ("near", "kth_d2", "kth_idx", "noise")
+_STATS = ("near", "kth_d2", "kth_idx", "nth_d2", "ref_d2", "noise")
 
 
 def _to_cleaned_order(
@@ -463,8 +469,8 @@ def _cloud_call(
     ``out`` names the arrays (fields of :class:`_CloudOut`) to fill, and the numbers
     ``noise_k`` and ``sheet_*``. Without the kNN table
     (``idx``) the pass writes its rows in tree order, moved to cleaned order after,
-    except the arrays named in ``in_tree_order`` (``near`` among them: its values are
-    tree positions too)."""
+    except the arrays named in ``in_tree_order`` (``near`` and ``kth_idx`` among them:
+    their values are tree positions too)."""
     lib = _LIB
     assert lib is not None
     t = tree
@@ -479,7 +485,7 @@ def _cloud_call(
         for name, value in out.items()
         if value is not None
     }
-    # 2: near as tree positions too, for isolated_from_stats in tree order
+    # 2: near and kth_idx as tree positions too, for isolated_from_stats in tree order
     spec = _CloudOut(**fields, tree_order=tree_order * (2 if "near" in in_tree_order else 1))
     args = (_ptr(t.points), _ptr(t.orig), t.n, _ptr(t.boxes), t.depth, _ptr(ks), len(ks))
     _run_chunks(
@@ -557,7 +563,7 @@ def _knn_at(tree: KdTree, pos: np.ndarray, k: int, workers: int) -> np.ndarray:
 class CloudStats:
     """Per point (cleaned order) what robust mode's set-up reads from the kNN lists at
     the largest scale ``k``, without the (n, k) table. With ``tree``, per position of
-    that kd-tree instead, and ``near`` a tree position: what reads them
+    that kd-tree instead, and ``near`` and ``kth_idx`` tree positions: what reads them
     (:func:`isolated_from_stats`, a median of ``noise``) needs no cleaned order, and
     reads near each point's own row."""
 
@@ -565,15 +571,20 @@ class CloudStats:
     near: np.ndarray  # (n,) int32 nearest other point (column 1 of the kNN table)
     kth_d2: np.ndarray  # (n,) float64 squared distance of the k-th neighbour
     kth_idx: np.ndarray  # (n,) int32 its index
+    nth_d2: np.ndarray  # (n,) float64 squared distance of column min(ISOLATED_NTH, k - 1)
+    ref_d2: np.ndarray  # (n,) float64 squared distance of column min(ISOLATED_REF, k - 1)
     noise: np.ndarray  # (n,) float64 noise ratio over the noise_k nearest
     tree: KdTree | None = None  # the kd-tree whose order the rows follow, or None
 
 
-def isolated_from_stats(points: np.ndarray, stats: CloudStats, workers: int = -1) -> np.ndarray:
+def isolated_from_stats(
+    points: np.ndarray, stats: CloudStats, spread: float, workers: int = -1
+) -> np.ndarray:
     """:func:`meshlab_sharp.robust.isolated_points` from a pass's :class:`CloudStats` at
     ``k_max`` over ``points`` (n, 3) (no kNN table): ``i`` is isolated when ``(|p_i -
     p_j|^2, i)``, ``j = near[i]``, comes after ``j``'s k_max-th neighbour in the lists'
-    order (squared distance, then index). (n,) bool, cleaned order; from statistics in
+    order (squared distance, then index), or when ``nth_d2[i] > spread**2 *
+    ref_d2[kth_idx[i]]``. (n,) bool, cleaned order; from statistics in
     tree order (``stats.tree``) found per tree position, moved only when some point is
     isolated."""
     lib = _LIB
@@ -581,6 +592,7 @@ def isolated_from_stats(points: np.ndarray, stats: CloudStats, workers: int = -1
     tree = stats.tree
     out = np.empty(len(points), dtype=np.bool_)
     found = (_ptr(stats.near), _ptr(stats.kth_d2), _ptr(stats.kth_idx))
+    found += (_ptr(stats.nth_d2), _ptr(stats.ref_d2), ctypes.c_double(spread))
     if tree is None:
         points = np.ascontiguousarray(points, dtype=np.float64)
         args = (_ptr(points), *found)
@@ -669,6 +681,7 @@ def cloud_projected_distances(
     relative: bool = False,
     keep_pdis: bool | None = None,
     noise_k: int = 0,
+    isolated: tuple[int, int] | None = None,
     sheet: SheetParameters | None = None,
     workers: int = -1,
     rows: np.ndarray | None = None,
@@ -678,7 +691,9 @@ def cloud_projected_distances(
     (s, n, 3) when ``keep_normals``; with ``relative`` robust mode's relative distances
     and score (:class:`ScalePass`), and then the projected distances only when
     ``keep_pdis`` (default: not ``relative``); with ``noise_k > 0`` the
-    :class:`CloudStats` (noise ratio over the ``noise_k`` nearest). With ``sheet``
+    :class:`CloudStats` (noise ratio over the ``noise_k`` nearest; ``nth_d2`` and
+    ``ref_d2`` at the columns ``isolated``, default the header's ``MS_ISOLATED_NTH`` and
+    ``MS_ISOLATED_REF``). With ``sheet``
     (:func:`meshlab_sharp.robust.sheet_parameters`), robust mode's
     :func:`meshlab_sharp.robust.sheet_mask` first: every
     neighbourhood (the scales', the noise's) is then the kept neighbours among its
@@ -698,13 +713,24 @@ def cloud_projected_distances(
         out.relative, out.score = np.empty((s, n)), np.empty(n)
     if noise_k > 0:
         i32 = np.int32
-        out.stats = CloudStats(np.empty(n, i32), np.empty(n), np.empty(n, i32), np.empty(n))
+        out.stats = CloudStats(
+            np.empty(n, i32), np.empty(n), np.empty(n, i32), np.empty(n), np.empty(n), np.empty(n)
+        )
     fields: dict[str, np.ndarray | int | None] = {"pdis": out.pdis, "normals": out.normals}
     fields.update(relative=out.relative, score=out.score)
     if out.stats is not None:
         st = out.stats
+        nth, ref = isolated or (_header.integer("ISOLATED_NTH"), _header.integer("ISOLATED_REF"))
         fields.update(
-            near=st.near, kth_d2=st.kth_d2, kth_idx=st.kth_idx, noise=st.noise, noise_k=noise_k
+            near=st.near,
+            kth_d2=st.kth_d2,
+            kth_idx=st.kth_idx,
+            nth_d2=st.nth_d2,
+            ref_d2=st.ref_d2,
+            isolated_nth=nth,
+            isolated_ref=ref,
+            noise=st.noise,
+            noise_k=noise_k,
         )
     if sheet is not None:
         fields.update(_sheet_fields(sheet))

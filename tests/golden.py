@@ -29,10 +29,16 @@ SHAPES: dict[str, Shape] = {
         shapes.with_outliers(shapes.random_box_points(1500, seed=2), 15),
         None,
     ),
-    # 60 outliers, some near the surface and not isolated: ACUTE_SCORE_MAX keeps those
-    # between candidates out of the candidates
+    # 60 outliers, most of them isolated
     "box_points_many_outliers": lambda: (
         shapes.with_outliers(shapes.random_box_points(1500, seed=0), 60),
+        None,
+    ),
+    # 40 clusters of 2-3 points 1-8 spacings off the surface: isolated or not by the
+    # second rule (ISOLATED_NTH, ISOLATED_REF, ISOLATED_SPREAD); ACUTE_SCORE_MAX keeps
+    # those near the surface and between candidates out of the candidates
+    "box_points_stray_clusters": lambda: (
+        shapes.with_stray_clusters(shapes.random_box_points(1500, seed=1), 40, 0.09),
         None,
     ),
     # a 45-degree wedge (the evaluation's Poisson-disk samples): its tip's points join

@@ -183,3 +183,18 @@ def shuffled_mesh(
     rank = np.empty_like(perm)
     rank[perm] = np.arange(len(perm))
     return vertices[perm], rank[faces][rng.permutation(len(faces))]
+
+
+def with_stray_clusters(
+    points: np.ndarray, count: int, spacing: float, seed: int = 0
+) -> np.ndarray:
+    """``points`` followed by ``count`` clusters of 2 or 3 points (about half ``spacing``
+    apart), each around a point 1 to 8 ``spacing`` from a random one of ``points`` in a
+    random direction. (n + 2..3 count, 3)."""
+    rng = np.random.default_rng(seed)
+    clusters = []
+    for i in rng.integers(len(points), size=count):
+        d = rng.normal(size=3)
+        centre = points[i] + rng.uniform(1.0, 8.0) * spacing * d / np.linalg.norm(d)
+        clusters.append(centre + rng.normal(scale=0.3 * spacing, size=(rng.integers(2, 4), 3)))
+    return np.vstack([points, *clusters])

@@ -781,7 +781,7 @@ def test_isolated_points_and_noise_from_one_search(name):
     assert fused.stats.near.dtype == fused.stats.kth_idx.dtype == np.int32  # 8 B a point less
     table = knn(points, k_max)
     np.testing.assert_array_equal(fused.stats.near, table[:, 1])
-    expected = isolated_points(table)
+    expected = isolated_points(points, table)
     assert expected.any()
     np.testing.assert_array_equal(_isolated_from_stats(points, fused.stats), expected)
     assert _noise_factor(fused.stats.noise) == pytest.approx(
@@ -795,8 +795,9 @@ def test_isolated_points_and_noise_from_one_search(name):
 def test_statistics_left_in_tree_order(name):
     """The pass's statistics left in the kd-tree's order (``tree_order``, what robust
     mode's set-up asks for) are the cleaned-order ones permuted by the tree's ``orig``,
-    ``near`` as tree positions; isolated_from_stats gives the same flags from them (ties
-    included, and none when no point is isolated) and the noise median is the same."""
+    ``near`` and ``kth_idx`` as tree positions; isolated_from_stats gives the same flags
+    from them (ties included, and none when no point is isolated) and the noise median is
+    the same."""
     cloud = ROBUST_CLOUDS.get(name, lambda: _noisy(box_cylinder_points(3000)))
     points = np.unique(cloud(), axis=0)
     tree = _kernels.build_tree(points)
@@ -807,7 +808,8 @@ def test_statistics_left_in_tree_order(name):
     assert a is not None and b is not None and a.tree is None and b.tree is tree
     assert not np.array_equal(tree.orig, np.arange(len(points)))
     np.testing.assert_array_equal(tree.orig[b.near], a.near[tree.orig])
-    for field in ("kth_d2", "kth_idx", "noise"):
+    np.testing.assert_array_equal(tree.orig[b.kth_idx], a.kth_idx[tree.orig])
+    for field in ("kth_d2", "nth_d2", "ref_d2", "noise"):
         assert getattr(b, field).tobytes() == getattr(a, field)[tree.orig].tobytes()
     expected = _isolated_from_stats(points, a)
     assert expected.any() == (name != "no_outliers")

@@ -37,6 +37,9 @@ R_MIN = (2 / math.pi) * math.sin(math.pi / 18)
 NOISE_KNN, NOISE_TOLERATED, NOISE_MAX_FACTOR = 7, 0.15, 3.0
 #: Step 3: the floor alone on a cloud whose nu is at most 0.05.
 NOISE_QUIET = 0.05
+#: Step 1: the third neighbour at most 2.5 times farther than the k_max-th neighbour's
+#: tenth.
+ISOLATED_NTH, ISOLATED_REF, ISOLATED_SPREAD = 3, 10, 2.5
 #: Step 1a: a gap of 0.4 spacings, at least 6 points beyond it.
 SHEET_GAP, SHEET_MIN, SHEET_OWN = 0.4, 6, 0.5
 #: Step 1a, second rule: a column 1.1 spacings wide, a gap of 0.75 there, the heights
@@ -244,7 +247,18 @@ class Reading:
         growth f (1 if none), the noise ratio nu)."""
         k_max = max(scales)
         hoods = spec_knn(points, k_max)
-        isolated = np.array([i not in hoods[h[1]] for i, h in enumerate(hoods)])
+
+        def d2(i: int, column: int) -> float:
+            d = points[i] - points[hoods[i][min(column, k_max - 1)]]
+            return d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+
+        isolated = np.array(
+            [
+                i not in hoods[h[1]]
+                or d2(i, ISOLATED_NTH) > ISOLATED_SPREAD**2 * d2(h[-1], ISOLATED_REF)
+                for i, h in enumerate(hoods)
+            ]
+        )
         keep = np.flatnonzero(~isolated)
         if isolated.any():
             points = points[keep]

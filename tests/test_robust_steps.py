@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 import shapes
 
 import meshlab_sharp
@@ -20,13 +21,41 @@ def _csr(lists: list[list[int]]) -> Neighbourhood:
 
 
 def test_isolated_points_are_not_among_their_nearest_neighbours_lists():
+    points = np.zeros((5, 3))  # the second rule finds none: every distance is 0
     # 2 columns: (0, 1) and (2, 3) are mutual nearest neighbours, 4's nearest is 3
     indices = np.array([[0, 1], [1, 0], [2, 3], [3, 2], [4, 3]])
-    np.testing.assert_array_equal(robust.isolated_points(indices), [0, 0, 0, 0, 1])
+    np.testing.assert_array_equal(robust.isolated_points(points, indices), [0, 0, 0, 0, 1])
     # 3 columns: 3's list reaches 4, nobody is isolated
     indices = np.array([[0, 1, 2], [1, 0, 2], [2, 3, 1], [3, 2, 4], [4, 3, 2]])
-    assert not robust.isolated_points(indices).any()
-    assert robust.isolated_points(np.zeros((3, 1), int)).tolist() == [False] * 3
+    assert not robust.isolated_points(points, indices).any()
+    assert robust.isolated_points(points[:3], np.zeros((3, 1), int)).tolist() == [False] * 3
+
+
+def _lists(points: np.ndarray, k: int) -> np.ndarray:
+    d2 = ((points[:, None] - points[None]) ** 2).sum(-1)
+    return np.lexsort((np.broadcast_to(np.arange(len(points)), d2.shape), d2))[:, :k]
+
+
+@pytest.mark.parametrize("size", [1, 2, 3])
+def test_a_stray_cluster_is_isolated_when_its_third_neighbour_is_far(size):
+    # a 12 x 12 grid of spacing 1 and a cluster of `size` points 0.5 apart at height h
+    # over its middle: the cluster's third neighbour lies about h away, the third
+    # neighbour of its k-th neighbour (on the grid) 1 away: less than 5 times farther at
+    # h = 4.5, more at 5.5; a lone point is isolated by the first rule at any height
+    xy = np.stack(np.meshgrid(np.arange(12.0), np.arange(12.0)), -1).reshape(-1, 2)
+    grid = np.c_[xy, np.zeros(144)]
+    k = 20
+    for h in (4.5, 5.5, 20.0):
+        cluster = [5.3, 5.6, h] + np.array([[0, 0, 0], [0.5, 0, 0], [0, 0.5, 0]])[:size]
+        points = np.vstack([grid, cluster])
+        found = robust.isolated_points(points, _lists(points, k))
+        assert not found[:144].any()
+        assert found[144:].tolist() == [size == 1 or h > 5] * size, (h, found[144:])
+    # the first rule alone leaves pairs and triples in: each is among the others' nearest
+    points = np.vstack([grid, [5.3, 5.6, 20.0] + 0.5 * np.eye(3)[:size]])
+    indices = _lists(points, k)
+    lone = ~(indices[indices[:, 1]] == np.arange(len(points))[:, None]).any(axis=1)
+    assert lone[144:].all() == (size == 1)
 
 
 def test_local_scale_and_centroid_distance():

@@ -101,7 +101,7 @@ def test_compiled_passes_of_some_rows_equal_the_whole_pass() -> None:
     assert whole.relative is not None and some.relative is not None
     assert np.array_equal(whole.relative[:, rows], some.relative[:, rows])
     assert np.array_equal(whole.score[rows], some.score[rows])
-    for name in ("near", "kth_d2", "kth_idx", "noise"):
+    for name in ("near", "kth_d2", "kth_idx", "nth_d2", "ref_d2", "noise"):
         assert np.array_equal(getattr(whole.stats, name)[rows], getattr(some.stats, name)[rows])
     idx, pdis = _kernels.cloud_knn_projected_distances(tree, SCALES)
     idx_r, pdis_r = _kernels.cloud_knn_projected_distances(tree, SCALES, rows=rows)

@@ -87,7 +87,7 @@ QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType filter) const
 	       "threshold on its histogram; at several scales (k-rings on a mesh, k nearest "
 	       "neighbours on a point cloud). A vertex is a feature if it is a candidate at every "
 	       "scale. The default Robust mode also leaves out isolated points (a far outlier on "
-	       "its own; stray points close to each other are not isolated and may stay), grows "
+	       "its own, or a stray pair or triple off the surface), grows "
 	       "the scales on noisy clouds, divides the distance by the local spacing, never "
 	       "thresholds below a %1-degree edge (no features on smooth objects), keeps points "
 	       "with neighbours along their feature line, thins lines to one point across, and on "

@@ -220,11 +220,12 @@ std::vector<T> toCleaned(const std::vector<Index> &orig, const std::vector<T> &v
 
 // What one pass of ms_cloud_pdis computed (_kernels.ScalePass, CloudStats): per scale s
 // and tree position t at [s * n + t] (tree order: the kernel writes its rows one after the
-// other, as _kernels' pass; near holds tree positions, for ms_isolated_tree; near and
-// kthIdx int32, as cloud_out_t's: a MeshLab layer counts its vertices in an int).
+// other, as _kernels' pass; near and kthIdx hold tree positions, for ms_isolated_tree;
+// near and kthIdx int32, as cloud_out_t's: a MeshLab layer counts its vertices in an int).
 struct CloudPass {
 	std::vector<double> pdis, relative, score, noise, kthD2;
 	std::vector<int32_t> near, kthIdx;
+	std::vector<double> nthD2, refD2;  // isolation's second rule
 };
 
 // One pass over the tree's points at the scales ks: projected distances (paper mode) or
@@ -260,11 +261,17 @@ CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian
 		c.kthD2.resize(t.n);
 		c.near.resize(t.n);
 		c.kthIdx.resize(t.n);
+		c.nthD2.resize(t.n);
+		c.refD2.resize(t.n);
 		out.noise = c.noise.data();
 		out.noise_k = noiseK;
 		out.near = c.near.data();
 		out.kth_d2 = c.kthD2.data();
 		out.kth_idx = c.kthIdx.data();
+		out.nth_d2 = c.nthD2.data();
+		out.ref_d2 = c.refD2.data();
+		out.isolated_nth = MS_ISOLATED_NTH;
+		out.isolated_ref = MS_ISOLATED_REF;
 	}
 	out.tree_order = noiseK > 0 ? 2 : 1;
 	chunks(t.n, [&](unsigned, Index a, Index b) {
@@ -529,7 +536,8 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 	std::vector<uint8_t> isolated(tree->n);  // per tree position (_kernels.isolated_from_stats)
 	eachIndex((tree->n + MS_CHUNK - 1) / MS_CHUNK, [&](Index u) {
 		ms_isolated_tree(tree->pts.data(), tree->orig.data(), pass.near.data(), pass.kthD2.data(),
-		                 pass.kthIdx.data(), u * MS_CHUNK, std::min(tree->n, (u + 1) * MS_CHUNK), isolated.data());
+		                 pass.kthIdx.data(), pass.nthD2.data(), pass.refD2.data(),
+		                 MS_ISOLATED_SPREAD, u * MS_CHUNK, std::min(tree->n, (u + 1) * MS_CHUNK), isolated.data());
 	});
 	isolated = toCleaned(tree->orig, isolated);
 	std::vector<Index> keep;

@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 
 from .. import _header, _kernels
-from .neighbourhoods import Neighbourhood
+from .neighbourhoods import Neighbourhood, squared_distances
 from .normals import Weighting
 from .projected_distance import projected_distances
 
@@ -25,33 +25,58 @@ THIN_CONE_COS = _header.real("THIN_CONE_COS")
 #: its support list (:data:`meshlab_sharp.robust.SUPPORT_KNN` nearest, or a mesh's
 #: ``THIN_RING``-ring).
 SUPPORT_MIN = _header.integer("SUPPORT_MIN")
+#: Isolation's second rule (:func:`isolated_points`; meshlab_sharp.robust says why).
+ISOLATED_NTH = _header.integer("ISOLATED_NTH")
+ISOLATED_REF = _header.integer("ISOLATED_REF")
+ISOLATED_SPREAD = _header.real("ISOLATED_SPREAD")
 #: Fewest feature points in one thread's part of the line directions (below it the
 #: threads' start costs more than they save).
 PART_MIN = 2048
 
 
-def isolated_points(indices: np.ndarray) -> np.ndarray:
-    """Points that are not among the k nearest neighbours of their nearest neighbour.
+def isolated_points(
+    points: np.ndarray,
+    indices: np.ndarray,
+    *,
+    nth: int = ISOLATED_NTH,
+    ref: int = ISOLATED_REF,
+    spread: float = ISOLATED_SPREAD,
+) -> np.ndarray:
+    """Points that are not among the k nearest neighbours of their nearest neighbour, or
+    whose first few neighbours lie far beyond the spacing of the surface around them (a
+    stray pair or triple off the surface).
 
     Parameters
     ----------
+    points : (n, 3) float64
     indices : (n, k) int
-        k-nearest-neighbour indices of distinct points, each row sorted by distance
-        with the point itself first (column 0) and its nearest neighbour in column 1.
-        ``k >= 2``.
+        k-nearest-neighbour indices of the distinct ``points``, each row sorted by
+        (squared distance, index) with the point itself first (column 0) and its nearest
+        neighbour in column 1. ``k >= 2``.
+    nth, ref : int
+        Columns of the two distances compared (capped at ``k - 1``).
+    spread : float
+        How many times farther than the surface's spacing the ``nth`` neighbour may lie.
 
     Returns
     -------
     (n,) bool
         True for isolated points (outliers): ``i`` does not occur in
-        ``indices[indices[i, 1]]``.
+        ``indices[indices[i, 1]]``, or ``d_nth_i > spread**2 * d_ref_j`` with ``d_nth``
+        and ``d_ref`` the squared distances to the neighbours in columns
+        ``min(nth, k - 1)`` and ``min(ref, k - 1)``, and ``j = indices[i, k - 1]``.
     """
     idx = np.asarray(indices)
     n = len(idx)
     if n == 0 or idx.shape[1] < 2:
         return np.zeros(n, bool)
     nearest = idx[:, 1]
-    return ~(idx[nearest] == np.arange(n)[:, None]).any(axis=1)
+    lone = ~(idx[nearest] == np.arange(n)[:, None]).any(axis=1)
+    p = np.asarray(points, dtype=np.float64)
+    last = idx.shape[1] - 1
+    d_nth = squared_distances(p, p[idx[:, min(nth, last)]])
+    d_ref = squared_distances(p, p[idx[:, min(ref, last)]])
+    return lone | (d_nth > spread * spread * d_ref[idx[:, -1]])
 
 
 def noise_ratios(points: np.ndarray, indices: np.ndarray, k: int) -> np.ndarray:

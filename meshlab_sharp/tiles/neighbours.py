@@ -101,8 +101,9 @@ class Context:
         (None after a robust pass).
     found : dict of str to array
         What the query's pass computed for the rows (first axis r): ``pdis`` (r, s)
-        (paper); ``near``, ``kth_d2``, ``kth_idx``, ``noise`` (r,), ``relative``
-        (r, s), ``score`` (r,) (robust pass; ``near`` and ``kth_idx`` local indices).
+        (paper); ``near``, ``kth_d2``, ``kth_idx``, ``nth_d2``, ``ref_d2``, ``noise``
+        (r,), ``relative`` (r, s), ``score`` (r,) (robust pass; ``near`` and ``kth_idx``
+        local indices).
     """
 
     store: Store
@@ -198,6 +199,7 @@ def _search(
             query.weighting,
             relative=True,
             noise_k=min(robust.NOISE_KNN, k),
+            isolated=(robust.ISOLATED_NTH, robust.ISOLATED_REF),
             sheet=robust.sheet_parameters(),
             workers=workers,
             rows=rows,
@@ -208,6 +210,8 @@ def _search(
             "near": st.near[rows],
             "kth_d2": st.kth_d2[rows],
             "kth_idx": st.kth_idx[rows],
+            "nth_d2": st.nth_d2[rows],
+            "ref_d2": st.ref_d2[rows],
             "noise": st.noise[rows],
             "relative": np.ascontiguousarray(got.relative[:, rows].T),
             "score": got.score[rows],

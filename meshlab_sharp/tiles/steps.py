@@ -136,13 +136,18 @@ def robust_pass(ctx: Context, *, first: bool) -> Partial:
     distances and score, as the in-memory :class:`~meshlab_sharp.robust.RobustSetup`
     computes them): ``ratio``, ``r`` (r, s), ``score``; on the ``first`` pass (every
     distinct point) also each row's nearest neighbour (``nn1``, a position), k-th
-    neighbour squared distance (``kd2``) and input index (``kid``). The histograms of
-    ``r``."""
+    neighbour squared distance (``kd2``), input index (``kid``) and position (``kpos``),
+    and the squared distances of its ``ISOLATED_NTH``-th and ``ISOLATED_REF``-th nearest
+    (``nd2``, ``rd2``). The histograms of ``r``."""
     found, store = ctx.found, ctx.store
     if first:
         store.write_at("nn1", ctx.own, ctx.pos[found["near"]])
         store.write_at("kd2", ctx.own, found["kth_d2"])
-        store.write_at("kid", ctx.own, store.read_at("ids", ctx.pos[found["kth_idx"]]))
+        kpos = ctx.pos[found["kth_idx"]]
+        store.write_at("kid", ctx.own, store.read_at("ids", kpos))
+        store.write_at("kpos", ctx.own, kpos)
+        store.write_at("nd2", ctx.own, found["nth_d2"])
+        store.write_at("rd2", ctx.own, found["ref_d2"])
     r = found["relative"]
     store.write_at("ratio", ctx.own, found["noise"])
     store.write_at("r", ctx.own, r)
@@ -153,7 +158,8 @@ def robust_pass(ctx: Context, *, first: bool) -> Partial:
 def robust_isolated(span: Span) -> Partial:
     """:func:`meshlab_sharp.robust.isolated_points`: ``i`` is isolated when it is not
     among the k nearest of its nearest ``j``, i.e. when ``(d2(j, i), i)`` comes after
-    ``j``'s k-th neighbour in the (squared distance, index) order. Writes ``kept``; the
+    ``j``'s k-th neighbour in the (squared distance, index) order, or when its ``nd2``
+    exceeds ``ISOLATED_SPREAD**2`` times its k-th neighbour's ``rd2``. Writes ``kept``; the
     isolated points' coordinates (``lone_cat``)."""
     d = span.distinct
     pos = span.a + d
@@ -163,6 +169,10 @@ def robust_isolated(span: Span) -> Partial:
     d2 = squared_distances(coords, store.read_at("coords", nn))
     kd2, kid = store.read_at("kd2", nn), store.read_at("kid", nn)
     inside = (d2 < kd2) | ((d2 == kd2) & (span.read("ids")[d] <= kid))
+    spread2 = robust.ISOLATED_SPREAD * robust.ISOLATED_SPREAD
+    inside &= store.read("nd2", span.a, span.b)[d] <= spread2 * store.read_at(
+        "rd2", store.read("kpos", span.a, span.b)[d]
+    )
     store.write_at("kept", pos, inside)
     return {"isolated": np.array(int((~inside).sum())), "lone_cat": coords[~inside]}
 

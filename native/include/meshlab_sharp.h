@@ -69,6 +69,13 @@
  * from the list's by at most about 10 degrees (the cosine). */
 #define MS_SHEET_TRIM 1.3
 #define MS_SHEET_TRIM_COS 0.985
+/* Isolation (robust.isolated_points): a point is also isolated when its MS_ISOLATED_NTH-th
+ * nearest lies more than MS_ISOLATED_SPREAD times farther than the MS_ISOLATED_REF-th
+ * nearest of its own kmax-th neighbour: its first few neighbours are not the surface's
+ * spacing away (a stray pair or triple off the surface), while its kmax-th is. */
+#define MS_ISOLATED_NTH 3
+#define MS_ISOLATED_REF 10
+#define MS_ISOLATED_SPREAD 2.5
 #define MS_THIN_CONE_COS 0.5
 /* On a noisy cloud (noise ratio above MS_NOISE_QUIET) thinning's cone is wider (about 63
  * degrees; support keeps MS_THIN_CONE_COS): noise tilts the offsets between a line's own
@@ -174,8 +181,8 @@ extern "C" {
 /* What one pass of ms_cloud_pdis writes (each pointer may be NULL), per cleaned index
  * oi = orig[i] (with tree_order = 1 or 2: per tree position oi = i, the caller then moving
  * the rows to cleaned order: sequential writes, several times faster on a shuffled cloud;
- * the values are cleaned indices either way, but near[oi] with tree_order = 2: a tree
- * position, for ms_isolated_tree), s the scale's position
+ * the values are cleaned indices either way, but near[oi] and kth_idx[oi] with
+ * tree_order = 2: tree positions, for ms_isolated_tree), s the scale's position
  * in ks:
  *   pdis[s * n + oi]          projected distance; normals[(s * n + oi) * 3] its normal;
  *   idx[oi * kmax + j]        the neighbour indices (kNN table);
@@ -193,7 +200,13 @@ extern "C" {
  *                             every scale's neighbourhood, and the noise's, is then the
  *                             kept points among its neighbours;
  *   near[oi]                  the nearest other point (column 1 of the kNN table);
- *   kth_d2[oi], kth_idx[oi]   squared distance and index of the kmax-th neighbour. */
+ *   kth_d2[oi], kth_idx[oi]   squared distance and index of the kmax-th neighbour;
+ *   nth_d2[oi], ref_d2[oi]    squared distances of the neighbours in columns
+ *                             min(isolated_nth, kmax - 1) and
+ *                             min(isolated_ref, kmax - 1) of the kNN table (both
+ *                             given or neither, as kth_d2 and kth_idx;
+ *                             robust.isolated_points: MS_ISOLATED_NTH and
+ *                             MS_ISOLATED_REF). */
 typedef struct {
     double *pdis, *normals;
     int64_t *idx;
@@ -202,6 +215,8 @@ typedef struct {
     int32_t *near; /* n < 2**31 (_kernels.cloud_projected_distances checks) */
     double *kth_d2;
     int32_t *kth_idx;
+    double *nth_d2, *ref_d2;
+    int64_t isolated_nth, isolated_ref;
     double sheet_gap;
     int64_t sheet_min;
     double sheet_own;
@@ -241,12 +256,14 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
 void ms_scatter_rows(const int64_t *orig, const void *src, int64_t bytes, int64_t begin,
                      int64_t end, void *dst);
 
-/* robust.isolated_points from a pass's statistics near, kth_d2, kth_idx (n, cleaned
- * order) for the points [begin, end) of p (n, 3): out[i] = 1 when i is not among the
- * kmax nearest of near[i] ((|p_i - p_near[i]|^2, i) after that point's kmax-th
- * neighbour in the lists' order). */
+/* robust.isolated_points from a pass's statistics near, kth_d2, kth_idx, nth_d2, ref_d2
+ * (n, cleaned order) for the points [begin, end) of p (n, 3): out[i] = 1 when i is not
+ * among the kmax nearest of near[i] ((|p_i - p_near[i]|^2, i) after that point's kmax-th
+ * neighbour in the lists' order), or when nth_d2[i] > spread^2 * ref_d2[kth_idx[i]]
+ * (robust.isolated_points: spread MS_ISOLATED_SPREAD). */
 void ms_isolated(const double *p, const int32_t *near, const double *kth_d2,
-                 const int32_t *kth_idx, int64_t begin, int64_t end, uint8_t *out);
+                 const int32_t *kth_idx, const double *nth_d2, const double *ref_d2,
+                 double spread, int64_t begin, int64_t end, uint8_t *out);
 
 /* robust.sheet_mask, bit for bit, of the rows [begin, end) of the kNN lists idx (n, k)
  * (the point itself first) of the points p (n, 3) with their normals nrm (n, 3) and the
@@ -256,11 +273,12 @@ void ms_isolated(const double *p, const int32_t *near, const double *kth_d2,
 int ms_sheet_mask(const double *p, const int64_t *idx, int64_t k, const double *nrm,
                   const cloud_out_t *params, int64_t begin, int64_t end, char *keep);
 
-/* ms_isolated from a tree_order pass's statistics (per tree position t, near[t] the tree
- * position of the nearest) for the tree positions [begin, end): tp (n, 3) the points in
+/* ms_isolated from a tree_order = 2 pass's statistics (per tree position t; near[t] and
+ * kth_idx[t] tree positions) for the tree positions [begin, end): tp (n, 3) the points in
  * tree order, orig their cleaned indices; out[t] per tree position. */
 void ms_isolated_tree(const double *tp, const int64_t *orig, const int32_t *near,
-                      const double *kth_d2, const int32_t *kth_idx, int64_t begin, int64_t end,
+                      const double *kth_d2, const int32_t *kth_idx, const double *nth_d2,
+                      const double *ref_d2, double spread, int64_t begin, int64_t end,
                       uint8_t *out);
 
 /* Counts of v[begin, end) added to counts (32769): +0.0 in counts[0], the others by the

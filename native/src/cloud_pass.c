@@ -114,9 +114,14 @@ int ms_cloud_pdis(const double *p, const int64_t *orig, int64_t n, const double 
             const cand_t *c = kmax > 1 ? nb + 1 : NULL;
             out->near[oi] = (int32_t)(out->tree_order == 2 ? (c ? c->pos : i) : (c ? c->idx : ci));
         }
-        if (out->kth_d2 != NULL) {
-            out->kth_d2[oi] = nb[kmax - 1].d2;
-            out->kth_idx[oi] = (int32_t)nb[kmax - 1].idx;
+        if (out->kth_d2 != NULL) { /* tree_order 2: kth_idx a tree position too */
+            const cand_t *c = nb + kmax - 1;
+            out->kth_d2[oi] = c->d2;
+            out->kth_idx[oi] = (int32_t)(out->tree_order == 2 ? c->pos : c->idx);
+        }
+        if (out->nth_d2 != NULL) {
+            out->nth_d2[oi] = nb[kmax - 1 < out->isolated_nth ? kmax - 1 : out->isolated_nth].d2;
+            out->ref_d2[oi] = nb[kmax - 1 < out->isolated_ref ? kmax - 1 : out->isolated_ref].d2;
         }
         if (out->pdis == NULL && out->relative == NULL && out->noise == NULL) continue;
         for (int s = 0; s < nscales; s++) mk[s] = ks[s];

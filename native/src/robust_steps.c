@@ -152,34 +152,41 @@ void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
 
 /* Whether the point a (cleaned index i) is not among the kmax nearest of its nearest b,
  * whose kmax-th neighbour has squared distance kth and index kth_idx: (|a - b|^2, i)
- * comes after (kth, kth_idx) in the lists' order (squared distance, then index). */
+ * comes after (kth, kth_idx) in the lists' order (squared distance, then index); or
+ * whether a's squared distance nth (to its isolated_nth-th nearest) exceeds spread2 times
+ * far (that of its kmax-th neighbour to its isolated_ref-th nearest). */
 static inline uint8_t isolated_one(const double *a, const double *b, double kth,
-                                   int64_t kth_idx, int64_t i) {
+                                   int64_t kth_idx, int64_t i, double nth, double far,
+                                   double spread2) {
     double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
     double d2 = dx * dx + dy * dy + dz * dz;
-    return !(d2 < kth || (d2 == kth && i <= kth_idx));
+    return !(d2 < kth || (d2 == kth && i <= kth_idx)) || nth > spread2 * far;
 }
 
-/* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx)
- * for the points [begin, end) of p (n, 3), cleaned order: out[i] = isolated_one of i and
- * j = near[i]. */
+/* robust.isolated_points from a pass's statistics (cloud_out_t's near, kth_d2, kth_idx,
+ * nth_d2, ref_d2) for the points [begin, end) of p (n, 3), cleaned order: out[i] = isolated_one of
+ * i and j = near[i]. */
 void ms_isolated(const double *p, const int32_t *near, const double *kth_d2,
-                 const int32_t *kth_idx, int64_t begin, int64_t end, uint8_t *out) {
+                 const int32_t *kth_idx, const double *nth_d2, const double *ref_d2,
+                 double spread, int64_t begin, int64_t end, uint8_t *out) {
     for (int64_t i = begin; i < end; i++) {
         int64_t j = near[i];
-        out[i] = isolated_one(p + 3 * i, p + 3 * j, kth_d2[j], kth_idx[j], i);
+        out[i] = isolated_one(p + 3 * i, p + 3 * j, kth_d2[j], kth_idx[j], i, nth_d2[i],
+                              ref_d2[kth_idx[i]], spread * spread);
     }
 }
 
-/* ms_isolated from a tree_order pass's statistics, for the tree positions [begin, end):
- * tp (n, 3) the points in tree order, orig their cleaned indices, near[t] the tree
- * position of the nearest, out[t] per tree position. The nearest lies close by in the
- * tree: reads near the point's own, where cleaned order reads all over the cloud. */
+/* ms_isolated from a tree_order = 2 pass's statistics, for the tree positions [begin, end):
+ * tp (n, 3) the points in tree order, orig their cleaned indices, near[t] and kth_idx[t]
+ * tree positions, out[t] per tree position. The nearest lies close by in the tree: reads
+ * near the point's own, where cleaned order reads all over the cloud. */
 void ms_isolated_tree(const double *tp, const int64_t *orig, const int32_t *near,
-                      const double *kth_d2, const int32_t *kth_idx, int64_t begin, int64_t end,
+                      const double *kth_d2, const int32_t *kth_idx, const double *nth_d2,
+                      const double *ref_d2, double spread, int64_t begin, int64_t end,
                       uint8_t *out) {
     for (int64_t t = begin; t < end; t++) {
         int64_t u = near[t];
-        out[t] = isolated_one(tp + 3 * t, tp + 3 * u, kth_d2[u], kth_idx[u], orig[t]);
+        out[t] = isolated_one(tp + 3 * t, tp + 3 * u, kth_d2[u], orig[kth_idx[u]], orig[t],
+                              nth_d2[t], ref_d2[kth_idx[t]], spread * spread);
     }
 }
