@@ -285,8 +285,8 @@ SHEET_TRIM_COS = _header.real("SHEET_TRIM_COS")
 #: nearest); its third neighbour lies 5-20 spacings away, while its ``k_max``-th
 #: neighbour lies on the surface, whose 10th nearest is about 2 spacings away (a
 #: neighbour farther out than the third: its distance varies less from point to point,
-#: which matters on randomly sampled surfaces). Points over the spread (20,000 points,
-#: docs/robust-mode.md, "Stray clusters"): none on the clean, noisy, thin-walled and
+#: which matters on randomly sampled surfaces). Points over the spread (20,000 points;
+#: docs/method.md, step 1): none on the clean, noisy, thin-walled and
 #: density-gradient parts and on 20,000 uniform random samples of a part; 0-5 per
 #: simulated scan; 80 % of stray points 5-20 spacings off a box in clusters of 2-3, 92 %
 #: of single ones. The third nearest against the kmax-th neighbour's third, spread 5:
