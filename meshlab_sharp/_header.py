@@ -132,3 +132,4 @@ CONSTANTS = KERNELS.constants
 integer = KERNELS.integer
 real = KERNELS.real
 integers = KERNELS.integers
+reals = KERNELS.reals

@@ -118,7 +118,8 @@ _SIGNATURES = {
         None,
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
     ),
-    "ms_face_average_normals": (None, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
+    "ms_face_average_normals": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
+    "ms_face_windings": (_i64, [_c_void_p, _i64, _i64, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_dedup_probe": (
         None,
@@ -1116,15 +1117,35 @@ def crease_vertices(
     return mask, float(threshold)
 
 
-def face_average_normals(points: np.ndarray, faces: np.ndarray, zero: float) -> np.ndarray:
-    """Face-average vertex normals, bit for bit as the numpy reference computes them."""
+def face_average_normals(
+    points: np.ndarray, faces: np.ndarray, zero: float
+) -> tuple[np.ndarray, int]:
+    """Face-average vertex normals, bit for bit as the numpy reference computes them, and
+    the number of faces :func:`face_windings` could not orient."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     acc = np.zeros_like(points)
-    lib.ms_face_average_normals(_ptr(points), len(points), _ptr(faces), len(faces), zero, _ptr(acc))
-    return acc
+    unoriented = lib.ms_face_average_normals(
+        _ptr(points), len(points), _ptr(faces), len(faces), zero, _ptr(acc)
+    )
+    if unoriented < 0:
+        raise MemoryError("out of memory orienting the faces of the mesh")
+    return acc, int(unoriented)
+
+
+def face_windings(faces: np.ndarray, n: int) -> tuple[np.ndarray, int]:
+    """:func:`meshlab_sharp.creases.face_windings` (the faces to turn, and the number of
+    faces it could not orient)."""
+    lib = _LIB
+    assert lib is not None
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    flip = np.zeros(len(faces), np.uint8)
+    unoriented = lib.ms_face_windings(_ptr(faces), len(faces), n, _ptr(flip))
+    if unoriented < 0:
+        raise MemoryError("out of memory orienting the faces of the mesh")
+    return flip.view(bool), int(unoriented)
 
 
 #: Fewest faces that :func:`keep_faces` splits between two threads (65,536 faces are

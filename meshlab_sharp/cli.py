@@ -10,6 +10,8 @@ built-in sample part, whose outputs in ``out/`` each run replaces.
 from __future__ import annotations
 
 import argparse
+import errno
+import logging
 import os
 import re
 import signal
@@ -18,7 +20,7 @@ import threading
 import time
 import warnings
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any, NamedTuple, NoReturn, TextIO
@@ -35,7 +37,7 @@ from .defaults import (
     MODES,
     WEIGHTINGS,
 )
-from .errors import InputError, InputWarning, MeshlabSharpError
+from .errors import InputError, InputWarning, Interrupted, MeshlabSharpError, OutOfMemory
 from .outputs import OutputSet
 from .plugin import add_plugin_command
 from .progress import TICK, Progress
@@ -89,6 +91,19 @@ def parse_scales(text: str) -> list[int]:
             f"invalid scales '{text}': {len(values)} scales, more than {MAX_SCALES}"
         )
     return list(values)
+
+
+def _seconds(text: str) -> float:
+    """A positive, finite number of seconds."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(
+            f"invalid time {text!r}: give a positive number of seconds"
+        )
+    return value
 
 
 class _Parser(argparse.ArgumentParser):
@@ -201,6 +216,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the tiles on Dask: local:N (N local workers) or tcp://HOST:PORT",
     )
     det.add_argument(
+        "--dask-timeout",
+        type=_seconds,
+        metavar="SECONDS",
+        help="--dask tcp://...: seconds to reach the scheduler, and then to wait for its "
+        "first worker (default 30)",
+    )
+    det.add_argument(
+        "--verbose",
+        action="store_true",
+        help="--dask: show the scheduler's and workers' log messages",
+    )
+    det.add_argument(
         "--scratch",
         metavar="DIR",
         help="folder for the tiles' arrays (with --dask on several machines: shared)",
@@ -220,24 +247,6 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_plugin_command(sub)
     return parser
-
-
-class Interrupted(BaseException):
-    """A catchable termination signal (SIGINT, SIGTERM, SIGHUP) stopped the command.
-
-    Attributes
-    ----------
-    signum : int
-        The signal.
-    written : list of Path or None
-        ``detect``: the outputs renamed into place before the signal (none unless it
-        came after the renames). None for commands that write no output set.
-    """
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signum)
-        self.signum = signum
-        self.written: list[Path] | None = None
 
 
 @contextmanager
@@ -290,12 +299,14 @@ def _warnings_as_lines() -> Iterator[None]:
         yield
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, *, end_after_out_of_memory: bool = False) -> int:
     """Entry point of the ``meshlab-sharp`` script; returns the exit status.
 
     Every failure is one line on stderr, ``meshlab-sharp: error: ...``, and status 1;
     SIGINT, SIGTERM and SIGHUP end the command with one line saying what was written,
-    and status 128 + the signal's number.
+    and status 128 + the signal's number. With ``end_after_out_of_memory`` (the
+    script), the process ends right after an out-of-memory line (``os._exit``): a
+    library whose threads could not start may crash while the interpreter shuts down.
     """
     with _signals_interrupt(), _warnings_as_lines():
         try:
@@ -303,6 +314,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return int(args.func(args) or 0)
         except MeshlabSharpError as exc:
             print(f"meshlab-sharp: error: {exc}", file=sys.stderr)
+            if end_after_out_of_memory and isinstance(exc, OutOfMemory):
+                sys.stdout.flush()
+                sys.stderr.flush()
+                os._exit(1)
             return 1
         except OSError as exc:
             where = f"{exc.filename}: " if exc.filename else ""
@@ -365,6 +380,20 @@ def run_detect(args: argparse.Namespace) -> int:
                 plan.own.mkdir(exist_ok=True)
             outputs.claim(mine, force=True)  # the sample's own outputs: replaced
             return _detect_into(args, plan, steps, outputs, progress)
+    except MemoryError:  # numpy's, the compiled kernels', pymeshlab's std::bad_alloc
+        raise OutOfMemory(_out_of_memory(args)) from None
+    except OSError as exc:  # a memory map, a thread or a process that cannot start
+        if exc.errno == errno.ENOMEM:
+            raise OutOfMemory(_out_of_memory(args)) from None
+        raise
+    except RuntimeError as exc:  # threading's, when a thread's stack cannot be mapped
+        if "can't start new thread" in str(exc):
+            raise OutOfMemory(_out_of_memory(args)) from None
+        raise
+    except ImportError as exc:  # a compiled module whose segments cannot be mapped
+        if "failed to map segment" in str(exc):
+            raise OutOfMemory(_out_of_memory(args)) from None
+        raise
     except Interrupted as exc:
         exc.written = list(written)
         raise
@@ -429,11 +458,13 @@ def _detect_into(
         _kernels.resolve(None)  # a bad MESHLAB_SHARP_BACKEND fails before any work
     except (ValueError, RuntimeError) as exc:
         raise MeshlabSharpError(str(exc)) from None
+    _load_libraries()
     source, output = plan.source, plan.output
     start = time.perf_counter()
     if args.max_memory is not None or args.dask is not None:
         return _detect_tiled(args, plan, outputs, progress, steps)
     geometry = _sample_geometry(plan.sample) if source is None else load(source)
+    args.input_points = len(geometry.vertices)
     attributes = _input_attributes(source) if output.suffix.lower() == ".ply" else None
     load_time = time.perf_counter() - start
     with _option_names():
@@ -562,6 +593,8 @@ def _detect_tiled(
         if given:
             raise MeshlabSharpError(f"{flag} is not available with --max-memory/--dask")
     start = time.perf_counter()
+    if args.dask is not None and not args.verbose:
+        _quiet_dask()
     if source is None:
         assert plan.sample is not None
         if plan.sample == "mesh" and not args.as_points:
@@ -569,18 +602,26 @@ def _detect_tiled(
         points = PointSource.from_array(_sample_geometry(plan.sample).vertices, "sample part")
     else:
         points = open_points(source, as_points=args.as_points)
-    result = _detect(
-        points,
-        scales=args.scales,
-        weighting=args.weighting,
-        mode=args.mode,
-        progress=progress,
-        preprocessing=steps,
-        max_memory=args.max_memory,
-        dask=args.dask,
-        scratch=args.scratch,
-        curves=args.curves is not None,
-    )
+    args.input_points = points.n
+    with ExitStack() as stack:
+        dask = args.dask
+        if dask is not None and not dask.startswith("local:"):
+            from .tiles.cluster import DEFAULT_CONNECT_TIMEOUT, connect
+
+            timeout = args.dask_timeout or DEFAULT_CONNECT_TIMEOUT
+            dask = stack.enter_context(connect(dask, timeout))
+        result = _detect(
+            points,
+            scales=args.scales,
+            weighting=args.weighting,
+            mode=args.mode,
+            progress=progress,
+            preprocessing=steps,
+            max_memory=args.max_memory,
+            dask=dask,
+            scratch=args.scratch,
+            curves=args.curves is not None,
+        )
     t = time.perf_counter()
     write_features_ply(output, points, result.strength, result.mask, into=outputs)
     if args.indices:
@@ -591,6 +632,32 @@ def _detect_tiled(
     if not args.quiet:
         _print_summary(points.name, output, result)
     return 0
+
+
+def _load_libraries() -> None:
+    """Before the input is read, while memory is free: import the detection's libraries
+    (numpy, scipy, pymeshlab, the compiled kernels) and have OpenBLAS map its threads'
+    buffers, which it maps at its first matrix product and, when it cannot, ends the
+    process with its own message instead of raising MemoryError."""
+    import numpy as np
+
+    from . import pipeline  # noqa: F401  (its imports load the libraries)
+
+    block = np.ones((512, 512))
+    block @ block
+
+
+def _quiet_dask() -> None:
+    """Keep distributed's log messages (this process's and its workers', which inherit
+    the setting) out of the terminal: only critical ones are shown."""
+    os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "critical")
+    try:
+        import distributed  # noqa: F401  (sets its loggers' levels from its config)
+    except ImportError:  # the --dask check says which extra to install
+        return
+    for name in list(logging.root.manager.loggerDict):
+        if name == "distributed" or name.startswith("distributed."):
+            logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
 def _commit(
@@ -629,6 +696,37 @@ def _pause_for_tests() -> None:
         time.sleep(0.02)
 
 
+#: Memory of an in-memory run per input point, bytes, for the out-of-memory message:
+#: the detection's measured peak above the input (140-190 B/point, README), the input
+#: and the output's copy, with a margin.
+MEMORY_PER_POINT = 320
+#: Memory of the interpreter and the libraries before the input is read, bytes.
+MEMORY_BASELINE = 200 << 20
+
+
+def _out_of_memory(args: argparse.Namespace) -> str:
+    """The out-of-memory message: what the input needs (estimated from its points, or
+    the file's size before they are counted) and the ``--max-memory`` hint."""
+    name = "the sample part" if args.input is None else args.input
+    name = name if name.isprintable() else ascii(name)
+    n = getattr(args, "input_points", None)
+    tiled = args.max_memory is not None or args.dask is not None
+    if n is None:
+        size = Path(args.input).stat().st_size if args.input else 0
+        need = f"reading {name} ({size / 2**20:.0f} MB) did not fit in memory"
+    elif tiled:
+        need = f"{name} ({n} points) did not fit in the memory left beside its tiles"
+    else:
+        mb = (MEMORY_BASELINE + n * MEMORY_PER_POINT) / 2**20
+        need = f"{name} ({n} points) needs about {mb:.0f} MB of memory"
+    if tiled:
+        return f"out of memory: {need}; give a smaller --max-memory, or free memory"
+    return (
+        f"out of memory: {need}; --max-memory SIZE (e.g. --max-memory 500MB) keeps a "
+        "point cloud's peak under SIZE"
+    )
+
+
 def _sample_geometry(kind: str) -> Geometry:
     """The built-in sample part as a Geometry (built once, then read from the cache)."""
     from .io import Geometry
@@ -650,6 +748,13 @@ def _check_outputs(source: Path | None, outputs: list[Path], *, own: Path | None
         raise MeshlabSharpError("two outputs have the same path")
     if source is not None and source.exists() and source.resolve() in resolved:
         raise MeshlabSharpError(f"{source}: an output would overwrite the input")
+    for p in outputs:
+        try:
+            str(p).encode("utf-8")
+        except UnicodeEncodeError:
+            raise MeshlabSharpError(
+                f"cannot write {str(p)!a}: the name is not valid UTF-8; choose another with -o"
+            ) from None
     if own is not None and not own.exists():
         folder = own.resolve().parent
         if not os.access(folder, os.W_OK | os.X_OK):

@@ -28,6 +28,7 @@ __all__ = [
     "NOISE_FACTOR",
     "crease_threshold",
     "dihedral_angles",
+    "face_windings",
     "sharp_vertices",
 ]
 
@@ -65,9 +66,10 @@ def dihedral_angles(
         face (boundaries) or more than two (non-manifold) are left out.
     angles : (e,) float64
         Radians in [0, pi]: ``acos(clamp(u . v, -1, 1))`` of the two unit face normals
-        ``u = cross(p1 - p0, p2 - p0) / |.|`` (``|.|`` = sqrt of the sum of squares).
-        The orientation of the faces does not matter for a consistently oriented mesh;
-        an edge between faces of opposite orientation gets the supplementary angle.
+        ``u = cross(p1 - p0, p2 - p0) / |.|`` (``|.|`` = sqrt of the sum of squares),
+        ``v`` negated where the two faces go the same way along the edge (one of them is
+        wound the other way round): the angle is the same whatever the faces' winding,
+        and only the line of each normal counts.
     """
     faces = np.asarray(faces, np.int64)
     if len(faces) == 0:
@@ -76,6 +78,41 @@ def dihedral_angles(
         edges, dot = _kernels.two_face_edges(faces, points)
         return edges, _angles(dot)
     return reference.dihedral_angles(points, faces)
+
+
+def face_windings(
+    faces: np.ndarray, n: int, *, backend: str | None = None
+) -> tuple[np.ndarray, int]:
+    """Which faces to turn so that every face is wound as its neighbours are
+    (:func:`meshlab_sharp.reference.creases.face_windings`).
+
+    Faces are joined through the edges with exactly two faces; two joined faces are
+    wound alike when they go opposite ways along their edge. In each part so joined the
+    lowest face keeps its winding, and the others are turned where they are wound the
+    other way round from it. Only the line of each face's normal then counts, never the
+    winding a file gave it.
+
+    Parameters
+    ----------
+    faces : (m, 3) int
+        Triangles over ``n`` vertices (three distinct vertices each).
+    n : int
+        Number of vertices.
+    backend : {"compiled", "numpy"}, optional
+        Default :func:`meshlab_sharp._kernels.default_backend`; the same result.
+
+    Returns
+    -------
+    flip : (m,) bool
+        True where the face is turned (none on a consistently wound mesh).
+    unoriented : int
+        Faces in parts with no consistent winding (non-orientable, a Moebius strip),
+        left as they are wound.
+    """
+    faces = np.asarray(faces, np.int64)
+    if _kernels.resolve(backend) == "compiled":
+        return _kernels.face_windings(faces, n)
+    return reference.face_windings(faces, n)
 
 
 def _angles(dot: np.ndarray) -> np.ndarray:

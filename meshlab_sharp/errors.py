@@ -6,6 +6,10 @@ prints its message on one line and exits with a non-zero status, never a traceba
 
 from __future__ import annotations
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from pathlib import Path
+
 
 class MeshlabSharpError(Exception):
     """Base class of every error meshlab-sharp raises on purpose."""
@@ -15,9 +19,36 @@ class InputError(MeshlabSharpError, ValueError):
     """The input geometry, file or options cannot be processed as given."""
 
 
+class OutOfMemory(MeshlabSharpError, MemoryError):
+    """Memory ran out (the command line's message says how much the input needs)."""
+
+
+class ClusterError(MeshlabSharpError, RuntimeError):
+    """The Dask cluster failed while it ran the tiles (scheduler lost, workers lost
+    again and again)."""
+
+
 class OutputError(MeshlabSharpError, OSError):
     """An output file cannot be written; the message names the destination, not the
     hidden temporary file."""
+
+
+class Interrupted(BaseException):
+    """A catchable termination signal (SIGINT, SIGTERM, SIGHUP) stopped the command.
+
+    Attributes
+    ----------
+    signum : int
+        The signal.
+    written : list of Path or None
+        ``detect``: the outputs renamed into place before the signal (none unless it
+        came after the renames). None for commands that write no output set.
+    """
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+        self.written: list[Path] | None = None
 
 
 class InputWarning(UserWarning):

@@ -8,6 +8,7 @@ import numpy as np
 import pymeshlab
 
 from .defaults import DEFAULT_MODE
+from .errors import InputError
 from .io import add_vertex_attribute, curve_arrays, select_vertices
 from .normals import DEFAULT_WEIGHTING, Weighting
 from .pipeline import detect
@@ -48,13 +49,27 @@ def detect_meshset(
         mesh's own colours as they are.
     curves : bool, default False
         Also extract the feature curves and add them to ``ms`` as a new mesh of edges
-        named ``sharp_curves`` (vertex quality = the curve's number); the analysed mesh
-        stays the current one.
+        named ``sharp_curves`` (vertex quality = the curve's number; none when no curve
+        is found: pymeshlab holds no empty mesh); the analysed mesh stays the current one.
 
     Returns
     -------
     DetectionResult
+
+    Raises
+    ------
+    TypeError
+        ``ms`` is not a MeshSet.
+    InputError
+        (a ValueError) ``ms`` holds no mesh, or its current mesh no vertices; the
+        options or the geometry cannot be processed.
     """
+    if not isinstance(ms, pymeshlab.MeshSet):
+        raise TypeError(f"ms must be a pymeshlab.MeshSet, not {type(ms).__name__}")
+    if ms.mesh_number() == 0:
+        raise InputError("ms: the MeshSet holds no mesh")
+    if ms.current_mesh().vertex_number() == 0:
+        raise InputError("ms: the current mesh has no vertices")
     result = detect(
         ms,
         scales=scales,
@@ -75,7 +90,7 @@ def detect_meshset(
             z=f"({name} >= 1) ? 13 : 200",
             a="255",
         )
-    if result.curves is not None:
+    if result.curves:
         _add_curve_mesh(ms, result)
     return result
 

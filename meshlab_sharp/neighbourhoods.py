@@ -46,6 +46,12 @@ __all__ = [
 #: Coordinates up to 2**UNIT_RANGE in absolute value, and at least 2**-UNIT_RANGE for
 #: the largest, are used as they are; others are scaled (:func:`unit_scale`).
 UNIT_RANGE = _header.integer("UNIT_RANGE")
+#: A point further from a cloud's median than this many of its spreads is far (and
+#: points up to this far are used as they are: the unit then stays within UNIT_RANGE
+#: of the bulk's); the spread is measured on at most FAR_SAMPLE points
+#: (:func:`far_points`).
+FAR_SPREADS = _header.real("FAR_SPREADS")  # 2**40
+FAR_SAMPLE = _header.integer("FAR_SAMPLE")
 
 
 def unit_scale(points: np.ndarray) -> tuple[np.ndarray, int]:
@@ -74,10 +80,75 @@ def unit_scale(points: np.ndarray) -> tuple[np.ndarray, int]:
         ``np.ldexp(scaled, e)`` gives ``points`` back.
     """
     largest = max(float(points.max()), -float(points.min())) if points.size else 0.0
+    e = unit_exponent(largest)
+    return (np.ldexp(points, -e), e) if e else (points, 0)
+
+
+def unit_exponent(largest: float) -> int:
+    """The ``e`` of :func:`unit_scale` for points whose largest absolute coordinate is
+    ``largest`` (finite, >= 0): 0 when it lies in [2**-UNIT_RANGE, 2**UNIT_RANGE) or is
+    0, else the exponent that brings it into [0.5, 1)."""
     e = math.frexp(largest)[1]
-    if largest == 0.0 or -UNIT_RANGE < e <= UNIT_RANGE:
-        return points, 0
-    return np.ldexp(points, -e), e
+    return 0 if largest == 0.0 or -UNIT_RANGE < e <= UNIT_RANGE else e
+
+
+def far_points(points: np.ndarray) -> np.ndarray | None:
+    """The points of a cloud that lie far from all the others, or None when none does.
+
+    A point is far when one of its coordinates lies more than ``FAR_SPREADS`` times the
+    bulk's spread from the bulk's median: the spread is the largest interquartile range
+    of a coordinate, both taken over at most ``FAR_SAMPLE`` points evenly spread through
+    the input (the same points whatever the machine). Such a point (a corrupted number
+    in a file, 1e300 away) has no neighbourhood of its own, and kept it would set the
+    coordinates' unit (:func:`unit_scale`): the bulk would shrink to where its squared
+    distances underflow. No real scan holds a point 2**40 times its own extent away.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+        Finite coordinates.
+
+    Returns
+    -------
+    (n,) bool or None
+        True for the far points; None when there are none (most inputs: one pass over
+        the bounds decides it).
+    """
+    n = len(points)
+    bulk = far_reach(points[:: far_step(n)])
+    if bulk is None:
+        return None
+    median, reach = bulk
+    lo = np.array([points[:, i].min() for i in range(3)])
+    hi = np.array([points[:, i].max() for i in range(3)])
+    if max(float((hi - median).max()), float((median - lo).max())) <= reach:
+        return None
+    return is_far(points, median, reach)
+
+
+def far_step(n: int) -> int:
+    """The step between the points :func:`far_points` measures the bulk on (n points:
+    every ``far_step(n)``-th from the first, at most ``FAR_SAMPLE``)."""
+    return max(1, -(-n // FAR_SAMPLE))
+
+
+def far_reach(sample: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """The bulk's median (3,) and how far from it a point is far, from the
+    :func:`far_step` sample (s, 3); None when the sample has no spread (or no point)."""
+    if len(sample) == 0:
+        return None
+    low, median, high = np.quantile(sample, [0.25, 0.5, 0.75], axis=0)
+    reach = FAR_SPREADS * float((high - low).max())
+    return None if reach == 0.0 else (median, reach)
+
+
+def is_far(points: np.ndarray, median: np.ndarray, reach: float) -> np.ndarray:
+    """(n,) bool: the points (n, 3) with a coordinate further than ``reach`` from the
+    ``median``'s."""
+    far = np.zeros(len(points), bool)
+    for i in range(3):
+        far |= np.abs(points[:, i] - median[i]) > reach
+    return far
 
 
 class KnnNeighbourhoods:

@@ -6,13 +6,33 @@ Only the orientation of a normal matters to the projected distance, never its si
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from . import _kernels
+from .errors import InputWarning
 from .reference import normals as reference
-from .reference.normals import DEFAULT_WEIGHTING, WEIGHTINGS, ZERO_NORMAL, Weighting
+from .reference.normals import (
+    DEFAULT_WEIGHTING,
+    EIG_TIE_DIRECTION,
+    WEIGHTINGS,
+    ZERO_NORMAL,
+    Weighting,
+    largest_eigenvectors,
+    smallest_eigenvectors,
+)
 
-__all__ = ["DEFAULT_WEIGHTING", "WEIGHTINGS", "ZERO_NORMAL", "Weighting", "face_average_normals"]
+__all__ = [
+    "DEFAULT_WEIGHTING",
+    "EIG_TIE_DIRECTION",
+    "WEIGHTINGS",
+    "ZERO_NORMAL",
+    "Weighting",
+    "face_average_normals",
+    "largest_eigenvectors",
+    "smallest_eigenvectors",
+]
 
 
 def face_average_normals(
@@ -34,7 +54,22 @@ def face_average_normals(
     (n, 3) float64
         Unit normals; a zero row where a vertex has no face or the sum vanishes
         (``|sum| <= ZERO_NORMAL``), to be replaced by a PCA normal.
+
+    Each face's normal is turned where :func:`meshlab_sharp.creases.face_windings` turns
+    the face, so that the faces' winding does not change the normals' lines; faces in a
+    part with no consistent winding (non-orientable) are summed as they are wound, with an
+    :class:`~meshlab_sharp.errors.InputWarning`.
     """
     if _kernels.resolve(backend) == "compiled":
-        return _kernels.face_average_normals(points, faces, ZERO_NORMAL)
-    return reference.face_average_normals(points, faces)
+        acc, unoriented = _kernels.face_average_normals(points, faces, ZERO_NORMAL)
+    else:
+        acc, unoriented = reference.face_average_normals(points, faces)
+    if unoriented:
+        warnings.warn(
+            InputWarning(
+                f"{unoriented} faces lie in parts with no consistent winding "
+                "(non-orientable): their vertex normals are summed as the faces are wound"
+            ),
+            stacklevel=2,
+        )
+    return acc

@@ -12,7 +12,7 @@ import numpy as np
 import pymeshlab
 
 from . import _header
-from .defaults import MAX_SCALES, MODES, WEIGHTINGS
+from .defaults import MAX_KNN_SCALE, MAX_RING_SCALE, MAX_SCALES, MODES, WEIGHTINGS
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
 
@@ -55,7 +55,9 @@ def check_scales(
     scales: Sequence[int] | int | None, default: tuple[int, ...], kind: str
 ) -> tuple[int, ...]:
     """Sorted, distinct, positive integer scales (a single int is one scale), at most
-    :data:`MAX_SCALES` of them; the default when None."""
+    :data:`MAX_SCALES` of them, within :data:`MIN_KNN_SCALE`..:data:`MAX_KNN_SCALE`
+    (clouds) or :data:`MIN_RING_SCALE`..:data:`MAX_RING_SCALE` (meshes); the default
+    when None."""
     if scales is None:
         return default
     given: Any = [int(scales)] if isinstance(scales, int | np.integer) else scales
@@ -72,8 +74,12 @@ def check_scales(
         raise InputError(f"scales must be integers, got {list(given)!r}")
     if not values:
         raise InputError("at least one scale is needed")
-    low = MIN_RING_SCALE if kind == "mesh" else MIN_KNN_SCALE
+    low, high = (
+        (MIN_RING_SCALE, MAX_RING_SCALE) if kind == "mesh" else (MIN_KNN_SCALE, MAX_KNN_SCALE)
+    )
+    what = "rings" if kind == "mesh" else "kNN sizes"
     if values[0] < low:
-        what = "rings" if kind == "mesh" else "kNN sizes"
         raise InputError(f"{what} must be >= {low}, got {values[0]}")
+    if values[-1] > high:
+        raise InputError(f"{what} must be <= {high}, got {values[-1]}")
     return tuple(values)

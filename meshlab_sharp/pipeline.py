@@ -26,6 +26,7 @@ from .neighbourhoods import (
     KnnNeighbourhoods,
     RingNeighbourhoods,
     build_neighbourhoods,
+    far_points,
     unit_scale,
 )
 from .normals import DEFAULT_WEIGHTING, Weighting, face_average_normals
@@ -37,7 +38,7 @@ from .preprocessing import (
     map_to_input,
     preprocess,
 )
-from .progress import Progress
+from .progress import Progress, cleared_on_error
 from .result import DetectionResult
 from .robust import RobustSetup
 
@@ -134,34 +135,36 @@ def detect(
         from .tiles import detect_out_of_core
 
         options = dict(scales=scales, weighting=weighting, as_points=as_points, mode=mode)
-        return detect_out_of_core(
+        with cleared_on_error():
+            return detect_out_of_core(
+                source,
+                faces,
+                **options,
+                return_details=return_details,
+                progress=progress,
+                workers=workers,
+                preprocessing=preprocessing,
+                backend=backend,
+                max_memory=max_memory,
+                dask=dask,
+                scratch=scratch,
+                curves=curves,
+            )
+    with cleared_on_error():
+        return _detect(
             source,
             faces,
-            **options,
+            scales=scales,
+            weighting=weighting,
+            as_points=as_points,
             return_details=return_details,
             progress=progress,
             workers=workers,
             preprocessing=preprocessing,
+            mode=mode,
             backend=backend,
-            max_memory=max_memory,
-            dask=dask,
-            scratch=scratch,
             curves=curves,
         )
-    return _detect(
-        source,
-        faces,
-        scales=scales,
-        weighting=weighting,
-        as_points=as_points,
-        return_details=return_details,
-        progress=progress,
-        workers=workers,
-        preprocessing=preprocessing,
-        mode=mode,
-        backend=backend,
-        curves=curves,
-    )
 
 
 def _detect(
@@ -226,10 +229,15 @@ def _detect(
     )
 
     t = time.perf_counter()
+    # A cloud's far points (a corrupted coordinate) are dropped first, as isolated points
+    # are: kept, they would set the unit of the rest.
+    far = None if is_mesh else far_points(geometry.vertices)
+    near = None if far is None else np.flatnonzero(~far)
+    del far
     # Exact power-of-two scaling to O(1) where needed: the answer does not depend on the
     # unit (every output is unit-free), no squared distance or area underflows or
     # overflows.
-    unit = unit_scale(geometry.vertices)[0]
+    unit = unit_scale(geometry.vertices if near is None else geometry.vertices[near])[0]
     faces_in = geometry.faces if is_mesh else None
     same = unit is geometry.vertices and faces_in is geometry.faces
     to_clean = geometry if same else Geometry(unit, faces_in, geometry.source)
@@ -239,6 +247,12 @@ def _detect(
         if is_mesh
         else _clean_beside_tree(to_clean, workers, backend)
     )
+    if near is not None:  # the maps to the input, the far points dropped
+        from_input = np.full(len(geometry.vertices), -1, np.int64)
+        from_input[near] = cleaned.from_input
+        cleaned = CleanGeometry.with_maps(
+            cleaned.vertices, None, near[cleaned.to_input], from_input
+        )
     timings["clean"] = time.perf_counter() - t
     bar.step("cleaned")
     bar.stage("neighbourhoods")

@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .defaults import DENOISE_METHODS as DENOISE_METHODS  # re-exported
+from .defaults import MAX_SMOOTHING_STEPS
 from .errors import InputError
 
 if TYPE_CHECKING:  # imported when a step runs: the CLI checks its options without them
@@ -98,7 +99,9 @@ class Preprocessing:
         clouds; ``"auto"``: ``taubin`` for meshes (the one measured to improve noisy
         meshes), ``rimls`` for clouds.
     smoothing_steps : int or None, default None
-        Iterations of mesh smoothing; None: 10 for Taubin, 3 for two-step.
+        Iterations of mesh smoothing, at most
+        :data:`~meshlab_sharp.defaults.MAX_SMOOTHING_STEPS`; None: 10 for Taubin, 3 for
+        two-step.
     taubin_lambda : float, default 0.5
         Taubin's shrinking step, in (0, 1).
     taubin_mu : float, default -0.53
@@ -152,7 +155,7 @@ class Preprocessing:
                 f"from {', '.join(DENOISE_METHODS)}"
             )
         if self.smoothing_steps is not None:
-            _check_int("smoothing_steps", self.smoothing_steps, 1)
+            _check_int("smoothing_steps", self.smoothing_steps, 1, MAX_SMOOTHING_STEPS)
         _check_number("taubin_lambda", self.taubin_lambda, 0.0, 1.0)
         _check_number("taubin_mu", self.taubin_mu, -1.0, 0.0)
         if abs(self.taubin_mu) <= self.taubin_lambda:
@@ -656,9 +659,12 @@ def _check_number(
         )
 
 
-def _check_int(name: str, value: Any, low: int) -> None:
-    """An integer >= low (a float with an integral value is refused: it is likely a slip)."""
+def _check_int(name: str, value: Any, low: int, high: int | None = None) -> None:
+    """An integer in low..high (a float with an integral value is refused: it is likely
+    a slip)."""
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         raise InputError(f"preprocessing: {name} must be an integer, got {value!r}")
     if value < low:
         raise InputError(f"preprocessing: {name} must be >= {low}, got {value}")
+    if high is not None and value > high:
+        raise InputError(f"preprocessing: {name} must be <= {high}, got {value}")

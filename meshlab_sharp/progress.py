@@ -13,7 +13,13 @@ from __future__ import annotations
 import sys
 import threading
 import time
+import weakref
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TextIO
+
+#: The bars whose line is drawn and not yet ended.
+_DRAWN: weakref.WeakSet[Progress] = weakref.WeakSet()
 
 #: Seconds between redraws of the clock while a stage runs.
 TICK = 0.5
@@ -58,6 +64,7 @@ class Progress:
         self._lock = threading.RLock()  # close() may run in a signal handler's unwinding
         self._closed = threading.Event()
         self._ticker: threading.Thread | None = None
+        self._width = 0
 
     def step(self, label: str, n: int = 1) -> None:
         """Advance by ``n`` steps and show ``label`` as the stage just done."""
@@ -83,11 +90,12 @@ class Progress:
         filled = round(self.width * self.done / self.total)
         elapsed = time.perf_counter() - self._start
         bar = "#" * filled + "." * (self.width - filled)
-        self.stream.write(
-            f"\r{self._label[:28]:<28} [{bar}] {self.done}/{self.total} {elapsed:6.1f}s"
-        )
+        line = f"{self._label[:28]:<28} [{bar}] {self.done}/{self.total} {elapsed:6.1f}s"
+        self.stream.write(f"\r{line}")
         self.stream.flush()
         self._drawn = True
+        self._width = len(line)
+        _DRAWN.add(self)
 
     def _run_ticker(self) -> None:
         """Redraw the clock every ``tick`` seconds until :meth:`close`."""
@@ -100,11 +108,32 @@ class Progress:
     def close(self) -> None:
         """End the line of the bar, if one was drawn, and draw no more (a second call
         does nothing, so a command can close the bar before printing an error)."""
+        self._end("\n")
+
+    def clear(self) -> None:
+        """Erase the bar's line, if one was drawn, and draw no more."""
+        self._end("\r" + " " * self._width + "\r")
+
+    def _end(self, text: str) -> None:
+        """Write ``text`` if the line was drawn, and stop drawing (the clock too)."""
         self._closed.set()
         with self._lock:
             if self._drawn:
-                self.stream.write("\n")
+                self.stream.write(text)
                 self.stream.flush()
             self.enabled = self._drawn = False
+            _DRAWN.discard(self)
         if self._ticker is not None and self._ticker is not threading.current_thread():
             self._ticker.join()
+
+
+@contextmanager
+def cleared_on_error() -> Iterator[None]:
+    """Erase every bar still drawn when the block ends with an exception (an error,
+    Ctrl-C): the message or the prompt that follows starts on a clean line."""
+    try:
+        yield
+    except BaseException:
+        for bar in list(_DRAWN):
+            bar.clear()
+        raise

@@ -346,3 +346,84 @@ def hostile_geometries() -> Iterator[tuple[str, np.ndarray, np.ndarray | None]]:
         np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]),
         np.array([[0, 1, 2], [1, 3, 2]]),
     )
+
+
+# ---------------------------------------------------------------- scanner files, bounds
+
+
+def _las(points: np.ndarray, compress: bool = False) -> bytes:
+    """A LAS (or LAZ) file of ``points``, point format 0, as meshlab_sharp writes it."""
+    import io
+
+    import laspy
+
+    header = laspy.LasHeader(point_format=0, version="1.2")
+    header.scales = np.array([1e-4] * 3)
+    header.offsets = points.min(axis=0) if len(points) else np.zeros(3)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points[:, 0], points[:, 1], points[:, 2]
+    buf = io.BytesIO()
+    las.write(buf, do_compress=compress)
+    return buf.getvalue()
+
+
+def _e57(points: np.ndarray) -> bytes:
+    """An E57 file of ``points`` (pye57 writes files only: through a temporary one)."""
+    import tempfile
+    from pathlib import Path
+
+    from meshlab_sharp.io.e57 import write_e57
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "cloud.e57"
+        write_e57(path, points)
+        return path.read_bytes()
+
+
+def _patch(data: bytes, at: int, fmt: str, *values: float) -> bytes:
+    """``data`` with ``values`` packed little-endian as ``fmt`` at byte ``at``."""
+    out = bytearray(data)
+    struct.pack_into("<" + fmt, out, at, *values)
+    return bytes(out)
+
+
+def scanner_cases() -> Iterator[Case]:
+    """LAS, LAZ and E57 files that laspy, lazrs and pye57 fail on, file names that are
+    not UTF-8 (the byte 0xff in the suffix, the output's name stays plain), and faces
+    beyond the corner limit, each with its known answer."""
+    las = _las(CLOUD)
+    offset = struct.unpack_from("<I", las, 96)[0]
+    yield Case("las-valid", ".las", las, "ok")
+    yield Case("las-zero-points", ".las", _las(np.zeros((0, 3))), "error")
+    yield Case("las-truncated-mid-points", ".las", las[: offset + 20 * 100 + 7], "error")
+    yield Case("las-huge-offset", ".las", _patch(las, 96, "I", 0xFFFFFFF0), "error")
+    yield Case("las-huge-vlr-count", ".las", _patch(las, 100, "I", 0xFFFFFFFF), "error")
+    yield Case("las-scale-inf", ".las", _patch(las, 131, "d", float("inf")), "error")
+    yield Case("las-scale-overflow", ".las", _patch(las, 131, "d", 1e308), "error")
+    yield Case("las-no-signature", ".las", b"LASX" + las[4:], "error")
+    laz = _las(CLOUD, compress=True)
+    yield Case("laz-valid", ".laz", laz, "ok")
+    yield Case("laz-truncated", ".laz", laz[: len(laz) // 2], "error")
+    garbled = bytearray(laz)
+    for i in range(len(laz) // 2, len(laz) // 2 + 200):
+        garbled[i] ^= 0x5A
+    yield Case("laz-garbled-chunk", ".laz", bytes(garbled), "error")
+    e57 = _e57(CLOUD)
+    yield Case("e57-valid", ".e57", e57, "ok")
+    crc = bytearray(e57)
+    for i in range(2000, 2050):
+        crc[i] ^= 0xFF
+    yield Case("e57-crc-page-error", ".e57", bytes(crc), "error")
+    yield Case("name-not-utf8", "\udcff.xyz", point_list(CLOUD), "ok")
+    yield Case("name-not-utf8-e57", "\udcff.e57", e57, "error")
+    head = b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n"
+    yield Case("off-size-5000-digits", ".off", head + b"9" * 5000 + b" 0 1 2\n", "error")
+    yield Case("off-size-5000-digits-walk", ".off", head + b"9" * 5000 + b"\n0 1 2\n", "error")
+    yield Case("off-face-2000-corners", ".off", head + b"2000 0 1 2\n", "error")
+    n = 100_000
+    angle = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    ring = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(n)])
+    corners = " ".join(str(i) for i in range(1, n + 1)).encode()
+    yield Case(
+        "obj-face-100000-corners", ".obj", obj(ring, None) + b"f " + corners + b"\n", "error"
+    )

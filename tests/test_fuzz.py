@@ -34,13 +34,16 @@ CASES = malformed.cases(seed=0)
 GROUPS = sorted({c.name.split("-")[0] for c in CASES})
 
 
-def _run(case: malformed.Case, folder: Path) -> str | None:
-    """Run the CLI on the case's file; a description of what went wrong, or None."""
+def _run(
+    case: malformed.Case, folder: Path, *options: str, message: str | None = None
+) -> str | None:
+    """Run the CLI on the case's file (with ``options``); a description of what went
+    wrong (with ``message``: also when the error line does not hold it), or None."""
     path = folder / f"{case.name}{case.suffix}"
     path.write_bytes(case.data)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    cmd = [sys.executable, "-m", "meshlab_sharp", "detect", str(path), "-q"]
-    cmd += ["-o", str(folder / f"{case.name}_out.ply")]
+    cmd = [sys.executable, "-m", "meshlab_sharp", "detect", str(path), "-q", *options]
+    cmd += ["-o", str(folder / f"{case.name}_out.ply"), "--force"]
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=TIMEOUT_S, env=env)
     except subprocess.TimeoutExpired:
@@ -62,6 +65,10 @@ def _run(case: malformed.Case, folder: Path) -> str | None:
         problems.append(f"expected exit {wanted}")
     if hashlib.sha256(path.read_bytes()).digest() != hashlib.sha256(case.data).digest():
         problems.append("input modified")
+    if message is not None and message not in proc.stderr:
+        problems.append(f"the error does not say {message!r}")
+    if proc.returncode != 0 and (folder / f"{case.name}_out.ply").exists():
+        problems.append("output written")
     if not problems:
         return None
     return f"{case.name}: exit {proc.returncode}, {'; '.join(problems)}: {proc.stderr[-300:]!r}"
@@ -75,6 +82,45 @@ def test_malformed_files_through_the_cli(tmp_path, group):
     with ThreadPoolExecutor(max_workers=2) as pool:
         failures = [r for r in pool.map(lambda c: _run(c, tmp_path), group_cases) if r]
     assert not failures, "\n".join(failures)
+
+
+SCANNER_CASES = list(malformed.scanner_cases())
+#: What the one-line error of each scanner case says.
+SCANNER_ERRORS = {
+    "las-zero-points": "no points",
+    "las-truncated-mid-points": "truncated: the header announces",
+    "las-huge-offset": "the offset to the points (4294967280) is outside the file",
+    "las-huge-vlr-count": "4294967295 variable-length records",
+    "las-scale-inf": "scale or offset of the header is zero or not finite",
+    "las-scale-overflow": "non-finite coordinate",
+    "las-no-signature": "no LASF signature",
+    "laz-truncated": "cannot read the LAS/LAZ file: ",
+    "laz-garbled-chunk": "cannot read the LAS/LAZ file: ",
+    "e57-crc-page-error": "cannot read the E57 file: checksum mismatch",
+    "name-not-utf8-e57": "the file name is not valid UTF-8",
+    "off-size-5000-digits": "is not an integer",
+    "off-size-5000-digits-walk": "(5000 digits) corners, more than the 1000",
+    "off-face-2000-corners": "a face with 2000 corners, more than the 1000",
+    "obj-face-100000-corners": "line 100002: a face with 100000 corners, more than the 1000",
+}
+
+
+#: Each scanner case in memory, and out of core where it is a point cloud.
+SCANNER_RUNS = [(case, "in memory") for case in SCANNER_CASES] + [
+    (case, "tiled")
+    for case in SCANNER_CASES
+    if case.suffix[-4:] in (".las", ".laz", ".e57", ".xyz")
+]
+
+
+@pytest.mark.parametrize(
+    "case, route", SCANNER_RUNS, ids=[f"{route}-{case.name}" for case, route in SCANNER_RUNS]
+)
+def test_scanner_files_and_bounds_through_the_cli(tmp_path, case, route):
+    """laspy's, lazrs' and pye57's failures, non-UTF-8 names and faces beyond the
+    corner limit: exit 0 or one line naming the problem, in memory and out of core."""
+    options = ("--max-memory", "300MB") if route == "tiled" else ()
+    assert _run(case, tmp_path, *options, message=SCANNER_ERRORS.get(case.name)) is None
 
 
 @pytest.mark.filterwarnings("error")

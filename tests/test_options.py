@@ -30,8 +30,10 @@ def test_scales_that_are_no_integers(bad):
 def test_too_many_scales_fail_before_any_work():
     with pytest.raises(meshlab_sharp.InputError, match=f"at most {MAX_SCALES}"):
         meshlab_sharp.detect(CUBE, scales=range(2, 100_000_000))
-    with pytest.raises(meshlab_sharp.InputError, match=r"k = 1000"):
+    with pytest.raises(meshlab_sharp.InputError, match=r"kNN sizes must be <= 512, got 1000"):
         meshlab_sharp.detect(CUBE, scales=[12, 1000])
+    with pytest.raises(meshlab_sharp.InputError, match=r"k = 512"):
+        meshlab_sharp.detect(CUBE[:500], scales=[12, 512])
 
 
 def test_robust_mode_reports_isolated_points_as_not_kept():

@@ -70,7 +70,7 @@ def test_cli_draws_the_bar_on_a_terminal_unless_quiet(tmp_path):
 
 def test_an_error_after_the_bar_starts_on_its_own_line(tmp_path):
     src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
-    code, err = _run_with_terminal_stderr(["detect", str(src), "--scales", "12,1000"])
+    code, err = _run_with_terminal_stderr(["detect", str(src), "--scales", "12,500"])
     assert code == 1
     lines = err.splitlines()
     assert lines[-1].startswith("meshlab-sharp: error: ")  # not after the bar's last line

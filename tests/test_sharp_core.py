@@ -131,6 +131,18 @@ def _case(name: str) -> tuple[np.ndarray, np.ndarray | None, dict[str, object]]:
     if name == "fold-mesh-grid-numbered":  # the ring pass takes most searches from the last
         v, f, _ = shapes.fold_mesh(60.0, m=60)
         return (*shapes.noisy_mesh(v, f, 0.05, seed=4), {})
+    if name == "box-far-point":  # dropped before the unit is chosen
+        return np.vstack([shapes.random_box_points(3000), [[1e300, -1e300, 1e300]]]), None, {}
+    if name == "cube-mesh-half-reversed":  # the features whatever the faces' winding
+        v, f = shapes.cube_grid_mesh(3)
+        turned = np.random.default_rng(5).random(len(f)) < 0.5
+        f = f.copy()
+        f[turned] = f[turned][:, ::-1]
+        return v, f, {}
+    if name == "shuffled-grid":  # double and triple smallest eigenvalues
+        axes = np.meshgrid(*[np.arange(12.0)] * 3, indexing="ij")
+        grid = np.stack(axes, -1).reshape(-1, 3)
+        return grid[np.random.default_rng(0).permutation(len(grid))], None, {}
     if name == "cube-mesh-rings-1-6":
         v, f = shapes.cube_grid_mesh(3)
         return v, f, {"scales": (1, 2, 3, 4, 5, 6)}
@@ -149,6 +161,9 @@ CASES = [
     "star-prism",
     "fandisk-mesh",
     "cube-mesh-rings-1-6",
+    "box-far-point",
+    "cube-mesh-half-reversed",
+    "shuffled-grid",
     "fold-mesh-shuffled",
     "fold-mesh-grid-numbered",
 ]

@@ -142,6 +142,39 @@ void unitScale(std::vector<double> &xyz) {
 	for (double &c : xyz) c = std::ldexp(c, -e);
 }
 
+// neighbourhoods.far_points: the points of a cloud (xyz, n x 3) further from its median
+// than MS_FAR_SPREADS of its spreads on some axis (the median and interquartile ranges of
+// at most MS_FAR_SAMPLE points evenly spread through it, numpy's linear quantiles); empty
+// when there are none.
+std::vector<char> farPoints(const std::vector<double> &xyz) {
+	const Index n = Index(xyz.size() / 3), step = std::max<Index>(1, (n + MS_FAR_SAMPLE - 1) / MS_FAR_SAMPLE);
+	double median[3], reach = 0.0;
+	for (int a = 0; a < 3; ++a) {
+		std::vector<double> x;
+		for (Index i = 0; i < n; i += step) x.push_back(xyz[3 * i + a]);
+		std::sort(x.begin(), x.end());
+		auto quantile = [&](double q) {
+			const double h = double(x.size() - 1) * q;
+			const size_t lo = size_t(std::floor(h));
+			const double t = h - double(lo), below = x[lo], above = x[std::min(lo + 1, x.size() - 1)];
+			const double diff = above - below;
+			return t >= 0.5 ? above - diff * (1.0 - t) : below + diff * t;
+		};
+		median[a] = quantile(0.5);
+		reach = std::max(reach, quantile(0.75) - quantile(0.25));
+	}
+	reach *= MS_FAR_SPREADS;
+	std::vector<char> far;
+	if (n == 0 || reach == 0.0) return far;
+	for (Index i = 0; i < n; ++i)
+		for (int a = 0; a < 3; ++a)
+			if (std::fabs(xyz[3 * i + a] - median[a]) > reach) {
+				if (far.empty()) far.assign(n, 0);
+				far[i] = 1;
+			}
+	return far;
+}
+
 struct Clean {
 	std::vector<double> pts;     // cleaned vertices (m, 3), input order
 	std::vector<Index> faces;    // cleaned triangles (f, 3)
@@ -425,7 +458,7 @@ std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector
                              std::vector<double> *score, Bar &bar, int from, int to) {
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
 	std::vector<double> normals(3 * n, 0.0);
-	ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data());
+	check(ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data()) < 0);
 	const std::vector<Index> rings(scales.begin(), scales.end());
 	std::vector<double> out(rings.size() * n);
 	if (score) score->assign(n, 0.0);
@@ -770,8 +803,25 @@ Result detect(const std::vector<Point> &vertices, const std::vector<std::array<i
 	std::vector<Index> tri;
 	if (r.mesh)
 		for (const auto &f : faces) tri.insert(tri.end(), f.begin(), f.end());
+	// a cloud's far points dropped first (as pipeline.py): kept, they would set the unit
+	const std::vector<char> far = r.mesh ? std::vector<char>() : farPoints(xyz);
+	std::vector<Index> near;
+	if (!far.empty()) {
+		std::vector<double> rest;
+		for (Index i = 0; i < nIn; ++i)
+			if (!far[i]) {
+				near.push_back(i);
+				rest.insert(rest.end(), xyz.begin() + 3 * i, xyz.begin() + 3 * i + 3);
+			}
+		xyz.swap(rest);
+	}
 	unitScale(xyz);
-	const Clean c = clean(xyz, tri, r.mesh);
+	Clean c = clean(xyz, tri, r.mesh);
+	if (!far.empty()) {  // the map from the input, the far points dropped
+		std::vector<Index> fromInput(nIn, -1);
+		for (size_t j = 0; j < near.size(); ++j) fromInput[near[j]] = c.fromInput[j];
+		c.fromInput.swap(fromInput);
+	}
 	r.scales = r.mesh ? options.ringScales : options.knnScales;
 	if (!r.mesh) {
 		const Index n = c.size();

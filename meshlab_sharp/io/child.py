@@ -71,10 +71,14 @@ def read_with_pymeshlab(path: Path, name: str) -> tuple[np.ndarray, np.ndarray |
         check_3ds(path, name)
     with tempfile.TemporaryDirectory(prefix="meshlab-sharp-") as tmp:
         out = Path(tmp) / "mesh.npz"
+        # pymeshlab takes UTF-8 names: the file is read through a link with a plain one
+        link = Path(tmp) / f"input{path.suffix}"
+        link.symlink_to(path.resolve())
         proc = subprocess.run(
-            [sys.executable, "-c", _CHILD, str(path), str(out)],
+            [sys.executable, "-c", _CHILD, str(link), str(out)],
             capture_output=True,
             text=True,
+            errors="replace",
             check=False,
         )
         if proc.returncode < 0:

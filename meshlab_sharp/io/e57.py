@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..extras import require
+from .scanner import guarded, library_message, require_utf8_name
 from .source import PointSource
 
 
@@ -19,11 +20,12 @@ def e57_points(path: str | os.PathLike[str]) -> PointSource:
     """An E57 file's points as a :class:`~meshlab_sharp.io.source.PointSource`."""
     pye57 = require("pye57", "reading E57", "e57")
     p = Path(path)
+    require_utf8_name(str(p), "E57")
     try:
         e57 = pye57.E57(str(p))
         counts = [int(e57.get_header(i).point_count) for i in range(e57.scan_count)]
     except Exception as exc:  # pye57 raises its own and OS errors
-        raise InputError(f"{p}: cannot read the E57 file: {exc}") from None
+        raise InputError(f"{p}: cannot read the E57 file: {library_message(exc)}") from None
 
     def blocks(size: int) -> Iterator[np.ndarray]:
         reader = pye57.E57(str(p))
@@ -33,7 +35,7 @@ def e57_points(path: str | os.PathLike[str]) -> PointSource:
             for s in range(0, len(xyz), size):
                 yield xyz[s : s + size]
 
-    return PointSource(sum(counts), blocks, str(p))
+    return PointSource(sum(counts), guarded(blocks, str(p), "E57"), str(p))
 
 
 def read_e57(path: str | os.PathLike[str]) -> np.ndarray:

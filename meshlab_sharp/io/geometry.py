@@ -40,8 +40,8 @@ class Geometry:
 
     def __post_init__(self) -> None:
         source = self.source
+        raw = _as_array(self.vertices, source, "vertices")
         try:
-            raw = np.asarray(self.vertices)
             if raw.dtype.kind not in "biufO":
                 raise TypeError(f"dtype {raw.dtype}")
             v = raw.astype(np.float64, copy=False)
@@ -67,11 +67,24 @@ class Geometry:
         return self.faces is not None and len(self.faces) > 0
 
 
+def _as_array(value: Any, source: str, what: str) -> np.ndarray:
+    """``np.asarray(value)``; whatever the object's own conversion raises (its
+    ``__array__``, a ragged list) is an :class:`InputError` naming ``what``."""
+    try:
+        return np.asarray(value)
+    except MemoryError:
+        raise
+    except Exception as exc:  # the caller's object runs its own code here
+        raise InputError(
+            f"{source}: the {what} cannot be read as an array: {type(exc).__name__}: {exc}"
+        ) from None
+
+
 def _valid_faces(faces: Any, n_vertices: int, source: str) -> np.ndarray | None:
     """``faces`` as an (m, 3) int64 array of indices below ``n_vertices``; None if empty."""
     if faces is None:
         return None
-    f_arr = np.asarray(faces)
+    f_arr = _as_array(faces, source, "faces")
     if f_arr.size == 0:
         return None
     if f_arr.ndim != 2 or f_arr.shape[1] != 3:

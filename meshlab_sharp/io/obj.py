@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .polygons import fan_triangles
+from .polygons import check_corner_limit, fan_triangles
 from .text import Tokens, line_table, numbers, read_text, tokenize
 
 _CONTINUATION = re.compile(rb"\\\r?\n")
@@ -70,6 +70,7 @@ def _faces(
             f"{name}: line {tokens.line[f_first[k]]}: a face needs at least 3 vertices, "
             f"this one has {sizes[k]}"
         )
+    check_corner_limit(sizes, lambda k: f"{name}: line {tokens.line[f_first[k]]}")
     offsets = np.cumsum(sizes) - sizes
     pos = np.repeat(f_first + 1, sizes) + np.arange(int(sizes.sum())) - np.repeat(offsets, sizes)
     corners = _vertex_part(tokens.take(pos))

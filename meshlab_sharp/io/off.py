@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .polygons import fan_triangles
+from .polygons import MAX_FACE_CORNERS, check_corner_limit, fan_triangles, too_many_corners
 from .text import Tokens, line_table, numbers, read_text, tokenize
 
 _KEYWORD = re.compile(rb"(?:ST|C|N)*(4?)(n?)OFF")
@@ -34,7 +34,8 @@ def read_off(path: Path, name: str) -> tuple[np.ndarray, np.ndarray | None]:
     ------
     InputError
         Binary content or binary OFF, no OFF keyword, counts that do not match the data,
-        a token that is not a number, a face with fewer than 3 corners or an index
+        a token that is not a number, a face with fewer than 3 or more than
+        :data:`~meshlab_sharp.io.polygons.MAX_FACE_CORNERS` corners or an index
         outside the vertices.
     """
     tokens = tokenize(read_text(path, name, "OFF file"))
@@ -96,6 +97,7 @@ def _faces(
         sizes = numbers(face_tokens, first, np.int64, name)
         simple = ((count >= sizes + 1) & (count <= sizes + 1 + _MAX_COLOUR)).all()
     if simple:
+        check_corner_limit(sizes, lambda k: f"{name}: line {face_tokens.line[first[k]]}")
         corners_at, line_of_face = _corner_positions(first, sizes), first
     else:
         corners_at, line_of_face, sizes = _walk_faces(face_tokens, n_faces, name)
@@ -142,7 +144,12 @@ def _walk_faces(
             )
         word = tokens.buf[tokens.start[pos] : tokens.end[pos]].tobytes()
         if not word.isdigit():
-            raise InputError(f"{name}: line {line[pos]}: {word!r} is not a face size")
+            raise InputError(f"{name}: line {line[pos]}: {word[:24]!r} is not a face size")
+        if len(word) > len(str(MAX_FACE_CORNERS)) or int(word) > MAX_FACE_CORNERS:
+            shown = word.decode()
+            if len(word) > 24:
+                shown = f"{shown[:24]}... ({len(word)} digits)"
+            raise too_many_corners(f"{name}: line {line[pos]}", shown)
         size = int(word)
         if size < 3:
             raise InputError(

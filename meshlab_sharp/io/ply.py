@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import InputError
-from .polygons import fan_triangles
+from .polygons import check_corner_limit, fan_triangles
 from .text import Tokens, check_text, line_table, numbers, read_text, tokenize
 
 _TYPES = {
@@ -147,6 +147,7 @@ def _polygon_triangles(faces: _Faces, n: int, name: str) -> np.ndarray:
         raise InputError(
             f"{name}: {faces.where(k)} has {faces.sizes[k]} vertex indices; a face needs at least 3"
         )
+    check_corner_limit(faces.sizes, lambda k: f"{name}: {faces.where(k)}")
     bad = (faces.corners < 0) | (faces.corners >= n)
     if bad.any():
         at = int(np.argmax(bad))

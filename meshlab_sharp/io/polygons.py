@@ -2,7 +2,33 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
+
+from ..errors import InputError
+
+#: Most corners of one polygon. A polygon becomes a fan around its first corner, which
+#: then neighbours every other corner, and the k-ring neighbourhoods around it grow with
+#: the polygon: a larger one is refused when the file is read, before any work.
+MAX_FACE_CORNERS = 1000
+
+
+def too_many_corners(where: str, size: int | str) -> InputError:
+    """The error for a face of ``size`` corners (its count as written, when too long to
+    be a number) at ``where`` (``"NAME: line N"``)."""
+    return InputError(
+        f"{where}: a face with {size} corners, more than the {MAX_FACE_CORNERS} a face may "
+        "have; split it into smaller polygons"
+    )
+
+
+def check_corner_limit(sizes: np.ndarray, where: Callable[[int], str]) -> None:
+    """Refuse the first face above :data:`MAX_FACE_CORNERS`; ``where(k)`` names face k."""
+    big = sizes > MAX_FACE_CORNERS
+    if big.any():
+        k = int(np.argmax(big))
+        raise too_many_corners(where(k), int(sizes[k]))
 
 
 def fan_triangles(corners: np.ndarray, sizes: np.ndarray) -> np.ndarray:

@@ -58,7 +58,14 @@ def scanner_points(path: Path) -> PointSource:
 
 def _read_scanner(path: Path) -> tuple[np.ndarray, None]:
     """A scanner's file (:func:`scanner_points`), read whole."""
-    return np.concatenate(list(scanner_points(path).blocks(1 << 20))), None
+    source = scanner_points(path)
+    parts = list(source.blocks(1 << 20))
+    if source.n == 0 or not parts:
+        raise InputError(f"{source.name}: the file holds no points")
+    points = np.concatenate(parts)
+    if len(points) != source.n:
+        raise InputError(f"{source.name}: {len(points)} points read, the header says {source.n}")
+    return points, None
 
 
 def load(path: str | os.PathLike[str], *, as_points: bool = False) -> Geometry:
@@ -89,6 +96,8 @@ def load(path: str | os.PathLike[str], *, as_points: bool = False) -> Geometry:
         Missing, empty, unsupported, truncated or malformed file; counts that do not
         match the data; non-finite coordinates; invalid face indices; faces with fewer
         than 3 vertices; no points.
+    MemoryError
+        The file does not fit in memory.
     """
     p = Path(path)
     name = str(p) if str(p).isprintable() else ascii(str(p))  # messages stay one line
@@ -103,8 +112,5 @@ def load(path: str | os.PathLike[str], *, as_points: bool = False) -> Geometry:
         raise InputError(f"{name}: unsupported format {ext or '(no extension)'!r}; use {known}")
     if p.stat().st_size == 0:
         raise InputError(f"{name}: the file is empty")
-    try:
-        vertices, faces = reader(p, name)
-    except MemoryError:
-        raise InputError(f"{name}: not enough memory to read the file") from None
+    vertices, faces = reader(p, name)
     return Geometry(vertices, None if as_points else faces, name)

@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import _header, _kernels
 from .neighbourhoods import Neighbourhood, squared_distances
-from .normals import Weighting
+from .normals import Weighting, largest_eigenvectors, smallest_eigenvectors
 from .projected_distance import projected_distances
 
 #: Thinning compares a point with candidate neighbours whose offset makes more than
@@ -93,7 +93,7 @@ def _plane_ratios(q: np.ndarray) -> np.ndarray:
     c = q.mean(axis=1)
     r = q - c[:, None, :]
     cov = np.einsum("nka,nkb->nab", r, r)
-    normal = np.linalg.eigh(cov)[1][:, :, 0]
+    normal = smallest_eigenvectors(cov)
     d = q[:, 1]
     length = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
     across = np.abs(d[:, 0] * normal[:, 0] + d[:, 1] * normal[:, 1] + d[:, 2] * normal[:, 2])
@@ -315,8 +315,7 @@ def _line_directions_of(
     safe = np.maximum(sizes.astype(np.float64), 1.0)[:, None]
     qbar = qsum / safe
     cov = outer - safe[:, :, None] * qbar[:, :, None] * qbar[:, None, :]
-    _, vecs = np.linalg.eigh(cov)
-    return vecs[:, :, 2]
+    return largest_eigenvectors(cov)
 
 
 def _feature_pairs(
@@ -536,7 +535,7 @@ def sheet_mask(
             qa, na = q[again], near[again][..., None]
             c = np.where(na, qa, 0.0).sum(axis=1) / count[again][:, None]
             r = np.where(na, qa - c[:, None, :], 0.0)
-            normal = np.linalg.eigh(np.einsum("rka,rkb->rab", r, r))[1][:, :, 0]
+            normal = smallest_eigenvectors(np.einsum("rka,rkb->rab", r, r))
             was = nrm[again]
             turn = np.abs(
                 normal[:, 0] * was[:, 0] + normal[:, 1] * was[:, 1] + normal[:, 2] * was[:, 2]

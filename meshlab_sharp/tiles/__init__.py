@@ -15,10 +15,10 @@ tiled (an input with faces is an error unless ``as_points``).
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import shutil
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
@@ -39,6 +39,7 @@ from ..options import as_input, check_mode_and_weighting, check_scales
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
 from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
+from .cluster import cluster_failures, completed, connect
 from .curves import curves_out_of_core
 from .layout import build_layout
 from .neighbours import Query
@@ -61,7 +62,7 @@ from .steps import (
     robust_support,
     robust_thin,
 )
-from .store import Store
+from .store import Store, make_scratch
 
 if TYPE_CHECKING:
     from ..result import DetectionResult
@@ -196,7 +197,7 @@ def detect_tiled(
             )
     chunk = int(min(max(tile_points, 65536), 1 << 20))
     with ExitStack() as stack:
-        root = tempfile.mkdtemp(prefix="meshlab-sharp-tiles-", dir=scratch)
+        root = make_scratch(scratch)
         stack.callback(shutil.rmtree, root, True)
         store = Store(root)
         timings: dict[str, float] = {}
@@ -215,7 +216,8 @@ def detect_tiled(
         )
         timings["tiles"] = time.perf_counter() - t
         if ready:
-            client.gather(ready)
+            with cluster_failures("start"):
+                client.gather(list(completed(client, ready)))
         if layout.n_clean < k_max:
             raise InputError(
                 f"{source.name}: {layout.n_clean} distinct points, fewer than the largest "
@@ -480,8 +482,12 @@ def _client(dask: str | Any, stack: ExitStack) -> Any:
     if dask is None:
         return None
     distributed = require("dask.distributed", "--dask", "dask")
-    Client, LocalCluster = distributed.Client, distributed.LocalCluster
     if not isinstance(dask, str):
+        if not isinstance(dask, distributed.Client):
+            raise TypeError(
+                "dask= must be 'local:N', 'tcp://HOST:PORT' or a dask.distributed.Client, "
+                f"not {type(dask).__name__}"
+            )
         return dask
     if dask.startswith("local:"):
         try:
@@ -492,18 +498,14 @@ def _client(dask: str | Any, stack: ExitStack) -> Any:
             raise InputError(f"--dask {dask}: write local:N with N >= 1 workers")
         with require("dask", "--dask", "dask").config.set(LOCAL_WORKER_CONFIG):
             cluster = stack.enter_context(
-                LocalCluster(
+                distributed.LocalCluster(
                     n_workers=n,
                     threads_per_worker=1,
                     processes=True,
                     dashboard_address="127.0.0.1:0",
                     host="127.0.0.1",
+                    silence_logs=logging.getLogger("distributed").getEffectiveLevel(),
                 )
             )
-        return stack.enter_context(Client(cluster))
-    if dask.startswith("tcp://"):
-        try:
-            return stack.enter_context(Client(dask, timeout=30))
-        except OSError as exc:
-            raise InputError(f"--dask {dask}: cannot reach the scheduler: {exc}") from None
-    raise InputError(f"--dask {dask!r}: write local:N or tcp://HOST:PORT")
+        return stack.enter_context(distributed.Client(cluster))
+    return stack.enter_context(connect(dask))

@@ -383,11 +383,12 @@ def _searched(
     last = None
     done: list[Context] = []
     pending: np.ndarray | None = None  # store positions of the rows not done yet
+    grown = False  # the halo grew because too few points were near (far outliers)
     for _ in range(ROUNDS):
         blo, bhi = lo0 - h, hi0 + h
         full = bool(np.all(blo <= layout.lo) and np.all(bhi >= layout.hi))
         pos, points, _ = gather(store, layout, layout.tiles_meeting(blo, bhi), blo, bhi, query.kept)
-        if last is not None and len(points) > most_points:
+        if (last is not None or grown) and len(points) > most_points:
             break
         rows = _rows(store, pos, a, b, query, pending)
         if len(rows) == 0:
@@ -398,6 +399,7 @@ def _searched(
                     f"{len(points)} points left, fewer than the largest scale k = {query.k}"
                 )
             h = max(2.0 * h, float(np.linalg.norm(hi0 - lo0)), 1e-3 * diag)
+            grown = True
             continue
         biggest = max(biggest, len(points))
         hint = None if query.hint is None else store.read_at(query.hint, pos[rows])
@@ -422,6 +424,7 @@ def _searched(
         want = float(np.max(np.maximum(lo0 - (p - nd), (p + nd) - hi0)))
         h = max(want * (1.0 + 1e-6), h * 1.01 + 1e-12 * diag)
     if last is None:  # too few points near the tile: all its rows take the streaming route
+        h = float(halo)  # the next step starts from it again, not from the whole cloud
         pos, points, _ = gather(store, layout, np.array([tile]), lo0, hi0, query.kept)
         rows = _rows(store, pos, a, b, query, pending)
         upper = np.full(len(rows), np.inf)

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .. import _kernels
+from .cluster import cluster_failures, completed
 from .layout import Layout
 from .neighbours import neighbours
 from .steps import Partial, Span, Step, combine, finish
@@ -186,7 +187,8 @@ class Runner:
             outcomes = self._local(step, n)
             reduced = combine([o.partial for o in outcomes])
         else:
-            outcomes, reduced = self._dask(step, n)
+            with cluster_failures(step.label):
+                outcomes, reduced = self._dask(step, n)
         for t, o in enumerate(outcomes):
             self.halos[t] = max(self.halos[t], o.halo)
             self.peak = max(self.peak, o.peak)
@@ -221,17 +223,15 @@ class Runner:
         futures = []
         if step.query is not None and guess == 0.0 and n > 0:
             futures.append(submit(0))
-            guess = futures[0].result().halo
+            guess = next(completed(self.client, futures)).result().halo
         futures += [submit(t) for t in range(len(futures), n)]
         partials = [self.client.submit(_partial, f) for f in futures]
         total = self.client.submit(_combine_all, partials)
-        from dask.distributed import as_completed
-
-        for done, f in enumerate(as_completed(futures), start=1):
+        for done, f in enumerate(completed(self.client, futures), start=1):
             f.result()
             if self.on_tile is not None:
                 self.on_tile(step.label, done, n)
-        return self.client.gather(futures), total.result()
+        return self.client.gather(futures), next(completed(self.client, [total])).result()
 
     def _local(self, step: Step, n: int) -> list[Outcome]:
         """The outcomes of ``step`` on the tiles ``0..n-1`` in this process, ``at_once``

@@ -10,6 +10,10 @@ of the whole cloud.
 from __future__ import annotations
 
 import os
+import re
+import shutil
+import socket
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,6 +22,58 @@ import numpy as np
 #: :meth:`Store.write_at` writes fewer runs of consecutive rows than this (or than an
 #: eighth of the rows) one by one.
 RUNS = 64
+#: Start of a scratch folder's name; then ``PID@HOST-`` of the process that owns it and
+#: :func:`tempfile.mkdtemp`'s random part.
+SCRATCH_PREFIX = "meshlab-sharp-tiles-"
+_SCRATCH_NAME = re.compile(re.escape(SCRATCH_PREFIX) + r"([0-9]+)@(.+)-[^-]+")
+
+
+def _host() -> str:
+    """This machine's name as it appears in scratch folder names."""
+    return re.sub(r"[^A-Za-z0-9.]", "_", socket.gethostname()) or "localhost"
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists on this machine (another user's counts)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def remove_stale_scratch(folder: str | os.PathLike[str] | None = None) -> list[str]:
+    """Remove the scratch folders in ``folder`` (default: the temp folder) left by runs
+    that were killed: named for a process of this machine that no longer exists.
+
+    Returns
+    -------
+    list of str
+        The folders removed.
+    """
+    where = Path(folder if folder is not None else tempfile.gettempdir())
+    host, removed = _host(), []
+    try:
+        entries = list(os.scandir(where))
+    except OSError:
+        return removed
+    for entry in entries:
+        match = _SCRATCH_NAME.fullmatch(entry.name)
+        if match is None or match.group(2) != host or _alive(int(match.group(1))):
+            continue
+        if entry.is_dir(follow_symlinks=False) and entry.stat().st_uid == os.getuid():
+            shutil.rmtree(entry.path, ignore_errors=True)
+            removed.append(entry.path)
+    return removed
+
+
+def make_scratch(folder: str | os.PathLike[str] | None = None) -> str:
+    """A new scratch folder in ``folder`` (default: the temp folder), named for this
+    process and machine, after removing the stale ones (:func:`remove_stale_scratch`)."""
+    remove_stale_scratch(folder)
+    return tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}@{_host()}-", dir=folder)
 
 
 @dataclass

@@ -19,7 +19,7 @@
 
 /* ---------------------------------------------------------------- constants
  * One `#define MS_NAME value` a line: a number, a quotient of two numbers in
- * parentheses, or a brace list of integers. meshlab_sharp/_header.py parses exactly
+ * parentheses, or a brace list of integers or of floating-point numbers. meshlab_sharp/_header.py parses exactly
  * these forms; the Python names drop the MS_ prefix. */
 
 /* Default scales: k nearest neighbours on a point cloud, k-rings on a mesh. */
@@ -42,6 +42,24 @@
 #define MS_FLAT_TOLERANCE 1e-6
 /* A face-average normal shorter than this is no normal (normals.ZERO_NORMAL). */
 #define MS_ZERO_NORMAL 1e-12
+/* The PCA normal where the covariance's smallest eigenvalue is not single (a
+ * neighbourhood as symmetric as a grid's): the eigenvector is no longer one line, and
+ * every path takes the same one in its eigenspace (normals.smallest_eigenvectors). With
+ * p = sqrt(tr((A - q I)^2) / 6), q = tr(A) / 3 and r = det((A - q I) / p) / 2 (the
+ * closed form's angle acos(r) / 3): triple where p <= EIG_TRIPLE_ROOT * |q|, the unit
+ * vector EIG_TIE_DIRECTION itself; else double where 1 - r <= EIG_DOUBLE_ROOT (the two
+ * smallest eigenvalues within about 1.6e-4 p; r is that accurate for p > EIG_TRIPLE_ROOT
+ * |q|), EIG_TIE_DIRECTION less its part along the largest eigenvalue's eigenvector,
+ * normalised; else a diagonal matrix's smallest entry's axis (the first of equals). The
+ * direction (cos 72, 1/2, cos 36 degrees) is on no line of a grid's symmetries. */
+#define MS_EIG_TRIPLE_ROOT 1e-5
+#define MS_EIG_DOUBLE_ROOT 1e-8
+#define MS_EIG_TIE_DIRECTION {0.30901699437494745, 0.5, 0.8090169943749475}
+/* A cloud's point further from its median than FAR_SPREADS of its spreads (the largest
+ * interquartile range of a coordinate), both measured on at most FAR_SAMPLE points evenly
+ * spread through it, is far: dropped before the unit is chosen (neighbourhoods.far_points). */
+#define MS_FAR_SPREADS 1099511627776.0
+#define MS_FAR_SAMPLE 65536
 /* Coordinates whose largest magnitude lies outside [2^-100, 2^100) are scaled by a
  * power of two first (neighbourhoods.UNIT_RANGE). */
 #define MS_UNIT_RANGE 100
@@ -357,14 +375,26 @@ int ms_ring_lists(const int64_t *ptr, const int32_t *adj, const int64_t *rows, i
                   const int64_t *rings, int nrings, int32_t *stamp, int64_t *out_len,
                   const int64_t *out_start, int32_t *out_idx);
 
+/* The faces (m, 3) wound as their neighbours are: flip[f] (m) 1 where face f is wound the
+ * other way round from the lowest face of its part (the faces joined through edges with
+ * exactly two faces, both faces of such an edge counted as one way round when they go
+ * opposite ways along it), else 0. A part with no consistent winding (non-orientable: a
+ * Moebius strip) keeps its faces' (0). Returns the number of faces in such parts, or -1
+ * out of memory (or m >= 2^31). */
+int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *flip);
+
 /* Face-average vertex normals (unit, or zero when shorter than `zero`) into acc (n, 3),
- * zero on entry; faces (m, 3). */
-void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
-                             double zero, double *acc);
+ * zero on entry; faces (m, 3), each face's normal turned where ms_face_windings turns the
+ * face: the same normals' lines whatever the faces' winding. Returns ms_face_windings'
+ * count of faces left as they are wound, or -1 out of memory. */
+int64_t ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
+                                double zero, double *acc);
 
 /* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for
  * (3 m + 1) / 2 rows: 3 m int64, the sort keys' scratch first), and the dot products of their faces' unit normals (cross(p1 - p0,
- * p2 - p0) / |.| of the points p), the lower face first, into out_dot (creases.dihedral_angles). n * m < 2^63.
+ * p2 - p0) / |.| of the points p), the lower face first, into out_dot (creases.dihedral_angles);
+ * negated where the two faces go the same way along the edge (wound opposite ways round),
+ * so that the dot product does not depend on the faces' winding. n * m < 2^63.
  * Returns the count, or -1 out of memory. */
 int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int64_t n,
                           int64_t *out_edges, double *out_dot);
@@ -372,7 +402,8 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
 /* creases.sharp_vertices in less memory than ms_two_face_edges (no sort keys, no edge
  * list). ms_vertex_faces: each vertex's faces, in face order, as CSR ptr (n + 1), inc
  * (3 m; m < 2^31); returns 0 or -1 out of memory. ms_crease_dots: the dot products u . v
- * of the unit normals of the two faces of every edge with exactly two faces (the same
+ * of the unit normals of the two faces of every edge with exactly two faces (negated as
+ * in ms_two_face_edges: independent of the winding; the same
  * values as ms_two_face_edges', in another order: the lower vertex increasing, then its
  * faces in order), those not >= 1 ("turned") into dot (room for (3 m + 1) / 2), where
  * each vertex's turned edges start into estart (n + 1), and the number of the others

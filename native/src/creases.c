@@ -3,26 +3,175 @@
  * Part of meshlab-sharp's native library (meshlab_sharp.h). */
 #include "internal.h"
 
+/* Whether face f, along its winding, goes from its corner lo straight to its corner hi
+ * (1) or from hi to lo (0). The two faces of an edge of a consistently wound mesh go
+ * opposite ways along it; where they go the same way one of them is wound the other way
+ * round, and the dot product of their normals is negated: the angle between the faces'
+ * normals as the two would be wound alike, whatever the winding of either. */
+static inline int walks_up(const int64_t *faces, int64_t f, int64_t lo, int64_t hi) {
+    const int64_t *c = faces + 3 * f;
+    const int at = c[0] == lo ? 0 : c[1] == lo ? 1 : 2;
+    return c[(at + 1) % 3] == hi;
+}
+
+/* Union-find over the faces with, per face, the parity of its winding against its
+ * parent's (1: wound the other way round) and, per root, whether its set holds a cycle
+ * of odd parity (a non-orientable part). */
+typedef struct {
+    int32_t *parent;
+    uint8_t *parity, *odd;
+} winding_sets;
+
+/* The root of f's set; *par: f's winding against the root's. Halves the paths. */
+static int32_t winding_find(winding_sets *w, int32_t f, uint8_t *par) {
+    uint8_t acc = 0;
+    while (w->parent[f] != f) {
+        int32_t up = w->parent[f];
+        if (w->parent[up] != up) { /* point f at its grandparent */
+            w->parity[f] ^= w->parity[up];
+            w->parent[f] = w->parent[up];
+        }
+        acc ^= w->parity[f];
+        f = w->parent[f];
+    }
+    *par = acc;
+    return f;
+}
+
+/* Faces f and g share an edge and are wound `flip` (1: opposite ways round). */
+static void winding_join(winding_sets *w, int32_t f, int32_t g, uint8_t flip) {
+    uint8_t pf, pg;
+    int32_t rf = winding_find(w, f, &pf), rg = winding_find(w, g, &pg);
+    if (rf == rg) {
+        if ((pf ^ pg) != flip) w->odd[rf] = 1;
+        return;
+    }
+    w->parent[rg] = rf;
+    w->parity[rg] = pf ^ pg ^ flip;
+    w->odd[rf] |= w->odd[rg];
+}
+
+int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *flip) {
+    memset(flip, 0, (size_t)m);
+    if (m == 0) return 0;
+    if (m >= ((int64_t)1 << 31)) return -1;
+    int64_t *ptr = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
+    int32_t *inc = (int32_t *)malloc((size_t)(3 * m) * sizeof(int32_t));
+    winding_sets w = {NULL, NULL, NULL};
+    int64_t unoriented = -1, cap = 0;
+    int64_t *other = NULL;
+    if (!ptr || !inc || ms_vertex_faces(faces, m, n, ptr, inc)) goto done;
+    /* each edge (a, b), a < b, with exactly two faces, at a: the faces of a's fan that
+     * hold b, read from a table of each face's corners after and before a; first only
+     * whether some two go the same way along their edge (none: a consistently wound
+     * mesh, nothing to turn), then the parts joined */
+    for (int join = 0; join < 2; join++) {
+        int same_seen = 0;
+        for (int64_t a = 0; a < n && !(same_seen && !join); a++) {
+            const int32_t *fa = inc + ptr[a];
+            const int64_t deg = ptr[a + 1] - ptr[a];
+            if (2 * deg > cap) {
+                cap = 4 * deg;
+                int64_t *grown = (int64_t *)realloc(other, (size_t)cap * sizeof(int64_t));
+                if (!grown) goto done;
+                other = grown;
+            }
+            for (int64_t i = 0; i < deg; i++) {
+                const int64_t *c = faces + 3 * (int64_t)fa[i];
+                const int at = c[0] == a ? 0 : c[1] == a ? 1 : 2;
+                other[2 * i] = c[(at + 1) % 3];     /* the face goes a -> other[2 i] */
+                other[2 * i + 1] = c[(at + 2) % 3]; /* and other[2 i + 1] -> a */
+            }
+            for (int64_t i = 0; i < deg; i++)
+                for (int k = 0; k < 2; k++) {
+                    const int64_t b = other[2 * i + k];
+                    if (b < a) continue;
+                    int64_t count = 1, second = -1, seen = 0, up = 0;
+                    for (int64_t j = 0; j < deg && !seen; j++) {
+                        if (j == i || (other[2 * j] != b && other[2 * j + 1] != b)) continue;
+                        seen = j < i;
+                        count++;
+                        second = j;
+                        up = other[2 * j] == b;
+                    }
+                    if (seen || count != 2) continue;
+                    /* the same way along the edge: wound opposite ways round */
+                    const int same = (k == 0) == up;
+                    same_seen |= same;
+                    if (join) winding_join(&w, fa[i], fa[second], (uint8_t)same);
+                }
+        }
+        if (!join && !same_seen) { /* consistently wound: no face turned */
+            unoriented = 0;
+            goto done;
+        }
+        if (!join) {
+            w.parent = (int32_t *)malloc((size_t)m * sizeof(int32_t));
+            w.parity = (uint8_t *)calloc((size_t)m, 1);
+            w.odd = (uint8_t *)calloc((size_t)m, 1);
+            if (!w.parent || !w.parity || !w.odd) goto done;
+            for (int64_t f = 0; f < m; f++) w.parent[f] = (int32_t)f;
+        }
+    }
+    /* each set's lowest face keeps its winding (faces in order: the first of its set
+     * met); a set with an odd cycle keeps every face's */
+    int32_t *lowest = inc, *base = inc + m; /* 2 m of the 3 m entries, read no more */
+    for (int64_t f = 0; f < m; f++) lowest[f] = -1;
+    unoriented = 0;
+    for (int64_t f = 0; f < m; f++) {
+        uint8_t par;
+        const int32_t r = winding_find(&w, (int32_t)f, &par);
+        if (w.odd[r]) {
+            unoriented++;
+            continue;
+        }
+        if (lowest[r] < 0) {
+            lowest[r] = (int32_t)f;
+            base[r] = par;
+        }
+        flip[f] = par ^ (uint8_t)base[r];
+    }
+done:
+    free(other);
+    free(ptr);
+    free(inc);
+    free(w.parent);
+    free(w.parity);
+    free(w.odd);
+    return unoriented;
+}
+
+
 /* Face-average normals exactly as normals.face_average_normals computes them with
  * numpy (same products, same order of the sums: corner 0 of every face in face order,
- * then corner 1, then corner 2): acc (n, 3) zero on entry. Each face's normal is computed
- * again for each corner, which is faster than storing them (no fresh memory). */
-void ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
-                             double zero, double *acc) {
+ * then corner 1, then corner 2): acc (n, 3) zero on entry; each face's unit normal
+ * negated where ms_face_windings turns the face. Each face's normal is computed again for
+ * each corner, which is faster than storing them (no fresh memory). */
+int64_t ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
+                                double zero, double *acc) {
+    uint8_t *flip = (uint8_t *)malloc((size_t)(m > 0 ? m : 1));
+    const int64_t unoriented = flip ? ms_face_windings(faces, m, n, flip) : -1;
+    if (unoriented < 0) {
+        free(flip);
+        return -1;
+    }
     for (int c = 0; c < 3; c++) {
         for (int64_t f = 0; f < m; f++) {
             double u[3];
             face_normal(p, faces, f, u);
             double *t = acc + 3 * faces[3 * f + c];
-            t[0] += u[0]; t[1] += u[1]; t[2] += u[2];
+            if (flip[f]) { t[0] -= u[0]; t[1] -= u[1]; t[2] -= u[2]; }
+            else { t[0] += u[0]; t[1] += u[1]; t[2] += u[2]; }
         }
     }
+    free(flip);
     for (int64_t v = 0; v < n; v++) {
         double *t = acc + 3 * v;
         double nn = sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
         if (nn > zero) { t[0] /= nn; t[1] /= nn; t[2] /= nn; }
         else { t[0] = 0.0; t[1] = 0.0; t[2] = 0.0; }
     }
+    return unoriented;
 }
 
 /* ------------------------------------------------------------ robust mode on meshes */
@@ -77,9 +226,10 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
                 double u[3], w[3];
                 face_normal(p, faces, f0, u);
                 face_normal(p, faces, f1, w);
+                const double d = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
                 out_edges[2 * e] = v;
                 out_edges[2 * e + 1] = hi;
-                out_dot[e++] = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+                out_dot[e++] = walks_up(faces, f0, v, hi) == walks_up(faces, f1, v, hi) ? -d : d;
             }
             i = j;
         }
@@ -192,7 +342,8 @@ static int64_t crease_walk(const double *p, const int64_t *faces, int64_t a0, in
                     face_normal(p, faces, fa[i], u);
                     face_normal(p, faces, second, w);
                 }
-                const double d = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+                const double uw = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+                const double d = (k == 0) == walks_up(faces, second, a, b) ? -uw : uw;
                 if (d >= 1.0) {
                     if (flat != NULL) ++*flat;
                     continue;

@@ -26,54 +26,11 @@ static void gaussian_weights(const double *d2, int64_t m, double h2, double *mu)
 
 /* ------------------------------------------------------------------ 3x3 eigenvector */
 
-/* Unit eigenvector of the smallest eigenvalue of the symmetric matrix
- * [[a, b, c], [b, d, e], [c, e, f]]: eigenvalue in closed form (trigonometric), vector
- * as the largest cross product of two rows of A - lambda I. Agrees with LAPACK's
- * dsyevd to about 1e-16 when the smallest eigenvalue is well separated (error ~
- * eps * |A| / gap, as for LAPACK itself). */
-void smallest_eigvec(double a, double b, double c, double d, double e, double f,
-                     double *out) {
-    double p1 = b * b + c * c + e * e;
-    double scale = fabs(a) + fabs(b) + fabs(c) + fabs(d) + fabs(e) + fabs(f);
-    if (scale == 0.0) {
-        out[0] = 1.0; out[1] = 0.0; out[2] = 0.0;
-        return;
-    }
-    if (p1 == 0.0) {
-        int k = 0;
-        if (d < a) k = 1;
-        if (f < (k == 0 ? a : d)) k = 2;
-        out[0] = k == 0; out[1] = k == 1; out[2] = k == 2;
-        return;
-    }
-    /* scale by a power of two (exact) to O(1), for range safety: s = 2^-e with scale =
-     * f 2^e, f in [0.5, 1) (frexp), built from the exponent bits when s is normal */
-    double s;
-    uint64_t bits;
-    memcpy(&bits, &scale, sizeof bits);
-    int64_t biased = (int64_t)(bits >> 52); /* scale > 0: no sign bit */
-    if (biased >= 1 && biased <= 2044) {
-        bits = (uint64_t)(2045 - biased) << 52;
-        memcpy(&s, &bits, sizeof s);
-    } else {
-        int ex;
-        frexp(scale, &ex);
-        s = ldexp(1.0, -ex);
-    }
-    a *= s; b *= s; c *= s; d *= s; e *= s; f *= s;
-    p1 = b * b + c * c + e * e;
-    double q = (a + d + f) / 3.0;
-    double p2 = (a - q) * (a - q) + (d - q) * (d - q) + (f - q) * (f - q) + 2.0 * p1;
-    double p = sqrt(p2 / 6.0);
-    double ip = 1.0 / p;
-    double B00 = (a - q) * ip, B11 = (d - q) * ip, B22 = (f - q) * ip;
-    double B01 = b * ip, B02 = c * ip, B12 = e * ip;
-    double r = 0.5 * (B00 * (B11 * B22 - B12 * B12) - B01 * (B01 * B22 - B12 * B02) +
-                      B02 * (B01 * B12 - B11 * B02));
-    if (r < -1.0) r = -1.0;
-    if (r > 1.0) r = 1.0;
-    double phi = acos(r) / 3.0;
-    double lam = q + 2.0 * p * cos(phi + 2.0943951023931954923);
+/* Unit eigenvector of the eigenvalue lam of the symmetric matrix [[a, b, c], [b, d, e],
+ * [c, e, f]] as the longest cross product of two rows of A - lam I (the first of equals),
+ * normalised; (1, 0, 0) where every cross product is zero. */
+static void eigvec_of(double a, double b, double c, double d, double e, double f, double lam,
+                      double *out) {
     double r0[3] = {a - lam, b, c}, r1[3] = {b, d - lam, e}, r2[3] = {c, e, f - lam};
     double x[3][3];
     x[0][0] = r0[1] * r1[2] - r0[2] * r1[1];
@@ -99,6 +56,79 @@ void smallest_eigvec(double a, double b, double c, double d, double e, double f,
         v0 = x[bi][0] * inv; v1 = x[bi][1] * inv; v2 = x[bi][2] * inv;
     }
     out[0] = v0; out[1] = v1; out[2] = v2;
+}
+
+static const double tie_direction[3] = MS_EIG_TIE_DIRECTION;
+
+/* Unit eigenvector of the smallest eigenvalue of the symmetric matrix
+ * [[a, b, c], [b, d, e], [c, e, f]]: eigenvalue in closed form (trigonometric), vector
+ * as the largest cross product of two rows of A - lambda I. Agrees with LAPACK's
+ * dsyevd to about 1e-16 when the smallest eigenvalue is well separated (error ~
+ * eps * |A| / gap, as for LAPACK itself); where it is not (MS_EIG_TRIPLE_ROOT,
+ * MS_EIG_DOUBLE_ROOT), the eigenspace's vector the header names. */
+void smallest_eigvec(double a, double b, double c, double d, double e, double f,
+                     double *out) {
+    double scale = fabs(a) + fabs(b) + fabs(c) + fabs(d) + fabs(e) + fabs(f);
+    if (scale == 0.0) {
+        out[0] = 1.0; out[1] = 0.0; out[2] = 0.0;
+        return;
+    }
+    /* scale by a power of two (exact) to O(1), for range safety: s = 2^-e with scale =
+     * f 2^e, f in [0.5, 1) (frexp), built from the exponent bits when s is normal */
+    double s;
+    uint64_t bits;
+    memcpy(&bits, &scale, sizeof bits);
+    int64_t biased = (int64_t)(bits >> 52); /* scale > 0: no sign bit */
+    if (biased == 0) { /* subnormal: made normal first (exact), 2^-ex would overflow */
+        a *= 0x1p600; b *= 0x1p600; c *= 0x1p600; d *= 0x1p600; e *= 0x1p600; f *= 0x1p600;
+        scale = fabs(a) + fabs(b) + fabs(c) + fabs(d) + fabs(e) + fabs(f);
+        memcpy(&bits, &scale, sizeof bits);
+        biased = (int64_t)(bits >> 52);
+    }
+    if (biased >= 1 && biased <= 2044) {
+        bits = (uint64_t)(2045 - biased) << 52;
+        memcpy(&s, &bits, sizeof s);
+    } else {
+        int ex;
+        frexp(scale, &ex);
+        s = ldexp(1.0, -ex);
+    }
+    a *= s; b *= s; c *= s; d *= s; e *= s; f *= s;
+    double p1 = b * b + c * c + e * e;
+    double q = (a + d + f) / 3.0;
+    double p2 = (a - q) * (a - q) + (d - q) * (d - q) + (f - q) * (f - q) + 2.0 * p1;
+    double p = sqrt(p2 / 6.0);
+    double ip = 1.0 / p;
+    double B00 = (a - q) * ip, B11 = (d - q) * ip, B22 = (f - q) * ip;
+    double B01 = b * ip, B02 = c * ip, B12 = e * ip;
+    double r = 0.5 * (B00 * (B11 * B22 - B12 * B12) - B01 * (B01 * B22 - B12 * B02) +
+                      B02 * (B01 * B12 - B11 * B02));
+    if (r < -1.0) r = -1.0;
+    if (r > 1.0) r = 1.0;
+    if (p <= MS_EIG_TRIPLE_ROOT * fabs(q)) { /* (p = 0 too: a multiple of I, r NaN) */
+        out[0] = tie_direction[0]; out[1] = tie_direction[1]; out[2] = tie_direction[2];
+        return;
+    }
+    double phi = acos(r) / 3.0;
+    if (1.0 - r <= MS_EIG_DOUBLE_ROOT) {
+        /* the plane across the largest eigenvalue's eigenvector v */
+        double v[3];
+        eigvec_of(a, b, c, d, e, f, q + 2.0 * p * cos(phi), v);
+        double t = tie_direction[0] * v[0] + tie_direction[1] * v[1] + tie_direction[2] * v[2];
+        double w0 = tie_direction[0] - t * v[0], w1 = tie_direction[1] - t * v[1];
+        double w2 = tie_direction[2] - t * v[2];
+        double inv = 1.0 / sqrt(w0 * w0 + w1 * w1 + w2 * w2);
+        out[0] = w0 * inv; out[1] = w1 * inv; out[2] = w2 * inv;
+        return;
+    }
+    if (p1 == 0.0) { /* diagonal: the smallest entry's axis (the first of equals) */
+        int k = 0;
+        if (d < a) k = 1;
+        if (f < (k == 0 ? a : d)) k = 2;
+        out[0] = k == 0; out[1] = k == 1; out[2] = k == 2;
+        return;
+    }
+    eigvec_of(a, b, c, d, e, f, q + 2.0 * p * cos(phi + 2.0943951023931954923), out);
 }
 
 /* Batch version (for tests): cov (c, 6) as a00 a01 a02 a11 a12 a22. */
@@ -360,7 +390,9 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     v2 = v4_sel(ok, v2 * inv, v4_set1(0.0));
     for (int l = 0; l < count; l++) {
         double *o = nrm + 3 * l;
-        if (s[l] == 0.0) {
+        /* (and where the smallest eigenvalue is not single: its vector is chosen there) */
+        if (s[l] == 0.0 || p[l] <= MS_EIG_TRIPLE_ROOT * fabs(qq[l]) ||
+            1.0 - r[l] <= MS_EIG_DOUBLE_ROOT) {
             smallest_eigvec(c00[l], c01[l], c02[l], c11[l], c12[l], c22[l], o);
         } else {
             o[0] = v0[l]; o[1] = v1[l]; o[2] = v2[l];

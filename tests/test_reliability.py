@@ -1,0 +1,671 @@
+"""Hostile conditions end in exit 0 or one line, within a bounded time, leaving nothing.
+
+Each case runs the command line as its own process: out of memory under a real address
+space limit, signals from the first instructions, Dask with real schedulers, workers
+and sockets that are not schedulers, a killed out-of-core run's scratch, bounds checked
+before any work; and the library's errors for wrong arguments.
+"""
+
+from __future__ import annotations
+
+import _thread
+import contextlib
+import io
+import os
+import re
+import resource
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pymeshlab
+import pytest
+import shapes
+
+import meshlab_sharp
+from meshlab_sharp.io.source import PointSource
+from meshlab_sharp.progress import Progress
+from meshlab_sharp.tiles.layout import build_layout
+from meshlab_sharp.tiles.store import SCRATCH_PREFIX, Store, remove_stale_scratch
+
+ONE_LINE = re.compile(r"meshlab-sharp: error: [^\n]+\n")
+
+
+def _cli(*args: object, env: dict[str, str] | None = None, timeout: float = 120, **kw):
+    """``python -m meshlab_sharp ARGS`` to its end: the CompletedProcess."""
+    return subprocess.run(
+        [sys.executable, "-m", "meshlab_sharp", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, **(env or {})},
+        **kw,
+    )
+
+
+def _one_error_line(proc: subprocess.CompletedProcess, *fragments: str) -> None:
+    """Exit 1 with exactly one ``meshlab-sharp: error:`` line holding ``fragments``."""
+    assert proc.returncode == 1, proc.stderr
+    assert ONE_LINE.fullmatch(proc.stderr), proc.stderr
+    for fragment in fragments:
+        assert fragment in proc.stderr, proc.stderr
+
+
+def _cube_cloud(n: int, seed: int = 1) -> np.ndarray:
+    """``n`` random points on the faces of the unit cube."""
+    rng = np.random.default_rng(seed)
+    p = rng.random((n, 3))
+    p[np.arange(n), rng.integers(0, 3, n)] = rng.integers(0, 2, n)
+    return p
+
+
+def _binary_ply(path: Path, points: np.ndarray) -> Path:
+    """Write ``points`` as a binary PLY of doubles."""
+    head = (
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {len(points)}\n"
+        "property double x\nproperty double y\nproperty double z\nend_header\n"
+    )
+    path.write_bytes(head.encode() + points.astype("<f8").tobytes())
+    return path
+
+
+@pytest.fixture(scope="module")
+def big_cloud(tmp_path_factory) -> Path:
+    """A 1,000,000-point cloud as a binary PLY."""
+    return _binary_ply(tmp_path_factory.mktemp("big") / "cube1m.ply", _cube_cloud(1_000_000))
+
+
+# ---------------------------------------------------------------- out of memory
+
+
+#: What OpenBLAS prints before it ends the process (exit 1) when it cannot map a
+#: thread's buffer: no exception reaches Python.
+_LIBRARY_EXITS = {"OpenBLAS error: Memory allocation still failed after 10 retries, giving up.\n"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "options, limits_gb",
+    [
+        ((), (0.55, 0.65, 0.75, 0.85)),
+        (("--mode", "paper"), (0.6, 0.75)),
+        (("--max-memory", "300MB"), (0.5, 0.7)),
+    ],
+    ids=["robust", "paper", "tiled"],
+)
+def test_out_of_memory_is_one_line(tmp_path, big_cloud, options, limits_gb):
+    """Under an address-space limit (setrlimit in the child), at limits that end in
+    every stage (reading, detection, the compiled kernels, writing): exit 0 with every
+    output, or one ``out of memory`` line with the estimate and the hint, and nothing
+    written."""
+    options = [o.format(tmp=tmp_path) for o in options]
+    failed = 0
+    for gb in limits_gb:
+        limit = int(gb * 2**30)
+        out = tmp_path / f"out{gb}.ply"
+        proc = _cli(
+            "detect",
+            big_cloud,
+            "-q",
+            "-o",
+            out,
+            *options,
+            "--force",
+            preexec_fn=lambda limit=limit: resource.setrlimit(resource.RLIMIT_AS, (limit, limit)),
+        )
+        if proc.returncode == 0:
+            assert out.is_file() and not proc.stderr
+            continue
+        assert not out.exists() and not list(tmp_path.glob(".*")), "output or temporary left"
+        if proc.stderr in _LIBRARY_EXITS:
+            continue  # OpenBLAS ends the process itself (README: known limits)
+        failed += 1
+        _one_error_line(proc, "error: out of memory: ", "--max-memory")
+        assert re.search(r"needs about [0-9]+ MB|did not fit", proc.stderr), proc.stderr
+        assert not out.exists() and not (tmp_path / "curves.obj").exists()
+        assert not list(tmp_path.glob(".*")), "a temporary file was left"
+    assert failed, "no limit ran out of memory: the test tests nothing"
+
+
+# ---------------------------------------------------------------- signals
+
+
+def _catches(pid: int, signum: int) -> bool:
+    """Whether process ``pid`` has a handler for ``signum`` (/proc SigCgt)."""
+    with contextlib.suppress(OSError):
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("SigCgt:"):
+                return bool(int(line.split()[1], 16) >> (signum - 1) & 1)
+    return False
+
+
+def _numpy_loaded(pid: int) -> bool:
+    """Whether numpy's compiled core is mapped into process ``pid``."""
+    with contextlib.suppress(OSError):
+        return "_multiarray_umath" in Path(f"/proc/{pid}/maps").read_text()
+    return False
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP])
+def test_a_signal_while_importing_is_one_line(tmp_path, signum):
+    """The handler is set before numpy loads: a signal as soon as it is set ends the
+    command with the promised line and 128 + N, no traceback, nothing written."""
+    cloud = tmp_path / "cloud.xyz"
+    cloud.write_text("\n".join(f"{x} {y} {z}" for x, y, z in _cube_cloud(500)))
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "meshlab_sharp",
+            "detect",
+            str(cloud),
+            "-o",
+            str(tmp_path / "o.ply"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    end = time.monotonic() + 30
+    # Python catches SIGINT from its start; the handlers are set together, SIGHUP's last
+    while not _catches(proc.pid, signal.SIGHUP) and proc.poll() is None and time.monotonic() < end:
+        time.sleep(0.0005)
+    early = not _numpy_loaded(proc.pid)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=60)
+    name = signal.Signals(signum).name
+    assert err == f"meshlab-sharp: interrupted by {name}; no output was written\n"
+    assert proc.returncode == 128 + signum
+    assert early, "numpy was loaded before the handler was set"
+    assert not (tmp_path / "o.ply").exists()
+
+
+# ---------------------------------------------------------------- Dask
+
+
+@contextlib.contextmanager
+def _server(answer: bytes | None) -> Iterator[str]:
+    """A loopback server that accepts connections and sends ``answer`` (None: never
+    answers; empty: closes the connection at once), closed afterwards; yields its
+    ``tcp://`` address."""
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    sock.listen()
+    sock.settimeout(0.2)
+    stop = threading.Event()
+    held: list[socket.socket] = []
+
+    def serve() -> None:
+        while not stop.is_set():
+            try:
+                conn, _ = sock.accept()
+            except OSError:
+                continue
+            held.append(conn)
+            if answer == b"":
+                conn.close()
+            elif answer is not None:
+                with contextlib.suppress(OSError):
+                    conn.sendall(answer)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield f"tcp://127.0.0.1:{sock.getsockname()[1]}"
+    finally:
+        stop.set()
+        thread.join()
+        for conn in held:
+            conn.close()
+        sock.close()
+
+
+def _closed_port() -> str:
+    """An address where nothing listens."""
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    sock.close()
+    return f"tcp://127.0.0.1:{port}"
+
+
+@pytest.fixture
+def small_cloud(tmp_path) -> Path:
+    return _binary_ply(tmp_path / "cloud.ply", _cube_cloud(3000))
+
+
+@pytest.mark.parametrize("address", ["tcp://", "tcp://host", "garbage", "tcp://127.0.0.1:99999"])
+def test_dask_addresses_are_checked(tmp_path, small_cloud, address):
+    proc = _cli("detect", small_cloud, "-q", "-o", tmp_path / "o.ply", "--dask", address)
+    _one_error_line(proc, "write local:N or tcp://HOST:PORT")
+    assert not (tmp_path / "o.ply").exists()
+
+
+@pytest.mark.parametrize(
+    "answer, message",
+    [
+        (None, "no answer from a Dask scheduler within 2 s"),
+        (os.urandom(64) + b"\xff" * 8, "not a Dask scheduler"),
+        (b"\xff" * 8 + b"x" * 64, "not a Dask scheduler"),  # 2**64 - 1 bytes to come
+        (b"HTTP/1.1 200 OK\r\nContent-Length: 0\r\n\r\n", "not a Dask scheduler"),
+        (b"", "not a Dask scheduler (it closed the connection)"),
+    ],
+    ids=["silent", "random", "huge-length", "http", "closes"],
+)
+def test_dask_non_schedulers_fail_in_one_line_within_the_timeout(
+    tmp_path, small_cloud, answer, message
+):
+    with _server(answer) as address:
+        start = time.monotonic()
+        proc = _cli(
+            "detect", small_cloud, "-q", "-o", tmp_path / "o.ply", "--dask", address,
+            "--dask-timeout", "2",
+        )  # fmt: skip
+        took = time.monotonic() - start
+    _one_error_line(proc, message)
+    assert took < 30, took
+    assert not (tmp_path / "o.ply").exists()
+
+
+def test_dask_closed_port_fails_in_one_line(tmp_path, small_cloud):
+    proc = _cli("detect", small_cloud, "-q", "-o", tmp_path / "o.ply", "--dask", _closed_port())
+    _one_error_line(proc, "cannot reach the scheduler")
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "inf", "nan", "soon"])
+def test_dask_timeout_option_is_checked(tmp_path, small_cloud, value):
+    proc = _cli("detect", small_cloud, "-o", tmp_path / "o.ply", "--dask-timeout", value)
+    _one_error_line(proc, "--dask-timeout", "positive number of seconds")
+
+
+def _dask_cli(*args: str) -> list[str]:
+    """The ``dask`` command of this environment."""
+    return [str(Path(sys.executable).parent / "dask"), *args]
+
+
+@contextlib.contextmanager
+def _scheduler(
+    workers: int, worker_ttl: str | None = None
+) -> Iterator[tuple[str, subprocess.Popen, list[subprocess.Popen]]]:
+    """A real scheduler process on loopback with ``workers`` worker processes, ready
+    (the workers joined); killed afterwards. ``worker_ttl``: how long the scheduler
+    keeps a silent worker (Dask's default: 5 minutes)."""
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    address = _closed_port()
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    port = address.rsplit(":", 1)[1]
+    ttl = {} if worker_ttl is None else {"DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL": worker_ttl}
+    scheduler = subprocess.Popen(
+        _dask_cli("scheduler", "--host", "127.0.0.1", "--port", port, "--no-dashboard"),
+        env={**os.environ, **ttl},
+        **quiet,
+    )
+    pool = [
+        subprocess.Popen(
+            _dask_cli("worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard"),
+            **quiet,
+        )
+        for _ in range(workers)
+    ]
+    try:
+        with Client(address, timeout=60) as client:
+            if workers:
+                client.wait_for_workers(workers, timeout=60)
+        yield address, scheduler, pool
+    finally:
+        for p in [*pool, scheduler]:
+            p.kill()
+            p.wait()
+
+
+@pytest.mark.slow
+def test_dask_scheduler_without_workers_fails_in_one_line(tmp_path, small_cloud):
+    with _scheduler(0) as (address, _, _):
+        start = time.monotonic()
+        proc = _cli(
+            "detect", small_cloud, "-q", "-o", tmp_path / "o.ply", "--dask", address,
+            "--dask-timeout", "2",
+        )  # fmt: skip
+        took = time.monotonic() - start
+    _one_error_line(proc, "no worker joined the scheduler within 2 s")
+    assert took < 40, took
+
+
+@pytest.mark.slow
+def test_dask_run_is_quiet_and_gives_the_tiled_answer(tmp_path, small_cloud):
+    """A real scheduler and worker: the same bytes as the run in this process, and not
+    a line of distributed's logging."""
+    alone = _cli("detect", small_cloud, "-q", "-o", tmp_path / "alone.ply", "--max-memory", "1GB")
+    assert alone.returncode == 0, alone.stderr
+    with _scheduler(1) as (address, _, _):
+        proc = _cli("detect", small_cloud, "-q", "-o", tmp_path / "dask.ply", "--dask", address)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == "" and proc.stdout == ""
+    assert (tmp_path / "dask.ply").read_bytes() == (tmp_path / "alone.ply").read_bytes()
+
+
+def _scratch_folders(folder: Path) -> list[Path]:
+    return sorted(folder.glob(f"{SCRATCH_PREFIX}*"))
+
+
+def _wait_for_scratch(folder: Path, proc: subprocess.Popen, timeout: float = 120) -> None:
+    """Until the run has made its scratch folder and cut its tiles."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and proc.poll() is None:
+        found = _scratch_folders(folder)
+        if found and (found[0] / "coords.bin").exists():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"no scratch folder appeared: {proc.poll()}")
+
+
+@pytest.fixture(scope="module")
+def medium_cloud(tmp_path_factory) -> Path:
+    """A 200,000-point cloud as a binary PLY."""
+    return _binary_ply(tmp_path_factory.mktemp("medium") / "cube200k.ply", _cube_cloud(200_000))
+
+
+@pytest.mark.slow
+def test_dask_scheduler_lost_mid_run_is_one_line(tmp_path, medium_cloud):
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    with _scheduler(1) as (address, scheduler, _):
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
+            + ["-o", str(tmp_path / "o.ply"), "--dask", address, "--max-memory", "300MB"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "TMPDIR": str(scratch)},
+        )
+        _wait_for_scratch(scratch, proc)
+        scheduler.kill()
+        start = time.monotonic()
+        out, err = proc.communicate(timeout=120)
+        took = time.monotonic() - start
+    _one_error_line(subprocess.CompletedProcess([], proc.returncode, out, err), "--dask: ")
+    assert took < 60, took
+    assert not (tmp_path / "o.ply").exists()
+    assert _scratch_folders(scratch) == []
+
+
+@pytest.mark.slow
+def test_dask_worker_lost_mid_run_resumes_with_the_same_answer(tmp_path, medium_cloud):
+    """One of two workers killed while the tiles run: its tasks run again on the other,
+    and the output is the run without Dask's, byte for byte."""
+    alone = _cli(
+        "detect", medium_cloud, "-q", "-o", tmp_path / "alone.ply", "--max-memory", "300MB"
+    )
+    assert alone.returncode == 0, alone.stderr
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    with _scheduler(2) as (address, _, workers):
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
+            + ["-o", str(tmp_path / "dask.ply"), "--dask", address, "--max-memory", "300MB"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "TMPDIR": str(scratch)},
+        )
+        _wait_for_scratch(scratch, proc)
+        time.sleep(2.0)  # tile tasks on both workers
+        assert proc.poll() is None, "the run ended before a worker was lost"
+        workers[0].kill()
+        _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert err == ""
+    assert (tmp_path / "dask.ply").read_bytes() == (tmp_path / "alone.ply").read_bytes()
+
+
+@pytest.mark.slow
+def test_dask_stopped_worker_is_one_line_once_the_scheduler_drops_it(tmp_path, medium_cloud):
+    """The only worker stopped (SIGSTOP) mid-run: once the scheduler drops it (its
+    worker-ttl, 5 s here) the run waits 30 s for another, then fails in one line."""
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    with _scheduler(1, worker_ttl="5s") as (address, _, workers):
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
+            + ["-o", str(tmp_path / "o.ply"), "--dask", address, "--max-memory", "300MB"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "TMPDIR": str(scratch)},
+        )
+        _wait_for_scratch(scratch, proc)
+        assert proc.poll() is None
+        workers[0].send_signal(signal.SIGSTOP)
+        start = time.monotonic()
+        out, err = proc.communicate(timeout=180)
+        took = time.monotonic() - start
+    _one_error_line(
+        subprocess.CompletedProcess([], proc.returncode, out, err),
+        "no worker left in the Dask cluster for 30 s",
+    )
+    assert took < 120, took
+    assert not (tmp_path / "o.ply").exists()
+    assert _scratch_folders(scratch) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_during_a_dask_run_is_one_line(tmp_path, medium_cloud, signum):
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
+        + ["-o", str(tmp_path / "o.ply"), "--dask", "local:1", "--max-memory", "300MB"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "TMPDIR": str(scratch)},
+    )
+    _wait_for_scratch(scratch, proc)
+    time.sleep(1.0)  # the tile tasks are running on the worker
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=120)
+    name = signal.Signals(signum).name
+    assert err == f"meshlab-sharp: interrupted by {name}; no output was written\n"
+    assert proc.returncode == 128 + signum
+    assert not (tmp_path / "o.ply").exists()
+    assert _scratch_folders(scratch) == []
+
+
+def test_dask_argument_of_the_wrong_type_is_a_type_error():
+    pytest.importorskip("distributed")
+    points = _cube_cloud(500)
+    for value in (5, object()):
+        with pytest.raises(TypeError, match=r"dask= must be .*, not (int|object)"):
+            meshlab_sharp.detect(points, dask=value)
+
+
+# ---------------------------------------------------------------- bounds before work
+
+
+@pytest.mark.parametrize(
+    "kind, scales, message",
+    [
+        ("mesh", "1000", "rings must be <= 32, got 1000"),
+        ("mesh", "1,2,33", "rings must be <= 32, got 33"),
+        ("points", "600", "kNN sizes must be <= 512, got 600"),
+    ],
+)
+def test_scales_above_the_maximum_are_refused_at_once(tmp_path, kind, scales, message):
+    v, f = shapes.cube_grid_mesh(30)
+    path = tmp_path / "part.obj"
+    rows = [f"v {x} {y} {z}" for x, y, z in v]
+    if kind == "mesh":
+        rows += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in f]
+    path.write_text("\n".join(rows) + "\n")
+    start = time.monotonic()
+    proc = _cli("detect", path, "-q", "--scales", scales)
+    _one_error_line(proc, message)
+    assert time.monotonic() - start < 30
+    assert not (tmp_path / "part_sharp.ply").exists()
+
+
+def test_smoothing_steps_above_the_maximum_are_refused(tmp_path):
+    v, f = shapes.cube_grid_mesh(4)
+    path = tmp_path / "part.off"
+    path.write_text(
+        f"OFF\n{len(v)} {len(f)} 0\n"
+        + "".join(f"{x} {y} {z}\n" for x, y, z in v)
+        + "".join(f"3 {a} {b} {c}\n" for a, b, c in f)
+    )
+    proc = _cli("detect", path, "-q", "--denoise", "--smoothing-steps", "1000000000")
+    _one_error_line(proc, "--smoothing-steps must be <= 1000, got 1000000000")
+
+
+def _with_far_outliers(n: int, outliers: int) -> np.ndarray:
+    """A cube cloud of ``n`` points and ``outliers`` points a million units away."""
+    rng = np.random.default_rng(3)
+    far = rng.normal(size=(outliers, 3))
+    far *= 1e6 / np.linalg.norm(far, axis=1)[:, None]
+    return np.concatenate([_cube_cloud(n), far])
+
+
+def test_far_outliers_do_not_squeeze_the_tiles(tmp_path):
+    """With 200 points a million units away, the cloud's tiles still hold at most
+    ``tile_points`` points each (the far points in tiles of their own); so do those of
+    the cloud without them."""
+    points = _with_far_outliers(50_000, 200)
+    source = PointSource.from_array(points)
+    layout = build_layout(
+        len(points), lambda: source.blocks(8192), Store(str(tmp_path)), tile_points=5000,
+        source="cloud",
+    )  # fmt: skip
+    counts = layout.counts()
+    assert counts.sum() == len(points)
+    assert counts.max() <= 5000, counts
+    far = np.abs(layout.boxes).max(axis=(1, 2)) > 10
+    assert counts[far].sum() == 200  # every far point is in a tile of far points
+    plain = _cube_cloud(50_000)
+    (tmp_path / "plain").mkdir()
+    source = PointSource.from_array(plain)
+    layout = build_layout(
+        len(plain), lambda: source.blocks(8192), Store(str(tmp_path / "plain")), tile_points=5000,
+        source="cloud",
+    )  # fmt: skip
+    assert layout.counts().max() <= 5000
+    assert (np.abs(layout.boxes) <= 1.0).all()
+
+
+@pytest.mark.slow
+def test_tiled_run_with_far_outliers_stays_fast_and_exact(tmp_path):
+    """200,000 points and 200 far outliers under --max-memory: the in-memory answer,
+    bit for bit, in bounded time and under the memory given."""
+    points = _with_far_outliers(200_000, 200)
+    cloud = _binary_ply(tmp_path / "outliers.ply", points)
+    start = time.monotonic()
+    proc = _cli(
+        "detect", cloud, "-q", "-o", tmp_path / "tiled.ply", "--indices", tmp_path / "t.txt",
+        "--max-memory", "250MB", "--report", tmp_path / "r.json",
+    )  # fmt: skip
+    took = time.monotonic() - start
+    assert proc.returncode == 0, proc.stderr
+    assert took < 120, took
+    expected = meshlab_sharp.detect(points)
+    got = np.loadtxt(tmp_path / "t.txt", dtype=np.int64, ndmin=1)
+    assert np.array_equal(got, np.flatnonzero(expected.mask))
+
+
+# ---------------------------------------------------------------- stale scratch
+
+
+@pytest.mark.slow
+def test_a_killed_runs_scratch_is_removed_by_the_next_run(tmp_path, medium_cloud, small_cloud):
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    env = {**os.environ, "TMPDIR": str(scratch)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
+        + ["-o", str(tmp_path / "o.ply"), "--max-memory", "200MB"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+    )
+    _wait_for_scratch(scratch, proc)
+    proc.kill()
+    proc.wait()
+    left = _scratch_folders(scratch)
+    assert len(left) == 1
+    assert left[0].name.startswith(f"{SCRATCH_PREFIX}{proc.pid}@")
+    other = scratch / f"{SCRATCH_PREFIX}1@another.host-abcdefgh"  # another machine's
+    other.mkdir()
+    again = _cli(
+        "detect", small_cloud, "-q", "-o", tmp_path / "o2.ply", "--max-memory", "200MB", env=env
+    )
+    assert again.returncode == 0, again.stderr
+    assert _scratch_folders(scratch) == [other]
+    assert remove_stale_scratch(scratch) == []
+
+
+# ---------------------------------------------------------------- the API
+
+
+def test_detect_meshset_checks_its_argument():
+    with pytest.raises(TypeError, match=r"ms must be a pymeshlab\.MeshSet, not int"):
+        meshlab_sharp.detect_meshset(5)
+    with pytest.raises(ValueError, match="ms: the MeshSet holds no mesh"):
+        meshlab_sharp.detect_meshset(pymeshlab.MeshSet())
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(np.random.default_rng(0).random((10, 3))))
+    ms.set_selection_all()
+    ms.meshing_remove_selected_vertices()
+    with pytest.raises(ValueError, match="ms: the current mesh has no vertices"):
+        meshlab_sharp.detect_meshset(ms)
+
+
+def test_detect_meshset_without_curves_adds_no_empty_mesh():
+    """A flat grid has no curves: pymeshlab cannot hold an empty mesh, none is added."""
+    g = np.mgrid[0:30, 0:30].reshape(2, -1).T
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(np.c_[g, np.zeros(len(g))].astype(float)))
+    result = meshlab_sharp.detect_meshset(ms, curves=True)
+    assert result.curves == [] and ms.mesh_number() == 1
+
+
+class _Hostile:
+    """An object whose conversion to an array raises."""
+
+    def __array__(self, *args, **kwargs):
+        raise RuntimeError("no array here")
+
+
+def test_an_object_whose_array_raises_is_a_value_error():
+    with pytest.raises(ValueError, match="the vertices cannot be read as an array: RuntimeError"):
+        meshlab_sharp.detect(_Hostile())
+    with pytest.raises(ValueError, match="the faces cannot be read as an array: RuntimeError"):
+        meshlab_sharp.detect(np.eye(3), _Hostile())
+
+
+class _Tripwire(io.StringIO):
+    """A bar's stream that interrupts the main thread at the first scale drawn."""
+
+    def write(self, text: str) -> int:
+        if "scale" in text and "tripped" not in self.__dict__:
+            self.tripped = True
+            _thread.interrupt_main()
+        return super().write(text)
+
+
+def test_an_interrupt_in_detect_clears_the_progress_bar():
+    stream = _Tripwire()
+    bar = Progress(12, enabled=True, stream=stream)
+    with pytest.raises(KeyboardInterrupt):
+        meshlab_sharp.detect(_cube_cloud(20_000), progress=bar)
+        time.sleep(5)  # the interrupt lands at the latest here
+    drawn = stream.getvalue()
+    assert "[" in drawn
+    assert drawn.endswith("\r" + " " * (len(drawn.split("\r")[-3])) + "\r")
+    bar.step("after")  # the bar draws no more
+    assert stream.getvalue() == drawn
