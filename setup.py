@@ -1,11 +1,13 @@
-"""Build the native library (native/: plain C and C++ behind a C ABI, loaded with ctypes;
+"""Build the native library (native/: C kernels and C++ behind a C ABI, loaded with ctypes;
 no Python headers).
 
-The sources native/src/*.c, compiled with the flags native/CMakeLists.txt gives them for
-the MeshLab plugin, into the package's ``_ckernels`` module; the feature curves,
-native/src/curves*.cpp, into ``_ccurves``. Everything else is configured
-in pyproject.toml. ``optional=True``: without a C compiler the package still installs and
-runs the numpy reference path.
+The sources native/src/*.c and *.cpp, compiled with the flags native/CMakeLists.txt gives
+them for the MeshLab plugin, into two ctypes libraries: ``_ckernels`` (the C kernels and
+the detection sequence behind ms_detect) and ``_ccurves`` (the feature curves,
+native/src/curves*.cpp, behind ms_curves_extract). The C++ is compiled with hidden
+visibility: each library exports its C ABI alone. Everything else is configured in
+pyproject.toml. ``optional=True``: without a compiler the package still installs and runs
+the numpy reference path.
 """
 
 import platform
@@ -13,49 +15,66 @@ import sys
 from pathlib import Path
 
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
 
 # glibc's vector math library (exp of two doubles at once) on x86-64 Linux.
 libmvec = sys.platform == "linux" and platform.machine() in ("x86_64", "AMD64")
 # Relative paths, as setuptools wants them.
 native = Path("native")
-sources = sorted(str(path) for path in (native / "src").glob("*.c"))
+curves = sorted(str(path) for path in (native / "src").glob("curves*.cpp"))
+kernels = sorted(
+    str(path)
+    for pattern in ("*.c", "*.cpp")
+    for path in (native / "src").glob(pattern)
+    if str(path) not in curves
+)
 headers = [str(native / "include" / "meshlab_sharp.h")]
 headers += sorted(str(path) for path in (native / "src").glob("*.h"))
 
+#: Flags by language, as native/CMakeLists.txt gives them; the C++ hidden but for the C ABI
+#: (meshlab_sharp.h declares it with default visibility).
+LANGUAGE_FLAGS = {
+    ".c": ["-std=c99"],
+    ".cpp": ["-std=c++14", "-Wall", "-Wno-unused-parameter", "-fvisibility=hidden"],
+}
+
+
+class BuildNative(build_ext):
+    """build_ext with each source's language flags (C99 for .c, C++14 for .cpp)."""
+
+    def build_extensions(self) -> None:
+        compile_one = self.compiler._compile
+
+        def compile_with_language(obj, src, ext, cc_args, extra_postargs, pp_opts):
+            flags = [*extra_postargs, *LANGUAGE_FLAGS[Path(src).suffix]]
+            compile_one(obj, src, ext, cc_args, flags, pp_opts)
+
+        self.compiler._compile = compile_with_language
+        super().build_extensions()
+
+
+def native_library(name: str, sources: list[str]) -> Extension:
+    """One ctypes library of the native sources, linked as C++."""
+    return Extension(
+        name,
+        sources=sources,
+        depends=headers,
+        include_dirs=[str(native / "include")],
+        # No fused multiply-add and no fast-math: products and sums rounded as numpy
+        # rounds them (docs/contributing.md).
+        extra_compile_args=["-O3", "-ffp-contract=off", "-fno-math-errno"],
+        extra_link_args=["-pthread"],
+        define_macros=[("MS_LIBMVEC", "1")] if libmvec else [],
+        libraries=["mvec", "m"] if libmvec else ["m"],
+        language="c++",
+        optional=True,
+    )
+
+
 setup(
+    cmdclass={"build_ext": BuildNative},
     ext_modules=[
-        Extension(
-            "meshlab_sharp._ckernels",
-            sources=sources,
-            depends=headers,
-            include_dirs=[str(native / "include")],
-            # No fused multiply-add and no fast-math: products and sums rounded as numpy
-            # rounds them (docs/contributing.md).
-            extra_compile_args=["-O3", "-ffp-contract=off", "-fno-math-errno", "-std=c99"],
-            define_macros=[("MS_LIBMVEC", "1")] if libmvec else [],
-            libraries=["mvec", "m"] if libmvec else ["m"],
-            optional=True,
-        ),
-        # The feature curves (C++ behind the C ABI of native/include/meshlab_sharp.h),
-        # compiled as the plugin compiles them: the same bits.
-        Extension(
-            "meshlab_sharp._ccurves",
-            sources=sorted(str(p) for p in Path("native/src").glob("curves*.cpp")),
-            depends=[
-                "native/include/meshlab_sharp.h",
-                "native/src/curves.h",
-                "native/src/curves_types.h",
-            ],
-            include_dirs=["native/include"],
-            extra_compile_args=[
-                "-std=c++14",
-                "-O3",
-                "-ffp-contract=off",
-                "-fno-math-errno",
-                "-fvisibility=hidden",  # the C ABI alone is exported (curves_api.cpp)
-            ],
-            language="c++",
-            optional=True,
-        ),
-    ]
+        native_library("meshlab_sharp._ckernels", kernels),
+        native_library("meshlab_sharp._ccurves", curves),
+    ],
 )

@@ -22,10 +22,14 @@ _OPERATORS = {ast.Div: float.__truediv__, ast.Mult: float.__mul__}
 
 
 def _value(node: ast.expr, known: dict[str, Value], where: str) -> Value:
-    """A number, an earlier constant's full name, a quotient or product of two
+    """A number (negative ones too), an earlier constant's full name, a quotient or product of two
     floating-point numbers or names, or a tuple of integers or of floating-point numbers."""
     if isinstance(node, ast.Constant) and type(node.value) in (int, float):
         return node.value
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+        value = _value(node.operand, known, where)
+        if isinstance(value, int | float):
+            return -value
     if isinstance(node, ast.Name) and node.id in known:
         return known[node.id]
     if isinstance(node, ast.BinOp) and type(node.op) in _OPERATORS:
@@ -123,7 +127,7 @@ PATH = header_path()
 #: Detection: the ``MS_`` constants (the curves' ``MS_CURVE_`` ones among them, as
 #: ``CURVE_NAME``).
 KERNELS = Header(PATH, "MS_")
-#: The feature curves: the ``MS_CURVE_`` constants (the plugin's curves_core.cpp uses them).
+#: The feature curves: the ``MS_CURVE_`` constants (native/src/curves.cpp uses them).
 CURVES = Header(PATH, "MS_CURVE_")
 
 #: The kernels' header and its constants, by name without the ``MS_`` prefix.

@@ -143,6 +143,20 @@ _SIGNATURES = {
         None,
         [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _c_void_p],
     ),
+    # the whole detection (meshlab_sharp._detect_native)
+    "ms_detect_defaults": (None, [_c_void_p]),
+    "ms_detect": (
+        _int,
+        [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p, _c_void_p]
+        + [_c_void_p, _int],
+    ),
+    "ms_detection_counts": (None, [_c_void_p, _c_void_p]),
+    "ms_detection_vertices": (None, [_c_void_p, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_detection_scales": (None, [_c_void_p, _c_void_p, _c_void_p, _c_void_p]),
+    "ms_detection_timing": (None, [_c_void_p, _int, _c_void_p, _int, _c_void_p]),
+    "ms_detection_free": (None, [_c_void_p]),
+    "ms_parse_scales": (_int, [_c_void_p, _int, _c_void_p, _int, _c_void_p, _int]),
+    "ms_format_scales": (_int, [_c_void_p, _int, _c_void_p, _int]),
 }
 
 

@@ -67,9 +67,9 @@ def parse_scales(text: str) -> list[int]:
 
     A list is comma-separated (white space around the commas allowed) or separated by
     ASCII white space, never both; each number is an optional sign and digits. A range
-    is checked before it is built: at most :data:`MAX_SCALES` values. The MeshLab
-    plugin's ``parseScales`` reads the same grammar with the same messages
-    (``tests/test_sharp_core.py`` checks both on one table).
+    is checked before it is built: at most :data:`MAX_SCALES` values. The native
+    library's ``ms_parse_scales``, which the MeshLab plugin calls, reads the same grammar
+    with the same messages (``tests/test_detect_native.py`` checks both on one table).
     """
     hint = "use a list like 12,16,20 or 12 16 20, or a range like 12:40:4"
     values: Sequence[int]

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _kernels
+from . import _detect_native, _kernels
 from .cleaning import CleanGeometry, clean
 from .creases import sharp_vertices
 from .curves import extract_curves
@@ -227,6 +227,34 @@ def _detect(
         if isinstance(progress, Progress)
         else Progress(len(scales_t) + 3, enabled=progress)
     )
+    if not return_details and backend == "compiled":
+        # the native library's sequence (ms_detect); an input it refuses takes the path
+        # below, which raises the error
+        native = _detect_native.detect(
+            geometry,
+            is_mesh=is_mesh,
+            scales=scales_t,
+            mode=mode,
+            weighting=weighting,
+            workers=workers,
+            bar=bar,
+        )
+        if native is not None:
+            result = DetectionResult(
+                mask=native.mask,
+                strength=native.strength,
+                kind=kind,
+                scales=native.scales,
+                thresholds=native.thresholds,
+                candidate_counts=native.candidate_counts,
+                kept=native.kept,
+                weighting=weighting,
+                n_clean=native.n_clean,
+                timings={**timings, **native.timings},
+                mode=mode,
+                backend=backend,
+            )
+            return _finish(result, geometry, as_points, curves, bar, progress, t0)
 
     t = time.perf_counter()
     # A cloud's far points (a corrupted coordinate) are dropped first, as isolated points
@@ -343,9 +371,22 @@ def _detect(
         )
         result.normals = np.stack([cleaned.to_input_order(n, np.nan) for n in per_scale.normals])
     timings["decide"] = time.perf_counter() - t
+    return _finish(result, geometry, as_points, curves, bar, progress, t0)
+
+
+def _finish(
+    result: DetectionResult,
+    geometry: Geometry,
+    as_points: bool,
+    curves: bool,
+    bar: Progress,
+    progress: bool | Progress,
+    t0: float,
+) -> DetectionResult:
+    """The curves when asked for, the total time and the progress bar's end."""
     if curves:
-        _add_curves(result, geometry, as_points, backend)
-    timings["total"] = time.perf_counter() - t0
+        _add_curves(result, geometry, as_points, result.backend)
+    result.timings["total"] = time.perf_counter() - t0
     bar.step("done")
     if not isinstance(progress, Progress):
         bar.close()

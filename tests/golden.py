@@ -76,9 +76,13 @@ SHAPES: dict[str, Shape] = {
 }
 
 
-def outputs(points: np.ndarray, faces: np.ndarray | None, mode: str) -> dict[str, Any]:
-    """The scales, thresholds, candidates per scale and feature indices of one mode."""
-    result = meshlab_sharp.detect(points, faces, mode=mode)
+def outputs(
+    points: np.ndarray, faces: np.ndarray | None, mode: str, python_driven: bool = False
+) -> dict[str, Any]:
+    """The scales, thresholds, candidates per scale and feature indices of one mode: of
+    ``detect``'s default path (the native library's sequence), or with ``python_driven``
+    of the path ``return_details`` takes (which reads the Python modules' constants)."""
+    result = meshlab_sharp.detect(points, faces, mode=mode, return_details=python_driven)
     return {
         "scales": list(result.scales),
         "thresholds": [float(t) for t in result.thresholds],

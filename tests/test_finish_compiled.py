@@ -28,7 +28,8 @@ from bench import cad_cloud, cad_mesh  # noqa: E402
 
 
 def _setup_of(monkeypatch, vertices, faces=None) -> tuple[robust.RobustSetup, np.ndarray]:
-    """The RobustSetup of a compiled robust ``detect`` and the candidates it finished."""
+    """The RobustSetup of a compiled robust ``detect`` and the candidates it finished (the
+    Python-driven path, which ``return_details`` takes)."""
     held = {}
     finish = robust.RobustSetup.finish
 
@@ -38,7 +39,9 @@ def _setup_of(monkeypatch, vertices, faces=None) -> tuple[robust.RobustSetup, np
 
     with monkeypatch.context() as m:
         m.setattr(robust.RobustSetup, "finish", grab)
-        meshlab_sharp.detect(vertices, faces, mode="robust", backend="compiled")
+        meshlab_sharp.detect(
+            vertices, faces, mode="robust", backend="compiled", return_details=True
+        )
     return held["setup"], held["mask"]
 
 

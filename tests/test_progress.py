@@ -62,7 +62,8 @@ def test_cli_draws_the_bar_on_a_terminal_unless_quiet(tmp_path):
     src = write_ply(tmp_path / "c.ply", shapes.cube_grid_points(9))
     code, err = _run_with_terminal_stderr(["detect", str(src)])
     assert code == 0
-    assert "scale 40" in err and "[" in err and "#" in err
+    # the library's stages, the label cut to the bar's 28 characters
+    assert "neighbours and projected dis" in err and "[" in err and "#" in err
     code, err = _run_with_terminal_stderr(["detect", str(src), "--force", "--quiet"])
     assert code == 0
     assert err == ""

@@ -121,7 +121,8 @@ def test_detect_is_the_same_with_and_without_the_renumbering(monkeypatch, mode):
 
     for on in (False, True):
         monkeypatch.setattr(_kernels, "scattered", rule(on))
-        results.append(meshlab_sharp.detect(v, f, mode=mode))
+        # the Python-driven path (return_details) asks the rule; ms_detect decides inside
+        results.append(meshlab_sharp.detect(v, f, mode=mode, return_details=True))
     assert False in asked and True in asked  # the ring pass asked the rule both times
     a, b = results
     assert a.scales == b.scales

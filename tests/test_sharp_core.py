@@ -1,8 +1,9 @@
-"""The MeshLab plugin's core without MeshLab: ``meshlab_plugin_cpp/src/sharp_core.cpp`` and
-the native library ``native/src/*.c``, built with gcc and g++ alone into a small
-driver (``tests/sharp_core_driver.cpp``), against :func:`meshlab_sharp.detect` on the same
-float64 arrays: the same scales, thresholds, candidate counts, features and strengths.
-Runs wherever g++ is (no MeshLab sources, no Qt)."""
+"""The native library's detection sequence through its C ABI (``ms_detect``,
+``ms_parse_scales``: what the MeshLab plugin calls), without MeshLab: ``native/src``
+built with gcc and g++ alone into a small driver (``tests/sharp_core_driver.cpp``),
+against the Python-driven path of :func:`meshlab_sharp.detect` (``return_details=True``)
+on the same float64 arrays: the same scales, thresholds, candidate counts, features and
+strengths. Runs wherever g++ is (no MeshLab sources, no Qt)."""
 
 from __future__ import annotations
 
@@ -28,19 +29,17 @@ from meshlab_sharp.sample import sample_part
 
 ROOT = Path(__file__).resolve().parent.parent
 DRIVER = Path(__file__).resolve().parent / "sharp_core_driver.cpp"
-CORE = ROOT / "meshlab_plugin_cpp" / "src" / "sharp_core.cpp"
 NATIVE = ROOT / "native"
 
 pytestmark = [
-    pytest.mark.slow,  # compiles and runs a C++ driver of the plugin's core
+    pytest.mark.slow,  # compiles and runs a C++ driver of the library
     pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++"),
 ]
 
 
 @pytest.fixture(scope="module")
 def driver(tmp_path_factory) -> Path:
-    """The driver, compiled with the flags the plugin's CMakeLists.txt (and native's) give
-    each file."""
+    """The driver, compiled with the flags native/CMakeLists.txt gives each file."""
     out = tmp_path_factory.mktemp("core")
     include = NATIVE / "include"
     flags = ["-O3", "-ffp-contract=off", "-fno-math-errno", "-DMS_LIBMVEC=1", "-fPIC"]
@@ -49,11 +48,13 @@ def driver(tmp_path_factory) -> Path:
         objects.append(out / f"{source.stem}.o")
         command = ["gcc", "-c", "-std=c99", *flags, f"-I{include}", source, "-o", objects[-1]]
         subprocess.run(command, check=True)
+    cxx = ["g++", "-O3", "-std=c++14", "-ffp-contract=off", "-fno-math-errno", "-Wall", "-Werror"]
+    cxx += ["-Wno-unused-parameter", "-fPIC", f"-I{include}"]
+    for source in sorted((NATIVE / "src").glob("*.cpp")):
+        objects.append(out / f"{source.stem}.o")
+        subprocess.run([*cxx, "-c", source, "-o", objects[-1]], check=True)
     exe = out / "driver"
-    command = ["g++", "-O3", "-std=c++14", "-ffp-contract=off", "-Wall", "-Werror"]
-    command += ["-Wno-unused-parameter", f"-I{include}", f"-I{CORE.parent}"]
-    command += [f"-I{NATIVE / 'src'}"]  # curves_types.h
-    command += [DRIVER, CORE, *objects, "-o", exe, "-lmvec", "-lm", "-pthread"]
+    command = [*cxx, DRIVER, *objects, "-o", exe, "-lmvec", "-lm", "-pthread"]
     subprocess.run(command, check=True)
     return exe
 
@@ -171,7 +172,7 @@ CASES = [
 
 @pytest.mark.parametrize("mode", ["paper", "robust"])
 @pytest.mark.parametrize("case", CASES)
-def test_the_core_agrees_with_python(driver, tmp_path, case, mode):
+def test_the_library_agrees_with_python(driver, tmp_path, case, mode):
     vertices, faces, options = _case(case)
     scales = options.get("scales")
     mesh = faces is not None and not options.get("as_points", False)
@@ -194,6 +195,7 @@ def test_the_core_agrees_with_python(driver, tmp_path, case, mode):
         scales=scales,
         weighting=options.get("weighting", "gaussian"),
         as_points=bool(options.get("as_points", False)),
+        return_details=True,  # the Python-driven path
     )
     assert tuple(int(s) for s in lines["scales"]) == expected.scales
     np.testing.assert_array_equal(lines["thresholds"], expected.thresholds)
@@ -207,7 +209,7 @@ def test_the_core_agrees_with_python(driver, tmp_path, case, mode):
 
 def test_the_grid_numbered_case_takes_the_shifted_search():
     """The agreement case above where the kernel's ring pass takes a vertex's search from
-    the previous vertex's (ms_shifted_lists), which the plugin core asks for too."""
+    the previous vertex's (ms_shifted_lists), which the library's sequence asks for too."""
     vertices, faces, _ = _case("fold-mesh-grid-numbered")
     cleaned = clean(Geometry(vertices, faces, "fold"))
     shifted = _kernels.shifted_lists(*_kernels.adjacency(cleaned.faces, len(cleaned.vertices)))
@@ -287,7 +289,7 @@ def test_the_option_lists_are_the_headers():
         assert enum.group(1) == f"MS_DEFAULT_{name.upper()}"
         assert tuple(re.findall(r'"(\w+)"', enum.group(2).lower())) == names
     for scales, low in (("knnScales", "MS_MIN_KNN_SCALE"), ("ringScales", "MS_MIN_RING_SCALE")):
-        assert f'parseScales(par.getString("{scales}").toStdString(), {low});' in glue
+        assert re.search(rf'readScales\(par, "{scales}", {low}, [^)]*\)', glue), scales
     for script in (ROOT / "meshlab_plugin_cpp" / "examples").glob("*.mlx"):
         text = script.read_text()
         for name, names in lists.items():
@@ -307,7 +309,7 @@ def test_the_option_lists_are_the_headers():
         ("1 12", "scales must be >= 2, got 1"),
     ],
 )
-def test_the_core_refuses_the_scales_python_refuses(driver, tmp_path, knn, message):
+def test_the_library_refuses_the_scales_python_refuses(driver, tmp_path, knn, message):
     """At most MAX_SCALES scales (a range is refused before it is built), k at least
     MIN_KNN_SCALE: the command line's limits and messages."""
     points = shapes.cube_grid_points(9)
@@ -354,8 +356,8 @@ SCALE_TEXTS = [
 
 
 @pytest.mark.parametrize("text", SCALE_TEXTS)
-def test_the_core_reads_scales_as_the_command_line_does(driver, tmp_path, text):
-    """One grammar for the scales: the plugin's ``parseScales`` accepts what
+def test_the_library_reads_scales_as_the_command_line_does(driver, tmp_path, text):
+    """One grammar for the scales: the library's ``ms_parse_scales`` accepts what
     ``meshlab_sharp.cli.parse_scales`` accepts, giving the same sorted distinct scales,
     and refuses the rest with the same message."""
     points = shapes.cube_grid_points(9)

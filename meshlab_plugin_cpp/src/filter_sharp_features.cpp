@@ -1,20 +1,53 @@
-// MeshLab glue around sharp_core: reads the current layer, runs the detector in double,
-// writes vertex quality (strength), vertex selection (features) and optional colour; or
-// adds the feature curves (the native library's curves.h) as a new layer of edges.
+// MeshLab glue around meshlab-sharp's native library: parameters to ms_detect's options
+// (the scales read by ms_parse_scales), the current layer to arrays in double, MeshLab's
+// progress callback; back: vertex quality (strength), vertex selection (features) and
+// optional colour, or the feature curves (the native library's curves.h) as a new layer of edges.
 #include "filter_sharp_features.h"
 
 #include "curves.h"
-#include "sharp_core.h"
+#include "meshlab_sharp.h"
 
 #include <vcg/complex/algorithms/update/bounding.h>
 #include <vcg/complex/algorithms/update/selection.h>
 
 #include <chrono>
+#include <memory>
 
 namespace {
 const char *NAME = "Select Sharp Features (Projected Distance)";
 const char *CURVES_NAME = "Extract Sharp Feature Curves";
 const char *CURVES_LAYER = "sharp_curves";
+
+static_assert(sizeof(sharp::Point) == 3 * sizeof(double), "vertices pass to ms_detect as (n, 3) doubles");
+
+// The library's progress report to MeshLab's callback (ctx: the vcg::CallBackPos *).
+int progress(int percent, const char *message, void *ctx)
+{
+	vcg::CallBackPos *cb = *static_cast<vcg::CallBackPos **>(ctx);
+	if (cb != nullptr)
+		cb(percent, message);
+	return 0;
+}
+
+// The scales parameter `name` read by the library's grammar into scales (count of them);
+// false, the message in `error`, when the text is not scales of at least `minimum`.
+bool readScales(const RichParameterList &par, const char *name, int minimum, int *scales, int &count,
+                QString &error)
+{
+	char why[512];
+	count = ms_parse_scales(qUtf8Printable(par.getString(name)), minimum, scales, MS_MAX_SCALES, why, sizeof why);
+	if (count < 0)
+		error = QString::fromUtf8(why);
+	return count >= 0;
+}
+
+// The scales as the library's grammar writes them, "12 16 20".
+QString formatScales(const int *scales, int count)
+{
+	char text[16 * MS_MAX_SCALES];
+	ms_format_scales(scales, count, text, sizeof text);
+	return QString(text);
+}
 
 // The curves as a new layer (vertices and edges; vertex quality: the curve's number; red,
 // the features' colour), the current layer staying current, as
@@ -126,15 +159,16 @@ int FilterSharpFeaturesPlugin::postCondition(QAction *a) const
 
 void FilterSharpFeaturesPlugin::initParameterSet(QAction *a, MeshModel &, RichParameterList &par)
 {
-	const sharp::Options defaults;
-	par.addParam(RichString("knnScales", QString::fromStdString(sharp::formatScales(defaults.knnScales)),
+	ms_detect_options defaults;
+	ms_detect_defaults(&defaults);
+	par.addParam(RichString("knnScales", formatScales(defaults.knn_scales, defaults.n_knn_scales),
 	                        "Point-cloud scales (k)",
 	                        "Point clouds only: the neighbourhood sizes k (the k nearest neighbours, "
 	                        "the point included), one per scale; a feature must be a candidate at "
 	                        "every scale. A list like '12 16 20' or a range 'start:stop:step'. "
 	                        "Smaller values find finer details and react more to noise; Robust mode "
 	                        "grows them on noisy clouds by itself."));
-	par.addParam(RichString("ringScales", QString::fromStdString(sharp::formatScales(defaults.ringScales)),
+	par.addParam(RichString("ringScales", formatScales(defaults.ring_scales, defaults.n_ring_scales),
 	                        "Mesh scales (rings)",
 	                        "Meshes only: the neighbourhood of a vertex at scale k is every vertex "
 	                        "within k edges of it (its k-ring), one per scale; a feature must be a "
@@ -178,23 +212,21 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 	if (mm == nullptr)
 		return fail("there is no current layer");
 	CMeshO &m = mm->cm;
-	sharp::Options options;
-	try {
-		options.knnScales = sharp::parseScales(par.getString("knnScales").toStdString(), MS_MIN_KNN_SCALE);
-		options.ringScales = sharp::parseScales(par.getString("ringScales").toStdString(), MS_MIN_RING_SCALE);
-	} catch (const sharp::InputError &e) {
-		return fail(e.what());
-	}
+	ms_detect_options options;
+	ms_detect_defaults(&options);
+	QString error;
+	if (!readScales(par, "knnScales", MS_MIN_KNN_SCALE, options.knn_scales, options.n_knn_scales, error) ||
+	    !readScales(par, "ringScales", MS_MIN_RING_SCALE, options.ring_scales, options.n_ring_scales, error))
+		return fail(error);
+	options.weighting = par.getEnum("weighting");
+	options.mode = par.getEnum("mode");
+	options.as_points = par.getBool("asPoints");
 	// An .mlx script may give an enum any integer: only the listed choices run.
-	const int weighting = par.getEnum("weighting");
-	const int mode = par.getEnum("mode");
-	if (weighting != 0 && weighting != 1)
-		return fail(QString("weighting = %1 is not one of the choices 0 (Gaussian) and 1 (None)").arg(weighting));
-	if (mode != 0 && mode != 1)
-		return fail(QString("mode = %1 is not one of the choices 0 (Paper) and 1 (Robust)").arg(mode));
-	options.gaussian = weighting == 0;
-	options.asPoints = par.getBool("asPoints");
-	options.robust = mode == 1;
+	if (options.weighting != 0 && options.weighting != 1)
+		return fail(QString("weighting = %1 is not one of the choices 0 (Gaussian) and 1 (None)").arg(options.weighting));
+	if (options.mode != 0 && options.mode != 1)
+		return fail(QString("mode = %1 is not one of the choices 0 (Paper) and 1 (Robust)").arg(options.mode));
+	const bool robust = options.mode == 1;
 
 	// Live vertices in layer order; faces re-indexed to that order.
 	std::vector<CMeshO::VertexPointer> live;
@@ -222,23 +254,34 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 			return fail("a face references a missing vertex");
 		faces.push_back(t);
 	}
+	std::vector<int64_t> triangles;
+	for (const auto &t : faces)
+		triangles.insert(triangles.end(), t.begin(), t.end());
 
-	sharp::Result r;
 	const auto start = std::chrono::steady_clock::now();
-	try {
-		r = sharp::detect(pts, faces, options, cb);
-	} catch (const sharp::InputError &e) {
-		return fail(e.what());
-	} catch (const std::exception &e) {
-		return fail(QString("internal error: ") + e.what());
-	}
-
+	ms_detection *run = nullptr;
+	char why[512];
+	const int status = ms_detect(reinterpret_cast<const double *>(pts.data()), int64_t(pts.size()), triangles.data(), int64_t(faces.size()), &options,
+	                             progress, &cb, &run, why, sizeof why);
+	if (status == MS_EINPUT)
+		return fail(why);
+	if (status != MS_OK)
+		return fail(QString("internal error: ") + why);
+	const std::unique_ptr<ms_detection, void (*)(ms_detection *)> owned(run, ms_detection_free);
+	int64_t counts[MS_DETECTION_COUNTS];
+	ms_detection_counts(run, counts);
+	const bool mesh = counts[MS_COUNT_MESH] != 0;
+	const long nFeatures = long(counts[MS_COUNT_FEATURES]);
+	std::vector<double> strength(live.size());
+	std::vector<char> feature(live.size()), kept(live.size());
+	ms_detection_vertices(run, strength.data(), reinterpret_cast<uint8_t *>(feature.data()),
+	                      reinterpret_cast<uint8_t *>(kept.data()));
 	const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
 	if (ID(action) == FP_SHARP_CURVES) {
 		sharp::Curves c;
 		try {
-			c = sharp::extractCurves(pts, r.feature, r.kept, options.asPoints ? decltype(faces)() : faces);
+			c = sharp::extractCurves(pts, feature, kept, options.as_points ? decltype(faces)() : faces);
 		} catch (const std::exception &e) {
 			return fail(QString("internal error: ") + e.what());
 		}
@@ -249,8 +292,7 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 		Log("Sharp feature curves: %d curves (%d closed), %d vertices, %d corners, spacing %.17g; "
 		    "%s, %s mode, %ld of %d vertices are features",
 		    int(c.curves.size()), int(closed), int(vertices), int(c.corners.size()), c.spacing,
-		    r.mesh ? "mesh (k-rings)" : "points (kNN)", options.robust ? "robust" : "paper",
-		    r.nFeatures, int(live.size()));
+		    mesh ? "mesh (k-rings)" : "points (kNN)", robust ? "robust" : "paper", nFeatures, int(live.size()));
 		return true;
 	}
 
@@ -260,28 +302,36 @@ bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, c
 		mm->updateDataMask(MeshModel::MM_VERTCOLOR);
 	vcg::tri::UpdateSelection<CMeshO>::VertexClear(m);
 	for (size_t i = 0; i < live.size(); ++i) {
-		live[i]->Q() = CMeshO::VertexType::QualityType(r.strength[i]);
-		if (r.feature[i])
+		live[i]->Q() = CMeshO::VertexType::QualityType(strength[i]);
+		if (feature[i])
 			live[i]->SetS();
 		if (colorize)
-			live[i]->C() = r.feature[i] ? vcg::Color4b(230, 13, 13, 255) : vcg::Color4b(200, 200, 200, 255);
+			live[i]->C() = feature[i] ? vcg::Color4b(230, 13, 13, 255) : vcg::Color4b(200, 200, 200, 255);
 	}
 
-	QString scales;
-	for (size_t s = 0; s < r.scales.size(); ++s)
-		scales += QString(" %1=%2:T=%3,candidates=%4")
-		              .arg(r.mesh ? "ring" : "k")
-		              .arg(r.scales[s])
-		              .arg(r.thresholds[s], 0, 'g', 17)
-		              .arg(r.candidates[s]);
-	Log("Sharp features: %s, %s mode, %ld of %d vertices are features;%s",
-	    r.mesh ? "mesh (k-rings)" : "points (kNN)", options.robust ? "robust" : "paper", r.nFeatures,
-	    int(live.size()), qUtf8Printable(scales));
-	if (r.allFlat)
+	const int nScales = int(counts[MS_COUNT_SCALES]);
+	std::vector<int> scales(nScales);
+	std::vector<double> thresholds(nScales);
+	std::vector<int64_t> candidates(nScales);
+	ms_detection_scales(run, scales.data(), thresholds.data(), candidates.data());
+	QString perScale;
+	for (int s = 0; s < nScales; ++s)
+		perScale += QString(" %1=%2:T=%3,candidates=%4")
+		                .arg(mesh ? "ring" : "k")
+		                .arg(scales[s])
+		                .arg(thresholds[s], 0, 'g', 17)
+		                .arg(qlonglong(candidates[s]));
+	Log("Sharp features: %s, %s mode, %ld of %d vertices are features;%s", mesh ? "mesh (k-rings)" : "points (kNN)",
+	    robust ? "robust" : "paper", nFeatures, int(live.size()), qUtf8Printable(perScale));
+	if (counts[MS_COUNT_ALL_FLAT])
 		Log("Sharp features: no features: all points lie on one plane.");
 	QString stages;
-	for (const auto &t : r.timings)
-		stages += QString("%1%2 %3 s").arg(stages.isEmpty() ? "" : ", ").arg(t.first.c_str()).arg(t.second, 0, 'f', 3);
+	for (int i = 0; i < int(counts[MS_COUNT_TIMINGS]); ++i) {
+		char stage[64];
+		double spent = 0.0;
+		ms_detection_timing(run, i, stage, sizeof stage, &spent);
+		stages += QString("%1%2 %3 s").arg(stages.isEmpty() ? "" : ", ").arg(stage).arg(spent, 0, 'f', 3);
+	}
 	Log("Sharp features: detection took %.3f s (%s)", seconds, qUtf8Printable(stages));
 	return true;
 }

@@ -4,7 +4,7 @@
  * Three users: the library itself (native/src); the Python package, which loads the
  * library with ctypes (meshlab_sharp/_kernels.py) and reads the MS_ constants below from
  * this file (meshlab_sharp/_header.py); and the MeshLab plugin
- * (meshlab_plugin_cpp/src/sharp_core.cpp, curves_core.cpp), which links the same library
+ * (meshlab_plugin_cpp/src/filter_sharp_features.cpp), which links the same library
  * and calls the same functions. Plain C99: no Python, Qt, MeshLab or vcg types.
  *
  * Conventions: points are (n, 3) row-major doubles; "tree positions" index the points
@@ -132,7 +132,7 @@
 /* ---------------------------------------------------------------- the feature curves
  * The constants of the feature curves: the Python package's curves modules
  * (meshlab_sharp/curves: graph.py, trace.py, extract.py, refine.py, fit.py) read them
- * (meshlab_sharp/_header.py), and the MeshLab plugin's curves (curves_core.cpp) use the
+ * (meshlab_sharp/_header.py), and the library's curves (native/src/curves.cpp) use the
  * macros. What each constant does and why it has its value is documented beside its
  * Python name (the name without the MS_CURVE_ prefix) in the module named above its
  * group. Lengths are in point spacings, angles in degrees. One `#define MS_CURVE_NAME
@@ -194,6 +194,12 @@
 
 #ifdef __cplusplus
 extern "C" {
+#endif
+
+/* The C ABI is the libraries' face: exported even where the rest is compiled with hidden
+ * visibility (the C++ sources of the Python package's libraries). */
+#if defined(__GNUC__)
+#pragma GCC visibility push(default)
 #endif
 
 /* What one pass of ms_cloud_pdis writes (each pointer may be NULL), per cleaned index
@@ -502,6 +508,84 @@ void ms_extent(const double *p, int64_t n, double *out);
 double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
                      double floor_, double *out, int64_t *votes, int64_t *count);
 
+/* The whole detection (detect_api.cpp, the sequence of both modes in detect.cpp): what
+ * meshlab_sharp.detect computes for an in-memory input, and what the MeshLab plugin runs.
+ *
+ * Status codes of ms_detect and ms_parse_scales: success, out of memory, unusable input or
+ * options (the message is meant for the user), a defect (the message says what failed). */
+#define MS_OK 0
+#define MS_ENOMEM (-1)
+#define MS_EINPUT (-2)
+#define MS_EINTERNAL (-3)
+
+/* Progress: percent done (0 to 100) and a message such as "Sharp features: neighbours and
+ * projected distances 45%", with the caller's ctx; called by the thread that called
+ * ms_detect only, never concurrently. Its result is ignored. */
+typedef int (*ms_progress_fn)(int percent, const char *message, void *ctx);
+
+/* Options of ms_detect; ms_detect_defaults fills in the defaults given here. */
+typedef struct {
+    int mode;                        /* 0: paper, 1: robust (MS_DEFAULT_MODE) */
+    int weighting;                   /* 0: Gaussian, 1: none, plain PCA (MS_DEFAULT_WEIGHTING) */
+    int as_points;                   /* 1: ignore the faces (k nearest neighbours); 0 */
+    int threads;                     /* threads of the run; 0: one per core the process may use */
+    int n_knn_scales;                /* point clouds: 1 to MS_MAX_SCALES scales k, ascending, */
+    int knn_scales[MS_MAX_SCALES];   /* each >= MS_MIN_KNN_SCALE (MS_DEFAULT_KNN_SCALES) */
+    int n_ring_scales;               /* meshes: 1 to MS_MAX_SCALES rings, ascending, */
+    int ring_scales[MS_MAX_SCALES];  /* each >= MS_MIN_RING_SCALE (MS_DEFAULT_RING_SCALES) */
+} ms_detect_options;
+
+/* A detection's results, owned by the library (ms_detection_free). */
+typedef struct ms_detection ms_detection;
+
+/* What ms_detection_counts writes into out (MS_DETECTION_COUNTS values), at these
+ * positions: input vertices n; distinct points processed; features; scales used (robust
+ * mode grows a noisy cloud's, not their number); 1 when processed as a mesh (k-rings), 0
+ * as points (kNN); 1 when every scale is flat (all points on one plane); stages timed
+ * (ms_detection_timing). */
+#define MS_COUNT_INPUT 0
+#define MS_COUNT_CLEAN 1
+#define MS_COUNT_FEATURES 2
+#define MS_COUNT_SCALES 3
+#define MS_COUNT_MESH 4
+#define MS_COUNT_ALL_FLAT 5
+#define MS_COUNT_TIMINGS 6
+#define MS_DETECTION_COUNTS 7
+
+void ms_detect_defaults(ms_detect_options *opt);
+/* Detect the sharp features of the n vertices xyz (n, 3) and, unless faces is NULL, m is 0
+ * or opt->as_points, of the mesh of the m triangles faces (m, 3) (0-based indices below
+ * n); opt NULL: the defaults. On MS_OK *out holds the results; otherwise *out is NULL and
+ * err (errlen bytes, NUL-terminated, may be NULL) the message. */
+int ms_detect(const double *xyz, int64_t n, const int64_t *faces, int64_t m,
+              const ms_detect_options *opt, ms_progress_fn progress, void *progress_ctx,
+              ms_detection **out, char *err, int errlen);
+void ms_detection_counts(const ms_detection *d, int64_t *out);
+/* Per input vertex, in input order (each pointer may be NULL): strength (n) the fraction
+ * of scales at which it was a candidate (1 on robust mode's sharp mesh edges), feature
+ * (n) 1 for a feature, kept (n) 1 when it took part (not a dropped or isolated point). */
+void ms_detection_vertices(const ms_detection *d, double *strength, uint8_t *feature,
+                           uint8_t *kept);
+/* Per scale used (MS_COUNT_SCALES of them; each pointer may be NULL): the scale, its
+ * threshold and its number of candidates. */
+void ms_detection_scales(const ms_detection *d, int *scales, double *thresholds,
+                         int64_t *candidates);
+/* Stage i's name (into name, cap bytes, NUL-terminated) and seconds, in order ("" and 0
+ * for an i out of range). */
+void ms_detection_timing(const ms_detection *d, int i, char *name, int cap, double *seconds);
+void ms_detection_free(ms_detection *d);
+
+/* The scales grammar of the command line (meshlab_sharp.cli.parse_scales): a list
+ * "12,16,20" (commas) or "12 16 20" (ASCII white space), never both, or an inclusive
+ * range "12:40:4" ("1:4" steps by 1); each number an optional sign and digits, white space
+ * around it allowed, at most 2^31 - 1 in magnitude; at most MS_MAX_SCALES; sorted, repeats
+ * dropped, each >= minimum. Writes at most cap scales into out and returns their number,
+ * or MS_EINPUT with the message in err (errlen bytes, may be NULL). */
+int ms_parse_scales(const char *text, int minimum, int *out, int cap, char *err, int errlen);
+/* The scales as ms_parse_scales reads them back, "12 16 20", into out (cap bytes,
+ * NUL-terminated, cut to fit); returns the length of the whole text. */
+int ms_format_scales(const int *scales, int count, char *out, int cap);
+
 /* Feature curves (native/src/curves.cpp: the steps of the numpy reference
  * meshlab_sharp/reference/curves, line for line; the MS_CURVE_ constants above). */
 
@@ -566,6 +650,10 @@ void ms_curves_copy(const ms_curves *c, int64_t *sizes, uint8_t *closed, double 
 void ms_curves_copy_corners(const ms_curves *c, double *points, int64_t *indices);
 
 void ms_curves_free(ms_curves *c);
+
+#if defined(__GNUC__)
+#pragma GCC visibility pop
+#endif
 
 #ifdef __cplusplus
 }

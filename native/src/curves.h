@@ -35,7 +35,7 @@ struct Curves {
 };
 
 // The feature curves of a detection. vertices: the input, in input order; feature and
-// valid: Result::feature and Result::kept of detect() (per vertex); faces: the
+// valid: the features and the kept vertices of ms_detect (per vertex); faces: the
 // triangles (curves are chains of mesh edges), or empty for a cloud; bounds: a cloud's
 // grid box {lo, hi} when the vertices are only the part of a larger cloud near the
 // features (out of core), or null (the vertices' bounding box); math: the elementwise

@@ -1,10 +1,8 @@
 // meshlab-sharp native library: the feature curves behind the C ABI of
 // native/include/meshlab_sharp.h (plain C types in and out; no C++ exception
 // crosses it). The library is compiled with hidden visibility: only the C ABI, declared
-// here first, is exported.
-#pragma GCC visibility push(default)
+// with default visibility by the header, is exported.
 #include "meshlab_sharp.h"
-#pragma GCC visibility pop
 
 #include "curves.h"
 

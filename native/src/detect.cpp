@@ -1,15 +1,15 @@
-// See sharp_core.h. The per-point work is the native library
-// (native/src), called with the same arguments as meshlab_sharp/_kernels.py
-// calls it, in chunks of MS_CHUNK points on every core; what remains here mirrors the
-// Python modules' global steps: cleaning.py (the compiled path), threshold.py,
+// See detect.h. The per-point kernels of native/src are called with the same arguments as
+// meshlab_sharp/_kernels.py calls them, in chunks of MS_CHUNK points on every core; what
+// remains here mirrors the Python modules' global steps: cleaning.py (the compiled path), threshold.py,
 // multiscale.py, robust.py (RobustSetup; its finishing steps are the kernel's) and
 // creases.py. docs/contributing.md ("The arithmetic both implementations share",
 // "Robust mode's arithmetic") is the contract.
-#include "sharp_core.h"
+#include "detect.h"
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cfloat>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -31,6 +31,29 @@ const double R_MIN = (2.0 / M_PI) * std::sin((MS_CREASE_ANGLE / 2.0) * (M_PI / 1
 
 using Index = int64_t;
 
+// An allocator that leaves elements default-initialised (numbers: not written) on
+// resize(n): for the large buffers a kernel fills whole, which zeroing would only slow.
+template <class T>
+struct NoInit : std::allocator<T> {
+	template <class U>
+	struct rebind {
+		using other = NoInit<U>;
+	};
+	NoInit() = default;
+	template <class U>
+	NoInit(const NoInit<U> &) {}
+	template <class U>
+	void construct(U *p) {
+		::new (static_cast<void *>(p)) U;
+	}
+	template <class U, class... A>
+	void construct(U *p, A &&...a) {
+		::new (static_cast<void *>(p)) U(std::forward<A>(a)...);
+	}
+};
+template <class T>
+using Buffer = std::vector<T, NoInit<T>>;
+
 // Throws std::bad_alloc when a kernel ran out of memory (a non-zero status).
 void check(int status) {
 	if (status != 0) throw std::bad_alloc();
@@ -41,7 +64,7 @@ void check(int status) {
 class Bar {
 public:
 	using Clock = std::chrono::steady_clock;
-	explicit Bar(Progress cb) : cb_(cb), since_(Clock::now()) {}
+	Bar(ms_progress_fn cb, void *ctx) : cb_(cb), ctx_(ctx), since_(Clock::now()) {}
 	void report(int percent, const char *stage) {
 		if (stage_ != stage) {
 			close();
@@ -50,7 +73,7 @@ public:
 		if (!cb_) return;
 		char text[160];
 		std::snprintf(text, sizeof text, "Sharp features: %s %d%%", stage, percent);
-		cb_(percent, text);
+		cb_(percent, text, ctx_);
 	}
 	// Seconds per stage in order of first entry (a stage entered twice adds up).
 	std::vector<std::pair<std::string, double>> times() {
@@ -69,20 +92,26 @@ private:
 		}
 		since_ = now;
 	}
-	Progress cb_;
+	ms_progress_fn cb_;
+	void *ctx_;
 	std::string stage_;
 	Clock::time_point since_;
 	std::vector<std::pair<std::string, double>> times_;
 };
 
-// Threads of a run: one per core this process may use (as _kernels._workers).
-unsigned workers() {
+// One thread per core this process may use (as _kernels._workers).
+unsigned cores() {
 #ifdef __linux__
 	cpu_set_t set;
 	if (sched_getaffinity(0, sizeof set, &set) == 0) return unsigned(std::max(1, CPU_COUNT(&set)));
 #endif
 	return std::max(1u, std::thread::hardware_concurrency());
 }
+
+// Threads of the calling thread's run (Options::threads, or cores()): set by detect().
+thread_local unsigned runThreads = 1;
+
+unsigned workers() { return runThreads; }
 
 // run(t) on min(workers(), max(items, 1)) threads, t = 0 on the calling thread.
 template <class Run>
@@ -132,22 +161,25 @@ void eachIndex(Index count, F f) {
 
 // neighbourhoods.unit_scale: multiply by 2^-e, 2^(e-1) <= max |coordinate| < 2^e, when e is
 // outside (-MS_UNIT_RANGE, MS_UNIT_RANGE]: exact, and no squared distance can then
-// overflow or underflow whatever the unit.
-void unitScale(std::vector<double> &xyz) {
+// overflow or underflow whatever the unit. Returns xyz (n, 3) itself, or its scaled copy
+// in `scaled`.
+const double *unitScale(const double *xyz, Index n, std::vector<double> &scaled) {
 	double big = 0.0;
-	for (double c : xyz) big = std::max(big, std::fabs(c));
+	for (Index i = 0; i < 3 * n; ++i) big = std::max(big, std::fabs(xyz[i]));
 	int e = 0;
 	std::frexp(big, &e);
-	if (big == 0.0 || (-MS_UNIT_RANGE < e && e <= MS_UNIT_RANGE)) return;
-	for (double &c : xyz) c = std::ldexp(c, -e);
+	if (big == 0.0 || (-MS_UNIT_RANGE < e && e <= MS_UNIT_RANGE)) return xyz;
+	scaled.resize(3 * n);
+	for (Index i = 0; i < 3 * n; ++i) scaled[i] = std::ldexp(xyz[i], -e);
+	return scaled.data();
 }
 
 // neighbourhoods.far_points: the points of a cloud (xyz, n x 3) further from its median
 // than MS_FAR_SPREADS of its spreads on some axis (the median and interquartile ranges of
 // at most MS_FAR_SAMPLE points evenly spread through it, numpy's linear quantiles); empty
 // when there are none.
-std::vector<char> farPoints(const std::vector<double> &xyz) {
-	const Index n = Index(xyz.size() / 3), step = std::max<Index>(1, (n + MS_FAR_SAMPLE - 1) / MS_FAR_SAMPLE);
+std::vector<char> farPoints(const double *xyz, const Index n) {
+	const Index step = std::max<Index>(1, (n + MS_FAR_SAMPLE - 1) / MS_FAR_SAMPLE);
 	double median[3], reach = 0.0;
 	for (int a = 0; a < 3; ++a) {
 		std::vector<double> x;
@@ -176,30 +208,37 @@ std::vector<char> farPoints(const std::vector<double> &xyz) {
 }
 
 struct Clean {
-	std::vector<double> pts;     // cleaned vertices (m, 3), input order
-	std::vector<Index> faces;    // cleaned triangles (f, 3)
-	std::vector<Index> fromInput;  // cleaned index of each input vertex or -1
-	Index size() const { return Index(pts.size() / 3); }
+	Buffer<double> pts;          // cleaned vertices (m, 3), input order
+	Buffer<Index> faces;         // cleaned triangles (f, 3)
+	std::vector<Index> fromInput;  // cleaned index of each input vertex or -1; empty: itself
+	Index n = 0;                 // cleaned vertices (pts may be handed on to a kd-tree)
+	Index size() const { return n; }
 };
 
 // cleaning._clean_compiled: exact duplicates merged into their first occurrence; for
-// meshes, faces of zero double area dropped, then unreferenced vertices.
-Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool mesh) {
-	const Index n = Index(v.size() / 3);
+// meshes, faces of zero double area dropped, then unreferenced vertices. v (n, 3), faces
+// (F, 3).
+Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
-	std::vector<uint64_t> table(size);  // scratch (ms_dedup clears it)
-	std::vector<Index> toInput(n), fromInput(n);  // fromInput: all 0, as ms_dedup needs
+	Buffer<uint64_t> table(size);  // scratch (ms_dedup clears it)
+	Buffer<Index> toInput(n);
+	std::vector<Index> fromInput(n);  // all 0, as ms_dedup needs
 	Clean c;
 	c.pts.resize(3 * n);
-	const Index m = ms_dedup(v.data(), n, table.data(), size - 1, fromInput.data(), toInput.data(), c.pts.data());
-	if (m == n) std::copy(v.begin(), v.end(), c.pts.begin());
+	const Index m = ms_dedup(v, n, table.data(), size - 1, fromInput.data(), toInput.data(), c.pts.data());
+	if (m == n) std::copy(v, v + 3 * n, c.pts.begin());
 	c.pts.resize(3 * m);
-	c.fromInput = fromInput;
-	if (!mesh) return c;
-	c.faces.resize(faces.size());
+	c.n = m;
+	Buffer<uint64_t>().swap(table);
+	Buffer<Index>().swap(toInput);
+	if (!mesh) {
+		if (m < n) c.fromInput = std::move(fromInput);
+		return c;
+	}
+	c.faces.resize(3 * F);
 	std::vector<uint8_t> used(m, 0);
-	const Index nonzero = ms_keep_faces(c.pts.data(), faces.data(), Index(faces.size() / 3), fromInput.data(),
+	const Index nonzero = ms_keep_faces(c.pts.data(), faces, F, fromInput.data(),
 	                                    c.faces.data(), used.data());
 	c.faces.resize(3 * nonzero);
 	if (c.faces.empty()) throw InputError("every face has zero area: nothing is left of the mesh");
@@ -211,14 +250,22 @@ Clean clean(const std::vector<double> &v, const std::vector<Index> &faces, bool 
 			renumber[i] = kept++;
 		}
 	c.pts.resize(3 * kept);
-	for (Index &f : c.faces) f = renumber[f];
-	for (Index &i : c.fromInput) i = renumber[i];
+	c.n = kept;
+	if (kept < m) {  // else renumber is the identity
+		for (Index &f : c.faces) f = renumber[f];
+		for (Index &i : fromInput) i = renumber[i];
+	}
+	for (Index i = 0; i < n; ++i)  // kept when a vertex moved or was dropped
+		if (fromInput[i] != i) {
+			c.fromInput = std::move(fromInput);
+			break;
+		}
 	return c;
 }
 
 // The kd-tree of the kernel (_kernels.KdTree).
 struct Tree {
-	std::vector<double> pts;   // (n, 3) in tree order
+	Buffer<double> pts;        // (n, 3) in tree order
 	std::vector<Index> orig;   // cleaned index of each
 	std::vector<double> box;   // node boxes
 	int depth = 0;
@@ -226,7 +273,7 @@ struct Tree {
 
 	// As _kernels.build_tree: the top MS_KD_TOP levels one after the other, the nodes of
 	// each on every core, then the subtrees below them (the same tree as ms_kdtree_build).
-	explicit Tree(const std::vector<double> &p) : pts(p), orig(p.size() / 3), n(Index(p.size() / 3)) {
+	explicit Tree(Buffer<double> p) : pts(std::move(p)), orig(pts.size() / 3), n(Index(pts.size() / 3)) {
 		depth = std::max(0, int(std::ceil(std::log2(double(std::max<Index>(n, 1)) / MS_KD_LEAF))));
 		box.resize(6 * ((Index(2) << depth) - 1));
 		for (Index i = 0; i < n; ++i) orig[size_t(i)] = i;
@@ -251,12 +298,21 @@ std::vector<T> toCleaned(const std::vector<Index> &orig, const std::vector<T> &v
 	return out;
 }
 
+// The tree's points in the cleaned order (row t to row orig[t]).
+Buffer<double> cleanedPoints(const Tree &t) {
+	Buffer<double> out(t.pts.size());
+	for (Index x = 0; x < t.n; ++x)
+		for (int a = 0; a < 3; ++a) out[3 * t.orig[x] + a] = t.pts[3 * x + a];
+	return out;
+}
+
 // What one pass of ms_cloud_pdis computed (_kernels.ScalePass, CloudStats): per scale s
 // and tree position t at [s * n + t] (tree order: the kernel writes its rows one after the
 // other, as _kernels' pass; near and kthIdx hold tree positions, for ms_isolated_tree;
 // near and kthIdx int32, as cloud_out_t's: a MeshLab layer counts its vertices in an int).
 struct CloudPass {
-	std::vector<double> pdis, relative, score, noise, kthD2;
+	Buffer<double> pdis, relative;  // filled whole by the kernel
+	std::vector<double> score, noise, kthD2;
 	std::vector<int32_t> near, kthIdx;
 	std::vector<double> nthD2, refD2;  // isolation's second rule
 };
@@ -318,7 +374,7 @@ CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian
 // of its faces).
 struct Rings {
 	std::vector<Index> ptr;
-	std::vector<int32_t> idx;
+	Buffer<int32_t> idx;
 };
 
 // ms_adjacency of the cleaned mesh, as _kernels.adjacency.
@@ -368,7 +424,7 @@ const uint8_t *bytes(const std::vector<char> &mask) { return reinterpret_cast<co
 // THIN_KNN of K (robust.smoothed_ranking); then, every candidate's support known, thinning
 // across the line (cone: robust.thin_cone) over K, the points not in f0 blocking with
 // block (robust.thin_blockers).
-std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector<char> &f0,
+std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
                                  const ms_lists_t &D, const ms_lists_t &S, const ms_lists_t &K, bool exempt,
                                  double freeBelow, bool smooth, bool block, double cone, Bar &bar, int from, int to) {
@@ -396,7 +452,7 @@ std::vector<char> supportAndThin(const std::vector<double> &p, const std::vector
 // creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
 // normals turn by more than max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles);
 // the edges and their normals' dot products from the kernel (_kernels.crease_vertices).
-std::vector<char> sharpVertices(const std::vector<double> &p, const std::vector<Index> &faces) {
+std::vector<char> sharpVertices(const Buffer<double> &p, const Buffer<Index> &faces) {
 	const Index F = Index(faces.size() / 3), n = Index(p.size() / 3);
 	std::vector<Index> ptr(n + 1), estart(n + 1);
 	std::vector<int32_t> inc(3 * F);
@@ -454,13 +510,14 @@ void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 // face-average normals fixed (zero rows: PCA), as _kernels.ring_projected_distances; with
 // score not null, robust mode's relative distances (S, n) instead, and the score (n) into
 // *score, from the same walk (relative=True).
-std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector<int> &scales, bool gaussian,
+Buffer<double> ringPdis(Clean &c, const Rings &adj, const std::vector<int> &scales, bool gaussian,
                              std::vector<double> *score, Bar &bar, int from, int to) {
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
 	std::vector<double> normals(3 * n, 0.0);
 	check(ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data()) < 0);
+	Buffer<Index>().swap(c.faces);  // no later step reads them (as pipeline.py)
 	const std::vector<Index> rings(scales.begin(), scales.end());
-	std::vector<double> out(rings.size() * n);
+	Buffer<double> out(rings.size() * n);  // filled whole by the kernel
 	if (score) score->assign(n, 0.0);
 	double *pdis = score ? nullptr : out.data(), *relative = score ? out.data() : nullptr;
 	double *scores = score ? score->data() : nullptr;
@@ -492,21 +549,21 @@ std::vector<double> ringPdis(const Clean &c, const Rings &adj, const std::vector
 
 // The paper's method (ALGORITHM.md): min-max normalisation with the flat-scale rule,
 // Otsu, candidates at every scale.
-Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) {
+Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = c.size();
 	const size_t S = r.scales.size();
-	std::vector<double> pdis;
+	double box[3];
+	ms_extent(c.pts.data(), n, box);
+	Buffer<double> pdis;
 	std::vector<Index> orig;  // a cloud's tree order: the cleaned index of each row of pdis
 	if (r.mesh) {
 		pdis = ringPdis(c, adjacency(c), r.scales, options.gaussian, nullptr, bar, 0, 90);
 	} else {
 		bar.report(0, "kd-tree");
-		Tree tree(c.pts);
+		Tree tree(std::move(c.pts));  // no later step reads the points
 		pdis = cloudPass(tree, r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
 		orig.swap(tree.orig);
 	}
-	double box[3];
-	ms_extent(c.pts.data(), n, box);
 	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(box[0] * box[0] + box[1] * box[1] + box[2] * box[2]);
 	bar.report(90, "thresholds");
 	std::vector<int64_t> votes(n, 0);
@@ -516,6 +573,7 @@ Decision paperMode(const Clean &c, const Options &options, Result &r, Bar &bar) 
 		// values hold 0 and 1, which Otsu's split parts
 		if (vote(&pdis[s * n], n, true, flatSpan, true, 0.0, votes, r) < 1.0) r.allFlat = false;
 	}
+	Buffer<double>().swap(pdis);
 	if (!orig.empty()) votes = toCleaned(orig, votes);
 	Decision d;
 	d.toClean.resize(n);
@@ -556,15 +614,13 @@ KnnOfMask knnOfMask(const Tree &t, const std::vector<char> &mask, int k, Bar &ba
 // grown with the noise, then the pass at the final scales; relative distances and score
 // from the kernel (RelativeRule.from_pass); acute tips, support and thinning by the
 // kernel on the candidates' kNN rows (RobustSetup._finish_compiled).
-Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar) {
-	Decision d;
-	d.toClean.resize(c.size());
-	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
-	std::vector<double> pts = c.pts;
+Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
+	Decision d;  // its toClean: all cleaned points unless isolated ones are left out
 	const int top0 = r.scales.back();
 	const int k0 = std::min(MS_NOISE_KNN, top0);
 	bar.report(0, "kd-tree");
-	auto tree = std::make_unique<Tree>(pts);
+	auto tree = std::make_unique<Tree>(std::move(c.pts));  // the points in cleaned order: pts below
+	Buffer<double> pts;  // the points processed, in cleaned order once the pass is done
 	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
 	std::vector<uint8_t> isolated(tree->n);  // per tree position (_kernels.isolated_from_stats)
 	eachIndex((tree->n + MS_CHUNK - 1) / MS_CHUNK, [&](Index u) {
@@ -573,24 +629,30 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		                 MS_ISOLATED_SPREAD, u * MS_CHUNK, std::min(tree->n, (u + 1) * MS_CHUNK), isolated.data());
 	});
 	isolated = toCleaned(tree->orig, isolated);
-	std::vector<Index> keep;
-	for (Index i = 0; i < tree->n; ++i)
-		if (!isolated[i]) keep.push_back(i);
-	if (Index(keep.size()) < tree->n) {
+	const Index nKeep = tree->n - Index(std::count(isolated.begin(), isolated.end(), uint8_t(1)));
+	if (nKeep < tree->n) {
+		std::vector<Index> keep;
+		keep.reserve(nKeep);
+		for (Index i = 0; i < tree->n; ++i)
+			if (!isolated[i]) keep.push_back(i);
 		if (Index(keep.size()) < top0) throw InputError("too few points are left once isolated points are removed");
-		std::vector<double> kept(3 * keep.size());
-		for (size_t i = 0; i < keep.size(); ++i)
-			for (int a = 0; a < 3; ++a) kept[3 * i + a] = pts[3 * keep[i] + a];
-		pts.swap(kept);
+		pass = CloudPass();
+		{
+			const Buffer<double> all = cleanedPoints(*tree);
+			tree.reset();
+			pts.resize(3 * keep.size());
+			for (size_t i = 0; i < keep.size(); ++i)
+				for (int a = 0; a < 3; ++a) pts[3 * i + a] = all[3 * keep[i] + a];
+		}
 		d.toClean.swap(keep);
 		tree = std::make_unique<Tree>(pts);
 		pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 45, 65);
 	}
 	const Index n = tree->n;
-	std::vector<double> ratio = pass.noise;
 	const Index at = (n - 1) / 2;
-	std::nth_element(ratio.begin(), ratio.begin() + at, ratio.end());
-	const double noise = std::min(std::max(1.0, std::pow(ratio[at] / MS_NOISE_TOLERATED, 2.0)), MS_NOISE_MAX_FACTOR);
+	std::nth_element(pass.noise.begin(), pass.noise.begin() + at, pass.noise.end());
+	const double ratio = pass.noise[at];  // the median noise ratio
+	const double noise = std::min(std::max(1.0, std::pow(ratio / MS_NOISE_TOLERATED, 2.0)), MS_NOISE_MAX_FACTOR);
 	const double factor = std::min(noise, double(n) / double(top0));
 	int thinKnn = MS_THIN_KNN;  // robust.thin_knn: grows with the scales
 	if (factor > 1.0) {
@@ -599,17 +661,25 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 		if (r.scales.back() > n)
 			throw InputError("k = " + std::to_string(r.scales.back()) + " nearest neighbours needs at least " +
 			                 std::to_string(r.scales.back()) + " points, got " + std::to_string(n));
+		pass = CloudPass();
 		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85);
 	}
 	bar.report(85, "thresholds");
-	const bool quiet = !(ratio[at] > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
+	const bool quiet = !(ratio > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
 	const size_t S = r.scales.size();
 	std::vector<int64_t> votes(n, 0);
 	for (size_t s = 0; s < S; ++s)  // robust.otsu_splits: without noise the floor alone
 		vote(&pass.relative[s * n], n, false, 0.0, !quiet, R_MIN, votes, r);
+	Buffer<double>().swap(pass.relative);
+	if (d.toClean.empty()) {
+		d.toClean.resize(n);
+		std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
+	}
 	votes = toCleaned(tree->orig, votes);
 	pass.score = toCleaned(tree->orig, pass.score);
 	decide(votes, S, d);
+	std::vector<int64_t>().swap(votes);
+	if (pts.empty()) pts = cleanedPoints(*tree);
 	bar.report(85, "support and thinning");
 	const int top = r.scales.back();
 	// robust.acute_tests: one search for them and the candidates (RobustSetup._finish_compiled)
@@ -656,20 +726,23 @@ Decision robustCloud(const Clean &c, const Options &options, Result &r, Bar &bar
 // Robust mode on a mesh: the relative distances and the score from the kernel's ring pass
 // (the local scales summed in breadth-first order, as RobustSetup), support and thinning
 // over the 2-ring, and the vertices of the mesh's sharp edges (creases.py).
-Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar) {
+Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = c.size();
 	const size_t S = r.scales.size();
 	const int top = r.scales.back();
+	const auto edges = sharpVertices(c.pts, c.faces);  // before the ring pass drops the faces
 	const Rings adj = adjacency(c);
 	std::vector<double> score;
-	const std::vector<double> relative = ringPdis(c, adj, r.scales, options.gaussian, &score, bar, 0, 85);
+	Buffer<double> relative = ringPdis(c, adj, r.scales, options.gaussian, &score, bar, 0, 85);
 	bar.report(85, "thresholds");
 	std::vector<int64_t> votes(n, 0);
 	for (size_t s = 0; s < S; ++s) vote(&relative[s * n], n, false, 0.0, true, R_MIN, votes, r);
+	Buffer<double>().swap(relative);
 	Decision d;
 	d.toClean.resize(n);
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
 	decide(votes, S, d);
+	std::vector<int64_t>().swap(votes);
 	bar.report(85, "support and thinning");
 	std::vector<Index> rows;
 	for (Index i = 0; i < n; ++i)
@@ -679,7 +752,6 @@ Decision robustMesh(const Clean &c, const Options &options, Result &r, Bar &bar)
 		d.feature = supportAndThin(c.pts, d.feature, score, rows, rings.lists(1), rings.lists(0), rings.lists(0), false,
 		                           0.0, false, false, MS_THIN_CONE_COS, bar, 85, 95);
 	}
-	const auto edges = sharpVertices(c.pts, c.faces);
 	for (Index i = 0; i < n; ++i)
 		if (edges[i]) {
 			d.feature[i] = 1;
@@ -780,46 +852,43 @@ std::string formatScales(const std::vector<int> &scales) {
 	return out;
 }
 
-Result detect(const std::vector<Point> &vertices, const std::vector<std::array<int, 3>> &faces,
-              const Options &options, Progress progress) {
-	Bar bar(progress);
+Result detect(const double *xyz, const Index nIn, const Index *faces, const Index m, const Options &options,
+              ms_progress_fn progress, void *ctx) {
+	runThreads = options.threads > 0 ? options.threads : cores();
+	Bar bar(progress, ctx);
 	bar.report(0, "cleaning");
-	const Index nIn = Index(vertices.size());
 	if (nIn == 0) throw InputError("the layer has no vertices");
-	std::vector<double> xyz(3 * nIn);
-	for (Index i = 0; i < nIn; ++i) {
-		const Point &p = vertices[i];
-		if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-			throw InputError("vertex " + std::to_string(i) + " has a non-finite coordinate (NaN or inf)");
-		xyz[3 * i] = p.x;
-		xyz[3 * i + 1] = p.y;
-		xyz[3 * i + 2] = p.z;
-	}
+	bool finite = true;  // branch-free checks over the whole input, the culprit found after
+	for (Index i = 0; i < 3 * nIn; ++i) finite &= std::fabs(xyz[i]) <= DBL_MAX;
+	for (Index i = 0; !finite; ++i)
+		if (!std::isfinite(xyz[i]))
+			throw InputError("vertex " + std::to_string(i / 3) + " has a non-finite coordinate (NaN or inf)");
 	Result r;
-	r.mesh = !faces.empty() && !options.asPoints;
-	for (const auto &f : faces)
-		for (int a = 0; a < 3; ++a)
-			if (f[a] < 0 || f[a] >= nIn) throw InputError("a face index is out of range");
-	std::vector<Index> tri;
-	if (r.mesh)
-		for (const auto &f : faces) tri.insert(tri.end(), f.begin(), f.end());
+	r.mesh = m > 0 && !options.asPoints;
+	bool inRange = true;
+	for (Index i = 0; i < 3 * m; ++i) inRange &= uint64_t(faces[i]) < uint64_t(nIn);
+	if (!inRange) throw InputError("a face index is out of range");
 	// a cloud's far points dropped first (as pipeline.py): kept, they would set the unit
-	const std::vector<char> far = r.mesh ? std::vector<char>() : farPoints(xyz);
+	const std::vector<char> far = r.mesh ? std::vector<char>() : farPoints(xyz, nIn);
 	std::vector<Index> near;
+	std::vector<double> rest;
 	if (!far.empty()) {
-		std::vector<double> rest;
 		for (Index i = 0; i < nIn; ++i)
 			if (!far[i]) {
 				near.push_back(i);
-				rest.insert(rest.end(), xyz.begin() + 3 * i, xyz.begin() + 3 * i + 3);
+				rest.insert(rest.end(), xyz + 3 * i, xyz + 3 * i + 3);
 			}
-		xyz.swap(rest);
 	}
-	unitScale(xyz);
-	Clean c = clean(xyz, tri, r.mesh);
+	const Index nNear = far.empty() ? nIn : Index(near.size());
+	std::vector<double> scaled;
+	Clean c = clean(unitScale(far.empty() ? xyz : rest.data(), nNear, scaled), nNear, faces, r.mesh ? m : 0,
+	                r.mesh);
+	scaled = std::vector<double>();
+	rest = std::vector<double>();
 	if (!far.empty()) {  // the map from the input, the far points dropped
 		std::vector<Index> fromInput(nIn, -1);
-		for (size_t j = 0; j < near.size(); ++j) fromInput[near[j]] = c.fromInput[j];
+		for (size_t j = 0; j < near.size(); ++j)
+			fromInput[near[j]] = c.fromInput.empty() ? Index(j) : c.fromInput[j];
 		c.fromInput.swap(fromInput);
 	}
 	r.scales = r.mesh ? options.ringScales : options.knnScales;
@@ -837,15 +906,24 @@ Result detect(const std::vector<Point> &vertices, const std::vector<std::array<i
 	                                   : robustCloud(c, options, r, bar);
 
 	r.timings = bar.times();
+	Buffer<double>().swap(c.pts);
 
 	// Back to the input's order.
+	if (c.fromInput.empty() && Index(d.toClean.size()) == c.size()) {  // every input point, in order
+		r.strength = d.strength;
+		r.feature = d.feature;
+		r.kept.assign(nIn, 1);
+		r.nFeatures = long(std::count(r.feature.begin(), r.feature.end(), 1));
+		bar.report(100, "done");
+		return r;
+	}
 	std::vector<Index> processed(c.size(), -1);
 	for (size_t i = 0; i < d.toClean.size(); ++i) processed[d.toClean[i]] = Index(i);
 	r.strength.assign(nIn, 0.0);
 	r.feature.assign(nIn, 0);
 	r.kept.assign(nIn, 0);
 	for (Index i = 0; i < nIn; ++i) {
-		const Index ci = c.fromInput[i];
+		const Index ci = c.fromInput.empty() ? i : c.fromInput[i];
 		if (ci < 0 || processed[ci] < 0) continue;
 		const Index pi = processed[ci];
 		r.kept[i] = 1;

@@ -1,18 +1,14 @@
-// meshlab-sharp: the projected-distance sharp feature detector (Tran et al. 2014),
-// independent of MeshLab's types: the filter glue around meshlab-sharp's native library
-// (native/, its ABI and the method's constants in native/include/meshlab_sharp.h). The
-// library does the per-point work (kd-tree, neighbours, normals, projected distances,
-// local scales, noise and isolation statistics, robust mode's support and thinning of
-// the candidates) on every core; this core does the small global steps, as the Python
-// package does: cleaning map, normalisation, Otsu, the multiscale vote, the mesh's sharp
-// edges.
-#ifndef MESHLAB_SHARP_CORE_H
-#define MESHLAB_SHARP_CORE_H
+// The detection sequence of both modes (internal to the native library; its C face is
+// ms_detect in native/include/meshlab_sharp.h, detect_api.cpp): the per-point kernels of
+// native/src (kd-tree, neighbours, normals, projected distances, local scales, noise and
+// isolation statistics, robust mode's support and thinning of the candidates) on every
+// core, and the small global steps around them: cleaning map, unit scaling,
+// normalisation, Otsu, the multiscale vote, the mesh's sharp edges.
+#ifndef MESHLAB_SHARP_DETECT_H
+#define MESHLAB_SHARP_DETECT_H
 
 #include "meshlab_sharp.h"
-#include "curves_types.h"  // Point, shared with the curves
 
-#include <array>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -26,6 +22,7 @@ struct Options {
 	bool gaussian = MS_DEFAULT_WEIGHTING == 0;  // Gaussian-weighted PCA normals; false: plain PCA
 	bool asPoints = false;                      // ignore the faces
 	bool robust = MS_DEFAULT_MODE == 1;  // robust mode (docs/method.md); false: the paper's method
+	unsigned threads = 0;                // threads of the run; 0: one per core this process may use
 };
 
 struct Result {
@@ -47,22 +44,24 @@ struct InputError : std::runtime_error {
 	explicit InputError(const std::string &what) : std::runtime_error(what) {}
 };
 
-// Progress report, MeshLab's vcg::CallBackPos: percent done and a message such as
-// "Sharp features: projected distances 45%". Called by the calling thread only.
-using Progress = bool (*)(const int percent, const char *message);
+// Nothing of the C++ sequence is exported: the library's face is its C ABI.
+#pragma GCC visibility push(hidden)
 
-// Detect the sharp features of vertices (and triangles, unless empty or asPoints), on
-// every core. Throws InputError on unusable input, std::bad_alloc out of memory.
-Result detect(const std::vector<Point> &vertices,
-              const std::vector<std::array<int, 3>> &faces,
-              const Options &options,
-              Progress progress = nullptr);
+// Detect the sharp features of the n vertices xyz (n, 3) (and the m triangles faces
+// (m, 3), unless m is 0 or asPoints), on options.threads threads. progress (may be null)
+// is called by the calling thread only, with ctx, percent done and a message such as
+// "Sharp features: neighbours and projected distances 45%". Throws InputError on unusable
+// input, std::bad_alloc out of memory.
+Result detect(const double *xyz, int64_t n, const int64_t *faces, int64_t m, const Options &options,
+              ms_progress_fn progress, void *ctx);
 
 // Parse "12 16 20" or "12,16,20" or a range "12:40:4"; throws InputError.
 std::vector<int> parseScales(const std::string &text, int minimum);
 
 // The scales as parseScales reads them back: "12 16 20".
 std::string formatScales(const std::vector<int> &scales);
+
+#pragma GCC visibility pop
 
 }  // namespace sharp
 
