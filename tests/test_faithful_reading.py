@@ -230,7 +230,10 @@ def test_a_las_count_mismatch_is_the_same_in_memory_and_out_of_core(tmp_path, de
     struct.pack_into("<I", data, 107, n + delta)
     path.write_bytes(bytes(data))
     if delta > 0:
-        message = f"c.las: {n} points read, the header says {n + delta}"
+        message = (
+            f"c.las: the file is truncated: the header announces {n + delta} points of 20 "
+            f"bytes, {n} are in the file"
+        )
     else:
         message = (
             f"c.las: {-delta * 20} bytes of point records after the {n + delta} points the "

@@ -653,9 +653,12 @@ class _Tripwire(io.StringIO):
     first is then drawn whole; the library's callback or the Python-driven path's
     own)."""
 
+    tripped = False
+
     def write(self, text: str) -> int:
         written = super().write(text)
-        if "[" in text and self.getvalue().count("[") == 2:
+        if not self.tripped and self.getvalue().count("[") >= 2:
+            self.tripped = True
             _thread.interrupt_main()
         return written
 
