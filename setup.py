@@ -61,7 +61,7 @@ def native_library(name: str, sources: list[str]) -> Extension:
         depends=headers,
         include_dirs=[str(native / "include")],
         # No fused multiply-add and no fast-math: products and sums rounded as numpy
-        # rounds them (docs/implementation-notes.md).
+        # rounds them (docs/contributing.md).
         extra_compile_args=["-O3", "-ffp-contract=off", "-fno-math-errno"],
         extra_link_args=["-pthread"],
         define_macros=[("MS_LIBMVEC", "1")] if libmvec else [],

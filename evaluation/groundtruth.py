@@ -599,7 +599,7 @@ class Condition:
     name : str
         Key of ``CONDITIONS``.
     group : str
-        The issue's target it counts towards ("clean", "cad", "thin", "noise",
+        The target it counts towards ("clean", "cad", "thin", "noise",
         "outliers_density", "acute", "scan", "mesh", "smooth").
     parts : tuple of str
         Parts it applies to.

@@ -335,7 +335,7 @@ def score_part(part: SamplePart, mask: np.ndarray) -> Scores:
 
 
 # ----------------------------------------------------------------------------------
-# Feature curves (issue 11)
+# Feature curves
 # ----------------------------------------------------------------------------------
 
 #: Degrees: exact edges are split into curves where they turn by more than this (the

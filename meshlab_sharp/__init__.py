@@ -15,7 +15,15 @@ The public names are imported on first use, so that the command line answers
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the public functions and classes, for type checkers and the API reference
+    from .errors import InputError, MeshlabSharpError  # noqa: F401
+    from .io import Geometry, load, save_features_ply  # noqa: F401
+    from .meshset import detect_meshset  # noqa: F401
+    from .pipeline import detect  # noqa: F401
+    from .preprocessing import Preprocessing, PreprocessingReport, preprocess  # noqa: F401
+    from .result import DetectionResult  # noqa: F401
 
 __version__ = "0.1.0"
 

@@ -247,7 +247,7 @@ class _Pool:
     """The process's worker threads, started at the first parallel call and reused by
     every later one (an executor per call started two threads each time: about 40 per
     ``detect``); a forked child starts its own. Its tasks never wait on the pool: a task
-    that ran :func:`_run_chunks` there would wait for helpers queued behind it, and a
+    that ran :func:`_run_chunks` there would wait for its own chunks queued behind it, and a
     few such tasks at once fill every thread and deadlock (tried and seen: kd-tree
     builds abandoned by cleaning, in a run of fuzzed detects). Work that calls
     :func:`_run_chunks` beside the caller runs on a thread of its own
@@ -298,13 +298,13 @@ def _run_chunks(
         run()
     else:
         pool = _Pool.get()
-        helpers = [pool.submit(run) for _ in range(w - 1)]
+        others = [pool.submit(run) for _ in range(w - 1)]
         try:
             run()
         finally:
-            for _ in todo:  # on an error here, the helpers stop after their chunk
+            for _ in todo:  # on an error here, the other threads stop after their chunk
                 pass
-            for f in helpers:
+            for f in others:
                 f.result()
     if any(c != 0 for c in codes):
         raise MemoryError("out of memory in a compiled kernel")

@@ -201,7 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=DEFAULT_MODE,
         help=f"robust (default: {DEFAULT_MODE}): ignores outliers, copes with noise, "
         "uneven density and CAD tessellations, no features on smooth objects, lines one "
-        "point wide (docs/robust-mode.md); paper: the paper's method exactly as "
+        "point wide; paper: the paper's method exactly as "
         "ALGORITHM.md reads it",
     )
     det.add_argument(

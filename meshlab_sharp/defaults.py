@@ -17,7 +17,7 @@ WEIGHTINGS: tuple[str, ...] = ("gaussian", "none")
 #: The weighting ``detect``, the CLI and the MeshLab plugin use unless told otherwise.
 DEFAULT_WEIGHTING = WEIGHTINGS[_header.integer("DEFAULT_WEIGHTING")]
 #: Detection modes: the paper's method as ALGORITHM.md reads it, or robust mode
-#: (:mod:`meshlab_sharp.robust`, docs/robust-mode.md).
+#: (:mod:`meshlab_sharp.robust`, docs/method.md).
 MODES: tuple[str, ...] = ("paper", "robust")
 #: The mode ``detect``, the CLI and the MeshLab plugin use unless told otherwise.
 DEFAULT_MODE = MODES[_header.integer("DEFAULT_MODE")]

@@ -93,7 +93,7 @@ def detect(
         out, scales grown with the measured noise, projected distances relative to the
         local spacing, a threshold floor (no features on smooth objects), support along
         and thinning across the lines, and on meshes the mesh's own sharp edges
-        (:mod:`meshlab_sharp.robust`, docs/robust-mode.md); ``distances`` are then the
+        (:mod:`meshlab_sharp.robust`, docs/method.md); ``distances`` are then the
         relative distances and ``scales`` the scales used. "paper": ALGORITHM.md's
         reading of the paper, exactly.
     backend : {"compiled", "numpy"}, optional

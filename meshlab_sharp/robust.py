@@ -1,7 +1,8 @@
 """Robust mode: the projected-distance method where the paper's reading fails.
 
 ``detect(..., mode="robust")`` changes these things of the paper's method (measured
-choices, see ``docs/robust-mode.md``; the arithmetic is pinned there for the plugin):
+choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down in
+``docs/contributing.md``):
 
 1. **Isolated points are left out** (point clouds): point ``i`` is isolated when it is
    not among the ``k_max`` nearest neighbours of its own nearest neighbour, or when its
@@ -192,7 +193,7 @@ SUPPORT_KNN = _header.integer("SUPPORT_KNN")
 #: or none of the 16 nearest. Points lifted off the surface (outliers that are not
 #: isolated: scores 0.68-0.94) and the bands of candidates down walls 1 spacing thick
 #: (0.25-0.31) stay subject to support; the fandisk's weak edges score 0.16-0.21.
-#: Measured (20,000 points; docs/robust-mode.md): fandisk 0.925 -> 0.950, clean 0.964
+#: Measured (20,000 points): fandisk 0.925 -> 0.950, clean 0.964
 #: -> 0.967, 1 % outliers 0.9506 -> 0.9535, density 0.956 -> 0.960, thin walls within
 #: 0.002.
 SUPPORT_FREE_SCORE = _header.real("SUPPORT_FREE_SCORE")
@@ -204,10 +205,8 @@ SUPPORT_FREE_SCORE = _header.real("SUPPORT_FREE_SCORE")
 #: bisector makes ``o / l`` peak (0.5-0.8 on the 30-60 degree wedges, the star prism
 #: and the rims of walls 1 spacing thick; outliers that are not isolated: 0.8-0.96;
 #: the density gradient's offsets along the surface: below 0.5, and not between two
-#: candidates). Measured (20,000 points; docs/robust-mode.md, "Acute tips join the
-#: candidates"): clean
-#: 0.966 -> 0.974 (star prism 0.901 -> 0.961), acute 0.929 -> 0.964, thin walls 1
-#: spacing 0.736 -> 0.80.
+#: candidates). Measured (20,000 points): clean 0.966 -> 0.974 (star prism 0.901 ->
+#: 0.961), acute 0.929 -> 0.964, thin walls 1 spacing 0.736 -> 0.80.
 ACUTE_SCORE = _header.real("ACUTE_SCORE")
 ACUTE_SCORE_MAX = _header.real("ACUTE_SCORE_MAX")
 #: The plane of the noise estimate: the point and its 6 nearest (the 1-ring of a
@@ -240,7 +239,7 @@ NOISE_MAX_FACTOR = _header.real("NOISE_MAX_FACTOR")
 #: surface that bends at an edge, however sharply, or curves, has no gap.
 #: Measured (quick size, thin1 / thin2 / thin3 F1): 0.25: 0.61 / 0.60 / 0.88, 0.35:
 #: 0.71 / 0.65 / 0.88, 0.4: 0.70 / 0.69 / 0.88, 0.5: 0.62 / 0.70 / 0.88, 0.7: 0.59 /
-#: 0.64 / 0.88 (docs/robust-mode.md).
+#: 0.64 / 0.88.
 SHEET_GAP = _header.real("SHEET_GAP")
 #: ... and the points beyond the gaps are left out only when they are at least
 #: SHEET_MIN: another sheet, not the sparse points of a face seen at a grazing angle (a
@@ -260,7 +259,7 @@ SHEET_OWN = _header.real("SHEET_OWN")
 #: SHEET_COLUMN_GAP times ``a`` parts the sheets (the cut in its middle), unless the
 #: heights left out on one side span more than SHEET_FAR_SPAN times ``a`` (a face
 #: turning away at an edge, sampled sparsely in the column, not a parallel sheet).
-#: Measured (20,000 points, thin1 / thin2 / thin3 F1; docs/robust-mode.md): without
+#: Measured (20,000 points, thin1 / thin2 / thin3 F1): without
 #: the rule 0.744 / 0.711 / 0.913; column 1.1, gap 0.75, span 1.25: 0.757 / 0.797 /
 #: 0.911 (1 % outliers 0.9507 -> 0.9506; span 1.5: thin2 0.805 but outliers 0.9498).
 SHEET_COLUMN = _header.real("SHEET_COLUMN")
@@ -273,8 +272,7 @@ SHEET_FAR_SPAN = _header.real("SHEET_FAR_SPAN")
 #: plane (the rib's points, higher, left out of it), where that normal turns by at most
 #: about 10 degrees (``|n2 . n| >= SHEET_TRIM_COS``; beside an edge of a scan it turns
 #: more, and the sparse face turning away showed gaps). Measured (20,000 points, thin1 /
-#: thin2 / thin3 / scan F1; docs/robust-mode.md, "The sheet filter cuts at the first
-#: gap"): without the pass 0.745 /
+#: thin2 / thin3 / scan F1): without the pass 0.745 /
 #: 0.866 / 0.922 / 0.888; trim 1.3, no turn limit: 0.754 / 0.874 / 0.927 / 0.871; at
 #: most 10 / 15 / 20 degrees: 0.753 / 0.873 / 0.923 / 0.888, 0.754 / 0.874 / 0.925 /
 #: 0.888, 0.754 / 0.874 / 0.927 / 0.878; trim 1.6 (no limit): 0.749 / 0.872 / 0.929.
@@ -287,8 +285,8 @@ SHEET_TRIM_COS = _header.real("SHEET_TRIM_COS")
 #: nearest); its third neighbour lies 5-20 spacings away, while its ``k_max``-th
 #: neighbour lies on the surface, whose 10th nearest is about 2 spacings away (a
 #: neighbour farther out than the third: its distance varies less from point to point,
-#: which matters on randomly sampled surfaces). Points over the spread (20,000 points,
-#: docs/robust-mode.md, "Stray clusters"): none on the clean, noisy, thin-walled and
+#: which matters on randomly sampled surfaces). Points over the spread (20,000 points;
+#: docs/method.md, step 1): none on the clean, noisy, thin-walled and
 #: density-gradient parts and on 20,000 uniform random samples of a part; 0-5 per
 #: simulated scan; 80 % of stray points 5-20 spacings off a box in clusters of 2-3, 92 %
 #: of single ones. The third nearest against the kmax-th neighbour's third, spread 5:
@@ -469,7 +467,7 @@ def otsu_splits(mesh: bool, noise: float) -> bool:
     """Whether Otsu's split raises the threshold above ``R_MIN``: on meshes, and on
     clouds whose noise ratio ``noise`` (the lower median of :func:`noise_ratios`, as
     :func:`noise_scale_factor` takes it) exceeds ``NOISE_QUIET``. On a cloud without
-    noise the floor alone (measured, docs/robust-mode.md: thin walls 1 / 2 / 3
+    noise the floor alone (measured: thin walls 1 / 2 / 3
     spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)."""
     return not quiet_cloud(mesh, noise)
 
@@ -491,7 +489,7 @@ def thin_cone(mesh: bool, noise: float) -> float:
     ``noise`` (as :func:`otsu_splits` takes it) exceeds ``NOISE_QUIET``,
     ``THIN_CONE_COS`` on meshes and quiet clouds. Noise tilts the offsets between a
     line's own points, which then count as across the line and thin it to gaps
-    (measured, docs/robust-mode.md: thickness on the scan 0.79 -> 0.82, at noise 50 %
+    (measured: thickness on the scan 0.79 -> 0.82, at noise 50 %
     0.78 -> 0.83)."""
     return THIN_CONE_COS if mesh or quiet_cloud(mesh, noise) else THIN_CONE_COS_NOISY
 
@@ -501,7 +499,7 @@ def ranking_smoothed(mesh: bool, noise: float) -> bool:
     ``noise`` (as :func:`otsu_splits` takes it) grew the scales to the cap
     (``noise_factor(noise) == NOISE_MAX_FACTOR``). Beyond it the larger scales no longer
     dilute the noise of the score, and single points lifted 1-2 spacings beside a line
-    outrank the line's own (measured, docs/robust-mode.md: noise 50 % F1 0.752 ->
+    outrank the line's own (measured: noise 50 % F1 0.752 ->
     0.813, thickness 0.72 -> 0.78)."""
     return not mesh and noise_factor(noise) == NOISE_MAX_FACTOR
 

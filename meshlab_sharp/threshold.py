@@ -1,6 +1,6 @@
 """Min-max normalisation and Otsu's threshold on a 256-bin histogram.
 
-The arithmetic is the one pinned down in ``docs/implementation-notes.md``, shared with
+The arithmetic is the one pinned down in ``docs/contributing.md``, shared with
 the MeshLab plugin: Otsu's criterion is evaluated in an integer form that is a constant
 multiple of ``w0 * w1 * (m0 - m1)**2`` with bin centres ``(b + 0.5) / B``.
 """

@@ -23,7 +23,7 @@ every thread: steadier than wall time on a shared machine). The stages are paper
     python3 scripts/bench.py --sizes 1M --kind points --mode both --repeat 2
     python3 scripts/bench.py --sizes 1M --kind shuffled --mode both --repeat 4
 
-``--compare`` runs one size side by side instead (issue 13): the CLI and the MeshLab
+``--compare`` runs one size side by side instead: the CLI and the MeshLab
 plugin under meshlabserver on the same float PLY, in both modes, with the plugin/CLI
 ratio; ``detect`` on the same points in memory against pgeof's kNN (k = 40) plus its
 multiscale features at the same 8 scales (``pip install 'meshlab-sharp[bench]'``),
@@ -189,9 +189,9 @@ def _reset_peak() -> None:
     """Start the high-water mark (``VmHWM``) afresh at the current resident memory
     (Linux: ``/proc/self/clear_refs``), so that a peak measured from here is not hidden
     under an earlier one: building the inputs peaks above what stays once their
-    temporaries are freed, and a baseline taken as that earlier peak made detect's
-    peak look smaller by the difference (session 9's code on the 1M cloud in the
-    default mode: 69 B a point without the reset, 165 with it). Where it cannot (another
+    temporaries are freed, and a baseline taken as that earlier peak makes detect's
+    peak look smaller by the difference (on the 1M cloud in the default mode: 69 B a
+    point without the reset, 165 with it, for the same code). Where it cannot (another
     system), the earlier peak stays in."""
     try:
         with open("/proc/self/clear_refs", "w") as f:

@@ -8,7 +8,7 @@ exports), thin walls 1 to 3 spacings thick, acute edges, a simulated scan, smoot
 controls), detected with each mode and scored with ``evaluation.score_part``
 (precision, edge coverage, F1, thickness; per vertex on CAD tessellations; the share
 of points flagged on smooth controls). Prints every row, then per-condition means per
-mode and the issue's targets; writes ``docs/evaluation.md`` and ``docs/evaluation.json``
+mode and the targets; writes ``docs/evaluation.md`` and ``docs/evaluation.json``
 unless ``--no-write``.
 
     python3 scripts/evaluate.py                          # 20,000 points, all (minutes)
@@ -223,7 +223,7 @@ def summarise(rows: list[dict], modes: list[str]) -> dict:
 
 
 def targets(rows: list[dict], summary: dict, modes: list[str]) -> list[dict]:
-    """The issue's targets, per mode, over the conditions that were run; thickness: the
+    """The targets, per mode, over the conditions that were run; thickness: the
     range of the per-condition mean thickness."""
     res = []
     for label, conds, stat, bound in TARGETS:

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Evaluate the feature curves (issue 11) on generated parts with known sharp edges.
+"""Evaluate the feature curves on generated parts with known sharp edges.
 
 For every sharp part (``groundtruth.part_names(smooth=False)``) as a clean cloud, a
 noisy cloud (normal noise of 25 % of the spacing) and an isotropic mesh, runs
@@ -139,43 +139,29 @@ def _f(x: float, digits: int = 3) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
 
 
-#: The section on the curves in MeshLab (screenshots), kept when the page is rewritten.
-IN_MESHLAB = """\
-## In MeshLab
+#: Where the generated part of the page starts: the guide above it is kept.
+EVALUATION_HEADING = "## Evaluation"
 
-`meshlab-sharp detect --sample --curves sample_curves.ply` writes the curves as a PLY
-edge mesh (a vertex element and an `edge` element), which Debian's MeshLab 2020.09 opens
-as a layer of edges. Below, `meshlab out/sample_part_sharp.ply sample_curves.ply`: the
-sample cloud with its features in red and its curves, drawn in yellow and wide (the
-layer's wire colour and edge width set in the layer dialog):
 
-![The sample's curves, written by meshlab-sharp, opened in MeshLab](meshlab-curves.png)
-
-The MeshLab plugin (`meshlab_plugin_cpp/`) has the same extraction as a filter,
-**Filters > Remeshing, Simplification and Reconstruction > Extract Sharp Feature
-Curves**: it adds a layer `sharp_curves` of vertices and edges (vertex quality: the
-curve's number), like `detect_meshset(ms, curves=True)`. Its C++ (`native/src/curves.cpp`) is
-a port of `meshlab_sharp/curves` with numpy's order of summation and the same constants
-(it includes `meshlab_sharp.h`), so the layer holds
-the same vertices and edges as `result.curves` (`tests/test_plugin_curves.py`). The
-sample mesh's 37 curves, drawn by MeshLab with the part hidden
-(`tests/test_plugin_gui.py`):
-
-![The plugin's curves of the sample mesh in MeshLab](meshlab-plugin-curves.png)
-"""
+def write_page(path: Path, generated: str) -> None:
+    """Replace the evaluation section of the page at ``path`` (everything from
+    :data:`EVALUATION_HEADING` on) by ``generated``, keeping the guide above it."""
+    old = path.read_text() if path.exists() else ""
+    guide = old.split("\n" + EVALUATION_HEADING + "\n", 1)[0].rstrip("\n")
+    path.write_text((guide + "\n\n" if guide else "") + generated)
 
 
 def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None) -> str:
     """docs/curves.md."""
     lines = [
-        "# Feature curves: evaluation (issue 11)",
+        EVALUATION_HEADING,
         "",
         "`python3 scripts/evaluate_curves.py` "
         f"({meta['n_points']:,} points per cloud, about half as many mesh vertices; seed "
-        f"{meta['seed']}; {meta['machine']}). Every sharp part of "
-        "`evaluation.groundtruth` as a clean cloud, a cloud with normal noise of 25 % of "
-        "the spacing, and an isotropic mesh; `detect(..., curves=True)` in robust and paper "
-        "mode; scores from `evaluation.scoring.evaluate_curves`:",
+        f"{meta['seed']}; {meta['machine']}). Every sharp part of the evaluation "
+        "([evaluation](evaluation.md)) as a clean cloud, a cloud with normal noise of 25 % "
+        "of the spacing, and an isotropic mesh; `detect(..., curves=True)` in robust and "
+        "paper mode; scores:",
         "",
         "- **precision**: share of the curves' length within 1 spacing of an exact edge;",
         "- **coverage**: share of the exact edges' length within 1.5 spacings of a curve;",
@@ -187,48 +173,7 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
         "- **time**: curve extraction time / detection time (these small inputs; the 1M-point "
         "figure is below).",
         "",
-        "## Method (`meshlab_sharp/curves/`)",
-        "",
-        "1. **Feature graph** (`graph.py`): clouds, each feature point linked to the features "
-        "among its 8 nearest within 2.5 spacings; meshes, the mesh edges between feature "
-        "vertices, weighted by length / (sin(turn / 2) + 0.05) so that the skeleton follows "
-        "the crease.",
-        "2. **Skeleton**: minimum spanning forest; the links it dropped at a free end are "
-        "given back where they close a loop at least 12 spacings long (circles, polygon "
-        "cycles); spurs shorter than 4 spacings removed (never so many that a junction "
-        "loses its two main branches).",
-        "3. **Polylines** (`trace.py`): traced between junctions; on clouds each vertex is "
-        "moved onto the intersection of the two surfaces on each side (`refine.py`: in the "
-        "plane across the skeleton's direction over 4 spacings on each side, the non-feature "
-        "neighbours form two arms; two lines fitted with reassignment, neighbours weighted by "
-        "their distance along the curve; fallback: the line of the curve's own vertices), "
-        "smoothed over 5 vertices; pieces where the two fitted surfaces are mostly flat "
-        "(false detections) are dropped.",
-        "4. **Corners and joins**: cut where the curve turns by more than 35 degrees at every "
-        "chord scale that fits (chords 0.5-2 spacings from the vertex, times 1, 2, 4, 8); "
-        "ends within 4 spacings that face each other are joined (a loop closes), free ends "
-        "facing each other across up to 12 spacings too (facing: the end chords within 35 "
-        "degrees, and the ends, or the chords' inner vertices, within 2 spacings of each "
-        "other's line); other groups of ends are corners. On clouds a free end joins the "
-        "corner its line meets (crossing another end's line at more than 35 degrees, within "
-        "2 spacings, at most 12 spacings ahead: detection leaves gaps at corners), the corner "
-        "is the least-squares meeting point of the end chords 2-8 spacings back, and the "
-        "ends are extended to it; fragments shorter than 8 spacings with two free ends are "
-        "dropped. On meshes the corner is the mesh vertex nearest the meeting point of the "
-        "last edges' lines, reached along mesh edges.",
-        "5. **Kinds** (`fit.py`): line if every vertex is within the tolerance (RMS 0.5 "
-        "spacing, max 2 spacings) of the principal axis, circular arc if within it of the "
-        "fitted plane and circle, free-form otherwise.",
-        "",
-        "The numbers above (and every other constant of the curves) are defined once, as "
-        "`MS_CURVE_` macros in `native/include/meshlab_sharp.h`: the modules read them from "
-        "it (`meshlab_sharp/_header.py`; the Python name drops the prefix, and the reasons "
-        "for each value are documented beside it), and the native library's "
-        "`native/src/curves.cpp` includes it.",
-        "",
-        *IN_MESHLAB.splitlines(),
-        "",
-        f"## Summary against the targets (means over the {len({r['part'] for r in rows})} parts)",
+        f"### Means over the {len({r['part'] for r in rows})} parts",
         "",
         "| condition | mode | precision | coverage | RMS (spacings) | count (min-max) "
         "| corners | time |",
@@ -245,7 +190,7 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
                 f"{_f(s['count_ratio_max'], 2)}) | {_f(s['corners_found'])} "
                 f"| {100 * s['time_share']:.0f} % |"
             )
-    lines += ["", "Targets (the default, robust mode):", ""]
+    lines += ["", "Against the targets (the default, robust mode):", ""]
     lines += ["| measure | target | condition | robust | met |", "|---|---|---|---:|---|"]
     for k in MEASURES:
         label, ok = TARGETS[k]
@@ -266,7 +211,7 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
                 f"{100 * t['extra_cpu']:.1f} % ({t['curves_cpu_s']:.2f} s over "
                 f"{t['detect_cpu_s']:.2f} s) | {'yes' if ok(t['extra']) else 'no'} |"
             )
-    lines += ["", "## Per part", ""]
+    lines += ["", "### Per part", ""]
     lines += [
         "| part | condition | mode | precision | coverage | RMS | curves / exact "
         "| corners found / exact | kinds (line/arc/free) |",
@@ -310,8 +255,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.add_timing:
         done = json.loads(out.with_suffix(".json").read_text())
         done["timing"] = timing(args.add_timing)
-        out.with_suffix(".md").write_text(
-            markdown(done["rows"], done["summary"], done["meta"], done["timing"])
+        write_page(
+            out.with_suffix(".md"),
+            markdown(done["rows"], done["summary"], done["meta"], done["timing"]),
         )
         out.with_suffix(".json").write_text(json.dumps(done, indent=1) + "\n")
         return 0
@@ -342,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
         "seed": args.seed,
         "machine": f"{platform.machine()}, Python {platform.python_version()}",
     }
-    out.with_suffix(".md").write_text(markdown(rows, summary, meta, time_rows))
+    write_page(out.with_suffix(".md"), markdown(rows, summary, meta, time_rows))
     out.with_suffix(".json").write_text(
         json.dumps({"meta": meta, "summary": summary, "rows": rows, "timing": time_rows}, indent=1)
         + "\n"

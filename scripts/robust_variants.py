@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Robust mode's choices, each measured by changing one of them (docs/robust-mode.md).
+"""Robust mode's choices, each measured by changing one of them (docs/method.md).
 
 Runs robust mode as chosen and with one constant changed at a time on the evaluation's
 inputs (``scripts/evaluate.py``'s generators and cache), and prints one markdown row per

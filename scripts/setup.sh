@@ -36,7 +36,7 @@ if [[ ! -x .venv/bin/python ]]; then
   "$python" -m venv .venv
 fi
 extras="[plot,dxf]"
-[[ $all == 1 ]] && extras="[plot,dxf,test,las,e57,dask,cad]"
+[[ $all == 1 ]] && extras="[plot,dxf,test,las,e57,dask,docs,cad]"
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".${extras}"
 if [[ $all == 1 ]]; then

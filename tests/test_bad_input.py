@@ -109,8 +109,7 @@ _NAN_TRIANGLE = np.array(
     [[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 0], [np.nan, 1, 0], [1, 1, 0]]]
 )
 
-#: Files that killed the interpreter or were read wrong before the readers were rewritten
-#: (issue 9): name, content.
+#: Hostile files that a lenient reader would crash on or read wrong: name, content.
 HOSTILE = {
     "obj-index-far": ("far.obj", _obj_grid(200) + b"f 1 2 3\nf 1 2 99999\n"),
     "obj-index-far-tabs": ("tabs.obj", _obj_grid(200) + b"f\t1\t2\t99999\n"),

@@ -159,7 +159,7 @@ def test_the_parser_refuses_an_unknown_type():
 )
 def test_the_library_exports_exactly_the_header(library, functions):
     """Each built library's exported functions are its part of the header: the private
-    helpers of native/src stay hidden, and no declared function is missing."""
+    internal functions of native/src stay hidden, and no declared function is missing."""
     if library is None:
         pytest.skip("the compiled library is not built")
     listing = subprocess.run(

@@ -1,4 +1,4 @@
-"""Feature curves (issue 11): known answers on a cube and a cylinder, invariance to the
+"""Feature curves: known answers on a cube and a cylinder, invariance to the
 input's order, the writers read back by pymeshlab and ezdxf, the MeshSet edge mesh, the
 command line, and the curve scores."""
 

@@ -258,7 +258,7 @@ def test_knn_identical_without_the_avx2_scan(name, tmp_path):
 
 def _grid_near_ties() -> np.ndarray:
     """A shuffled grid on a cube's faces, each coordinate moved by at most 1e-12 (the
-    spacing is 1/7): its tied squared distances now differ, by far less than a float's
+    spacing is 1/7): its tied squared distances differ, by far less than a float's
     precision. (1178, 3)"""
     p = _shuffled(cube_grid_points(15))
     return p + np.random.default_rng(4).uniform(-1e-12, 1e-12, p.shape)
@@ -453,10 +453,10 @@ np.savez(sys.argv[2], **masks)
 
 @pytest.mark.slow
 def test_detect_with_a_far_outlier_both_modes(tmp_path):
-    """The issue's case end to end: a scan with one stray point at 1e12, both modes
+    """A scan with one stray point at 1e12, end to end, both modes
     (robust mode searches neighbours again for thinning), with the numpy reference's
-    answer, in a subprocess with a time limit against a hang (the former grid search
-    was quadratic here; test_knn_any_spatial_distribution measures that at 100k)."""
+    answer, in a subprocess with a time limit against a hang (a grid search is
+    quadratic here; test_knn_any_spatial_distribution measures the search at 100k)."""
     points = _far_outlier(20_000)
     masks = _run_on_points(_COMPILED_DETECT, points, tmp_path / "masks.npz", timeout=150)
     for mode in ("paper", "robust"):

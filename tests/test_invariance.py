@@ -83,8 +83,8 @@ def unit_shapes():
 @pytest.mark.parametrize("kind", ["cloud", "mesh"])
 def test_answer_does_not_depend_on_the_unit(unit_shapes, kind, mode, backend):
     """Coordinates are brought to O(1) by an exact power of two before anything is
-    computed, so no floating-point warning at any unit (squared distances of 1e-85
-    units used to underflow, and 1e153 units to overflow into "no features") and the
+    computed, so no floating-point warning at any unit (unscaled, squared distances of
+    1e-85 units underflow, and 1e153 units overflow into "no features") and the
     same mask, strength and thresholds. A power-of-two unit changes no bit of the
     details either; a decimal one rounds the input, so the normalised distances agree
     to round-off."""
@@ -128,7 +128,7 @@ mesh_v = mesh_v + rng.normal(scale=0.03, size=mesh_v.shape)  # noisy: denoise ru
 inputs = {"cloud": (cloud, None), "mesh": (mesh_v, mesh_f)}
 # pymeshlab's point-cloud normals + RIMLS projection (the cloud's denoise) can give a
 # different projection on its first call in a process (about 1 process in 20 under
-# load; our compiled code has not run yet then): one call first, so
+# load, before any compiled code of this package has run): one call first, so
 # that this test compares units, not that.
 meshlab_sharp.detect(cloud, None, preprocessing=steps["cloud"][1])
 out = {}
@@ -145,7 +145,7 @@ np.savez(sys.argv[1], **out)
 
 def test_preprocessing_does_not_depend_on_the_unit(tmp_path):
     """pymeshlab's filters run on the scaled coordinates too: at 2**332 (about 1e100)
-    Poisson-disk subsampling used to hang and quadric decimation to empty the mesh. The
+    unscaled, Poisson-disk subsampling hangs and quadric decimation empties the mesh. The
     same features and the same processed geometry (in the input's unit) at 2**-332 and
     2**332 as at 1, every step; in a subprocess with a time limit against a hang."""
     tests = Path(__file__).resolve().parent

@@ -81,7 +81,7 @@ def test_repeated_detect_keeps_no_arrays() -> None:
 @pytest.mark.parametrize("mode", ["robust", "paper"])
 def test_cleaned_faces_freed_before_the_scales_pass(mode: str, monkeypatch) -> None:
     """The cleaned faces (48 bytes a vertex, a copy of the input's) are gone by the time
-    the scales' pass runs, where the peak memory was: neither the ring neighbourhoods
+    the scales' pass runs, where the peak memory is: neither the ring neighbourhoods
     (compiled: their adjacency only) nor robust mode's set-up keeps them (the
     Python-driven path, which ``return_details`` takes; the library's sequence drops them
     too, once the normals are known)."""

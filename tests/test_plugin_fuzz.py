@@ -18,8 +18,8 @@ CASES = {name: (v, f) for name, v, f in hostile_geometries()}
 #: In CI a skip here is a failure (conftest.py): set-up installs MeshLab there.
 REQUIRED_IN_CI = True
 #: Degenerate cases where both survive but do not agree point for point: the plugin runs
-#: the package's C kernel, so everything per point is the same code (issue 13 removed the
-#: collinear and far-outlier strength differences of Eigen's solver), but robust mode's
+#: the package's C kernel, so everything per point is the same code (no collinear or
+#: far-outlier strength differences), but robust mode's
 #: line directions are LAPACK's eigh in Python and the kernel's closed-form 3x3 solver in
 #: the plugin. On the triplicated faces of a coarse cube grid no edge has exactly two
 #: faces, so no mesh edge is sharp and support and thinning decide alone, with line

@@ -1,4 +1,4 @@
-"""Robust mode (docs/robust-mode.md): the key cases of issue 6, on small parts."""
+"""Robust mode (docs/method.md): the cases it exists for, on small parts."""
 
 from __future__ import annotations
 
@@ -71,7 +71,7 @@ def test_outliers_robust_finds_the_edges_paper_does_not():
     scores = _f1(part, result.mask)
     assert paper.f1 < 0.2
     assert scores.f1 >= 0.9, scores
-    # outliers near the surface or in pairs are not isolated (docs/robust-mode.md)
+    # outliers near the surface or in pairs are not isolated (docs/method.md)
     assert result.mask[part.outliers].sum() <= 0.25 * part.outliers.sum()
 
 
@@ -157,7 +157,7 @@ def test_cli_mode(tmp_path):
 
 
 def test_cad_pipe_every_rim_vertex():
-    # issue 10: 160 vertices, all on sharp rims; the old thinning removed all of them
+    # 160 vertices, all on sharp rims: thinning must not remove any of them
     verts, faces = shapes.pipe_mesh()
     result = meshlab_sharp.detect(verts, faces, mode="robust")
     assert result.mask.all() and (result.strength == 1.0).all()

@@ -1,6 +1,6 @@
 """Robust mode against an independent, deliberately plain reading of its pinned arithmetic.
 
-docs/robust-mode.md, "The arithmetic, pinned down for the plugin", read step by step with
+docs/contributing.md, "Robust mode's arithmetic", read step by step with
 brute-force neighbourhoods and per-point loops. Nothing here imports the package's
 internals: only ``detect`` is compared, and the paper mode's own steps (kNN with
 (distance, index) ties, k-rings, PCA and face normals, Otsu) come from the independent
@@ -31,7 +31,7 @@ from evaluation import groundtruth
 EPS_R = 1e-9
 #: Scores and cosines this close to each other may compare either way.
 EPS = 1e-10
-#: docs/robust-mode.md, step 3: r of an edge turning by 20 degrees (0.11054786...).
+#: docs/contributing.md, robust mode's step 3: r of an edge turning by 20 degrees (0.11054786...).
 R_MIN = (2 / math.pi) * math.sin(math.pi / 18)
 #: Step 1b.
 NOISE_KNN, NOISE_TOLERATED, NOISE_MAX_FACTOR = 7, 0.15, 3.0

@@ -1,5 +1,5 @@
 """Stray points off the sampled surface, alone or in small clusters, are not features
-(robust mode's isolation, docs/robust-mode.md "Stray clusters"): in memory, on the
+(robust mode's isolation, docs/method.md, step 1): in memory, on the
 Python-driven path and tile by tile."""
 
 from __future__ import annotations

@@ -470,8 +470,8 @@ def test_peak_memory_stays_under_the_limit(tmp_path, mode: str) -> None:
 
     The peak is the child's ``VmHWM`` (``tiles.run.peak_rss``), not ``ru_maxrss``: a
     child started by ``subprocess`` (vfork + exec) inherits its parent's peak in
-    ``ru_maxrss``, which made this test report pytest's own memory (653-672 MB after a
-    long session). This test holds 400 MB itself while the child runs, so an inherited
+    ``ru_maxrss``, which would make this test report pytest's own memory (653-672 MB
+    after a long test run). This test holds 400 MB itself while the child runs, so an inherited
     peak would fail it."""
     rng = np.random.default_rng(0)
     pts = random_box_points(400_000, seed=1) + rng.normal(scale=1e-4, size=(400_000, 3))

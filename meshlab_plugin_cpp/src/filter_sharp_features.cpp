@@ -111,21 +111,25 @@ QString FilterSharpFeaturesPlugin::filterInfo(FilterIDType filter) const
 		       "object, cut at corners and sharp turns, without fragments or spurs. On a mesh the curves are "
 		       "chains of the mesh's own edges through feature vertices; on a point cloud the "
 		       "skeleton of the feature points, moved onto the intersection of the surfaces "
-		       "fitted on each side (below the point spacing). The same steps and arithmetic as "
-		       "the meshlab-sharp Python package (detect(..., curves=True), docs/curves.md).";
+		       "fitted on each side (below the point spacing). The log gives the numbers of "
+		       "curves, closed curves, vertices and corners. The parameters are those of the "
+		       "detection. The same steps and arithmetic as the meshlab-sharp Python package.";
 	return QString("Selects the sharp features (creases, corners) of a mesh or point cloud automatically, "
 	       "with the projected-distance method of Tran et al. (2014): per vertex, the distance "
 	       "between the vertex and the centroid of its neighbourhood along the normal; Otsu's "
 	       "threshold on its histogram; at several scales (k-rings on a mesh, k nearest "
 	       "neighbours on a point cloud). A vertex is a feature if it is a candidate at every "
-	       "scale. The default Robust mode also leaves out isolated points (outliers), grows "
+	       "scale. The default Robust mode also leaves out isolated points (a far outlier on "
+	       "its own, or a stray pair or triple off the surface), grows "
 	       "the scales on noisy clouds, divides the distance by the local spacing, never "
 	       "thresholds below a %1-degree edge (no features on smooth objects), keeps points "
 	       "with neighbours along their feature line, thins lines to one point across, and on "
 	       "meshes adds the vertices of edges whose faces turn by more than %1 degrees (CAD "
 	       "tessellations). Paper mode is the method as the paper describes it. Vertex quality "
-	       "is set to the feature strength (fraction of scales), the selection to the features. "
-	       "The same algorithm as the meshlab-sharp Python package.")
+	       "is set to the feature strength (the fraction of scales at which the vertex was a "
+	       "candidate), the selection to the features; the log lists each scale's threshold and "
+	       "candidate count. Nothing to tune: the defaults suit scans and CAD meshes alike. The "
+	       "same algorithm, with the same answers, as the meshlab-sharp Python package.")
 	    .arg(MS_CREASE_ANGLE);
 }
 
@@ -159,29 +163,40 @@ void FilterSharpFeaturesPlugin::initParameterSet(QAction *a, MeshModel &, RichPa
 	ms_detect_defaults(&defaults);
 	par.addParam(RichString("knnScales", formatScales(defaults.knn_scales, defaults.n_knn_scales),
 	                        "Point-cloud scales (k)",
-	                        "Neighbourhood sizes k (k nearest neighbours, the point included) used "
-	                        "on point clouds: a list like '12 16 20' or a range 'start:stop:step'."));
+	                        "Point clouds only: the neighbourhood sizes k (the k nearest neighbours, "
+	                        "the point included), one per scale; a feature must be a candidate at "
+	                        "every scale. A list like '12 16 20' or a range 'start:stop:step'. "
+	                        "Smaller values find finer details and react more to noise; Robust mode "
+	                        "grows them on noisy clouds by itself."));
 	par.addParam(RichString("ringScales", formatScales(defaults.ring_scales, defaults.n_ring_scales),
 	                        "Mesh scales (rings)",
-	                        "k-ring sizes used on meshes: a list like '1 2 3 4' or a range '1:4'."));
+	                        "Meshes only: the neighbourhood of a vertex at scale k is every vertex "
+	                        "within k edges of it (its k-ring), one per scale; a feature must be a "
+	                        "candidate at every scale. A list like '1 2 3 4' or a range '1:4'."));
 	par.addParam(RichEnum("weighting", MS_DEFAULT_WEIGHTING, QStringList() << "Gaussian" << "None", "Normal weighting",
-	                      "Weights of the PCA normals: Gaussian exp(-d^2/h^2), h the farthest "
-	                      "neighbour, or none (plain PCA)."));
+	                      "How the normals of a point cloud are fitted to each neighbourhood: "
+	                      "Gaussian weights exp(-d^2/h^2) (d a neighbour's distance, h the "
+	                      "farthest neighbour's), so that near points count more, or None, a "
+	                      "plain PCA. Meshes use their face normals."));
 	par.addParam(RichBool("asPoints", false, "Treat a mesh as points",
-	                      "Ignore the faces and use k nearest neighbours."));
+	                      "Ignore the faces and process the vertices as a point cloud, with the "
+	                      "point-cloud scales (k nearest neighbours)."));
 	par.addParam(RichEnum("mode", MS_DEFAULT_MODE, QStringList() << "Paper" << "Robust", "Mode",
 	                      QString("Robust (default): isolated points left out, scales grown with the "
 	                      "measured noise, projected distance relative to the local spacing, a "
 	                      "threshold floor of a %1-degree edge, support along and thinning across "
-	                      "the feature lines, and on meshes the edges whose faces turn by more "
-	                      "than %1 degrees (docs/robust-mode.md): survives outliers and noise, "
-	                      "says 'no features' on smooth objects, handles CAD tessellations. "
-	                      "Paper: the method as the paper describes it (ALGORITHM.md).")
+	                      "the feature lines (lines one point wide), and on meshes the vertices "
+	                      "of edges whose faces turn by more than %1 degrees: copes with outliers, "
+	                      "noise, uneven density and thin walls, finds no features on smooth "
+	                      "objects, and handles CAD tessellations. Paper: Tran et al.'s method "
+	                      "as the paper describes it (min-max normalised distances, Otsu's "
+	                      "threshold at every scale).")
 	                          .arg(MS_CREASE_ANGLE)));
 	if (ID(a) == FP_SHARP_CURVES)
 		return;
 	par.addParam(RichBool("colorize", true, "Colour the features",
-	                      "Features red, the other vertices grey."));
+	                      "Colour the features red and the other vertices grey (the vertex "
+	                      "colours are replaced). Off: only quality and selection are set."));
 }
 
 bool FilterSharpFeaturesPlugin::applyFilter(QAction *action, MeshDocument &md, const RichParameterList &par,

@@ -33,7 +33,7 @@ def peak_rss() -> int:
     On Linux the high-water mark of the process's address space (``VmHWM``), not
     ``ru_maxrss``: a process started by ``vfork`` + ``exec`` (Python's ``subprocess``,
     Dask's worker processes) inherits its parent's peak in ``ru_maxrss``, so a small
-    child of a large process (a test in a long pytest session) would report the
+    child of a large process (a test in a long pytest run) would report the
     parent's memory as its own.
     """
     try:

@@ -63,7 +63,7 @@
 /* Coordinates whose largest magnitude lies outside [2^-100, 2^100) are scaled by a
  * power of two first (neighbourhoods.UNIT_RANGE). */
 #define MS_UNIT_RANGE 100
-/* Robust mode (robust.py, creases.py; docs/robust-mode.md). */
+/* Robust mode (robust.py, creases.py; docs/method.md). */
 #define MS_CREASE_ANGLE 20.0
 #define MS_NOISE_FACTOR (4.0 / 0.3186)
 #define MS_NOISE_KNN 7
@@ -493,7 +493,7 @@ void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const doub
 void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
                    const ms_lists_t *lists, int64_t begin, int64_t end, uint8_t *out);
 
-/* Thresholds, the global steps of every path (docs/implementation-notes.md,
+/* Thresholds, the global steps of every path (docs/contributing.md,
  * "Normalisation and Otsu"; threshold.py is the numpy reference).
  * ms_extent: max - min of each coordinate of the finite points p (n, 3) into out (3)
  * (numpy's ptp of each column; 0 when n = 0), for the flat rule's bounding box.

@@ -2,8 +2,8 @@
 // meshlab_sharp/_kernels.py calls them, in chunks of MS_CHUNK points on every core; what
 // remains here mirrors the Python modules' global steps: cleaning.py (the compiled path), threshold.py,
 // multiscale.py, robust.py (RobustSetup; its finishing steps are the kernel's) and
-// creases.py. docs/implementation-notes.md and docs/robust-mode.md ("The arithmetic,
-// pinned down for the plugin") are the contract.
+// creases.py. docs/contributing.md ("The arithmetic both implementations share",
+// "Robust mode's arithmetic") is the contract.
 #include "detect.h"
 
 #include <algorithm>

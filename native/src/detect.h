@@ -21,7 +21,7 @@ struct Options {
 	std::vector<int> ringScales MS_DEFAULT_RING_SCALES;  // meshes
 	bool gaussian = MS_DEFAULT_WEIGHTING == 0;  // Gaussian-weighted PCA normals; false: plain PCA
 	bool asPoints = false;                      // ignore the faces
-	bool robust = MS_DEFAULT_MODE == 1;  // robust mode (docs/robust-mode.md); false: the paper's method
+	bool robust = MS_DEFAULT_MODE == 1;  // robust mode (docs/method.md); false: the paper's method
 	unsigned threads = 0;                // threads of the run; 0: one per core this process may use
 };
 

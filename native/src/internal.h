@@ -2,7 +2,7 @@
  *
  * Built with -O3 -ffp-contract=off -fno-math-errno -std=c99 (native/CMakeLists.txt and
  * setup.py): no fused multiply-add the code does not write, every product and sum rounded
- * as numpy rounds it, in the order docs/implementation-notes.md pins down; the cloud
+ * as numpy rounds it, in the order docs/contributing.md pins down; the cloud
  * pass's PCA (pca.c's lanes) writes its fused multiply-adds (fma()) and its own exp, acos
  * and cos, the same bits on every machine (see that page). The library is plain C: loaded
  * with ctypes by the Python package (no Python headers; ctypes releases the GIL during a

@@ -176,7 +176,7 @@ void scatter(const double *q, int64_t m, const double *mean, const double *w,
 }
 
 /* Normal and projected distance of one neighbourhood given as offsets q (m, 3) from
- * the point and their squared lengths d2 (m); see docs/implementation-notes.md.
+ * the point and their squared lengths d2 (m); see docs/contributing.md.
  * fixed: a fixed unit normal or NULL (PCA). h2 is max d2 (given). */
 double neighbourhood_pdis(const double *q, const double *d2, int64_t m,
                           const double *mean, double h2, int gaussian,
@@ -204,10 +204,10 @@ double neighbourhood_pdis(const double *q, const double *d2, int64_t m,
  * vectors of 4 doubles (the GCC / Clang vector extension) and compiled twice: with AVX2
  * and FMA (chosen at run time) and plain. Every operation in it is correctly rounded
  * (+, -, *, /, sqrt, and fma(), exact then rounded once, on every machine), so both
- * builds give the same bits; docs/implementation-notes.md says how this differs from
+ * builds give the same bits; docs/contributing.md says how this differs from
  * the numpy reference. */
 #if defined(__GNUC__) && !defined(__clang__)
-/* the helpers below pass vectors only inlined: no ABI to keep */
+/* the functions below pass vectors only inlined: no ABI to keep */
 #pragma GCC diagnostic ignored "-Wpsabi"
 #endif
 typedef double v4d __attribute__((vector_size(32)));
@@ -339,7 +339,7 @@ LANES_INLINE void pca_lanes_body(const double *q, const double *d2, const int64_
     /* the weights first, then their sums (the same operations): each exp is a chain of
      * 16 dependent fused multiply-adds, and a loop of exps alone keeps more of them in
      * flight than one that also holds the sums (the pass's 8 scales: 0.68 against 0.84
-     * us a point, docs/benchmark-history.md, "Session 11") */
+     * us a point) */
     v4d_mem *w4 = (v4d_mem *)ws;
     for (int64_t j = 0; j < mmax; j++) w4[j] = v4_exp(d2[j] / vh2);
     for (int64_t j = 0; j < mmax; j++, vj += 1) {
