@@ -16,7 +16,7 @@ if [[ "$(id -u)" != 0 ]]; then sudo="sudo"; fi
 export DEBIAN_FRONTEND=noninteractive
 
 # pymeshlab needs libgl1 (import) and libopengl0 (its PLY/OBJ/OFF/STL plugins).
-packages=(libgl1 libopengl0 libgomp1 python3 python3-venv python3-pip python3-dev gcc)
+packages=(libgl1 libopengl0 libgomp1 python3 python3-venv python3-pip python3-dev gcc g++)  # g++: the native library has C++ sources
 if [[ $all == 1 ]]; then
   packages+=(xdotool imagemagick)  # the GUI test drives MeshLab and takes screenshots
   packages+=(libglu1-mesa libxcursor1 libxft2 libxinerama1)  # the gmsh wheel's library (cad extra)
