@@ -650,7 +650,6 @@ def bench_compare(n: int, repeat: int, meshlab_root: str | None, out_json: str) 
     modes = ("paper", "robust")
     points = cad_cloud(n).astype(np.float32).astype(np.float64)  # what the PLY holds
     result: dict = {"n": n, "cpus": os.cpu_count(), "load_before": os.getloadavg()[0]}
-    result["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     with tempfile.TemporaryDirectory(prefix="meshlab_sharp_compare_") as tmp:
         work = Path(tmp)
         path = work / "cloud.ply"
@@ -677,7 +676,7 @@ def bench_compare(n: int, repeat: int, meshlab_root: str | None, out_json: str) 
 
 
 def _print_compare(r: dict) -> None:
-    print(f"{r['n']:,d} points, {r['cpus']} CPUs, {r['date']}, load {r['load_before']:.1f}")
+    print(f"{r['n']:,d} points, {r['cpus']} CPUs, load {r['load_before']:.1f}")
     pg = r["pgeof"]
     for mode in ("paper", "robust"):
         cli, plug = r["cli"][mode], r["plugin"][mode]
@@ -769,7 +768,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--backend", choices=["compiled", "numpy"], default="compiled")
     ap.add_argument("--mode", choices=["paper", "robust", "both"], default="both")
     ap.add_argument("--repeat", type=int, default=3, help="runs per size (best is reported)")
-    ap.add_argument("--json", default="bench.json", help="where to write the results")
+    ap.add_argument("--json", default="out/bench.json", help="where to write the results")
     ap.add_argument("--one", nargs=3, metavar=("N", "KIND", "WORKDIR"), help=argparse.SUPPRESS)
     ap.add_argument(
         "--tiled",
