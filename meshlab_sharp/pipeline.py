@@ -227,11 +227,9 @@ def _detect(
         if isinstance(progress, Progress)
         else Progress(len(scales_t) + 3, enabled=progress)
     )
-    if not return_details and backend == "compiled" and not is_mesh:
-        # a cloud: the native library's sequence (ms_detect); an input it refuses takes
-        # the path below, which raises the error. A mesh takes the path below: it
-        # renumbers a scattered mesh once and builds the rings beside the sharp edges on
-        # two threads, which the library's sequence does not yet (the same bits).
+    if not return_details and backend == "compiled":
+        # the native library's sequence (ms_detect); an input it refuses takes the path
+        # below, which raises the error
         native = _detect_native.detect(
             geometry,
             is_mesh=is_mesh,

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import functools
 import importlib.machinery
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,9 +19,11 @@ import shapes
 import meshlab_sharp
 from meshlab_sharp import _detect_native, _header, _kernels
 from meshlab_sharp.cli import parse_scales
-from meshlab_sharp.defaults import DEFAULT_RING_SCALES
 from meshlab_sharp.io import Geometry
 from meshlab_sharp.progress import Progress
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+from bench import cad_mesh
 
 
 def test_a_built_library_loads_whole():
@@ -50,37 +54,34 @@ def _cases() -> dict[str, tuple[np.ndarray, np.ndarray | None, dict[str, object]
         "cube-mesh": (*cube, {}),
         "noisy-mesh": (*shapes.noisy_mesh(*cube, 0.2, seed=5), {"scales": (1, 3)}),
         "cube-mesh-as-points": (*cube, {"as_points": True}),
+        # a vertex order the library renumbers breadth-first (with duplicates merged)
+        "scattered-mesh": (*_scattered_mesh(), {}),
     }
+
+
+@functools.cache
+def _scattered_mesh() -> tuple[np.ndarray, np.ndarray]:
+    """The bench's CAD mesh of about 80,000 vertices (some duplicated) in a scattered
+    vertex order: one cleaning renumbers (``ms_scattered_faces``)."""
+    vertices, faces = shapes.shuffled_mesh(*cad_mesh(80_000), seed=3)
+    assert _kernels.scattered_faces(faces, len(vertices))
+    return vertices, faces
 
 
 @needs_library
 @pytest.mark.parametrize("mode", ["paper", "robust"])
 @pytest.mark.parametrize("case", sorted(_cases()))
 def test_the_library_gives_the_python_driven_bits(case, mode):
-    """Every output of the library's sequence (the default path for a cloud; for a mesh
-    the plugin's, called here directly) equals the Python-driven path's
-    (``return_details=True``), bit for bit, on one thread and on every core."""
+    """Every output of the library's sequence (the default path of clouds and meshes)
+    equals the Python-driven path's (``return_details=True``), bit for bit, on one thread
+    and on every core."""
     vertices, faces, options = _cases()[case]
     expected = meshlab_sharp.detect(vertices, faces, mode=mode, return_details=True, **options)
     assert "clean" in expected.timings  # the Python-driven path
-    mesh = faces is not None and not options.get("as_points", False)
     for workers in (1, -1):
-        if mesh:
-            got = _detect_native.detect(
-                Geometry(vertices, faces, case),
-                is_mesh=True,
-                scales=tuple(options.get("scales", DEFAULT_RING_SCALES)),
-                mode=mode,
-                weighting=options.get("weighting", "gaussian"),
-                workers=workers,
-                bar=Progress(1, enabled=False),
-            )
-            assert got is not None
-            assert tuple(got.scales) == expected.scales
-        else:
-            got = meshlab_sharp.detect(vertices, faces, mode=mode, workers=workers, **options)
-            assert "kd-tree" in got.timings or "thresholds" in got.timings  # the library's
-            assert got.scales == expected.scales and got.kind == expected.kind
+        got = meshlab_sharp.detect(vertices, faces, mode=mode, workers=workers, **options)
+        assert "thresholds" in got.timings  # the library's
+        assert got.scales == expected.scales and got.kind == expected.kind
         assert got.n_clean == expected.n_clean
         for name in ("mask", "strength", "thresholds", "candidate_counts", "kept"):
             a, b = np.asarray(getattr(got, name)), np.asarray(getattr(expected, name))

@@ -12,6 +12,7 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <memory>
 #include <new>
 #include <numeric>
@@ -207,39 +208,155 @@ std::vector<char> farPoints(const double *xyz, const Index n) {
 	return far;
 }
 
+// A mesh's 1-ring lists in CSR form: ms_adjacency's (each vertex's neighbours in the order
+// of its faces).
+struct Rings {
+	std::vector<Index> ptr;
+	Buffer<int32_t> idx;
+};
+
+// ms_adjacency of the faces (F, 3) over n vertices, as _kernels.adjacency.
+Rings adjacency(const Index *faces, Index F, Index n) {
+	Rings a;
+	a.ptr.resize(n + 1);
+	a.idx.resize(6 * F);
+	check(ms_adjacency(faces, F, n, a.ptr.data(), a.idx.data()));
+	a.idx.resize(a.ptr[n]);
+	return a;
+}
+
 struct Clean {
-	Buffer<double> pts;          // cleaned vertices (m, 3), input order
+	Buffer<double> pts;          // cleaned vertices (m, 3), input order (a scattered mesh: breadth-first)
 	Buffer<Index> faces;         // cleaned triangles (f, 3)
 	std::vector<Index> fromInput;  // cleaned index of each input vertex or -1; empty: itself
+	Rings adj;                   // the mesh's adjacency when the renumbering built it and it holds; else empty
 	Index n = 0;                 // cleaned vertices (pts may be handed on to a kd-tree)
 	Index size() const { return n; }
 };
 
-// cleaning._clean_compiled: exact duplicates merged into their first occurrence; for
-// meshes, faces of zero double area dropped, then unreferenced vertices. v (n, 3), faces
-// (F, 3).
-Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
+// Fewest points or faces that cleaning splits between two threads (_kernels'
+// _PARALLEL_POINTS, _PARALLEL_FACES).
+const Index PARALLEL_ITEMS = Index(1) << 16;
+
+// f(part) for the parts 0 and 1 of a two-part step, on two threads (one unless
+// workers() > 1), each part's exception raised after both ran.
+template <class F>
+void twoParts(Index parts, F f, bool threads = true) {
+	std::exception_ptr error;
+	std::thread side;
+	if (parts > 1 && !threads) f(Index(1));
+	else if (parts > 1) side = std::thread([&] {
+		try {
+			f(Index(1));
+		} catch (...) {
+			error = std::current_exception();
+		}
+	});
+	f(Index(0));
+	if (side.joinable()) side.join();
+	if (error) std::rethrow_exception(error);
+}
+
+// _kernels.merge_duplicates: exact duplicates merged into their first occurrence, on two
+// threads for a large input (each probes the points whose hash falls in its half of the
+// table, then numbers half of the points: the same result). fromInput (n, all 0):
+// cleaned index of each input point; out (room for n rows): the cleaned points when some
+// merge. Returns their number m.
+Index mergeDuplicates(const double *v, Index n, std::vector<Index> &fromInput, double *out) {
+	const Index parts = workers() > 1 && n >= PARALLEL_ITEMS ? 2 : 1;
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
-	Buffer<uint64_t> table(size);  // scratch (ms_dedup clears it)
+	Buffer<uint64_t> table(size);  // each part cleared by its probe
 	Buffer<Index> toInput(n);
-	std::vector<Index> fromInput(n);  // all 0, as ms_dedup needs
+	const Index bounds[3] = {0, n * 1 / parts, n};
+	Index dups[2][2] = {{0, 0}, {0, 0}};  // (table part, span of the points)
+	twoParts(parts, [&](Index part) {
+		ms_dedup_probe(v, n, table.data(), size - 1, parts, part, bounds, fromInput.data(), dups[part]);
+	});
+	Buffer<uint64_t>().swap(table);
+	Index before[3] = {0, 0, 0};  // merged points before each span
+	for (Index span = 0; span < parts; ++span) before[span + 1] = before[span] + dups[0][span] + dups[1][span];
+	const Index m = n - before[parts];
+	twoParts(parts, [&](Index span) {
+		const Index lo = bounds[span], hi = bounds[span + 1];
+		ms_dedup_number(v, lo, hi, lo - before[span], fromInput.data(), toInput.data(), m < n ? out : nullptr);
+	});
+	if (m < n)  // after every span's numbering: it reads them all
+		twoParts(parts, [&](Index span) { ms_dedup_resolve(bounds[span], bounds[span + 1], fromInput.data()); });
+	return m;
+}
+
+// _kernels.keep_faces: the faces (F, 3) mapped through remap (or not, when null) whose
+// double area on p is > 0, in order, into out (may be faces when remap is null), the
+// vertices they use marked in used (m, zeroed); on two threads for many faces, each
+// part marking its own array (the same result). Returns the faces kept.
+Index keepFaces(const double *p, Index m, const Index *faces, Index F, const Index *remap, Index *out,
+                std::vector<uint8_t> &used) {
+	const Index parts = workers() > 1 && F >= PARALLEL_ITEMS ? 2 : 1;
+	const Index bounds[3] = {0, F * 1 / parts, F};
+	Index kept[2] = {0, 0};
+	std::vector<uint8_t> second(parts > 1 ? m : 0, 0);
+	twoParts(parts, [&](Index part) {
+		const Index lo = bounds[part];
+		kept[part] = ms_keep_faces(p, faces + 3 * lo, bounds[part + 1] - lo, remap, out + 3 * lo,
+		                           part ? second.data() : used.data());
+	});
+	if (parts == 1) return kept[0];
+	// the second part's faces moved to follow the first's
+	std::copy(out + 3 * bounds[1], out + 3 * (bounds[1] + kept[1]), out + 3 * kept[0]);
+	for (Index i = 0; i < m; ++i) used[size_t(i)] |= second[size_t(i)];
+	return kept[0] + kept[1];
+}
+
+// cleaning._clean_compiled(local_order=True)'s renumbering, between the merge and the
+// faces' test: a mesh whose order is scattered (ms_scattered_faces) renumbered
+// breadth-first (ms_bfs_renumber), so that the faces' test and every later step read
+// nearby memory. faces (F, 3) over the m merged points pts (remapped through fromInput
+// when some merged): into c.faces renumbered, pts and fromInput renumbered, the lists
+// (renumbered) into c.adj. False (nothing done) when the order has locality.
+bool localOrder(Clean &c, const Index *faces, Index F, Index m, bool merged, std::vector<Index> &fromInput) {
+	if (m >= (Index(1) << 31) || !ms_scattered_faces(faces, F, merged ? fromInput.data() : nullptr, m))
+		return false;
+	c.faces.resize(3 * F);
+	for (Index i = 0; i < 3 * F; ++i) c.faces[i] = merged ? fromInput[faces[i]] : faces[i];
+	Rings adj = adjacency(c.faces.data(), F, m);
+	std::vector<int32_t> order(m), rank(m);
+	Rings renumbered;
+	renumbered.ptr.resize(m + 1);
+	renumbered.idx.resize(adj.idx.size());
+	Buffer<double> at(3 * m);
+	ms_bfs_renumber(adj.ptr.data(), adj.idx.data(), m, c.pts.data(), nullptr, order.data(), rank.data(),
+	                renumbered.ptr.data(), renumbered.idx.data(), at.data(), nullptr);
+	adj = Rings();
+	c.pts.swap(at);
+	for (Index &f : c.faces) f = rank[f];
+	for (Index &i : fromInput) i = rank[i];
+	c.adj = std::move(renumbered);
+	return true;
+}
+
+// cleaning._clean_compiled: exact duplicates merged into their first occurrence; for
+// meshes, renumbered breadth-first when scattered (localOrder), faces of zero double area
+// dropped, then unreferenced vertices. v (n, 3), faces (F, 3).
+Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
+	std::vector<Index> fromInput(n);  // all 0, as the merge needs
 	Clean c;
 	c.pts.resize(3 * n);
-	const Index m = ms_dedup(v, n, table.data(), size - 1, fromInput.data(), toInput.data(), c.pts.data());
+	const Index m = mergeDuplicates(v, n, fromInput, c.pts.data());
 	if (m == n) std::copy(v, v + 3 * n, c.pts.begin());
 	c.pts.resize(3 * m);
 	c.n = m;
-	Buffer<uint64_t>().swap(table);
-	Buffer<Index>().swap(toInput);
 	if (!mesh) {
 		if (m < n) c.fromInput = std::move(fromInput);
 		return c;
 	}
-	c.faces.resize(3 * F);
+	const bool renumbered = localOrder(c, faces, F, m, m < n, fromInput);
+	if (!renumbered) c.faces.resize(3 * F);
 	std::vector<uint8_t> used(m, 0);
-	const Index nonzero = ms_keep_faces(c.pts.data(), faces, F, fromInput.data(),
-	                                    c.faces.data(), used.data());
+	const Index nonzero = renumbered
+	                          ? keepFaces(c.pts.data(), m, c.faces.data(), F, nullptr, c.faces.data(), used)
+	                          : keepFaces(c.pts.data(), m, faces, F, m < n ? fromInput.data() : nullptr,
+	                                      c.faces.data(), used);
 	c.faces.resize(3 * nonzero);
 	if (c.faces.empty()) throw InputError("every face has zero area: nothing is left of the mesh");
 	std::vector<Index> renumber(m, -1);
@@ -253,8 +370,9 @@ Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 	c.n = kept;
 	if (kept < m) {  // else renumber is the identity
 		for (Index &f : c.faces) f = renumber[f];
-		for (Index &i : fromInput) i = renumber[i];
+		for (Index &i : fromInput) i = i < 0 ? i : renumber[i];
 	}
+	if (kept < m || nonzero < F) c.adj = Rings();  // the lists are the faces' own no more
 	for (Index i = 0; i < n; ++i)  // kept when a vertex moved or was dropped
 		if (fromInput[i] != i) {
 			c.fromInput = std::move(fromInput);
@@ -370,22 +488,10 @@ CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian
 	return c;
 }
 
-// A mesh's 1-ring lists in CSR form: ms_adjacency's (each vertex's neighbours in the order
-// of its faces).
-struct Rings {
-	std::vector<Index> ptr;
-	Buffer<int32_t> idx;
-};
-
-// ms_adjacency of the cleaned mesh, as _kernels.adjacency.
-Rings adjacency(const Clean &c) {
-	const Index n = c.size(), F = Index(c.faces.size() / 3);
-	Rings a;
-	a.ptr.resize(n + 1);
-	a.idx.resize(6 * F);
-	check(ms_adjacency(c.faces.data(), F, n, a.ptr.data(), a.idx.data()));
-	a.idx.resize(a.ptr[n]);
-	return a;
+// The cleaned mesh's adjacency: cleaning's when it built it (handed on), else ms_adjacency's.
+Rings adjacency(Clean &c) {
+	if (!c.adj.ptr.empty()) return std::move(c.adj);
+	return adjacency(c.faces.data(), Index(c.faces.size() / 3), c.size());
 }
 
 // The rings `inner` and `outer` (inner <= outer) of the vertices rows, breadth-first as
@@ -506,16 +612,46 @@ void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 	}
 }
 
+// What the ring pass reads of a mesh, besides its points: the adjacency, the
+// face-average normals (n, 3) and, in robust mode, the vertices of its sharp edges
+// (creases.py). Built as pipeline._neighbourhoods_and_normals builds them: unless the
+// run has one thread, on two threads (in paper mode the normals beside the adjacency; in
+// robust mode the sharp edges, the longest, beside the adjacency and then the normals).
+// The faces are freed once read (no later step reads them, as pipeline.py).
+struct MeshLists {
+	Rings adj;
+	std::vector<double> normals;
+	std::vector<char> edges;
+};
+
+MeshLists meshLists(Clean &c, bool robust) {
+	MeshLists out;
+	auto normals = [&] {
+		out.normals.assign(3 * c.size(), 0.0);
+		check(ms_face_average_normals(c.pts.data(), c.size(), c.faces.data(), Index(c.faces.size() / 3),
+		                              MS_ZERO_NORMAL, out.normals.data()) < 0);
+	};
+	auto side = [&] {
+		if (robust) out.edges = sharpVertices(c.pts, c.faces);
+		else normals();
+	};
+	twoParts(2, [&](Index part) {
+		if (part == 1) return side();
+		out.adj = adjacency(c);
+		if (robust) normals();
+	}, workers() > 1);
+	Buffer<Index>().swap(c.faces);
+	return out;
+}
+
 // The mesh's projected distances (S, n) at every ring by the kernel's breadth-first search,
-// face-average normals fixed (zero rows: PCA), as _kernels.ring_projected_distances; with
-// score not null, robust mode's relative distances (S, n) instead, and the score (n) into
-// *score, from the same walk (relative=True).
-Buffer<double> ringPdis(Clean &c, const Rings &adj, const std::vector<int> &scales, bool gaussian,
-                             std::vector<double> *score, Bar &bar, int from, int to) {
-	const Index n = c.size(), F = Index(c.faces.size() / 3);
-	std::vector<double> normals(3 * n, 0.0);
-	check(ms_face_average_normals(c.pts.data(), n, c.faces.data(), F, MS_ZERO_NORMAL, normals.data()) < 0);
-	Buffer<Index>().swap(c.faces);  // no later step reads them (as pipeline.py)
+// the face-average normals fixed (n, 3; zero rows: PCA), as _kernels.ring_projected_distances;
+// with score not null, robust mode's relative distances (S, n) instead, and the score (n)
+// into *score, from the same walk (relative=True).
+Buffer<double> ringPdis(const Clean &c, const Rings &adj, const std::vector<double> &normals,
+                        const std::vector<int> &scales, bool gaussian, std::vector<double> *score, Bar &bar,
+                        int from, int to) {
+	const Index n = c.size();
 	const std::vector<Index> rings(scales.begin(), scales.end());
 	Buffer<double> out(rings.size() * n);  // filled whole by the kernel
 	if (score) score->assign(n, 0.0);
@@ -557,7 +693,9 @@ Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 	Buffer<double> pdis;
 	std::vector<Index> orig;  // a cloud's tree order: the cleaned index of each row of pdis
 	if (r.mesh) {
-		pdis = ringPdis(c, adjacency(c), r.scales, options.gaussian, nullptr, bar, 0, 90);
+		bar.report(0, "neighbourhoods");
+		const MeshLists lists = meshLists(c, false);
+		pdis = ringPdis(c, lists.adj, lists.normals, r.scales, options.gaussian, nullptr, bar, 0, 90);
 	} else {
 		bar.report(0, "kd-tree");
 		Tree tree(std::move(c.pts));  // no later step reads the points
@@ -730,10 +868,12 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = c.size();
 	const size_t S = r.scales.size();
 	const int top = r.scales.back();
-	const auto edges = sharpVertices(c.pts, c.faces);  // before the ring pass drops the faces
-	const Rings adj = adjacency(c);
+	bar.report(0, "neighbourhoods");
+	const MeshLists lists = meshLists(c, true);
+	const Rings &adj = lists.adj;
+	const std::vector<char> &edges = lists.edges;
 	std::vector<double> score;
-	Buffer<double> relative = ringPdis(c, adj, r.scales, options.gaussian, &score, bar, 0, 85);
+	Buffer<double> relative = ringPdis(c, adj, lists.normals, r.scales, options.gaussian, &score, bar, 0, 85);
 	bar.report(85, "thresholds");
 	std::vector<int64_t> votes(n, 0);
 	for (size_t s = 0; s < S; ++s) vote(&relative[s * n], n, false, 0.0, true, R_MIN, votes, r);
