@@ -23,6 +23,10 @@ _TIMINGS = _header.integer("COUNT_TIMINGS")
 #: The largest scale a C int holds.
 _INT_MAX = 2**31 - 1
 _ERROR_BYTES = 512
+#: The buffers of the error message and of a stage's name: their types made once (a type
+#: made per call, as ``create_string_buffer`` makes it, is left in a reference cycle).
+_ERROR_BUFFER = ctypes.c_char * _ERROR_BYTES
+_NAME_BUFFER = ctypes.c_char * 64
 
 #: The library's stage names that the report spells as the Python-driven path does.
 _STAGE_NAMES = {"cleaning": "clean"}
@@ -43,6 +47,7 @@ class _Options(ctypes.Structure):
         ("knn_scales", ctypes.c_int * MAX_SCALES),
         ("n_ring_scales", ctypes.c_int),
         ("ring_scales", ctypes.c_int * MAX_SCALES),
+        ("details", ctypes.c_int),
     ]
 
 
@@ -50,7 +55,9 @@ class _Options(ctypes.Structure):
 class NativeDetection:
     """What ``ms_detect`` returned: per input vertex ``mask``, ``strength`` and ``kept``;
     per scale used ``scales``, ``thresholds`` and ``candidate_counts``; ``n_clean``,
-    ``mesh`` (processed as a mesh) and the seconds of each stage in order."""
+    ``mesh`` (processed as a mesh) and the seconds of each stage in order; when asked
+    for, per scale and input vertex the ``distances`` (s, n) the thresholds split and the
+    ``normals`` (s, n, 3) (NaN where a vertex took no part), else None."""
 
     mask: np.ndarray
     strength: np.ndarray
@@ -61,6 +68,8 @@ class NativeDetection:
     n_clean: int
     mesh: bool
     timings: dict[str, float]
+    distances: np.ndarray | None = None
+    normals: np.ndarray | None = None
 
 
 def available() -> bool:
@@ -77,10 +86,12 @@ def detect(
     weighting: str,
     workers: int,
     bar: Progress,
+    details: bool = False,
 ) -> NativeDetection | None:
     """Run ``ms_detect`` on ``geometry`` (its faces unless ``is_mesh`` is False) at
     ``scales`` (the kNN sizes or the rings, as ``is_mesh`` says), on ``workers`` threads
-    (<= 0: every core), stepping ``bar`` as the library reports progress.
+    (<= 0: every core), stepping ``bar`` as the library reports progress; with
+    ``details`` the per-scale distances and normals too.
 
     Returns None when the library refuses the input as unusable (too few distinct
     points, every face of zero area, a scale beyond a C int): the caller's own path then
@@ -95,6 +106,7 @@ def detect(
     options.weighting = 0 if weighting == "gaussian" else 1
     options.as_points = 0
     options.threads = max(0, int(workers))
+    options.details = int(details)
     if is_mesh:
         options.n_ring_scales = len(scales)
         options.ring_scales[: len(scales)] = scales
@@ -126,7 +138,7 @@ def detect(
 
     callback = _PROGRESS(report)
     handle = ctypes.c_void_p()
-    error = ctypes.create_string_buffer(_ERROR_BYTES)
+    error = _ERROR_BUFFER()
     status = lib.ms_detect(
         vertices.ctypes.data,
         len(vertices),
@@ -171,12 +183,17 @@ def _results(lib: ctypes.CDLL, handle: ctypes.c_void_p) -> NativeDetection:
         handle, scales.ctypes.data, thresholds.ctypes.data, candidates.ctypes.data
     )
     timings = {}
-    name = ctypes.create_string_buffer(64)
+    name = _NAME_BUFFER()
     seconds = ctypes.c_double()
     for i in range(int(counts[_TIMINGS])):
         lib.ms_detection_timing(handle, i, name, len(name), ctypes.byref(seconds))
         stage = name.value.decode()
         timings[_STAGE_NAMES.get(stage, stage)] = seconds.value
+    distances = normals = None
+    if lib.ms_detection_details(handle, None, None):
+        distances = np.empty((s, n), dtype=np.float64)
+        normals = np.empty((s, n, 3), dtype=np.float64)
+        lib.ms_detection_details(handle, distances.ctypes.data, normals.ctypes.data)
     return NativeDetection(
         mask=mask,
         strength=strength,
@@ -187,4 +204,6 @@ def _results(lib: ctypes.CDLL, handle: ctypes.c_void_p) -> NativeDetection:
         n_clean=int(counts[_CLEAN]),
         mesh=bool(counts[_MESH]),
         timings=timings,
+        distances=distances,
+        normals=normals,
     )

@@ -154,6 +154,7 @@ _SIGNATURES = {
     "ms_detection_vertices": (None, [_c_void_p, _c_void_p, _c_void_p, _c_void_p]),
     "ms_detection_scales": (None, [_c_void_p, _c_void_p, _c_void_p, _c_void_p]),
     "ms_detection_timing": (None, [_c_void_p, _int, _c_void_p, _int, _c_void_p]),
+    "ms_detection_details": (_int, [_c_void_p, _c_void_p, _c_void_p]),
     "ms_detection_free": (None, [_c_void_p]),
     "ms_parse_scales": (_int, [_c_void_p, _int, _c_void_p, _int, _c_void_p, _int]),
     "ms_format_scales": (_int, [_c_void_p, _int, _c_void_p, _int]),

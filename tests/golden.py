@@ -17,6 +17,7 @@ import shapes
 
 import meshlab_sharp
 from evaluation import groundtruth
+from meshlab_sharp.reference import detect as reference_sequence
 
 FOLDER = Path(__file__).parent / "data" / "golden"
 MODES = ("robust", "paper")
@@ -81,8 +82,12 @@ def outputs(
 ) -> dict[str, Any]:
     """The scales, thresholds, candidates per scale and feature indices of one mode: of
     ``detect``'s default path (the native library's sequence), or with ``python_driven``
-    of the path ``return_details`` takes (which reads the Python modules' constants)."""
-    result = meshlab_sharp.detect(points, faces, mode=mode, return_details=python_driven)
+    of the Python-driven sequence (:mod:`meshlab_sharp.reference.detect`, compiled
+    steps; it reads the Python modules' constants)."""
+    if python_driven:
+        result = reference_sequence.detect(points, faces, mode=mode, backend="compiled")
+    else:
+        result = meshlab_sharp.detect(points, faces, mode=mode)
     return {
         "scales": list(result.scales),
         "thresholds": [float(t) for t in result.thresholds],

@@ -1,5 +1,6 @@
 """The native library's whole detection (``ms_detect``) as :func:`meshlab_sharp.detect`
-takes it by default: the same bits as the Python-driven path, its options and errors
+takes it by default: the same bits as the Python-driven sequence
+(:mod:`meshlab_sharp.reference.detect`), the details included, its options and errors
 through the C ABI, the scales grammar (``ms_parse_scales``) the command line's, the
 progress bar fed from the library's callback."""
 
@@ -19,8 +20,8 @@ import shapes
 import meshlab_sharp
 from meshlab_sharp import _detect_native, _header, _kernels
 from meshlab_sharp.cli import parse_scales
-from meshlab_sharp.io import Geometry
 from meshlab_sharp.progress import Progress
+from meshlab_sharp.reference import detect as reference_sequence
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
 from bench import cad_mesh
@@ -72,16 +73,25 @@ def _scattered_mesh() -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("mode", ["paper", "robust"])
 @pytest.mark.parametrize("case", sorted(_cases()))
 def test_the_library_gives_the_python_driven_bits(case, mode):
-    """Every output of the library's sequence (the default path of clouds and meshes)
-    equals the Python-driven path's (``return_details=True``), bit for bit, on one thread
-    and on every core."""
+    """Every output of the library's sequence (the default path of clouds and meshes; a
+    scattered mesh renumbered) equals the Python-driven sequence's, bit for bit, on one
+    thread and on every core, with and without the per-scale details."""
     vertices, faces, options = _cases()[case]
-    expected = meshlab_sharp.detect(vertices, faces, mode=mode, return_details=True, **options)
-    assert "clean" in expected.timings  # the Python-driven path
-    for workers in (1, -1):
-        got = meshlab_sharp.detect(vertices, faces, mode=mode, workers=workers, **options)
+    expected = reference_sequence.detect(
+        vertices, faces, mode=mode, return_details=True, backend="compiled", **options
+    )
+    for workers, details in ((1, False), (-1, False), (-1, True)):
+        got = meshlab_sharp.detect(
+            vertices, faces, mode=mode, workers=workers, return_details=details, **options
+        )
         assert "thresholds" in got.timings  # the library's
         assert got.scales == expected.scales and got.kind == expected.kind
+        if details:
+            for name in ("distances", "normals"):
+                a, b = np.asarray(getattr(got, name)), np.asarray(getattr(expected, name))
+                assert a.shape == b.shape and a.tobytes() == b.tobytes(), name
+        else:
+            assert got.distances is None and got.normals is None
         assert got.n_clean == expected.n_clean
         for name in ("mask", "strength", "thresholds", "candidate_counts", "kept"):
             a, b = np.asarray(getattr(got, name)), np.asarray(getattr(expected, name))
@@ -91,8 +101,37 @@ def test_the_library_gives_the_python_driven_bits(case, mode):
 
 
 @needs_library
+@pytest.mark.parametrize("mode", ["paper", "robust"])
+@pytest.mark.parametrize("case", ["noisy-outliers", "noisy-mesh"])
+def test_the_librarys_details_are_the_numpy_references(case, mode):
+    """The library's results equal the numpy reference's: the decisions bit for bit, the
+    details to the last bits (the two backends' sums round differently; the normals'
+    lines), NaN at the same vertices."""
+    vertices, faces, options = _cases()[case]
+    expected = reference_sequence.detect(
+        vertices, faces, mode=mode, return_details=True, backend="numpy", **options
+    )
+    got = meshlab_sharp.detect(vertices, faces, mode=mode, return_details=True, **options)
+    assert "thresholds" in got.timings  # the library's
+    for name in ("mask", "strength", "kept", "thresholds", "candidate_counts"):
+        a, b = np.asarray(getattr(got, name)), np.asarray(getattr(expected, name))
+        assert a.shape == b.shape and a.tobytes() == b.tobytes(), name
+    assert got.distances.shape == expected.distances.shape
+    np.testing.assert_allclose(
+        got.distances, expected.distances, rtol=1e-9, atol=1e-12, equal_nan=True
+    )
+    # the normals' lines (a PCA normal's sign is either eigenvector's)
+    assert got.normals.shape == expected.normals.shape
+    dots = np.abs(np.sum(got.normals * expected.normals, axis=-1))
+    taking_part = ~np.isnan(expected.distances)
+    assert (np.isnan(dots) == ~taking_part).all()
+    np.testing.assert_allclose(dots[taking_part], 1.0, atol=1e-9)
+    assert np.isnan(got.distances).any() == (not got.kept.all())
+
+
+@needs_library
 def test_a_refused_input_gives_the_commands_message():
-    """An input the library refuses takes the Python-driven path's error message."""
+    """An input the library refuses takes the Python-driven sequence's error message."""
     with pytest.raises(meshlab_sharp.InputError, match=r"30 distinct points, fewer than .* k = 40"):
         meshlab_sharp.detect(shapes.random_box_points(30))
     with pytest.raises(meshlab_sharp.InputError, match="all 50 points are identical"):

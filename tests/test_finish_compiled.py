@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 import shapes
 
-import meshlab_sharp
 from meshlab_sharp import _kernels, robust
 from meshlab_sharp.neighbourhoods import Neighbourhood
+from meshlab_sharp.reference import detect as reference_sequence
 from meshlab_sharp.sample import sample_part
 
 pytestmark = pytest.mark.skipif(not _kernels.available(), reason="needs the compiled kernels")
@@ -28,8 +28,8 @@ from bench import cad_cloud, cad_mesh  # noqa: E402
 
 
 def _setup_of(monkeypatch, vertices, faces=None) -> tuple[robust.RobustSetup, np.ndarray]:
-    """The RobustSetup of a compiled robust ``detect`` and the candidates it finished (the
-    Python-driven path, which ``return_details`` takes)."""
+    """The RobustSetup of the Python-driven sequence with the compiled backend and the
+    candidates it finished."""
     held = {}
     finish = robust.RobustSetup.finish
 
@@ -39,9 +39,7 @@ def _setup_of(monkeypatch, vertices, faces=None) -> tuple[robust.RobustSetup, np
 
     with monkeypatch.context() as m:
         m.setattr(robust.RobustSetup, "finish", grab)
-        meshlab_sharp.detect(
-            vertices, faces, mode="robust", backend="compiled", return_details=True
-        )
+        reference_sequence.detect(vertices, faces, mode="robust", backend="compiled")
     return held["setup"], held["mask"]
 
 

@@ -132,7 +132,9 @@ def test_the_package_imports_nothing_outside_it() -> None:
 def test_the_reference_stands_alone() -> None:
     """The numpy reference (``meshlab_sharp.reference``) imports none of the product
     modules that dispatch to it: only other reference modules, the constants, the
-    kernels' thread pool, the errors and the input's types."""
+    kernels' thread pool, the errors and the input's types. The Python-driven sequence
+    (``reference.detect``) is the one exception: it runs the product's steps, each with
+    the backend of the call, and no product module but the entry point imports it."""
     allowed = {
         "meshlab_sharp._header",
         "meshlab_sharp._kernels",
@@ -141,8 +143,13 @@ def test_the_reference_stands_alone() -> None:
         "meshlab_sharp.io",
     }
     graph = import_graph()
-    reference = [name for name in graph if name.startswith("meshlab_sharp.reference")]
+    sequence = "meshlab_sharp.reference.detect"
+    reference = [
+        name for name in graph if name.startswith("meshlab_sharp.reference") and name != sequence
+    ]
     assert len(reference) >= 7
+    users = {name for name in graph if sequence in graph[name]}
+    assert users <= {"meshlab_sharp.pipeline"}, users
     bad = {
         (name, target)
         for name in reference

@@ -41,6 +41,7 @@ def test_detect_leaves_no_reference_cycles(case: str, mode: str, backend: str) -
     if backend == "compiled" and not _kernels.available():
         pytest.skip("compiled kernel not built")
     args = CASES[case]()
+    assert callable(ms.detect)  # imported first (lazily): an import's garbage is not detect's
     _settle()
     gc.disable()
     try:
@@ -83,13 +84,13 @@ def test_cleaned_faces_freed_before_the_scales_pass(mode: str, monkeypatch) -> N
     """The cleaned faces (48 bytes a vertex, a copy of the input's) are gone by the time
     the scales' pass runs, where the peak memory is: neither the ring neighbourhoods
     (compiled: their adjacency only) nor robust mode's set-up keeps them (the
-    Python-driven path, which ``return_details`` takes; the library's sequence drops them
-    too, once the normals are known)."""
+    Python-driven sequence; the library's sequence drops them too, once the normals are
+    known)."""
     if not _kernels.available():
         pytest.skip("compiled kernel not built")
     import weakref
 
-    from meshlab_sharp import pipeline
+    from meshlab_sharp.reference import detect as pipeline
 
     vertices, faces = cube_grid_mesh(6)
     faces = faces.astype(np.int32)  # cleaning then makes its own int64 copy
@@ -109,6 +110,6 @@ def test_cleaned_faces_freed_before_the_scales_pass(mode: str, monkeypatch) -> N
 
     monkeypatch.setattr(pipeline, "clean", spy_clean)
     monkeypatch.setattr(pipeline, "run_scales", spy_run_scales)
-    result = ms.detect(vertices, faces, mode=mode, return_details=True, backend="compiled")
+    result = pipeline.detect(vertices, faces, mode=mode, return_details=True, backend="compiled")
     assert result.mask.any()
     assert alive == [False]

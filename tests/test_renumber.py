@@ -15,6 +15,7 @@ import shapes
 import meshlab_sharp
 from meshlab_sharp import _header, _kernels, cleaning
 from meshlab_sharp.io import as_geometry
+from meshlab_sharp.reference import detect as reference_sequence
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
 from bench import cad_mesh
@@ -121,8 +122,8 @@ def test_detect_is_the_same_with_and_without_the_renumbering(monkeypatch, mode):
 
     for on in (False, True):
         monkeypatch.setattr(_kernels, "scattered", rule(on))
-        # the Python-driven path (return_details) asks the rule; ms_detect decides inside
-        results.append(meshlab_sharp.detect(v, f, mode=mode, return_details=True))
+        # the Python-driven sequence asks the rule; ms_detect decides inside
+        results.append(reference_sequence.detect(v, f, mode=mode, backend="compiled"))
     assert False in asked and True in asked  # the ring pass asked the rule both times
     a, b = results
     assert a.scales == b.scales
@@ -340,12 +341,17 @@ def test_detect_on_the_mesh_shuffled_is_detect_on_the_mesh(monkeypatch, name, mo
         renumbered.append(out.renumbered)
         return out
 
-    monkeypatch.setattr(meshlab_sharp.pipeline, "clean", spy)
-    a = meshlab_sharp.detect(v, f, mode=mode, return_details=True, backend="compiled")
-    b = meshlab_sharp.detect(sv, sf, mode=mode, return_details=True, backend="compiled")
+    monkeypatch.setattr(reference_sequence, "clean", spy)
+    options = dict(mode=mode, return_details=True, backend="compiled")
+    a = reference_sequence.detect(v, f, **options)
+    b = reference_sequence.detect(sv, sf, **options)
     assert renumbered == [False, True]
     _same_after_mapping(a, b, perm)
     assert a.n_features > 0
+    # the library's sequence (which renumbers in its own cleaning): the same bits
+    c = meshlab_sharp.detect(sv, sf, **options)
+    assert "thresholds" in c.timings
+    _same_after_mapping(a, c, perm)
 
 
 @pytest.mark.slow

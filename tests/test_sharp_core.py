@@ -25,6 +25,7 @@ from meshlab_sharp.cli import parse_scales
 from meshlab_sharp.errors import InputError
 from meshlab_sharp.io.geometry import Geometry
 from meshlab_sharp.options import MIN_KNN_SCALE
+from meshlab_sharp.reference import detect as reference_sequence
 from meshlab_sharp.sample import sample_part
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -188,14 +189,13 @@ def test_the_library_agrees_with_python(driver, tmp_path, case, mode):
         weighting=str(options.get("weighting", "gaussian")),
         as_points=bool(options.get("as_points", False)),
     )
-    expected = meshlab_sharp.detect(
+    expected = reference_sequence.detect(
         vertices,
         faces,
         mode=mode,
         scales=scales,
         weighting=options.get("weighting", "gaussian"),
         as_points=bool(options.get("as_points", False)),
-        return_details=True,  # the Python-driven path
     )
     assert tuple(int(s) for s in lines["scales"]) == expected.scales
     np.testing.assert_array_equal(lines["thresholds"], expected.thresholds)

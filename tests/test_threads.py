@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 import shapes
 
-from meshlab_sharp import _kernels, pipeline, robust
+from meshlab_sharp import _kernels, robust
 from meshlab_sharp.io import Geometry
 from meshlab_sharp.neighbourhoods import Neighbourhood, knn
+from meshlab_sharp.reference import detect as reference_sequence
 from meshlab_sharp.reference import robust as reference_robust
 
 
@@ -104,7 +105,8 @@ def test_a_stopped_tree_build_raises():
 def test_the_tree_built_beside_cleaning_is_the_cleaned_clouds(duplicates):
     points = np.random.default_rng(3).random((20000, 3))
     points[:duplicates] = points[-duplicates - 1 : -1] if duplicates else points[:0]
-    cleaned, tree = pipeline._clean_beside_tree(Geometry(points, None, "test"), -1, "compiled")
+    geometry = Geometry(points, None, "test")
+    cleaned, tree = reference_sequence._clean_beside_tree(geometry, -1, "compiled")
     assert len(cleaned.vertices) == len(points) - duplicates
     if duplicates:
         assert tree is None
@@ -115,7 +117,7 @@ def test_the_tree_built_beside_cleaning_is_the_cleaned_clouds(duplicates):
     for name in ("points", "orig", "boxes"):
         assert getattr(got, name).tobytes() == getattr(want, name).tobytes()
     # one worker: no thread beside cleaning
-    assert pipeline._clean_beside_tree(Geometry(points, None, "test"), 1, "compiled")[1] is None
+    assert reference_sequence._clean_beside_tree(geometry, 1, "compiled")[1] is None
 
 
 def _same_result(got, want) -> None:

@@ -533,6 +533,8 @@ typedef struct {
     int knn_scales[MS_MAX_SCALES];   /* each >= MS_MIN_KNN_SCALE (MS_DEFAULT_KNN_SCALES) */
     int n_ring_scales;               /* meshes: 1 to MS_MAX_SCALES rings, ascending, */
     int ring_scales[MS_MAX_SCALES];  /* each >= MS_MIN_RING_SCALE (MS_DEFAULT_RING_SCALES) */
+    int details;                     /* 1: keep the per-scale distances and normals
+                                        (ms_detection_details); 0 */
 } ms_detect_options;
 
 /* A detection's results, owned by the library (ms_detection_free). */
@@ -573,6 +575,12 @@ void ms_detection_scales(const ms_detection *d, int *scales, double *thresholds,
 /* Stage i's name (into name, cap bytes, NUL-terminated) and seconds, in order ("" and 0
  * for an i out of range). */
 void ms_detection_timing(const ms_detection *d, int i, char *name, int cap, double *seconds);
+/* With opt->details, per scale used and input vertex, in input order (each pointer may be
+ * NULL; NaN where the vertex took no part): distances (MS_COUNT_SCALES, n) the values the
+ * scale's threshold split (the normalised projected distances; in robust mode the
+ * relative ones), normals (MS_COUNT_SCALES, n, 3) the unit normals they were measured
+ * along. Returns 1, or 0 (nothing written) when the detection kept no details. */
+int ms_detection_details(const ms_detection *d, double *distances, double *normals);
 void ms_detection_free(ms_detection *d);
 
 /* The scales grammar of the command line (meshlab_sharp.cli.parse_scales): a list

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
+#include <limits>
 #include <memory>
 #include <new>
 #include <numeric>
@@ -429,7 +430,7 @@ Buffer<double> cleanedPoints(const Tree &t) {
 // other, as _kernels' pass; near and kthIdx hold tree positions, for ms_isolated_tree;
 // near and kthIdx int32, as cloud_out_t's: a MeshLab layer counts its vertices in an int).
 struct CloudPass {
-	Buffer<double> pdis, relative;  // filled whole by the kernel
+	Buffer<double> pdis, relative, normals;  // filled whole by the kernel (normals: when asked)
 	std::vector<double> score, noise, kthD2;
 	std::vector<int32_t> near, kthIdx;
 	std::vector<double> nthD2, refD2;  // isolation's second rule
@@ -439,7 +440,7 @@ struct CloudPass {
 // relative distances and score (robust), and with noiseK > 0 the isolation and noise
 // statistics (_kernels.cloud_projected_distances).
 CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian, bool relative,
-                    int noiseK, Bar &bar, int from, int to) {
+                    int noiseK, Bar &bar, int from, int to, bool normals = false) {
 	const std::vector<Index> ks(scales.begin(), scales.end());
 	const size_t S = ks.size();
 	CloudPass c;
@@ -479,6 +480,10 @@ CloudPass cloudPass(const Tree &t, const std::vector<int> &scales, bool gaussian
 		out.ref_d2 = c.refD2.data();
 		out.isolated_nth = MS_ISOLATED_NTH;
 		out.isolated_ref = MS_ISOLATED_REF;
+	}
+	if (normals) {  // the normals at every scale (S, n, 3)
+		c.normals.resize(3 * S * t.n);
+		out.normals = c.normals.data();
 	}
 	out.tree_order = noiseK > 0 ? 2 : 1;
 	chunks(t.n, [&](unsigned, Index a, Index b) {
@@ -587,16 +592,43 @@ struct Decision {
 	std::vector<Index> toClean;    // cleaned index of each processed point
 	std::vector<double> strength;  // fraction of scales (1 on robust mode's sharp mesh edges)
 	std::vector<char> feature;
+	// Options::details: per scale and processed point the distances Otsu split (S, p) and
+	// the normals (S, p, 3); else empty.
+	Buffer<double> distances, normals;
 };
 
+// Per-scale rows (S, n, width) in tree order moved to the cleaned order (toCleaned).
+void toCleanedRows(const std::vector<Index> &orig, Buffer<double> &rows, int width) {
+	if (rows.empty()) return;
+	const size_t n = orig.size(), block = n * size_t(width);
+	std::vector<double> tmp(block);
+	for (size_t at = 0; at < rows.size(); at += block) {
+		for (size_t t = 0; t < n; ++t)
+			for (int a = 0; a < width; ++a) tmp[size_t(orig[t]) * width + a] = rows[at + t * width + a];
+		std::copy(tmp.begin(), tmp.end(), rows.begin() + at);
+	}
+}
+
+// Decision's details kept for S scales of n points: the distances written by vote(), the
+// normals moved from the pass's.
+void keepDetails(Decision &d, bool details, size_t S, Index n, Buffer<double> &normals) {
+	if (!details) return;
+	d.distances.resize(S * n);
+	d.normals.swap(normals);
+}
+
+// The distances' row of scale s (null without details).
+double *detailRow(Decision &d, size_t s, Index n) { return d.distances.empty() ? nullptr : &d.distances[s * n]; }
+
 // One scale's threshold and candidates v >= T over x (n), by the kernel's ms_scale_vote
-// (threshold.py's and robust.robust_threshold's arithmetic): votes, threshold and count.
+// (threshold.py's and robust.robust_threshold's arithmetic): votes, threshold and count,
+// and v into out (n) unless it is null.
 // normalise: min-max with the flat rule (flatSpan), else x in [0, 1]; otsu: T =
 // max(Otsu's split, floor), else floor. Returns T.
 double vote(const double *x, Index n, bool normalise, double flatSpan, bool otsu, double floor,
-            std::vector<int64_t> &votes, Result &r) {
+            std::vector<int64_t> &votes, Result &r, double *out = nullptr) {
 	int64_t count = 0;
-	const double T = ms_scale_vote(x, n, normalise, flatSpan, otsu, floor, nullptr, votes.data(), &count);
+	const double T = ms_scale_vote(x, n, normalise, flatSpan, otsu, floor, out, votes.data(), &count);
 	r.thresholds.push_back(T);
 	r.candidates.push_back(long(count));
 	return T;
@@ -647,16 +679,19 @@ MeshLists meshLists(Clean &c, bool robust) {
 // The mesh's projected distances (S, n) at every ring by the kernel's breadth-first search,
 // the face-average normals fixed (n, 3; zero rows: PCA), as _kernels.ring_projected_distances;
 // with score not null, robust mode's relative distances (S, n) instead, and the score (n)
-// into *score, from the same walk (relative=True).
+// into *score, from the same walk (relative=True); with normalsOut not null, the normals
+// (S, n, 3) into it (keep_normals=True).
 Buffer<double> ringPdis(const Clean &c, const Rings &adj, const std::vector<double> &normals,
                         const std::vector<int> &scales, bool gaussian, std::vector<double> *score, Bar &bar,
-                        int from, int to) {
+                        int from, int to, Buffer<double> *normalsOut = nullptr) {
 	const Index n = c.size();
 	const std::vector<Index> rings(scales.begin(), scales.end());
 	Buffer<double> out(rings.size() * n);  // filled whole by the kernel
 	if (score) score->assign(n, 0.0);
 	double *pdis = score ? nullptr : out.data(), *relative = score ? out.data() : nullptr;
 	double *scores = score ? score->data() : nullptr;
+	if (normalsOut) normalsOut->resize(3 * rings.size() * n);  // the normals at every ring (S, n, 3)
+	double *usedNormals = normalsOut ? normalsOut->data() : nullptr;
 	// a scattered vertex order renumbered breadth-first (same rings, same sums), for locality
 	const double *pts = c.pts.data(), *fixed = normals.data();
 	const Index *ptr = adj.ptr.data();
@@ -678,7 +713,7 @@ Buffer<double> ringPdis(const Clean &c, const Rings &adj, const std::vector<doub
 	chunks(n, [&](unsigned w, Index a, Index b) {
 		if (stamps[w].empty()) stamps[w].assign(n, -1);
 		return ms_ring_pdis(pts, n, ptr, idx, fixed, rings.data(), int(rings.size()), int(gaussian), a, b,
-		                    stamps[w].data(), dest, shifted.data(), pdis, nullptr, relative, scores);
+		                    stamps[w].data(), dest, shifted.data(), pdis, usedNormals, relative, scores);
 	}, bar, from, to, score ? "rings, projected distances and local scales" : "rings and projected distances");
 	return out;
 }
@@ -690,30 +725,38 @@ Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const size_t S = r.scales.size();
 	double box[3];
 	ms_extent(c.pts.data(), n, box);
-	Buffer<double> pdis;
+	Buffer<double> pdis, normals;
 	std::vector<Index> orig;  // a cloud's tree order: the cleaned index of each row of pdis
 	if (r.mesh) {
 		bar.report(0, "neighbourhoods");
 		const MeshLists lists = meshLists(c, false);
-		pdis = ringPdis(c, lists.adj, lists.normals, r.scales, options.gaussian, nullptr, bar, 0, 90);
+		pdis = ringPdis(c, lists.adj, lists.normals, r.scales, options.gaussian, nullptr, bar, 0, 90,
+		                options.details ? &normals : nullptr);
 	} else {
 		bar.report(0, "kd-tree");
 		Tree tree(std::move(c.pts));  // no later step reads the points
-		pdis = cloudPass(tree, r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
+		CloudPass pass = cloudPass(tree, r.scales, options.gaussian, false, 0, bar, 5, 90, options.details);
+		pdis.swap(pass.pdis);
+		normals.swap(pass.normals);
 		orig.swap(tree.orig);
 	}
 	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(box[0] * box[0] + box[1] * box[1] + box[2] * box[2]);
 	bar.report(90, "thresholds");
+	Decision d;
+	keepDetails(d, options.details, S, n, normals);
 	std::vector<int64_t> votes(n, 0);
 	r.allFlat = true;
 	for (size_t s = 0; s < S; ++s) {
 		// a flat scale's threshold is 1.0, and only a flat scale's: any other's normalised
 		// values hold 0 and 1, which Otsu's split parts
-		if (vote(&pdis[s * n], n, true, flatSpan, true, 0.0, votes, r) < 1.0) r.allFlat = false;
+		if (vote(&pdis[s * n], n, true, flatSpan, true, 0.0, votes, r, detailRow(d, s, n)) < 1.0) r.allFlat = false;
 	}
 	Buffer<double>().swap(pdis);
-	if (!orig.empty()) votes = toCleaned(orig, votes);
-	Decision d;
+	if (!orig.empty()) {
+		votes = toCleaned(orig, votes);
+		toCleanedRows(orig, d.distances, 1);
+		toCleanedRows(orig, d.normals, 3);
+	}
 	d.toClean.resize(n);
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
 	decide(votes, S, d);
@@ -759,7 +802,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	bar.report(0, "kd-tree");
 	auto tree = std::make_unique<Tree>(std::move(c.pts));  // the points in cleaned order: pts below
 	Buffer<double> pts;  // the points processed, in cleaned order once the pass is done
-	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45);
+	CloudPass pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 5, 45, options.details);
 	std::vector<uint8_t> isolated(tree->n);  // per tree position (_kernels.isolated_from_stats)
 	eachIndex((tree->n + MS_CHUNK - 1) / MS_CHUNK, [&](Index u) {
 		ms_isolated_tree(tree->pts.data(), tree->orig.data(), pass.near.data(), pass.kthD2.data(),
@@ -784,7 +827,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 		}
 		d.toClean.swap(keep);
 		tree = std::make_unique<Tree>(pts);
-		pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 45, 65);
+		pass = cloudPass(*tree, r.scales, options.gaussian, true, k0, bar, 45, 65, options.details);
 	}
 	const Index n = tree->n;
 	const Index at = (n - 1) / 2;
@@ -800,15 +843,18 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 			throw InputError("k = " + std::to_string(r.scales.back()) + " nearest neighbours needs at least " +
 			                 std::to_string(r.scales.back()) + " points, got " + std::to_string(n));
 		pass = CloudPass();
-		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85);
+		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85, options.details);
 	}
 	bar.report(85, "thresholds");
 	const bool quiet = !(ratio > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
 	const size_t S = r.scales.size();
+	keepDetails(d, options.details, S, n, pass.normals);
 	std::vector<int64_t> votes(n, 0);
 	for (size_t s = 0; s < S; ++s)  // robust.otsu_splits: without noise the floor alone
-		vote(&pass.relative[s * n], n, false, 0.0, !quiet, R_MIN, votes, r);
+		vote(&pass.relative[s * n], n, false, 0.0, !quiet, R_MIN, votes, r, detailRow(d, s, n));
 	Buffer<double>().swap(pass.relative);
+	toCleanedRows(tree->orig, d.distances, 1);
+	toCleanedRows(tree->orig, d.normals, 3);
 	if (d.toClean.empty()) {
 		d.toClean.resize(n);
 		std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
@@ -873,12 +919,15 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Rings &adj = lists.adj;
 	const std::vector<char> &edges = lists.edges;
 	std::vector<double> score;
-	Buffer<double> relative = ringPdis(c, adj, lists.normals, r.scales, options.gaussian, &score, bar, 0, 85);
+	Buffer<double> normals;
+	Buffer<double> relative = ringPdis(c, adj, lists.normals, r.scales, options.gaussian, &score, bar, 0, 85,
+	                                   options.details ? &normals : nullptr);
 	bar.report(85, "thresholds");
-	std::vector<int64_t> votes(n, 0);
-	for (size_t s = 0; s < S; ++s) vote(&relative[s * n], n, false, 0.0, true, R_MIN, votes, r);
-	Buffer<double>().swap(relative);
 	Decision d;
+	keepDetails(d, options.details, S, n, normals);
+	std::vector<int64_t> votes(n, 0);
+	for (size_t s = 0; s < S; ++s) vote(&relative[s * n], n, false, 0.0, true, R_MIN, votes, r, detailRow(d, s, n));
+	Buffer<double>().swap(relative);
 	d.toClean.resize(n);
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
 	decide(votes, S, d);
@@ -898,6 +947,25 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 			d.strength[i] = 1.0;
 		}
 	return d;
+}
+
+// Per-scale rows (S, p, width) of the p processed points moved to the nIn input
+// vertices (S, nIn, width), NaN where a vertex took no part: input vertex i is cleaned
+// vertex fromInput[i] (itself when fromInput is empty; -1: dropped), that processed
+// point processed[.] (-1: left out).
+void toInputRows(const Buffer<double> &rows, int width, size_t p, const std::vector<Index> &fromInput,
+                 const std::vector<Index> &processed, Index nIn, std::vector<double> &out) {
+	if (rows.empty()) return;
+	const size_t S = rows.size() / (p * size_t(width));
+	out.assign(S * size_t(nIn) * width, std::numeric_limits<double>::quiet_NaN());
+	for (Index i = 0; i < nIn; ++i) {
+		const Index ci = fromInput.empty() ? i : fromInput[i];
+		if (ci < 0 || processed[ci] < 0) continue;
+		const size_t pi = size_t(processed[ci]);
+		for (size_t s = 0; s < S; ++s)
+			for (int a = 0; a < width; ++a)
+				out[(s * nIn + i) * width + a] = rows[(s * p + pi) * width + a];
+	}
 }
 
 // The command line's grammar (meshlab_sharp.cli.parse_scales), read the same way:
@@ -1041,9 +1109,9 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	}
 	r.nClean = long(c.size());
 
-	const Decision d = !options.robust ? paperMode(c, options, r, bar)
-	                   : r.mesh        ? robustMesh(c, options, r, bar)
-	                                   : robustCloud(c, options, r, bar);
+	Decision d = !options.robust ? paperMode(c, options, r, bar)
+	             : r.mesh        ? robustMesh(c, options, r, bar)
+	                             : robustCloud(c, options, r, bar);
 
 	r.timings = bar.times();
 	Buffer<double>().swap(c.pts);
@@ -1054,11 +1122,18 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 		r.feature = d.feature;
 		r.kept.assign(nIn, 1);
 		r.nFeatures = long(std::count(r.feature.begin(), r.feature.end(), 1));
+		r.distances.assign(d.distances.begin(), d.distances.end());
+		Buffer<double>().swap(d.distances);
+		r.normals.assign(d.normals.begin(), d.normals.end());
 		bar.report(100, "done");
 		return r;
 	}
 	std::vector<Index> processed(c.size(), -1);
 	for (size_t i = 0; i < d.toClean.size(); ++i) processed[d.toClean[i]] = Index(i);
+	toInputRows(d.distances, 1, d.toClean.size(), c.fromInput, processed, nIn, r.distances);
+	Buffer<double>().swap(d.distances);
+	toInputRows(d.normals, 3, d.toClean.size(), c.fromInput, processed, nIn, r.normals);
+	Buffer<double>().swap(d.normals);
 	r.strength.assign(nIn, 0.0);
 	r.feature.assign(nIn, 0);
 	r.kept.assign(nIn, 0);

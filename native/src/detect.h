@@ -23,6 +23,7 @@ struct Options {
 	bool asPoints = false;                      // ignore the faces
 	bool robust = MS_DEFAULT_MODE == 1;  // robust mode (docs/method.md); false: the paper's method
 	unsigned threads = 0;                // threads of the run; 0: one per core this process may use
+	bool details = false;                // keep the per-scale distances and normals (Result)
 };
 
 struct Result {
@@ -33,6 +34,10 @@ struct Result {
 	std::vector<double> strength;      // per input vertex: fraction of scales
 	std::vector<char> feature;         // per input vertex: a sharp feature
 	std::vector<char> kept;            // per input vertex: took part (not dropped)
+	// With Options::details, per scale and input vertex (NaN where it took no part): the
+	// distances Otsu split (normalised, or robust mode's relative ones), (S, n), and the
+	// unit normals they were measured along, (S, n, 3); else empty.
+	std::vector<double> distances, normals;
 	long nClean = 0;
 	long nFeatures = 0;
 	bool allFlat = false;              // every scale flat: all points on one plane

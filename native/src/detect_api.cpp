@@ -65,6 +65,7 @@ int ms_detect(const double *xyz, int64_t n, const int64_t *faces, int64_t m, con
 	options.gaussian = given.weighting == 0;
 	options.asPoints = given.as_points != 0;
 	options.threads = unsigned(std::max(0, given.threads));
+	options.details = given.details != 0;
 	options.knnScales.assign(given.knn_scales, given.knn_scales + given.n_knn_scales);
 	options.ringScales.assign(given.ring_scales, given.ring_scales + given.n_ring_scales);
 	try {
@@ -111,6 +112,14 @@ void ms_detection_timing(const ms_detection *d, int i, char *name, int cap, doub
 	const bool known = i >= 0 && size_t(i) < timings.size();
 	fail(MS_OK, known ? timings[size_t(i)].first.c_str() : "", name, cap);
 	*seconds = known ? timings[size_t(i)].second : 0.0;
+}
+
+int ms_detection_details(const ms_detection *d, double *distances, double *normals) {
+	const sharp::Result &r = d->result;
+	if (r.distances.empty() && r.normals.empty()) return 0;
+	if (distances != nullptr) std::copy(r.distances.begin(), r.distances.end(), distances);
+	if (normals != nullptr) std::copy(r.normals.begin(), r.normals.end(), normals);
+	return 1;
 }
 
 void ms_detection_free(ms_detection *d) { delete d; }
