@@ -55,9 +55,18 @@ def _cases() -> dict[str, tuple[np.ndarray, np.ndarray | None, dict[str, object]
         "cube-mesh": (*cube, {}),
         "noisy-mesh": (*shapes.noisy_mesh(*cube, 0.2, seed=5), {"scales": (1, 3)}),
         "cube-mesh-as-points": (*cube, {"as_points": True}),
+        # faces wound either way round (the normals' windings turn some)
+        "flipped-mesh": (cube[0], _flipped(cube[1]), {}),
         # a vertex order the library renumbers breadth-first (with duplicates merged)
         "scattered-mesh": (*_scattered_mesh(), {}),
     }
+
+
+def _flipped(faces: np.ndarray) -> np.ndarray:
+    """``faces`` with every third one wound the other way round."""
+    out = faces.copy()
+    out[::3] = out[::3, ::-1]
+    return out
 
 
 @functools.cache

@@ -395,6 +395,12 @@ int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *fl
  * count of faces left as they are wound, or -1 out of memory. */
 int64_t ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                                 double zero, double *acc);
+/* ms_face_average_normals with the faces' incidence (ptr (n + 1), inc (3 m): ms_vertex_faces'
+ * of the same faces, only read) given, or NULL (built inside): the same normals, without
+ * building it again where the caller holds it (robust mode's sharp edges read it too). */
+int64_t ms_face_average_normals_at(const double *p, int64_t n, const int64_t *faces, int64_t m,
+                                   const int64_t *ptr, const int32_t *inc, double zero,
+                                   double *acc);
 
 /* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for
  * (3 m + 1) / 2 rows: 3 m int64, the sort keys' scratch first), and the dot products of their faces' unit normals (cross(p1 - p0,

@@ -51,16 +51,18 @@ static void winding_join(winding_sets *w, int32_t f, int32_t g, uint8_t flip) {
     w->odd[rf] |= w->odd[rg];
 }
 
-int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *flip) {
+/* ms_face_windings over the faces' incidence (ptr, inc: ms_vertex_faces'), which it
+ * only reads. */
+static int64_t windings_at(const int64_t *faces, int64_t m, int64_t n, const int64_t *ptr,
+                           const int32_t *inc, uint8_t *flip) {
     memset(flip, 0, (size_t)m);
     if (m == 0) return 0;
     if (m >= ((int64_t)1 << 31)) return -1;
-    int64_t *ptr = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
-    int32_t *inc = (int32_t *)malloc((size_t)(3 * m) * sizeof(int32_t));
     winding_sets w = {NULL, NULL, NULL};
     int64_t unoriented = -1, cap = 0;
     int64_t *other = NULL;
-    if (!ptr || !inc || ms_vertex_faces(faces, m, n, ptr, inc)) goto done;
+    int32_t *lowest = NULL;
+    uint8_t *base = NULL;
     /* each edge (a, b), a < b, with exactly two faces, at a: the faces of a's fan that
      * hold b, read from a table of each face's corners after and before a; first only
      * whether some two go the same way along their edge (none: a consistently wound
@@ -115,7 +117,9 @@ int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *fl
     }
     /* each set's lowest face keeps its winding (faces in order: the first of its set
      * met); a set with an odd cycle keeps every face's */
-    int32_t *lowest = inc, *base = inc + m; /* 2 m of the 3 m entries, read no more */
+    lowest = (int32_t *)malloc((size_t)m * sizeof(int32_t));
+    base = (uint8_t *)malloc((size_t)m);
+    if (!lowest || !base) goto done;
     for (int64_t f = 0; f < m; f++) lowest[f] = -1;
     unoriented = 0;
     for (int64_t f = 0; f < m; f++) {
@@ -129,18 +133,29 @@ int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *fl
             lowest[r] = (int32_t)f;
             base[r] = par;
         }
-        flip[f] = par ^ (uint8_t)base[r];
+        flip[f] = par ^ base[r];
     }
 done:
     free(other);
-    free(ptr);
-    free(inc);
+    free(lowest);
+    free(base);
     free(w.parent);
     free(w.parity);
     free(w.odd);
     return unoriented;
 }
 
+int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *flip) {
+    if (m == 0 || m >= ((int64_t)1 << 31)) return windings_at(faces, m, n, NULL, NULL, flip);
+    int64_t *ptr = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
+    int32_t *inc = (int32_t *)malloc((size_t)(3 * m) * sizeof(int32_t));
+    int64_t unoriented = -1;
+    if (ptr && inc && !ms_vertex_faces(faces, m, n, ptr, inc))
+        unoriented = windings_at(faces, m, n, ptr, inc, flip);
+    free(ptr);
+    free(inc);
+    return unoriented;
+}
 
 /* Face-average normals exactly as normals.face_average_normals computes them with
  * numpy (same products, same order of the sums: corner 0 of every face in face order,
@@ -149,8 +164,16 @@ done:
  * each corner, which is faster than storing them (no fresh memory). */
 int64_t ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                                 double zero, double *acc) {
+    return ms_face_average_normals_at(p, n, faces, m, NULL, NULL, zero, acc);
+}
+
+int64_t ms_face_average_normals_at(const double *p, int64_t n, const int64_t *faces, int64_t m,
+                                   const int64_t *ptr, const int32_t *inc, double zero,
+                                   double *acc) {
     uint8_t *flip = (uint8_t *)malloc((size_t)(m > 0 ? m : 1));
-    const int64_t unoriented = flip ? ms_face_windings(faces, m, n, flip) : -1;
+    const int64_t unoriented = !flip                       ? -1
+                               : ptr != NULL && m < ((int64_t)1 << 31) ? windings_at(faces, m, n, ptr, inc, flip)
+                                                                       : ms_face_windings(faces, m, n, flip);
     if (unoriented < 0) {
         free(flip);
         return -1;

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cfloat>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <exception>
 #include <limits>
@@ -209,11 +210,44 @@ std::vector<char> farPoints(const double *xyz, const Index n) {
 	return far;
 }
 
+// An array in malloc'd memory whose shrinking resize hands the tail back (realloc), where
+// a std::vector keeps its whole capacity: ms_adjacency writes its lists at 6 entries a
+// face (48 bytes a vertex), then they are trimmed to about half.
+template <class T>
+class Trimmable {
+public:
+	size_t size() const { return n_; }
+	T *data() { return p_.get(); }
+	const T *data() const { return p_.get(); }
+	// Room for n (numbers: not written) when larger; else the first n, the rest handed back.
+	void resize(size_t n) {
+		if (n > n_) {
+			T *q = static_cast<T *>(std::realloc(p_.get(), std::max<size_t>(n, 1) * sizeof(T)));
+			if (q == nullptr) throw std::bad_alloc();
+			p_.release();
+			p_.reset(q);
+		} else if (n < n_) {
+			if (T *q = static_cast<T *>(std::realloc(p_.get(), std::max<size_t>(n, 1) * sizeof(T)))) {
+				p_.release();
+				p_.reset(q);
+			}
+		}
+		n_ = n;
+	}
+
+private:
+	struct Free {
+		void operator()(T *p) const { std::free(p); }
+	};
+	std::unique_ptr<T, Free> p_;
+	size_t n_ = 0;
+};
+
 // A mesh's 1-ring lists in CSR form: ms_adjacency's (each vertex's neighbours in the order
 // of its faces).
 struct Rings {
 	std::vector<Index> ptr;
-	Buffer<int32_t> idx;
+	Trimmable<int32_t> idx;
 };
 
 // ms_adjacency of the faces (F, 3) over n vertices, as _kernels.adjacency.
@@ -563,27 +597,41 @@ std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char
 // creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
 // normals turn by more than max(CREASE_ANGLE, NOISE_FACTOR * lower quartile of the angles);
 // the edges and their normals' dot products from the kernel (_kernels.crease_vertices).
-std::vector<char> sharpVertices(const Buffer<double> &p, const Buffer<Index> &faces) {
-	const Index F = Index(faces.size() / 3), n = Index(p.size() / 3);
-	std::vector<Index> ptr(n + 1), estart(n + 1);
-	std::vector<int32_t> inc(3 * F);
-	check(ms_vertex_faces(faces.data(), F, n, ptr.data(), inc.data()));
-	std::vector<double> angles((3 * F + 1) / 2);
+// Each vertex's faces, in face order (ms_vertex_faces): what the sharp edges and the
+// faces' windings read.
+struct Incidence {
+	std::vector<Index> ptr;
+	Buffer<int32_t> inc;
+};
+
+Incidence vertexFaces(const Buffer<Index> &faces, Index n) {
+	const Index F = Index(faces.size() / 3);
+	Incidence out{std::vector<Index>(n + 1), Buffer<int32_t>(3 * F)};
+	check(ms_vertex_faces(faces.data(), F, n, out.ptr.data(), out.inc.data()));
+	return out;
+}
+
+std::vector<char> sharpVertices(const Buffer<double> &p, const Buffer<Index> &faces, const Incidence &at) {
+	const Index n = Index(p.size() / 3);
+	const Index *ptr = at.ptr.data();
+	const int32_t *inc = at.inc.data();
+	std::vector<Index> estart(n + 1);
+	Buffer<double> angles((3 * (faces.size() / 3) + 1) / 2);  // the turned edges' only written
 	int64_t flat = 0; // edges whose angle is exactly 0, left out of angles
-	angles.resize(ms_crease_dots(p.data(), faces.data(), n, ptr.data(), inc.data(), angles.data(), estart.data(), &flat));
+	angles.resize(ms_crease_dots(p.data(), faces.data(), n, ptr, inc, angles.data(), estart.data(), &flat));
 	for (double &a : angles) a = std::acos(std::min(1.0, std::max(-1.0, a)));
 	double theta = MS_CREASE_ANGLE * (M_PI / 180.0);
 	const size_t all = angles.size() + size_t(flat);
 	// the quartile is element (all - 1) / 4 of all the angles; the flat ones are the
 	// smallest (0: NOISE_FACTOR * 0 leaves theta at the floor)
 	if (all > 0 && (all - 1) / 4 >= size_t(flat)) {
-		std::vector<double> sorted = angles;
+		std::vector<double> sorted(angles.begin(), angles.end());
 		const size_t at = (all - 1) / 4 - size_t(flat);
 		std::nth_element(sorted.begin(), sorted.begin() + at, sorted.end());
 		theta = std::max(theta, MS_NOISE_FACTOR * sorted[at]);
 	}
 	std::vector<uint8_t> mask(n, 0);
-	ms_crease_mask(p.data(), faces.data(), n, ptr.data(), inc.data(), estart.data(), angles.data(), theta, mask.data());
+	ms_crease_mask(p.data(), faces.data(), n, ptr, inc, estart.data(), angles.data(), theta, mask.data());
 	return std::vector<char>(mask.begin(), mask.end());
 }
 
@@ -658,13 +706,18 @@ struct MeshLists {
 
 MeshLists meshLists(Clean &c, bool robust) {
 	MeshLists out;
+	// robust mode: the faces' incidence built once, read by the sharp edges and by the
+	// normals' windings (each would build its own: 32 bytes a vertex more)
+	Incidence at;
+	if (robust) at = vertexFaces(c.faces, c.size());
 	auto normals = [&] {
 		out.normals.assign(3 * c.size(), 0.0);
-		check(ms_face_average_normals(c.pts.data(), c.size(), c.faces.data(), Index(c.faces.size() / 3),
-		                              MS_ZERO_NORMAL, out.normals.data()) < 0);
+		check(ms_face_average_normals_at(c.pts.data(), c.size(), c.faces.data(), Index(c.faces.size() / 3),
+		                                 robust ? at.ptr.data() : nullptr, robust ? at.inc.data() : nullptr,
+		                                 MS_ZERO_NORMAL, out.normals.data()) < 0);
 	};
 	auto side = [&] {
-		if (robust) out.edges = sharpVertices(c.pts, c.faces);
+		if (robust) out.edges = sharpVertices(c.pts, c.faces, at);
 		else normals();
 	};
 	twoParts(2, [&](Index part) {
