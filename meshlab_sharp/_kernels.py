@@ -121,9 +121,10 @@ _SIGNATURES = {
     "ms_face_average_normals": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _f64, _c_void_p]),
     "ms_face_average_normals_at": (
         _i64,
-        [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p, _f64, _c_void_p],
+        [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _f64, _c_void_p],
     ),
     "ms_face_windings": (_i64, [_c_void_p, _i64, _i64, _c_void_p]),
+    "ms_face_windings_at": (_i64, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_dedup_probe": (
         None,

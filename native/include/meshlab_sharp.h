@@ -388,6 +388,10 @@ int ms_ring_lists(const int64_t *ptr, const int32_t *adj, const int64_t *rows, i
  * Moebius strip) keeps its faces' (0). Returns the number of faces in such parts, or -1
  * out of memory (or m >= 2^31). */
 int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *flip);
+/* ms_face_windings over the faces' incidence (ptr (n + 1), inc (3 m): ms_vertex_faces' of
+ * the same faces), which it only reads: the same turns, without building it again. */
+int64_t ms_face_windings_at(const int64_t *faces, int64_t m, int64_t n, const int64_t *ptr,
+                            const int32_t *inc, uint8_t *flip);
 
 /* Face-average vertex normals (unit, or zero when shorter than `zero`) into acc (n, 3),
  * zero on entry; faces (m, 3), each face's normal turned where ms_face_windings turns the
@@ -395,12 +399,13 @@ int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *fl
  * count of faces left as they are wound, or -1 out of memory. */
 int64_t ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                                 double zero, double *acc);
-/* ms_face_average_normals with the faces' incidence (ptr (n + 1), inc (3 m): ms_vertex_faces'
- * of the same faces, only read) given, or NULL (built inside): the same normals, without
- * building it again where the caller holds it (robust mode's sharp edges read it too). */
+/* ms_face_average_normals with the faces' turns given: turned (m), ms_face_windings'
+ * flip, or NULL (found inside; the same normals). Returns 0 (turned given), else
+ * ms_face_average_normals'. A caller that holds the faces' incidence finds the turns
+ * with ms_face_windings_at, and may find them before building what the normals' sum
+ * runs beside (the windings' memory freed first). */
 int64_t ms_face_average_normals_at(const double *p, int64_t n, const int64_t *faces, int64_t m,
-                                   const int64_t *ptr, const int32_t *inc, double zero,
-                                   double *acc);
+                                   const uint8_t *turned, double zero, double *acc);
 
 /* The edges (a, b), a < b, with exactly two faces, sorted, into out_edges (room for
  * (3 m + 1) / 2 rows: 3 m int64, the sort keys' scratch first), and the dot products of their faces' unit normals (cross(p1 - p0,

@@ -145,6 +145,11 @@ done:
     return unoriented;
 }
 
+int64_t ms_face_windings_at(const int64_t *faces, int64_t m, int64_t n, const int64_t *ptr,
+                            const int32_t *inc, uint8_t *flip) {
+    return windings_at(faces, m, n, ptr, inc, flip);
+}
+
 int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *flip) {
     if (m == 0 || m >= ((int64_t)1 << 31)) return windings_at(faces, m, n, NULL, NULL, flip);
     int64_t *ptr = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
@@ -164,16 +169,18 @@ int64_t ms_face_windings(const int64_t *faces, int64_t m, int64_t n, uint8_t *fl
  * each corner, which is faster than storing them (no fresh memory). */
 int64_t ms_face_average_normals(const double *p, int64_t n, const int64_t *faces, int64_t m,
                                 double zero, double *acc) {
-    return ms_face_average_normals_at(p, n, faces, m, NULL, NULL, zero, acc);
+    return ms_face_average_normals_at(p, n, faces, m, NULL, zero, acc);
 }
 
 int64_t ms_face_average_normals_at(const double *p, int64_t n, const int64_t *faces, int64_t m,
-                                   const int64_t *ptr, const int32_t *inc, double zero,
-                                   double *acc) {
-    uint8_t *flip = (uint8_t *)malloc((size_t)(m > 0 ? m : 1));
-    const int64_t unoriented = !flip                       ? -1
-                               : ptr != NULL && m < ((int64_t)1 << 31) ? windings_at(faces, m, n, ptr, inc, flip)
-                                                                       : ms_face_windings(faces, m, n, flip);
+                                   const uint8_t *turned, double zero, double *acc) {
+    uint8_t *flip = NULL;
+    int64_t unoriented = 0;
+    if (turned == NULL) {
+        flip = (uint8_t *)malloc((size_t)(m > 0 ? m : 1));
+        unoriented = flip ? ms_face_windings(faces, m, n, flip) : -1;
+        turned = flip;
+    }
     if (unoriented < 0) {
         free(flip);
         return -1;
@@ -183,7 +190,7 @@ int64_t ms_face_average_normals_at(const double *p, int64_t n, const int64_t *fa
             double u[3];
             face_normal(p, faces, f, u);
             double *t = acc + 3 * faces[3 * f + c];
-            if (flip[f]) { t[0] -= u[0]; t[1] -= u[1]; t[2] -= u[2]; }
+            if (turned[f]) { t[0] -= u[0]; t[1] -= u[1]; t[2] -= u[2]; }
             else { t[0] += u[0]; t[1] += u[1]; t[2] += u[2]; }
         }
     }

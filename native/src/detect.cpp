@@ -694,9 +694,10 @@ void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 
 // What the ring pass reads of a mesh, besides its points: the adjacency, the
 // face-average normals (n, 3) and, in robust mode, the vertices of its sharp edges
-// (creases.py). Built as pipeline._neighbourhoods_and_normals builds them: unless the
-// run has one thread, on two threads (in paper mode the normals beside the adjacency; in
-// robust mode the sharp edges, the longest, beside the adjacency and then the normals).
+// (creases.py), the faces' turns found first. In robust mode, unless the run has one
+// thread, the sharp edges (the longest) on a thread beside the adjacency and then the
+// normals; in paper mode one after the other (the peak of memory: the adjacency's
+// untrimmed lists beside the normals would add 24 bytes a vertex).
 // The faces are freed once read (no later step reads them, as pipeline.py).
 struct MeshLists {
 	Rings adj;
@@ -706,25 +707,32 @@ struct MeshLists {
 
 MeshLists meshLists(Clean &c, bool robust) {
 	MeshLists out;
-	// robust mode: the faces' incidence built once, read by the sharp edges and by the
-	// normals' windings (each would build its own: 32 bytes a vertex more)
-	Incidence at;
-	if (robust) at = vertexFaces(c.faces, c.size());
+	const Index n = c.size(), F = Index(c.faces.size() / 3);
+	// the faces' turns first (ms_face_windings: on a mesh wound either way round its
+	// incidence and union-find, about 60 bytes a vertex), freed before the adjacency
+	std::vector<uint8_t> turned(size_t(std::max<Index>(F, 1)));
+	Incidence at;  // robust mode: built once, read by the windings and the sharp edges
+	if (robust) {
+		at = vertexFaces(c.faces, n);
+		check(ms_face_windings_at(c.faces.data(), F, n, at.ptr.data(), at.inc.data(), turned.data()) < 0);
+	} else {
+		check(ms_face_windings(c.faces.data(), F, n, turned.data()) < 0);
+	}
 	auto normals = [&] {
-		out.normals.assign(3 * c.size(), 0.0);
-		check(ms_face_average_normals_at(c.pts.data(), c.size(), c.faces.data(), Index(c.faces.size() / 3),
-		                                 robust ? at.ptr.data() : nullptr, robust ? at.inc.data() : nullptr,
-		                                 MS_ZERO_NORMAL, out.normals.data()) < 0);
+		out.normals.assign(3 * n, 0.0);
+		check(ms_face_average_normals_at(c.pts.data(), n, c.faces.data(), F, turned.data(), MS_ZERO_NORMAL,
+		                                 out.normals.data()) < 0);
 	};
-	auto side = [&] {
-		if (robust) out.edges = sharpVertices(c.pts, c.faces, at);
-		else normals();
-	};
-	twoParts(2, [&](Index part) {
-		if (part == 1) return side();
+	if (!robust) {  // the adjacency (48 bytes a vertex until trimmed to about half), then the normals
 		out.adj = adjacency(c);
-		if (robust) normals();
-	}, workers() > 1);
+		normals();
+	} else {  // the sharp edges (the longest) beside the adjacency and then the normals
+		twoParts(2, [&](Index part) {
+			if (part == 1) return void(out.edges = sharpVertices(c.pts, c.faces, at));
+			out.adj = adjacency(c);
+			normals();
+		}, workers() > 1);
+	}
 	Buffer<Index>().swap(c.faces);
 	return out;
 }
