@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import ctypes
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -187,3 +189,42 @@ def test_the_c_abi_refuses_bad_input():
     lib.ms_curves_free(handle)
     with pytest.raises(ValueError, match=r"ms_curves_extract failed \(status -2\)"):
         _native.extract_curves(vertices, feature.astype(bool), np.array([[0, 1, 5]]), None, None)
+
+
+#: Run in a child process: the native curves of 200,000 feature points on a zigzag sheet
+#: under an address-space limit a few MB above what the process maps, then again with
+#: the limit lifted. Prints what each call gave.
+_UNDER_A_LIMIT = """
+import resource
+import numpy as np
+from meshlab_sharp.curves import _native
+
+rng = np.random.default_rng(0)
+x, y = rng.random(200_000), rng.random(200_000)
+points = np.c_[x, y, np.abs((x * 20) % 1 - 0.5) / 20]
+mask = np.ones(len(points), bool)
+_native.extract_curves(points[:2000], mask[:2000], None, None, None)  # the library loaded
+with open("/proc/self/statm") as f:
+    mapped = int(f.read().split()[0]) * resource.getpagesize()
+resource.setrlimit(resource.RLIMIT_AS, (mapped + (8 << 20), resource.RLIM_INFINITY))
+try:
+    _native.extract_curves(points, mask, None, None, None)
+    print("no error")
+except MemoryError as exc:
+    print("MemoryError:", exc)
+resource.setrlimit(resource.RLIMIT_AS, (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
+print("then", len(_native.extract_curves(points, mask, None, None, None).curves), "curves")
+"""
+
+
+def test_out_of_memory_in_the_library_is_a_memory_error():
+    """std::bad_alloc inside the library is its out-of-memory status at the C ABI, a
+    MemoryError in Python; the process goes on, and the same call with memory to spare
+    gives curves."""
+    done = subprocess.run(
+        [sys.executable, "-c", _UNDER_A_LIMIT], capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0] == "MemoryError: ms_curves_extract failed (status -1)", done.stdout
+    assert re.fullmatch(r"then [1-9][0-9]* curves", lines[1]), done.stdout

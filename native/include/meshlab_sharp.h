@@ -30,6 +30,11 @@
 #define MS_MIN_KNN_SCALE 2
 #define MS_MIN_RING_SCALE 1
 #define MS_MAX_SCALES 64
+/* The largest scales, refused before any work (ms_detect, the command line): k nearest
+ * neighbours (lists of k neighbours per point and scale) and rings (a k-ring's
+ * neighbourhoods grow with k squared: ring 32 of a 25,000-vertex mesh takes about 20 s). */
+#define MS_MAX_KNN_SCALE 512
+#define MS_MAX_RING_SCALE 32
 /* Default options, as indices into the lists the plugin's enums and Python share:
  * modes 0 paper, 1 robust (pipeline.MODES); weightings 0 gaussian, 1 none
  * (normals.WEIGHTINGS). */
@@ -555,8 +560,10 @@ typedef struct ms_detection ms_detection;
 void ms_detect_defaults(ms_detect_options *opt);
 /* Detect the sharp features of the n vertices xyz (n, 3) and, unless faces is NULL, m is 0
  * or opt->as_points, of the mesh of the m triangles faces (m, 3) (0-based indices below
- * n); opt NULL: the defaults. On MS_OK *out holds the results; otherwise *out is NULL and
- * err (errlen bytes, NUL-terminated, may be NULL) the message. */
+ * n); opt NULL: the defaults. The scales it uses (rings of a mesh, k of points) above
+ * MS_MAX_RING_SCALE or MS_MAX_KNN_SCALE are MS_EINPUT ("rings must be <= 32, got 40").
+ * On MS_OK *out holds the results; otherwise *out is NULL and err (errlen bytes,
+ * NUL-terminated, may be NULL) the message. */
 int ms_detect(const double *xyz, int64_t n, const int64_t *faces, int64_t m,
               const ms_detect_options *opt, ms_progress_fn progress, void *progress_ctx,
               ms_detection **out, char *err, int errlen);
