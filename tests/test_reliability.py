@@ -251,6 +251,16 @@ def test_dask_addresses_are_checked(tmp_path, small_cloud, address):
     assert not (tmp_path / "o.ply").exists()
 
 
+def _dask_run_timed(
+    cloud: Path, out: Path, address: str
+) -> tuple[subprocess.CompletedProcess, float]:
+    """``detect CLOUD -o OUT --dask ADDRESS --dask-timeout 2`` to its end, and its
+    seconds."""
+    start = time.monotonic()
+    proc = _cli("detect", cloud, "-q", "-o", out, "--dask", address, "--dask-timeout", "2")
+    return proc, time.monotonic() - start
+
+
 @pytest.mark.parametrize(
     "answer, message",
     [
@@ -266,12 +276,7 @@ def test_dask_non_schedulers_fail_in_one_line_within_the_timeout(
     tmp_path, small_cloud, answer, message
 ):
     with _server(answer) as address:
-        start = time.monotonic()
-        proc = _cli(
-            "detect", small_cloud, "-q", "-o", tmp_path / "o.ply", "--dask", address,
-            "--dask-timeout", "2",
-        )  # fmt: skip
-        took = time.monotonic() - start
+        proc, took = _dask_run_timed(small_cloud, tmp_path / "o.ply", address)
     _one_error_line(proc, message)
     assert took < 30, took
     assert not (tmp_path / "o.ply").exists()
@@ -331,12 +336,7 @@ def _scheduler(
 @pytest.mark.slow
 def test_dask_scheduler_without_workers_fails_in_one_line(tmp_path, small_cloud):
     with _scheduler(0) as (address, _, _):
-        start = time.monotonic()
-        proc = _cli(
-            "detect", small_cloud, "-q", "-o", tmp_path / "o.ply", "--dask", address,
-            "--dask-timeout", "2",
-        )  # fmt: skip
-        took = time.monotonic() - start
+        proc, took = _dask_run_timed(small_cloud, tmp_path / "o.ply", address)
     _one_error_line(proc, "no worker joined the scheduler within 2 s")
     assert took < 40, took
 
