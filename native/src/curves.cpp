@@ -1459,6 +1459,21 @@ std::vector<long> advancing(const std::vector<Vec3> &p, const std::vector<Vec3> 
 	return keep;
 }
 
+// cloud_spacing: the median distance from a feature to the nearest other point, or
+// DENSITY_SCALE times the median distance to the DENSITY_NEIGHBOURS-th nearest where
+// that is larger (independently drawn points)
+double cloudSpacing(const KdTree &tree, const std::vector<Vec3> &fp)
+{
+	const size_t k = std::min<size_t>(MS_CURVE_DENSITY_NEIGHBOURS + 1, tree.size());
+	std::vector<double> d1(fp.size()), dk(fp.size());
+	for (size_t i = 0; i < fp.size(); ++i) {
+		const auto hits = tree.query(fp[i], k);
+		d1[i] = std::sqrt(hits[1].first);
+		dk[i] = std::sqrt(hits[k - 1].first);
+	}
+	return std::max(median(d1), MS_CURVE_DENSITY_SCALE * median(dk));
+}
+
 std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<char> &mask,
                                const std::vector<char> &ok, const std::vector<long> &feat,
                                const std::vector<Vec3> &fp, const std::array<Vec3, 2> *bounds,
@@ -1474,8 +1489,7 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	std::vector<char> nearFeature;
 	for (long i : near) nearPts.push_back(pts[i]), nearFeature.push_back(mask[i]);
 	const KdTree tree(nearPts);
-	for (size_t i = 0; i < fp.size(); ++i) d1[i] = std::sqrt(tree.query(fp[i], 2)[1].first);
-	spacing = median(d1);
+	spacing = cloudSpacing(tree, fp);
 	// cloud_graph
 	const long n = long(fp.size());
 	const size_t k = std::min<size_t>(MS_CURVE_LINK_NEIGHBOURS + 1, fp.size());
@@ -1750,7 +1764,10 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 		return mid;
 	};
 	const Bridge *bridge = paths ? &bridgeFn : nullptr;
-	pieces = dropShort(cutAll(pieces, spacing, math), spacing);
+	pieces = cutAll(pieces, spacing, math);
+	// meshes drop the short pieces before joining; on clouds they join first (sampling
+	// gaps cut an edge's features into short pieces)
+	if (paths) pieces = dropShort(pieces, spacing);
 	pieces = dropShort(joinPieces(pieces, spacing, bridge), spacing);
 	pieces = joinPieces(pieces, spacing, bridge);
 	pieces = cutAll(pieces, spacing, math);

@@ -44,7 +44,7 @@ from .trace import (
     trace_paths,
 )
 
-__all__ = ["MIN_CURVE_LENGTH", "CurveSet", "extract_curves", "support_radius"]
+__all__ = ["MIN_CURVE_LENGTH", "CurveSet", "cloud_spacing", "extract_curves", "support_radius"]
 
 # The numbers are defined once, in native/include/meshlab_sharp.h.
 #: An open curve shorter than this, in spacings (GAP_LENGTH), is dropped: what is left of a spur
@@ -61,6 +61,17 @@ MAX_FLAT_SHARE = CURVES.real("MAX_FLAT_SHARE")
 #: Side of the grid cells, in feature spacings, that select the points near the curves
 #: for the refinement (3x3x3 cells around each feature hold its REFINE_NEIGHBOURS).
 CELL_SPACINGS = CURVES.real("CELL_SPACINGS")
+#: The spacing of a cloud's curves is at least DENSITY_SCALE times the median distance
+#: from a feature to its DENSITY_NEIGHBOURS-th nearest point. The nearest-neighbour
+#: distance alone is too short where the points are drawn independently (iid: they
+#: cluster, the median nearest distance is 0.6 times blue noise's of the same density)
+#: and the feature graph falls apart at the gaps along an edge. On Poisson-disk (blue
+#: noise) clouds, noisy or not, the nearest distance is 0.47-0.50 times the 8th
+#: nearest and stays the spacing; on iid clouds it is 0.30-0.33 times it, and the
+#: density term, 1.4 times the nearest distance, is the spacing.
+DENSITY_NEIGHBOURS = CURVES.integer("DENSITY_NEIGHBOURS")
+#: See DENSITY_NEIGHBOURS.
+DENSITY_SCALE = CURVES.real("DENSITY_SCALE")
 #: Cloud vertices closer than this along the curve's direction to the previous vertex
 #: kept, in spacings, are dropped after refinement (a skeleton that zigzags across a
 #: wide band of features leaves vertices that double back once refined).
@@ -149,7 +160,11 @@ def extract_curves(
     if spacing <= 0:
         return _no_curves()
     bridge = None if paths is None else _bridge(pts, paths, spacing)
-    pieces = _drop_short(cut_at_turns(pieces, spacing), spacing)
+    pieces = cut_at_turns(pieces, spacing)
+    # meshes drop the short pieces before joining; on clouds they join first (sampling
+    # gaps cut an edge's features into short pieces)
+    if paths is not None:
+        pieces = _drop_short(pieces, spacing)
     pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
     pieces = join_pieces(pieces, spacing, bridge)
     # joining may have run a curve round a corner whose vertex was near a piece's end
@@ -193,6 +208,24 @@ def support_radius(features: np.ndarray) -> float:
     return CELL_SPACINGS * float(np.median(d[:, 1]))
 
 
+def cloud_spacing(tree: cKDTree, features: np.ndarray) -> float:
+    """Spacing of a cloud's curves: the median distance from a feature to the nearest
+    other point, or DENSITY_SCALE times the median distance to the DENSITY_NEIGHBOURS-th
+    nearest where that is larger (independently drawn points).
+
+    Parameters
+    ----------
+    tree : cKDTree
+        Of the points near the features (the features among them), at least 2.
+    features : (f, 3) float64
+        The distinct feature positions.
+    """
+    k = min(DENSITY_NEIGHBOURS + 1, tree.n)
+    d, _ = tree.query(features, k=k, workers=-1)
+    nearest = float(np.median(d[:, 1]))
+    return max(nearest, DENSITY_SCALE * float(np.median(d[:, k - 1])))
+
+
 def _cloud_pieces(
     pts: np.ndarray,
     mask: np.ndarray,
@@ -207,8 +240,7 @@ def _cloud_pieces(
     order = np.lexsort((near_pts[:, 2], near_pts[:, 1], near_pts[:, 0]))
     near, near_pts = near[order], near_pts[order]
     tree = cKDTree(near_pts)
-    d, _ = tree.query(fp, k=2, workers=-1)
-    spacing = float(np.median(d[:, 1]))
+    spacing = cloud_spacing(tree, fp)
     edges, lengths = cloud_graph(fp, spacing)
     paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
     pieces = []
