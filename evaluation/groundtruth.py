@@ -86,6 +86,8 @@ __all__ = [
     "crease_segments",
     "density_gradient",
     "expected_spacing",
+    "iid_part",
+    "iid_points",
     "make_condition",
     "make_part",
     "make_thin_part",
@@ -509,6 +511,36 @@ def add_noise(
         delta = rng.normal(0.0, sigma, (n, 3))
     delta[part.outliers] = 0.0
     return replace(part, vertices=float32_rounded(part.vertices + delta))
+
+
+def iid_points(
+    verts: np.ndarray, faces: np.ndarray, n: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """n points drawn independently, uniform over the mesh's area (as MeshLab's "sample
+    points on mesh" does): (n, 3) points and (n, 3) their faces' unit normals."""
+    rng = np.random.default_rng(seed)
+    cross = np.cross(
+        verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]]
+    )
+    area = np.linalg.norm(cross, axis=1)
+    f = rng.choice(len(faces), size=n, p=area / area.sum())
+    r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
+    v = verts[faces[f]]
+    pts = (
+        (1 - r1)[:, None] * v[:, 0]
+        + (r1 * (1 - r2))[:, None] * v[:, 1]
+        + (r1 * r2)[:, None] * v[:, 2]
+    )
+    return pts, cross[f] / np.maximum(area[f], 1e-300)[:, None]
+
+
+def iid_part(part: SamplePart, *, seed: int = 0) -> SamplePart:
+    """The part's reference surface sampled with as many points drawn independently
+    (:func:`iid_points`) instead of Poisson-disk ones; the spacing is kept (that of the
+    Poisson-disk cloud, whose density it has)."""
+    verts, faces = part.extra["reference"]
+    pts, nrm = iid_points(np.asarray(verts, np.float64), np.asarray(faces), part.n, seed)
+    return replace(part, vertices=_f32(pts), normals=nrm)
 
 
 def add_outliers(part: SamplePart, fraction: float = 0.01, *, seed: int = 0) -> SamplePart:

@@ -13,6 +13,7 @@ import sys
 import numpy as np
 import pytest
 import shapes
+from scipy.spatial import cKDTree
 
 import meshlab_sharp
 from meshlab_sharp import _header
@@ -74,6 +75,8 @@ def _cloud(case: str) -> tuple[np.ndarray, str]:
         return shapes.cube_grid_points(15), "robust"
     if case == "random-box":
         return shapes.random_box_points(4000, seed=2), "robust"
+    if case == "iid-box":  # iid: the spacing from the density, short pieces joined
+        return shapes.random_box_points(8000, seed=2), "robust"
     if case == "box-cylinder":
         return shapes.box_cylinder_points(4000, seed=3), "paper"
     if case == "noisy-box":
@@ -83,18 +86,28 @@ def _cloud(case: str) -> tuple[np.ndarray, str]:
     raise AssertionError(case)
 
 
-@pytest.mark.parametrize("case", ["cube-grid", "random-box", "box-cylinder", "noisy-box", "iid"])
+@pytest.mark.parametrize(
+    "case", ["cube-grid", "random-box", "iid-box", "box-cylinder", "noisy-box", "iid"]
+)
 def test_cloud_curves_are_the_references_to_the_bit(case):
     """Refined positions, indices, loops, lengths, corners and their order: the same
-    bits as the numpy reference, and some curves to compare."""
+    bits as the numpy reference, and some curves to compare; on the iid box, the
+    spacing is the density's (:func:`meshlab_sharp.reference.curves.extract.cloud_spacing`)
+    and its edges are one curve each."""
     vertices, mode = _cloud(case)
     result = meshlab_sharp.detect(vertices, mode=mode)
     want = reference.extract_curves(vertices, result.mask, None, result.kept)
     got = _native.extract_curves(vertices, result.mask, None, result.kept, None)
     assert want.curves
     _assert_same(got, want)
-    if case == "cube-grid":  # one curve per edge of the cube, from corner to corner
+    if case in ("cube-grid", "iid-box"):  # one curve per edge of the box, corner to corner
         assert len(got.curves) == 12 and len(got.corner_points) == 8
+    if case == "iid-box":
+        features = np.unique(vertices[result.mask], axis=0)
+        d, _ = cKDTree(vertices).query(features, k=reference.extract.DENSITY_NEIGHBOURS + 1)
+        q = reference.extract.DENSITY_SCALE * np.median(d[:, -1]) / np.median(d[:, 1])
+        assert q > 1.3  # irregular: the spacing is d q^1.5
+        assert got.spacing == pytest.approx(np.median(d[:, 1]) * q**1.5, rel=1e-12)
 
 
 def test_a_larger_grid_box_gives_the_references_curves():

@@ -23,6 +23,7 @@ from evaluation.groundtruth import (
     SamplePart,
     add_noise,
     expected_spacing,
+    iid_points,
     visible_edges,
     weld,
 )
@@ -122,24 +123,6 @@ def _part(
     )
 
 
-def _iid(verts: np.ndarray, faces: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """n points drawn independently, uniform over the mesh's area, and their face normals."""
-    rng = np.random.default_rng(seed)
-    cross = np.cross(
-        verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]]
-    )
-    area = np.linalg.norm(cross, axis=1)
-    f = rng.choice(len(faces), size=n, p=area / area.sum())
-    r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
-    v = verts[faces[f]]
-    pts = (
-        (1 - r1)[:, None] * v[:, 0]
-        + (r1 * (1 - r2))[:, None] * v[:, 1]
-        + (r1 * r2)[:, None] * v[:, 2]
-    )
-    return pts, cross[f] / np.maximum(area[f], 1e-300)[:, None]
-
-
 def make_inputs(
     name: str, edges: np.ndarray, n: int, *, seed: int = 0, which: tuple[str, ...] = INPUTS
 ) -> dict[str, SamplePart]:
@@ -178,7 +161,7 @@ def make_inputs(
         out["blue_noise"] = blue
         out["noise25"] = add_noise(blue, 0.25, seed=seed + 1)
     if "iid" in which:
-        pts, nrm = _iid(fv, ff, n, seed + 2)
+        pts, nrm = iid_points(fv, ff, n, seed + 2)
         out["iid"] = _part(name, pts, None, nrm, edges, s, ref)
     if "scan" in which:
         res = scan(fv, ff, scanner_positions(fv), n_points=n, noise=SCAN_NOISE, seed=seed + 3)
