@@ -38,7 +38,7 @@ from ..normals import DEFAULT_WEIGHTING
 from ..options import as_input, check_mode_and_weighting, check_scales
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
-from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
+from ..threshold import FLAT_TOLERANCE
 from .cluster import cluster_failures, completed, connect
 from .curves import curves_out_of_core
 from .layout import build_layout
@@ -380,7 +380,7 @@ def _paper(
     flat = FLAT_TOLERANCE * float(np.linalg.norm(layout.hi - layout.lo))
     norm = {"lo": ranges["pdis_min"], "hi": ranges["pdis_max"], "flat": flat}
     hist = runner.step(Step("histograms", paper_histograms, None, norm))["hist"]
-    thresholds = np.array([otsu_from_histogram(h) for h in hist])
+    thresholds = np.array([_kernels.stage_threshold(h, True, 0.0) for h in hist])
     decided = runner.step(Step("decide", paper_decide, None, {**norm, "thresholds": thresholds}))
     return thresholds, decided["counts"], "mask", None, scales
 
@@ -443,7 +443,7 @@ def _robust(
         grown = Query(top, "kept", None, scales, **passes)
         hist = runner.step(Step("pass grown", robust_pass, grown, {"first": False}))["hist"]
     otsu = robust.otsu_splits(False, nu)
-    thresholds = np.array([robust.robust_threshold_from_histogram(h, otsu) for h in hist])
+    thresholds = np.array([_kernels.stage_threshold(h, otsu, robust.R_MIN) for h in hist])
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     if robust.quiet_cloud(False, nu):  # robust.acute_tests: tips of acute edges
