@@ -152,6 +152,7 @@ _SIGNATURES = {
         + [_c_void_p, _c_void_p, _c_void_p],
     ),
     "ms_stage_acute_tests": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _int, _f64, _c_void_p]),
+    "ms_stage_isolated": (None, [_c_void_p] * 7 + [_f64, _i64, _i64, _c_void_p]),
     "ms_two_face_edges": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_vertex_faces": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_crease_dots": (
@@ -1427,6 +1428,29 @@ def stage_acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: fl
     args = (int(mesh), float(noise), _ptr(tested))
     _lib().ms_stage_acute_tests(_ptr(score), _ptr(mask), 0, len(score), *args)
     return np.flatnonzero(tested)
+
+
+def stage_isolated(
+    a: np.ndarray,
+    b: np.ndarray,
+    kth_d2: np.ndarray,
+    kth_idx: np.ndarray,
+    idx: np.ndarray,
+    nth_d2: np.ndarray,
+    far_d2: np.ndarray,
+    spread: float,
+) -> np.ndarray:
+    """``ms_stage_isolated``: which of the points ``a`` (r, 3) (indices ``idx`` (r,) in the
+    lists' order) are isolated, their values gathered per row: the nearest ``b`` (r, 3),
+    its k-th neighbour's squared distance ``kth_d2`` and index ``kth_idx``, the point's
+    ``nth_d2`` and its k-th neighbour's ``far_d2`` (r,). Returns (r,) bool."""
+    f64 = [np.ascontiguousarray(x, dtype=np.float64) for x in (a, b, kth_d2, nth_d2, far_d2)]
+    i64 = [np.ascontiguousarray(x, dtype=np.int64) for x in (kth_idx, idx)]
+    pa, pb, pk, pn, pf = (_ptr(x) for x in f64)
+    out = np.zeros(len(f64[0]), dtype=bool)
+    args = (pa, pb, pk, _ptr(i64[0]), _ptr(i64[1]), pn, pf, float(spread))
+    _lib().ms_stage_isolated(*args, 0, len(out), _ptr(out))
+    return out
 
 
 #: Fewest points that :func:`merge_duplicates` splits between threads (65,536 points are

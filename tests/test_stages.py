@@ -90,3 +90,27 @@ def test_acute_tests_only_on_quiet_clouds() -> None:
     assert len(_kernels.stage_acute_tests(score, mask, False, 0.1)) == 0
     assert len(_kernels.stage_acute_tests(score, mask, True, 0.0)) == 0
     assert list(reference.stage_acute_tests(score, mask, False, 0.0)) == [1, 2]
+
+
+def test_isolated_stage_equals_reference() -> None:
+    """ms_stage_isolated of every point, its nearest's values gathered per row, finds
+    the reference's isolated points: a stray pair and a point beside a tight clump."""
+    rng = np.random.default_rng(5)
+    pts = rng.random((1500, 3)) * [1.0, 1.0, 0.0]
+    clump = pts[0] + rng.normal(scale=1e-4, size=(20, 3)) * [1, 1, 0]
+    pts = np.concatenate(
+        [pts, clump, [pts[0] + [0.005, 0, 0]], [[0.5, 0.5, 0.3], [0.5, 0.51, 0.3]]]
+    )
+    k = 16
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2)
+    idx = np.lexsort((np.broadcast_to(np.arange(len(pts)), d2.shape), d2), axis=1)[:, :k]
+    kd2 = np.take_along_axis(d2, idx, axis=1)
+    near, kth = idx[:, 1], idx[:, k - 1]
+    nth, ref = kd2[:, min(robust.ISOLATED_NTH, k - 1)], kd2[:, min(robust.ISOLATED_REF, k - 1)]
+    got = _kernels.stage_isolated(
+        pts, pts[near], kd2[near, k - 1], kth[near], np.arange(len(pts)), nth, ref[kth],
+        robust.ISOLATED_SPREAD,
+    )  # fmt: skip
+    expected = reference.isolated_points(pts, idx)
+    assert expected[-2:].all() and expected.sum() >= 2
+    assert np.array_equal(got, expected)

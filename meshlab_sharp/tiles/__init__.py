@@ -3,7 +3,8 @@
 ``detect(cloud, max_memory="1GB")`` (CLI ``--max-memory 1GB``) and ``detect(cloud,
 dask="local:2")`` (CLI ``--dask``) come here. The cloud is sorted into tiles
 (:mod:`.layout`) on disk (:mod:`.store`); each mode is a sequence of steps
-(:mod:`.steps`) run tile by tile (:mod:`.run`): local steps on each tile's exact
+(:mod:`.steps`, each the native library's stage that the in-memory run composes too)
+run tile by tile (:mod:`.run`): local steps on each tile's exact
 neighbourhoods (:mod:`.neighbours`, the halo proven wide enough per point) and
 pointwise steps, with the global quantities (min-max ranges, the 256-bin histograms
 that give Otsu's thresholds, counts) reduced exactly over the tiles. The result is the

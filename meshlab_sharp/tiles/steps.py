@@ -27,7 +27,6 @@ from scipy.spatial import cKDTree
 
 from .. import _kernels, robust
 from .._kernels import CandidateLists, FinishRules
-from ..neighbourhoods import squared_distances
 from .neighbours import Context, Query
 from .store import Store
 
@@ -155,24 +154,28 @@ def robust_pass(ctx: Context, *, first: bool) -> Partial:
 
 
 def robust_isolated(span: Span) -> Partial:
-    """:func:`meshlab_sharp.robust.isolated_points`: ``i`` is isolated when it is not
-    among the k nearest of its nearest ``j``, i.e. when ``(d2(j, i), i)`` comes after
-    ``j``'s k-th neighbour in the (squared distance, index) order, or when its ``nd2``
-    exceeds ``ISOLATED_SPREAD**2`` times its k-th neighbour's ``rd2``. Writes ``kept``; the
-    isolated points' coordinates (``lone_cat``)."""
+    """``ms_stage_isolated`` (:func:`meshlab_sharp.robust.isolated_points`) of the
+    span's distinct points, with their nearest's values read wherever it lies: ``i`` is
+    isolated when it is not among the k nearest of its nearest ``j`` (``(d2(j, i), i)``
+    after ``j``'s k-th neighbour in the (squared distance, index) order), or when its
+    ``nd2`` exceeds ``ISOLATED_SPREAD**2`` times its k-th neighbour's ``rd2``. Writes
+    ``kept``; the isolated points' coordinates (``lone_cat``)."""
     d = span.distinct
-    pos = span.a + d
     store = span.store
     nn = store.read("nn1", span.a, span.b)[d]
     coords = span.read("coords")[d]
-    d2 = squared_distances(coords, store.read_at("coords", nn))
-    kd2, kid = store.read_at("kd2", nn), store.read_at("kid", nn)
-    inside = (d2 < kd2) | ((d2 == kd2) & (span.read("ids")[d] <= kid))
-    spread2 = robust.ISOLATED_SPREAD * robust.ISOLATED_SPREAD
-    inside &= store.read("nd2", span.a, span.b)[d] <= spread2 * store.read_at(
-        "rd2", store.read("kpos", span.a, span.b)[d]
+    isolated = _kernels.stage_isolated(
+        coords,
+        store.read_at("coords", nn),
+        store.read_at("kd2", nn),
+        store.read_at("kid", nn),
+        span.read("ids")[d],
+        span.read("nd2")[d],
+        store.read_at("rd2", span.read("kpos")[d]),
+        robust.ISOLATED_SPREAD,
     )
-    store.write_at("kept", pos, inside)
+    inside = ~isolated
+    store.write_at("kept", span.a + d, inside)
     return {"isolated": np.array(int((~inside).sum())), "lone_cat": coords[~inside]}
 
 

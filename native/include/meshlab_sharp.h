@@ -540,6 +540,15 @@ void ms_stage_decide(const double *x, int64_t point_stride, int64_t scale_stride
                      double *strength, int64_t *counts);
 int64_t ms_stage_acute_tests(const double *score, const uint8_t *feature, int64_t begin,
                              int64_t end, int mesh, double noise, uint8_t *tested);
+/* ms_isolated's test of the rows [begin, end) whose values are gathered per row (a tile's
+ * points, their nearest anywhere in the cloud): out[r] = 1 when the point a[r] (3; index
+ * idx[r] in the lists' order) is not among the kmax nearest of its nearest b[r] (3), whose
+ * kmax-th neighbour has squared distance kth_d2[r] and index kth_idx[r], or when its
+ * nth_d2[r] > spread^2 * far_d2[r] (the ref_d2 of its own kmax-th neighbour). */
+void ms_stage_isolated(const double *a, const double *b, const double *kth_d2,
+                       const int64_t *kth_idx, const int64_t *idx, const double *nth_d2,
+                       const double *far_d2, double spread, int64_t begin, int64_t end,
+                       uint8_t *out);
 
 /* Thresholds, the global steps of every path (docs/contributing.md,
  * "Normalisation and Otsu"; threshold.py is the numpy reference).
