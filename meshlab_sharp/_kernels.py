@@ -134,6 +134,7 @@ _SIGNATURES = {
         [_c_void_p, _i64, _int, _f64, _int, _f64, _c_void_p, _c_void_p, _c_void_p],
     ),
     "ms_noise_factor": (_f64, [_f64]),
+    "ms_scale_growth": (_f64, [_f64, _i64, _int]),
     "ms_grown_scale": (_int, [_int, _f64]),
     "ms_thin_knn": (_int, [_f64]),
     "ms_quiet_cloud": (_int, [_int, _f64]),
@@ -1310,6 +1311,12 @@ def _lib() -> ctypes.CDLL:
 def noise_factor(noise: float) -> float:
     """``ms_noise_factor``: the scales' growth for the cloud's noise ratio."""
     return float(_lib().ms_noise_factor(float(noise)))
+
+
+def scale_growth(noise: float, n: int, top: int) -> float:
+    """``ms_scale_growth``: the scales' growth on a cloud of ``n`` points (isolated ones
+    left out) whose largest scale is ``top``: :func:`noise_factor`, at most ``n / top``."""
+    return float(_lib().ms_scale_growth(float(noise), int(n), int(top)))
 
 
 def grown_scale(k: int, factor: float) -> int:

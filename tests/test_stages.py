@@ -30,6 +30,9 @@ def test_rules_known_answers() -> None:
     assert _kernels.noise_factor(0.0) == 1.0
     assert _kernels.noise_factor(0.3) == 3.0  # (0.3 / 0.15)^2 = 4, capped
     assert _kernels.noise_factor(0.2) == (0.2 / 0.15) ** 2
+    assert _kernels.scale_growth(0.3, 10_000, 40) == 3.0
+    assert _kernels.scale_growth(0.3, 100, 40) == 2.5  # the largest grown scale fits
+    assert _kernels.scale_growth(0.0, 100, 40) == 1.0
     assert _kernels.grown_scale(12, 1.5) == 18 and _kernels.grown_scale(5, 1.5) == 8  # half up
     assert _kernels.thin_knn(1.0) == robust.THIN_KNN and _kernels.thin_knn(3.0) == 36
     assert _kernels.quiet_cloud(False, 0.05) and not _kernels.quiet_cloud(False, 0.06)

@@ -435,7 +435,7 @@ def _robust(
             runner.step(Step("pass kept", robust_pass, again, {"first": False}))
         hist = runner.step(Step("histograms", robust_histograms))["hist"]
     nu = order_statistic(runner, "ratio", "kept", (n_kept - 1) // 2)
-    factor = min(robust.noise_factor(nu), n_kept / top)
+    factor = _kernels.scale_growth(nu, n_kept, top)
     if factor > 1.0:  # the tiles are sized for one at a time at the grown scales
         runner.at_once = 1
         scales = robust.grown_scales(scales, factor)

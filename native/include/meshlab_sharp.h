@@ -500,15 +500,18 @@ void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
 /* Robust mode's rules on a cloud's noise ratio `noise` (the lower median of the pass's
  * per-point ratios; 0 on a mesh, mesh = 1), the one definition of each (robust.py binds
  * them). ms_noise_factor: the scales' growth, min(max(1, (noise / MS_NOISE_TOLERATED)^2),
- * MS_NOISE_MAX_FACTOR). ms_grown_scale: k * factor rounded half up. ms_thin_knn:
- * thinning's comparison list on a cloud, MS_THIN_KNN grown by `growth` (1: not grown).
- * ms_quiet_cloud: a cloud whose noise is at most MS_NOISE_QUIET, thresholded at the floor
- * alone; ms_otsu_splits its negation. ms_thin_cone: thinning's cone, MS_THIN_CONE_COS_NOISY
- * on a noisy cloud, else MS_THIN_CONE_COS. ms_ranking_smoothed: thinning ranks by
- * ms_smoothed_ranking, on a cloud whose noise grew the scales to the cap.
- * ms_support_free_score: 1 and *score = MS_SUPPORT_FREE_SCORE on a quiet cloud (a
+ * MS_NOISE_MAX_FACTOR); ms_scale_growth: that factor for a cloud of n points (isolated
+ * ones left out) at largest scale top, at most n / top (the largest grown scale stays
+ * within the cloud; above 1, the scales grow). ms_grown_scale: k * factor rounded half up.
+ * ms_thin_knn: thinning's comparison list on a cloud, MS_THIN_KNN grown by `growth` (1:
+ * not grown). ms_quiet_cloud: a cloud whose noise is at most MS_NOISE_QUIET, thresholded
+ * at the floor alone; ms_otsu_splits its negation. ms_thin_cone: thinning's cone,
+ * MS_THIN_CONE_COS_NOISY on a noisy cloud, else MS_THIN_CONE_COS. ms_ranking_smoothed:
+ * thinning ranks by ms_smoothed_ranking, on a cloud whose noise grew the scales to the
+ * cap. ms_support_free_score: 1 and *score = MS_SUPPORT_FREE_SCORE on a quiet cloud (a
  * candidate scoring below it needs no support), else 0 (*score untouched). */
 double ms_noise_factor(double noise);
+double ms_scale_growth(double noise, int64_t n, int top);
 int ms_grown_scale(int k, double factor);
 int ms_thin_knn(double growth);
 int ms_quiet_cloud(int mesh, double noise);

@@ -697,7 +697,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index at = (n - 1) / 2;
 	std::nth_element(pass.noise.begin(), pass.noise.begin() + at, pass.noise.end());
 	const double ratio = pass.noise[at];  // the median noise ratio
-	const double factor = std::min(ms_noise_factor(ratio), double(n) / double(top0));
+	const double factor = ms_scale_growth(ratio, n, top0);
 	int thinKnn = ms_thin_knn(1.0);  // grows with the scales
 	if (factor > 1.0) {
 		thinKnn = ms_thin_knn(factor);

@@ -11,6 +11,11 @@ double ms_noise_factor(double noise) {
     return factor < MS_NOISE_MAX_FACTOR ? factor : MS_NOISE_MAX_FACTOR;
 }
 
+double ms_scale_growth(double noise, int64_t n, int top) {
+    const double factor = ms_noise_factor(noise), most = (double)n / (double)top;
+    return most < factor ? most : factor;
+}
+
 int ms_grown_scale(int k, double factor) { return (int)floor((double)k * factor + 0.5); }
 
 int ms_thin_knn(double growth) { return ms_grown_scale(MS_THIN_KNN, growth); }
