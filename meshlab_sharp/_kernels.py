@@ -142,6 +142,7 @@ _SIGNATURES = {
     "ms_thin_cone": (_f64, [_int, _f64]),
     "ms_ranking_smoothed": (_int, [_int, _f64]),
     "ms_support_free_score": (_int, [_int, _f64, _c_void_p]),
+    "ms_flat_span": (_f64, [_c_void_p]),
     "ms_stage_histograms": (
         None,
         [_c_void_p, _i64, _i64, _int, _i64, _i64, _c_void_p, _c_void_p, _f64, _c_void_p],
@@ -1355,6 +1356,15 @@ def support_free_score(mesh: bool, noise: float) -> float | None:
     score = ctypes.c_double(0.0)
     found = _lib().ms_support_free_score(int(mesh), float(noise), ctypes.byref(score))
     return score.value if found else None
+
+
+def flat_span(extent: np.ndarray) -> float:
+    """``ms_flat_span``: ``FLAT_TOLERANCE`` times the diagonal of the bounding box whose
+    sides are ``extent`` (3,) (:func:`extent`'s)."""
+    extent = np.ascontiguousarray(extent, dtype=np.float64)
+    if extent.shape != (3,):
+        raise ValueError("extent must be (3,)")
+    return float(_lib().ms_flat_span(_ptr(extent)))
 
 
 #: Lower and upper ends of each scale's min-max normalisation, and the flat span: the

@@ -86,6 +86,14 @@ def test_stages_over_parts_equal_scale_vote(normalise: bool, otsu: bool) -> None
     assert _header.integer("BINS") == hist.shape[1] and hist.sum() == values.size
 
 
+def test_flat_span_is_the_box_diagonal() -> None:
+    tolerance = _header.real("FLAT_TOLERANCE")
+    assert _kernels.flat_span(np.array([3.0, 4.0, 12.0])) == tolerance * 13.0
+    assert _kernels.flat_span(np.zeros(3)) == 0.0
+    with pytest.raises(ValueError):
+        _kernels.flat_span(np.zeros(2))
+
+
 def test_acute_tests_only_on_quiet_clouds() -> None:
     score = np.array([0.49, 0.5, 0.7, 0.8, 0.6])
     mask = np.array([False, False, False, False, True])

@@ -39,7 +39,6 @@ from ..normals import DEFAULT_WEIGHTING
 from ..options import as_input, check_mode_and_weighting, check_scales
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
-from ..threshold import FLAT_TOLERANCE
 from .cluster import cluster_failures, completed, connect
 from .curves import curves_out_of_core
 from .layout import build_layout
@@ -378,7 +377,7 @@ def _paper(
     store.create("strength", (n,), np.float64)
     query = Query(max(scales), scales=scales, weighting=weighting)
     ranges = runner.step(Step("distances", paper_distances, query, {"s": s}))
-    flat = FLAT_TOLERANCE * float(np.linalg.norm(layout.hi - layout.lo))
+    flat = _kernels.flat_span(layout.hi - layout.lo)
     norm = {"lo": ranges["pdis_min"], "hi": ranges["pdis_max"], "flat": flat}
     hist = runner.step(Step("histograms", paper_histograms, None, norm))["hist"]
     thresholds = np.array([_kernels.stage_threshold(h, True, 0.0) for h in hist])

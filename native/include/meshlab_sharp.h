@@ -522,17 +522,19 @@ int ms_support_free_score(int mesh, double noise, double *score);
 
 /* The pointwise stages of a cloud's sequence (stages.c), over the points [begin, end):
  * ms_detect runs them over every point, the out-of-core path over each tile's points and
- * sums their partials. Point i's value at scale s (s < MS_MAX_SCALES of them) is
- * x[i * point_stride + s * scale_stride]; with lo not NULL, min-max normalised as
- * ms_scale_vote normalises it with the global lo[s], hi[s] (s each) and flat_span.
- * ms_stage_histograms: adds each scale's MS_BINS-bin histogram (ms_scale_vote's bins) to
- * counts (s, MS_BINS). ms_stage_threshold: a scale's threshold from its summed histogram,
- * max(Otsu's split, floor_) with `otsu`, floor_ without (ms_scale_vote's T).
- * ms_stage_decide: with the global thresholds (s), the votes v >= T of each point: feature
- * (all s), strength (votes / s), and each scale's candidates added to counts (s).
- * ms_stage_acute_tests (robust.acute_tests): on a quiet cloud (ms_quiet_cloud), tested[i] =
- * not feature[i] and score[i] in [MS_ACUTE_SCORE, MS_ACUTE_SCORE_MAX); returns how many
- * (0, tested untouched, otherwise). */
+ * sums their partials. ms_flat_span: paper mode's flat span, MS_FLAT_TOLERANCE times the
+ * diagonal of the bounding box whose sides are extent (3; ms_extent's). Point i's value at
+ * scale s (s < MS_MAX_SCALES of them) is x[i * point_stride + s * scale_stride]; with lo
+ * not NULL, min-max normalised as ms_scale_vote normalises it with the global lo[s], hi[s]
+ * (s each) and flat_span. ms_stage_histograms: adds each scale's MS_BINS-bin histogram
+ * (ms_scale_vote's bins) to counts (s, MS_BINS). ms_stage_threshold: a scale's threshold
+ * from its summed histogram, max(Otsu's split, floor_) with `otsu`, floor_ without
+ * (ms_scale_vote's T). ms_stage_decide: with the global thresholds (s), the votes v >= T
+ * of each point: feature (all s), strength (votes / s), and each scale's candidates added
+ * to counts (s). ms_stage_acute_tests (robust.acute_tests): on a quiet cloud
+ * (ms_quiet_cloud), tested[i] = not feature[i] and score[i] in [MS_ACUTE_SCORE,
+ * MS_ACUTE_SCORE_MAX); returns how many (0, tested untouched, otherwise). */
+double ms_flat_span(const double *extent);
 void ms_stage_histograms(const double *x, int64_t point_stride, int64_t scale_stride, int s,
                          int64_t begin, int64_t end, const double *lo, const double *hi,
                          double flat_span, int64_t *counts);

@@ -604,7 +604,7 @@ Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 		pdis = cloudPass(tree, r.scales, options.gaussian, false, 0, bar, 5, 90).pdis;
 		orig.swap(tree.orig);
 	}
-	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(box[0] * box[0] + box[1] * box[1] + box[2] * box[2]);
+	const double flatSpan = ms_flat_span(box);
 	bar.report(90, "thresholds");
 	std::vector<double> lo(S, 0.0), hi(S, 0.0);  // each scale's range
 	eachIndex(Index(S), [&](Index s) {

@@ -38,6 +38,11 @@ int ms_support_free_score(int mesh, double noise, double *score) {
     return 1;
 }
 
+double ms_flat_span(const double *extent) {
+    return MS_FLAT_TOLERANCE *
+           sqrt(extent[0] * extent[0] + extent[1] * extent[1] + extent[2] * extent[2]);
+}
+
 /* Scale s's value of point i: x[i * point_stride + s * scale_stride], min-max normalised
  * with lo[s] and span[s] (span > 0; span < 0, a flat scale: 0) when lo is not NULL. */
 static inline double stage_value(const double *x, int64_t point_stride, int64_t scale_stride,
