@@ -9,11 +9,14 @@ steps the reduced values (min-max ranges, the 256-bin histograms and so Otsu's
 thresholds) are fixed, exactly as the in-memory run computes them from all points.
 
 Every step's arithmetic is the native library's, the stages that ``ms_detect`` composes
-in memory (``native/src/stages.c``: histograms, the decision, the acute tests and robust
-mode's rules; the finishing kernels: acute tips, line directions and support, the
-smoothed ranking, thinning), called on the tile's points through
-:mod:`meshlab_sharp._kernels`; what is left here is reading and writing the store and
-the isolated points' test across tiles.
+in memory (``native/src/stages.c``: histograms, the decision, the isolation and acute
+tests and robust mode's rules; the finishing kernels: acute tips, line directions and
+support, the smoothed ranking, thinning), called on the tile's points through
+:mod:`meshlab_sharp._kernels`. What is left here joins the tiles: reading and writing
+the store (the values of a point's neighbours in other tiles), the partials, and which
+kept points' pass runs again once isolated points are left out (:func:`robust_affected`,
+a question the in-memory run, which runs the pass again over every kept point, does
+not ask).
 """
 
 from __future__ import annotations
