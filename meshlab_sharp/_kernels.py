@@ -129,6 +129,8 @@ _SIGNATURES = {
     "ms_dedup_resolve": (None, [_i64, _i64, _c_void_p]),
     "ms_keep_faces": (_i64, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_extent": (None, [_c_void_p, _i64, _c_void_p]),
+    "ms_noise_floor": (_f64, [_c_void_p]),
+    "ms_noise_floor_of": (_f64, [_c_void_p, _i64]),
     "ms_scale_vote": (
         _f64,
         [_c_void_p, _i64, _int, _f64, _int, _f64, _c_void_p, _c_void_p, _c_void_p],
@@ -1222,6 +1224,27 @@ def extent(points: np.ndarray) -> np.ndarray:
     out = np.empty(3)
     lib.ms_extent(_ptr(points), len(points), _ptr(out))
     return out
+
+
+def noise_floor(counts: np.ndarray) -> float:
+    """Robust mode's noise floor of a histogram's counts (``threshold.BINS``,) int
+    (``ms_noise_floor``; :func:`meshlab_sharp.reference.robust.noise_floor` is the numpy
+    reference)."""
+    lib = _LIB
+    assert lib is not None
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    if counts.shape != (_header.integer("BINS"),):
+        raise ValueError("counts must hold one count per histogram bin")
+    return float(lib.ms_noise_floor(_ptr(counts)))
+
+
+def noise_floor_of(values: np.ndarray) -> float:
+    """:func:`noise_floor` of the histogram of ``values`` (m,) in [0, 1]
+    (``ms_noise_floor_of``, in one C call)."""
+    lib = _LIB
+    assert lib is not None
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    return float(lib.ms_noise_floor_of(_ptr(values), len(values)))
 
 
 def scale_vote(

@@ -79,6 +79,21 @@ def isolated_points(
     return lone | (d_nth > spread * spread * d_ref[idx[:, -1]])
 
 
+def noise_floor(counts: np.ndarray) -> float:
+    """Robust mode's noise floor of a histogram's counts (``threshold.BINS``,) int:
+    ``min(NOISE_FLOOR * (b + 1) / BINS, NOISE_FLOOR_MAX)``, ``b`` the bin of the lower
+    median (the first bin whose cumulative count exceeds ``(total - 1) // 2``); 0.0 when
+    every count is 0 (``ms_noise_floor``, :func:`meshlab_sharp.robust.scale_floor`)."""
+    counts = np.asarray(counts, np.int64)
+    total = int(counts.sum())
+    if total == 0:
+        return 0.0
+    rank = (total - 1) // 2  # the lower median's, from 0
+    b = min(int(np.searchsorted(np.cumsum(counts), rank, side="right")), len(counts) - 1)
+    floor = _header.real("NOISE_FLOOR") * float(b + 1) / float(len(counts))
+    return min(floor, _header.real("NOISE_FLOOR_MAX"))
+
+
 def noise_ratios(points: np.ndarray, indices: np.ndarray, k: int) -> np.ndarray:
     """``|d . n_i| / |d|`` of every point, ``d = p_{N(i)[1]} - p_i`` (the nearest
     neighbour's offset across the plane of the ``k`` nearest, relative to its distance;

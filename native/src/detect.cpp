@@ -668,8 +668,12 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const bool quiet = !(ratio > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
 	const size_t S = r.scales.size();
 	std::vector<int64_t> votes(n, 0);
-	for (size_t s = 0; s < S; ++s)  // robust.otsu_splits: without noise the floor alone
-		vote(&pass.relative[s * n], n, false, 0.0, !quiet, R_MIN, votes, r);
+	for (size_t s = 0; s < S; ++s) {  // robust.otsu_splits: without noise the floor alone
+		const double *rs = &pass.relative[s * n];
+		// robust.scale_floor: with noise, the largest scale's floor also follows its median
+		const double floor = quiet || s + 1 < S ? R_MIN : std::max(R_MIN, ms_noise_floor_of(rs, n));
+		vote(rs, n, false, 0.0, !quiet, floor, votes, r);
+	}
 	Buffer<double>().swap(pass.relative);
 	if (d.toClean.empty()) {
 		d.toClean.resize(n);
