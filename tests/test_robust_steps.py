@@ -477,21 +477,12 @@ def test_the_noise_floor_is_three_lower_medians_of_the_largest_noisy_scale_cappe
     assert robust.scale_floor(high, True, False, noisy) == 0.22
 
 
-def _noisy_sphere(n: int, noise: float, seed: int) -> np.ndarray:
-    """n uniform points on the unit sphere moved along the radius by normal noise of
-    ``noise`` times the spacing ``sqrt(4 pi / n)``."""
-    rng = np.random.default_rng(seed)
-    d = rng.normal(size=(n, 3))
-    d /= np.linalg.norm(d, axis=1)[:, None]
-    return d * (1.0 + rng.normal(0.0, noise * math.sqrt(4 * math.pi / n), n))[:, None]
-
-
 @pytest.mark.parametrize("backend", ["compiled", "numpy"])
 def test_a_noisy_sphere_has_no_features_and_a_noisy_box_keeps_its_edges(backend):
     """Noise of 25 % of the spacing: the sphere's points pass R_MIN at every scale
     (about 10 % flagged without the noise floor), the largest scale's floor drops them;
     the box, whose edges raise Otsu's split above the floor, keeps its 12 edges."""
-    sphere = meshlab_sharp.detect(_noisy_sphere(6000, 0.25, 0), backend=backend)
+    sphere = meshlab_sharp.detect(shapes.noisy_sphere_points(6000, 0.25), backend=backend)
     assert sphere.thresholds[-1] > robust.R_MIN
     assert sphere.mask.mean() <= 0.002
     points = shapes.noisy_box_points(6000, 0.25, seed=0)
