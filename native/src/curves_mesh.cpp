@@ -25,58 +25,69 @@ double radians(double deg) { return deg * (PI / 180.0); }
 // np.linalg.norm along an axis of length 3
 double length3(const Vec3 &a) { return std::sqrt((a[0] * a[0] + a[1] * a[1]) + a[2] * a[2]); }
 
-// the unit normal of each face as np.cross and np.linalg.norm give it (zero for a face of
-// zero area), and whether the face has an area
-void faceNormals(const std::vector<Vec3> &pts, const std::vector<std::array<int, 3>> &faces,
-                 std::vector<Vec3> &normal, std::vector<char> &solid)
+// a face's normal as creases.dihedral_angles gives it: the cross product over its length
+// (false for a face of zero area)
+bool faceNormal(const std::vector<Vec3> &pts, const std::array<int, 3> &t, Vec3 &normal)
 {
-	normal.resize(faces.size());
-	solid.resize(faces.size());
-	for (size_t i = 0; i < faces.size(); ++i) {
-		const Vec3 &p0 = pts[faces[i][0]], &p1 = pts[faces[i][1]], &p2 = pts[faces[i][2]];
-		const Vec3 a{p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
-		const Vec3 b{p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
-		const Vec3 c{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-		const double nrm = length3(c);
-		solid[i] = nrm > 0;
-		const double d = nrm > 0 ? nrm : 1.0;
-		normal[i] = {c[0] / d, c[1] / d, c[2] / d};
-	}
+	const Vec3 &p0 = pts[t[0]], &p1 = pts[t[1]], &p2 = pts[t[2]];
+	const Vec3 a{p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+	const Vec3 b{p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
+	const Vec3 c{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+	const double length = length3(c);
+	normal = {c[0] / length, c[1] / length, c[2] / length};
+	return length > 0;
 }
 
 // mesh.py _sharp_edges: the edges (a < b, sorted) between usable vertices whose two faces
-// turn by more than the crease threshold of all the mesh's two-face edges
+// turn by more than the crease threshold of all the mesh's two-face edges (faces of zero
+// area left out); the angles are creases.dihedral_angles' (ms_two_face_edges' dot products)
 std::vector<Edge> sharpEdges(const std::vector<Vec3> &pts, const std::vector<std::array<int, 3>> &faces,
                              const std::vector<char> &usable, const ms_curves_math &math)
 {
+	const long n = long(pts.size());
+	std::vector<long> solid;  // the faces of non-zero area
 	std::vector<Vec3> normal;
-	std::vector<char> solid;
-	faceNormals(pts, faces, normal, solid);
-	struct Side { Edge e; long face; bool up; };
-	std::vector<Side> sides;
-	sides.reserve(3 * faces.size());
-	for (size_t i = 0; i < faces.size(); ++i)
+	for (size_t i = 0; i < faces.size(); ++i) {
+		Vec3 u;
+		if (faceNormal(pts, faces[i], u)) solid.push_back(long(i)), normal.push_back(u);
+	}
+	const long m = long(solid.size());
+	// per lower end, the other end and the face (in solid) as one key: hi * m + f
+	std::vector<long> ptr(n + 2, 0), key(3 * m);
+	for (long f = 0; f < m; ++f)
 		for (int k = 0; k < 3; ++k) {
-			const long a = faces[i][k], b = faces[i][(k + 1) % 3];
-			sides.push_back({{std::min(a, b), std::max(a, b)}, long(i), a < b});
+			const long a = faces[solid[f]][k], b = faces[solid[f]][(k + 1) % 3];
+			++ptr[std::min(a, b) + 2];
 		}
-	std::sort(sides.begin(), sides.end(), [](const Side &x, const Side &y) {
-		return x.e != y.e ? x.e < y.e : x.face < y.face;
-	});
+	for (long v = 0; v < n; ++v) ptr[v + 2] += ptr[v + 1];
+	for (long f = 0; f < m; ++f)
+		for (int k = 0; k < 3; ++k) {
+			const long a = faces[solid[f]][k], b = faces[solid[f]][(k + 1) % 3];
+			key[ptr[std::min(a, b) + 1]++] = std::max(a, b) * m + f;
+		}
+	auto walksUp = [&](long f, long lo, long hi) {  // the face goes from lo straight to hi
+		const std::array<int, 3> &c = faces[solid[f]];
+		const int at = c[0] == lo ? 0 : c[1] == lo ? 1 : 2;
+		return c[(at + 1) % 3] == hi;
+	};
 	std::vector<Edge> edges;
 	std::vector<double> dots;
-	for (size_t s = 0; s < sides.size();) {
-		size_t t = s + 1;
-		while (t < sides.size() && sides[t].e == sides[s].e) ++t;
-		const long f0 = sides[s].face, f1 = t - s == 2 ? sides[s + 1].face : -1;
-		if (f1 >= 0 && solid[f0] && solid[f1]) {
-			const Vec3 &u = normal[f0], &v = normal[f1];
-			double dot = (u[0] * v[0] + u[2] * v[2]) + u[1] * v[1];  // np.einsum's order
-			if (sides[s].up == sides[s + 1].up) dot = -dot;  // one face wound the other way round
-			edges.push_back(sides[s].e);
-			dots.push_back(std::max(-1.0, std::min(1.0, dot)));
+	for (long v = 0; v < n; ++v) {
+		const auto first = key.begin() + ptr[v], last = key.begin() + ptr[v + 1];
+		std::sort(first, last);
+		for (auto it = first; it != last;) {
+			const long hi = *it / m;
+			auto next = it + 1;
+			while (next != last && *next / m == hi) ++next;
+			if (next - it == 2) {
+				const long f0 = *it % m, f1 = *(it + 1) % m;
+				const Vec3 &u = normal[f0], &w = normal[f1];
+				const double d = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+				edges.push_back({v, hi});
+				dots.push_back(std::max(-1.0, std::min(1.0, walksUp(f0, v, hi) == walksUp(f1, v, hi) ? -d : d)));
+			}
+			it = next;
 		}
-		s = t;
 	}
 	if (edges.empty()) return {};
 	std::vector<double> angle(dots.size());

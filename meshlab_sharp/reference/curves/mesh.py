@@ -25,6 +25,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..._header import KERNELS
+from ..creases import dihedral_angles
 from .trace import CORNER_TURN, Piece
 
 __all__ = ["CreaseChains", "crease_chains"]
@@ -76,7 +77,7 @@ def crease_chains(
     """
     n = len(vertices)
     f = np.asarray(faces, np.int64).reshape(-1, 3)
-    sharp = _sharp_edges(vertices, f, usable)
+    sharp = _sharp_edges(vertices, f, usable) if len(f) else np.zeros((0, 2), np.int64)
     rest = mask & ~_joined(f, usable, sharp, n)
     if len(sharp) == 0:
         return CreaseChains([], np.zeros(0, np.int64), rest)
@@ -142,39 +143,20 @@ def _turns(a: list[float], b: list[float], c: list[float], cos_turn: float) -> b
 
 def _sharp_edges(vertices: np.ndarray, faces: np.ndarray, usable: np.ndarray) -> np.ndarray:
     """The edges (a, b), a < b, sorted, between usable vertices whose two faces turn by
-    more than the crease threshold of all the two-face edges of the mesh (faces of zero
-    area take no part), (s, 2) int64."""
-    if len(faces) == 0:
+    more than the crease threshold of all the two-face edges of the mesh (the angles of
+    :func:`meshlab_sharp.reference.creases.dihedral_angles`; faces of zero area left
+    out), (s, 2) int64."""
+    p0, p1, p2 = (vertices[faces[:, c]] for c in range(3))
+    fn = np.cross(p1 - p0, p2 - p0)
+    length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
+    solid = faces[length > 0]
+    if len(solid) == 0:
         return np.zeros((0, 2), np.int64)
-    p = vertices[faces]
-    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    norm = np.linalg.norm(normal, axis=1, keepdims=True)
-    solid = norm[:, 0] > 0  # faces of non-zero area
-    normal = normal / np.where(norm > 0, norm, 1.0)
-    m = len(faces)
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    up = e[:, 0] < e[:, 1]
-    face = np.tile(np.arange(m), 3)
-    e.sort(axis=1)
-    order = np.lexsort((face, e[:, 1], e[:, 0]))
-    e, face, up = e[order], face[order], up[order]
-    first = np.ones(len(e), bool)
-    first[1:] = (e[1:] != e[:-1]).any(axis=1)
-    start = np.flatnonzero(first)
-    count = np.diff(np.append(start, len(e)))
-    s = start[count == 2]
-    f0, f1 = face[s], face[s + 1]
-    s = s[solid[f0] & solid[f1]]
-    if len(s) == 0:
+    edges, angle = dihedral_angles(vertices, solid)
+    if len(angle) == 0:
         return np.zeros((0, 2), np.int64)
-    f0, f1 = face[s], face[s + 1]
-    dot = np.einsum("ij,ij->i", normal[f0], normal[f1])
-    dot = np.where(up[s] == up[s + 1], -dot, dot)  # one face wound the other way round
-    angle = np.arccos(np.clip(dot, -1.0, 1.0))
-    at = (len(angle) - 1) // 4
-    quartile = float(np.sort(angle)[at])
+    quartile = float(np.partition(angle, (len(angle) - 1) // 4)[(len(angle) - 1) // 4])
     threshold = max(math.radians(CREASE_ANGLE), NOISE_FACTOR * quartile)
-    edges = e[s]
     keep = (angle > threshold) & usable[edges[:, 0]] & usable[edges[:, 1]]
     return edges[keep]
 
