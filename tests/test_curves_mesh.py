@@ -109,20 +109,23 @@ def test_the_curves_do_not_depend_on_the_faces_winding():
         assert got.corner_points.tobytes() == want.corner_points.tobytes()
 
 
-def test_only_sharp_edges_between_features_are_chained():
-    """An edge is chained only where both its vertices are features: with one corner of
-    the 2-triangle cube left out, its three edges are no curve; the three corners next to
-    it hold two sharp edges at a right angle (a turn: still corners, where the chain is
-    cut), the other four three edges each."""
+def test_a_crease_the_detection_saw_is_chained_through_the_vertices_it_left_out():
+    """The sharp edges are chained where the detection saw a crease (a sharp edge between
+    two features), also through the vertices on it that it left out: with one corner of
+    the 2-triangle cube no feature, still 12 curves and 8 corners; with no two features
+    on one sharp edge, no chain, and the features are the skeleton's."""
     vertices, faces = shapes.two_triangle_cube()
     mask = np.ones(len(vertices), bool)
     mask[0] = False
     chains = crease_chains(vertices, faces, mask, mask)
-    assert len(chains.pieces) == 9
-    assert all(0 not in pc.nodes for pc in chains.pieces)
-    assert chains.corners.tolist() == [1, 2, 3, 4, 5, 6, 7]
+    assert len(chains.pieces) == 12 and chains.corners.tolist() == list(range(8))
     assert all(len(pc.nodes) == 2 for pc in chains.pieces)
     assert not chains.rest.any()  # every feature is on a sharp edge
+    mask = np.zeros(len(vertices), bool)
+    mask[[0, 7]] = True  # opposite corners
+    chains = crease_chains(vertices, faces, mask, mask)
+    assert chains.pieces == [] and len(chains.corners) == 0
+    np.testing.assert_array_equal(chains.rest, mask)
 
 
 @pytest.mark.parametrize(
@@ -139,13 +142,15 @@ def test_only_sharp_edges_between_features_are_chained():
 def test_mesh_sharp_edge_curves_are_the_references_to_the_bit(case):
     """The native library's chains of sharp edges, with the skeleton of the features
     away from them: the numpy reference's curves, lengths and corners to the bit, for
-    the detection's features and for every vertex a feature."""
+    the features of either mode and for every vertex a feature."""
     vertices, faces = _mesh(case)
-    result = meshlab_sharp.detect(vertices, faces)
-    for mask, kept in ((result.mask, result.kept), (np.ones(len(vertices), bool), None)):
+    robust = meshlab_sharp.detect(vertices, faces)
+    paper = meshlab_sharp.detect(vertices, faces, mode="paper")  # fewer of the crease's vertices
+    masks = [(robust.mask, robust.kept), (paper.mask, paper.kept)]
+    for mask, kept in [*masks, (np.ones(len(vertices), bool), None)]:
         want = reference.extract_curves(vertices, mask, faces, kept)
         got = _native.extract_curves(vertices, mask, faces, kept, None)
-        assert want.curves
+        assert want.curves or mask is paper.mask
         assert got.spacing == want.spacing and len(got.curves) == len(want.curves)
         for (p, i, c, length), (wp, wi, wc, wlength) in zip(got.curves, want.curves, strict=True):
             assert p.tobytes() == np.ascontiguousarray(wp).tobytes()

@@ -38,11 +38,19 @@ bool faceNormal(const std::vector<Vec3> &pts, const std::array<int, 3> &t, Vec3 
 	return length > 0;
 }
 
-// mesh.py _sharp_edges: the edges (a < b, sorted) between usable vertices whose two faces
-// turn by more than the crease threshold of all the mesh's two-face edges (faces of zero
-// area left out); the angles are creases.dihedral_angles' (ms_two_face_edges' dot products)
+long findRoot(std::vector<long> &parent, long v)
+{
+	while (parent[v] != v) v = parent[v] = parent[parent[v]];
+	return v;
+}
+
+// mesh.py _sharp_edges: the edges (a < b, sorted) whose two faces turn by more than the
+// crease threshold of all the mesh's two-face edges (faces of zero area left out; the
+// angles creases.dihedral_angles' and ms_two_face_edges'), between usable or non-feature
+// vertices, in the parts of their graph that hold one between two usable vertices
 std::vector<Edge> sharpEdges(const std::vector<Vec3> &pts, const std::vector<std::array<int, 3>> &faces,
-                             const std::vector<char> &usable, const ms_curves_math &math)
+                             const std::vector<char> &mask, const std::vector<char> &usable,
+                             const ms_curves_math &math)
 {
 	const long n = long(pts.size());
 	std::vector<long> solid;  // the faces of non-zero area
@@ -96,16 +104,22 @@ std::vector<Edge> sharpEdges(const std::vector<Vec3> &pts, const std::vector<std
 	const size_t at = (sorted.size() - 1) / 4;
 	std::nth_element(sorted.begin(), sorted.begin() + long(at), sorted.end());
 	const double threshold = std::max(radians(MS_CREASE_ANGLE), MS_NOISE_FACTOR * sorted[at]);
-	std::vector<Edge> out;
+	std::vector<Edge> turned;
+	std::vector<long> parent(n);
+	std::iota(parent.begin(), parent.end(), 0L);
+	auto allowed = [&](long v) { return usable[v] || !mask[v]; };
 	for (size_t i = 0; i < edges.size(); ++i)
-		if (angle[i] > threshold && usable[edges[i][0]] && usable[edges[i][1]]) out.push_back(edges[i]);
+		if (angle[i] > threshold && allowed(edges[i][0]) && allowed(edges[i][1])) {
+			turned.push_back(edges[i]);
+			parent[findRoot(parent, edges[i][0])] = findRoot(parent, edges[i][1]);
+		}
+	std::vector<char> seen(n, 0);
+	for (const Edge &e : turned)
+		if (usable[e[0]] && usable[e[1]]) seen[findRoot(parent, e[0])] = 1;
+	std::vector<Edge> out;
+	for (const Edge &e : turned)
+		if (seen[findRoot(parent, e[0])]) out.push_back(e);
 	return out;
-}
-
-long findRoot(std::vector<long> &parent, long v)
-{
-	while (parent[v] != v) v = parent[v] = parent[parent[v]];
-	return v;
 }
 
 // mesh.py _turns: whether a-b-c turns at b by more than the angle of cosTurn
@@ -126,9 +140,9 @@ CreaseChains creaseChains(const std::vector<Vec3> &pts, const std::vector<std::a
 	CreaseChains out;
 	const long n = long(pts.size());
 	out.rest = mask;
-	const std::vector<Edge> sharp = sharpEdges(pts, faces, usable, math);
+	const std::vector<Edge> sharp = sharpEdges(pts, faces, mask, usable, math);
 	if (sharp.empty()) return out;
-	// the feature vertices joined to a sharp edge by edges between usable vertices
+	// the usable vertices joined to a vertex of a sharp edge by edges between usable vertices
 	std::vector<long> parent(n);
 	std::iota(parent.begin(), parent.end(), 0L);
 	for (const auto &t : faces)
@@ -137,7 +151,7 @@ CreaseChains creaseChains(const std::vector<Vec3> &pts, const std::vector<std::a
 			if (usable[a] && usable[b]) parent[findRoot(parent, a)] = findRoot(parent, b);
 		}
 	std::vector<char> crease(n, 0);
-	for (const Edge &e : sharp) crease[findRoot(parent, e[0])] = 1;
+	for (const Edge &e : sharp) crease[findRoot(parent, e[0])] = 1, crease[findRoot(parent, e[1])] = 1;
 	for (long v = 0; v < n; ++v)
 		if (usable[v] && crease[findRoot(parent, v)]) out.rest[v] = 0;
 	std::map<long, std::vector<long>> nbrs;

@@ -77,7 +77,7 @@ def crease_chains(
     """
     n = len(vertices)
     f = np.asarray(faces, np.int64).reshape(-1, 3)
-    sharp = _sharp_edges(vertices, f, usable) if len(f) else np.zeros((0, 2), np.int64)
+    sharp = _sharp_edges(vertices, f, mask, usable) if len(f) else np.zeros((0, 2), np.int64)
     rest = mask & ~_joined(f, usable, sharp, n)
     if len(sharp) == 0:
         return CreaseChains([], np.zeros(0, np.int64), rest)
@@ -141,28 +141,43 @@ def _turns(a: list[float], b: list[float], c: list[float], cos_turn: float) -> b
     return dot < cos_turn * (nu * nw)
 
 
-def _sharp_edges(vertices: np.ndarray, faces: np.ndarray, usable: np.ndarray) -> np.ndarray:
-    """The edges (a, b), a < b, sorted, between usable vertices whose two faces turn by
-    more than the crease threshold of all the two-face edges of the mesh (the angles of
-    :func:`meshlab_sharp.reference.creases.dihedral_angles`; faces of zero area left
-    out), (s, 2) int64."""
+def _sharp_edges(
+    vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, usable: np.ndarray
+) -> np.ndarray:
+    """The sharp edges to chain, (s, 2) int64, (a, b), a < b, sorted: the edges whose two
+    faces turn by more than the crease threshold of all the two-face edges of the mesh
+    (the angles of :func:`meshlab_sharp.reference.creases.dihedral_angles`; faces of zero
+    area left out), between usable or non-feature vertices, in the parts of the graph of
+    such edges that hold one between two usable vertices (a crease the detection saw,
+    through the vertices on it that it left out)."""
     p0, p1, p2 = (vertices[faces[:, c]] for c in range(3))
     fn = np.cross(p1 - p0, p2 - p0)
     length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
     solid = faces[length > 0]
+    none = np.zeros((0, 2), np.int64)
     if len(solid) == 0:
-        return np.zeros((0, 2), np.int64)
+        return none
     edges, angle = dihedral_angles(vertices, solid)
     if len(angle) == 0:
-        return np.zeros((0, 2), np.int64)
+        return none
     quartile = float(np.partition(angle, (len(angle) - 1) // 4)[(len(angle) - 1) // 4])
     threshold = max(math.radians(CREASE_ANGLE), NOISE_FACTOR * quartile)
-    keep = (angle > threshold) & usable[edges[:, 0]] & usable[edges[:, 1]]
-    return edges[keep]
+    allowed = usable | ~mask
+    edges = edges[(angle > threshold) & allowed[edges[:, 0]] & allowed[edges[:, 1]]]
+    seen = usable[edges[:, 0]] & usable[edges[:, 1]]
+    if not seen.any():
+        return none
+    n = len(vertices)
+    graph = coo_matrix((np.ones(len(edges), np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    label = connected_components(graph, directed=False)[1]
+    part = np.zeros(n, bool)
+    part[label[edges[seen, 0]]] = True
+    return edges[part[label[edges[:, 0]]]]
 
 
 def _joined(faces: np.ndarray, usable: np.ndarray, sharp: np.ndarray, n: int) -> np.ndarray:
-    """The vertices (n,) bool joined to a sharp edge by edges between usable vertices."""
+    """The usable vertices (n,) bool joined to a vertex of a sharp edge by edges between
+    usable vertices."""
     if len(sharp) == 0:
         return np.zeros(n, bool)
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
@@ -170,5 +185,5 @@ def _joined(faces: np.ndarray, usable: np.ndarray, sharp: np.ndarray, n: int) ->
     graph = coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
     label = connected_components(graph, directed=False)[1]
     crease = np.zeros(n, bool)
-    crease[label[sharp[:, 0]]] = True
+    crease[label[sharp.ravel()]] = True
     return crease[label] & usable
