@@ -98,20 +98,32 @@ std::vector<Edge> sharpEdges(const std::vector<Vec3> &pts, const std::vector<std
 		}
 	}
 	if (edges.empty()) return {};
-	std::vector<double> angle(dots.size());
-	math.acos(dots.data(), angle.data(), int64_t(dots.size()));
-	std::vector<double> sorted = angle;
-	const size_t at = (sorted.size() - 1) / 4;
-	std::nth_element(sorted.begin(), sorted.begin() + long(at), sorted.end());
-	const double threshold = std::max(radians(MS_CREASE_ANGLE), MS_NOISE_FACTOR * sorted[at]);
+	// the lower quartile of the angles (element (e - 1) / 4 in increasing order): the
+	// acos of the dot product as far from the top
+	std::vector<double> sorted = dots;
+	const size_t top = sorted.size() - 1 - (sorted.size() - 1) / 4;
+	std::nth_element(sorted.begin(), sorted.begin() + long(top), sorted.end());
+	double quartile = 0.0;
+	math.acos(&sorted[top], &quartile, 1);
+	const double threshold = std::max(radians(MS_CREASE_ANGLE), MS_NOISE_FACTOR * quartile);
+	// the angles only of the edges that may turn by more: a dot product above the
+	// threshold's cosine by more than acos' rounding turns by less (the bound tunes nothing)
+	const double below = std::cos(threshold) + 1e-9;
+	auto allowed = [&](long v) { return usable[v] || !mask[v]; };
+	std::vector<size_t> which;
+	std::vector<double> steep;
+	for (size_t i = 0; i < edges.size(); ++i)
+		if (dots[i] < below && allowed(edges[i][0]) && allowed(edges[i][1])) which.push_back(i), steep.push_back(dots[i]);
+	std::vector<double> angle(steep.size());
+	if (!steep.empty()) math.acos(steep.data(), angle.data(), int64_t(steep.size()));
 	std::vector<Edge> turned;
 	std::vector<long> parent(n);
 	std::iota(parent.begin(), parent.end(), 0L);
-	auto allowed = [&](long v) { return usable[v] || !mask[v]; };
-	for (size_t i = 0; i < edges.size(); ++i)
-		if (angle[i] > threshold && allowed(edges[i][0]) && allowed(edges[i][1])) {
-			turned.push_back(edges[i]);
-			parent[findRoot(parent, edges[i][0])] = findRoot(parent, edges[i][1]);
+	for (size_t j = 0; j < which.size(); ++j)
+		if (angle[j] > threshold) {
+			const Edge &e = edges[which[j]];
+			turned.push_back(e);
+			parent[findRoot(parent, e[0])] = findRoot(parent, e[1]);
 		}
 	std::vector<char> seen(n, 0);
 	for (const Edge &e : turned)

@@ -25,7 +25,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..._header import KERNELS
-from ..creases import dihedral_angles
+from ..creases import _two_face_edges
 from .trace import CORNER_TURN, Piece
 
 __all__ = ["CreaseChains", "crease_chains"]
@@ -153,15 +153,24 @@ def _sharp_edges(
     p0, p1, p2 = (vertices[faces[:, c]] for c in range(3))
     fn = np.cross(p1 - p0, p2 - p0)
     length = np.sqrt(fn[:, 0] * fn[:, 0] + fn[:, 1] * fn[:, 1] + fn[:, 2] * fn[:, 2])
-    solid = faces[length > 0]
+    solid = length > 0
     none = np.zeros((0, 2), np.int64)
-    if len(solid) == 0:
+    if not solid.any():
         return none
-    edges, angle = dihedral_angles(vertices, solid)
-    if len(angle) == 0:
+    # creases.dihedral_angles' dot products, of the faces of non-zero area
+    edges, first, second, same = _two_face_edges(faces[solid], len(vertices))
+    if len(edges) == 0:
         return none
-    quartile = float(np.partition(angle, (len(angle) - 1) // 4)[(len(angle) - 1) // 4])
+    fn = fn[solid] / length[solid][:, None]
+    u, v = fn[first], fn[second]
+    dot = u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1] + u[:, 2] * v[:, 2]
+    dot = np.clip(np.where(same, -dot, dot), -1.0, 1.0)
+    # the lower quartile of the angles (element (e - 1) // 4 in increasing order): the
+    # arccos of the dot product as far from the top
+    top = len(dot) - 1 - (len(dot) - 1) // 4
+    quartile = float(np.arccos(np.partition(dot, top)[top : top + 1])[0])
     threshold = max(math.radians(CREASE_ANGLE), NOISE_FACTOR * quartile)
+    angle = np.arccos(dot)
     allowed = usable | ~mask
     edges = edges[(angle > threshold) & allowed[edges[:, 0]] & allowed[edges[:, 1]]]
     seen = usable[edges[:, 0]] & usable[edges[:, 1]]
