@@ -47,8 +47,8 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
                      const ms_curves_math *math = nullptr);
 
 // The chains of a mesh's sharp edges (curves_mesh.cpp; reference/curves/mesh.py): the
-// edges between usable vertices whose two faces turn by more than the detection's crease
-// threshold, cut at their corners.
+// edges whose two faces turn by more than the detection's crease threshold, on the creases
+// the detection saw (a sharp edge between two usable vertices), cut at their corners.
 struct CreaseChains {
 	std::vector<std::vector<long>> chains;  // mesh vertices, in the order traced
 	std::vector<char> closed;               // per chain: a loop (the first vertex not repeated)

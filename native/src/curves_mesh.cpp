@@ -1,7 +1,8 @@
 // meshlab-sharp feature curves: a mesh's sharp edges as curves, the chains of the mesh
-// edges between feature vertices whose two faces turn by more than the detection's crease
-// threshold, cut where three or more chains meet or a chain turns (the numpy reference
-// meshlab_sharp/reference/curves/mesh.py, with the same arithmetic; see curves.h).
+// edges whose two faces turn by more than the detection's crease threshold, on the
+// creases the detection saw, cut where one or three or more chains meet or a chain turns
+// (the numpy reference meshlab_sharp/reference/curves/mesh.py, with the same arithmetic;
+// see curves.h).
 #include "curves.h"
 
 #include "meshlab_sharp.h"

@@ -2,17 +2,19 @@
 more than the crease threshold, cut where three or more chains meet (the numpy reference
 of the native library's native/src/curves_mesh.cpp).
 
-An edge between two feature vertices is sharp when the normals of its two faces differ
-by more than ``max(CREASE_ANGLE, NOISE_FACTOR * lower quartile)`` of the angles of all
-the mesh's two-face edges: the threshold of the detection's own creases
-(:func:`meshlab_sharp.creases.crease_threshold`). The sharp edges are chained whatever
-their length: a coarse tessellation's one long edge along a crease is a curve, the
-diagonal of a flat quad (0 degrees) and the facets of a 24-segment cylinder (15
-degrees) are not. A chain ends at a vertex where one or three or more sharp edges
-meet, or where it turns by more than ``CORNER_TURN`` degrees; those vertices, but the
-free ends, are corners. The other feature vertices joined to a sharp edge through
-feature edges (the band of detections beside a crease) take no further part; the rest
-are left to the skeleton of :mod:`.extract`.
+An edge is sharp when the normals of its two faces differ by more than
+``max(CREASE_ANGLE, NOISE_FACTOR * lower quartile)`` of the angles of all the mesh's
+two-face edges: the threshold of the detection's own creases
+(:func:`meshlab_sharp.creases.crease_threshold`). The sharp edges are chained where the
+detection saw the crease (a sharp edge between two feature vertices), also through the
+vertices on it that the detection left out, whatever their length: a coarse
+tessellation's one long edge along a crease is a curve, the diagonal of a flat quad (0
+degrees) and the facets of a 24-segment cylinder (15 degrees) are not. A chain ends at a
+vertex where one or three or more sharp edges meet, or where it turns by more than
+``CORNER_TURN`` degrees; those vertices, but the free ends, are corners. The other
+feature vertices joined to a sharp edge through feature edges (the band of detections
+beside a crease) take no further part; the rest are left to the skeleton of
+:mod:`.extract`.
 """
 
 from __future__ import annotations
@@ -60,7 +62,7 @@ class CreaseChains:
 def crease_chains(
     vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, usable: np.ndarray
 ) -> CreaseChains:
-    """The chains of the sharp edges between feature vertices.
+    """The chains of the sharp edges of the creases the detection saw.
 
     Parameters
     ----------
