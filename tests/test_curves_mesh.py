@@ -158,3 +158,15 @@ def test_mesh_sharp_edge_curves_are_the_references_to_the_bit(case):
             assert (c, np.float64(length).tobytes()) == (wc, np.float64(wlength).tobytes())
         assert got.corner_points.tobytes() == want.corner_points.tobytes()
         np.testing.assert_array_equal(got.corner_indices, want.corner_indices)
+
+
+def test_a_noisy_mesh_leaves_its_creases_to_the_skeleton():
+    """Noise raises the crease threshold (edges beside a crease turn by more than the
+    crease angle, one here, one there): no edge is chained alone, every feature goes to
+    the skeleton, which still finds the cube's 12 edges and 8 corners."""
+    vertices, faces = shapes.noisy_mesh(*shapes.cube_grid_mesh(5), 0.1, seed=1)
+    result = meshlab_sharp.detect(vertices, faces, curves=True)
+    chains = crease_chains(vertices, faces, result.mask, result.mask)
+    assert chains.pieces == [] and len(chains.corners) == 0
+    np.testing.assert_array_equal(chains.rest, result.mask)
+    assert len(result.curves) == 12 and len(result.corners) == 8

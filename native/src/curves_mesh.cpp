@@ -46,9 +46,10 @@ long findRoot(std::vector<long> &parent, long v)
 }
 
 // mesh.py _sharp_edges: the edges (a < b, sorted) whose two faces turn by more than the
-// crease threshold of all the mesh's two-face edges (faces of zero area left out; the
-// angles creases.dihedral_angles' and ms_two_face_edges'), between usable or non-feature
-// vertices, in the parts of their graph that hold one between two usable vertices
+// crease angle (faces of zero area left out; the angles creases.dihedral_angles' and
+// ms_two_face_edges'), between usable or non-feature vertices, in the parts of their
+// graph that hold one between two usable vertices; none where the noise raises the
+// crease threshold of all the mesh's two-face edges above the crease angle
 std::vector<Edge> sharpEdges(const std::vector<Vec3> &pts, const std::vector<std::array<int, 3>> &faces,
                              const std::vector<char> &mask, const std::vector<char> &usable,
                              const ms_curves_math &math)
@@ -106,7 +107,10 @@ std::vector<Edge> sharpEdges(const std::vector<Vec3> &pts, const std::vector<std
 	std::nth_element(sorted.begin(), sorted.begin() + long(top), sorted.end());
 	double quartile = 0.0;
 	math.acos(&sorted[top], &quartile, 1);
-	const double threshold = std::max(radians(MS_CREASE_ANGLE), MS_NOISE_FACTOR * quartile);
+	// a threshold raised by the noise: the mesh's creases are not to be trusted edge by
+	// edge (the skeleton of the features follows them)
+	const double threshold = radians(MS_CREASE_ANGLE);
+	if (MS_NOISE_FACTOR * quartile > threshold) return {};
 	// the angles only of the edges that may turn by more: a dot product above the
 	// threshold's cosine by more than acos' rounding turns by less (the bound tunes nothing)
 	const double below = std::cos(threshold) + 1e-9;

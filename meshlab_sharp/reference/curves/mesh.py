@@ -2,16 +2,17 @@
 more than the crease threshold, cut where three or more chains meet (the numpy reference
 of the native library's native/src/curves_mesh.cpp).
 
-An edge is sharp when the normals of its two faces differ by more than
-``max(CREASE_ANGLE, NOISE_FACTOR * lower quartile)`` of the angles of all the mesh's
-two-face edges: the threshold of the detection's own creases
-(:func:`meshlab_sharp.creases.crease_threshold`). The sharp edges are chained where the
-detection saw the crease (a sharp edge between two feature vertices), also through the
-vertices on it that the detection left out, whatever their length: a coarse
-tessellation's one long edge along a crease is a curve, the diagonal of a flat quad (0
-degrees) and the facets of a 24-segment cylinder (15 degrees) are not. A chain ends at a
-vertex where one or three or more sharp edges meet, or where it turns by more than
-``CORNER_TURN`` degrees; those vertices, but the free ends, are corners. The other
+An edge is sharp when the normals of its two faces differ by more than ``CREASE_ANGLE``,
+the threshold of the detection's own creases on a mesh without noise
+(:func:`meshlab_sharp.creases.crease_threshold`); where the noise raises that threshold
+(``NOISE_FACTOR`` times the lower quartile of the angles of all the mesh's two-face
+edges), no edge is taken alone and the features go to the skeleton. The sharp edges are
+chained where the detection saw the crease (a sharp edge between two feature vertices),
+also through the vertices on it that the detection left out, whatever their length: a
+coarse tessellation's one long edge along a crease is a curve, the diagonal of a flat
+quad (0 degrees) and the facets of a 24-segment cylinder (15 degrees) are not. A chain
+ends at a vertex where one or three or more sharp edges meet, or where it turns by more
+than ``CORNER_TURN`` degrees; those vertices, but the free ends, are corners. The other
 feature vertices joined to a sharp edge through feature edges (the band of detections
 beside a crease) take no further part; the rest are left to the skeleton of
 :mod:`.extract`.
@@ -147,9 +148,10 @@ def _sharp_edges(
     vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, usable: np.ndarray
 ) -> np.ndarray:
     """The sharp edges to chain, (s, 2) int64, (a, b), a < b, sorted: the edges whose two
-    faces turn by more than the crease threshold of all the two-face edges of the mesh
-    (the angles of :func:`meshlab_sharp.reference.creases.dihedral_angles`; faces of zero
-    area left out), between usable or non-feature vertices, in the parts of the graph of
+    faces turn by more than CREASE_ANGLE (the angles of
+    :func:`meshlab_sharp.reference.creases.dihedral_angles`; faces of zero area left
+    out), none where the noise raises the crease threshold of the mesh's two-face edges
+    above it, between usable or non-feature vertices, in the parts of the graph of
     such edges that hold one between two usable vertices (a crease the detection saw,
     through the vertices on it that it left out)."""
     p0, p1, p2 = (vertices[faces[:, c]] for c in range(3))
@@ -171,7 +173,9 @@ def _sharp_edges(
     # arccos of the dot product as far from the top
     top = len(dot) - 1 - (len(dot) - 1) // 4
     quartile = float(np.arccos(np.partition(dot, top)[top : top + 1])[0])
-    threshold = max(math.radians(CREASE_ANGLE), NOISE_FACTOR * quartile)
+    threshold = math.radians(CREASE_ANGLE)
+    if NOISE_FACTOR * quartile > threshold:
+        return none  # a noisy mesh: its creases are left to the skeleton of the features
     angle = np.arccos(dot)
     allowed = usable | ~mask
     edges = edges[(angle > threshold) & allowed[edges[:, 0]] & allowed[edges[:, 1]]]
