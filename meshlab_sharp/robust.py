@@ -81,7 +81,6 @@ choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -169,8 +168,8 @@ __all__ = [
 ]
 
 #: Relative projected distance at a point on a straight edge turning by CREASE_ANGLE,
-#: with a disc-shaped neighbourhood: ``(2 / pi) * sin(CREASE_ANGLE / 2)`` = 0.1106.
-R_MIN = (2.0 / math.pi) * math.sin(math.radians(CREASE_ANGLE / 2.0))
+#: with a disc-shaped neighbourhood: ``(2 / pi) * sin(CREASE_ANGLE / 2)`` = 0.1105.
+R_MIN = _header.real("R_MIN")
 #: ... and by more than about 63 degrees on a noisy cloud (:func:`thin_cone`).
 THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
 #: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
@@ -317,22 +316,29 @@ def noise_scale_factor(points: np.ndarray, indices: np.ndarray, k: int) -> float
     return _noise_factor(noise_ratios(points, indices, k))
 
 
+#: Where robust mode's rules on the noise are defined: the native library
+#: (``ms_noise_factor``, ``ms_quiet_cloud``, ... in ``native/src/stages.c``), or, in an
+#: install without it, the numpy reference's statement of the same rules.
+_RULES = _kernels if _kernels.available() else reference
+
+
 def noise_factor(nu: float) -> float:
     """The scales' growth for the median noise ratio ``nu``:
-    ``min(max(1, (nu / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)``."""
-    return min(max(1.0, (nu / NOISE_TOLERATED) ** 2), NOISE_MAX_FACTOR)
+    ``min(max(1, (nu / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)`` (``ms_noise_factor``)."""
+    return _RULES.noise_factor(nu)
 
 
 def grown_scales(scales: tuple[int, ...], factor: float) -> tuple[int, ...]:
-    """The scales times ``factor``, rounded half up."""
-    return tuple(math.floor(k * factor + 0.5) for k in scales)
+    """The scales times ``factor``, rounded half up (``ms_grown_scale``)."""
+    return tuple(_RULES.grown_scale(k, factor) for k in scales)
 
 
 def thin_knn(growth: float) -> int:
     """Thinning's comparison list (clouds): ``THIN_KNN`` grown with the scales
     (``growth`` the factor the noise grew them by, 1 when it did not), rounded half
-    up: the band of points that noise lifts beside a line widens with the noise."""
-    return grown_scales((THIN_KNN,), growth)[0]
+    up: the band of points that noise lifts beside a line widens with the noise
+    (``ms_thin_knn``)."""
+    return _RULES.thin_knn(growth)
 
 
 def _noise_factor(ratio: np.ndarray) -> float:
@@ -459,8 +465,9 @@ def quiet_cloud(mesh: bool, noise: float) -> bool:
     ``noise`` (the lower median of :func:`noise_ratios`, as :func:`noise_scale_factor`
     takes it) not above ``NOISE_QUIET``. The one test behind every rule kept for such
     clouds: the floor alone (:func:`otsu_splits`), :func:`support_exempt`,
-    :func:`acute_tests`, :func:`thin_blockers` and the cone of :func:`thin_cone`."""
-    return not (mesh or noise > NOISE_QUIET)
+    :func:`acute_tests`, :func:`thin_blockers` and the cone of :func:`thin_cone`
+    (``ms_quiet_cloud``)."""
+    return _RULES.quiet_cloud(mesh, noise)
 
 
 def otsu_splits(mesh: bool, noise: float) -> bool:
@@ -468,8 +475,9 @@ def otsu_splits(mesh: bool, noise: float) -> bool:
     clouds whose noise ratio ``noise`` (the lower median of :func:`noise_ratios`, as
     :func:`noise_scale_factor` takes it) exceeds ``NOISE_QUIET``. On a cloud without
     noise the floor alone (measured: thin walls 1 / 2 / 3
-    spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)."""
-    return not quiet_cloud(mesh, noise)
+    spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)
+    (``ms_otsu_splits``)."""
+    return _RULES.otsu_splits(mesh, noise)
 
 
 def thin_blockers(candidates: np.ndarray, mesh: bool, noise: float) -> np.ndarray | None:
@@ -490,8 +498,8 @@ def thin_cone(mesh: bool, noise: float) -> float:
     ``THIN_CONE_COS`` on meshes and quiet clouds. Noise tilts the offsets between a
     line's own points, which then count as across the line and thin it to gaps
     (measured: thickness on the scan 0.79 -> 0.82, at noise 50 %
-    0.78 -> 0.83)."""
-    return THIN_CONE_COS if mesh or quiet_cloud(mesh, noise) else THIN_CONE_COS_NOISY
+    0.78 -> 0.83) (``ms_thin_cone``)."""
+    return _RULES.thin_cone(mesh, noise)
 
 
 def ranking_smoothed(mesh: bool, noise: float) -> bool:
@@ -500,16 +508,16 @@ def ranking_smoothed(mesh: bool, noise: float) -> bool:
     (``noise_factor(noise) == NOISE_MAX_FACTOR``). Beyond it the larger scales no longer
     dilute the noise of the score, and single points lifted 1-2 spacings beside a line
     outrank the line's own (measured: noise 50 % F1 0.752 ->
-    0.813, thickness 0.72 -> 0.78)."""
-    return not mesh and noise_factor(noise) == NOISE_MAX_FACTOR
+    0.813, thickness 0.72 -> 0.78) (``ms_ranking_smoothed``)."""
+    return _RULES.ranking_smoothed(mesh, noise)
 
 
 def support_free_score(mesh: bool, noise: float) -> float | None:
     """The score below which :func:`supported` keeps a point without support:
     ``SUPPORT_FREE_SCORE`` on a cloud whose noise ratio ``noise`` (as :func:`otsu_splits`
     takes it) is at most ``NOISE_QUIET``; None (no such score) on meshes and noisier
-    clouds."""
-    return SUPPORT_FREE_SCORE if quiet_cloud(mesh, noise) else None
+    clouds (``ms_support_free_score``)."""
+    return _RULES.support_free_score(mesh, noise)
 
 
 def support_exempt(score: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
@@ -529,11 +537,7 @@ def acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: float) -
     bool (the candidates at every scale) whose ``score`` (m,) lies in ``[ACUTE_SCORE,
     ACUTE_SCORE_MAX)``; none on meshes and noisier clouds. Returns (t,) int64,
     increasing."""
-    if not quiet_cloud(mesh, noise):
-        return np.zeros(0, np.int64)
-    score = np.asarray(score, np.float64)
-    test = ~np.asarray(mask, bool) & (score >= ACUTE_SCORE) & (score < ACUTE_SCORE_MAX)
-    return np.flatnonzero(test)
+    return _RULES.stage_acute_tests(score, mask, mesh, noise)
 
 
 @dataclass

@@ -1461,10 +1461,30 @@ std::vector<long> advancing(const std::vector<Vec3> &p, const std::vector<Vec3> 
 	return keep;
 }
 
+// cloud_spacing: the median distance d from a feature to the nearest other point; where
+// DENSITY_SCALE times the median distance to the DENSITY_NEIGHBOURS-th nearest is
+// q d with q > 1, the cloud is irregular and the spacing d q^1.5
+double cloudSpacing(const KdTree &tree, const std::vector<Vec3> &fp, bool &irregular)
+{
+	const size_t k = std::min<size_t>(MS_CURVE_DENSITY_NEIGHBOURS + 1, tree.size());
+	std::vector<double> d1(fp.size()), dk(fp.size());
+	for (size_t i = 0; i < fp.size(); ++i) {
+		const auto hits = tree.query(fp[i], k);
+		d1[i] = std::sqrt(hits[1].first);
+		dk[i] = std::sqrt(hits[k - 1].first);
+	}
+	const double nearest = median(d1);
+	const double density = MS_CURVE_DENSITY_SCALE * median(dk);
+	irregular = nearest > 0.0 && density > nearest;
+	if (!irregular) return nearest;
+	const double q = density / nearest;
+	return nearest * (q * std::sqrt(q));
+}
+
 std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<char> &mask,
                                const std::vector<char> &ok, const std::vector<long> &feat,
                                const std::vector<Vec3> &fp, const std::array<Vec3, 2> *bounds,
-                               const ms_curves_math &math, double &spacing)
+                               const ms_curves_math &math, double &spacing, bool &irregular)
 {
 	const KdTree fpTree(fp);
 	std::vector<double> d1(fp.size());
@@ -1476,8 +1496,7 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	std::vector<char> nearFeature;
 	for (long i : near) nearPts.push_back(pts[i]), nearFeature.push_back(mask[i]);
 	const KdTree tree(nearPts);
-	for (size_t i = 0; i < fp.size(); ++i) d1[i] = std::sqrt(tree.query(fp[i], 2)[1].first);
-	spacing = median(d1);
+	spacing = cloudSpacing(tree, fp, irregular);
 	// cloud_graph
 	const long n = long(fp.size());
 	const size_t k = std::min<size_t>(MS_CURVE_LINK_NEIGHBOURS + 1, fp.size());
@@ -1735,10 +1754,11 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	double spacing = 0.0;
 	std::unique_ptr<MeshPaths> paths;
 	CreaseChains creases;
+	bool irregular = false;
 	if (faces.empty()) {
 		std::vector<char> mask(n);
 		for (size_t i = 0; i < n; ++i) mask[i] = feature[i] != 0;
-		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing);
+		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing, irregular);
 	} else {
 		std::vector<char> usable(n, 0);
 		for (long v : feat) usable[v] = 1;
@@ -1756,7 +1776,10 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 		return mid;
 	};
 	const Bridge *bridge = paths ? &bridgeFn : nullptr;
-	pieces = dropShort(cutAll(pieces, spacing, math), spacing);
+	pieces = cutAll(pieces, spacing, math);
+	// the short pieces are dropped before joining, but on an irregular cloud, where the
+	// sampling's gaps cut an edge's features into short pieces: they join first
+	if (!irregular) pieces = dropShort(pieces, spacing);
 	pieces = dropShort(joinPieces(pieces, spacing, bridge), spacing);
 	pieces = joinPieces(pieces, spacing, bridge);
 	pieces = cutAll(pieces, spacing, math);
