@@ -540,7 +540,7 @@ def iid_part(part: SamplePart, *, seed: int = 0) -> SamplePart:
     Poisson-disk cloud, whose density it has)."""
     verts, faces = part.extra["reference"]
     pts, nrm = iid_points(np.asarray(verts, np.float64), np.asarray(faces), part.n, seed)
-    return replace(part, vertices=_f32(pts), normals=nrm)
+    return replace(part, vertices=float32_rounded(pts), normals=nrm)
 
 
 def add_outliers(part: SamplePart, fraction: float = 0.01, *, seed: int = 0) -> SamplePart:

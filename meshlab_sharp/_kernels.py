@@ -129,6 +129,7 @@ _SIGNATURES = {
     "ms_dedup_resolve": (None, [_i64, _i64, _c_void_p]),
     "ms_keep_faces": (_i64, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_extent": (None, [_c_void_p, _i64, _c_void_p]),
+    "ms_noise_floor": (_f64, [_c_void_p]),
     "ms_scale_vote": (
         _f64,
         [_c_void_p, _i64, _int, _f64, _int, _f64, _c_void_p, _c_void_p, _c_void_p],
@@ -139,6 +140,7 @@ _SIGNATURES = {
     "ms_thin_knn": (_int, [_f64]),
     "ms_quiet_cloud": (_int, [_int, _f64]),
     "ms_otsu_splits": (_int, [_int, _f64]),
+    "ms_scale_floor": (_f64, [_c_void_p, _int, _int, _f64]),
     "ms_thin_cone": (_f64, [_int, _f64]),
     "ms_ranking_smoothed": (_int, [_int, _f64]),
     "ms_support_free_score": (_int, [_int, _f64, _c_void_p]),
@@ -1246,6 +1248,18 @@ def extent(points: np.ndarray) -> np.ndarray:
     return out
 
 
+def noise_floor(counts: np.ndarray) -> float:
+    """Robust mode's noise floor of a histogram's counts (``threshold.BINS``,) int
+    (``ms_noise_floor``; :func:`meshlab_sharp.reference.robust.noise_floor` is the numpy
+    reference)."""
+    lib = _LIB
+    assert lib is not None
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    if counts.shape != (_header.integer("BINS"),):
+        raise ValueError("counts must hold one count per histogram bin")
+    return float(lib.ms_noise_floor(_ptr(counts)))
+
+
 def scale_vote(
     values: np.ndarray,
     votes: np.ndarray,
@@ -1338,6 +1352,15 @@ def quiet_cloud(mesh: bool, noise: float) -> bool:
 def otsu_splits(mesh: bool, noise: float) -> bool:
     """``ms_otsu_splits``: Otsu's split can raise the threshold above the floor."""
     return bool(_lib().ms_otsu_splits(int(mesh), float(noise)))
+
+
+def scale_floor(counts: np.ndarray | None, last: bool, mesh: bool, noise: float) -> float:
+    """``ms_scale_floor``: the floor of a scale's threshold, from its histogram ``counts``
+    (B,) int (read only on the largest scale of a noisy cloud)."""
+    if counts is None:
+        counts = np.zeros(_header.integer("BINS"), np.int64)
+    counts = np.ascontiguousarray(counts, np.int64)
+    return float(_lib().ms_scale_floor(_ptr(counts), int(last), int(mesh), float(noise)))
 
 
 def thin_cone(mesh: bool, noise: float) -> float:

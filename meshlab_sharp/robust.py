@@ -156,6 +156,7 @@ __all__ = [
     "relative_distances",
     "robust_threshold",
     "robust_threshold_from_histogram",
+    "scale_floor",
     "sheet_mask",
     "sheet_parameters",
     "support_exempt",
@@ -225,6 +226,18 @@ NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
 #: controls, 0.09-0.096 with normal noise of 10 % of the spacing, 0.068-0.115 on the
 #: simulated scans; a third of ``NOISE_TOLERATED`` lies between.
 NOISE_QUIET = _header.real("NOISE_QUIET")
+#: On a cloud noisier than ``NOISE_QUIET``, the largest scale's threshold is at least
+#: this many times the median of its relative distances (:func:`scale_floor`). The noise
+#: that lifts a point's ``r`` lifts it at every scale, and where a part has few edges
+#: Otsu's split lies below ``R_MIN``: 15 % of the points of a noisy cylinder (a CAD end
+#: mill with noise of 25 % of the spacing) passed the floor at every scale. The median
+#: is that of the flat points' noise; three times it is about its 95th percentile.
+NOISE_FLOOR = _header.real("NOISE_FLOOR")
+#: ... but never above this, about the ``r`` of an edge turning by 40 degrees: where the
+#: largest scale spans much of a small cloud (1,500 points, k = 110), most points see an
+#: edge, the median is no longer the flat points' noise and 3 times it (0.57) dropped
+#: 90 % of a noisy box's edge points.
+NOISE_FLOOR_MAX = _header.real("NOISE_FLOOR_MAX")
 #: The scales grow at most 3-fold (``k_max`` 120 with the default scales: the kNN table
 #: of a million points stays below 0.5 GB); measured at 50 % noise, quick size: x2 0.64,
 #: x3 0.66.
@@ -434,8 +447,8 @@ def relative_distances(pdis: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return np.minimum(r, 1.0, out=r)
 
 
-def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
-    """Otsu's threshold of relative distances on [0, 1], never below ``R_MIN``.
+def robust_threshold(r: np.ndarray, otsu: bool = True, floor: float = R_MIN) -> float:
+    """Otsu's threshold of relative distances on [0, 1], never below ``floor``.
 
     Parameters
     ----------
@@ -443,21 +456,40 @@ def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
         Relative projected distances in [0, 1] (isolated points left out).
     otsu : bool, default True
         False on a cloud without noise (:func:`otsu_splits`): the floor alone.
+    floor : float, default R_MIN
+        :func:`scale_floor`.
 
     Returns
     -------
     float
-        ``max(otsu_threshold(r), R_MIN)``, or ``R_MIN`` when not ``otsu`` (then no
+        ``max(otsu_threshold(r), floor)``, or ``floor`` when not ``otsu`` (then no
         histogram is made); candidates are ``r >= T``.
     """
-    return robust_threshold_from_histogram(histogram(r)) if otsu else R_MIN
+    return robust_threshold_from_histogram(histogram(r), True, floor) if otsu else floor
 
 
-def robust_threshold_from_histogram(counts: np.ndarray, otsu: bool = True) -> float:
+def robust_threshold_from_histogram(
+    counts: np.ndarray, otsu: bool = True, floor: float = R_MIN
+) -> float:
     """:func:`robust_threshold` from the 256-bin histogram (B,) int of the relative
     distances (:func:`meshlab_sharp.threshold.histogram`): histograms summed over parts of
     the points give the whole's threshold (the out-of-core tiles)."""
-    return max(otsu_from_histogram(counts), R_MIN) if otsu else R_MIN
+    return max(otsu_from_histogram(counts), floor) if otsu else floor
+
+
+def scale_floor(
+    counts: np.ndarray, last: bool, mesh: bool, noise: float, backend: str | None = None
+) -> float:
+    """The floor of a scale's threshold: ``R_MIN``, and on the largest scale (``last``)
+    of a cloud whose noise ratio ``noise`` exceeds ``NOISE_QUIET``, at least
+    ``NOISE_FLOOR`` times the median of its relative distances (at most
+    ``NOISE_FLOOR_MAX``), read from their histogram ``counts`` (B,) int
+    (``ms_noise_floor``; the numpy reference with ``backend="numpy"``). Measured on the
+    CAD parts with noise of 25 % of the spacing (50,000 points): the end mill 0.258 ->
+    0.942, filleted parts 4.19 / 4.43 % flagged -> 0.66 / 2.78 %; parts with many edges
+    keep Otsu's split, which lies higher."""
+    rules = reference if backend == "numpy" else _RULES
+    return rules.scale_floor(counts, last, mesh, noise)
 
 
 def quiet_cloud(mesh: bool, noise: float) -> bool:
@@ -564,6 +596,8 @@ class RelativeRule:
         (:class:`SheetNeighbourhoods`): the compiled pass over a cloud then does too.
     otsu : bool, default True
         :func:`robust_threshold`'s ``otsu`` (:func:`otsu_splits`).
+    noise : float, default 0.0
+        The cloud's noise ratio, read by :func:`scale_floor` (0 on a mesh).
     backend : {"compiled", "numpy"}, optional
         :func:`local_scale`'s; default :func:`meshlab_sharp._kernels.default_backend`.
     """
@@ -573,6 +607,7 @@ class RelativeRule:
     n_scales: int
     sheet: _kernels.SheetParameters | None = None
     otsu: bool = True
+    noise: float = 0.0
     backend: str | None = None
 
     def __post_init__(self) -> None:
@@ -584,16 +619,22 @@ class RelativeRule:
         ell, offset = local_scale(self.points, lists, backend=self.backend)
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
-        return r, robust_threshold(r, self.otsu)
+        return r, robust_threshold(r, self.otsu, self.floor(i, r))
 
-    def from_pass(self, score: np.ndarray) -> tuple[bool, float]:
+    def floor(self, i: int, r: np.ndarray) -> float:
+        """:func:`scale_floor` of the i-th scale's relative distances ``r`` (m,)."""
+        last = i == self.n_scales - 1
+        counts = histogram(r) if last else None  # read on the largest scale only
+        return scale_floor(counts, last, False, self.noise, self.backend)
+
+    def from_pass(self, score: np.ndarray, i: int, r: np.ndarray) -> tuple[bool, float]:
         """Take the final ``score`` (m,) of the compiled pass (over a cloud or a mesh's
         rings), which computed it and every scale's relative distances with this rule's
         arithmetic (:class:`meshlab_sharp._kernels.ScalePass`); returns how
-        :func:`robust_threshold` thresholds them, ``(otsu, floor)``, for
-        :func:`meshlab_sharp._kernels.scale_vote` (the same threshold)."""
+        :func:`robust_threshold` thresholds the i-th scale's, ``r`` (m,), ``(otsu,
+        floor)``, for :func:`meshlab_sharp._kernels.scale_vote` (the same threshold)."""
         self.score = score
-        return self.otsu, R_MIN
+        return self.otsu, self.floor(i, r)
 
 
 class RobustSetup:
@@ -737,7 +778,7 @@ class RobustSetup:
         # pass's outputs: about 55 bytes a point) stayed until the garbage collector ran
         lists = self.scale_neighbourhoods.at
         self.rule = RelativeRule(
-            self.points, lists, len(self.scales), sheet, otsu, backend=self.backend
+            self.points, lists, len(self.scales), sheet, otsu, self.noise, backend=self.backend
         )
 
     def _sheets(self) -> SheetNeighbourhoods:

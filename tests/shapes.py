@@ -153,6 +153,15 @@ def noisy_box_points(n: int, noise: float, seed: int = 0) -> np.ndarray:
     return points + np.random.default_rng(seed + 1).normal(0, noise * spacing, (n, 3))
 
 
+def noisy_sphere_points(n: int, noise: float, seed: int = 0) -> np.ndarray:
+    """n uniform points on the unit sphere moved along the radius by normal noise of
+    ``noise`` times the spacing ``sqrt(4 pi / n)``. (n, 3)."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    return d * (1.0 + rng.normal(0.0, noise * np.sqrt(4 * np.pi / n), n))[:, None]
+
+
 def with_outliers(points: np.ndarray, count: int, seed: int = 0) -> np.ndarray:
     """``points`` followed by ``count`` uniform points in their bounding box grown by half
     its size on each side. (n + count, 3)."""

@@ -34,6 +34,8 @@ ISOLATED_SPREAD = _header.real("ISOLATED_SPREAD")
 NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
 NOISE_MAX_FACTOR = _header.real("NOISE_MAX_FACTOR")
 NOISE_QUIET = _header.real("NOISE_QUIET")
+#: The threshold floor (meshlab_sharp.robust says why).
+R_MIN = _header.real("R_MIN")
 THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
 THIN_KNN = _header.integer("THIN_KNN")
 SUPPORT_FREE_SCORE = _header.real("SUPPORT_FREE_SCORE")
@@ -87,6 +89,21 @@ def isolated_points(
     d_nth = squared_distances(p, p[idx[:, min(nth, last)]])
     d_ref = squared_distances(p, p[idx[:, min(ref, last)]])
     return lone | (d_nth > spread * spread * d_ref[idx[:, -1]])
+
+
+def noise_floor(counts: np.ndarray) -> float:
+    """Robust mode's noise floor of a histogram's counts (``threshold.BINS``,) int:
+    ``min(NOISE_FLOOR * (b + 1) / BINS, NOISE_FLOOR_MAX)``, ``b`` the bin of the lower
+    median (the first bin whose cumulative count exceeds ``(total - 1) // 2``); 0.0 when
+    every count is 0 (``ms_noise_floor``, :func:`meshlab_sharp.robust.scale_floor`)."""
+    counts = np.asarray(counts, np.int64)
+    total = int(counts.sum())
+    if total == 0:
+        return 0.0
+    rank = (total - 1) // 2  # the lower median's, from 0
+    b = min(int(np.searchsorted(np.cumsum(counts), rank, side="right")), len(counts) - 1)
+    floor = _header.real("NOISE_FLOOR") * float(b + 1) / float(len(counts))
+    return min(floor, _header.real("NOISE_FLOOR_MAX"))
 
 
 def noise_ratios(points: np.ndarray, indices: np.ndarray, k: int) -> np.ndarray:
@@ -705,6 +722,14 @@ def quiet_cloud(mesh: bool, noise: float) -> bool:
 def otsu_splits(mesh: bool, noise: float) -> bool:
     """Not :func:`quiet_cloud`."""
     return not quiet_cloud(mesh, noise)
+
+
+def scale_floor(counts: np.ndarray | None, last: bool, mesh: bool, noise: float) -> float:
+    """``R_MIN``; on the largest scale (``last``) of a cloud that is not quiet, at least
+    :func:`noise_floor` of that scale's histogram ``counts`` (B,) int."""
+    if not last or mesh or quiet_cloud(mesh, noise):
+        return R_MIN
+    return max(R_MIN, noise_floor(counts))
 
 
 def thin_cone(mesh: bool, noise: float) -> float:

@@ -443,7 +443,13 @@ def _robust(
         grown = Query(top, "kept", None, scales, **passes)
         hist = runner.step(Step("pass grown", robust_pass, grown, {"first": False}))["hist"]
     otsu = robust.otsu_splits(False, nu)
-    thresholds = np.array([_kernels.stage_threshold(h, otsu, robust.R_MIN) for h in hist])
+    last = len(hist) - 1
+    thresholds = np.array(
+        [
+            _kernels.stage_threshold(h, otsu, robust.scale_floor(h, s == last, False, nu))
+            for s, h in enumerate(hist)
+        ]
+    )
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     if robust.quiet_cloud(False, nu):  # robust.acute_tests: tips of acute edges

@@ -78,6 +78,16 @@
 #define MS_NOISE_KNN 7
 #define MS_NOISE_TOLERATED 0.15
 #define MS_NOISE_MAX_FACTOR 3.0
+/* On a cloud whose noise ratio exceeds MS_NOISE_QUIET, the largest scale's threshold is
+ * at least this many times the median of its relative distances (robust.scale_floor,
+ * ms_noise_floor): the noise that lifts a point's r at one scale lifts it at every
+ * scale, and on a part with few edges Otsu's split lies below R_MIN, so 13-15 % of a
+ * noisy cylinder's points passed the floor at every scale. */
+#define MS_NOISE_FLOOR 3.0
+/* ... but never above this (about the r of an edge turning by 40 degrees, twice the
+ * crease angle): where the largest scale spans much of a small cloud, most points see
+ * an edge and the median is no longer the flat points' noise. */
+#define MS_NOISE_FLOOR_MAX 0.22
 /* At most this median noise ratio, a cloud is thresholded at the floor alone
  * (robust.otsu_splits). */
 #define MS_NOISE_QUIET 0.05
@@ -526,6 +536,10 @@ int ms_otsu_splits(int mesh, double noise);
 double ms_thin_cone(int mesh, double noise);
 int ms_ranking_smoothed(int mesh, double noise);
 int ms_support_free_score(int mesh, double noise, double *score);
+/* ms_scale_floor (robust.scale_floor): the floor of a scale's threshold, MS_R_MIN; on the
+ * largest scale (last) of a cloud that is not quiet (ms_quiet_cloud), at least
+ * ms_noise_floor(counts) of that scale's histogram (MS_BINS; not read otherwise). */
+double ms_scale_floor(const int64_t *counts, int last, int mesh, double noise);
 
 /* The pointwise stages of a cloud's sequence (stages.c), over the points [begin, end):
  * ms_detect runs them over every point, the out-of-core path over each tile's points and
@@ -572,8 +586,13 @@ void ms_stage_isolated(const double *a, const double *b, const double *kth_d2,
  * min(floor(v * MS_BINS), MS_BINS - 1); the split's integer form of the notes, the first
  * largest wins; 1.0 when no split has points on both sides), floor_) with `otsu`, floor_
  * without (no histogram; robust.robust_threshold); then votes[i] += v[i] >= T, the number
- * of such points into *count, and v into out when out is not NULL. Returns T. */
+ * of such points into *count, and v into out when out is not NULL. Returns T.
+ * ms_noise_floor: the least of MS_NOISE_FLOOR * (b + 1) / MS_BINS, b the bin of the
+ * lower median of the MS_BINS counts (the first bin whose cumulative count exceeds
+ * (total - 1) / 2), and MS_NOISE_FLOOR_MAX; 0 when every count is 0
+ * (ms_scale_floor). */
 void ms_extent(const double *p, int64_t n, double *out);
+double ms_noise_floor(const int64_t *counts);
 double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
                      double floor_, double *out, int64_t *votes, int64_t *count);
 

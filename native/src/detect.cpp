@@ -508,11 +508,12 @@ void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 // The pointwise stages (stages.c) over the n points' values x, scale s at x[s * n ...], in
 // the order `order` maps to the cleaned points (empty: that order): each scale's threshold
 // from the histograms summed over chunks of points on every core (ms_stage_threshold:
-// with otsu, Otsu's split, never below floor; lo, hi and flatSpan: ms_stage_histograms'
+// with otsu, Otsu's split, never below floor, or with noise >= 0 below robust mode's floor
+// of a cloud of that noise ratio, ms_scale_floor; lo, hi and flatSpan: ms_stage_histograms'
 // normalisation), then the decision (ms_stage_decide); thresholds and candidates to r,
 // strength and feature (in the cleaned order) to d.
 void stageDecision(const double *x, Index n, size_t S, const double *lo, const double *hi, double flatSpan, bool otsu,
-                   double floor, const std::vector<Index> &order, Decision &d, Result &r) {
+                   double floor, const std::vector<Index> &order, Decision &d, Result &r, double noise = -1.0) {
 	const Index count = (n + MS_CHUNK - 1) / MS_CHUNK;
 	const int s = int(S);
 	std::vector<int64_t> counts(otsu ? size_t(count) * S * MS_BINS : 0, 0);
@@ -524,7 +525,11 @@ void stageDecision(const double *x, Index n, size_t S, const double *lo, const d
 	std::vector<double> thresholds(S);
 	for (Index u = 1; u < count && otsu; ++u)  // the chunks' histograms summed into the first's
 		for (size_t b = 0; b < S * MS_BINS; ++b) counts[b] += counts[size_t(u) * S * MS_BINS + b];
-	for (size_t k = 0; k < S; ++k) thresholds[k] = ms_stage_threshold(otsu ? &counts[k * MS_BINS] : nullptr, otsu, floor);
+	for (size_t k = 0; k < S; ++k) {  // noise >= 0: robust mode's floors (ms_scale_floor)
+		const int64_t *hist = otsu ? &counts[k * MS_BINS] : nullptr;
+		const double f = noise < 0.0 ? floor : ms_scale_floor(hist, k + 1 == S, 0, noise);
+		thresholds[k] = ms_stage_threshold(hist, otsu, f);
+	}
 	std::vector<uint8_t> feature(n);
 	std::vector<double> strength(n);
 	std::vector<int64_t> candidates(size_t(count) * S, 0);
@@ -711,7 +716,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	bar.report(85, "thresholds");
 	const bool quiet = ms_quiet_cloud(0, ratio);
 	stageDecision(pass.relative.data(), n, r.scales.size(), nullptr, nullptr, 0.0, ms_otsu_splits(0, ratio), R_MIN,
-	              tree->orig, d, r);
+	              tree->orig, d, r, ratio);
 	Buffer<double>().swap(pass.relative);
 	if (d.toClean.empty()) {
 		d.toClean.resize(n);

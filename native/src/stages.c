@@ -24,6 +24,12 @@ int ms_quiet_cloud(int mesh, double noise) { return !(mesh || noise > MS_NOISE_Q
 
 int ms_otsu_splits(int mesh, double noise) { return !ms_quiet_cloud(mesh, noise); }
 
+double ms_scale_floor(const int64_t *counts, int last, int mesh, double noise) {
+    if (!last || mesh || ms_quiet_cloud(mesh, noise)) return MS_R_MIN;
+    const double floor_ = ms_noise_floor(counts);
+    return floor_ > MS_R_MIN ? floor_ : MS_R_MIN;
+}
+
 double ms_thin_cone(int mesh, double noise) {
     return mesh || ms_quiet_cloud(mesh, noise) ? MS_THIN_CONE_COS : MS_THIN_CONE_COS_NOISY;
 }

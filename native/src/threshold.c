@@ -1,5 +1,5 @@
 /* Thresholds, the global steps of every path: extent, histograms, Otsu's
- * split and one scale's vote.
+ * split, robust mode's noise floor and one scale's vote.
  * Part of meshlab-sharp's native library (meshlab_sharp.h). */
 #include "internal.h"
 
@@ -67,6 +67,21 @@ static void histogram(const double *x, int64_t n, double lo, double span, int64_
     } else {
         counts[0] += n;
     }
+}
+
+double ms_noise_floor(const int64_t *counts) {
+    int64_t total = 0;
+    for (int b = 0; b < MS_BINS; b++) total += counts[b];
+    if (total == 0) return 0.0;
+    const int64_t rank = (total - 1) / 2; /* the lower median's, from 0 */
+    int64_t below = 0;
+    int b = 0;
+    for (; b < MS_BINS - 1; b++) {
+        below += counts[b];
+        if (below > rank) break;
+    }
+    const double floor_ = MS_NOISE_FLOOR * (double)(b + 1) / (double)MS_BINS;
+    return floor_ < MS_NOISE_FLOOR_MAX ? floor_ : MS_NOISE_FLOOR_MAX;
 }
 
 double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
