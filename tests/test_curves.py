@@ -478,9 +478,9 @@ def test_piece_lengths_in_one_pass_match_each_piece() -> None:
 #: The modules that read the curves' constants: the numpy reference's, and fit.py.
 CURVE_MODULES = {
     name: Path(meshlab_sharp.reference.curves.__file__).with_name(f"{name}.py")
-    for name in ("graph", "trace", "extract", "refine")
+    for name in ("graph", "trace", "extract", "refine", "mesh")
 } | {"fit": Path(meshlab_sharp.curves.__file__).with_name("fit.py")}
-CURVES_CPP = Path(__file__).resolve().parent.parent / "native" / "src" / "curves.cpp"
+CURVES_CPP = sorted((Path(__file__).resolve().parent.parent / "native" / "src").glob("curves*.cpp"))
 #: The constants the native library has no use for: it does not classify the curves
 #: (fit.py).
 PYTHON_ONLY = {"FIT_TOLERANCE", "FIT_MAX", "MAX_RADIUS_RATIO"}
@@ -520,7 +520,7 @@ def test_the_curves_constants_are_typed_only_in_their_header():
                 read[target.id] = name
     assert set(read) == set(_header.CURVES.constants)
 
-    text = CURVES_CPP.read_text()
+    text = "\n".join(path.read_text() for path in CURVES_CPP)
     typed = re.findall(
         r"^\s*(?:static\s+)?(?:constexpr|const)\s+[\w:<> ]+?\s"  # a type
         r"([A-Z][A-Z0-9_]*)(?:\[\])?\s*=\s*(.+);",

@@ -1178,9 +1178,11 @@ std::vector<Piece> skeletonPieces(long n, const std::vector<Edge> &edges, const 
 	return pieces;
 }
 
+// the skeleton of the feature vertices rest (those away from the sharp edges); the
+// spacing around all the features mask
 std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<std::array<int, 3>> &faces,
                               const std::vector<char> &mask, const std::vector<long> &feat,
-                              const std::vector<Vec3> &fp, double &spacing)
+                              const std::vector<Vec3> &fp, const std::vector<char> &rest, double &spacing)
 {
 	spacing = 0.0;
 	std::vector<std::array<int, 3>> near;
@@ -1233,7 +1235,7 @@ std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<st
 	std::vector<double> w;
 	for (size_t i = 0; i < edges.size(); ++i) {
 		const long a = node[edges[i][0]], b = node[edges[i][1]];
-		if (a >= 0 && b >= 0) local.push_back({a, b}), w.push_back(weights[i]);
+		if (a >= 0 && b >= 0 && rest[edges[i][0]] && rest[edges[i][1]]) local.push_back({a, b}), w.push_back(weights[i]);
 	}
 	return skeletonPieces(long(feat.size()), local, w, fp, spacing, feat);
 }
@@ -1751,14 +1753,18 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	std::vector<Piece> pieces;
 	double spacing = 0.0;
 	std::unique_ptr<MeshPaths> paths;
+	CreaseChains creases;
 	bool irregular = false;
 	if (faces.empty()) {
 		std::vector<char> mask(n);
 		for (size_t i = 0; i < n; ++i) mask[i] = feature[i] != 0;
 		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing, irregular);
 	} else {
-		pieces = meshPieces(pts, faces, both, feat, fp, spacing);
-		paths.reset(new MeshPaths(pts, faces, both));
+		std::vector<char> usable(n, 0);
+		for (long v : feat) usable[v] = 1;
+		creases = creaseChains(pts, faces, both, usable, math);
+		pieces = meshPieces(pts, faces, both, feat, fp, creases.rest, spacing);
+		paths.reset(new MeshPaths(pts, faces, creases.rest));
 	}
 	if (spacing <= 0) return result;
 	result.spacing = spacing;
@@ -1780,6 +1786,22 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	pieces = splitAtTouches(pieces, spacing);
 	if (!paths) pieces = dropIsolated(pieces, spacing);
 	pieces = corners(pieces, spacing, pts, paths.get(), result);
+	if (!creases.chains.empty()) {  // the mesh's sharp edges, and their corners
+		for (size_t i = 0; i < creases.chains.size(); ++i) {
+			Piece pc;
+			pc.closed = creases.closed[i] != 0;
+			for (long v : creases.chains[i]) pc.nodes.push_back(v), pc.points.push_back(pts[v]);
+			pieces.push_back(pc);
+		}
+		std::vector<std::pair<Vec3, long>> all;
+		for (size_t i = 0; i < result.corners.size(); ++i) all.push_back({result.corners[i], result.cornerIndices[i]});
+		for (long v : creases.corners) all.push_back({pts[v], v});
+		std::stable_sort(all.begin(), all.end(), [](const std::pair<Vec3, long> &a, const std::pair<Vec3, long> &b) {
+			return lexLess(a.first, b.first);
+		});
+		result.corners.clear(), result.cornerIndices.clear();
+		for (const auto &c : all) result.corners.push_back(c.first), result.cornerIndices.push_back(c.second);
+	}
 	for (const Piece &pc : pieces)
 		if (pc.points.size() >= 2) result.curves.push_back(finalCurve(pc));
 	std::stable_sort(result.curves.begin(), result.curves.end(), [](const Curve &a, const Curve &b) {

@@ -22,6 +22,7 @@ from .graph import (
     prune_spurs,
     spanning_forest,
 )
+from .mesh import CreaseChains, crease_chains
 from .refine import (
     cell_neighbourhood,
     line_fit_positions,
@@ -154,12 +155,18 @@ def extract_curves(
     if len(feat) < 2:
         return _no_curves()
     paths: MeshPaths | None = None
+    creases: CreaseChains | None = None
     irregular = False
     if faces is None:
         pieces, spacing, irregular = _cloud_pieces(pts, feat_mask, ok, feat, fp, bounds)
     else:
-        pieces, spacing = _mesh_pieces(pts, np.asarray(faces), feat_mask & ok, feat, fp)
-        paths = MeshPaths(pts, np.asarray(faces), feat_mask & ok)
+        usable = np.zeros(len(pts), bool)
+        usable[feat] = True
+        creases = crease_chains(pts, np.asarray(faces), feat_mask & ok, usable)
+        pieces, spacing = _mesh_pieces(
+            pts, np.asarray(faces), feat_mask & ok, feat, fp, creases.rest
+        )
+        paths = MeshPaths(pts, np.asarray(faces), creases.rest)
     if spacing <= 0:
         return _no_curves()
     bridge = None if paths is None else _bridge(pts, paths, spacing)
@@ -176,6 +183,11 @@ def extract_curves(
     if paths is None:
         pieces = _drop_isolated(pieces, spacing)
     pieces, corner_points, corner_indices = _corners(pieces, spacing, pts, paths)
+    if creases is not None and len(creases.pieces):
+        pieces += creases.pieces
+        corner_points, corner_indices = _merged_corners(
+            corner_points, corner_indices, pts, creases.corners
+        )
     oriented = [_oriented(pc) for pc in pieces if len(pc.points) >= 2]
     lengths = piece_lengths(oriented).tolist()
     order = sorted(
@@ -309,10 +321,16 @@ def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
 
 
 def _mesh_pieces(
-    pts: np.ndarray, faces: np.ndarray, mask: np.ndarray, feat: np.ndarray, fp: np.ndarray
+    pts: np.ndarray,
+    faces: np.ndarray,
+    mask: np.ndarray,
+    feat: np.ndarray,
+    fp: np.ndarray,
+    rest: np.ndarray,
 ) -> tuple[list[Piece], float]:
-    """Chains of mesh edges between feature vertices; and the spacing (median length
-    of the edges around the features)."""
+    """Skeleton chains of mesh edges between the feature vertices ``rest`` (n,) bool
+    (those away from the mesh's sharp edges, :func:`.mesh.crease_chains`); and the
+    spacing (median length of the edges around all the features ``mask``)."""
     edges, weights, around = mesh_graph(pts, faces, mask)
     if len(edges) == 0:
         return [], 0.0
@@ -320,7 +338,8 @@ def _mesh_pieces(
     node = np.full(len(pts), -1, np.int64)
     node[feat] = np.arange(len(feat))
     local = node[edges]
-    keep = (local >= 0).all(axis=1)  # duplicated positions keep one vertex
+    # duplicated positions keep one vertex
+    keep = (local >= 0).all(axis=1) & rest[edges[:, 0]] & rest[edges[:, 1]]
     paths = _skeleton_pieces(len(feat), local[keep], weights[keep], fp, spacing)
     pieces = []
     for path in paths:
@@ -459,6 +478,17 @@ def _corners(
     p = np.array(points)
     order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
     return pieces, p[order], np.array(indices, np.int64)[order]
+
+
+def _merged_corners(
+    points: np.ndarray, indices: np.ndarray, pts: np.ndarray, more: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The corners ``points`` (c, 3) and ``indices`` (c,) with the mesh vertices
+    ``more`` (k,) added, all in coordinate order."""
+    p = np.vstack([points, pts[more]])
+    i = np.concatenate([indices, more]).astype(np.int64)
+    order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
+    return p[order], i[order]
 
 
 def _solve3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
