@@ -38,15 +38,15 @@ from meshlab_sharp.parts import (
     _check_kind_and_count,
     _crease_edges,
     _cylinder,
-    _f32,
     _face_normals,
-    _mesh_spacing,
     _minus,
-    _sample_surface,
     _sampled,
     _union,
-    _vertex_normals,
     crease_segments,
+    float32_rounded,
+    mesh_spacing,
+    sample_surface,
+    vertex_normals,
 )
 
 from .parts import (
@@ -86,6 +86,8 @@ __all__ = [
     "crease_segments",
     "density_gradient",
     "expected_spacing",
+    "iid_part",
+    "iid_points",
     "make_condition",
     "make_part",
     "make_thin_part",
@@ -283,14 +285,14 @@ def cad_part(name: str, segments: int = SEGMENTS) -> SamplePart:
 
 def _tessellation(name: str, verts: np.ndarray, faces: np.ndarray, edges: np.ndarray) -> SamplePart:
     """A CAD tessellation as a SamplePart scored per vertex."""
-    pts = _f32(verts)
+    pts = float32_rounded(verts)
     return SamplePart(
         name=name,
         vertices=pts,
         faces=np.asarray(faces, np.int64),
         edges=edges,
-        spacing=_mesh_spacing(pts, faces),
-        normals=_vertex_normals(pts, faces),
+        spacing=mesh_spacing(pts, faces),
+        normals=vertex_normals(pts, faces),
         outliers=np.zeros(len(pts), bool),
         kind="mesh",
         extra={"reference": (verts, faces), "scoring": "vertices"},
@@ -457,7 +459,7 @@ def scan_part(
     """
     verts, faces, edges = reference_surface(name)
     res = scan(verts, faces, scanner_positions(verts), n_points=n_points, noise=noise, seed=seed)
-    pts = _f32(res.points)
+    pts = float32_rounded(res.points)
     local = density_spacing(pts)
     return SamplePart(
         name=name,
@@ -508,7 +510,37 @@ def add_noise(
     else:
         delta = rng.normal(0.0, sigma, (n, 3))
     delta[part.outliers] = 0.0
-    return replace(part, vertices=_f32(part.vertices + delta))
+    return replace(part, vertices=float32_rounded(part.vertices + delta))
+
+
+def iid_points(
+    verts: np.ndarray, faces: np.ndarray, n: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """n points drawn independently, uniform over the mesh's area (as MeshLab's "sample
+    points on mesh" does): (n, 3) points and (n, 3) their faces' unit normals."""
+    rng = np.random.default_rng(seed)
+    cross = np.cross(
+        verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]]
+    )
+    area = np.linalg.norm(cross, axis=1)
+    f = rng.choice(len(faces), size=n, p=area / area.sum())
+    r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
+    v = verts[faces[f]]
+    pts = (
+        (1 - r1)[:, None] * v[:, 0]
+        + (r1 * (1 - r2))[:, None] * v[:, 1]
+        + (r1 * r2)[:, None] * v[:, 2]
+    )
+    return pts, cross[f] / np.maximum(area[f], 1e-300)[:, None]
+
+
+def iid_part(part: SamplePart, *, seed: int = 0) -> SamplePart:
+    """The part's reference surface sampled with as many points drawn independently
+    (:func:`iid_points`) instead of Poisson-disk ones; the spacing is kept (that of the
+    Poisson-disk cloud, whose density it has)."""
+    verts, faces = part.extra["reference"]
+    pts, nrm = iid_points(np.asarray(verts, np.float64), np.asarray(faces), part.n, seed)
+    return replace(part, vertices=float32_rounded(pts), normals=nrm)
 
 
 def add_outliers(part: SamplePart, fraction: float = 0.01, *, seed: int = 0) -> SamplePart:
@@ -529,7 +561,7 @@ def add_outliers(part: SamplePart, fraction: float = 0.01, *, seed: int = 0) -> 
         c = rng.uniform(lo - pad, hi + pad, size=(2 * (k - len(out)) + 8, 3))
         d, _ = tree.query(c)
         out = np.vstack([out, c[d > 2 * part.spacing]])
-    out = _f32(out[:k])
+    out = float32_rounded(out[:k])
     return replace(
         part,
         vertices=np.vstack([part.vertices, out]),
@@ -561,8 +593,8 @@ def density_gradient(
     def dens(p: np.ndarray) -> np.ndarray:
         return np.where(p[:, axis] < mid, float(factor), 1.0)
 
-    pts, nrm = _sample_surface(verts, faces, part.n, part.seed if seed is None else seed, dens)
-    pts = _f32(pts)
+    pts, nrm = sample_surface(verts, faces, part.n, part.seed if seed is None else seed, dens)
+    pts = float32_rounded(pts)
     d, _ = cKDTree(pts).query(pts, k=2)
     dense = pts[:, axis] < mid
     local = np.where(dense, d[dense, 1].mean(), d[~dense, 1].mean())

@@ -134,10 +134,34 @@ _SIGNATURES = {
     "ms_dedup_resolve": (None, [_i64, _i64, _c_void_p]),
     "ms_keep_faces": (_i64, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_extent": (None, [_c_void_p, _i64, _c_void_p]),
+    "ms_noise_floor": (_f64, [_c_void_p]),
     "ms_scale_vote": (
         _f64,
         [_c_void_p, _i64, _int, _f64, _int, _f64, _c_void_p, _c_void_p, _c_void_p],
     ),
+    "ms_noise_factor": (_f64, [_f64]),
+    "ms_scale_growth": (_f64, [_f64, _i64, _int]),
+    "ms_grown_scale": (_int, [_int, _f64]),
+    "ms_thin_knn": (_int, [_f64]),
+    "ms_quiet_cloud": (_int, [_int, _f64]),
+    "ms_otsu_splits": (_int, [_int, _f64]),
+    "ms_scale_floor": (_f64, [_c_void_p, _int, _int, _f64]),
+    "ms_thin_cone": (_f64, [_int, _f64]),
+    "ms_ranking_smoothed": (_int, [_int, _f64]),
+    "ms_support_free_score": (_int, [_int, _f64, _c_void_p]),
+    "ms_flat_span": (_f64, [_c_void_p]),
+    "ms_stage_histograms": (
+        None,
+        [_c_void_p, _i64, _i64, _int, _i64, _i64, _c_void_p, _c_void_p, _f64, _c_void_p],
+    ),
+    "ms_stage_threshold": (_f64, [_c_void_p, _int, _f64]),
+    "ms_stage_decide": (
+        None,
+        [_c_void_p, _i64, _i64, _int, _i64, _i64, _c_void_p, _c_void_p, _f64, _c_void_p]
+        + [_c_void_p, _c_void_p, _c_void_p, _c_void_p],
+    ),
+    "ms_stage_acute_tests": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _int, _f64, _c_void_p]),
+    "ms_stage_isolated": (None, [_c_void_p] * 7 + [_f64, _i64, _i64, _c_void_p]),
     "ms_two_face_edges": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_vertex_faces": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_crease_dots": (
@@ -1230,6 +1254,18 @@ def extent(points: np.ndarray) -> np.ndarray:
     return out
 
 
+def noise_floor(counts: np.ndarray) -> float:
+    """Robust mode's noise floor of a histogram's counts (``threshold.BINS``,) int
+    (``ms_noise_floor``; :func:`meshlab_sharp.reference.robust.noise_floor` is the numpy
+    reference)."""
+    lib = _LIB
+    assert lib is not None
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    if counts.shape != (_header.integer("BINS"),):
+        raise ValueError("counts must hold one count per histogram bin")
+    return float(lib.ms_noise_floor(_ptr(counts)))
+
+
 def scale_vote(
     values: np.ndarray,
     votes: np.ndarray,
@@ -1279,6 +1315,196 @@ def scale_vote(
         float(floor), _ptr(out), _ptr(votes), ctypes.byref(count),
     )  # fmt: skip
     return float(t), int(count.value)
+
+
+# ------------------------------------------- robust mode's rules, the cloud's stages
+
+
+def _lib() -> ctypes.CDLL:
+    """The loaded library; RuntimeError when it is not built."""
+    if _LIB is None:
+        raise RuntimeError(
+            "the compiled kernels are not built: reinstall with 'pip install .' (needs gcc)"
+        )
+    return _LIB
+
+
+def noise_factor(noise: float) -> float:
+    """``ms_noise_factor``: the scales' growth for the cloud's noise ratio."""
+    return float(_lib().ms_noise_factor(float(noise)))
+
+
+def scale_growth(noise: float, n: int, top: int) -> float:
+    """``ms_scale_growth``: the scales' growth on a cloud of ``n`` points (isolated ones
+    left out) whose largest scale is ``top``: :func:`noise_factor`, at most ``n / top``."""
+    return float(_lib().ms_scale_growth(float(noise), int(n), int(top)))
+
+
+def grown_scale(k: int, factor: float) -> int:
+    """``ms_grown_scale``: ``k * factor`` rounded half up."""
+    return int(_lib().ms_grown_scale(int(k), float(factor)))
+
+
+def thin_knn(growth: float) -> int:
+    """``ms_thin_knn``: thinning's comparison list on a cloud whose scales grew by ``growth``."""
+    return int(_lib().ms_thin_knn(float(growth)))
+
+
+def quiet_cloud(mesh: bool, noise: float) -> bool:
+    """``ms_quiet_cloud``: a cloud whose noise ratio is at most ``NOISE_QUIET``."""
+    return bool(_lib().ms_quiet_cloud(int(mesh), float(noise)))
+
+
+def otsu_splits(mesh: bool, noise: float) -> bool:
+    """``ms_otsu_splits``: Otsu's split can raise the threshold above the floor."""
+    return bool(_lib().ms_otsu_splits(int(mesh), float(noise)))
+
+
+def scale_floor(counts: np.ndarray | None, last: bool, mesh: bool, noise: float) -> float:
+    """``ms_scale_floor``: the floor of a scale's threshold, from its histogram ``counts``
+    (B,) int (read only on the largest scale of a noisy cloud)."""
+    if counts is None:
+        counts = np.zeros(_header.integer("BINS"), np.int64)
+    counts = np.ascontiguousarray(counts, np.int64)
+    return float(_lib().ms_scale_floor(_ptr(counts), int(last), int(mesh), float(noise)))
+
+
+def thin_cone(mesh: bool, noise: float) -> float:
+    """``ms_thin_cone``: thinning's cone cosine."""
+    return float(_lib().ms_thin_cone(int(mesh), float(noise)))
+
+
+def ranking_smoothed(mesh: bool, noise: float) -> bool:
+    """``ms_ranking_smoothed``: thinning ranks by the smoothed score."""
+    return bool(_lib().ms_ranking_smoothed(int(mesh), float(noise)))
+
+
+def support_free_score(mesh: bool, noise: float) -> float | None:
+    """``ms_support_free_score``: the score below which a candidate needs no support;
+    None where there is none."""
+    score = ctypes.c_double(0.0)
+    found = _lib().ms_support_free_score(int(mesh), float(noise), ctypes.byref(score))
+    return score.value if found else None
+
+
+def flat_span(extent: np.ndarray) -> float:
+    """``ms_flat_span``: ``FLAT_TOLERANCE`` times the diagonal of the bounding box whose
+    sides are ``extent`` (3,) (:func:`extent`'s)."""
+    extent = np.ascontiguousarray(extent, dtype=np.float64)
+    if extent.shape != (3,):
+        raise ValueError("extent must be (3,)")
+    return float(_lib().ms_flat_span(_ptr(extent)))
+
+
+#: Lower and upper ends of each scale's min-max normalisation, and the flat span: the
+#: global ones of a cloud (None: the values as they are, in [0, 1]).
+Normalisation = tuple[np.ndarray, np.ndarray, float] | None
+
+
+def _stage_args(values: np.ndarray, norm: Normalisation) -> tuple[np.ndarray, tuple[Any, ...]]:
+    """The values (m, s) made contiguous, and their scale count, point and scale strides
+    and normalisation as the ``ms_stage_`` functions take them (the normalisation's
+    arrays kept alive by the caller's ``norm``)."""
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    if values.ndim != 2:
+        raise ValueError("values must be (m, s)")
+    s = values.shape[1]
+    if norm is None:
+        return values, (s, s, 1, None, None, 0.0)
+    lo, hi, flat = norm
+    if len(lo) != s or len(hi) != s:
+        raise ValueError("the normalisation needs one lo and one hi per scale")
+    return values, (s, s, 1, _ptr(lo), _ptr(hi), float(flat))
+
+
+def _norm(norm: Normalisation) -> Normalisation:
+    """``norm`` with contiguous float64 arrays."""
+    if norm is None:
+        return None
+    lo, hi, flat = norm
+    as_f64 = (np.ascontiguousarray(x, dtype=np.float64) for x in (lo, hi))
+    return (*as_f64, float(flat))
+
+
+def stage_histograms(values: np.ndarray, norm: Normalisation = None) -> np.ndarray:
+    """``ms_stage_histograms``: each scale's ``BINS``-bin histogram (s, BINS) int64 of
+    ``values`` (m, s), min-max normalised with ``norm`` when given; histograms of parts
+    of the points add up to the whole's."""
+    norm = _norm(norm)
+    values, (s, ps, ss, lo, hi, flat) = _stage_args(values, norm)
+    counts = np.zeros((s, _header.integer("BINS")), dtype=np.int64)
+    _lib().ms_stage_histograms(_ptr(values), ps, ss, s, 0, len(values), lo, hi, flat, _ptr(counts))
+    return counts
+
+
+def stage_threshold(counts: np.ndarray, otsu: bool, floor: float) -> float:
+    """``ms_stage_threshold``: a scale's threshold from its (summed) histogram (BINS,):
+    ``max(Otsu's split, floor)``, ``floor`` alone when not ``otsu``."""
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    return float(_lib().ms_stage_threshold(_ptr(counts), int(otsu), float(floor)))
+
+
+def stage_decide(
+    values: np.ndarray,
+    thresholds: np.ndarray,
+    norm: Normalisation = None,
+    out: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``ms_stage_decide``: with the global ``thresholds`` (s,), the candidates at every
+    scale (m,) bool, the strength (m,) (fraction of scales) and the candidates per scale
+    (s,) int64 of ``values`` (m, s) (normalised with ``norm`` when given); ``out``
+    (m, s) float64, when given, receives the values compared with the thresholds."""
+    norm = _norm(norm)
+    values, (s, ps, ss, lo, hi, flat) = _stage_args(values, norm)
+    thresholds = np.ascontiguousarray(thresholds, dtype=np.float64)
+    if len(thresholds) != s:
+        raise ValueError("one threshold per scale")
+    if out is not None and (
+        out.dtype != np.float64 or not out.flags.c_contiguous or out.shape != values.shape
+    ):
+        raise ValueError("out must be a contiguous float64 array shaped like values")
+    m = len(values)
+    feature, strength = np.zeros(m, dtype=bool), np.zeros(m)
+    counts = np.zeros(s, dtype=np.int64)
+    _lib().ms_stage_decide(
+        _ptr(values), ps, ss, s, 0, m, lo, hi, flat, _ptr(thresholds), _ptr(feature),
+        _ptr(strength), _ptr(counts), _ptr(out),
+    )  # fmt: skip
+    return feature, strength, counts
+
+
+def stage_acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
+    """``ms_stage_acute_tests``: the points :func:`acute_tips` tests, (t,) int64
+    increasing (none unless a quiet cloud)."""
+    score = np.ascontiguousarray(score, dtype=np.float64)
+    mask = np.ascontiguousarray(mask, dtype=bool)
+    tested = np.zeros(len(score), dtype=bool)
+    args = (int(mesh), float(noise), _ptr(tested))
+    _lib().ms_stage_acute_tests(_ptr(score), _ptr(mask), 0, len(score), *args)
+    return np.flatnonzero(tested)
+
+
+def stage_isolated(
+    a: np.ndarray,
+    b: np.ndarray,
+    kth_d2: np.ndarray,
+    kth_idx: np.ndarray,
+    idx: np.ndarray,
+    nth_d2: np.ndarray,
+    far_d2: np.ndarray,
+    spread: float,
+) -> np.ndarray:
+    """``ms_stage_isolated``: which of the points ``a`` (r, 3) (indices ``idx`` (r,) in the
+    lists' order) are isolated, their values gathered per row: the nearest ``b`` (r, 3),
+    its k-th neighbour's squared distance ``kth_d2`` and index ``kth_idx``, the point's
+    ``nth_d2`` and its k-th neighbour's ``far_d2`` (r,). Returns (r,) bool."""
+    f64 = [np.ascontiguousarray(x, dtype=np.float64) for x in (a, b, kth_d2, nth_d2, far_d2)]
+    i64 = [np.ascontiguousarray(x, dtype=np.int64) for x in (kth_idx, idx)]
+    pa, pb, pk, pn, pf = (_ptr(x) for x in f64)
+    out = np.zeros(len(f64[0]), dtype=bool)
+    args = (pa, pb, pk, _ptr(i64[0]), _ptr(i64[1]), pn, pf, float(spread))
+    _lib().ms_stage_isolated(*args, 0, len(out), _ptr(out))
+    return out
 
 
 #: Fewest points that :func:`merge_duplicates` splits between threads (65,536 points are
@@ -1461,6 +1687,115 @@ class FinishRules:
     between: np.ndarray | None
 
 
+def line_support(
+    points: np.ndarray,
+    mask: np.ndarray,
+    score: np.ndarray,
+    rows: np.ndarray,
+    lists: tuple[CandidateLists, CandidateLists],
+    rules: FinishRules,
+    workers: int = -1,
+    compare: CandidateLists | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Support, the first of robust mode's finishing steps, over the candidates ``rows``
+    (c,) (points of ``mask`` (n,) bool), in C: each one's line direction
+    (``ms_line_directions``, over ``lists[0]``) and support (``ms_supported``, over
+    ``lists[1]``, by ``rules``' cone and minimum, ``score`` (n,) below
+    ``rules.free_below`` exempt) and, with ``rules.window`` and ``compare``, the score
+    smoothed over the first ``window`` of compare (``ms_smoothed_ranking``). Returns the
+    directions (c, 3), the supported mask (n,) bool (at the rows; False elsewhere) and the
+    ranking (n,): the smoothed score at the rows, ``score`` elsewhere (``score`` itself
+    when not smoothed)."""
+    lib = _lib()
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    mask = np.ascontiguousarray(mask, dtype=bool)
+    score = np.ascontiguousarray(score, dtype=np.float64)
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    direction, around = (ctypes.byref(x.spec()) for x in lists)
+    window = rules.window if compare is not None else 0
+    near = None if compare is None else ctypes.byref(compare.spec())
+    e = np.empty((len(rows), 3))
+    supported = np.zeros(len(mask), dtype=bool)
+    rank = score.copy() if window else score
+    free = rules.free_below
+    p, f0, r, f1, pe, pr = (
+        _ptr(points),
+        _ptr(mask),
+        _ptr(rows),
+        _ptr(supported),
+        _ptr(e),
+        _ptr(rank),
+    )
+
+    def along(a: int, b: int) -> int:
+        if lib.ms_line_directions(p, f0, r, direction, a, b, pe) != 0:
+            return -1
+        lib.ms_supported(
+            p, f0, r, pe, around, rules.support_cone, rules.minimum,
+            None if free is None else _ptr(score), 0.0 if free is None else free, a, b, f1,
+        )  # fmt: skip
+        if window:
+            lib.ms_smoothed_ranking(_ptr(score), r, near, window, a, b, pr)
+        return 0
+
+    _slot_chunks(len(rows), workers, along)
+    return e, supported, rank
+
+
+def smoothed_ranking(
+    score: np.ndarray, rows: np.ndarray, compare: CandidateLists, window: int, workers: int = -1
+) -> np.ndarray:
+    """``ms_smoothed_ranking`` of the points ``rows`` (c,): the mean of ``score`` (n,) over
+    the first ``window`` of each one's ``compare`` list at the rows, ``score`` elsewhere
+    (n,)."""
+    lib = _lib()
+    score = np.ascontiguousarray(score, dtype=np.float64)
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    rank = score.copy()
+    spec = ctypes.byref(compare.spec())
+
+    def task(a: int, b: int) -> int:
+        lib.ms_smoothed_ranking(_ptr(score), _ptr(rows), spec, window, a, b, _ptr(rank))
+        return 0
+
+    _slot_chunks(len(rows), workers, task)
+    return rank
+
+
+def thin_candidates(
+    points: np.ndarray,
+    supported: np.ndarray,
+    rows: np.ndarray,
+    e: np.ndarray,
+    compare: CandidateLists,
+    rank: np.ndarray,
+    rules: FinishRules,
+    workers: int = -1,
+) -> np.ndarray:
+    """Thinning, the last of robust mode's finishing steps (``ms_thin``), of the points
+    ``rows`` (c,) with their line directions ``e`` (c, 3), once ``supported`` (n,) bool
+    is known at every point of their ``compare`` lists: by ``rank`` (n,), in
+    ``rules.thin_cone``, blocked by ``rules.between``. Returns the thinned mask (n,) bool
+    (False off the rows)."""
+    lib = _lib()
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    supported = np.ascontiguousarray(supported, dtype=bool)
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    e = np.ascontiguousarray(e, dtype=np.float64)
+    rank = np.ascontiguousarray(rank, dtype=np.float64)
+    between = None if rules.between is None else np.ascontiguousarray(rules.between, bool)
+    spec = ctypes.byref(compare.spec())
+    out = np.zeros(len(supported), dtype=bool)
+    args = (_ptr(points), _ptr(supported), _ptr(rows), _ptr(e), spec, _ptr(rank))
+
+    def task(a: int, b: int) -> int:
+        lib.ms_thin(*args, rules.thin_cone, _ptr(between), a, b, _ptr(out))
+        return 0
+
+    _slot_chunks(len(rows), workers, task)
+    return out
+
+
 def support_and_thin(
     points: np.ndarray,
     mask: np.ndarray,
@@ -1471,45 +1806,14 @@ def support_and_thin(
     workers: int = -1,
 ) -> np.ndarray:
     """Robust mode's finishing steps over the candidates ``rows`` (c,) = the points of
-    ``mask`` (n,) bool, in C: per candidate its line direction, support and (with
-    ``rules.window``) smoothed ranking, then, once every candidate's support is known,
-    thinning (:func:`meshlab_sharp.robust.line_directions`, ``supported``,
+    ``mask`` (n,) bool, in C: :func:`line_support` (with ``rules.window``, the smoothed
+    ranking too), then, once every candidate's support is known,
+    :func:`thin_candidates` (:func:`meshlab_sharp.robust.line_directions`, ``supported``,
     ``smoothed_ranking``, ``thin``, of which this gives the masks). ``lists``: each
     candidate's direction, support and comparison lists; ``score`` (n,): the ranking.
     Returns the thinned mask (n,) bool."""
-    lib = _LIB
-    assert lib is not None
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    mask = np.ascontiguousarray(mask, dtype=bool)
-    score = np.ascontiguousarray(score, dtype=np.float64)
-    rows = np.ascontiguousarray(rows, dtype=np.int64)
-    c = len(rows)
-    direction, around, compare = (ctypes.byref(x.spec()) for x in lists)
-    e = np.empty((c, 3))
-    supported = np.zeros(len(mask), dtype=bool)
-    rank = score.copy() if rules.window else score
-    free = rules.free_below
-    between = None if rules.between is None else np.ascontiguousarray(rules.between, bool)
-    p, f0, r, f1 = _ptr(points), _ptr(mask), _ptr(rows), _ptr(supported)
-    pe, pr = _ptr(e), _ptr(rank)
-
-    def along(a: int, b: int) -> int:
-        if lib.ms_line_directions(p, f0, r, direction, a, b, pe) != 0:
-            return -1
-        lib.ms_supported(
-            p, f0, r, pe, around, rules.support_cone, rules.minimum,
-            None if free is None else _ptr(score), 0.0 if free is None else free, a, b, f1,
-        )  # fmt: skip
-        if rules.window:
-            lib.ms_smoothed_ranking(_ptr(score), r, compare, rules.window, a, b, pr)
-        return 0
-
-    _slot_chunks(c, workers, along)
-    out = np.zeros(len(mask), dtype=bool)
-
-    def thin(a: int, b: int) -> int:
-        lib.ms_thin(p, f1, r, pe, compare, pr, rules.thin_cone, _ptr(between), a, b, _ptr(out))
-        return 0
-
-    _slot_chunks(c, workers, thin)
-    return out
+    direction, around, compare = lists
+    e, supported, rank = line_support(
+        points, mask, score, rows, (direction, around), rules, workers, compare
+    )
+    return thin_candidates(points, supported, rows, e, compare, rank, rules, workers)

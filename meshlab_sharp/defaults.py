@@ -25,9 +25,9 @@ DEFAULT_MODE = MODES[_header.integer("DEFAULT_MODE")]
 MAX_SCALES = _header.integer("MAX_SCALES")
 #: The largest scales, checked before any work: rings (a k-ring's neighbourhoods grow
 #: with k squared: ring 32 of a 25,000-vertex mesh takes about 20 s) ...
-MAX_RING_SCALE = 32
+MAX_RING_SCALE = _header.integer("MAX_RING_SCALE")
 #: ... and k nearest neighbours (lists of k neighbours per point and scale).
-MAX_KNN_SCALE = 512
+MAX_KNN_SCALE = _header.integer("MAX_KNN_SCALE")
 #: Default scales of a point cloud: k nearest neighbours.
 DEFAULT_KNN_SCALES: tuple[int, ...] = _header.integers("DEFAULT_KNN_SCALES")
 #: Default scales of a mesh: k-rings.

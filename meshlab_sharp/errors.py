@@ -33,6 +33,11 @@ class OutputError(MeshlabSharpError, OSError):
     hidden temporary file."""
 
 
+class ScratchError(MeshlabSharpError, OSError):
+    """The tiles' scratch arrays cannot be written (a full disk, a file size limit); the
+    message names the scratch folder's place and the options that choose it."""
+
+
 class Interrupted(BaseException):
     """A catchable termination signal (SIGINT, SIGTERM, SIGHUP) stopped the command.
 

@@ -117,7 +117,7 @@ def run_scales(
         used = None if fused is None or fused.normals is None else fused.normals[i]
         out = None if distances is None else distances[i]
         if fused is not None and fused.relative is not None and fused.score is not None:
-            otsu, floor = rule.from_pass(fused.score)  # type: ignore[union-attr]
+            otsu, floor = rule.from_pass(fused.score, i, fused.relative[i])  # type: ignore[union-attr]
             thresholds[i], counts[i] = _kernels.scale_vote(
                 fused.relative[i], votes, otsu=otsu, floor=floor, out=out
             )

@@ -103,16 +103,8 @@ def far_points(points: np.ndarray) -> np.ndarray | None:
     coordinates' unit (:func:`unit_scale`): the bulk would shrink to where its squared
     distances underflow. No real scan holds a point 2**40 times its own extent away.
 
-    Parameters
-    ----------
-    points : (n, 3) float64
-        Finite coordinates.
-
-    Returns
-    -------
-    (n,) bool or None
-        True for the far points; None when there are none (most inputs: one pass over
-        the bounds decides it).
+    ``points``: (n, 3) float64, finite. Returns (n,) bool, True for the far points, or
+    None when there are none (most inputs: one pass over the bounds decides it).
     """
     n = len(points)
     bulk = far_reach(points[:: far_step(n)])

@@ -41,8 +41,12 @@ __all__ = [
     "SAMPLE_PARTS",
     "SamplePart",
     "crease_segments",
+    "float32_rounded",
     "make_part",
+    "mesh_spacing",
     "reference_surface",
+    "sample_surface",
+    "vertex_normals",
 ]
 
 
@@ -439,7 +443,7 @@ def _trim(points: np.ndarray, radius: np.ndarray, n: int) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
-def _sample_surface(
+def sample_surface(
     verts: np.ndarray,
     faces: np.ndarray,
     n: int,
@@ -506,7 +510,8 @@ def _remesh(verts: np.ndarray, faces: np.ndarray, n_vertices: int) -> Mesh:
     return m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64)
 
 
-def _vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit vertex normals (n, 3) of a triangle mesh: its face normals weighted by area."""
     fn, areas = _face_normals(verts, faces)
     vn = np.zeros_like(verts)
     for k in range(3):
@@ -514,7 +519,9 @@ def _vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
 
 
-def _f32(a: np.ndarray) -> np.ndarray:
+def float32_rounded(a: np.ndarray) -> np.ndarray:
+    """``a`` rounded to float32 and back to float64: coordinates as a float32 file holds
+    them, so that a part written and read again is the same part."""
     return np.asarray(a, np.float64).astype(np.float32).astype(np.float64)
 
 
@@ -523,7 +530,7 @@ def _mean_nn(points: np.ndarray) -> float:
     return float(d[:, 1].mean())
 
 
-def _mesh_spacing(verts: np.ndarray, faces: np.ndarray) -> float:
+def mesh_spacing(verts: np.ndarray, faces: np.ndarray) -> float:
     """Mean edge length of a triangle mesh (each edge counted once)."""
     e = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     e = np.unique(np.sort(e, axis=1), axis=0)
@@ -536,15 +543,15 @@ def _sampled(
     """Points (exactly n) or an isotropic mesh (about n vertices) of a reference surface."""
     verts, faces, edges = reference
     if kind == "points":
-        pts, nrm = _sample_surface(verts, faces, n, seed)
-        pts = _f32(pts)
+        pts, nrm = sample_surface(verts, faces, n, seed)
+        pts = float32_rounded(pts)
         out_faces = None
         spacing = _mean_nn(pts)
     else:
         pts, out_faces = _remesh(verts, faces, n)
-        pts = _f32(pts)
-        nrm = _vertex_normals(pts, out_faces)
-        spacing = _mesh_spacing(pts, out_faces)
+        pts = float32_rounded(pts)
+        nrm = vertex_normals(pts, out_faces)
+        spacing = mesh_spacing(pts, out_faces)
     return SamplePart(
         name=name,
         vertices=pts,

@@ -81,7 +81,6 @@ choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -157,6 +156,7 @@ __all__ = [
     "relative_distances",
     "robust_threshold",
     "robust_threshold_from_histogram",
+    "scale_floor",
     "sheet_mask",
     "sheet_parameters",
     "support_exempt",
@@ -169,8 +169,8 @@ __all__ = [
 ]
 
 #: Relative projected distance at a point on a straight edge turning by CREASE_ANGLE,
-#: with a disc-shaped neighbourhood: ``(2 / pi) * sin(CREASE_ANGLE / 2)`` = 0.1106.
-R_MIN = (2.0 / math.pi) * math.sin(math.radians(CREASE_ANGLE / 2.0))
+#: with a disc-shaped neighbourhood: ``(2 / pi) * sin(CREASE_ANGLE / 2)`` = 0.1105.
+R_MIN = _header.real("R_MIN")
 #: ... and by more than about 63 degrees on a noisy cloud (:func:`thin_cone`).
 THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
 #: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
@@ -226,6 +226,18 @@ NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
 #: controls, 0.09-0.096 with normal noise of 10 % of the spacing, 0.068-0.115 on the
 #: simulated scans; a third of ``NOISE_TOLERATED`` lies between.
 NOISE_QUIET = _header.real("NOISE_QUIET")
+#: On a cloud noisier than ``NOISE_QUIET``, the largest scale's threshold is at least
+#: this many times the median of its relative distances (:func:`scale_floor`). The noise
+#: that lifts a point's ``r`` lifts it at every scale, and where a part has few edges
+#: Otsu's split lies below ``R_MIN``: 15 % of the points of a noisy cylinder (a CAD end
+#: mill with noise of 25 % of the spacing) passed the floor at every scale. The median
+#: is that of the flat points' noise; three times it is about its 95th percentile.
+NOISE_FLOOR = _header.real("NOISE_FLOOR")
+#: ... but never above this, about the ``r`` of an edge turning by 40 degrees: where the
+#: largest scale spans much of a small cloud (1,500 points, k = 110), most points see an
+#: edge, the median is no longer the flat points' noise and 3 times it (0.57) dropped
+#: 90 % of a noisy box's edge points.
+NOISE_FLOOR_MAX = _header.real("NOISE_FLOOR_MAX")
 #: The scales grow at most 3-fold (``k_max`` 120 with the default scales: the kNN table
 #: of a million points stays below 0.5 GB); measured at 50 % noise, quick size: x2 0.64,
 #: x3 0.66.
@@ -317,22 +329,29 @@ def noise_scale_factor(points: np.ndarray, indices: np.ndarray, k: int) -> float
     return _noise_factor(noise_ratios(points, indices, k))
 
 
+#: Where robust mode's rules on the noise are defined: the native library
+#: (``ms_noise_factor``, ``ms_quiet_cloud``, ... in ``native/src/stages.c``), or, in an
+#: install without it, the numpy reference's statement of the same rules.
+_RULES = _kernels if _kernels.available() else reference
+
+
 def noise_factor(nu: float) -> float:
     """The scales' growth for the median noise ratio ``nu``:
-    ``min(max(1, (nu / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)``."""
-    return min(max(1.0, (nu / NOISE_TOLERATED) ** 2), NOISE_MAX_FACTOR)
+    ``min(max(1, (nu / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)`` (``ms_noise_factor``)."""
+    return _RULES.noise_factor(nu)
 
 
 def grown_scales(scales: tuple[int, ...], factor: float) -> tuple[int, ...]:
-    """The scales times ``factor``, rounded half up."""
-    return tuple(math.floor(k * factor + 0.5) for k in scales)
+    """The scales times ``factor``, rounded half up (``ms_grown_scale``)."""
+    return tuple(_RULES.grown_scale(k, factor) for k in scales)
 
 
 def thin_knn(growth: float) -> int:
     """Thinning's comparison list (clouds): ``THIN_KNN`` grown with the scales
     (``growth`` the factor the noise grew them by, 1 when it did not), rounded half
-    up: the band of points that noise lifts beside a line widens with the noise."""
-    return grown_scales((THIN_KNN,), growth)[0]
+    up: the band of points that noise lifts beside a line widens with the noise
+    (``ms_thin_knn``)."""
+    return _RULES.thin_knn(growth)
 
 
 def _noise_factor(ratio: np.ndarray) -> float:
@@ -428,8 +447,8 @@ def relative_distances(pdis: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return np.minimum(r, 1.0, out=r)
 
 
-def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
-    """Otsu's threshold of relative distances on [0, 1], never below ``R_MIN``.
+def robust_threshold(r: np.ndarray, otsu: bool = True, floor: float = R_MIN) -> float:
+    """Otsu's threshold of relative distances on [0, 1], never below ``floor``.
 
     Parameters
     ----------
@@ -437,21 +456,40 @@ def robust_threshold(r: np.ndarray, otsu: bool = True) -> float:
         Relative projected distances in [0, 1] (isolated points left out).
     otsu : bool, default True
         False on a cloud without noise (:func:`otsu_splits`): the floor alone.
+    floor : float, default R_MIN
+        :func:`scale_floor`.
 
     Returns
     -------
     float
-        ``max(otsu_threshold(r), R_MIN)``, or ``R_MIN`` when not ``otsu`` (then no
+        ``max(otsu_threshold(r), floor)``, or ``floor`` when not ``otsu`` (then no
         histogram is made); candidates are ``r >= T``.
     """
-    return robust_threshold_from_histogram(histogram(r)) if otsu else R_MIN
+    return robust_threshold_from_histogram(histogram(r), True, floor) if otsu else floor
 
 
-def robust_threshold_from_histogram(counts: np.ndarray, otsu: bool = True) -> float:
+def robust_threshold_from_histogram(
+    counts: np.ndarray, otsu: bool = True, floor: float = R_MIN
+) -> float:
     """:func:`robust_threshold` from the 256-bin histogram (B,) int of the relative
     distances (:func:`meshlab_sharp.threshold.histogram`): histograms summed over parts of
     the points give the whole's threshold (the out-of-core tiles)."""
-    return max(otsu_from_histogram(counts), R_MIN) if otsu else R_MIN
+    return max(otsu_from_histogram(counts), floor) if otsu else floor
+
+
+def scale_floor(
+    counts: np.ndarray, last: bool, mesh: bool, noise: float, backend: str | None = None
+) -> float:
+    """The floor of a scale's threshold: ``R_MIN``, and on the largest scale (``last``)
+    of a cloud whose noise ratio ``noise`` exceeds ``NOISE_QUIET``, at least
+    ``NOISE_FLOOR`` times the median of its relative distances (at most
+    ``NOISE_FLOOR_MAX``), read from their histogram ``counts`` (B,) int
+    (``ms_noise_floor``; the numpy reference with ``backend="numpy"``). Measured on the
+    CAD parts with noise of 25 % of the spacing (50,000 points): the end mill 0.258 ->
+    0.942, filleted parts 4.19 / 4.43 % flagged -> 0.66 / 2.78 %; parts with many edges
+    keep Otsu's split, which lies higher."""
+    rules = reference if backend == "numpy" else _RULES
+    return rules.scale_floor(counts, last, mesh, noise)
 
 
 def quiet_cloud(mesh: bool, noise: float) -> bool:
@@ -459,8 +497,9 @@ def quiet_cloud(mesh: bool, noise: float) -> bool:
     ``noise`` (the lower median of :func:`noise_ratios`, as :func:`noise_scale_factor`
     takes it) not above ``NOISE_QUIET``. The one test behind every rule kept for such
     clouds: the floor alone (:func:`otsu_splits`), :func:`support_exempt`,
-    :func:`acute_tests`, :func:`thin_blockers` and the cone of :func:`thin_cone`."""
-    return not (mesh or noise > NOISE_QUIET)
+    :func:`acute_tests`, :func:`thin_blockers` and the cone of :func:`thin_cone`
+    (``ms_quiet_cloud``)."""
+    return _RULES.quiet_cloud(mesh, noise)
 
 
 def otsu_splits(mesh: bool, noise: float) -> bool:
@@ -468,8 +507,9 @@ def otsu_splits(mesh: bool, noise: float) -> bool:
     clouds whose noise ratio ``noise`` (the lower median of :func:`noise_ratios`, as
     :func:`noise_scale_factor` takes it) exceeds ``NOISE_QUIET``. On a cloud without
     noise the floor alone (measured: thin walls 1 / 2 / 3
-    spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)."""
-    return not quiet_cloud(mesh, noise)
+    spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)
+    (``ms_otsu_splits``)."""
+    return _RULES.otsu_splits(mesh, noise)
 
 
 def thin_blockers(candidates: np.ndarray, mesh: bool, noise: float) -> np.ndarray | None:
@@ -490,8 +530,8 @@ def thin_cone(mesh: bool, noise: float) -> float:
     ``THIN_CONE_COS`` on meshes and quiet clouds. Noise tilts the offsets between a
     line's own points, which then count as across the line and thin it to gaps
     (measured: thickness on the scan 0.79 -> 0.82, at noise 50 %
-    0.78 -> 0.83)."""
-    return THIN_CONE_COS if mesh or quiet_cloud(mesh, noise) else THIN_CONE_COS_NOISY
+    0.78 -> 0.83) (``ms_thin_cone``)."""
+    return _RULES.thin_cone(mesh, noise)
 
 
 def ranking_smoothed(mesh: bool, noise: float) -> bool:
@@ -500,16 +540,16 @@ def ranking_smoothed(mesh: bool, noise: float) -> bool:
     (``noise_factor(noise) == NOISE_MAX_FACTOR``). Beyond it the larger scales no longer
     dilute the noise of the score, and single points lifted 1-2 spacings beside a line
     outrank the line's own (measured: noise 50 % F1 0.752 ->
-    0.813, thickness 0.72 -> 0.78)."""
-    return not mesh and noise_factor(noise) == NOISE_MAX_FACTOR
+    0.813, thickness 0.72 -> 0.78) (``ms_ranking_smoothed``)."""
+    return _RULES.ranking_smoothed(mesh, noise)
 
 
 def support_free_score(mesh: bool, noise: float) -> float | None:
     """The score below which :func:`supported` keeps a point without support:
     ``SUPPORT_FREE_SCORE`` on a cloud whose noise ratio ``noise`` (as :func:`otsu_splits`
     takes it) is at most ``NOISE_QUIET``; None (no such score) on meshes and noisier
-    clouds."""
-    return SUPPORT_FREE_SCORE if quiet_cloud(mesh, noise) else None
+    clouds (``ms_support_free_score``)."""
+    return _RULES.support_free_score(mesh, noise)
 
 
 def support_exempt(score: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
@@ -529,11 +569,7 @@ def acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: float) -
     bool (the candidates at every scale) whose ``score`` (m,) lies in ``[ACUTE_SCORE,
     ACUTE_SCORE_MAX)``; none on meshes and noisier clouds. Returns (t,) int64,
     increasing."""
-    if not quiet_cloud(mesh, noise):
-        return np.zeros(0, np.int64)
-    score = np.asarray(score, np.float64)
-    test = ~np.asarray(mask, bool) & (score >= ACUTE_SCORE) & (score < ACUTE_SCORE_MAX)
-    return np.flatnonzero(test)
+    return _RULES.stage_acute_tests(score, mask, mesh, noise)
 
 
 @dataclass
@@ -560,6 +596,8 @@ class RelativeRule:
         (:class:`SheetNeighbourhoods`): the compiled pass over a cloud then does too.
     otsu : bool, default True
         :func:`robust_threshold`'s ``otsu`` (:func:`otsu_splits`).
+    noise : float, default 0.0
+        The cloud's noise ratio, read by :func:`scale_floor` (0 on a mesh).
     backend : {"compiled", "numpy"}, optional
         :func:`local_scale`'s; default :func:`meshlab_sharp._kernels.default_backend`.
     """
@@ -569,6 +607,7 @@ class RelativeRule:
     n_scales: int
     sheet: _kernels.SheetParameters | None = None
     otsu: bool = True
+    noise: float = 0.0
     backend: str | None = None
 
     def __post_init__(self) -> None:
@@ -580,16 +619,22 @@ class RelativeRule:
         ell, offset = local_scale(self.points, lists, backend=self.backend)
         r = relative_distances(np.asarray(pdis, np.float64), ell)
         self.score += relative_distances(offset, ell) / self.n_scales
-        return r, robust_threshold(r, self.otsu)
+        return r, robust_threshold(r, self.otsu, self.floor(i, r))
 
-    def from_pass(self, score: np.ndarray) -> tuple[bool, float]:
+    def floor(self, i: int, r: np.ndarray) -> float:
+        """:func:`scale_floor` of the i-th scale's relative distances ``r`` (m,)."""
+        last = i == self.n_scales - 1
+        counts = histogram(r) if last else None  # read on the largest scale only
+        return scale_floor(counts, last, False, self.noise, self.backend)
+
+    def from_pass(self, score: np.ndarray, i: int, r: np.ndarray) -> tuple[bool, float]:
         """Take the final ``score`` (m,) of the compiled pass (over a cloud or a mesh's
         rings), which computed it and every scale's relative distances with this rule's
         arithmetic (:class:`meshlab_sharp._kernels.ScalePass`); returns how
-        :func:`robust_threshold` thresholds them, ``(otsu, floor)``, for
-        :func:`meshlab_sharp._kernels.scale_vote` (the same threshold)."""
+        :func:`robust_threshold` thresholds the i-th scale's, ``r`` (m,), ``(otsu,
+        floor)``, for :func:`meshlab_sharp._kernels.scale_vote` (the same threshold)."""
         self.score = score
-        return self.otsu, R_MIN
+        return self.otsu, self.floor(i, r)
 
 
 class RobustSetup:
@@ -733,7 +778,7 @@ class RobustSetup:
         # pass's outputs: about 55 bytes a point) stayed until the garbage collector ran
         lists = self.scale_neighbourhoods.at
         self.rule = RelativeRule(
-            self.points, lists, len(self.scales), sheet, otsu, backend=self.backend
+            self.points, lists, len(self.scales), sheet, otsu, self.noise, backend=self.backend
         )
 
     def _sheets(self) -> SheetNeighbourhoods:

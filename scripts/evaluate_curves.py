@@ -2,7 +2,8 @@
 """Evaluate the feature curves on generated parts with known sharp edges.
 
 For every sharp part (``groundtruth.part_names(smooth=False)``) as a clean cloud, a
-noisy cloud (normal noise of 25 % of the spacing) and an isotropic mesh, runs
+noisy cloud (normal noise of 25 % of the spacing), an iid cloud (as many points drawn
+independently, ``groundtruth.iid_part``) and an isotropic mesh, runs
 ``detect(..., curves=True)`` in both modes and scores the curves with
 :func:`evaluation.scoring.evaluate_curves` (precision, coverage, RMS distance in
 spacings, curve count / exact curve count, corners found), and the time of the curves
@@ -34,7 +35,7 @@ from meshlab_sharp import detect  # noqa: E402
 from meshlab_sharp.curves import extract_curves  # noqa: E402
 
 MODES = ("robust", "paper")
-CONDITIONS = ("clean", "noise25", "mesh")
+CONDITIONS = ("clean", "noise25", "iid", "mesh")
 MEASURES = ("precision", "coverage", "rms", "count_ratio", "corners_found")
 TARGETS = {
     "precision": (">= 0.95", lambda v: v >= 0.95),
@@ -47,10 +48,12 @@ TARGETS = {
 
 
 def part_under(name: str, condition: str, n_points: int, seed: int) -> gt.SamplePart:
-    """The part as a clean cloud, a noisy cloud or a mesh."""
+    """The part as a clean cloud, a noisy cloud, an iid cloud or a mesh."""
     if condition == "mesh":
         return gt.make_part(name, "mesh", n_points=max(n_points // 2, 200))
     part = gt.make_part(name, n_points=n_points, seed=seed)
+    if condition == "iid":
+        return gt.iid_part(part, seed=seed + 2)
     if condition == "noise25":
         part = gt.add_noise(part, 0.25, seed=seed + 1)
     return part
@@ -160,8 +163,9 @@ def markdown(rows: list[dict], summary: dict, meta: dict, time_rows: dict | None
         f"({meta['n_points']:,} points per cloud, about half as many mesh vertices; seed "
         f"{meta['seed']}; {meta['machine']}). Every sharp part of the evaluation "
         "([evaluation](evaluation.md)) as a clean cloud, a cloud with normal noise of 25 % "
-        "of the spacing, and an isotropic mesh; `detect(..., curves=True)` in robust and "
-        "paper mode; scores:",
+        "of the spacing, an iid cloud (as many points drawn independently, uniform over the "
+        "area, as MeshLab's sample points on mesh does; scored at the clean cloud's spacing) "
+        "and an isotropic mesh; `detect(..., curves=True)` in robust and paper mode; scores:",
         "",
         "- **precision**: share of the curves' length within 1 spacing of an exact edge;",
         "- **coverage**: share of the exact edges' length within 1.5 spacings of a curve;",

@@ -153,6 +153,15 @@ def noisy_box_points(n: int, noise: float, seed: int = 0) -> np.ndarray:
     return points + np.random.default_rng(seed + 1).normal(0, noise * spacing, (n, 3))
 
 
+def noisy_sphere_points(n: int, noise: float, seed: int = 0) -> np.ndarray:
+    """n uniform points on the unit sphere moved along the radius by normal noise of
+    ``noise`` times the spacing ``sqrt(4 pi / n)``. (n, 3)."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    return d * (1.0 + rng.normal(0.0, noise * np.sqrt(4 * np.pi / n), n))[:, None]
+
+
 def with_outliers(points: np.ndarray, count: int, seed: int = 0) -> np.ndarray:
     """``points`` followed by ``count`` uniform points in their bounding box grown by half
     its size on each side. (n + count, 3)."""
@@ -198,3 +207,49 @@ def with_stray_clusters(
         centre = points[i] + rng.uniform(1.0, 8.0) * spacing * d / np.linalg.norm(d)
         clusters.append(centre + rng.normal(scale=0.3 * spacing, size=(rng.integers(2, 4), 3)))
     return np.vstack([points, *clusters])
+
+
+def two_triangle_cube() -> tuple[np.ndarray, np.ndarray]:
+    """Cube [-1, 1]^3 as a CAD exporter writes it: its 8 corners and 2 triangles per face
+    (each sharp edge one mesh edge, a flat diagonal across each face), outward wound.
+    (8, 3), (12, 3)."""
+    v = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    faces = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    return v, np.array(faces, np.int64)
+
+
+def prism_mesh(profile: np.ndarray, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """A convex polygon ``profile`` (k, 2), counter-clockwise, extruded from z = 0 to
+    ``height`` as an STL export tessellates it: one quad (2 triangles) per side, each
+    cap a fan of long thin triangles from its first vertex; no other vertex.
+    (2 k, 3), (4 k - 4, 3)."""
+    k = len(profile)
+    v = np.vstack([np.c_[profile, np.zeros(k)], np.c_[profile, np.full(k, height)]])
+    faces = []
+    for i in range(k):
+        j = (i + 1) % k
+        faces += [(i, j, k + j), (i, k + j, k + i)]
+    for i in range(1, k - 1):
+        faces += [(0, i + 1, i), (k, k + i, k + i + 1)]
+    return v, np.array(faces, np.int64)
+
+
+def polygon(segments: int, radius: float = 1.0) -> np.ndarray:
+    """A regular polygon of ``segments`` vertices on the circle of ``radius`` around the
+    origin, counter-clockwise from the x axis. (segments, 2)."""
+    a = 2 * np.pi * np.arange(segments) / segments
+    return radius * np.c_[np.cos(a), np.sin(a)]
+
+
+def rounded_rectangle(width: float, depth: float, radius: float, segments: int = 24) -> np.ndarray:
+    """The outline of a ``width`` x ``depth`` rectangle centred on the origin with its
+    corners rounded to ``radius``, ``segments`` per turn on the arcs, counter-clockwise.
+    (segments + 4, 2)."""
+    quarter = segments // 4
+    cx, cy = width / 2 - radius, depth / 2 - radius
+    out = []
+    for q, (sx, sy) in enumerate(((1, 1), (-1, 1), (-1, -1), (1, -1))):
+        a = np.pi / 2 * q + np.pi / 2 * np.arange(quarter + 1) / quarter
+        out.append(np.c_[sx * cx + radius * np.cos(a), sy * cy + radius * np.sin(a)])
+    return np.vstack(out)

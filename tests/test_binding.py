@@ -81,13 +81,21 @@ HEADER = {name: sig for name, sig in DECLARED.items() if name not in CURVES}
 
 
 def test_the_header_declares_the_abi():
-    """Known prototypes read as their C says (49 functions: the parser misses none)."""
+    """Known prototypes read as their C says (66 functions: the parser misses none)."""
     i32, i64, f64, ptr = ctypes.c_int, ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
-    assert len(HEADER) == 49
+    assert len(HEADER) == 66
+    assert HEADER["ms_noise_floor"] == (f64, [ptr])
+    assert HEADER["ms_scale_floor"] == (f64, [ptr, i32, i32, f64])
     assert HEADER["ms_face_windings"] == (i64, [ptr, i64, i64, ptr])
     assert HEADER["ms_dedup_resolve"] == (None, [i64, i64, ptr])
     assert HEADER["ms_scale_vote"] == (f64, [ptr, i64, i32, f64, i32, f64, ptr, ptr, ptr])
     assert HEADER["ms_bit_histogram"] == (i64, [ptr, i64, i64, ptr])
+    assert HEADER["ms_noise_factor"] == (f64, [f64])
+    assert HEADER["ms_support_free_score"] == (i32, [i32, f64, ptr])
+    assert HEADER["ms_stage_decide"] == (
+        None,
+        [ptr, i64, i64, i32, i64, i64, ptr, ptr, f64, ptr, ptr, ptr, ptr, ptr],
+    )
     assert HEADER["ms_detect"] == (i32, [ptr, i64, ptr, i64, ptr, ptr, ptr, ptr, ptr, i32])
     assert HEADER["ms_parse_scales"] == (i32, [ptr, i32, ptr, i32, ptr, i32])
     assert HEADER["ms_detection_details"] == (i32, [ptr, ptr, ptr])

@@ -87,6 +87,48 @@ def test_sampled_box_cloud_gives_12_lines_and_8_corners():
     assert scores.rms < 0.35  # below the spacing: refined onto the planes' intersection
 
 
+@pytest.mark.parametrize(("n", "seed"), [(4000, 0), (8000, 2)])
+def test_iid_box_cloud_gives_12_lines_and_8_corners(n, seed):
+    """Points drawn independently on a 2 x 1.4 x 1 box: they cluster, the detected points
+    along an edge leave gaps of several spacings, and the curves still run along each
+    edge from corner to corner, one an edge, with the 8 corners at the box's."""
+    points = shapes.random_box_points(n, seed=seed)
+    spacing = 0.78 * np.sqrt(12.4 / n)  # blue noise's on this area: 0.043, 0.031
+    result = meshlab_sharp.detect(points, mode="robust", curves=True)
+    assert len(result.curves) == 12 and len(result.corners) == 8
+    assert [c.kind for c in result.curves] == ["line"] * 12
+    lengths = sorted(c.length for c in result.curves)
+    np.testing.assert_allclose(lengths, [1.0] * 4 + [1.4] * 4 + [2.0] * 4, atol=2 * spacing)
+    box = np.array([[x, y, z] for x in (-1, 1) for y in (-0.7, 0.7) for z in (-0.5, 0.5)])
+    d = np.linalg.norm(result.corners.points[:, None] - box[None], axis=2)
+    assert sorted(d.argmin(axis=1)) == list(range(8))
+    assert d.min(axis=1).max() < 1.5 * spacing
+
+
+def test_the_spacing_of_an_iid_cloud_follows_its_density():
+    """The curves' spacing: on a Poisson-disk cloud the median nearest-neighbour
+    distance d of the features (regular: DENSITY_SCALE times the median distance to the
+    DENSITY_NEIGHBOURS-th nearest is below d); on an iid cloud of the same box, whose
+    nearest distances are shorter (clustered points), that density term is q d with
+    q > 1.3 and the spacing is d q^1.5, within 10 % of the Poisson-disk spacing."""
+    from meshlab_sharp.reference.curves import extract as reference
+
+    blue = gt.make_part("box", n_points=8000, seed=1)
+    iid = shapes.random_box_points(8000, seed=2, size=(60.0, 40.0, 30.0))
+    found = []
+    for points in (blue.vertices.astype(np.float64), iid):
+        mask = meshlab_sharp.detect(points).mask
+        features = np.unique(points[mask], axis=0)
+        d, _ = cKDTree(points).query(features, k=reference.DENSITY_NEIGHBOURS + 1)
+        nearest, density = np.median(d[:, 1]), reference.DENSITY_SCALE * np.median(d[:, -1])
+        found.append((*reference.cloud_spacing(cKDTree(points), features), nearest, density))
+    (blue_s, blue_irregular, blue_near, blue_density), (iid_s, iid_irregular, near, density) = found
+    assert (blue_s, blue_irregular) == (blue_near, False) and blue_density < blue_near
+    assert iid_irregular and density > 1.3 * near
+    assert iid_s == pytest.approx(near * (density / near) ** 1.5, rel=1e-12)
+    assert abs(iid_s / blue_s - 1) < 0.1
+
+
 @pytest.mark.parametrize(
     ("kind", "mode"), [("points", "robust"), ("points", "paper"), ("mesh", "robust")]
 )
@@ -436,9 +478,9 @@ def test_piece_lengths_in_one_pass_match_each_piece() -> None:
 #: The modules that read the curves' constants: the numpy reference's, and fit.py.
 CURVE_MODULES = {
     name: Path(meshlab_sharp.reference.curves.__file__).with_name(f"{name}.py")
-    for name in ("graph", "trace", "extract", "refine")
+    for name in ("graph", "trace", "extract", "refine", "mesh")
 } | {"fit": Path(meshlab_sharp.curves.__file__).with_name("fit.py")}
-CURVES_CPP = Path(__file__).resolve().parent.parent / "native" / "src" / "curves.cpp"
+CURVES_CPP = sorted((Path(__file__).resolve().parent.parent / "native" / "src").glob("curves*.cpp"))
 #: The constants the native library has no use for: it does not classify the curves
 #: (fit.py).
 PYTHON_ONLY = {"FIT_TOLERANCE", "FIT_MAX", "MAX_RADIUS_RATIO"}
@@ -478,7 +520,7 @@ def test_the_curves_constants_are_typed_only_in_their_header():
                 read[target.id] = name
     assert set(read) == set(_header.CURVES.constants)
 
-    text = CURVES_CPP.read_text()
+    text = "\n".join(path.read_text() for path in CURVES_CPP)
     typed = re.findall(
         r"^\s*(?:static\s+)?(?:constexpr|const)\s+[\w:<> ]+?\s"  # a type
         r"([A-Z][A-Z0-9_]*)(?:\[\])?\s*=\s*(.+);",

@@ -7,10 +7,13 @@ from __future__ import annotations
 
 import ctypes
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 import shapes
+from scipy.spatial import cKDTree
 
 import meshlab_sharp
 from meshlab_sharp import _header
@@ -72,6 +75,8 @@ def _cloud(case: str) -> tuple[np.ndarray, str]:
         return shapes.cube_grid_points(15), "robust"
     if case == "random-box":
         return shapes.random_box_points(4000, seed=2), "robust"
+    if case == "iid-box":  # iid: the spacing from the density, short pieces joined
+        return shapes.random_box_points(8000, seed=2), "robust"
     if case == "box-cylinder":
         return shapes.box_cylinder_points(4000, seed=3), "paper"
     if case == "noisy-box":
@@ -81,18 +86,28 @@ def _cloud(case: str) -> tuple[np.ndarray, str]:
     raise AssertionError(case)
 
 
-@pytest.mark.parametrize("case", ["cube-grid", "random-box", "box-cylinder", "noisy-box", "iid"])
+@pytest.mark.parametrize(
+    "case", ["cube-grid", "random-box", "iid-box", "box-cylinder", "noisy-box", "iid"]
+)
 def test_cloud_curves_are_the_references_to_the_bit(case):
     """Refined positions, indices, loops, lengths, corners and their order: the same
-    bits as the numpy reference, and some curves to compare."""
+    bits as the numpy reference, and some curves to compare; on the iid box, the
+    spacing is the density's (:func:`meshlab_sharp.reference.curves.extract.cloud_spacing`)
+    and its edges are one curve each."""
     vertices, mode = _cloud(case)
     result = meshlab_sharp.detect(vertices, mode=mode)
     want = reference.extract_curves(vertices, result.mask, None, result.kept)
     got = _native.extract_curves(vertices, result.mask, None, result.kept, None)
     assert want.curves
     _assert_same(got, want)
-    if case == "cube-grid":  # one curve per edge of the cube, from corner to corner
+    if case in ("cube-grid", "iid-box"):  # one curve per edge of the box, corner to corner
         assert len(got.curves) == 12 and len(got.corner_points) == 8
+    if case == "iid-box":
+        features = np.unique(vertices[result.mask], axis=0)
+        d, _ = cKDTree(vertices).query(features, k=reference.extract.DENSITY_NEIGHBOURS + 1)
+        q = reference.extract.DENSITY_SCALE * np.median(d[:, -1]) / np.median(d[:, 1])
+        assert q > 1.3  # irregular: the spacing is d q^1.5
+        assert got.spacing == pytest.approx(np.median(d[:, 1]) * q**1.5, rel=1e-12)
 
 
 def test_a_larger_grid_box_gives_the_references_curves():
@@ -187,3 +202,42 @@ def test_the_c_abi_refuses_bad_input():
     lib.ms_curves_free(handle)
     with pytest.raises(ValueError, match=r"ms_curves_extract failed \(status -2\)"):
         _native.extract_curves(vertices, feature.astype(bool), np.array([[0, 1, 5]]), None, None)
+
+
+#: Run in a child process: the native curves of 200,000 feature points on a zigzag sheet
+#: under an address-space limit a few MB above what the process maps, then again with
+#: the limit lifted. Prints what each call gave.
+_UNDER_A_LIMIT = """
+import resource
+import numpy as np
+from meshlab_sharp.curves import _native
+
+rng = np.random.default_rng(0)
+x, y = rng.random(200_000), rng.random(200_000)
+points = np.c_[x, y, np.abs((x * 20) % 1 - 0.5) / 20]
+mask = np.ones(len(points), bool)
+_native.extract_curves(points[:2000], mask[:2000], None, None, None)  # the library loaded
+with open("/proc/self/statm") as f:
+    mapped = int(f.read().split()[0]) * resource.getpagesize()
+resource.setrlimit(resource.RLIMIT_AS, (mapped + (8 << 20), resource.RLIM_INFINITY))
+try:
+    _native.extract_curves(points, mask, None, None, None)
+    print("no error")
+except MemoryError as exc:
+    print("MemoryError:", exc)
+resource.setrlimit(resource.RLIMIT_AS, (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
+print("then", len(_native.extract_curves(points, mask, None, None, None).curves), "curves")
+"""
+
+
+def test_out_of_memory_in_the_library_is_a_memory_error():
+    """std::bad_alloc inside the library is its out-of-memory status at the C ABI, a
+    MemoryError in Python; the process goes on, and the same call with memory to spare
+    gives curves."""
+    done = subprocess.run(
+        [sys.executable, "-c", _UNDER_A_LIMIT], capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0] == "MemoryError: ms_curves_extract failed (status -1)", done.stdout
+    assert re.fullmatch(r"then [1-9][0-9]* curves", lines[1]), done.stdout

@@ -20,6 +20,8 @@ import shapes
 import meshlab_sharp
 from meshlab_sharp import _detect_native, _header, _kernels
 from meshlab_sharp.cli import parse_scales
+from meshlab_sharp.defaults import MAX_KNN_SCALE, MAX_RING_SCALE, MAX_SCALES
+from meshlab_sharp.options import check_scales
 from meshlab_sharp.progress import Progress
 from meshlab_sharp.reference import detect as reference_sequence
 
@@ -147,17 +149,21 @@ def test_a_refused_input_gives_the_commands_message():
         meshlab_sharp.detect(np.ones((50, 3)))
 
 
-def _detect(vertices: np.ndarray, **fields: object) -> tuple[int, str]:
-    """ms_detect's status and message on a cloud with options changed by ``fields``."""
+def _detect(
+    vertices: np.ndarray, faces: np.ndarray | None = None, **fields: object
+) -> tuple[int, str]:
+    """ms_detect's status and message on a cloud (or the mesh of ``faces``) with options
+    changed by ``fields``."""
     options = _detect_native._Options()
     LIB.ms_detect_defaults(ctypes.byref(options))
     for name, value in fields.items():
         setattr(options, name, value)
     handle, error = ctypes.c_void_p(), ctypes.create_string_buffer(256)
     v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = None if faces is None else np.ascontiguousarray(faces, dtype=np.int64)
     status = LIB.ms_detect(
-        v.ctypes.data, len(v), None, 0, ctypes.byref(options), None, None,
-        ctypes.byref(handle), error, len(error),
+        v.ctypes.data, len(v), None if f is None else f.ctypes.data, 0 if f is None else len(f),
+        ctypes.byref(options), None, None, ctypes.byref(handle), error, len(error),
     )  # fmt: skip
     LIB.ms_detection_free(handle)
     return status, error.value.decode()
@@ -186,6 +192,38 @@ def test_the_defaults_are_the_headers():
 )
 def test_bad_options_are_refused_with_a_message(fields, message):
     assert _detect(shapes.random_box_points(500), **fields) == (EINPUT, message)
+
+
+def _scales(kind: str, *values: int) -> dict[str, object]:
+    """ms_detect_options fields of a list of ``kind`` scales (``knn`` or ``ring``)."""
+    return {f"n_{kind}_scales": len(values), f"{kind}_scales": (ctypes.c_int * MAX_SCALES)(*values)}
+
+
+@needs_library
+@pytest.mark.parametrize(
+    ("mesh", "as_points", "kind", "scales", "answer"),
+    [
+        (False, 0, "knn", (12, MAX_KNN_SCALE + 1), "kNN sizes must be <= 512, got 513"),
+        (True, 0, "ring", (1, MAX_RING_SCALE + 1), "rings must be <= 32, got 33"),
+        (True, 1, "knn", (12, MAX_KNN_SCALE + 88), "kNN sizes must be <= 512, got 600"),
+        (True, 0, "ring", (1, 2, MAX_RING_SCALE), ""),  # at the maximum: it runs
+        (True, 0, "knn", (12, MAX_KNN_SCALE + 88), ""),  # a mesh's k: unused
+        (False, 0, "ring", (1, MAX_RING_SCALE + 8), ""),  # a cloud's rings: unused
+    ],
+)  # fmt: skip
+def test_scales_above_the_maxima_are_refused_with_the_commands_message(
+    mesh, as_points, kind, scales, answer
+):
+    """The scales the detection would use, above the header's maxima: refused with the
+    command line's message before any work; the unused kind's scales are not checked."""
+    vertices, faces = shapes.cube_grid_mesh(4)
+    if not mesh:
+        vertices, faces = shapes.random_box_points(500), None
+    status = _detect(vertices, faces, as_points=as_points, **_scales(kind, *scales))
+    assert status == ((EINPUT, answer) if answer else (0, ""))
+    if answer:
+        with pytest.raises(meshlab_sharp.InputError, match=answer):
+            check_scales(scales, (), "mesh" if kind == "ring" else "points")
 
 
 @needs_library

@@ -724,7 +724,7 @@ def test_relative_distances_in_the_pass_identical(scales):
     for i, k in enumerate(scales):
         r, threshold = rule(i, k, fused.pdis[i])
         assert np.array_equal(fused.relative[i], r)
-        otsu, floor = rule.from_pass(rule.score)
+        otsu, floor = rule.from_pass(rule.score, i, fused.relative[i])
         votes = np.zeros(len(points), np.int64)
         assert _kernels.scale_vote(fused.relative[i], votes, otsu=otsu, floor=floor) == (
             threshold,

@@ -135,6 +135,22 @@ def test_noise(box, direction):
     assert np.array_equal(noisy.vertices, again.vertices)
 
 
+def test_iid_part_is_on_the_surface_and_clustered(box):
+    """As many points, drawn independently on the box's faces (60 x 40 x 30 at the
+    origin) with their faces' normals, the same edges and spacing; clustered: the median
+    nearest-neighbour distance well below the Poisson-disk cloud's."""
+    iid = gt.iid_part(box, seed=4)
+    assert iid.n == box.n and iid.spacing == box.spacing
+    assert np.array_equal(iid.edges, box.edges)
+    p = iid.vertices.astype(np.float64)
+    on_face = np.isclose(p, 0.0, atol=1e-4) | np.isclose(p, [60.0, 40.0, 30.0], atol=1e-4)
+    assert on_face.any(axis=1).all()
+    assert np.allclose(np.abs(iid.normals).max(axis=1), 1.0)
+    near = [np.median(cKDTree(q).query(q, k=2)[0][:, 1]) for q in (p, box.vertices)]
+    assert near[0] < 0.75 * near[1]
+    assert np.array_equal(gt.iid_part(box, seed=4).vertices, iid.vertices)
+
+
 def test_outliers(box):
     out = gt.add_outliers(box, 0.01, seed=1)
     assert out.n == N + 20 and out.outliers.sum() == 20

@@ -57,6 +57,10 @@ def _case(case: str) -> tuple[np.ndarray, np.ndarray | None, str]:
     if case == "fandisk-mesh":
         v, f, _ = groundtruth.reference_surface("fandisk")
         return v, f, "1"
+    if case == "stl-rounded-box-mesh":  # long thin triangles, rounds of 15-degree facets
+        return (*shapes.prism_mesh(shapes.rounded_rectangle(3.0, 2.0, 0.5), 1.0), "1")
+    if case == "two-triangle-cube-mesh":  # each sharp curve one mesh edge
+        return (*shapes.two_triangle_cube(), "1")
     if case == "cube-points":  # a regular grid: neighbours at equal distances
         return shapes.cube_grid_points(15), None, "1"
     if case == "box-cylinder-points-paper":
@@ -77,6 +81,8 @@ def read_obj_edges(path: Path) -> np.ndarray:
         "cube-mesh",
         "sample-mesh",
         "fandisk-mesh",
+        "stl-rounded-box-mesh",
+        "two-triangle-cube-mesh",
         "cube-points",
         "sample-points",
         "box-cylinder-points-paper",
@@ -95,7 +101,7 @@ def test_curves_agree_with_the_python_package(meshlab_root, tmp_path, case):
     assert expected.curves, "no curves to compare"
     _assert_same_curves(log, out, ply, expected)
     assert f"saved as {kept} ({len(vertices)} vn" in log  # the input stays the current layer
-    if case.startswith("cube"):  # one curve per edge of the cube, from corner to corner
+    if "cube" in case:  # one curve per edge of the cube, from corner to corner
         assert len(expected.curves) == 12 and len(expected.corners) == 8
         assert not any(c.closed for c in expected.curves)
 

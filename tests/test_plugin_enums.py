@@ -42,3 +42,26 @@ def test_the_listed_choices_still_run(meshlab_root, tmp_path, mode, weighting):
     code, log = run_meshlabserver(meshlab_root, src, out, mode=mode, weighting=weighting)
     assert code == 0, log
     assert "vertices are features" in log, log
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("mesh", "param", "value", "message"),
+    [
+        (False, "knnScales", "12 600", "kNN sizes must be <= 512, got 600"),
+        (True, "ringScales", "1 2 40", "rings must be <= 32, got 40"),
+    ],
+    ids=["knn", "rings"],
+)
+def test_scales_above_the_maxima_are_refused(meshlab_root, tmp_path, mesh, param, value, message):
+    """The scales the filter would use, above the library's maxima: the filter's error
+    message (the command line's words), before any work."""
+    vertices, faces = shapes.cube_grid_mesh(6)
+    if not mesh:
+        vertices, faces = shapes.cube_grid_points(9), None
+    src = write_ply(tmp_path / "in.ply", vertices, faces, binary=True)
+    out = tmp_path / "out.ply"
+    code, log = run_meshlabserver(meshlab_root, src, out, **{param: value})
+    assert code == FILTER_FAILED, log
+    assert f"Sharp features: error: {message}" in log, log
+    assert "vertices are features" not in log, log

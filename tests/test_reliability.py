@@ -20,7 +20,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +29,7 @@ import pytest
 import shapes
 
 import meshlab_sharp
+from meshlab_sharp.errors import ScratchError
 from meshlab_sharp.io.source import PointSource
 from meshlab_sharp.progress import Progress
 from meshlab_sharp.tiles.layout import build_layout
@@ -96,8 +97,9 @@ _LIBRARY_EXITS = {"OpenBLAS error: Memory allocation still failed after 10 retri
         ((), (0.55, 0.65, 0.75, 0.85)),
         (("--mode", "paper"), (0.6, 0.75)),
         (("--max-memory", "300MB"), (0.5, 0.7)),
+        (("--curves", "{tmp}/curves.obj"), (0.55, 0.75, 0.85)),
     ],
-    ids=["robust", "paper", "tiled"],
+    ids=["robust", "paper", "tiled", "curves"],
 )
 def test_out_of_memory_is_one_line(tmp_path, big_cloud, options, limits_gb):
     """Under an address-space limit (setrlimit in the child), at limits that end in
@@ -121,6 +123,8 @@ def test_out_of_memory_is_one_line(tmp_path, big_cloud, options, limits_gb):
         )
         if proc.returncode == 0:
             assert out.is_file() and not proc.stderr
+            if "--curves" in options:
+                (tmp_path / "curves.obj").unlink()  # there, and gone before the next limit
             continue
         assert not out.exists() and not list(tmp_path.glob(".*")), "output or temporary left"
         if proc.stderr in _LIBRARY_EXITS:
@@ -247,6 +251,16 @@ def test_dask_addresses_are_checked(tmp_path, small_cloud, address):
     assert not (tmp_path / "o.ply").exists()
 
 
+def _dask_run_timed(
+    cloud: Path, out: Path, address: str
+) -> tuple[subprocess.CompletedProcess, float]:
+    """``detect CLOUD -o OUT --dask ADDRESS --dask-timeout 2`` to its end, and its
+    seconds."""
+    start = time.monotonic()
+    proc = _cli("detect", cloud, "-q", "-o", out, "--dask", address, "--dask-timeout", "2")
+    return proc, time.monotonic() - start
+
+
 @pytest.mark.parametrize(
     "answer, message",
     [
@@ -262,12 +276,7 @@ def test_dask_non_schedulers_fail_in_one_line_within_the_timeout(
     tmp_path, small_cloud, answer, message
 ):
     with _server(answer) as address:
-        start = time.monotonic()
-        proc = _cli(
-            "detect", small_cloud, "-q", "-o", tmp_path / "o.ply", "--dask", address,
-            "--dask-timeout", "2",
-        )  # fmt: skip
-        took = time.monotonic() - start
+        proc, took = _dask_run_timed(small_cloud, tmp_path / "o.ply", address)
     _one_error_line(proc, message)
     assert took < 30, took
     assert not (tmp_path / "o.ply").exists()
@@ -291,26 +300,24 @@ def _dask_cli(*args: str) -> list[str]:
 
 @contextlib.contextmanager
 def _scheduler(
-    workers: int, worker_ttl: str | None = None
+    workers: int, worker_setup: Callable[[], None] | None = None
 ) -> Iterator[tuple[str, subprocess.Popen, list[subprocess.Popen]]]:
     """A real scheduler process on loopback with ``workers`` worker processes, ready
-    (the workers joined); killed afterwards. ``worker_ttl``: how long the scheduler
-    keeps a silent worker (Dask's default: 5 minutes)."""
+    (the workers joined); killed afterwards. ``worker_setup``: run in each worker
+    process before it starts (a resource limit)."""
     pytest.importorskip("distributed")
     from distributed import Client
 
     address = _closed_port()
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     port = address.rsplit(":", 1)[1]
-    ttl = {} if worker_ttl is None else {"DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL": worker_ttl}
     scheduler = subprocess.Popen(
-        _dask_cli("scheduler", "--host", "127.0.0.1", "--port", port, "--no-dashboard"),
-        env={**os.environ, **ttl},
-        **quiet,
+        _dask_cli("scheduler", "--host", "127.0.0.1", "--port", port, "--no-dashboard"), **quiet
     )
     pool = [
         subprocess.Popen(
             _dask_cli("worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard"),
+            preexec_fn=worker_setup,
             **quiet,
         )
         for _ in range(workers)
@@ -329,12 +336,7 @@ def _scheduler(
 @pytest.mark.slow
 def test_dask_scheduler_without_workers_fails_in_one_line(tmp_path, small_cloud):
     with _scheduler(0) as (address, _, _):
-        start = time.monotonic()
-        proc = _cli(
-            "detect", small_cloud, "-q", "-o", tmp_path / "o.ply", "--dask", address,
-            "--dask-timeout", "2",
-        )  # fmt: skip
-        took = time.monotonic() - start
+        proc, took = _dask_run_timed(small_cloud, tmp_path / "o.ply", address)
     _one_error_line(proc, "no worker joined the scheduler within 2 s")
     assert took < 40, took
 
@@ -373,111 +375,144 @@ def medium_cloud(tmp_path_factory) -> Path:
     return _binary_ply(tmp_path_factory.mktemp("medium") / "cube200k.ply", _cube_cloud(200_000))
 
 
+@pytest.fixture
+def scratch(tmp_path) -> Path:
+    """An empty folder for a run's ``TMPDIR``: where its tiles' scratch folder goes."""
+    folder = tmp_path / "tmp"
+    folder.mkdir()
+    return folder
+
+
+def _start_tiled(cloud: Path, out: Path, scratch: Path, dask: str, *more: str) -> subprocess.Popen:
+    """``detect CLOUD -o OUT --dask DASK --max-memory 300MB MORE`` started with
+    ``TMPDIR=scratch``, its stdout and stderr piped."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "meshlab_sharp", "detect", str(cloud), "-q", "-o", str(out)]
+        + ["--dask", dask, "--max-memory", "300MB", *more],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "TMPDIR": str(scratch)},
+    )
+
+
+def _ended(proc: subprocess.Popen, timeout: float) -> subprocess.CompletedProcess:
+    """``proc`` waited for (at most ``timeout`` seconds) as a CompletedProcess."""
+    out, err = proc.communicate(timeout=timeout)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
 @pytest.mark.slow
-def test_dask_scheduler_lost_mid_run_is_one_line(tmp_path, medium_cloud):
-    scratch = tmp_path / "tmp"
-    scratch.mkdir()
+def test_dask_scheduler_lost_mid_run_is_one_line(tmp_path, medium_cloud, scratch):
     with _scheduler(1) as (address, scheduler, _):
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
-            + ["-o", str(tmp_path / "o.ply"), "--dask", address, "--max-memory", "300MB"],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "TMPDIR": str(scratch)},
-        )
+        proc = _start_tiled(medium_cloud, tmp_path / "o.ply", scratch, address)
         _wait_for_scratch(scratch, proc)
         scheduler.kill()
         start = time.monotonic()
-        out, err = proc.communicate(timeout=120)
+        ended = _ended(proc, 120)
         took = time.monotonic() - start
-    _one_error_line(subprocess.CompletedProcess([], proc.returncode, out, err), "--dask: ")
+    _one_error_line(ended, "--dask: ")
     assert took < 60, took
     assert not (tmp_path / "o.ply").exists()
     assert _scratch_folders(scratch) == []
 
 
 @pytest.mark.slow
-def test_dask_worker_lost_mid_run_resumes_with_the_same_answer(tmp_path, medium_cloud):
+def test_dask_worker_lost_mid_run_resumes_with_the_same_answer(tmp_path, medium_cloud, scratch):
     """One of two workers killed while the tiles run: its tasks run again on the other,
     and the output is the run without Dask's, byte for byte."""
     alone = _cli(
         "detect", medium_cloud, "-q", "-o", tmp_path / "alone.ply", "--max-memory", "300MB"
     )
     assert alone.returncode == 0, alone.stderr
-    scratch = tmp_path / "tmp"
-    scratch.mkdir()
     with _scheduler(2) as (address, _, workers):
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
-            + ["-o", str(tmp_path / "dask.ply"), "--dask", address, "--max-memory", "300MB"],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "TMPDIR": str(scratch)},
-        )
+        proc = _start_tiled(medium_cloud, tmp_path / "dask.ply", scratch, address)
         _wait_for_scratch(scratch, proc)
         time.sleep(2.0)  # tile tasks on both workers
         assert proc.poll() is None, "the run ended before a worker was lost"
         workers[0].kill()
-        _, err = proc.communicate(timeout=300)
-    assert proc.returncode == 0, err
-    assert err == ""
+        ended = _ended(proc, 300)
+    assert ended.returncode == 0, ended.stderr
+    assert ended.stderr == ""
     assert (tmp_path / "dask.ply").read_bytes() == (tmp_path / "alone.ply").read_bytes()
 
 
 @pytest.mark.slow
-def test_dask_stopped_worker_is_one_line_once_the_scheduler_drops_it(tmp_path, medium_cloud):
-    """The only worker stopped (SIGSTOP) mid-run: once the scheduler drops it (its
-    worker-ttl, 5 s here) the run waits 30 s for another, then fails in one line."""
-    scratch = tmp_path / "tmp"
-    scratch.mkdir()
-    with _scheduler(1, worker_ttl="5s") as (address, _, workers):
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
-            + ["-o", str(tmp_path / "o.ply"), "--dask", address, "--max-memory", "300MB"],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "TMPDIR": str(scratch)},
-        )
+def test_dask_stopped_worker_is_one_line(tmp_path, medium_cloud, scratch):
+    """The only worker stopped (SIGSTOP) mid-run, while the scheduler still keeps it
+    (its worker-ttl, 5 minutes by default): once it has been silent for 30 s the run
+    waits 30 s for another, then fails in one line, well before the scheduler would
+    drop it."""
+    with _scheduler(1) as (address, _, workers):
+        proc = _start_tiled(medium_cloud, tmp_path / "o.ply", scratch, address)
         _wait_for_scratch(scratch, proc)
         assert proc.poll() is None
         workers[0].send_signal(signal.SIGSTOP)
-        start = time.monotonic()
-        out, err = proc.communicate(timeout=180)
-        took = time.monotonic() - start
-    _one_error_line(
-        subprocess.CompletedProcess([], proc.returncode, out, err),
-        "no worker left in the Dask cluster for 30 s",
-    )
-    assert took < 120, took
+        ended = _ended(proc, 240)
+    _one_error_line(ended, "no live worker in the Dask cluster for 30 s", "silent for 30 s")
     assert not (tmp_path / "o.ply").exists()
     assert _scratch_folders(scratch) == []
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
-def test_a_signal_during_a_dask_run_is_one_line(tmp_path, medium_cloud, signum):
-    scratch = tmp_path / "tmp"
-    scratch.mkdir()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "meshlab_sharp", "detect", str(medium_cloud), "-q"]
-        + ["-o", str(tmp_path / "o.ply"), "--dask", "local:1", "--max-memory", "300MB"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "TMPDIR": str(scratch)},
-    )
+def test_a_signal_during_a_dask_run_is_one_line(tmp_path, medium_cloud, scratch, signum):
+    proc = _start_tiled(medium_cloud, tmp_path / "o.ply", scratch, "local:1")
     _wait_for_scratch(scratch, proc)
     time.sleep(1.0)  # the tile tasks are running on the worker
     proc.send_signal(signum)
-    _, err = proc.communicate(timeout=120)
+    ended = _ended(proc, 120)
     name = signal.Signals(signum).name
-    assert err == f"meshlab-sharp: interrupted by {name}; no output was written\n"
-    assert proc.returncode == 128 + signum
+    assert ended.stderr == f"meshlab-sharp: interrupted by {name}; no output was written\n"
+    assert ended.returncode == 128 + signum
     assert not (tmp_path / "o.ply").exists()
     assert _scratch_folders(scratch) == []
+
+
+#: Largest file a worker may write in the file-size-limit case (RLIMIT_FSIZE; Python
+#: ignores SIGXFSZ, so a longer write fails with EFBIG).
+_WORKER_FILE_LIMIT = 1 << 20
+
+
+def _mount_tmpfs(folder: Path, size: str) -> bool:
+    """Mount a tmpfs of ``size`` on ``folder``; False where mounting is not permitted."""
+    try:
+        done = subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)],
+            capture_output=True,
+        )
+    except OSError:  # no mount command
+        return False
+    return done.returncode == 0
+
+
+def _limit_file_size() -> None:
+    resource.setrlimit(resource.RLIMIT_FSIZE, (_WORKER_FILE_LIMIT, _WORKER_FILE_LIMIT))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("full", ["filesystem", "file-size-limit"])
+def test_dask_full_scratch_is_one_line(tmp_path, medium_cloud, scratch, full):
+    """A real scheduler and worker, and the tiles' scratch folder on a full filesystem
+    (a 16 MB tmpfs: the cut tiles fit, the steps' arrays do not; where mounting is not
+    permitted, the workers' own writes refused by a file size limit instead), or the
+    workers' writes refused: one line naming the scratch folder's place, no worker's
+    traceback, no output, no scratch left."""
+    if not hasattr(resource, "RLIMIT_FSIZE"):
+        pytest.skip("no RLIMIT_FSIZE on this system to refuse the workers' writes")
+    mounted = full == "filesystem" and _mount_tmpfs(scratch, "16m")
+    try:
+        with _scheduler(1, None if mounted else _limit_file_size) as (address, _, _):
+            ended = _ended(_start_tiled(medium_cloud, tmp_path / "o.ply", scratch, address), 240)
+        left = _scratch_folders(scratch)
+    finally:
+        if mounted:
+            subprocess.run(["umount", str(scratch)], check=True)
+    _one_error_line(ended, f"cannot write the tiles' scratch arrays in {scratch}: ", "--scratch")
+    assert ("No space left on device" if mounted else "File too large") in ended.stderr
+    assert "Traceback" not in ended.stderr and ended.stdout == ""
+    assert not (tmp_path / "o.ply").exists()
+    assert left == []
 
 
 def test_dask_argument_of_the_wrong_type_is_a_type_error():
@@ -607,6 +642,27 @@ def test_a_killed_runs_scratch_is_removed_by_the_next_run(tmp_path, medium_cloud
     assert again.returncode == 0, again.stderr
     assert _scratch_folders(scratch) == [other]
     assert remove_stale_scratch(scratch) == []
+
+
+def test_scratch_arrays_on_a_full_filesystem_fail_when_created(tmp_path):
+    """On a 1 MB tmpfs: an array that does not fit fails when it is created, with the
+    scratch folder's place; the arrays that were created take scattered writes (through
+    a map of the file) without SIGBUS, since their space is reserved."""
+    folder = tmp_path / "small"
+    folder.mkdir()
+    if not _mount_tmpfs(folder, "1m"):
+        pytest.skip("mounting a tmpfs is not permitted here")
+    try:
+        store = Store(str(folder / "run"))
+        os.mkdir(store.root)
+        store.create("a", (100_000,), np.float64)  # 800 kB
+        with pytest.raises(ScratchError, match=f"scratch arrays in {folder}: No space left"):
+            store.create("b", (100_000,), np.float64)
+        rows = np.arange(0, 100_000, 3)
+        store.write_at("a", rows, 1.0)  # the map route: many runs of one row
+        assert store.read("a", 0, 100_000).sum() == len(rows)
+    finally:
+        subprocess.run(["umount", str(folder)], check=True)
 
 
 # ---------------------------------------------------------------- the API

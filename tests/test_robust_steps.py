@@ -4,6 +4,7 @@ the local scale and centroid distance, relative distances, the floor and the sco
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -11,8 +12,10 @@ import pytest
 import shapes
 
 import meshlab_sharp
-from meshlab_sharp import robust
+from meshlab_sharp import _kernels, robust
 from meshlab_sharp.neighbourhoods import KnnNeighbourhoods, Neighbourhood
+from meshlab_sharp.reference import robust as reference
+from meshlab_sharp.threshold import BINS, histogram
 
 
 def _csr(lists: list[list[int]]) -> Neighbourhood:
@@ -422,3 +425,79 @@ def test_flat_edges_left_out_are_numpys_zero_angles():
         assert len(at_one) and (at_one == 0.0).all() and not np.signbit(at_one).any()
         assert (angles[~(dot >= 1.0)] > 0.0).all()
     assert np.arccos(np.nextafter(1.0, 0.0)) > 0.0
+
+
+def _histograms() -> list[np.ndarray]:
+    """Counts of every shape the noise floor meets: empty, one point, one bin, the last
+    bin, an even total whose lower median ends a bin, and random ones."""
+    bins = BINS
+    out = [np.zeros(bins, np.int64), np.eye(1, bins, 7, np.int64)[0]]
+    out.append(np.eye(1, bins, bins - 1, np.int64)[0] * 5)
+    even = np.zeros(bins, np.int64)
+    even[[3, 9]] = 2  # ranks 0-1 in bin 3, 2-3 in bin 9: the lower median (rank 1), bin 3
+    out.append(even)
+    rng = np.random.default_rng(4)
+    out += [rng.integers(0, 50, bins) * (rng.random(bins) < p) for p in (0.05, 0.5, 1.0)]
+    return out
+
+
+def test_the_noise_floor_kernel_is_the_reference_bit_for_bit():
+    """ms_noise_floor and ms_scale_floor give the numpy reference's value exactly, on
+    histograms and on those of values (bins as Otsu's), on every scale and noise."""
+    rng = np.random.default_rng(5)
+    values = (np.zeros(0), rng.random(1001) ** 3, np.r_[np.zeros(10), np.ones(11)])
+    for counts in _histograms() + [histogram(v) for v in values]:
+        assert _kernels.noise_floor(counts) == reference.noise_floor(counts)
+        for last, mesh, noise in itertools.product((False, True), (False, True), (0.0, 0.2)):
+            expected = reference.scale_floor(counts, last, mesh, noise)
+            assert _kernels.scale_floor(counts, last, mesh, noise) == expected
+    with pytest.raises(ValueError, match="one count per histogram bin"):
+        _kernels.noise_floor(np.zeros(3, np.int64))
+
+
+def test_the_noise_floor_is_three_lower_medians_of_the_largest_noisy_scale_capped():
+    assert robust.NOISE_FLOOR == 3.0
+    counts = np.zeros(BINS, np.int64)
+    counts[[5, 10, 30]] = [4, 1, 4]  # 9 values: the lower median (rank 4) in bin 10
+    assert reference.noise_floor(counts) == 3.0 * 11 / 256
+    assert reference.noise_floor(np.zeros(BINS, np.int64)) == 0.0
+    noisy = robust.NOISE_QUIET + 1e-12
+    for backend in ("compiled", "numpy"):
+        assert robust.scale_floor(counts, True, False, noisy, backend) == 3.0 * 11 / 256
+        # other scales, quiet clouds and meshes: R_MIN alone
+        assert robust.scale_floor(counts, False, False, noisy, backend) == robust.R_MIN
+        assert robust.scale_floor(counts, True, False, robust.NOISE_QUIET, backend) == robust.R_MIN
+        assert robust.scale_floor(counts, True, True, noisy, backend) == robust.R_MIN
+    low = np.zeros(BINS, np.int64)
+    low[2] = 9  # 3 * 3 / 256 < R_MIN: the floor stays R_MIN
+    assert robust.scale_floor(low, True, False, noisy) == robust.R_MIN
+    high = np.zeros(BINS, np.int64)
+    high[100] = 9  # 3 * 101 / 256 > NOISE_FLOOR_MAX: the floor is the cap
+    assert robust.NOISE_FLOOR_MAX == 0.22
+    assert reference.noise_floor(high) == _kernels.noise_floor(high) == 0.22
+    assert robust.scale_floor(high, True, False, noisy) == 0.22
+
+
+@pytest.mark.parametrize("backend", ["compiled", "numpy"])
+def test_a_noisy_sphere_has_no_features_and_a_noisy_box_keeps_its_edges(backend):
+    """Noise of 25 % of the spacing: the sphere's points pass R_MIN at every scale
+    (about 10 % flagged without the noise floor), the largest scale's floor drops them;
+    the box, whose edges raise Otsu's split above the floor, keeps its 12 edges."""
+    sphere = meshlab_sharp.detect(shapes.noisy_sphere_points(6000, 0.25), backend=backend)
+    assert sphere.thresholds[-1] > robust.R_MIN
+    assert sphere.mask.mean() <= 0.002
+    points = shapes.noisy_box_points(6000, 0.25, seed=0)
+    box = meshlab_sharp.detect(points, backend=backend)
+    half = np.array([1.0, 0.7, 0.5])
+    on_face = np.abs(np.abs(points) - half) < 0.05  # (n, 3): near each face pair
+    near_edge = on_face.sum(axis=1) >= 2
+    assert (box.mask & ~near_edge).sum() <= 0.07 * box.mask.sum()
+    for a in range(3):  # the 4 edges along each axis: each one's length mostly covered
+        b, c = [x for x in range(3) if x != a]
+        for sb in (-1, 1):
+            for sc in (-1, 1):
+                edge = box.mask & on_face[:, b] & on_face[:, c]
+                edge &= (np.sign(points[:, b]) == sb) & (np.sign(points[:, c]) == sc)
+                along = np.sort(points[edge, a])
+                gaps = np.diff(np.r_[-half[a], along, half[a]])
+                assert gaps.max() < 0.4 * half[a], (a, sb, sc)

@@ -7,7 +7,7 @@ import os
 
 import numpy as np
 import pytest
-from shapes import random_box_points
+from shapes import noisy_sphere_points, random_box_points
 
 import meshlab_sharp
 from meshlab_sharp import _kernels
@@ -345,6 +345,18 @@ def test_noise_grown_scales_equal_in_memory(noise: float) -> None:
     out = detect_tiled(noisy, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500)
     assert out["scales"] == ref.scales
     assert_same(out, ref)
+
+
+def test_noise_floor_equal_in_memory() -> None:
+    """The largest scale's noise floor (robust.scale_floor) read from the tiles' summed
+    histogram is the in-memory one: on a noisy sphere it, not Otsu's split, sets the
+    threshold, and few points are features."""
+    pts = noisy_sphere_points(6000, 0.25)
+    ref = meshlab_sharp.detect(pts, mode="robust")
+    assert ref.thresholds[-1] > max(ref.thresholds[:-1])
+    out = detect_tiled(pts, scales=DEFAULT_KNN_SCALES, mode="robust", tile_points=500)
+    assert_same(out, ref)
+    assert ref.mask.mean() <= 0.002
 
 
 @pytest.mark.parametrize("collect", [1, 7, 1 << 21])

@@ -23,12 +23,13 @@ from evaluation.groundtruth import (
     SamplePart,
     add_noise,
     expected_spacing,
+    iid_points,
     visible_edges,
     weld,
 )
 from evaluation.scan import scan, scanner_positions
 from evaluation.scoring import density_spacing, distance_to_segments
-from meshlab_sharp.parts import _f32, _mesh_spacing, _sample_surface, _vertex_normals
+from meshlab_sharp.parts import float32_rounded, mesh_spacing, sample_surface, vertex_normals
 
 __all__ = [
     "COARSE_PER_TURN",
@@ -95,7 +96,7 @@ def gmsh_mesh(size: float, per_turn: int, *, extend: bool = True) -> tuple[np.nd
     used = np.unique(faces)
     remap = np.zeros(len(verts), np.int64)
     remap[used] = np.arange(len(used))
-    verts, faces = weld(_f32(verts[used]), remap[faces])
+    verts, faces = weld(float32_rounded(verts[used]), remap[faces])
     return verts, faces
 
 
@@ -111,7 +112,7 @@ def _part(
 ) -> SamplePart:
     return SamplePart(
         name=name,
-        vertices=_f32(verts),
+        vertices=float32_rounded(verts),
         faces=faces,
         edges=edges,
         spacing=spacing,
@@ -120,24 +121,6 @@ def _part(
         kind="points" if faces is None else "mesh",
         extra={"reference": reference, **extra},
     )
-
-
-def _iid(verts: np.ndarray, faces: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """n points drawn independently, uniform over the mesh's area, and their face normals."""
-    rng = np.random.default_rng(seed)
-    cross = np.cross(
-        verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]]
-    )
-    area = np.linalg.norm(cross, axis=1)
-    f = rng.choice(len(faces), size=n, p=area / area.sum())
-    r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
-    v = verts[faces[f]]
-    pts = (
-        (1 - r1)[:, None] * v[:, 0]
-        + (r1 * (1 - r2))[:, None] * v[:, 1]
-        + (r1 * r2)[:, None] * v[:, 2]
-    )
-    return pts, cross[f] / np.maximum(area[f], 1e-300)[:, None]
 
 
 def make_inputs(
@@ -170,19 +153,19 @@ def make_inputs(
     out: dict[str, SamplePart] = {}
     if "fine_mesh" in which:
         out["fine_mesh"] = _part(
-            name, fv, ff, _vertex_normals(fv, ff), edges, _mesh_spacing(fv, ff), ref
+            name, fv, ff, vertex_normals(fv, ff), edges, mesh_spacing(fv, ff), ref
         )
     if {"blue_noise", "noise25"} & set(which):
-        pts, nrm = _sample_surface(fv, ff, n, seed)
+        pts, nrm = sample_surface(fv, ff, n, seed)
         blue = _part(name, pts, None, nrm, edges, s, ref)
         out["blue_noise"] = blue
         out["noise25"] = add_noise(blue, 0.25, seed=seed + 1)
     if "iid" in which:
-        pts, nrm = _iid(fv, ff, n, seed + 2)
+        pts, nrm = iid_points(fv, ff, n, seed + 2)
         out["iid"] = _part(name, pts, None, nrm, edges, s, ref)
     if "scan" in which:
         res = scan(fv, ff, scanner_positions(fv), n_points=n, noise=SCAN_NOISE, seed=seed + 3)
-        local = density_spacing(_f32(res.points))
+        local = density_spacing(float32_rounded(res.points))
         seen = visible_edges(fv, ff, res.surface, res.normals, local)
         # the exact edges' pieces the scan saw: those near a seen crease of the mesh
         mid = edges.mean(axis=1)
@@ -205,5 +188,5 @@ def make_inputs(
     if "stl_like" in which:
         diag = math.dist(fv.min(axis=0), fv.max(axis=0))
         cv, cf = gmsh_mesh(diag, COARSE_PER_TURN, extend=False)
-        out["stl_like"] = _part(name, cv, cf, _vertex_normals(cv, cf), edges, s, ref)
+        out["stl_like"] = _part(name, cv, cf, vertex_normals(cv, cf), edges, s, ref)
     return {k: out[k] for k in which}

@@ -8,6 +8,7 @@ other, and the out-of-core tiles (:mod:`meshlab_sharp.tiles.steps`) run these pe
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Protocol
 
@@ -29,6 +30,17 @@ SUPPORT_MIN = _header.integer("SUPPORT_MIN")
 ISOLATED_NTH = _header.integer("ISOLATED_NTH")
 ISOLATED_REF = _header.integer("ISOLATED_REF")
 ISOLATED_SPREAD = _header.real("ISOLATED_SPREAD")
+#: Robust mode's rules on the cloud's noise ratio (meshlab_sharp.robust says why).
+NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
+NOISE_MAX_FACTOR = _header.real("NOISE_MAX_FACTOR")
+NOISE_QUIET = _header.real("NOISE_QUIET")
+#: The threshold floor (meshlab_sharp.robust says why).
+R_MIN = _header.real("R_MIN")
+THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
+THIN_KNN = _header.integer("THIN_KNN")
+SUPPORT_FREE_SCORE = _header.real("SUPPORT_FREE_SCORE")
+ACUTE_SCORE = _header.real("ACUTE_SCORE")
+ACUTE_SCORE_MAX = _header.real("ACUTE_SCORE_MAX")
 #: Fewest feature points in one thread's part of the line directions (below it the
 #: threads' start costs more than they save).
 PART_MIN = 2048
@@ -77,6 +89,21 @@ def isolated_points(
     d_nth = squared_distances(p, p[idx[:, min(nth, last)]])
     d_ref = squared_distances(p, p[idx[:, min(ref, last)]])
     return lone | (d_nth > spread * spread * d_ref[idx[:, -1]])
+
+
+def noise_floor(counts: np.ndarray) -> float:
+    """Robust mode's noise floor of a histogram's counts (``threshold.BINS``,) int:
+    ``min(NOISE_FLOOR * (b + 1) / BINS, NOISE_FLOOR_MAX)``, ``b`` the bin of the lower
+    median (the first bin whose cumulative count exceeds ``(total - 1) // 2``); 0.0 when
+    every count is 0 (``ms_noise_floor``, :func:`meshlab_sharp.robust.scale_floor`)."""
+    counts = np.asarray(counts, np.int64)
+    total = int(counts.sum())
+    if total == 0:
+        return 0.0
+    rank = (total - 1) // 2  # the lower median's, from 0
+    b = min(int(np.searchsorted(np.cumsum(counts), rank, side="right")), len(counts) - 1)
+    floor = _header.real("NOISE_FLOOR") * float(b + 1) / float(len(counts))
+    return min(floor, _header.real("NOISE_FLOOR_MAX"))
 
 
 def noise_ratios(points: np.ndarray, indices: np.ndarray, k: int) -> np.ndarray:
@@ -664,3 +691,67 @@ class SheetNeighbourhoods:
     def _csr(keep: np.ndarray, idx: np.ndarray) -> Neighbourhood:
         indptr = np.concatenate([[0], np.cumsum(keep.sum(axis=1))]).astype(np.int64)
         return Neighbourhood(indptr, idx[keep])
+
+
+# The rules on the noise ratio, as the native library states them (native/src/stages.c,
+# ms_noise_factor ... ms_stage_acute_tests): meshlab_sharp.robust runs these where the
+# library is not built.
+
+
+def noise_factor(noise: float) -> float:
+    """``min(max(1, (noise / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)``."""
+    ratio = noise / NOISE_TOLERATED
+    return min(max(1.0, ratio * ratio), NOISE_MAX_FACTOR)
+
+
+def grown_scale(k: int, factor: float) -> int:
+    """``k * factor`` rounded half up."""
+    return math.floor(k * factor + 0.5)
+
+
+def thin_knn(growth: float) -> int:
+    """``THIN_KNN`` grown by ``growth``, rounded half up."""
+    return grown_scale(THIN_KNN, growth)
+
+
+def quiet_cloud(mesh: bool, noise: float) -> bool:
+    """A cloud whose noise ratio is at most ``NOISE_QUIET``."""
+    return not (mesh or noise > NOISE_QUIET)
+
+
+def otsu_splits(mesh: bool, noise: float) -> bool:
+    """Not :func:`quiet_cloud`."""
+    return not quiet_cloud(mesh, noise)
+
+
+def scale_floor(counts: np.ndarray | None, last: bool, mesh: bool, noise: float) -> float:
+    """``R_MIN``; on the largest scale (``last``) of a cloud that is not quiet, at least
+    :func:`noise_floor` of that scale's histogram ``counts`` (B,) int."""
+    if not last or mesh or quiet_cloud(mesh, noise):
+        return R_MIN
+    return max(R_MIN, noise_floor(counts))
+
+
+def thin_cone(mesh: bool, noise: float) -> float:
+    """``THIN_CONE_COS_NOISY`` on a noisy cloud, else ``THIN_CONE_COS``."""
+    return THIN_CONE_COS if mesh or quiet_cloud(mesh, noise) else THIN_CONE_COS_NOISY
+
+
+def ranking_smoothed(mesh: bool, noise: float) -> bool:
+    """A cloud whose noise grew the scales to the cap."""
+    return not mesh and noise_factor(noise) == NOISE_MAX_FACTOR
+
+
+def support_free_score(mesh: bool, noise: float) -> float | None:
+    """``SUPPORT_FREE_SCORE`` on a quiet cloud, else None."""
+    return SUPPORT_FREE_SCORE if quiet_cloud(mesh, noise) else None
+
+
+def stage_acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
+    """On a quiet cloud the points not in ``mask`` whose ``score`` lies in
+    ``[ACUTE_SCORE, ACUTE_SCORE_MAX)``, (t,) int64 increasing; none otherwise."""
+    if not quiet_cloud(mesh, noise):
+        return np.zeros(0, np.int64)
+    score = np.asarray(score, np.float64)
+    test = ~np.asarray(mask, bool) & (score >= ACUTE_SCORE) & (score < ACUTE_SCORE_MAX)
+    return np.flatnonzero(test)

@@ -3,7 +3,8 @@
 ``detect(cloud, max_memory="1GB")`` (CLI ``--max-memory 1GB``) and ``detect(cloud,
 dask="local:2")`` (CLI ``--dask``) come here. The cloud is sorted into tiles
 (:mod:`.layout`) on disk (:mod:`.store`); each mode is a sequence of steps
-(:mod:`.steps`) run tile by tile (:mod:`.run`): local steps on each tile's exact
+(:mod:`.steps`, each the native library's stage that the in-memory run composes too)
+run tile by tile (:mod:`.run`): local steps on each tile's exact
 neighbourhoods (:mod:`.neighbours`, the halo proven wide enough per point) and
 pointwise steps, with the global quantities (min-max ranges, the 256-bin histograms
 that give Otsu's thresholds, counts) reduced exactly over the tiles. The result is the
@@ -38,7 +39,6 @@ from ..normals import DEFAULT_WEIGHTING
 from ..options import as_input, check_mode_and_weighting, check_scales
 from ..preprocessing import as_preprocessing
 from ..progress import Progress
-from ..threshold import FLAT_TOLERANCE, otsu_from_histogram
 from .cluster import cluster_failures, completed, connect
 from .curves import curves_out_of_core
 from .layout import build_layout
@@ -377,10 +377,10 @@ def _paper(
     store.create("strength", (n,), np.float64)
     query = Query(max(scales), scales=scales, weighting=weighting)
     ranges = runner.step(Step("distances", paper_distances, query, {"s": s}))
-    flat = FLAT_TOLERANCE * float(np.linalg.norm(layout.hi - layout.lo))
+    flat = _kernels.flat_span(layout.hi - layout.lo)
     norm = {"lo": ranges["pdis_min"], "hi": ranges["pdis_max"], "flat": flat}
     hist = runner.step(Step("histograms", paper_histograms, None, norm))["hist"]
-    thresholds = np.array([otsu_from_histogram(h) for h in hist])
+    thresholds = np.array([_kernels.stage_threshold(h, True, 0.0) for h in hist])
     decided = runner.step(Step("decide", paper_decide, None, {**norm, "thresholds": thresholds}))
     return thresholds, decided["counts"], "mask", None, scales
 
@@ -434,7 +434,7 @@ def _robust(
             runner.step(Step("pass kept", robust_pass, again, {"first": False}))
         hist = runner.step(Step("histograms", robust_histograms))["hist"]
     nu = order_statistic(runner, "ratio", "kept", (n_kept - 1) // 2)
-    factor = min(robust.noise_factor(nu), n_kept / top)
+    factor = _kernels.scale_growth(nu, n_kept, top)
     if factor > 1.0:  # the tiles are sized for one at a time at the grown scales
         runner.at_once = 1
         scales = robust.grown_scales(scales, factor)
@@ -443,7 +443,13 @@ def _robust(
         grown = Query(top, "kept", None, scales, **passes)
         hist = runner.step(Step("pass grown", robust_pass, grown, {"first": False}))["hist"]
     otsu = robust.otsu_splits(False, nu)
-    thresholds = np.array([robust.robust_threshold_from_histogram(h, otsu) for h in hist])
+    last = len(hist) - 1
+    thresholds = np.array(
+        [
+            _kernels.stage_threshold(h, otsu, robust.scale_floor(h, s == last, False, nu))
+            for s, h in enumerate(hist)
+        ]
+    )
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
     compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
     if robust.quiet_cloud(False, nu):  # robust.acute_tests: tips of acute edges

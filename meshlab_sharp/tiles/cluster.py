@@ -24,8 +24,13 @@ from ..io.scanner import library_message
 
 #: Seconds to reach a scheduler, and then to wait for its first worker, by default.
 DEFAULT_CONNECT_TIMEOUT = 30.0
-#: Seconds a run waits with no worker left (all lost) before it fails.
+#: Seconds a run waits with no worker left (all lost or silent) before it fails.
 WORKERLESS_PATIENCE = 30.0
+#: Seconds without a heartbeat after which a worker counts as lost for that wait (a
+#: stopped or frozen worker: the scheduler itself keeps one for its worker-ttl, 5
+#: minutes by default). Workers send one every 0.5 s in clusters of up to 10 workers,
+#: every few seconds in clusters of thousands.
+SILENT_WORKER = 30.0
 #: Most bytes of a scheduler's greeting (its handshake is a few hundred).
 _GREETING_MOST = 1 << 16
 _ADDRESS = re.compile(r"tcp://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):([0-9]{1,5})")
@@ -143,22 +148,32 @@ def completed(
     client: Any, futures: Sequence[Any], patience: float = WORKERLESS_PATIENCE
 ) -> Iterator[Any]:
     """``futures`` as they complete; a :class:`~meshlab_sharp.errors.ClusterError` once
-    the cluster has had no worker for ``patience`` seconds (the tasks of lost workers
-    run again on the others, or on workers that join in time)."""
+    the cluster has had no live worker for ``patience`` seconds (the tasks of lost
+    workers run again on the others, or on workers that join in time). A worker whose
+    heartbeat the scheduler has not seen change for :data:`SILENT_WORKER` seconds
+    (stopped, frozen) is not live."""
     distributed = require("dask.distributed", "--dask", "dask")
     pending = list(futures)
     alone_since: float | None = None
+    heard: dict[str, tuple[float, float]] = {}  # worker: (its last_seen, when it changed)
     while pending:
         try:
             done, rest = distributed.wait(pending, timeout=1.0, return_when="FIRST_COMPLETED")
         except TimeoutError:
-            if client.scheduler_info(n_workers=-1)["workers"]:
+            now = time.monotonic()
+            workers = client.scheduler_info(n_workers=-1)["workers"]
+            for name, info in workers.items():
+                seen = float(info.get("last_seen", 0.0))
+                if name not in heard or heard[name][0] != seen:
+                    heard[name] = (seen, now)  # the scheduler's clock: compared, not read
+            if any(now - heard[name][1] <= SILENT_WORKER for name in workers):
                 alone_since = None
             elif alone_since is None:
-                alone_since = time.monotonic()
-            elif time.monotonic() - alone_since > patience:
+                alone_since = now
+            elif now - alone_since > patience:
                 raise ClusterError(
-                    f"--dask: no worker left in the Dask cluster for {patience:g} s"
+                    f"--dask: no live worker in the Dask cluster for {patience:g} s "
+                    f"(every worker lost, or silent for {SILENT_WORKER:g} s)"
                 ) from None
             continue
         pending = list(rest)

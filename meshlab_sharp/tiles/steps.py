@@ -8,8 +8,15 @@ tiles: keys ending in ``_min``/``_max`` by minimum/maximum, the others by sum. B
 steps the reduced values (min-max ranges, the 256-bin histograms and so Otsu's
 thresholds) are fixed, exactly as the in-memory run computes them from all points.
 
-The arithmetic is the in-memory modules' own functions (:mod:`meshlab_sharp.threshold`,
-:mod:`meshlab_sharp.robust`) applied to the same values, never a copy of them.
+Every step's arithmetic is the native library's, the stages that ``ms_detect`` composes
+in memory (``native/src/stages.c``: histograms, the decision, the isolation and acute
+tests and robust mode's rules; the finishing kernels: acute tips, line directions and
+support, the smoothed ranking, thinning), called on the tile's points through
+:mod:`meshlab_sharp._kernels`. What is left here joins the tiles: reading and writing
+the store (the values of a point's neighbours in other tiles), the partials, and which
+kept points' pass runs again once isolated points are left out (:func:`robust_affected`,
+a question the in-memory run, which runs the pass again over every kept point, does
+not ask).
 """
 
 from __future__ import annotations
@@ -21,13 +28,15 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .. import robust
-from ..neighbourhoods import squared_distances
-from ..threshold import BINS, histogram
+from .. import _kernels, robust
+from .._kernels import CandidateLists, FinishRules
 from .neighbours import Context, Query
 from .store import Store
 
 Partial = dict[str, np.ndarray]
+#: Threads of a tile's finishing kernels (a few thousand candidates: milliseconds; the
+#: tiles themselves run side by side).
+TILE_THREADS = 1
 
 
 @dataclass(frozen=True)
@@ -89,25 +98,11 @@ def paper_distances(ctx: Context, *, s: int) -> Partial:
     return {"pdis_min": pdis.min(axis=0), "pdis_max": pdis.max(axis=0)}
 
 
-def _normalised(pdis: np.ndarray, lo: np.ndarray, hi: np.ndarray, flat: float) -> np.ndarray:
-    """:func:`meshlab_sharp.threshold.normalise` of each scale (column) with the global
-    ``lo``, ``hi``: the same expression, value by value."""
-    out = np.zeros_like(pdis)
-    for i in range(pdis.shape[1]):
-        lo_i, hi_i = float(lo[i]), float(hi[i])
-        if not hi_i - lo_i <= flat:
-            out[:, i] = (pdis[:, i] - lo_i) / (hi_i - lo_i)
-    return out
-
-
 def paper_histograms(span: Span, *, lo: np.ndarray, hi: np.ndarray, flat: float) -> Partial:
-    """256-bin histograms (s, B) of the normalised distances."""
-    return {"hist": _histograms(_normalised(span.read("pdis")[span.distinct], lo, hi, flat))}
-
-
-def _histograms(values: np.ndarray) -> np.ndarray:
-    """256-bin histograms (s, B) of the columns of ``values`` (m, s)."""
-    return np.stack([histogram(values[:, i], BINS) for i in range(values.shape[1])])
+    """The histograms (s, BINS) of the distances normalised with the global ``lo``,
+    ``hi`` and ``flat`` (``ms_stage_histograms``)."""
+    pdis = span.read("pdis")[span.distinct]
+    return {"hist": _kernels.stage_histograms(pdis, (lo, hi, flat))}
 
 
 def paper_decide(
@@ -115,16 +110,22 @@ def paper_decide(
 ) -> Partial:
     """Candidates at every scale: ``mask`` and ``strength``; candidates per scale."""
     d = span.distinct
-    candidate = _normalised(span.read("pdis")[d], lo, hi, flat) >= thresholds
-    return _decided(span, d, candidate)
+    return _decided(span, d, span.read("pdis")[d], thresholds, (lo, hi, flat))
 
 
-def _decided(span: Span, d: np.ndarray, candidate: np.ndarray) -> Partial:
-    votes = candidate.sum(axis=1)
-    s = candidate.shape[1]
-    span.store.write_at("mask", span.a + d, votes == s)
-    span.store.write_at("strength", span.a + d, votes / float(s))
-    return {"counts": candidate.sum(axis=0).astype(np.int64)}
+def _decided(
+    span: Span,
+    d: np.ndarray,
+    values: np.ndarray,
+    thresholds: np.ndarray,
+    norm: _kernels.Normalisation = None,
+) -> Partial:
+    """The decision (``ms_stage_decide``) of the span's points ``d`` by their ``values``
+    (m, s): ``mask``, ``strength``; the candidates per scale."""
+    feature, strength, counts = _kernels.stage_decide(values, thresholds, norm)
+    span.store.write_at("mask", span.a + d, feature)
+    span.store.write_at("strength", span.a + d, strength)
+    return {"counts": counts}
 
 
 # ---------------------------------------------------------------------------- robust
@@ -152,28 +153,32 @@ def robust_pass(ctx: Context, *, first: bool) -> Partial:
     store.write_at("ratio", ctx.own, found["noise"])
     store.write_at("r", ctx.own, r)
     store.write_at("score", ctx.own, found["score"])
-    return {"hist": _histograms(r)}
+    return {"hist": _kernels.stage_histograms(r)}
 
 
 def robust_isolated(span: Span) -> Partial:
-    """:func:`meshlab_sharp.robust.isolated_points`: ``i`` is isolated when it is not
-    among the k nearest of its nearest ``j``, i.e. when ``(d2(j, i), i)`` comes after
-    ``j``'s k-th neighbour in the (squared distance, index) order, or when its ``nd2``
-    exceeds ``ISOLATED_SPREAD**2`` times its k-th neighbour's ``rd2``. Writes ``kept``; the
-    isolated points' coordinates (``lone_cat``)."""
+    """``ms_stage_isolated`` (:func:`meshlab_sharp.robust.isolated_points`) of the
+    span's distinct points, with their nearest's values read wherever it lies: ``i`` is
+    isolated when it is not among the k nearest of its nearest ``j`` (``(d2(j, i), i)``
+    after ``j``'s k-th neighbour in the (squared distance, index) order), or when its
+    ``nd2`` exceeds ``ISOLATED_SPREAD**2`` times its k-th neighbour's ``rd2``. Writes
+    ``kept``; the isolated points' coordinates (``lone_cat``)."""
     d = span.distinct
-    pos = span.a + d
     store = span.store
     nn = store.read("nn1", span.a, span.b)[d]
     coords = span.read("coords")[d]
-    d2 = squared_distances(coords, store.read_at("coords", nn))
-    kd2, kid = store.read_at("kd2", nn), store.read_at("kid", nn)
-    inside = (d2 < kd2) | ((d2 == kd2) & (span.read("ids")[d] <= kid))
-    spread2 = robust.ISOLATED_SPREAD * robust.ISOLATED_SPREAD
-    inside &= store.read("nd2", span.a, span.b)[d] <= spread2 * store.read_at(
-        "rd2", store.read("kpos", span.a, span.b)[d]
+    isolated = _kernels.stage_isolated(
+        coords,
+        store.read_at("coords", nn),
+        store.read_at("kd2", nn),
+        store.read_at("kid", nn),
+        span.read("ids")[d],
+        span.read("nd2")[d],
+        store.read_at("rd2", span.read("kpos")[d]),
+        robust.ISOLATED_SPREAD,
     )
-    store.write_at("kept", pos, inside)
+    inside = ~isolated
+    store.write_at("kept", span.a + d, inside)
     return {"isolated": np.array(int((~inside).sum())), "lone_cat": coords[~inside]}
 
 
@@ -197,14 +202,14 @@ def robust_affected(span: Span, *, lone: np.ndarray) -> Partial:
 def robust_histograms(span: Span) -> Partial:
     """The histograms of ``r`` over the kept distinct points."""
     d = span.distinct
-    return {"hist": _histograms(span.read("r")[d[span.read("kept")[d]]])}
+    return {"hist": _kernels.stage_histograms(span.read("r")[d[span.read("kept")[d]]])}
 
 
 def robust_decide(span: Span, *, thresholds: np.ndarray) -> Partial:
     """Candidates at every scale (``mask``), strength, candidates per scale."""
     d = span.distinct
     d = d[span.read("kept")[d]]
-    return _decided(span, d, span.read("r")[d] >= thresholds)
+    return _decided(span, d, span.read("r")[d], thresholds)
 
 
 def robust_acute_tests(span: Span, *, noise: float) -> Partial:
@@ -218,9 +223,10 @@ def robust_acute_tests(span: Span, *, noise: float) -> Partial:
 
 
 def robust_acute_tips(ctx: Context, *, compare: int) -> Partial:
-    """:func:`meshlab_sharp.robust.acute_tips` of the rows (the points tested) among the
-    candidates ``mask`` of their ``compare`` nearest: writes ``tip``."""
-    tips = robust.acute_tips(ctx.points, ctx.gather("mask"), ctx.rows, ctx.lists(compare))
+    """``ms_acute_tips`` (:func:`meshlab_sharp.robust.acute_tips`) of the rows (the points
+    tested) among the candidates ``mask`` of their ``compare`` nearest: writes ``tip``."""
+    near = CandidateLists.knn(ctx.idx, compare)
+    tips = _kernels.acute_tips(ctx.points, ctx.gather("mask"), ctx.rows, near, TILE_THREADS)
     ctx.store.write_at("tip", ctx.own, tips)
     return {}
 
@@ -231,47 +237,59 @@ def robust_acute_join(span: Span) -> Partial:
     return {}
 
 
-def robust_support(ctx: Context, *, top: int, around: int, noise: float) -> Partial:
-    """The rows' line directions (:func:`meshlab_sharp.robust.line_directions`, to
-    ``e``) and :func:`meshlab_sharp.robust.supported` (to ``mask1``), exempting
-    :func:`meshlab_sharp.robust.support_exempt` of the cloud's noise ratio ``noise``."""
-    mask = ctx.gather("mask")
-    e = robust.line_directions(ctx.points, mask, ctx.lists(top))
-    out = robust.supported(
-        ctx.points,
-        mask,
-        e,
-        ctx.lists(around),
-        robust.SUPPORT_MIN,
-        cone_cos=robust.THIN_CONE_COS,
-        exempt=robust.support_exempt(ctx.gather("score"), False, noise),
+def _rules(noise: float, candidates: np.ndarray | None = None) -> FinishRules:
+    """Robust mode's finishing rules on a cloud of noise ratio ``noise`` (the library's:
+    :func:`meshlab_sharp.robust.support_free_score`, ``thin_cone``, ``thin_blockers`` of
+    the ``candidates`` when given)."""
+    between = None if candidates is None else robust.thin_blockers(candidates, False, noise)
+    return FinishRules(
+        support_cone=robust.THIN_CONE_COS,
+        minimum=robust.SUPPORT_MIN,
+        free_below=robust.support_free_score(False, noise),
+        thin_cone=robust.thin_cone(False, noise),
+        window=0,
+        between=between,
     )
-    ctx.store.write_at("e", ctx.own, e[ctx.rows])
+
+
+def robust_support(ctx: Context, *, top: int, around: int, noise: float) -> Partial:
+    """The rows' line directions over their ``top`` nearest (to ``e``) and support over
+    their ``around`` nearest (to ``mask1``), ``ms_line_directions`` and ``ms_supported``
+    (:func:`meshlab_sharp._kernels.line_support`) by the rules of the cloud's noise ratio
+    ``noise``."""
+    lists = (CandidateLists.knn(ctx.idx, top), CandidateLists.knn(ctx.idx, around))
+    e, out, _ = _kernels.line_support(
+        ctx.points, ctx.gather("mask"), ctx.gather("score"), ctx.rows, lists, _rules(noise),
+        TILE_THREADS,
+    )  # fmt: skip
+    ctx.store.write_at("e", ctx.own, e)
     ctx.store.write_at("mask1", ctx.own, out[ctx.rows])
     return {}
 
 
 def robust_rank(ctx: Context, *, compare: int) -> Partial:
-    """:func:`meshlab_sharp.robust.smoothed_ranking` of the rows over the first
-    ``THIN_KNN`` of their ``compare`` nearest (to ``rank``)."""
-    rank = robust.smoothed_ranking(ctx.gather("score"), ctx.lists(compare), robust.THIN_KNN)
+    """``ms_smoothed_ranking`` of the rows over the first ``THIN_KNN`` of their
+    ``compare`` nearest (to ``rank``)."""
+    near = CandidateLists.knn(ctx.idx, compare)
+    score = ctx.gather("score")
+    rank = _kernels.smoothed_ranking(score, ctx.rows, near, robust.THIN_KNN, TILE_THREADS)
     ctx.store.write_at("rank", ctx.own, rank[ctx.rows])
     return {}
 
 
 def robust_thin(ctx: Context, *, compare: int, noise: float, ranking: str) -> Partial:
-    """:func:`meshlab_sharp.robust.thin` of the rows by the store array ``ranking``
-    (``score``, or ``rank`` where :func:`meshlab_sharp.robust.ranking_smoothed`), blocked
-    by :func:`meshlab_sharp.robust.thin_blockers` of the cloud's noise ratio ``noise``,
-    in the cone :func:`meshlab_sharp.robust.thin_cone` of it; writes ``final``."""
-    out = robust.thin(
+    """``ms_thin`` of the rows by the store array ``ranking`` (``score``, or ``rank``
+    where :func:`meshlab_sharp.robust.ranking_smoothed`) over their ``compare`` nearest,
+    by the rules of the cloud's noise ratio ``noise``; writes ``final``."""
+    out = _kernels.thin_candidates(
         ctx.points,
         ctx.gather("mask1"),
+        ctx.rows,
+        ctx.gather("e")[ctx.rows],
+        CandidateLists.knn(ctx.idx, compare),
         ctx.gather(ranking),
-        ctx.gather("e"),
-        ctx.lists(compare),
-        cone_cos=robust.thin_cone(False, noise),
-        between=robust.thin_blockers(ctx.gather("mask"), False, noise),
+        _rules(noise, ctx.gather("mask")),
+        TILE_THREADS,
     )
     ctx.store.write_at("final", ctx.own, out[ctx.rows])
     return {}

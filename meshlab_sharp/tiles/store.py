@@ -14,10 +14,14 @@ import re
 import shutil
 import socket
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from ..errors import ScratchError
 
 #: :meth:`Store.write_at` writes fewer runs of consecutive rows than this (or than an
 #: eighth of the rows) one by one.
@@ -98,12 +102,29 @@ class Store:
         """:meth:`path` as a string (many calls: no Path object)."""
         return os.path.join(self.root, f"{name}.bin")
 
+    @contextmanager
+    def _writing(self) -> Iterator[None]:
+        """A failed write of the scratch arrays (a full disk, a file size limit) as a
+        :class:`~meshlab_sharp.errors.ScratchError` naming the scratch folder's place."""
+        try:
+            yield
+        except OSError as exc:
+            where = os.path.dirname(os.path.abspath(self.root))
+            raise ScratchError(
+                f"cannot write the tiles' scratch arrays in {where}: {exc.strerror or exc} "
+                "(--scratch DIR or TMPDIR chooses the folder)"
+            ) from None
+
     def create(self, name: str, shape: tuple[int, ...], dtype: np.dtype | str) -> None:
-        """A new array of zeros (a sparse file)."""
+        """A new array of zeros, its disk space reserved: a full disk fails here, not
+        later in a write through a map of the file (which would end the process with
+        SIGBUS)."""
         dt = np.dtype(dtype)
         size = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
-        with open(self._file(name), "wb") as f:
+        with self._writing(), open(self._file(name), "wb") as f:
             f.truncate(size)
+            if size and hasattr(os, "posix_fallocate"):  # not on macOS
+                os.posix_fallocate(f.fileno(), 0, size)
         self.arrays[name] = (tuple(int(s) for s in shape), dt.str)
 
     def _map(self, name: str, mode: str) -> np.ndarray:
@@ -140,7 +161,7 @@ class Store:
                 f"{name}: rows {start}:{start + len(data)} of shape {data.shape[1:]} "
                 f"do not fit an array of shape {shape}"
             )
-        with open(self._file(name), "r+b") as f:
+        with self._writing(), open(self._file(name), "r+b") as f:
             _pwrite(f.fileno(), start * self._row_bytes(name), _bytes(data))
 
     def write_at(self, name: str, rows: np.ndarray, values: np.ndarray) -> None:
@@ -159,14 +180,15 @@ class Store:
         if len(cuts) < max(RUNS, len(rows) // 8) and rows[0] >= 0 and rows[-1] < shape[0]:
             data = _bytes(np.ascontiguousarray(values, np.dtype(dtype)))
             row = self._row_bytes(name)
-            with open(self._file(name), "r+b") as f:
+            with self._writing(), open(self._file(name), "r+b") as f:
                 for a, b in zip([0, *cuts], [*cuts, len(rows)], strict=True):
                     _pwrite(f.fileno(), int(rows[a]) * row, data[a * row : b * row])
             return
-        m = self._map(name, "r+")
-        m[rows] = values
-        m.flush()
-        del m
+        with self._writing():
+            m = self._map(name, "r+")
+            m[rows] = values
+            m.flush()
+            del m
 
     def _row_bytes(self, name: str) -> int:
         """Bytes of one row of array ``name``."""
@@ -180,7 +202,8 @@ class Store:
 
     def put(self, name: str, key: int, values: np.ndarray) -> None:
         """A per-tile array (not per point): ``values`` under ``name`` and ``key``."""
-        np.save(Path(self.root) / f"{name}-{key}.npy", values, allow_pickle=False)
+        with self._writing():
+            np.save(Path(self.root) / f"{name}-{key}.npy", values, allow_pickle=False)
 
     def get(self, name: str, key: int) -> np.ndarray:
         """The array :meth:`put` saved under ``name`` and ``key``."""

@@ -30,6 +30,11 @@
 #define MS_MIN_KNN_SCALE 2
 #define MS_MIN_RING_SCALE 1
 #define MS_MAX_SCALES 64
+/* The largest scales, refused before any work (ms_detect, the command line): k nearest
+ * neighbours (lists of k neighbours per point and scale) and rings (a k-ring's
+ * neighbourhoods grow with k squared: ring 32 of a 25,000-vertex mesh takes about 20 s). */
+#define MS_MAX_KNN_SCALE 512
+#define MS_MAX_RING_SCALE 32
 /* Default options, as indices into the lists the plugin's enums and Python share:
  * modes 0 paper, 1 robust (pipeline.MODES); weightings 0 gaussian, 1 none
  * (normals.WEIGHTINGS). */
@@ -65,10 +70,24 @@
 #define MS_UNIT_RANGE 100
 /* Robust mode (robust.py, creases.py; docs/method.md). */
 #define MS_CREASE_ANGLE 20.0
+/* Robust mode's threshold floor (robust.R_MIN): r on a straight edge turning by
+ * MS_CREASE_ANGLE with a disc-shaped neighbourhood, (2 / pi) sin(MS_CREASE_ANGLE / 2),
+ * to the nearest double. */
+#define MS_R_MIN 0.11054786333836651
 #define MS_NOISE_FACTOR (4.0 / 0.3186)
 #define MS_NOISE_KNN 7
 #define MS_NOISE_TOLERATED 0.15
 #define MS_NOISE_MAX_FACTOR 3.0
+/* On a cloud whose noise ratio exceeds MS_NOISE_QUIET, the largest scale's threshold is
+ * at least this many times the median of its relative distances (robust.scale_floor,
+ * ms_noise_floor): the noise that lifts a point's r at one scale lifts it at every
+ * scale, and on a part with few edges Otsu's split lies below R_MIN, so 13-15 % of a
+ * noisy cylinder's points passed the floor at every scale. */
+#define MS_NOISE_FLOOR 3.0
+/* ... but never above this (about the r of an edge turning by 40 degrees, twice the
+ * crease angle): where the largest scale spans much of a small cloud, most points see
+ * an edge and the median is no longer the flat points' noise. */
+#define MS_NOISE_FLOOR_MAX 0.22
 /* At most this median noise ratio, a cloud is thresholded at the floor alone
  * (robust.otsu_splits). */
 #define MS_NOISE_QUIET 0.05
@@ -168,6 +187,8 @@
 #define MS_CURVE_SPUR_PIECE (2.0 * MS_CURVE_GAP_LENGTH)
 #define MS_CURVE_MAX_FLAT_SHARE 0.5
 #define MS_CURVE_CELL_SPACINGS 4.0
+#define MS_CURVE_DENSITY_NEIGHBOURS 8
+#define MS_CURVE_DENSITY_SCALE 0.45
 #define MS_CURVE_MIN_ADVANCE 0.3
 /* Vertices on each side. */
 #define MS_CURVE_LINE_FIT_HALF 2
@@ -504,6 +525,69 @@ void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const doub
 void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
                    const ms_lists_t *lists, int64_t begin, int64_t end, uint8_t *out);
 
+/* Robust mode's rules on a cloud's noise ratio `noise` (the lower median of the pass's
+ * per-point ratios; 0 on a mesh, mesh = 1), the one definition of each (robust.py binds
+ * them). ms_noise_factor: the scales' growth, min(max(1, (noise / MS_NOISE_TOLERATED)^2),
+ * MS_NOISE_MAX_FACTOR); ms_scale_growth: that factor for a cloud of n points (isolated
+ * ones left out) at largest scale top, at most n / top (the largest grown scale stays
+ * within the cloud; above 1, the scales grow). ms_grown_scale: k * factor rounded half up.
+ * ms_thin_knn: thinning's comparison list on a cloud, MS_THIN_KNN grown by `growth` (1:
+ * not grown). ms_quiet_cloud: a cloud whose noise is at most MS_NOISE_QUIET, thresholded
+ * at the floor alone; ms_otsu_splits its negation. ms_thin_cone: thinning's cone,
+ * MS_THIN_CONE_COS_NOISY on a noisy cloud, else MS_THIN_CONE_COS. ms_ranking_smoothed:
+ * thinning ranks by ms_smoothed_ranking, on a cloud whose noise grew the scales to the
+ * cap. ms_support_free_score: 1 and *score = MS_SUPPORT_FREE_SCORE on a quiet cloud (a
+ * candidate scoring below it needs no support), else 0 (*score untouched). */
+double ms_noise_factor(double noise);
+double ms_scale_growth(double noise, int64_t n, int top);
+int ms_grown_scale(int k, double factor);
+int ms_thin_knn(double growth);
+int ms_quiet_cloud(int mesh, double noise);
+int ms_otsu_splits(int mesh, double noise);
+double ms_thin_cone(int mesh, double noise);
+int ms_ranking_smoothed(int mesh, double noise);
+int ms_support_free_score(int mesh, double noise, double *score);
+/* ms_scale_floor (robust.scale_floor): the floor of a scale's threshold, MS_R_MIN; on the
+ * largest scale (last) of a cloud that is not quiet (ms_quiet_cloud), at least
+ * ms_noise_floor(counts) of that scale's histogram (MS_BINS; not read otherwise). */
+double ms_scale_floor(const int64_t *counts, int last, int mesh, double noise);
+
+/* The pointwise stages of a cloud's sequence (stages.c), over the points [begin, end):
+ * ms_detect runs them over every point, the out-of-core path over each tile's points and
+ * sums their partials. ms_flat_span: paper mode's flat span, MS_FLAT_TOLERANCE times the
+ * diagonal of the bounding box whose sides are extent (3; ms_extent's). Point i's value at
+ * scale s (s < MS_MAX_SCALES of them) is x[i * point_stride + s * scale_stride]; with lo
+ * not NULL, min-max normalised as ms_scale_vote normalises it with the global lo[s], hi[s]
+ * (s each) and flat_span. ms_stage_histograms: adds each scale's MS_BINS-bin histogram
+ * (ms_scale_vote's bins) to counts (s, MS_BINS). ms_stage_threshold: a scale's threshold
+ * from its summed histogram, max(Otsu's split, floor_) with `otsu`, floor_ without
+ * (ms_scale_vote's T). ms_stage_decide: with the global thresholds (s), the votes v >= T
+ * of each point: feature (all s), strength (votes / s), each scale's candidates added
+ * to counts (s), and v into out (x's layout) when out is not NULL.
+ * ms_stage_acute_tests (robust.acute_tests): on a quiet cloud (ms_quiet_cloud),
+ * tested[i] = not feature[i] and score[i] in [MS_ACUTE_SCORE, MS_ACUTE_SCORE_MAX); returns
+ * how many (0, tested untouched, otherwise). */
+double ms_flat_span(const double *extent);
+void ms_stage_histograms(const double *x, int64_t point_stride, int64_t scale_stride, int s,
+                         int64_t begin, int64_t end, const double *lo, const double *hi,
+                         double flat_span, int64_t *counts);
+double ms_stage_threshold(const int64_t *counts, int otsu, double floor_);
+void ms_stage_decide(const double *x, int64_t point_stride, int64_t scale_stride, int s,
+                     int64_t begin, int64_t end, const double *lo, const double *hi,
+                     double flat_span, const double *thresholds, uint8_t *feature,
+                     double *strength, int64_t *counts, double *out);
+int64_t ms_stage_acute_tests(const double *score, const uint8_t *feature, int64_t begin,
+                             int64_t end, int mesh, double noise, uint8_t *tested);
+/* ms_isolated's test of the rows [begin, end) whose values are gathered per row (a tile's
+ * points, their nearest anywhere in the cloud): out[r] = 1 when the point a[r] (3; index
+ * idx[r] in the lists' order) is not among the kmax nearest of its nearest b[r] (3), whose
+ * kmax-th neighbour has squared distance kth_d2[r] and index kth_idx[r], or when its
+ * nth_d2[r] > spread^2 * far_d2[r] (the ref_d2 of its own kmax-th neighbour). */
+void ms_stage_isolated(const double *a, const double *b, const double *kth_d2,
+                       const int64_t *kth_idx, const int64_t *idx, const double *nth_d2,
+                       const double *far_d2, double spread, int64_t begin, int64_t end,
+                       uint8_t *out);
+
 /* Thresholds, the global steps of every path (docs/contributing.md,
  * "Normalisation and Otsu"; threshold.py is the numpy reference).
  * ms_extent: max - min of each coordinate of the finite points p (n, 3) into out (3)
@@ -514,8 +598,13 @@ void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
  * min(floor(v * MS_BINS), MS_BINS - 1); the split's integer form of the notes, the first
  * largest wins; 1.0 when no split has points on both sides), floor_) with `otsu`, floor_
  * without (no histogram; robust.robust_threshold); then votes[i] += v[i] >= T, the number
- * of such points into *count, and v into out when out is not NULL. Returns T. */
+ * of such points into *count, and v into out when out is not NULL. Returns T.
+ * ms_noise_floor: the least of MS_NOISE_FLOOR * (b + 1) / MS_BINS, b the bin of the
+ * lower median of the MS_BINS counts (the first bin whose cumulative count exceeds
+ * (total - 1) / 2), and MS_NOISE_FLOOR_MAX; 0 when every count is 0
+ * (ms_scale_floor). */
 void ms_extent(const double *p, int64_t n, double *out);
+double ms_noise_floor(const int64_t *counts);
 double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
                      double floor_, double *out, int64_t *votes, int64_t *count);
 
@@ -568,8 +657,10 @@ typedef struct ms_detection ms_detection;
 void ms_detect_defaults(ms_detect_options *opt);
 /* Detect the sharp features of the n vertices xyz (n, 3) and, unless faces is NULL, m is 0
  * or opt->as_points, of the mesh of the m triangles faces (m, 3) (0-based indices below
- * n); opt NULL: the defaults. On MS_OK *out holds the results; otherwise *out is NULL and
- * err (errlen bytes, NUL-terminated, may be NULL) the message. */
+ * n); opt NULL: the defaults. The scales it uses (rings of a mesh, k of points) above
+ * MS_MAX_RING_SCALE or MS_MAX_KNN_SCALE are MS_EINPUT ("rings must be <= 32, got 40").
+ * On MS_OK *out holds the results; otherwise *out is NULL and err (errlen bytes,
+ * NUL-terminated, may be NULL) the message. */
 int ms_detect(const double *xyz, int64_t n, const int64_t *faces, int64_t m,
               const ms_detect_options *opt, ms_progress_fn progress, void *progress_ctx,
               ms_detection **out, char *err, int errlen);

@@ -1178,9 +1178,11 @@ std::vector<Piece> skeletonPieces(long n, const std::vector<Edge> &edges, const 
 	return pieces;
 }
 
+// the skeleton of the feature vertices rest (those away from the sharp edges); the
+// spacing around all the features mask
 std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<std::array<int, 3>> &faces,
                               const std::vector<char> &mask, const std::vector<long> &feat,
-                              const std::vector<Vec3> &fp, double &spacing)
+                              const std::vector<Vec3> &fp, const std::vector<char> &rest, double &spacing)
 {
 	spacing = 0.0;
 	std::vector<std::array<int, 3>> near;
@@ -1233,7 +1235,7 @@ std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<st
 	std::vector<double> w;
 	for (size_t i = 0; i < edges.size(); ++i) {
 		const long a = node[edges[i][0]], b = node[edges[i][1]];
-		if (a >= 0 && b >= 0) local.push_back({a, b}), w.push_back(weights[i]);
+		if (a >= 0 && b >= 0 && rest[edges[i][0]] && rest[edges[i][1]]) local.push_back({a, b}), w.push_back(weights[i]);
 	}
 	return skeletonPieces(long(feat.size()), local, w, fp, spacing, feat);
 }
@@ -1459,10 +1461,30 @@ std::vector<long> advancing(const std::vector<Vec3> &p, const std::vector<Vec3> 
 	return keep;
 }
 
+// cloud_spacing: the median distance d from a feature to the nearest other point; where
+// DENSITY_SCALE times the median distance to the DENSITY_NEIGHBOURS-th nearest is
+// q d with q > 1, the cloud is irregular and the spacing d q^1.5
+double cloudSpacing(const KdTree &tree, const std::vector<Vec3> &fp, bool &irregular)
+{
+	const size_t k = std::min<size_t>(MS_CURVE_DENSITY_NEIGHBOURS + 1, tree.size());
+	std::vector<double> d1(fp.size()), dk(fp.size());
+	for (size_t i = 0; i < fp.size(); ++i) {
+		const auto hits = tree.query(fp[i], k);
+		d1[i] = std::sqrt(hits[1].first);
+		dk[i] = std::sqrt(hits[k - 1].first);
+	}
+	const double nearest = median(d1);
+	const double density = MS_CURVE_DENSITY_SCALE * median(dk);
+	irregular = nearest > 0.0 && density > nearest;
+	if (!irregular) return nearest;
+	const double q = density / nearest;
+	return nearest * (q * std::sqrt(q));
+}
+
 std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<char> &mask,
                                const std::vector<char> &ok, const std::vector<long> &feat,
                                const std::vector<Vec3> &fp, const std::array<Vec3, 2> *bounds,
-                               const ms_curves_math &math, double &spacing)
+                               const ms_curves_math &math, double &spacing, bool &irregular)
 {
 	const KdTree fpTree(fp);
 	std::vector<double> d1(fp.size());
@@ -1474,8 +1496,7 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	std::vector<char> nearFeature;
 	for (long i : near) nearPts.push_back(pts[i]), nearFeature.push_back(mask[i]);
 	const KdTree tree(nearPts);
-	for (size_t i = 0; i < fp.size(); ++i) d1[i] = std::sqrt(tree.query(fp[i], 2)[1].first);
-	spacing = median(d1);
+	spacing = cloudSpacing(tree, fp, irregular);
 	// cloud_graph
 	const long n = long(fp.size());
 	const size_t k = std::min<size_t>(MS_CURVE_LINK_NEIGHBOURS + 1, fp.size());
@@ -1732,13 +1753,18 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	std::vector<Piece> pieces;
 	double spacing = 0.0;
 	std::unique_ptr<MeshPaths> paths;
+	CreaseChains creases;
+	bool irregular = false;
 	if (faces.empty()) {
 		std::vector<char> mask(n);
 		for (size_t i = 0; i < n; ++i) mask[i] = feature[i] != 0;
-		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing);
+		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing, irregular);
 	} else {
-		pieces = meshPieces(pts, faces, both, feat, fp, spacing);
-		paths.reset(new MeshPaths(pts, faces, both));
+		std::vector<char> usable(n, 0);
+		for (long v : feat) usable[v] = 1;
+		creases = creaseChains(pts, faces, both, usable, math);
+		pieces = meshPieces(pts, faces, both, feat, fp, creases.rest, spacing);
+		paths.reset(new MeshPaths(pts, faces, creases.rest));
 	}
 	if (spacing <= 0) return result;
 	result.spacing = spacing;
@@ -1750,13 +1776,32 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 		return mid;
 	};
 	const Bridge *bridge = paths ? &bridgeFn : nullptr;
-	pieces = dropShort(cutAll(pieces, spacing, math), spacing);
+	pieces = cutAll(pieces, spacing, math);
+	// the short pieces are dropped before joining, but on an irregular cloud, where the
+	// sampling's gaps cut an edge's features into short pieces: they join first
+	if (!irregular) pieces = dropShort(pieces, spacing);
 	pieces = dropShort(joinPieces(pieces, spacing, bridge), spacing);
 	pieces = joinPieces(pieces, spacing, bridge);
 	pieces = cutAll(pieces, spacing, math);
 	pieces = splitAtTouches(pieces, spacing);
 	if (!paths) pieces = dropIsolated(pieces, spacing);
 	pieces = corners(pieces, spacing, pts, paths.get(), result);
+	if (!creases.chains.empty()) {  // the mesh's sharp edges, and their corners
+		for (size_t i = 0; i < creases.chains.size(); ++i) {
+			Piece pc;
+			pc.closed = creases.closed[i] != 0;
+			for (long v : creases.chains[i]) pc.nodes.push_back(v), pc.points.push_back(pts[v]);
+			pieces.push_back(pc);
+		}
+		std::vector<std::pair<Vec3, long>> all;
+		for (size_t i = 0; i < result.corners.size(); ++i) all.push_back({result.corners[i], result.cornerIndices[i]});
+		for (long v : creases.corners) all.push_back({pts[v], v});
+		std::stable_sort(all.begin(), all.end(), [](const std::pair<Vec3, long> &a, const std::pair<Vec3, long> &b) {
+			return lexLess(a.first, b.first);
+		});
+		result.corners.clear(), result.cornerIndices.clear();
+		for (const auto &c : all) result.corners.push_back(c.first), result.cornerIndices.push_back(c.second);
+	}
 	for (const Piece &pc : pieces)
 		if (pc.points.size() >= 2) result.curves.push_back(finalCurve(pc));
 	std::stable_sort(result.curves.begin(), result.curves.end(), [](const Curve &a, const Curve &b) {

@@ -46,6 +46,22 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
                      const std::array<Vec3, 2> *bounds = nullptr,
                      const ms_curves_math *math = nullptr);
 
+// The chains of a mesh's sharp edges (curves_mesh.cpp; reference/curves/mesh.py): the
+// edges whose two faces turn by more than the detection's crease threshold, on the creases
+// the detection saw (a sharp edge between two usable vertices), cut at their corners.
+struct CreaseChains {
+	std::vector<std::vector<long>> chains;  // mesh vertices, in the order traced
+	std::vector<char> closed;               // per chain: a loop (the first vertex not repeated)
+	std::vector<long> corners;              // three or more chains meet, or a chain turns; ascending
+	std::vector<char> rest;                 // the feature vertices left to the skeleton
+};
+
+// mask: the (valid) feature vertices; usable: those that may be curve vertices (one per
+// distinct position); math: acos for the dihedral angles.
+CreaseChains creaseChains(const std::vector<Vec3> &pts, const std::vector<std::array<int, 3>> &faces,
+                          const std::vector<char> &mask, const std::vector<char> &usable,
+                          const ms_curves_math &math);
+
 }  // namespace sharp
 
 #endif

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <cstring>
+#include <memory>
 #include <new>
 #include <stdexcept>
 #include <vector>
@@ -55,10 +56,10 @@ int extract(const double *vertices, const uint8_t *feature, const uint8_t *valid
 		box[0] = {bounds[0], bounds[1], bounds[2]};
 		box[1] = {bounds[3], bounds[4], bounds[5]};
 	}
-	ms_curves *c = new ms_curves;
+	std::unique_ptr<ms_curves> c(new ms_curves);  // freed when an allocation below fails
 	c->result = sharp::extractCurves(pts, feat, ok, tri, bounds != nullptr ? &box : nullptr, math);
 	for (const sharp::Curve &curve : c->result.curves) c->vertices += int64_t(curve.points.size());
-	*out = c;
+	*out = c.release();
 	return MS_CURVES_OK;
 }
 

@@ -28,9 +28,8 @@
 namespace sharp {
 namespace {
 
-// robust.R_MIN: r on a straight edge turning by CREASE_ANGLE, (2 / pi) sin(CREASE_ANGLE / 2),
-// with math.radians's arithmetic.
-const double R_MIN = (2.0 / M_PI) * std::sin((MS_CREASE_ANGLE / 2.0) * (M_PI / 180.0));
+// Robust mode's threshold floor (the header's MS_R_MIN).
+const double R_MIN = MS_R_MIN;
 
 using Index = int64_t;
 
@@ -657,8 +656,8 @@ void toCleanedRows(const std::vector<Index> &orig, Buffer<double> &rows, int wid
 	}
 }
 
-// Decision's details kept for S scales of n points: the distances written by vote(), the
-// normals moved from the pass's.
+// Decision's details kept for S scales of n points: the distances written by vote() or
+// stageDecision(), the normals moved from the pass's.
 void keepDetails(Decision &d, bool details, size_t S, Index n, Buffer<double> &normals) {
 	if (!details) return;
 	d.distances.resize(S * n);
@@ -690,6 +689,54 @@ void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 		d.strength[i] = double(votes[i]) / double(S);
 		d.feature[i] = votes[i] == int64_t(S);
 	}
+}
+
+// The pointwise stages (stages.c) over the n points' values x, scale s at x[s * n ...], in
+// the order `order` maps to the cleaned points (empty: that order): each scale's threshold
+// from the histograms summed over chunks of points on every core (ms_stage_threshold:
+// with otsu, Otsu's split, never below floor, or with noise >= 0 below robust mode's floor
+// of a cloud of that noise ratio, ms_scale_floor; lo, hi and flatSpan: ms_stage_histograms'
+// normalisation), then the decision (ms_stage_decide); thresholds and candidates to r,
+// strength and feature (in the cleaned order) to d; with values not null, the values the
+// thresholds split (S, n; x's order: normalised with lo, else x's) into values.
+void stageDecision(const double *x, Index n, size_t S, const double *lo, const double *hi, double flatSpan, bool otsu,
+                   double floor, const std::vector<Index> &order, Decision &d, Result &r, double noise = -1.0,
+                   double *values = nullptr) {
+	const Index count = (n + MS_CHUNK - 1) / MS_CHUNK;
+	const int s = int(S);
+	std::vector<int64_t> counts(otsu ? size_t(count) * S * MS_BINS : 0, 0);
+	if (otsu)
+		eachIndex(count, [&](Index u) {
+			ms_stage_histograms(x, 1, n, s, u * MS_CHUNK, std::min(n, (u + 1) * MS_CHUNK), lo, hi, flatSpan,
+			                    &counts[size_t(u) * S * MS_BINS]);
+		});
+	std::vector<double> thresholds(S);
+	for (Index u = 1; u < count && otsu; ++u)  // the chunks' histograms summed into the first's
+		for (size_t b = 0; b < S * MS_BINS; ++b) counts[b] += counts[size_t(u) * S * MS_BINS + b];
+	for (size_t k = 0; k < S; ++k) {  // noise >= 0: robust mode's floors (ms_scale_floor)
+		const int64_t *hist = otsu ? &counts[k * MS_BINS] : nullptr;
+		const double f = noise < 0.0 ? floor : ms_scale_floor(hist, k + 1 == S, 0, noise);
+		thresholds[k] = ms_stage_threshold(hist, otsu, f);
+	}
+	std::vector<uint8_t> feature(n);
+	std::vector<double> strength(n);
+	std::vector<int64_t> candidates(size_t(count) * S, 0);
+	eachIndex(count, [&](Index u) {
+		ms_stage_decide(x, 1, n, s, u * MS_CHUNK, std::min(n, (u + 1) * MS_CHUNK), lo, hi, flatSpan, thresholds.data(),
+		                feature.data(), strength.data(), &candidates[size_t(u) * S], values);
+	});
+	for (size_t k = 0; k < S; ++k) {
+		int64_t c = 0;
+		for (Index u = 0; u < count; ++u) c += candidates[size_t(u) * S + k];
+		r.thresholds.push_back(thresholds[k]);
+		r.candidates.push_back(long(c));
+	}
+	if (!order.empty()) {
+		feature = toCleaned(order, feature);
+		strength = toCleaned(order, strength);
+	}
+	d.feature.assign(feature.begin(), feature.end());
+	d.strength.swap(strength);
 }
 
 // What the ring pass reads of a mesh, besides its points: the adjacency, the
@@ -801,26 +848,31 @@ Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 		normals.swap(pass.normals);
 		orig.swap(tree.orig);
 	}
-	const double flatSpan = MS_FLAT_TOLERANCE * std::sqrt(box[0] * box[0] + box[1] * box[1] + box[2] * box[2]);
+	const double flatSpan = ms_flat_span(box);
 	bar.report(90, "thresholds");
+	std::vector<double> lo(S, 0.0), hi(S, 0.0);  // each scale's range
+	eachIndex(Index(S), [&](Index s) {
+		const double *x = &pdis[s * n];
+		double mn = n > 0 ? x[0] : 0.0, mx = mn;
+		for (Index i = 1; i < n; ++i) {
+			mn = x[i] < mn ? x[i] : mn;
+			mx = x[i] > mx ? x[i] : mx;
+		}
+		lo[s] = mn, hi[s] = mx;
+	});
 	Decision d;
 	keepDetails(d, options.details, S, n, normals);
-	std::vector<int64_t> votes(n, 0);
-	r.allFlat = true;
-	for (size_t s = 0; s < S; ++s) {
-		// a flat scale's threshold is 1.0, and only a flat scale's: any other's normalised
-		// values hold 0 and 1, which Otsu's split parts
-		if (vote(&pdis[s * n], n, true, flatSpan, true, 0.0, votes, r, detailRow(d, s, n)) < 1.0) r.allFlat = false;
-	}
+	stageDecision(pdis.data(), n, S, lo.data(), hi.data(), flatSpan, true, 0.0, orig, d, r, -1.0, detailRow(d, 0, n));
 	Buffer<double>().swap(pdis);
 	if (!orig.empty()) {
-		votes = toCleaned(orig, votes);
 		toCleanedRows(orig, d.distances, 1);
 		toCleanedRows(orig, d.normals, 3);
 	}
+	// a flat scale's threshold is 1.0, and only a flat scale's: any other's normalised
+	// values hold 0 and 1, which Otsu's split parts
+	r.allFlat = std::all_of(r.thresholds.begin(), r.thresholds.end(), [](double t) { return !(t < 1.0); });
 	d.toClean.resize(n);
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
-	decide(votes, S, d);
 	return d;
 }
 
@@ -894,12 +946,11 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index at = (n - 1) / 2;
 	std::nth_element(pass.noise.begin(), pass.noise.begin() + at, pass.noise.end());
 	const double ratio = pass.noise[at];  // the median noise ratio
-	const double noise = std::min(std::max(1.0, std::pow(ratio / MS_NOISE_TOLERATED, 2.0)), MS_NOISE_MAX_FACTOR);
-	const double factor = std::min(noise, double(n) / double(top0));
-	int thinKnn = MS_THIN_KNN;  // robust.thin_knn: grows with the scales
+	const double factor = ms_scale_growth(ratio, n, top0);
+	int thinKnn = ms_thin_knn(1.0);  // grows with the scales
 	if (factor > 1.0) {
-		thinKnn = int(std::floor(MS_THIN_KNN * factor + 0.5));
-		for (int &k : r.scales) k = int(std::floor(k * factor + 0.5));
+		thinKnn = ms_thin_knn(factor);
+		for (int &k : r.scales) k = ms_grown_scale(k, factor);
 		if (r.scales.back() > n)
 			throw InputError("k = " + std::to_string(r.scales.back()) + " nearest neighbours needs at least " +
 			                 std::to_string(r.scales.back()) + " points, got " + std::to_string(n));
@@ -907,12 +958,10 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85, options.details);
 	}
 	bar.report(85, "thresholds");
-	const bool quiet = !(ratio > MS_NOISE_QUIET);  // robust.otsu_splits, support_exempt
-	const size_t S = r.scales.size();
-	keepDetails(d, options.details, S, n, pass.normals);
-	std::vector<int64_t> votes(n, 0);
-	for (size_t s = 0; s < S; ++s)  // robust.otsu_splits: without noise the floor alone
-		vote(&pass.relative[s * n], n, false, 0.0, !quiet, R_MIN, votes, r, detailRow(d, s, n));
+	const bool quiet = ms_quiet_cloud(0, ratio);
+	keepDetails(d, options.details, r.scales.size(), n, pass.normals);
+	stageDecision(pass.relative.data(), n, r.scales.size(), nullptr, nullptr, 0.0, ms_otsu_splits(0, ratio), R_MIN,
+	              tree->orig, d, r, ratio, detailRow(d, 0, n));
 	Buffer<double>().swap(pass.relative);
 	toCleanedRows(tree->orig, d.distances, 1);
 	toCleanedRows(tree->orig, d.normals, 3);
@@ -920,19 +969,16 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 		d.toClean.resize(n);
 		std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
 	}
-	votes = toCleaned(tree->orig, votes);
 	pass.score = toCleaned(tree->orig, pass.score);
-	decide(votes, S, d);
-	std::vector<int64_t>().swap(votes);
 	if (pts.empty()) pts = cleanedPoints(*tree);
 	bar.report(85, "support and thinning");
 	const int top = r.scales.back();
 	// robust.acute_tests: one search for them and the candidates (RobustSetup._finish_compiled)
+	std::vector<uint8_t> tests(n, 0);
+	const bool tested = ms_stage_acute_tests(pass.score.data(), bytes(d.feature), 0, n, 0, ratio, tests.data()) > 0;
 	std::vector<char> todo = d.feature;
-	bool tested = false;
-	for (Index i = 0; quiet && i < n; ++i)
-		if (!d.feature[i] && pass.score[i] >= MS_ACUTE_SCORE && pass.score[i] < MS_ACUTE_SCORE_MAX)
-			todo[i] = tested = true;
+	for (Index i = 0; tested && i < n; ++i) todo[i] |= char(tests[i]);
+	std::vector<uint8_t>().swap(tests);
 	const KnnOfMask knn = knnOfMask(*tree, todo, top, bar, 85, 90);
 	const int thinK = std::min(thinKnn, top);
 	std::vector<Index> starts, rows;  // the candidates and where their rows begin in the table
@@ -958,13 +1004,12 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 			rows.push_back(knn.rows[c]);
 		}
 	if (rows.empty()) return d;
-	// robust.ranking_smoothed: where the noise grew the scales to the cap, thinning ranks by
-	// the score averaged over the THIN_KNN nearest (support reads no score there: not quiet)
-	const bool smooth = noise == MS_NOISE_MAX_FACTOR;
+	double freeBelow = 0.0;
+	const bool exempt = ms_support_free_score(0, ratio, &freeBelow) != 0;
 	d.feature = supportAndThin(pts, d.feature, pass.score, rows, knn.lists(top, starts),
-	                           knn.lists(std::min(MS_SUPPORT_KNN, top), starts), knn.lists(thinK, starts), quiet,
-	                           MS_SUPPORT_FREE_SCORE, smooth, quiet,
-	                           quiet ? MS_THIN_CONE_COS : MS_THIN_CONE_COS_NOISY, bar, 90, 95);  // robust.thin_cone
+	                           knn.lists(std::min(MS_SUPPORT_KNN, top), starts), knn.lists(thinK, starts), exempt,
+	                           freeBelow, ms_ranking_smoothed(0, ratio) != 0, quiet, ms_thin_cone(0, ratio), bar, 90,
+	                           95);
 	return d;
 }
 

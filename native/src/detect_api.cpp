@@ -4,6 +4,7 @@
 #include "detect.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 #include <exception>
 #include <memory>
@@ -60,6 +61,15 @@ int ms_detect(const double *xyz, int64_t n, const int64_t *faces, int64_t m, con
 		return fail(MS_EINPUT, "invalid scales", err, errlen);
 	if (n < 0 || m < 0 || (faces == nullptr && m > 0) || (xyz == nullptr && n > 0))
 		return fail(MS_EINPUT, "negative counts or missing arrays", err, errlen);
+	// the largest of the scales used, as the command line words it
+	const bool mesh = faces != nullptr && m > 0 && given.as_points == 0;
+	const int largest = mesh ? given.ring_scales[given.n_ring_scales - 1] : given.knn_scales[given.n_knn_scales - 1];
+	const int most = mesh ? MS_MAX_RING_SCALE : MS_MAX_KNN_SCALE;
+	if (largest > most) {
+		char message[96];
+		std::snprintf(message, sizeof message, "%s must be <= %d, got %d", mesh ? "rings" : "kNN sizes", most, largest);
+		return fail(MS_EINPUT, message, err, errlen);
+	}
 	sharp::Options options;
 	options.robust = given.mode == 1;
 	options.gaussian = given.weighting == 0;

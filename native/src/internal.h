@@ -182,6 +182,17 @@ MS_INTERNAL int64_t sheet_keep(const double *q, const double *d2, int64_t k, con
 /* The sheet filter's parameters from a pass's outputs. */
 MS_INTERNAL sheet_params_t sheet_params(const cloud_out_t *out);
 
+/* ------------------------------------------------------------------ thresholds */
+
+/* Bin of a value in [0, 1] (threshold.c): min(floor(v * MS_BINS), MS_BINS - 1), 0 below 0. */
+MS_INTERNAL int64_t ms_value_bin(double v);
+/* Otsu's threshold t / MS_BINS from the MS_BINS counts of a histogram; 1.0 when no split
+ * has points on both sides. */
+MS_INTERNAL double ms_otsu_split(const int64_t *counts);
+/* The span of min-max normalisation over [lo, hi], -1 (flat: every value 0) when it is
+ * not above flat_span. */
+MS_INTERNAL double ms_normal_span(double lo, double hi, double flat_span);
+
 /* ------------------------------------------------------------------ meshes */
 
 /* cross(p1 - p0, p2 - p0) of the triangle (i0, i1, i2) into c; returns its length, the

@@ -176,6 +176,15 @@ void ms_isolated(const double *p, const int32_t *near, const double *kth_d2,
     }
 }
 
+void ms_stage_isolated(const double *a, const double *b, const double *kth_d2,
+                       const int64_t *kth_idx, const int64_t *idx, const double *nth_d2,
+                       const double *far_d2, double spread, int64_t begin, int64_t end,
+                       uint8_t *out) {
+    for (int64_t r = begin; r < end; r++)
+        out[r] = isolated_one(a + 3 * r, b + 3 * r, kth_d2[r], kth_idx[r], idx[r], nth_d2[r],
+                              far_d2[r], spread * spread);
+}
+
 /* ms_isolated from a tree_order = 2 pass's statistics, for the tree positions [begin, end):
  * tp (n, 3) the points in tree order, orig their cleaned indices, near[t] and kth_idx[t]
  * tree positions, out[t] per tree position. The nearest lies close by in the tree: reads

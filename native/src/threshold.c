@@ -1,5 +1,5 @@
 /* Thresholds, the global steps of every path: extent, histograms, Otsu's
- * split and one scale's vote.
+ * split, robust mode's noise floor and one scale's vote.
  * Part of meshlab-sharp's native library (meshlab_sharp.h). */
 #include "internal.h"
 
@@ -20,7 +20,7 @@ void ms_extent(const double *p, int64_t n, double *out) {
  * below 0, not a value the method makes, bin 0 rather than a write out of bounds). On
  * [0, MS_BINS - 1) the conversion's truncation is floor (no call of floor: a plain build
  * has no SSE4.1 rounding instruction). */
-static inline int64_t value_bin(double v) {
+MS_INTERNAL int64_t ms_value_bin(double v) {
     const double b = v * MS_BINS;
     if (!(b >= 0.0)) return 0;
     return b >= MS_BINS - 1 ? MS_BINS - 1 : (int64_t)b;
@@ -29,7 +29,7 @@ static inline int64_t value_bin(double v) {
 /* Otsu's threshold t / MS_BINS from the MS_BINS counts of a histogram, in the integer
  * form of the notes (the first largest split wins); 1.0 when no split has points on both
  * sides (threshold.otsu_from_histogram). */
-static double otsu_split(const int64_t *counts) {
+MS_INTERNAL double ms_otsu_split(const int64_t *counts) {
     int64_t total = 0, weighted_total = 0;
     for (int64_t b = 0; b < MS_BINS; b++) {
         total += counts[b];
@@ -53,16 +53,35 @@ static double otsu_split(const int64_t *counts) {
     return best_t < 0 ? 1.0 : (double)best_t / MS_BINS;
 }
 
-/* Adds the bins (value_bin) of v = (x[i] - lo) / span (span > 0), v = x[i] (span == 0),
+MS_INTERNAL double ms_normal_span(double lo, double hi, double flat_span) {
+    return hi - lo > flat_span ? hi - lo : -1.0;
+}
+
+/* Adds the bins (ms_value_bin) of v = (x[i] - lo) / span (span > 0), v = x[i] (span == 0),
  * or v = 0 (span < 0: a flat scale) of x (n) to counts (MS_BINS) (threshold.histogram). */
 static void histogram(const double *x, int64_t n, double lo, double span, int64_t *counts) {
     if (span > 0.0) {
-        for (int64_t i = 0; i < n; i++) counts[value_bin((x[i] - lo) / span)]++;
+        for (int64_t i = 0; i < n; i++) counts[ms_value_bin((x[i] - lo) / span)]++;
     } else if (span == 0.0) {
-        for (int64_t i = 0; i < n; i++) counts[value_bin(x[i])]++;
+        for (int64_t i = 0; i < n; i++) counts[ms_value_bin(x[i])]++;
     } else {
         counts[0] += n;
     }
+}
+
+double ms_noise_floor(const int64_t *counts) {
+    int64_t total = 0;
+    for (int b = 0; b < MS_BINS; b++) total += counts[b];
+    if (total == 0) return 0.0;
+    const int64_t rank = (total - 1) / 2; /* the lower median's, from 0 */
+    int64_t below = 0;
+    int b = 0;
+    for (; b < MS_BINS - 1; b++) {
+        below += counts[b];
+        if (below > rank) break;
+    }
+    const double floor_ = MS_NOISE_FLOOR * (double)(b + 1) / (double)MS_BINS;
+    return floor_ < MS_NOISE_FLOOR_MAX ? floor_ : MS_NOISE_FLOOR_MAX;
 }
 
 double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span, int otsu,
@@ -75,13 +94,13 @@ double ms_scale_vote(const double *x, int64_t n, int normalise, double flat_span
             mx = x[i] > mx ? x[i] : mx;
         }
         lo = mn;
-        span = mx - mn > flat_span ? mx - mn : -1.0; /* -1: flat, every value 0 */
+        span = ms_normal_span(mn, mx, flat_span);
     }
     double t = floor_;
     if (otsu) {
         int64_t counts[MS_BINS] = {0};
         histogram(x, n, lo, span, counts);
-        const double split = otsu_split(counts);
+        const double split = ms_otsu_split(counts);
         t = split > floor_ ? split : floor_;
     }
     int64_t c = 0;

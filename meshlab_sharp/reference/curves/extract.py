@@ -6,6 +6,7 @@ them).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,7 @@ from .graph import (
     prune_spurs,
     spanning_forest,
 )
+from .mesh import CreaseChains, crease_chains
 from .refine import (
     cell_neighbourhood,
     line_fit_positions,
@@ -44,7 +46,7 @@ from .trace import (
     trace_paths,
 )
 
-__all__ = ["MIN_CURVE_LENGTH", "CurveSet", "extract_curves", "support_radius"]
+__all__ = ["MIN_CURVE_LENGTH", "CurveSet", "cloud_spacing", "extract_curves", "support_radius"]
 
 # The numbers are defined once, in native/include/meshlab_sharp.h.
 #: An open curve shorter than this, in spacings (GAP_LENGTH), is dropped: what is left of a spur
@@ -61,6 +63,18 @@ MAX_FLAT_SHARE = CURVES.real("MAX_FLAT_SHARE")
 #: Side of the grid cells, in feature spacings, that select the points near the curves
 #: for the refinement (3x3x3 cells around each feature hold its REFINE_NEIGHBOURS).
 CELL_SPACINGS = CURVES.real("CELL_SPACINGS")
+#: Irregular (iid) clouds: where DENSITY_SCALE times the median distance from a feature
+#: to its DENSITY_NEIGHBOURS-th nearest point exceeds the median nearest distance d by a
+#: factor q > 1, the spacing is d q^1.5 and the short pieces join before the short ones
+#: are dropped. Independently drawn points cluster: their nearest distances are short
+#: (0.6 times blue noise's of the same density) and the features along an edge leave
+#: gaps of several of them, which split the feature graph. On Poisson-disk (blue
+#: noise) clouds, noisy or not, d is 0.47-0.50 times the 8th nearest distance (q < 1):
+#: they are regular and keep d; on iid clouds d is 0.30-0.33 times it (q about 1.4,
+#: the spacing about 1.7 d, blue noise's of the same density).
+DENSITY_NEIGHBOURS = CURVES.integer("DENSITY_NEIGHBOURS")
+#: See DENSITY_NEIGHBOURS.
+DENSITY_SCALE = CURVES.real("DENSITY_SCALE")
 #: Cloud vertices closer than this along the curve's direction to the previous vertex
 #: kept, in spacings, are dropped after refinement (a skeleton that zigzags across a
 #: wide band of features leaves vertices that double back once refined).
@@ -141,15 +155,26 @@ def extract_curves(
     if len(feat) < 2:
         return _no_curves()
     paths: MeshPaths | None = None
+    creases: CreaseChains | None = None
+    irregular = False
     if faces is None:
-        pieces, spacing = _cloud_pieces(pts, feat_mask, ok, feat, fp, bounds)
+        pieces, spacing, irregular = _cloud_pieces(pts, feat_mask, ok, feat, fp, bounds)
     else:
-        pieces, spacing = _mesh_pieces(pts, np.asarray(faces), feat_mask & ok, feat, fp)
-        paths = MeshPaths(pts, np.asarray(faces), feat_mask & ok)
+        usable = np.zeros(len(pts), bool)
+        usable[feat] = True
+        creases = crease_chains(pts, np.asarray(faces), feat_mask & ok, usable)
+        pieces, spacing = _mesh_pieces(
+            pts, np.asarray(faces), feat_mask & ok, feat, fp, creases.rest
+        )
+        paths = MeshPaths(pts, np.asarray(faces), creases.rest)
     if spacing <= 0:
         return _no_curves()
     bridge = None if paths is None else _bridge(pts, paths, spacing)
-    pieces = _drop_short(cut_at_turns(pieces, spacing), spacing)
+    pieces = cut_at_turns(pieces, spacing)
+    # the short pieces are dropped before joining, but on an irregular cloud, where the
+    # sampling's gaps cut an edge's features into short pieces: they join first
+    if not irregular:
+        pieces = _drop_short(pieces, spacing)
     pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
     pieces = join_pieces(pieces, spacing, bridge)
     # joining may have run a curve round a corner whose vertex was near a piece's end
@@ -158,6 +183,11 @@ def extract_curves(
     if paths is None:
         pieces = _drop_isolated(pieces, spacing)
     pieces, corner_points, corner_indices = _corners(pieces, spacing, pts, paths)
+    if creases is not None and len(creases.pieces):
+        pieces += creases.pieces
+        corner_points, corner_indices = _merged_corners(
+            corner_points, corner_indices, pts, creases.corners
+        )
     oriented = [_oriented(pc) for pc in pieces if len(pc.points) >= 2]
     lengths = piece_lengths(oriented).tolist()
     order = sorted(
@@ -193,6 +223,35 @@ def support_radius(features: np.ndarray) -> float:
     return CELL_SPACINGS * float(np.median(d[:, 1]))
 
 
+def cloud_spacing(tree: cKDTree, features: np.ndarray) -> tuple[float, bool]:
+    """Spacing of a cloud's curves, and whether the cloud is irregular (iid).
+
+    ``d`` the median distance from a feature to the nearest other point, ``q``
+    DENSITY_SCALE times the median distance to the DENSITY_NEIGHBOURS-th nearest over
+    ``d``: the spacing is ``d`` where ``q <= 1``, else ``d * (q * sqrt(q))`` (irregular).
+
+    Parameters
+    ----------
+    tree : cKDTree
+        Of the points near the features (the features among them), at least 2.
+    features : (f, 3) float64
+        The distinct feature positions.
+
+    Returns
+    -------
+    spacing : float
+    irregular : bool
+    """
+    k = min(DENSITY_NEIGHBOURS + 1, tree.n)
+    d, _ = tree.query(features, k=k, workers=-1)
+    nearest = float(np.median(d[:, 1]))
+    density = DENSITY_SCALE * float(np.median(d[:, k - 1]))
+    if nearest <= 0.0 or not density > nearest:
+        return nearest, False
+    q = density / nearest
+    return nearest * (q * math.sqrt(q)), True
+
+
 def _cloud_pieces(
     pts: np.ndarray,
     mask: np.ndarray,
@@ -200,15 +259,15 @@ def _cloud_pieces(
     feat: np.ndarray,
     fp: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray] | None,
-) -> tuple[list[Piece], float]:
-    """Skeleton polylines of a cloud's features, refined; and the spacing."""
+) -> tuple[list[Piece], float, bool]:
+    """Skeleton polylines of a cloud's features, refined; the spacing; whether the
+    cloud is irregular (:func:`cloud_spacing`)."""
     near = cell_neighbourhood(pts, ok, fp, support_radius(fp), bounds)
     near_pts = pts[near]
     order = np.lexsort((near_pts[:, 2], near_pts[:, 1], near_pts[:, 0]))
     near, near_pts = near[order], near_pts[order]
     tree = cKDTree(near_pts)
-    d, _ = tree.query(fp, k=2, workers=-1)
-    spacing = float(np.median(d[:, 1]))
+    spacing, irregular = cloud_spacing(tree, fp)
     edges, lengths = cloud_graph(fp, spacing)
     paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
     pieces = []
@@ -217,7 +276,7 @@ def _cloud_pieces(
         nodes = path[:-1] if closed else path
         pieces.append(Piece(nodes, fp[nodes], closed))
     if not pieces:
-        return [], spacing
+        return [], spacing, irregular
     # refine every vertex at once, across the skeleton's directions over a wide window
     # (the skeleton zigzags across the band of features)
     raw = np.concatenate([pc.points for pc in pieces])
@@ -243,7 +302,7 @@ def _cloud_pieces(
         p, d = smooth[stop - size : stop], dirs[stop - size : stop]
         keep = _advancing(p, d, spacing)
         out.append(Piece(feat[pc.nodes[keep]], p[keep], pc.closed))
-    return out, spacing
+    return out, spacing, irregular
 
 
 def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
@@ -262,10 +321,16 @@ def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
 
 
 def _mesh_pieces(
-    pts: np.ndarray, faces: np.ndarray, mask: np.ndarray, feat: np.ndarray, fp: np.ndarray
+    pts: np.ndarray,
+    faces: np.ndarray,
+    mask: np.ndarray,
+    feat: np.ndarray,
+    fp: np.ndarray,
+    rest: np.ndarray,
 ) -> tuple[list[Piece], float]:
-    """Chains of mesh edges between feature vertices; and the spacing (median length
-    of the edges around the features)."""
+    """Skeleton chains of mesh edges between the feature vertices ``rest`` (n,) bool
+    (those away from the mesh's sharp edges, :func:`.mesh.crease_chains`); and the
+    spacing (median length of the edges around all the features ``mask``)."""
     edges, weights, around = mesh_graph(pts, faces, mask)
     if len(edges) == 0:
         return [], 0.0
@@ -273,7 +338,8 @@ def _mesh_pieces(
     node = np.full(len(pts), -1, np.int64)
     node[feat] = np.arange(len(feat))
     local = node[edges]
-    keep = (local >= 0).all(axis=1)  # duplicated positions keep one vertex
+    # duplicated positions keep one vertex
+    keep = (local >= 0).all(axis=1) & rest[edges[:, 0]] & rest[edges[:, 1]]
     paths = _skeleton_pieces(len(feat), local[keep], weights[keep], fp, spacing)
     pieces = []
     for path in paths:
@@ -412,6 +478,17 @@ def _corners(
     p = np.array(points)
     order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
     return pieces, p[order], np.array(indices, np.int64)[order]
+
+
+def _merged_corners(
+    points: np.ndarray, indices: np.ndarray, pts: np.ndarray, more: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The corners ``points`` (c, 3) and ``indices`` (c,) with the mesh vertices
+    ``more`` (k,) added, all in coordinate order."""
+    p = np.vstack([points, pts[more]])
+    i = np.concatenate([indices, more]).astype(np.int64)
+    order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
+    return p[order], i[order]
 
 
 def _solve3(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -1,0 +1,133 @@
+"""The native library's stages of a cloud's sequence and robust mode's rules
+(native/src/stages.c): the rules say what docs/method.md says, the numpy reference
+states the same rules, and the pointwise stages over parts of the points add up to
+ms_scale_vote's answer over the whole."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from meshlab_sharp import _header, _kernels, robust
+from meshlab_sharp.reference import robust as reference
+
+pytestmark = pytest.mark.skipif(not _kernels.available(), reason="needs the compiled kernels")
+
+NOISES = [0.0, 0.01, 0.05, np.nextafter(0.05, 1.0), 0.1, 0.15, 0.2, 0.25, 0.259, 0.26, 0.3, 2.0]
+RULES = ["noise_factor", "thin_knn", "quiet_cloud", "otsu_splits", "thin_cone"]
+RULES += ["ranking_smoothed", "support_free_score"]
+
+
+def test_floor_is_the_straight_edge_value() -> None:
+    """MS_R_MIN is (2 / pi) sin(CREASE_ANGLE / 2) to the nearest double."""
+    floor = (2.0 / math.pi) * math.sin(math.radians(robust.CREASE_ANGLE / 2.0))
+    assert floor == robust.R_MIN
+
+
+def test_rules_known_answers() -> None:
+    assert _kernels.noise_factor(0.0) == 1.0
+    assert _kernels.noise_factor(0.3) == 3.0  # (0.3 / 0.15)^2 = 4, capped
+    assert _kernels.noise_factor(0.2) == (0.2 / 0.15) ** 2
+    assert _kernels.scale_growth(0.3, 10_000, 40) == 3.0
+    assert _kernels.scale_growth(0.3, 100, 40) == 2.5  # the largest grown scale fits
+    assert _kernels.scale_growth(0.0, 100, 40) == 1.0
+    assert _kernels.grown_scale(12, 1.5) == 18 and _kernels.grown_scale(5, 1.5) == 8  # half up
+    assert _kernels.thin_knn(1.0) == robust.THIN_KNN and _kernels.thin_knn(3.0) == 36
+    assert _kernels.quiet_cloud(False, 0.05) and not _kernels.quiet_cloud(False, 0.06)
+    assert not _kernels.quiet_cloud(True, 0.0) and _kernels.otsu_splits(True, 0.0)
+    assert _kernels.thin_cone(False, 0.1) == robust.THIN_CONE_COS_NOISY
+    assert _kernels.thin_cone(True, 0.1) == robust.THIN_CONE_COS
+    assert _kernels.ranking_smoothed(False, 0.3) and not _kernels.ranking_smoothed(True, 0.3)
+    assert _kernels.support_free_score(False, 0.0) == robust.SUPPORT_FREE_SCORE
+    assert _kernels.support_free_score(False, 0.1) is None
+
+
+@pytest.mark.parametrize("rule", RULES)
+@pytest.mark.parametrize("mesh", [False, True])
+def test_reference_states_the_library_rules(rule: str, mesh: bool) -> None:
+    """The numpy reference (an install without the library) answers as the library."""
+    for noise in NOISES:
+        args = (noise,) if rule in ("noise_factor", "thin_knn") else (mesh, noise)
+        if rule == "thin_knn":
+            args = (_kernels.noise_factor(noise),)
+        assert getattr(_kernels, rule)(*args) == getattr(reference, rule)(*args), (rule, noise)
+        assert getattr(robust, rule)(*args) == getattr(_kernels, rule)(*args)
+
+
+@pytest.mark.parametrize("normalise", [False, True])
+@pytest.mark.parametrize("otsu", [False, True])
+def test_stages_over_parts_equal_scale_vote(normalise: bool, otsu: bool) -> None:
+    """Histograms of three parts summed, the threshold from them and each part's decision
+    give ms_scale_vote's thresholds, votes, counts and values over the whole."""
+    rng = np.random.default_rng(3)
+    values = rng.random((3000, 4)) ** 3
+    values[:, 3] = 0.25  # a flat scale
+    floor = 0.0 if normalise else robust.R_MIN
+    lo, hi = values.min(axis=0), values.max(axis=0)
+    norm = (lo, hi, 1e-9) if normalise else None
+    parts = np.array_split(np.arange(len(values)), 3)
+    hist = sum(_kernels.stage_histograms(values[p], norm) for p in parts)
+    thresholds = np.array([_kernels.stage_threshold(h, otsu, floor) for h in hist])
+    votes = np.zeros(len(values), np.int64)
+    whole, split = [], np.zeros((values.shape[1], len(values)))
+    for s in range(values.shape[1]):
+        t, count = _kernels.scale_vote(
+            values[:, s], votes, flat_span=1e-9 if normalise else None, otsu=otsu, floor=floor,
+            out=split[s],
+        )  # fmt: skip
+        assert thresholds[s] == t
+        whole.append(count)
+    outs = [np.full((len(p), values.shape[1]), np.nan) for p in parts]
+    decided = [
+        _kernels.stage_decide(values[p], thresholds, norm, o)
+        for p, o in zip(parts, outs, strict=True)
+    ]
+    assert np.array_equal(np.concatenate(outs), split.T)
+    assert np.array_equal(np.concatenate([d[0] for d in decided]), votes == 4)
+    assert np.array_equal(np.concatenate([d[1] for d in decided]), votes / 4.0)
+    counts = sum(d[2] for d in decided)
+    assert list(counts) == whole and counts[3] in (0, len(values))
+    assert _header.integer("BINS") == hist.shape[1] and hist.sum() == values.size
+
+
+def test_flat_span_is_the_box_diagonal() -> None:
+    tolerance = _header.real("FLAT_TOLERANCE")
+    assert _kernels.flat_span(np.array([3.0, 4.0, 12.0])) == tolerance * 13.0
+    assert _kernels.flat_span(np.zeros(3)) == 0.0
+    with pytest.raises(ValueError):
+        _kernels.flat_span(np.zeros(2))
+
+
+def test_acute_tests_only_on_quiet_clouds() -> None:
+    score = np.array([0.49, 0.5, 0.7, 0.8, 0.6])
+    mask = np.array([False, False, False, False, True])
+    assert list(_kernels.stage_acute_tests(score, mask, False, 0.0)) == [1, 2]
+    assert len(_kernels.stage_acute_tests(score, mask, False, 0.1)) == 0
+    assert len(_kernels.stage_acute_tests(score, mask, True, 0.0)) == 0
+    assert list(reference.stage_acute_tests(score, mask, False, 0.0)) == [1, 2]
+
+
+def test_isolated_stage_equals_reference() -> None:
+    """ms_stage_isolated of every point, its nearest's values gathered per row, finds
+    the reference's isolated points: a stray pair and a point beside a tight clump."""
+    rng = np.random.default_rng(5)
+    pts = rng.random((1500, 3)) * [1.0, 1.0, 0.0]
+    clump = pts[0] + rng.normal(scale=1e-4, size=(20, 3)) * [1, 1, 0]
+    pts = np.concatenate(
+        [pts, clump, [pts[0] + [0.005, 0, 0]], [[0.5, 0.5, 0.3], [0.5, 0.51, 0.3]]]
+    )
+    k = 16
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2)
+    idx = np.lexsort((np.broadcast_to(np.arange(len(pts)), d2.shape), d2), axis=1)[:, :k]
+    kd2 = np.take_along_axis(d2, idx, axis=1)
+    near, kth = idx[:, 1], idx[:, k - 1]
+    nth, ref = kd2[:, min(robust.ISOLATED_NTH, k - 1)], kd2[:, min(robust.ISOLATED_REF, k - 1)]
+    got = _kernels.stage_isolated(
+        pts, pts[near], kd2[near, k - 1], kth[near], np.arange(len(pts)), nth, ref[kth],
+        robust.ISOLATED_SPREAD,
+    )  # fmt: skip
+    expected = reference.isolated_points(pts, idx)
+    assert expected[-2:].all() and expected.sum() >= 2
+    assert np.array_equal(got, expected)
