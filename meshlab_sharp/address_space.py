@@ -26,8 +26,9 @@ The estimate (:func:`loading_need`), all in address space (VmSize), not resident
 * :data:`MARGIN`, for other library builds than the measured ones.
 
 On a 2-CPU machine with 8 MB stacks that is 23 + 400 + 2 x (32 + 8) + 32 + 32 = about
-567 MB; loading maps 536 MB at its peak there (``OPENBLAS_NUM_THREADS=1``: 456 MB, and
-the estimate 487 MB; a 16 MB stack limit: 552 MB, the estimate 583 MB). The figures come from::
+567 MB; loading maps 536 to 549 MB at its peak there, from one process to another
+(``OPENBLAS_NUM_THREADS=1``: 456 to 467 MB, and the estimate 487 MB; a 16 MB stack
+limit: 552 MB, the estimate 583 MB). The figures come from::
 
     python -c "import meshlab_sharp.cli as c; c._load_libraries(); \\
         print(open('/proc/self/status').read())" | grep -E 'VmSize|VmPeak'
