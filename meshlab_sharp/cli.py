@@ -26,6 +26,7 @@ from types import FrameType
 from typing import TYPE_CHECKING, Any, NamedTuple, NoReturn, TextIO
 
 from . import __version__
+from .address_space import check_address_space
 from .defaults import (
     DEFAULT_KNN_SCALES,
     DEFAULT_MODE,
@@ -369,6 +370,7 @@ def run_detect(args: argparse.Namespace) -> int:
         tick=TICK,
     )
     written: list[Path] = []
+    check_address_space()  # before any library loads: a low ulimit -v would hang it
     try:
         plan = _plan(args)
         steps = _preprocessing_from_args(args)

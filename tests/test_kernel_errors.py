@@ -10,6 +10,7 @@ that only the kernel's own allocation (the mesh adjacency's fill pointers) fails
 from __future__ import annotations
 
 import os
+import resource
 import subprocess
 import sys
 from pathlib import Path
@@ -70,3 +71,41 @@ def test_cloud_statistics_need_fewer_than_2_31_points():
     tree = _kernels.KdTree(huge, np.zeros(0, np.int64), np.zeros((1, 6)), 0)
     with pytest.raises(ValueError, match=r"fewer than 2\*\*31 points"):
         _kernels.cloud_projected_distances(tree, (8,), relative=True, noise_k=7)
+
+
+_THREADS_CANNOT_START = """
+import resource
+import numpy as np
+import meshlab_sharp as ms
+from shapes import box_cylinder_points
+
+points = box_cylinder_points(3000)
+free = ms.detect(points).mask
+with open("/proc/self/status") as f:
+    vm = next(int(l.split()[1]) * 1024 for l in f if l.startswith("VmSize:"))
+# each new thread's stack is RLIMIT_STACK's 1 GB (read at start-up): none fits any more
+resource.setrlimit(resource.RLIMIT_AS, (vm + 256 * 2**20, resource.RLIM_INFINITY))
+limited = ms.detect(points).mask
+print(int(free.sum()), bool(np.array_equal(free, limited)))
+"""
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one CPU: no thread to start")
+def test_threads_that_cannot_start_leave_their_work_to_the_caller():
+    """``ms_detect`` on a machine where no new thread fits in the address space (a 1 GB
+    stack each, 256 MB left): the calling thread does all the work, with the same
+    result, instead of failing with EAGAIN."""
+    root = Path(__file__).resolve().parent.parent
+    gb = 2**30
+    run = subprocess.run(
+        [sys.executable, "-c", _THREADS_CANNOT_START],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": f"{root}{os.pathsep}{root / 'tests'}"},
+        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_STACK, (gb, gb)),
+    )
+    assert run.returncode == 0, run.stderr
+    found, same = run.stdout.split()
+    assert int(found) > 0 and same == "True", run.stdout

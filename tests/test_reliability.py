@@ -29,6 +29,7 @@ import pytest
 import shapes
 
 import meshlab_sharp
+from meshlab_sharp.address_space import MARGIN
 from meshlab_sharp.errors import ScratchError
 from meshlab_sharp.io.source import PointSource
 from meshlab_sharp.progress import Progress
@@ -85,9 +86,12 @@ def big_cloud(tmp_path_factory) -> Path:
 # ---------------------------------------------------------------- out of memory
 
 
-#: What OpenBLAS prints before it ends the process (exit 1) when it cannot map a
-#: thread's buffer: no exception reaches Python.
-_LIBRARY_EXITS = {"OpenBLAS error: Memory allocation still failed after 10 retries, giving up.\n"}
+#: The line that refuses an address-space limit below what loading the libraries needs.
+_LOADING = re.compile(
+    r"meshlab-sharp: error: out of memory: loading the libraries needs about ([0-9]+) MB "
+    r"of address space, and the limit \(ulimit -v\) is ([0-9]+) MB; raise it to at least "
+    r"ulimit -v [0-9]+ \(KB\), or unlimited[^\n]*\n"
+)
 
 
 @pytest.mark.slow
@@ -127,14 +131,91 @@ def test_out_of_memory_is_one_line(tmp_path, big_cloud, options, limits_gb):
                 (tmp_path / "curves.obj").unlink()  # there, and gone before the next limit
             continue
         assert not out.exists() and not list(tmp_path.glob(".*")), "output or temporary left"
-        if proc.stderr in _LIBRARY_EXITS:
-            continue  # OpenBLAS ends the process itself (README: known limits)
+        if _LOADING.fullmatch(proc.stderr):
+            continue  # below what loading the libraries needs: refused before it
         failed += 1
         _one_error_line(proc, "error: out of memory: ", "--max-memory")
         assert re.search(r"needs about [0-9]+ MB|did not fit", proc.stderr), proc.stderr
         assert not out.exists() and not (tmp_path / "curves.obj").exists()
         assert not list(tmp_path.glob(".*")), "a temporary file was left"
     assert failed, "no limit ran out of memory: the test tests nothing"
+
+
+def _sample_under(tmp_path: Path, limit_mb: int) -> tuple[subprocess.CompletedProcess, Path]:
+    """``detect --sample`` under an address-space limit of ``limit_mb`` MB: the finished
+    process (killed after a minute: a hang fails the test) and its output's path."""
+    out = tmp_path / f"out{limit_mb}.ply"
+    limit = limit_mb << 20
+    proc = _cli(
+        "detect",
+        "--sample",
+        "-q",
+        "-o",
+        out,
+        timeout=60,
+        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (limit, limit)),
+    )
+    return proc, out
+
+
+@pytest.mark.parametrize("limit_mb", [300, 425, 450])
+def test_a_limit_below_loading_is_refused_first(tmp_path, limit_mb):
+    """Limits where loading the libraries used to hang (scipy's OpenBLAS retrying for
+    ever for its threads' buffers, 403-465 MB on 2 CPUs) or end in OpenBLAS's own
+    message: one out-of-memory line naming the need and the limit, status 1, nothing
+    written (the guard runs before numpy, scipy or pymeshlab is imported)."""
+    proc, out = _sample_under(tmp_path, limit_mb)
+    assert proc.returncode == 1, proc.stderr
+    said = _LOADING.fullmatch(proc.stderr)
+    assert said, proc.stderr
+    assert int(said[2]) == limit_mb and int(said[1]) > limit_mb
+    assert not out.exists() and not list(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_a_limit_just_above_loading_runs(tmp_path):
+    """The need the refusal names is enough: 1 MB under it is refused the same way, and
+    8 MB over it the sample part is detected (or runs out of memory with the ordinary
+    line, never a library's message or a hang)."""
+    proc, _ = _sample_under(tmp_path, 300)
+    need = int(_LOADING.fullmatch(proc.stderr)[1])
+    below, out = _sample_under(tmp_path, need - 1)
+    assert below.returncode == 1 and _LOADING.fullmatch(below.stderr), below.stderr
+    assert not out.exists()
+    above, out = _sample_under(tmp_path, need + 8)
+    if above.returncode == 0:
+        assert out.is_file() and not above.stderr
+    else:
+        _one_error_line(above, "error: out of memory: ", "--max-memory")
+        assert not out.exists()
+
+
+_NEED_AND_PEAK = """
+import meshlab_sharp.cli as cli
+from meshlab_sharp.address_space import loading_need
+need = loading_need()
+cli._load_libraries()
+peak = next(l for l in open("/proc/self/status") if l.startswith("VmPeak:"))
+print(need, int(peak.split()[1]) * 1024)
+"""
+
+
+@pytest.mark.parametrize("threads", ["1", ""])
+def test_the_loading_estimate_covers_loading(threads):
+    """What the command line's loading maps at its peak (VmPeak, every library imported
+    and OpenBLAS warmed up) stays under the estimate taken before it, with one OpenBLAS
+    thread and with one per CPU; the estimate's margin is not all of it."""
+    proc = subprocess.run(
+        [sys.executable, "-c", _NEED_AND_PEAK],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "OPENBLAS_NUM_THREADS": threads},
+        check=True,
+    )
+    need, peak = map(int, proc.stdout.split())
+    assert peak <= need, (peak >> 20, need >> 20)
+    assert need - peak < 3 * MARGIN, (peak >> 20, need >> 20)
 
 
 # ---------------------------------------------------------------- signals

@@ -19,6 +19,7 @@
 #include <new>
 #include <numeric>
 #include <sstream>
+#include <system_error>
 #include <thread>
 
 #ifdef __linux__
@@ -115,12 +116,19 @@ thread_local unsigned runThreads = 1;
 
 unsigned workers() { return runThreads; }
 
-// run(t) on min(workers(), max(items, 1)) threads, t = 0 on the calling thread.
+// run(t) on min(workers(), max(items, 1)) threads, t = 0 on the calling thread. Every
+// caller takes its items from a shared counter, so a thread that cannot start (no room
+// for its stack under an address-space limit: std::system_error, EAGAIN) leaves its share
+// to the threads that did; the calling thread alone finishes the work.
 template <class Run>
 void onCores(Index items, Run run) {
 	std::vector<std::thread> pool;
 	const unsigned w = unsigned(std::min<Index>(workers(), std::max<Index>(items, 1)));
-	for (unsigned t = 1; t < w; ++t) pool.emplace_back(run, t);
+	pool.reserve(w - 1);  // no allocation once a thread runs: only the threads' own can fail
+	try {
+		for (unsigned t = 1; t < w; ++t) pool.emplace_back(run, t);
+	} catch (const std::system_error &) {
+	}
 	run(0u);
 	for (auto &t : pool) t.join();
 }
