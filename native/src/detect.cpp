@@ -281,19 +281,27 @@ struct Clean {
 const Index PARALLEL_ITEMS = Index(1) << 16;
 
 // f(part) for the parts 0 and 1 of a two-part step, on two threads (one unless
-// workers() > 1), each part's exception raised after both ran.
+// workers() > 1), each part's exception raised after both ran. A side thread that cannot
+// start (std::system_error, as in onCores) leaves part 1 to the calling thread.
 template <class F>
 void twoParts(Index parts, F f, bool threads = true) {
 	std::exception_ptr error;
 	std::thread side;
-	if (parts > 1 && !threads) f(Index(1));
-	else if (parts > 1) side = std::thread([&] {
+	bool alone = parts > 1 && !threads;
+	if (parts > 1 && threads) {
 		try {
-			f(Index(1));
-		} catch (...) {
-			error = std::current_exception();
+			side = std::thread([&] {
+				try {
+					f(Index(1));
+				} catch (...) {
+					error = std::current_exception();
+				}
+			});
+		} catch (const std::system_error &) {
+			alone = true;
 		}
-	});
+	}
+	if (alone) f(Index(1));
 	f(Index(0));
 	if (side.joinable()) side.join();
 	if (error) std::rethrow_exception(error);
