@@ -56,4 +56,6 @@ def render(out: Path, n_points: int = 50_000) -> None:
 
 
 if __name__ == "__main__":
+    if len(sys.argv) > 2 or (len(sys.argv) == 2 and sys.argv[1].startswith("-")):
+        sys.exit(__doc__)
     render(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("docs/sample-part.png"))
