@@ -109,7 +109,7 @@ from .reference.robust import (
     supported,
     thin,
 )
-from .threshold import histogram, otsu_from_histogram
+from .threshold import histogram, otsu_threshold
 
 __all__ = [
     "ACUTE_SCORE",
@@ -155,7 +155,6 @@ __all__ = [
     "quiet_cloud",
     "relative_distances",
     "robust_threshold",
-    "robust_threshold_from_histogram",
     "scale_floor",
     "sheet_mask",
     "sheet_parameters",
@@ -465,16 +464,7 @@ def robust_threshold(r: np.ndarray, otsu: bool = True, floor: float = R_MIN) -> 
         ``max(otsu_threshold(r), floor)``, or ``floor`` when not ``otsu`` (then no
         histogram is made); candidates are ``r >= T``.
     """
-    return robust_threshold_from_histogram(histogram(r), True, floor) if otsu else floor
-
-
-def robust_threshold_from_histogram(
-    counts: np.ndarray, otsu: bool = True, floor: float = R_MIN
-) -> float:
-    """:func:`robust_threshold` from the 256-bin histogram (B,) int of the relative
-    distances (:func:`meshlab_sharp.threshold.histogram`): histograms summed over parts of
-    the points give the whole's threshold (the out-of-core tiles)."""
-    return max(otsu_from_histogram(counts), floor) if otsu else floor
+    return max(otsu_threshold(r), floor) if otsu else floor
 
 
 def scale_floor(
