@@ -149,6 +149,8 @@ _SIGNATURES = {
     "ms_thin_cone": (_f64, [_int, _f64]),
     "ms_ranking_smoothed": (_int, [_int, _f64]),
     "ms_support_free_score": (_int, [_int, _f64, _c_void_p]),
+    "ms_robust_plan": (_int, [_f64, _i64, _c_void_p, _int, _int, _c_void_p]),
+    "ms_plan_thresholds": (None, [_c_void_p, _c_void_p, _c_void_p]),
     "ms_flat_span": (_f64, [_c_void_p]),
     "ms_stage_histograms": (
         None,
@@ -698,7 +700,7 @@ class ScalePass:
     """What one pass over the points computed at every scale (cleaned order).
 
     Robust mode (``relative``) gets, instead of the projected distances, what
-    :class:`meshlab_sharp.robust.RelativeRule` computes from them, bit for bit: the
+    :class:`meshlab_sharp.reference.detect.RelativeRule` computes from them, bit for bit: the
     relative distances and the thinning's score. With ``order``, the per-scale arrays
     (``pdis``, ``normals``, ``relative``) are in the kd-tree's order instead, row ``t``
     being the cleaned point ``order[t]`` (what needs no order, as a histogram, reads them
@@ -1002,7 +1004,7 @@ def ring_projected_distances(
     adjacency (``indptr``, ``indices``: :func:`adjacency`); ``normals`` (n, 3) fixed (zero
     rows: PCA of the ring) or None (PCA everywhere). Each ring is summed in the order
     ``RingNeighbourhoods.at`` lists it. With ``relative``, robust mode's
-    :class:`meshlab_sharp.robust.RelativeRule` in the same walk instead of the projected
+    :class:`meshlab_sharp.reference.detect.RelativeRule` in the same walk instead of the projected
     distances: the relative distances (s, n) and the score (n,), bit for bit (the local
     scales of each ring summed in numpy's order). ``renumber``: run the pass over the
     vertices renumbered breadth-first (``ms_bfs_renumber``: the same rings listed in the
@@ -1385,6 +1387,104 @@ def support_free_score(mesh: bool, noise: float) -> float | None:
     score = ctypes.c_double(0.0)
     found = _lib().ms_support_free_score(int(mesh), float(noise), ctypes.byref(score))
     return score.value if found else None
+
+
+class _RobustPlan(ctypes.Structure):
+    """``ms_robust_plan_t``."""
+
+    _fields_ = [
+        ("mesh", _int),
+        ("noise", _f64),
+        ("n_scales", _int),
+        ("scales", _int * _header.integer("MAX_SCALES")),
+        ("growth", _f64),
+        ("grown", _int),
+        ("otsu", _int),
+        ("noise_floor", _int),
+        ("acute_tests", _int),
+        ("support_knn", _int),
+        ("compare_knn", _int),
+        ("ranking_smoothed", _int),
+        ("support_exempt", _int),
+        ("free_below", _f64),
+        ("thin_cone", _f64),
+        ("thin_between", _int),
+    ]
+
+
+@dataclass(frozen=True)
+class RobustPlan:
+    """Robust mode's decisions once the first pass has measured the noise
+    (``ms_robust_plan_t``, :func:`robust_plan`; the numpy reference's statement:
+    :func:`meshlab_sharp.reference.robust.robust_plan`). ``scales``: those the detection
+    runs at, grown by ``growth`` when ``grown`` (a pass at them follows); ``otsu``: Otsu's
+    split raises the thresholds; ``noise_floor``: the largest scale's floor reads its
+    histogram (:func:`plan_thresholds` applies both); ``acute_tests``: acute tips are
+    looked for; ``support_knn``, ``compare_knn``: the support and comparison lists' sizes
+    (a mesh's ``THIN_RING``-ring); ``ranking_smoothed``: thinning ranks by the smoothed
+    score; ``free_below``: the score below which a candidate needs no support (None: every
+    candidate needs it); ``thin_cone``: thinning's cone; ``thin_between``: thinning is
+    blocked by the points that are not candidates."""
+
+    mesh: bool
+    noise: float
+    scales: tuple[int, ...]
+    growth: float
+    grown: bool
+    otsu: bool
+    noise_floor: bool
+    acute_tests: bool
+    support_knn: int
+    compare_knn: int
+    ranking_smoothed: bool
+    free_below: float | None
+    thin_cone: float
+    thin_between: bool
+
+
+def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) -> RobustPlan:
+    """``ms_robust_plan``: robust mode's decisions on an input (``mesh`` or a cloud) of
+    noise ratio ``noise`` and ``n_kept`` points (isolated ones left out) at the given
+    increasing ``scales``."""
+    c = _RobustPlan()
+    given = (ctypes.c_int * len(scales))(*scales)
+    args = (float(noise), int(n_kept), given, len(scales), int(mesh), ctypes.byref(c))
+    if _lib().ms_robust_plan(*args):
+        raise ValueError(f"robust_plan: 1 to {len(c.scales)} scales, got {len(scales)}")
+    return RobustPlan(
+        mesh=bool(c.mesh),
+        noise=c.noise,
+        scales=tuple(c.scales[: c.n_scales]),
+        growth=c.growth,
+        grown=bool(c.grown),
+        otsu=bool(c.otsu),
+        noise_floor=bool(c.noise_floor),
+        acute_tests=bool(c.acute_tests),
+        support_knn=c.support_knn,
+        compare_knn=c.compare_knn,
+        ranking_smoothed=bool(c.ranking_smoothed),
+        free_below=c.free_below if c.support_exempt else None,
+        thin_cone=c.thin_cone,
+        thin_between=bool(c.thin_between),
+    )
+
+
+def plan_thresholds(plan: RobustPlan, counts: np.ndarray) -> np.ndarray:
+    """``ms_plan_thresholds``: each scale's threshold (s,) from its summed histogram,
+    ``counts`` (s, BINS) int64, by ``plan``'s rules (Otsu's split and the floors)."""
+    c = _RobustPlan()
+    for name, _ in _RobustPlan._fields_:
+        if name not in ("scales", "free_below"):  # the others are plan's own fields
+            setattr(c, name, getattr(plan, name, 0))
+    c.n_scales, c.scales[: len(plan.scales)] = len(plan.scales), plan.scales
+    c.support_exempt, c.free_below = plan.free_below is not None, plan.free_below or 0.0
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    bins = _header.integer("BINS")
+    if counts.shape != (len(plan.scales), bins):
+        raise ValueError(f"counts must be (s, {bins}), one histogram per scale")
+    out = np.zeros(len(plan.scales))
+    _lib().ms_plan_thresholds(ctypes.byref(c), _ptr(counts), _ptr(out))
+    return out
 
 
 def flat_span(extent: np.ndarray) -> float:

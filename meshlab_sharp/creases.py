@@ -11,7 +11,7 @@ of degrees; the threshold then rises with the mesh's lower quartile of dihedral 
 regions, where a clean mesh, CAD or remeshed, turns by 0-3 degrees), and robust mode's
 multiscale vote
 finds the creases that the raised threshold no longer sees
-(:class:`meshlab_sharp.robust.RobustSetup`).
+(:class:`meshlab_sharp.reference.detect.RobustSetup`).
 """
 
 from __future__ import annotations

@@ -79,10 +79,10 @@ def run_scales(
         Called with each scale when it is done (progress reporting).
     rule : callable, optional
         ``rule(i, scale, pdis) -> (values, threshold)`` replaces min-max normalisation
-        and Otsu's threshold (robust mode, :class:`meshlab_sharp.robust.RelativeRule`).
+        and Otsu's threshold (robust mode, :class:`meshlab_sharp.reference.detect.RelativeRule`).
         None: the paper's rule.
     relative : bool, default False
-        Robust mode (``rule`` a :class:`meshlab_sharp.robust.RelativeRule`): where the
+        Robust mode (``rule`` a :class:`meshlab_sharp.reference.detect.RelativeRule`): where the
         compiled pass over a cloud or a mesh's rings computes the projected distances it
         also computes what the rule computes from them, bit for bit (the relative
         distances and the score; on a cloud, on the neighbourhoods less ``rule.sheet``'s
@@ -90,7 +90,7 @@ def run_scales(
         the relative distances; elsewhere the rule is called.
     fused : ScalePass, optional
         The compiled pass over these points at these scales, already run
-        (:class:`meshlab_sharp.robust.RobustSetup` runs it to read the isolated points
+        (:class:`meshlab_sharp.reference.detect.RobustSetup` runs it to read the isolated points
         and the noise from the same search); None: run it here.
 
     The backend is the neighbourhoods': with "compiled", the projected distances of

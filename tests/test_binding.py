@@ -81,9 +81,9 @@ HEADER = {name: sig for name, sig in DECLARED.items() if name not in CURVES}
 
 
 def test_the_header_declares_the_abi():
-    """Known prototypes read as their C says (66 functions: the parser misses none)."""
+    """Known prototypes read as their C says (68 functions: the parser misses none)."""
     i32, i64, f64, ptr = ctypes.c_int, ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
-    assert len(HEADER) == 66
+    assert len(HEADER) == 68
     assert HEADER["ms_noise_floor"] == (f64, [ptr])
     assert HEADER["ms_scale_floor"] == (f64, [ptr, i32, i32, f64])
     assert HEADER["ms_face_windings"] == (i64, [ptr, i64, i64, ptr])
@@ -92,6 +92,8 @@ def test_the_header_declares_the_abi():
     assert HEADER["ms_bit_histogram"] == (i64, [ptr, i64, i64, ptr])
     assert HEADER["ms_noise_factor"] == (f64, [f64])
     assert HEADER["ms_support_free_score"] == (i32, [i32, f64, ptr])
+    assert HEADER["ms_robust_plan"] == (i32, [f64, i64, ptr, i32, i32, ptr])
+    assert HEADER["ms_plan_thresholds"] == (None, [ptr, ptr, ptr])
     assert HEADER["ms_stage_decide"] == (
         None,
         [ptr, i64, i64, i32, i64, i64, ptr, ptr, f64, ptr, ptr, ptr, ptr, ptr],

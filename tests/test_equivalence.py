@@ -40,12 +40,10 @@ from meshlab_sharp.neighbourhoods import (
     squared_distances,
 )
 from meshlab_sharp.normals import face_average_normals
+from meshlab_sharp.reference.detect import RelativeRule, isolated_from_stats, pass_noise_median
 from meshlab_sharp.robust import (
     R_MIN,
-    RelativeRule,
-    _isolated_from_stats,
     _noise_factor,
-    _pass_noise_median,
     isolated_points,
     local_scale,
     noise_scale_factor,
@@ -783,7 +781,7 @@ def test_isolated_points_and_noise_from_one_search(name):
     np.testing.assert_array_equal(fused.stats.near, table[:, 1])
     expected = isolated_points(points, table)
     assert expected.any()
-    np.testing.assert_array_equal(_isolated_from_stats(points, fused.stats), expected)
+    np.testing.assert_array_equal(isolated_from_stats(points, fused.stats), expected)
     assert _noise_factor(fused.stats.noise) == pytest.approx(
         noise_scale_factor(points, table, 7), rel=1e-12
     )
@@ -811,10 +809,10 @@ def test_statistics_left_in_tree_order(name):
     np.testing.assert_array_equal(tree.orig[b.kth_idx], a.kth_idx[tree.orig])
     for field in ("kth_d2", "nth_d2", "ref_d2", "noise"):
         assert getattr(b, field).tobytes() == getattr(a, field)[tree.orig].tobytes()
-    expected = _isolated_from_stats(points, a)
+    expected = isolated_from_stats(points, a)
     assert expected.any() == (name != "no_outliers")
-    np.testing.assert_array_equal(_isolated_from_stats(points, b), expected)
-    assert _pass_noise_median(b.noise) == _pass_noise_median(a.noise)
+    np.testing.assert_array_equal(isolated_from_stats(points, b), expected)
+    assert pass_noise_median(b.noise) == pass_noise_median(a.noise)
 
 
 @pytest.mark.parametrize(

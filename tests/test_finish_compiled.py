@@ -1,6 +1,6 @@
 """Robust mode's finishing steps in C (``ms_line_directions``, ``ms_supported``,
 ``ms_smoothed_ranking``, ``ms_thin``, ``ms_acute_tips``; ``_kernels.support_and_thin``
-and ``_kernels.acute_tips``, ``RobustSetup._finish_compiled``) against their numpy
+and ``_kernels.acute_tips``, ``reference.detect.RobustSetup._finish_compiled``) against their numpy
 reference (``robust.line_directions``, ``supported``, ``smoothed_ranking``, ``thin``,
 ``acute_tips``, ``RobustSetup._finish_numpy``): the same masks and ranks, bit for bit,
 and the same line directions up to sign and rounding (the 3x3 solver of the normals,
@@ -19,6 +19,7 @@ import shapes
 from meshlab_sharp import _kernels, robust
 from meshlab_sharp.neighbourhoods import Neighbourhood
 from meshlab_sharp.reference import detect as reference_sequence
+from meshlab_sharp.reference import robust as reference_robust
 from meshlab_sharp.sample import sample_part
 
 pytestmark = pytest.mark.skipif(not _kernels.available(), reason="needs the compiled kernels")
@@ -27,18 +28,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
 from bench import cad_cloud, cad_mesh  # noqa: E402
 
 
-def _setup_of(monkeypatch, vertices, faces=None) -> tuple[robust.RobustSetup, np.ndarray]:
+def _setup_of(
+    monkeypatch, vertices, faces=None
+) -> tuple[reference_sequence.RobustSetup, np.ndarray]:
     """The RobustSetup of the Python-driven sequence with the compiled backend and the
     candidates it finished."""
     held = {}
-    finish = robust.RobustSetup.finish
+    finish = reference_sequence.RobustSetup.finish
 
     def grab(self, mask, strength):
         held["setup"], held["mask"] = self, mask.copy()
         return finish(self, mask, strength)
 
     with monkeypatch.context() as m:
-        m.setattr(robust.RobustSetup, "finish", grab)
+        m.setattr(reference_sequence.RobustSetup, "finish", grab)
         reference_sequence.detect(vertices, faces, mode="robust", backend="compiled")
     return held["setup"], held["mask"]
 
@@ -159,7 +162,7 @@ def test_the_kernels_steps_one_by_one(wide):
     lib.ms_smoothed_ranking(
         _kernels._ptr(score), r, ctypes.byref(compare.spec()), 4, 0, c, _kernels._ptr(rank)
     )
-    assert rank.tobytes() == robust.smoothed_ranking(score, c_ref, 4).tobytes()
+    assert rank.tobytes() == reference_robust.smoothed_ranking(score, c_ref, 4).tobytes()
 
     e_full = np.zeros((n, 3))
     e_full[rows] = e

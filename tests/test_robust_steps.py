@@ -15,6 +15,7 @@ import meshlab_sharp
 from meshlab_sharp import _kernels, robust
 from meshlab_sharp.neighbourhoods import KnnNeighbourhoods, Neighbourhood
 from meshlab_sharp.reference import robust as reference
+from meshlab_sharp.reference.detect import RelativeRule
 from meshlab_sharp.threshold import BINS, histogram
 
 
@@ -145,7 +146,7 @@ def test_a_cloud_without_noise_is_thresholded_at_the_floor_a_noisy_one_by_otsu()
 def test_score_is_the_mean_centroid_distance_over_the_scales():
     points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 2, 0], [0, 0, 4]])
     lists = {2: _csr([[0, 1], [1, 0], [2, 0], [3, 0]]), 4: _csr([[0, 1, 2, 3]] * 4)}
-    rule = robust.RelativeRule(points, lists.__getitem__, 2)
+    rule = RelativeRule(points, lists.__getitem__, 2)
     for i, k in enumerate((2, 4)):
         r, t = rule(i, k, np.zeros(4))
         assert (r == 0).all() and t == 1.0
@@ -316,7 +317,7 @@ def test_thinning_ranks_by_the_mean_score_where_the_noise_grew_the_scales_to_the
     assert not robust.ranking_smoothed(True, 0.5)
     score = np.array([0.9, 0.1, 0.2, 0.6, 0.3])
     compare = _csr([[0, 1, 2, 3], [1, 0], [], [3, 4, 0], []])
-    rank = robust.smoothed_ranking(score, compare, 3)
+    rank = reference.smoothed_ranking(score, compare, 3)
     # rows: the mean of their first 3 entries (the point itself first); empty: the score
     np.testing.assert_array_equal(rank, [(0.9 + 0.1 + 0.2) / 3, (0.1 + 0.9) / 2, 0.2, 0.6, 0.3])
     # a point lifted beside a line outranks the line's point (0.9 > 0.6), but not its mean
@@ -326,7 +327,7 @@ def test_thinning_ranks_by_the_mean_score_where_the_noise_grew_the_scales_to_the
     e = np.tile([1.0, 0.0, 0.0], (6, 1))
     compare = _csr([[0, 1, 2, 3], [1, 0, 4, 5], [], [], [], []])
     assert robust.thin(pts, mask, score, e, compare).tolist() == [False, True] + [False] * 4
-    rank = robust.smoothed_ranking(score, compare, 4)
+    rank = reference.smoothed_ranking(score, compare, 4)
     assert robust.thin(pts, mask, rank, e, compare).tolist() == [True, False] + [False] * 4
 
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from meshlab_sharp import _header, _kernels, robust
+from meshlab_sharp.reference import detect as reference_sequence
 from meshlab_sharp.reference import robust as reference
 
 pytestmark = pytest.mark.skipif(not _kernels.available(), reason="needs the compiled kernels")
@@ -54,6 +55,48 @@ def test_reference_states_the_library_rules(rule: str, mesh: bool) -> None:
             args = (_kernels.noise_factor(noise),)
         assert getattr(_kernels, rule)(*args) == getattr(reference, rule)(*args), (rule, noise)
         assert getattr(robust, rule)(*args) == getattr(_kernels, rule)(*args)
+
+
+SCALE_SETS = [(12, 16, 20, 24, 28, 32, 36, 40), (8, 16, 24), (3,), (1, 2, 3, 4), (40, 600)]
+
+
+@pytest.mark.parametrize("mesh", [False, True])
+@pytest.mark.parametrize("scales", SCALE_SETS)
+def test_reference_states_the_library_plan(mesh: bool, scales: tuple[int, ...]) -> None:
+    """ms_robust_plan gives the numpy reference's decisions over a grid of noise ratios,
+    kept counts (the growth's cap n / top included) and scales, and ms_plan_thresholds
+    its thresholds of the same histograms."""
+    rng = np.random.default_rng(len(scales))
+    counts = rng.integers(0, 50, (len(scales), _header.integer("BINS")))
+    counts[:, :20] += rng.integers(0, 2000, (len(scales), 20))
+    for noise in NOISES:
+        for n_kept in (max(scales), 2 * max(scales) + 1, 3 * max(scales), 10_000):
+            plan = _kernels.robust_plan(noise, n_kept, scales, mesh)
+            assert plan == reference.robust_plan(noise, n_kept, scales, mesh), (noise, n_kept)
+            expected = reference_sequence.plan_thresholds(plan, counts)
+            assert _kernels.plan_thresholds(plan, counts).tolist() == expected.tolist()
+            if mesh:
+                assert plan.scales == scales and not plan.grown and not plan.acute_tests
+
+
+def test_plan_known_answers() -> None:
+    """The plan of a noisy cloud grows the scales to the cap and smooths the ranking; a
+    quiet cloud's looks for acute tips, exempts weak candidates and thresholds at the
+    floor alone; a mesh's lists are its THIN_RING-ring."""
+    scales = (12, 16, 20, 24, 28, 32, 36, 40)
+    noisy = _kernels.robust_plan(0.3, 10_000, scales, False)
+    assert noisy.grown and noisy.growth == 3.0 and noisy.scales == tuple(3 * k for k in scales)
+    assert noisy.otsu and noisy.noise_floor and noisy.ranking_smoothed
+    assert noisy.compare_knn == 36 and noisy.support_knn == robust.SUPPORT_KNN
+    assert noisy.free_below is None and not noisy.acute_tests and not noisy.thin_between
+    quiet = _kernels.robust_plan(0.01, 10_000, scales, False)
+    assert not quiet.grown and quiet.scales == scales and not quiet.otsu
+    assert quiet.acute_tests and quiet.thin_between
+    assert quiet.free_below == robust.SUPPORT_FREE_SCORE
+    assert quiet.compare_knn == robust.THIN_KNN
+    mesh = _kernels.robust_plan(0.0, 10_000, (1, 2, 3, 4), True)
+    assert mesh.otsu and not mesh.noise_floor and mesh.support_knn == robust.THIN_RING
+    assert mesh.compare_knn == robust.THIN_RING and mesh.thin_cone == robust.THIN_CONE_COS
 
 
 @pytest.mark.parametrize("normalise", [False, True])

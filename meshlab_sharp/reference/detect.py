@@ -16,7 +16,7 @@ import threading
 import time
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,16 +29,56 @@ from ..io import Geometry
 from ..multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
 from ..neighbourhoods import (
     KnnNeighbourhoods,
+    Neighbourhood,
     RingNeighbourhoods,
     build_neighbourhoods,
     far_points,
+    grow_rings,
     unit_scale,
 )
 from ..normals import DEFAULT_WEIGHTING, Weighting, face_average_normals
 from ..options import Source, as_input, check_mode_and_weighting, check_scales
 from ..progress import Progress
 from ..result import DetectionResult
-from ..robust import RobustSetup
+from ..robust import (
+    ISOLATED_NTH,
+    ISOLATED_REF,
+    ISOLATED_SPREAD,
+    NOISE_KNN,
+    SUPPORT_KNN,
+    THIN_KNN,
+    THIN_RING,
+    acute_tests,
+    grown_scales,
+    local_scale,
+    noise_factor,
+    noise_median,
+    otsu_splits,
+    ranking_smoothed,
+    relative_distances,
+    robust_threshold,
+    scale_floor,
+    sheet_parameters,
+    support_exempt,
+    support_free_score,
+    thin_blockers,
+    thin_cone,
+    thin_knn,
+)
+from ..threshold import histogram, otsu_from_histogram
+from . import robust as reference_robust
+from .robust import (
+    SUPPORT_MIN,
+    THIN_CONE_COS,
+    SheetNeighbourhoods,
+    acute_tips,
+    isolated_points,
+    line_directions,
+    noise_ratios_lists,
+    smoothed_ranking,
+    supported,
+    thin,
+)
 
 
 def detect(
@@ -299,3 +339,442 @@ def _check_cloud_size(n_input: int, n_clean: int, k_max: int, source: str) -> No
             f"{source}: {n_clean} distinct points{dup}, fewer than the largest scale "
             f"k = {k_max}; use smaller --scales"
         )
+
+
+def plan_thresholds(plan: _kernels.RobustPlan, counts: np.ndarray) -> np.ndarray:
+    """Each scale's threshold (s,) from its histogram ``counts`` (s, B) by ``plan``'s
+    rules, in numpy: Otsu's split when ``plan.otsu``, never below the reference's
+    :func:`~meshlab_sharp.reference.robust.scale_floor` (``ms_plan_thresholds``)."""
+    last = len(plan.scales) - 1
+    out = [
+        reference_robust.scale_floor(c, s == last, plan.mesh, plan.noise)
+        for s, c in enumerate(np.asarray(counts))
+    ]
+    if plan.otsu:
+        out = [max(otsu_from_histogram(c), floor) for c, floor in zip(counts, out, strict=True)]
+    return np.array(out, dtype=np.float64)
+
+
+def pass_noise_median(ratio: np.ndarray, workers: int = -1) -> float:
+    """:func:`meshlab_sharp.robust.noise_median` of the compiled pass's ratios (n,), the
+    same value, on ``workers`` threads (:func:`meshlab_sharp._kernels.lower_median`)."""
+    median = _kernels.lower_median(ratio, workers)
+    return noise_median(ratio) if median is None else median
+
+
+def isolated_from_stats(
+    points: np.ndarray, stats: _kernels.CloudStats, workers: int = -1
+) -> np.ndarray:
+    """:func:`isolated_points` from the pass's :class:`~meshlab_sharp._kernels.CloudStats` at
+    ``k_max`` (no kNN table): ``i`` is among the k_max nearest of ``j = near[i]`` when
+    ``(|p_i - p_j|^2, i)`` does not come after ``j``'s k_max-th neighbour in the
+    lists' order (squared distance, then index), and the second rule (ISOLATED_SPREAD).
+    (n,) bool, computed in C (:func:`meshlab_sharp._kernels.isolated_from_stats`)."""
+    return _kernels.isolated_from_stats(points, stats, ISOLATED_SPREAD, workers)
+
+
+@dataclass
+class RelativeRule:
+    """Per-scale rule of robust mode for :func:`meshlab_sharp.multiscale.run_scales`.
+
+    Called as ``rule(i, scale, pdis)`` for the i-th scale (the compiled pass, which does
+    this arithmetic itself, hands its score to ``rule.from_pass`` instead): returns
+    the relative distances (m,) and the threshold; it also accumulates ``score``, the mean over the
+    scales of ``o / l`` (:func:`local_scale`: the centroid's distance relative to the
+    local scale), the ranking used by :func:`thin`. Not ``r``: at an acute edge the
+    normal turns, the projected distance peaks beside the edge, the centroid's distance
+    at the edge.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+    lists : callable
+        ``lists(scale) -> Neighbourhood``, the neighbourhoods of that scale (called in
+        increasing order of scale).
+    n_scales : int
+    sheet : (float, int, float, float, float, float) or None
+        :func:`sheet_parameters` when ``lists`` leave out the other sheets
+        (:class:`SheetNeighbourhoods`): the compiled pass over a cloud then does too.
+    otsu : bool, default True
+        :func:`robust_threshold`'s ``otsu`` (:func:`otsu_splits`).
+    noise : float, default 0.0
+        The cloud's noise ratio, read by :func:`scale_floor` (0 on a mesh).
+    backend : {"compiled", "numpy"}, optional
+        :func:`local_scale`'s; default :func:`meshlab_sharp._kernels.default_backend`.
+    """
+
+    points: np.ndarray
+    lists: object
+    n_scales: int
+    sheet: _kernels.SheetParameters | None = None
+    otsu: bool = True
+    noise: float = 0.0
+    backend: str | None = None
+
+    def __post_init__(self) -> None:
+        self.score = np.zeros(len(self.points))
+
+    def __call__(self, i: int, scale: int, pdis: np.ndarray) -> tuple[np.ndarray, float]:
+        """Relative distances (m,) and threshold of the i-th scale, ``scale``."""
+        lists = self.lists(scale)  # type: ignore[operator]
+        ell, offset = local_scale(self.points, lists, backend=self.backend)
+        r = relative_distances(np.asarray(pdis, np.float64), ell)
+        self.score += relative_distances(offset, ell) / self.n_scales
+        return r, robust_threshold(r, self.otsu, self.floor(i, r))
+
+    def floor(self, i: int, r: np.ndarray) -> float:
+        """:func:`scale_floor` of the i-th scale's relative distances ``r`` (m,)."""
+        last = i == self.n_scales - 1
+        counts = histogram(r) if last else None  # read on the largest scale only
+        return scale_floor(counts, last, False, self.noise, self.backend)
+
+    def from_pass(self, score: np.ndarray, i: int, r: np.ndarray) -> tuple[bool, float]:
+        """Take the final ``score`` (m,) of the compiled pass (over a cloud or a mesh's
+        rings), which computed it and every scale's relative distances with this rule's
+        arithmetic (:class:`meshlab_sharp._kernels.ScalePass`); returns how
+        :func:`robust_threshold` thresholds the i-th scale's, ``r`` (m,), ``(otsu,
+        floor)``, for :func:`meshlab_sharp._kernels.scale_vote` (the same threshold)."""
+        self.score = score
+        return self.otsu, self.floor(i, r)
+
+
+class RobustSetup:
+    """What robust mode adds around :func:`meshlab_sharp.multiscale.run_scales`.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+        Cleaned points.
+    faces : (f, 3) int or None
+        Cleaned triangles of a mesh; None for a cloud.
+    neighbourhoods : KnnNeighbourhoods or RingNeighbourhoods
+        Those of ``points`` (built by the pipeline).
+    scales : tuple of int
+        Increasing scales.
+    workers : int, default -1
+        Threads for a kNN query when isolated points are left out, and for the line
+        directions.
+    weighting : {"gaussian", "none"}, default "gaussian"
+    keep_normals : bool, default False
+        How :func:`meshlab_sharp.multiscale.run_scales` will be called (the compiled
+        pass that finds the isolated points and the noise also computes what it needs).
+    sharp_edges : (m,) bool, optional
+        A mesh's :func:`meshlab_sharp.creases.sharp_vertices` mask when the caller has
+        found it already (``detect`` finds it on a thread beside the adjacency); None:
+        found here.
+
+    Attributes
+    ----------
+    keep : (p,) int64
+        Indices (into ``points``) of the points processed: all for a mesh, the
+        non-isolated ones for a cloud.
+    points, neighbourhoods
+        The points processed and their neighbourhoods (rebuilt without the isolated
+        points when there are any).
+    rule : RelativeRule
+        The per-scale rule to pass to ``run_scales``.
+    fused : ScalePass or None
+        The compiled pass over ``points`` at ``scales`` to pass to ``run_scales``, when
+        the set-up's search already made it (compiled backend, a cloud whose noise did
+        not grow the scales); None otherwise, and once :meth:`finish` starts (its
+        per-scale arrays, read by ``run_scales``, are released before support and
+        thinning).
+    sharp_edges : (m,) bool or None
+        A mesh's vertices on its own sharp edges
+        (:func:`meshlab_sharp.creases.sharp_vertices`): the ``sharp_edges`` given, or
+        found here before the ring pass's arrays exist; None for a cloud.
+    """
+
+    def __init__(
+        self,
+        points: np.ndarray,
+        faces: np.ndarray | None,
+        neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods,
+        scales: tuple[int, ...],
+        *,
+        workers: int = -1,
+        weighting: Weighting = DEFAULT_WEIGHTING,
+        keep_normals: bool = False,
+        sharp_edges: np.ndarray | None = None,
+    ) -> None:
+        self.n = len(points)
+        #: A mesh's set-up (the faces themselves are not kept: 48 bytes a vertex).
+        self.mesh = faces is not None
+        self.workers = workers
+        self.scales = tuple(scales)
+        self.keep = np.arange(self.n, dtype=np.int64)
+        self.points = points
+        self.neighbourhoods = neighbourhoods
+        self.weighting = weighting
+        self.keep_normals = keep_normals
+        #: The neighbourhoods' backend, which every step of the set-up and of
+        #: :meth:`finish` runs with.
+        self.backend = neighbourhoods.backend
+        self.fused: _kernels.ScalePass | None = None
+        #: How much the noise grew the scales (1: not at all).
+        self.growth = 1.0
+        #: The cloud's noise ratio (the lower median of :func:`noise_ratios`; 0 on a mesh).
+        self.noise = 0.0
+        #: The neighbourhoods the scales use: ``neighbourhoods`` (meshes; clouds with
+        #: the compiled pass, which leaves the other sheets out itself), or their
+        #: :class:`SheetNeighbourhoods` (clouds, numpy).
+        self.scale_neighbourhoods: KnnNeighbourhoods | RingNeighbourhoods | SheetNeighbourhoods
+        self.scale_neighbourhoods = neighbourhoods
+        sheet = None
+        if faces is None:
+            assert isinstance(neighbourhoods, KnnNeighbourhoods)
+            sheet = sheet_parameters()
+            top = max(self.scales)
+            k0 = min(NOISE_KNN, top)
+            compiled = neighbourhoods.tree is not None
+            if compiled:
+                self.fused = self._pass(k0, sheet)
+                assert self.fused.stats is not None
+                isolated = isolated_from_stats(points, self.fused.stats, workers)
+            else:
+                isolated = isolated_points(
+                    points,
+                    neighbourhoods.indices,
+                    nth=ISOLATED_NTH,
+                    ref=ISOLATED_REF,
+                    spread=ISOLATED_SPREAD,
+                )
+            if isolated.any():
+                self.fused = None  # freed before the pass over the points kept
+                self.keep = np.flatnonzero(~isolated)
+                self.points = np.ascontiguousarray(points[self.keep])
+                self.neighbourhoods = build_neighbourhoods(
+                    self.points, None, self.scales, workers=workers, backend=self.backend
+                )
+                if compiled:
+                    self.fused = self._pass(k0, sheet)
+            del isolated
+            if self.fused is not None and self.fused.stats is not None:
+                self.noise = pass_noise_median(self.fused.stats.noise, workers)
+                self.fused.stats = None  # read: its (n,) arrays are not kept
+                self.scale_neighbourhoods = self.neighbourhoods
+            else:
+                self.scale_neighbourhoods = self._sheets()
+                self.noise = noise_median(
+                    noise_ratios_lists(self.points, self.scale_neighbourhoods.first(k0))
+                )
+            factor = min(noise_factor(self.noise), len(self.points) / top)
+            if factor > 1.0:
+                self.growth = factor
+                self.scales = grown_scales(self.scales, factor)
+                self.neighbourhoods = build_neighbourhoods(
+                    self.points, None, self.scales, workers=workers, backend=self.backend
+                )
+                self.fused = None
+                self.scale_neighbourhoods = self.neighbourhoods if compiled else self._sheets()
+        if faces is None:
+            self.sharp_edges = None
+        elif sharp_edges is None:
+            self.sharp_edges = sharp_vertices(points, faces, backend=self.backend)[0]
+        else:
+            self.sharp_edges = np.asarray(sharp_edges, bool)
+        otsu = otsu_splits(faces is not None, self.noise)
+        # the lists' own method, not one of self: a rule that referred back to this
+        # setup made a reference cycle, so the arrays of every call (the kd-tree, the
+        # pass's outputs: about 55 bytes a point) stayed until the garbage collector ran
+        lists = self.scale_neighbourhoods.at
+        self.rule = RelativeRule(
+            self.points, lists, len(self.scales), sheet, otsu, self.noise, backend=self.backend
+        )
+
+    def _sheets(self) -> SheetNeighbourhoods:
+        """:class:`SheetNeighbourhoods` of ``neighbourhoods`` (numpy kNN lists)."""
+        assert isinstance(self.neighbourhoods, KnnNeighbourhoods)
+        return SheetNeighbourhoods(
+            self.points, self.neighbourhoods, self.weighting, sheet_parameters()
+        )
+
+    def _pass(self, noise_k: int, sheet: _kernels.SheetParameters) -> _kernels.ScalePass:
+        """The compiled pass at ``scales`` over ``points`` (whose kd-tree
+        ``neighbourhoods`` holds): projected distances, local scales, and the isolated
+        points' and the noise's statistics from the same search. It is the pass
+        ``run_scales`` needs when it finds no isolated points and no noise to grow the
+        scales for (``fused``)."""
+        assert isinstance(self.neighbourhoods, KnnNeighbourhoods)
+        assert self.neighbourhoods.tree is not None
+        return _kernels.cloud_projected_distances(
+            self.neighbourhoods.tree,
+            self.scales,
+            self.weighting,
+            keep_normals=self.keep_normals,
+            relative=True,
+            noise_k=noise_k,
+            isolated=(ISOLATED_NTH, ISOLATED_REF),
+            sheet=sheet,
+            workers=self.neighbourhoods.workers,
+            tree_order=True,  # read by scale_vote, isolated_from_stats and a median only
+        )
+
+    def _compiled(self) -> bool:
+        """Whether :meth:`finish` runs its steps in C: the neighbourhoods are the compiled
+        backend's (a cloud's kd-tree, a mesh's adjacency)."""
+        lists = self.neighbourhoods
+        if isinstance(lists, KnnNeighbourhoods):
+            return lists.tree is not None
+        return lists.adjacency is not None
+
+    def _candidate_lists(self, rows: np.ndarray, ks: tuple[int, ...]) -> list[Neighbourhood]:
+        """The kNN lists at each of ``ks`` (at most ``k_max``) for the points ``rows``
+        (increasing) only, the other rows empty: what support and thinning read (numpy)."""
+        assert isinstance(self.neighbourhoods, KnnNeighbourhoods)
+        table = np.asarray(self.neighbourhoods.indices)[rows, : max(ks)]
+        before = np.zeros(len(self.points) + 1, dtype=np.int64)  # rows before each point
+        before[np.asarray(rows, dtype=np.int64) + 1] = 1
+        np.cumsum(before, out=before)
+        return [
+            Neighbourhood(before * k, np.ascontiguousarray(table[:, :k]).reshape(-1)) for k in ks
+        ]
+
+    def _ring_rows(self, rows: np.ndarray, rings: tuple[int, ...]) -> list[Neighbourhood]:
+        """The k-rings, k in ``rings`` (increasing), of the vertices ``rows`` only (the
+        other rows empty), each listed as ``RingNeighbourhoods.at(k)`` lists it (a row
+        depends only on its vertex: :func:`meshlab_sharp.neighbourhoods.grow_rings`)."""
+        assert isinstance(self.neighbourhoods, RingNeighbourhoods)
+        grown = grow_rings(self.neighbourhoods.lists(), rows)
+        listed = dict(zip(range(1, max(rings) + 1), grown, strict=False))
+        out = []
+        for k in rings:
+            indptr = np.zeros(self.n + 1, dtype=np.int64)  # the sizes, summed in place
+            indptr[np.asarray(rows, dtype=np.int64) + 1] = listed[k].sizes
+            np.cumsum(indptr, out=indptr)
+            out.append(Neighbourhood(indptr, listed[k].indices))
+        return out
+
+    def _list_sizes(self) -> tuple[int, int, int]:
+        """The sizes of each candidate's support, comparison and direction lists: the
+        SUPPORT_KNN, thin_knn and k_max nearest (clouds), the THIN_RING-ring twice and
+        the largest ring (meshes)."""
+        top = max(self.scales)
+        if self.mesh:
+            return min(THIN_RING, top), min(THIN_RING, top), top
+        return min(SUPPORT_KNN, top), min(thin_knn(self.growth), top), top
+
+    def finish(self, mask: np.ndarray, strength: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Acute tips (clouds without noise), support, thinning and (meshes) the sharp
+        mesh edges, on all cleaned points: in C with the compiled backend
+        (:meth:`_finish_compiled`), in numpy otherwise (:meth:`_finish_numpy`), the same
+        masks.
+
+        Parameters
+        ----------
+        mask : (p,) bool
+            Candidates at every scale, per processed point (:func:`acute_tips` adds
+            the tips of acute edges on a cloud without noise).
+        strength : (p,) float64
+            Fraction of scales at which each processed point was a candidate.
+
+        Returns
+        -------
+        mask, strength : (m,) bool, (m,) float64
+            Per cleaned point (isolated points: False, 0). On a mesh, vertices of a
+            sharp edge (:func:`meshlab_sharp.creases.sharp_vertices`) are features with
+            strength 1.
+        """
+        self.fused = None
+        if mask.any():
+            mask = self._finish_compiled(mask) if self._compiled() else self._finish_numpy(mask)
+        if self.sharp_edges is not None:
+            mask = mask | self.sharp_edges
+            strength = np.where(self.sharp_edges, 1.0, strength)
+        return self.expand(mask, False), self.expand(strength, 0.0)
+
+    def _finish_numpy(self, mask: np.ndarray) -> np.ndarray:
+        """:meth:`finish`'s acute tips, support and thinning of ``mask`` (p,) bool in
+        numpy (the reference): the thinned mask (p,) bool."""
+        mesh = self.mesh
+        around_k, compare_k, top = self._list_sizes()
+        tests = acute_tests(self.rule.score, mask, mesh, self.noise)
+        if len(tests):
+            (near,) = self._candidate_lists(tests, (compare_k,))
+            mask = mask.copy()
+            mask[tests[acute_tips(self.points, mask, tests, near)]] = True
+        if mesh:
+            around, direction = self._ring_rows(np.flatnonzero(mask), (around_k, top))
+            compare = around
+        else:
+            around, compare, direction = self._candidate_lists(
+                np.flatnonzero(mask), (around_k, compare_k, top)
+            )
+        e = line_directions(self.points, mask, direction, self.workers)
+        free = support_exempt(self.rule.score, mesh, self.noise)
+        block = thin_blockers(mask, mesh, self.noise)
+        rank = self.rule.score
+        if ranking_smoothed(mesh, self.noise):
+            rank = smoothed_ranking(rank, compare, THIN_KNN)
+        mask = supported(
+            self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS, exempt=free
+        )
+        return thin(
+            self.points, mask, rank, e, compare, cone_cos=thin_cone(mesh, self.noise), between=block
+        )
+
+    def _finish_compiled(self, mask: np.ndarray) -> np.ndarray:
+        """:meth:`_finish_numpy` in C (:func:`meshlab_sharp._kernels.acute_tips` and
+        :func:`~meshlab_sharp._kernels.support_and_thin`), the candidates taken in tree
+        order (clouds; each step independent per candidate, the order changes nothing)
+        with their lists from the kd-tree (one table of the k_max nearest of the
+        candidates and the points tested as tips, read at every k) or the adjacency (the
+        largest ring, its THIN_RING-ring a prefix): the same mask."""
+        mesh = self.mesh
+        around_k, compare_k, top = self._list_sizes()
+        lists = self.neighbourhoods
+        if isinstance(lists, KnnNeighbourhoods):
+            assert lists.tree is not None
+            tests = acute_tests(self.rule.score, mask, mesh, self.noise)
+            todo = mask
+            if len(tests):
+                todo = mask.copy()
+                todo[tests] = True
+            # one search for the candidates and the points tested as acute tips, in tree
+            # order (no inverse of the tree's order, the rows of a leaf searched together)
+            rows, table = _kernels.cloud_knn_of_mask(lists.tree, todo, top, lists.workers)
+            del todo
+            slots = None  # every row of the table
+            if len(tests):
+                tested = np.flatnonzero(~mask[rows])
+                near = _kernels.CandidateLists.knn(table, compare_k, tested)
+                tips = _kernels.acute_tips(self.points, mask, rows[tested], near, self.workers)
+                mask = mask.copy()
+                mask[rows[tested[tips]]] = True
+                slots = np.flatnonzero(mask[rows])
+                rows = rows[slots]
+            around, compare, direction = (
+                _kernels.CandidateLists.knn(table, k, slots) for k in (around_k, compare_k, top)
+            )
+        else:
+            assert lists.adjacency is not None
+            rows = np.flatnonzero(mask)
+            members = _kernels.ring_members(lists.adjacency, rows, (around_k, top), self.workers)
+            around, direction = _kernels.CandidateLists.rings(members)
+            compare = around
+        rules = _kernels.FinishRules(
+            support_cone=THIN_CONE_COS,
+            minimum=SUPPORT_MIN,
+            free_below=support_free_score(mesh, self.noise),
+            thin_cone=thin_cone(mesh, self.noise),
+            window=THIN_KNN if ranking_smoothed(mesh, self.noise) else 0,
+            between=thin_blockers(mask, mesh, self.noise),
+        )
+        return _kernels.support_and_thin(
+            self.points,
+            mask,
+            self.rule.score,
+            rows,
+            (direction, around, compare),
+            rules,
+            self.workers,
+        )
+
+    def expand(self, values: np.ndarray, fill: object) -> np.ndarray:
+        """Per-processed-point values (p, ...) to all cleaned points (m, ...), ``fill``
+        for the isolated ones."""
+        if len(self.keep) == self.n:
+            return values
+        out = np.full((self.n,) + values.shape[1:], fill, dtype=values.dtype)
+        out[self.keep] = values
+        return out

@@ -9,12 +9,13 @@ other, and the out-of-core tiles (:mod:`meshlab_sharp.tiles.steps`) run these pe
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 import numpy as np
 
 from .. import _header, _kernels
+from .._kernels import RobustPlan
 from .neighbourhoods import Neighbourhood, squared_distances
 from .normals import Weighting, largest_eigenvectors, smallest_eigenvectors
 from .projected_distance import projected_distances
@@ -38,6 +39,8 @@ NOISE_QUIET = _header.real("NOISE_QUIET")
 R_MIN = _header.real("R_MIN")
 THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
 THIN_KNN = _header.integer("THIN_KNN")
+THIN_RING = _header.integer("THIN_RING")
+SUPPORT_KNN = _header.integer("SUPPORT_KNN")
 SUPPORT_FREE_SCORE = _header.real("SUPPORT_FREE_SCORE")
 ACUTE_SCORE = _header.real("ACUTE_SCORE")
 ACUTE_SCORE_MAX = _header.real("ACUTE_SCORE_MAX")
@@ -435,7 +438,7 @@ def thin(
     mask : (m,) bool
         Feature points before thinning.
     score : (m,) float64
-        Ranking (:class:`meshlab_sharp.robust.RelativeRule`'s ``score``).
+        Ranking (:class:`meshlab_sharp.reference.detect.RelativeRule`'s ``score``).
     e : (m, 3) float64
         Line directions (:func:`line_directions`).
     compare : Neighbourhood
@@ -755,3 +758,37 @@ def stage_acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: fl
     score = np.asarray(score, np.float64)
     test = ~np.asarray(mask, bool) & (score >= ACUTE_SCORE) & (score < ACUTE_SCORE_MAX)
     return np.flatnonzero(test)
+
+
+def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) -> RobustPlan:
+    """Robust mode's decisions once the first pass has measured the noise ratio ``noise``
+    of an input (``mesh`` or a cloud of ``n_kept`` points, isolated ones left out) at the
+    increasing ``scales``, as the rules above take them (the library's ``ms_robust_plan``
+    gives the same :class:`~meshlab_sharp._kernels.RobustPlan`)."""
+    top = max(scales)
+    growth = 1.0
+    if not mesh:  # the largest grown scale stays within the cloud
+        growth = min(noise_factor(noise), n_kept / top)
+    grown = growth > 1.0
+    if grown:
+        scales = tuple(grown_scale(k, growth) for k in scales)
+        top = max(scales)
+    quiet = quiet_cloud(mesh, noise)
+    support_k = THIN_RING if mesh else SUPPORT_KNN
+    compare_k = THIN_RING if mesh else thin_knn(growth)
+    return RobustPlan(
+        mesh=bool(mesh),
+        noise=float(noise),
+        scales=tuple(int(k) for k in scales),
+        growth=float(growth),
+        grown=grown,
+        otsu=otsu_splits(mesh, noise),
+        noise_floor=not mesh and not quiet,
+        acute_tests=quiet,
+        support_knn=min(support_k, top),
+        compare_knn=min(compare_k, top),
+        ranking_smoothed=ranking_smoothed(mesh, noise),
+        free_below=support_free_score(mesh, noise),
+        thin_cone=thin_cone(mesh, noise),
+        thin_between=quiet,
+    )

@@ -388,8 +388,9 @@ def _paper(
 def _robust(
     runner: Runner, store: Store, layout: Any, scales: tuple[int, ...], weighting: str
 ) -> tuple[np.ndarray, np.ndarray, str, str | None, tuple[int, ...]]:
-    """Robust mode (:mod:`meshlab_sharp.robust`, :class:`~meshlab_sharp.robust.RobustSetup`)
-    on a cloud, step by step, with the in-memory run's compiled passes: one over every
+    """Robust mode (:mod:`meshlab_sharp.robust`) on a cloud, step by step, with the
+    in-memory run's compiled passes and decisions (``ms_robust_plan``, once the noise is
+    measured: the scales, thresholds, acute tips, lists and ranking): a pass over every
     point, which finds the isolated points and, when there are none and the noise does
     not grow the scales, everything else too; then, if there are isolated points, again
     over the kept points whose k nearest held one (the others' lists are unchanged); and
@@ -434,44 +435,33 @@ def _robust(
             runner.step(Step("pass kept", robust_pass, again, {"first": False}))
         hist = runner.step(Step("histograms", robust_histograms))["hist"]
     nu = order_statistic(runner, "ratio", "kept", (n_kept - 1) // 2)
-    factor = _kernels.scale_growth(nu, n_kept, top)
-    if factor > 1.0:  # the tiles are sized for one at a time at the grown scales
+    plan = _kernels.robust_plan(nu, n_kept, scales, False)  # every decision below
+    if plan.grown:  # the tiles are sized for one at a time at the grown scales
         runner.at_once = 1
-        scales = robust.grown_scales(scales, factor)
-        top = max(scales)
-        store.create("r", (n, len(scales)), np.float64)
-        grown = Query(top, "kept", None, scales, **passes)
+        store.create("r", (n, len(plan.scales)), np.float64)
+        grown = Query(max(plan.scales), "kept", None, plan.scales, **passes)
         hist = runner.step(Step("pass grown", robust_pass, grown, {"first": False}))["hist"]
-    otsu = robust.otsu_splits(False, nu)
-    last = len(hist) - 1
-    thresholds = np.array(
-        [
-            _kernels.stage_threshold(h, otsu, robust.scale_floor(h, s == last, False, nu))
-            for s, h in enumerate(hist)
-        ]
-    )
+    thresholds = _kernels.plan_thresholds(plan, hist)
     decided = runner.step(Step("decide", robust_decide, None, {"thresholds": thresholds}))
-    compare = min(robust.thin_knn(factor if factor > 1.0 else 1.0), top)
-    if robust.quiet_cloud(False, nu):  # robust.acute_tests: tips of acute edges
+    top, compare = max(plan.scales), plan.compare_knn
+    if plan.acute_tests:  # tips of acute edges
         for name in ("tested", "tip"):
             store.create(name, (n,), bool)
-        tested = runner.step(Step("acute tests", robust_acute_tests, None, {"noise": nu}))
+        tested = runner.step(Step("acute tests", robust_acute_tests, None, {"plan": plan}))
         if int(tested["tested"]):
             tips = Query(compare, "kept", "tested", hint="kd2")
             runner.step(Step("acute tips", robust_acute_tips, tips, {"compare": compare}))
             runner.step(Step("acute join", robust_acute_join))
-    support = {"top": top, "around": min(robust.SUPPORT_KNN, top), "noise": nu}
     near = Query(top, "kept", "mask", save="lists", hint="kd2")
-    runner.step(Step("support", robust_support, near, support))
+    runner.step(Step("support", robust_support, near, {"plan": plan}))
     reuse = Query(compare, "kept", "mask1", reuse="lists")  # mask1: a subset of mask
     ranking = "score"
-    if robust.ranking_smoothed(False, nu):  # thinning compares the rows of mask1 only
+    if plan.ranking_smoothed:  # thinning compares the rows of mask1 only
         ranking = "rank"
         store.create(ranking, (n,), np.float64)
-        runner.step(Step("rank", robust_rank, reuse, {"compare": compare}))
-    thin = {"compare": compare, "noise": nu, "ranking": ranking}
-    runner.step(Step("thin", robust_thin, reuse, thin))
-    return thresholds, decided["counts"], "final", "kept", scales
+        runner.step(Step("rank", robust_rank, reuse, {"plan": plan}))
+    runner.step(Step("thin", robust_thin, reuse, {"plan": plan, "ranking": ranking}))
+    return thresholds, decided["counts"], "final", "kept", plan.scales
 
 
 def _resident() -> int:

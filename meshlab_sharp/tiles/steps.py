@@ -29,7 +29,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .. import _kernels, robust
-from .._kernels import CandidateLists, FinishRules
+from .._kernels import CandidateLists, FinishRules, RobustPlan
 from .neighbours import Context, Query
 from .store import Store
 
@@ -133,8 +133,8 @@ def _decided(
 
 def robust_pass(ctx: Context, *, first: bool) -> Partial:
     """The compiled pass of robust mode on the rows (the query's ``robust`` pass: the
-    sheet filter, the noise ratio, :class:`meshlab_sharp.robust.RelativeRule`'s relative
-    distances and score, as the in-memory :class:`~meshlab_sharp.robust.RobustSetup`
+    sheet filter, the noise ratio, :class:`meshlab_sharp.reference.detect.RelativeRule`'s relative
+    distances and score, as the in-memory :class:`~meshlab_sharp.reference.detect.RobustSetup`
     computes them): ``ratio``, ``r`` (r, s), ``score``; on the ``first`` pass (every
     distinct point) also each row's nearest neighbour (``nn1``, a position), k-th
     neighbour squared distance (``kd2``), input index (``kid``) and position (``kpos``),
@@ -212,12 +212,13 @@ def robust_decide(span: Span, *, thresholds: np.ndarray) -> Partial:
     return _decided(span, d, span.read("r")[d], thresholds)
 
 
-def robust_acute_tests(span: Span, *, noise: float) -> Partial:
-    """:func:`meshlab_sharp.robust.acute_tests` of the kept distinct points, with the
-    cloud's noise ratio ``noise``: writes ``tested``; their count."""
+def robust_acute_tests(span: Span, *, plan: RobustPlan) -> Partial:
+    """``ms_stage_acute_tests`` of the kept distinct points on the cloud of ``plan``
+    (where ``plan.acute_tests``): writes ``tested``; their count."""
     d = span.distinct
     d = d[span.read("kept")[d]]
-    test = robust.acute_tests(span.read("score")[d], span.read("mask")[d], False, noise)
+    score, mask = span.read("score")[d], span.read("mask")[d]
+    test = _kernels.stage_acute_tests(score, mask, plan.mesh, plan.noise)
     span.store.write_at("tested", span.a + d[test], np.ones(len(test), bool))
     return {"tested": np.array(len(test))}
 
@@ -237,29 +238,32 @@ def robust_acute_join(span: Span) -> Partial:
     return {}
 
 
-def _rules(noise: float, candidates: np.ndarray | None = None) -> FinishRules:
-    """Robust mode's finishing rules on a cloud of noise ratio ``noise`` (the library's:
-    :func:`meshlab_sharp.robust.support_free_score`, ``thin_cone``, ``thin_blockers`` of
-    the ``candidates`` when given)."""
-    between = None if candidates is None else robust.thin_blockers(candidates, False, noise)
+def _rules(plan: RobustPlan, candidates: np.ndarray | None = None) -> FinishRules:
+    """Robust mode's finishing rules as ``plan`` states them (the score that needs no
+    support, thinning's cone and, with ``candidates`` given and ``plan.thin_between``,
+    the points that are not candidates as thinning's blockers)."""
+    between = None
+    if candidates is not None and plan.thin_between:
+        between = ~np.asarray(candidates, bool)
     return FinishRules(
         support_cone=robust.THIN_CONE_COS,
         minimum=robust.SUPPORT_MIN,
-        free_below=robust.support_free_score(False, noise),
-        thin_cone=robust.thin_cone(False, noise),
+        free_below=plan.free_below,
+        thin_cone=plan.thin_cone,
         window=0,
         between=between,
     )
 
 
-def robust_support(ctx: Context, *, top: int, around: int, noise: float) -> Partial:
-    """The rows' line directions over their ``top`` nearest (to ``e``) and support over
-    their ``around`` nearest (to ``mask1``), ``ms_line_directions`` and ``ms_supported``
-    (:func:`meshlab_sharp._kernels.line_support`) by the rules of the cloud's noise ratio
-    ``noise``."""
+def robust_support(ctx: Context, *, plan: RobustPlan) -> Partial:
+    """The rows' line directions over their nearest at the largest of ``plan.scales``
+    (to ``e``) and support over their ``plan.support_knn`` nearest (to ``mask1``),
+    ``ms_line_directions`` and ``ms_supported`` (:func:`meshlab_sharp._kernels.line_support`)
+    by ``plan``'s rules."""
+    top, around = max(plan.scales), plan.support_knn
     lists = (CandidateLists.knn(ctx.idx, top), CandidateLists.knn(ctx.idx, around))
     e, out, _ = _kernels.line_support(
-        ctx.points, ctx.gather("mask"), ctx.gather("score"), ctx.rows, lists, _rules(noise),
+        ctx.points, ctx.gather("mask"), ctx.gather("score"), ctx.rows, lists, _rules(plan),
         TILE_THREADS,
     )  # fmt: skip
     ctx.store.write_at("e", ctx.own, e)
@@ -267,28 +271,28 @@ def robust_support(ctx: Context, *, top: int, around: int, noise: float) -> Part
     return {}
 
 
-def robust_rank(ctx: Context, *, compare: int) -> Partial:
+def robust_rank(ctx: Context, *, plan: RobustPlan) -> Partial:
     """``ms_smoothed_ranking`` of the rows over the first ``THIN_KNN`` of their
-    ``compare`` nearest (to ``rank``)."""
-    near = CandidateLists.knn(ctx.idx, compare)
+    ``plan.compare_knn`` nearest (to ``rank``)."""
+    near = CandidateLists.knn(ctx.idx, plan.compare_knn)
     score = ctx.gather("score")
     rank = _kernels.smoothed_ranking(score, ctx.rows, near, robust.THIN_KNN, TILE_THREADS)
     ctx.store.write_at("rank", ctx.own, rank[ctx.rows])
     return {}
 
 
-def robust_thin(ctx: Context, *, compare: int, noise: float, ranking: str) -> Partial:
+def robust_thin(ctx: Context, *, plan: RobustPlan, ranking: str) -> Partial:
     """``ms_thin`` of the rows by the store array ``ranking`` (``score``, or ``rank``
-    where :func:`meshlab_sharp.robust.ranking_smoothed`) over their ``compare`` nearest,
-    by the rules of the cloud's noise ratio ``noise``; writes ``final``."""
+    where ``plan.ranking_smoothed``) over their ``plan.compare_knn`` nearest, by
+    ``plan``'s rules; writes ``final``."""
     out = _kernels.thin_candidates(
         ctx.points,
         ctx.gather("mask1"),
         ctx.rows,
         ctx.gather("e")[ctx.rows],
-        CandidateLists.knn(ctx.idx, compare),
+        CandidateLists.knn(ctx.idx, plan.compare_knn),
         ctx.gather(ranking),
-        _rules(noise, ctx.gather("mask")),
+        _rules(plan, ctx.gather("mask")),
         TILE_THREADS,
     )
     ctx.store.write_at("final", ctx.own, out[ctx.rows])

@@ -479,9 +479,9 @@ void ms_dedup_resolve(int64_t lo, int64_t hi, int64_t *from_input);
 int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const int64_t *from_input,
                       int64_t *out, uint8_t *used);
 
-/* Robust mode's finishing steps (robust.RobustSetup.finish; robust.py is the numpy
- * reference), over candidate slots r in [begin, end): the point rows[r] (cleaned index)
- * and its lists in an ms_lists_t; below i = rows[r]. f0, f1, f2, between: (n) masks, one
+/* Robust mode's finishing steps (reference.detect.RobustSetup.finish; reference/robust.py
+ * is the numpy reference), over candidate slots r in [begin, end): the point rows[r]
+ * (cleaned index) and its lists in an ms_lists_t; below i = rows[r]. f0, f1, f2, between: (n) masks, one
  * byte a point; e (c, 3) and out (c) per slot; f1, f2 and rank are written at the rows
  * only (the caller sets the rest).
  * Slot r's list: the members idx[first ...], len of them, first = start[r] (start NULL:
@@ -551,6 +551,42 @@ int ms_support_free_score(int mesh, double noise, double *score);
  * largest scale (last) of a cloud that is not quiet (ms_quiet_cloud), at least
  * ms_noise_floor(counts) of that scale's histogram (MS_BINS; not read otherwise). */
 double ms_scale_floor(const int64_t *counts, int last, int mesh, double noise);
+
+/* Robust mode's decisions once the first pass has measured the noise (ms_robust_plan,
+ * stages.c): every branch of the sequence after that pass, taken from the rules above,
+ * in one place. ms_detect's cloud sequence (detect.cpp) and the out-of-core tiles
+ * (meshlab_sharp.tiles) both run what it says; the numpy reference states the same
+ * decisions (meshlab_sharp.reference.robust.robust_plan). */
+typedef struct {
+    int mesh;                  /* the input: a mesh (1) or a cloud (0) */
+    double noise;              /* the cloud's noise ratio (0 on a mesh) */
+    int n_scales;              /* s, the scales' count */
+    int scales[MS_MAX_SCALES]; /* the scales the detection runs at (grown when grown) */
+    double growth;             /* how much the noise grew the scales (ms_scale_growth; 1: not) */
+    int grown;                 /* growth > 1: the scales grew, and a pass at them follows */
+    int otsu;                  /* Otsu's split raises the thresholds (ms_otsu_splits) */
+    int noise_floor;           /* the largest scale's floor reads its histogram (ms_scale_floor) */
+    int acute_tests;           /* acute tips are looked for (ms_quiet_cloud; ms_stage_acute_tests) */
+    int support_knn;           /* support's list: the MS_SUPPORT_KNN nearest (a mesh's
+                                  MS_THIN_RING-ring), at most the largest scale */
+    int compare_knn;           /* thinning's and acute tips' comparison list: ms_thin_knn(growth)
+                                  nearest (a mesh's MS_THIN_RING-ring), at most the largest scale */
+    int ranking_smoothed;      /* thinning ranks by ms_smoothed_ranking (ms_ranking_smoothed) */
+    int support_exempt;        /* candidates scoring below free_below need no support */
+    double free_below;         /* ms_support_free_score's score (0 when not support_exempt) */
+    double thin_cone;          /* thinning's cone (ms_thin_cone) */
+    int thin_between;          /* thinning is blocked by the points that are not candidates
+                                  (a quiet cloud: robust.thin_blockers) */
+} ms_robust_plan_t;
+/* ms_robust_plan: the plan for an input of `mesh`, noise ratio `noise`, n_kept points (the
+ * isolated ones left out) and the s given scales (increasing, s <= MS_MAX_SCALES; a cloud's
+ * scales grow by ms_scale_growth(noise, n_kept, largest scale), a mesh's do not). Returns 0,
+ * or -1 when s is out of range. ms_plan_thresholds: each scale's threshold (s) from its
+ * summed MS_BINS-bin histogram counts (s, MS_BINS; read only with plan->otsu): with the
+ * plan's floor of that scale (ms_scale_floor), ms_stage_threshold. */
+int ms_robust_plan(double noise, int64_t n_kept, const int *scales, int s, int mesh,
+                   ms_robust_plan_t *plan);
+void ms_plan_thresholds(const ms_robust_plan_t *plan, const int64_t *counts, double *thresholds);
 
 /* The pointwise stages of a cloud's sequence (stages.c), over the points [begin, end):
  * ms_detect runs them over every point, the out-of-core path over each tile's points and

@@ -1,7 +1,7 @@
 // See detect.h. The per-point kernels of native/src are called with the same arguments as
 // meshlab_sharp/_kernels.py calls them, in chunks of MS_CHUNK points on every core; what
 // remains here mirrors the Python modules' global steps: cleaning.py (the compiled path), threshold.py,
-// multiscale.py, robust.py (RobustSetup; its finishing steps are the kernel's) and
+// multiscale.py, reference/detect.py (RobustSetup; its finishing steps are the kernel's) and
 // creases.py. docs/contributing.md ("The arithmetic both implementations share",
 // "Robust mode's arithmetic") is the contract.
 #include "detect.h"
@@ -710,14 +710,13 @@ void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 // The pointwise stages (stages.c) over the n points' values x, scale s at x[s * n ...], in
 // the order `order` maps to the cleaned points (empty: that order): each scale's threshold
 // from the histograms summed over chunks of points on every core (ms_stage_threshold:
-// with otsu, Otsu's split, never below floor, or with noise >= 0 below robust mode's floor
-// of a cloud of that noise ratio, ms_scale_floor; lo, hi and flatSpan: ms_stage_histograms'
-// normalisation), then the decision (ms_stage_decide); thresholds and candidates to r,
+// with otsu, Otsu's split, never below floor, or with a plan its floors, ms_plan_thresholds;
+// lo, hi and flatSpan: ms_stage_histograms' normalisation), then the decision (ms_stage_decide); thresholds and candidates to r,
 // strength and feature (in the cleaned order) to d; with values not null, the values the
 // thresholds split (S, n; x's order: normalised with lo, else x's) into values.
 void stageDecision(const double *x, Index n, size_t S, const double *lo, const double *hi, double flatSpan, bool otsu,
-                   double floor, const std::vector<Index> &order, Decision &d, Result &r, double noise = -1.0,
-                   double *values = nullptr) {
+                   double floor, const std::vector<Index> &order, Decision &d, Result &r,
+                   const ms_robust_plan_t *plan = nullptr, double *values = nullptr) {
 	const Index count = (n + MS_CHUNK - 1) / MS_CHUNK;
 	const int s = int(S);
 	std::vector<int64_t> counts(otsu ? size_t(count) * S * MS_BINS : 0, 0);
@@ -729,11 +728,10 @@ void stageDecision(const double *x, Index n, size_t S, const double *lo, const d
 	std::vector<double> thresholds(S);
 	for (Index u = 1; u < count && otsu; ++u)  // the chunks' histograms summed into the first's
 		for (size_t b = 0; b < S * MS_BINS; ++b) counts[b] += counts[size_t(u) * S * MS_BINS + b];
-	for (size_t k = 0; k < S; ++k) {  // noise >= 0: robust mode's floors (ms_scale_floor)
-		const int64_t *hist = otsu ? &counts[k * MS_BINS] : nullptr;
-		const double f = noise < 0.0 ? floor : ms_scale_floor(hist, k + 1 == S, 0, noise);
-		thresholds[k] = ms_stage_threshold(hist, otsu, f);
-	}
+	if (plan != nullptr)  // robust mode's floors
+		ms_plan_thresholds(plan, otsu ? counts.data() : nullptr, thresholds.data());
+	for (size_t k = 0; k < S && plan == nullptr; ++k)
+		thresholds[k] = ms_stage_threshold(otsu ? &counts[k * MS_BINS] : nullptr, otsu, floor);
 	std::vector<uint8_t> feature(n);
 	std::vector<double> strength(n);
 	std::vector<int64_t> candidates(size_t(count) * S, 0);
@@ -878,7 +876,7 @@ Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 	});
 	Decision d;
 	keepDetails(d, options.details, S, n, normals);
-	stageDecision(pdis.data(), n, S, lo.data(), hi.data(), flatSpan, true, 0.0, orig, d, r, -1.0, detailRow(d, 0, n));
+	stageDecision(pdis.data(), n, S, lo.data(), hi.data(), flatSpan, true, 0.0, orig, d, r, nullptr, detailRow(d, 0, n));
 	Buffer<double>().swap(pdis);
 	if (!orig.empty()) {
 		toCleanedRows(orig, d.distances, 1);
@@ -920,9 +918,10 @@ KnnOfMask knnOfMask(const Tree &t, const std::vector<char> &mask, int k, Bar &ba
 	return out;
 }
 
-// robust.RobustSetup on a cloud: isolated points left out (_isolated_from_stats), scales
-// grown with the noise, then the pass at the final scales; relative distances and score
-// from the kernel (RelativeRule.from_pass); acute tips, support and thinning by the
+// reference.detect.RobustSetup on a cloud: isolated points left out (isolated_from_stats),
+// then what ms_robust_plan decides: the scales grown with the noise and the pass at them,
+// the thresholds, the acute tests, the lists and the ranking; relative distances and
+// score from the kernel (RelativeRule.from_pass); acute tips, support and thinning by the
 // kernel on the candidates' kNN rows (RobustSetup._finish_compiled).
 Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	Decision d;  // its toClean: all cleaned points unless isolated ones are left out
@@ -961,12 +960,10 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index n = tree->n;
 	const Index at = (n - 1) / 2;
 	std::nth_element(pass.noise.begin(), pass.noise.begin() + at, pass.noise.end());
-	const double ratio = pass.noise[at];  // the median noise ratio
-	const double factor = ms_scale_growth(ratio, n, top0);
-	int thinKnn = ms_thin_knn(1.0);  // grows with the scales
-	if (factor > 1.0) {
-		thinKnn = ms_thin_knn(factor);
-		for (int &k : r.scales) k = ms_grown_scale(k, factor);
+	ms_robust_plan_t plan;  // every decision below (the median noise ratio's)
+	ms_robust_plan(pass.noise[at], n, r.scales.data(), int(r.scales.size()), 0, &plan);  // scales checked
+	if (plan.grown) {
+		r.scales.assign(plan.scales, plan.scales + plan.n_scales);
 		if (r.scales.back() > n)
 			throw InputError("k = " + std::to_string(r.scales.back()) + " nearest neighbours needs at least " +
 			                 std::to_string(r.scales.back()) + " points, got " + std::to_string(n));
@@ -974,10 +971,9 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 		pass = cloudPass(*tree, r.scales, options.gaussian, true, 0, bar, 65, 85, options.details);
 	}
 	bar.report(85, "thresholds");
-	const bool quiet = ms_quiet_cloud(0, ratio);
 	keepDetails(d, options.details, r.scales.size(), n, pass.normals);
-	stageDecision(pass.relative.data(), n, r.scales.size(), nullptr, nullptr, 0.0, ms_otsu_splits(0, ratio), R_MIN,
-	              tree->orig, d, r, ratio, detailRow(d, 0, n));
+	stageDecision(pass.relative.data(), n, r.scales.size(), nullptr, nullptr, 0.0, plan.otsu != 0, R_MIN, tree->orig,
+	              d, r, &plan, detailRow(d, 0, n));
 	Buffer<double>().swap(pass.relative);
 	toCleanedRows(tree->orig, d.distances, 1);
 	toCleanedRows(tree->orig, d.normals, 3);
@@ -991,12 +987,13 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const int top = r.scales.back();
 	// robust.acute_tests: one search for them and the candidates (RobustSetup._finish_compiled)
 	std::vector<uint8_t> tests(n, 0);
-	const bool tested = ms_stage_acute_tests(pass.score.data(), bytes(d.feature), 0, n, 0, ratio, tests.data()) > 0;
+	const bool tested = plan.acute_tests &&
+	                    ms_stage_acute_tests(pass.score.data(), bytes(d.feature), 0, n, 0, plan.noise, tests.data()) > 0;
 	std::vector<char> todo = d.feature;
 	for (Index i = 0; tested && i < n; ++i) todo[i] |= char(tests[i]);
 	std::vector<uint8_t>().swap(tests);
 	const KnnOfMask knn = knnOfMask(*tree, todo, top, bar, 85, 90);
-	const int thinK = std::min(thinKnn, top);
+	const int thinK = plan.compare_knn;
 	std::vector<Index> starts, rows;  // the candidates and where their rows begin in the table
 	if (tested) {  // robust.acute_tips
 		std::vector<Index> tests, at;
@@ -1020,12 +1017,10 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 			rows.push_back(knn.rows[c]);
 		}
 	if (rows.empty()) return d;
-	double freeBelow = 0.0;
-	const bool exempt = ms_support_free_score(0, ratio, &freeBelow) != 0;
 	d.feature = supportAndThin(pts, d.feature, pass.score, rows, knn.lists(top, starts),
-	                           knn.lists(std::min(MS_SUPPORT_KNN, top), starts), knn.lists(thinK, starts), exempt,
-	                           freeBelow, ms_ranking_smoothed(0, ratio) != 0, quiet, ms_thin_cone(0, ratio), bar, 90,
-	                           95);
+	                           knn.lists(plan.support_knn, starts), knn.lists(thinK, starts), plan.support_exempt != 0,
+	                           plan.free_below, plan.ranking_smoothed != 0, plan.thin_between != 0, plan.thin_cone, bar,
+	                           90, 95);
 	return d;
 }
 

@@ -1,4 +1,4 @@
-/* Robust mode's finishing steps (robust.RobustSetup.finish): isolation, line
+/* Robust mode's finishing steps (reference.detect.RobustSetup.finish): isolation, line
  * directions, support, the smoothed ranking, thinning, acute tips.
  * Part of meshlab-sharp's native library (meshlab_sharp.h). */
 #include "internal.h"

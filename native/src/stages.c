@@ -24,8 +24,11 @@ int ms_quiet_cloud(int mesh, double noise) { return !(mesh || noise > MS_NOISE_Q
 
 int ms_otsu_splits(int mesh, double noise) { return !ms_quiet_cloud(mesh, noise); }
 
+/* Whether the largest scale's floor reads its histogram: a cloud that is not quiet. */
+static int noise_floored(int mesh, double noise) { return !(mesh || ms_quiet_cloud(mesh, noise)); }
+
 double ms_scale_floor(const int64_t *counts, int last, int mesh, double noise) {
-    if (!last || mesh || ms_quiet_cloud(mesh, noise)) return MS_R_MIN;
+    if (!last || !noise_floored(mesh, noise)) return MS_R_MIN;
     const double floor_ = ms_noise_floor(counts);
     return floor_ > MS_R_MIN ? floor_ : MS_R_MIN;
 }
@@ -42,6 +45,42 @@ int ms_support_free_score(int mesh, double noise, double *score) {
     if (!ms_quiet_cloud(mesh, noise)) return 0;
     *score = MS_SUPPORT_FREE_SCORE;
     return 1;
+}
+
+int ms_robust_plan(double noise, int64_t n_kept, const int *scales, int s, int mesh,
+                   ms_robust_plan_t *plan) {
+    if (s < 1 || s > MS_MAX_SCALES) return -1;
+    const int given_top = scales[s - 1];
+    plan->mesh = mesh;
+    plan->noise = noise;
+    plan->n_scales = s;
+    plan->growth = mesh ? 1.0 : ms_scale_growth(noise, n_kept, given_top);
+    plan->grown = plan->growth > 1.0;
+    for (int k = 0; k < s; k++)
+        plan->scales[k] = plan->grown ? ms_grown_scale(scales[k], plan->growth) : scales[k];
+    const int top = plan->scales[s - 1];
+    plan->otsu = ms_otsu_splits(mesh, noise);
+    plan->noise_floor = noise_floored(mesh, noise);
+    plan->acute_tests = ms_quiet_cloud(mesh, noise);
+    const int support = mesh ? MS_THIN_RING : MS_SUPPORT_KNN;
+    const int compare = mesh ? MS_THIN_RING : ms_thin_knn(plan->growth);
+    plan->support_knn = support < top ? support : top;
+    plan->compare_knn = compare < top ? compare : top;
+    plan->ranking_smoothed = ms_ranking_smoothed(mesh, noise);
+    plan->free_below = 0.0;
+    plan->support_exempt = ms_support_free_score(mesh, noise, &plan->free_below);
+    plan->thin_cone = ms_thin_cone(mesh, noise);
+    plan->thin_between = ms_quiet_cloud(mesh, noise);
+    return 0;
+}
+
+void ms_plan_thresholds(const ms_robust_plan_t *plan, const int64_t *counts, double *thresholds) {
+    const int s = plan->n_scales;
+    for (int k = 0; k < s; k++) {
+        const int64_t *c = plan->otsu ? counts + (int64_t)k * MS_BINS : NULL;
+        const double floor_ = ms_scale_floor(c, k == s - 1, plan->mesh, plan->noise);
+        thresholds[k] = ms_stage_threshold(c, plan->otsu, floor_);
+    }
 }
 
 double ms_flat_span(const double *extent) {
