@@ -34,18 +34,18 @@ from meshlab_sharp.parts import (
     SEGMENTS,
     Mesh,
     SamplePart,
-    _box,
-    _check_kind_and_count,
-    _crease_edges,
-    _cylinder,
-    _face_normals,
-    _minus,
-    _sampled,
-    _union,
+    box,
+    check_kind_and_count,
+    crease_edges,
     crease_segments,
+    cylinder,
+    face_normals,
     float32_rounded,
     mesh_spacing,
+    minus,
     sample_surface,
+    sampled,
+    union,
     vertex_normals,
 )
 
@@ -118,20 +118,20 @@ def _thin_sheet_bracket(w: float, segments: int = SEGMENTS) -> Mesh:
     """Sheet-metal angle bracket: a 60 x 40 base and a 40-high upright of sheet ``w``
     thick, bent at a sharp 90 degrees (convex outside, concave inside), two r = 5
     holes in the base and an r = 6 hole in the upright."""
-    base = _box((0, 0, 0), (60, 40, w))
-    upright = _box((0, 0, 0), (w, 40, 40))
-    holes = [_cylinder((36, y), 5, -1, w + 1, segments) for y in (12, 28)]
-    holes.append(_along_x(_cylinder((20, 26), 6, -1, w + 1, segments)))
-    return _minus(_union(base, upright), *holes)
+    base = box((0, 0, 0), (60, 40, w))
+    upright = box((0, 0, 0), (w, 40, 40))
+    holes = [cylinder((36, y), 5, -1, w + 1, segments) for y in (12, 28)]
+    holes.append(_along_x(cylinder((20, 26), 6, -1, w + 1, segments)))
+    return minus(union(base, upright), *holes)
 
 
 def _thin_ribbed_housing(w: float, segments: int = SEGMENTS) -> Mesh:
     """Open box housing 80 x 50 x 30 with walls and floor ``w`` thick, two cross ribs
     (20 high) and a lengthwise rib (14 high), all ``w`` thick (``segments`` unused)."""
-    shell = _minus(_box((0, 0, 0), (80, 50, 30)), _box((w, w, w), (80 - w, 50 - w, 31)))
-    ribs = [_box((x - w / 2, w / 2, w / 2), (x + w / 2, 50 - w / 2, 20)) for x in (27.0, 53.0)]
-    ribs.append(_box((w / 2, 25 - w / 2, w / 2), (80 - w / 2, 25 + w / 2, 14)))
-    return _union(shell, *ribs)
+    shell = minus(box((0, 0, 0), (80, 50, 30)), box((w, w, w), (80 - w, 50 - w, 31)))
+    ribs = [box((x - w / 2, w / 2, w / 2), (x + w / 2, 50 - w / 2, 20)) for x in (27.0, 53.0)]
+    ribs.append(box((w / 2, 25 - w / 2, w / 2), (80 - w / 2, 25 + w / 2, 14)))
+    return union(shell, *ribs)
 
 
 def _thin_blade_rotor(w: float, segments: int = SEGMENTS) -> Mesh:
@@ -155,15 +155,13 @@ def _thin_blade_rotor(w: float, segments: int = SEGMENTS) -> Mesh:
                         )
                     )
         blades.append(_convex_hull(np.array(corners)))
-    hub = _cylinder((0, 0), 12, 0, 20, segments)
-    return _minus(_union(hub, *blades), _cylinder((0, 0), 4, -1, 21, segments))
+    hub = cylinder((0, 0), 12, 0, 20, segments)
+    return minus(union(hub, *blades), cylinder((0, 0), 4, -1, 21, segments))
 
 
 def _thin_tube(w: float, segments: int = SEGMENTS) -> Mesh:
     """Tube: outer radius 15, wall ``w``, 40 long: four circular 90-degree edges."""
-    return _minus(
-        _cylinder((0, 0), 15, 0, 40, segments), _cylinder((0, 0), 15 - w, -1, 41, segments)
-    )
+    return minus(cylinder((0, 0), 15, 0, 40, segments), cylinder((0, 0), 15 - w, -1, 41, segments))
 
 
 THIN_PARTS: dict[str, Callable[[float], Mesh]] = {
@@ -209,7 +207,7 @@ def thin_wall(name: str, spacings: float, n: int, kind: str = "points") -> float
     areas = []
     for w in (1.0, 3.0):
         verts, faces, _ = _thin_cached(name, w)
-        areas.append(float(_face_normals(verts, faces)[1].sum()))
+        areas.append(float(face_normals(verts, faces)[1].sum()))
     b = (areas[1] - areas[0]) / 2.0
     a = areas[0] - b
     # w = spacings * c * sqrt(A / n) with c from expected_spacing: w^2 = k (a + b w)
@@ -259,9 +257,9 @@ def make_thin_part(
     -------
     SamplePart
     """
-    n = _check_kind_and_count(kind, n_points)
+    n = check_kind_and_count(kind, n_points)
     wall = thin_wall(name, spacings, n, kind)
-    part = _sampled(name, thin_surface(name, wall), kind, n, seed)
+    part = sampled(name, thin_surface(name, wall), kind, n, seed)
     return replace(part, extra={**part.extra, "wall": wall})
 
 
@@ -425,7 +423,7 @@ def visible_edges(
         The seen pieces of the sharp edges.
     """
     v = np.asarray(verts, np.float64)
-    ends, fa, fb, fn = _crease_edges(v, np.asarray(faces, np.int64), CREASE_ANGLE)
+    ends, fa, fb, fn = crease_edges(v, np.asarray(faces, np.int64), CREASE_ANGLE)
     if len(ends) == 0 or len(surface) == 0:
         return np.zeros((0, 2, 3))
     spacing = np.asarray(spacing, np.float64)

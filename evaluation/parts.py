@@ -20,12 +20,12 @@ from meshlab_sharp.parts import (
     Builder,
     Mesh,
     SamplePart,
-    _box,
-    _cylinder,
-    _frustum,
-    _minus,
-    _prism,
-    _union,
+    box,
+    cylinder,
+    frustum,
+    minus,
+    prism,
+    union,
 )
 
 __all__ = [
@@ -125,7 +125,7 @@ def _rounded_box(
 
 def _part_box(segments: int = SEGMENTS) -> Mesh:
     """Box 60 x 40 x 30: twelve 90-degree edges (no round surface: ``segments`` unused)."""
-    return _box((0, 0, 0), (60, 40, 30))
+    return box((0, 0, 0), (60, 40, 30))
 
 
 def _part_chamfered_box(segments: int = SEGMENTS) -> Mesh:
@@ -141,31 +141,31 @@ def _part_chamfered_box(segments: int = SEGMENTS) -> Mesh:
 
 def _part_cylinder(segments: int = SEGMENTS) -> Mesh:
     """Cylinder r = 20, height 40: two circular 90-degree edges."""
-    return _cylinder((0, 0), 20, 0, 40, segments)
+    return cylinder((0, 0), 20, 0, 40, segments)
 
 
 def _part_cone(segments: int = SEGMENTS) -> Mesh:
     """Truncated cone r = 25 at the base to r = 10 at height 35 (23-degree half-angle):
     a 67-degree edge at the base circle, a 113-degree one at the top."""
-    return _frustum((0, 0), 25, 10, 0, 35, segments)
+    return frustum((0, 0), 25, 10, 0, 35, segments)
 
 
 def _part_drilled_plate(segments: int = SEGMENTS) -> Mesh:
     """Plate 80 x 50 x 12 with three through holes (r = 5, 7, 9): rims at 90 degrees."""
-    plate = _box((0, 0, 0), (80, 50, 12))
+    plate = box((0, 0, 0), (80, 50, 12))
     holes = [
-        _cylinder(c, r, -1, 13, segments) for c, r in (((16, 25), 5), ((38, 25), 7), ((62, 25), 9))
+        cylinder(c, r, -1, 13, segments) for c, r in (((16, 25), 5), ((38, 25), 7), ((62, 25), 9))
     ]
-    return _minus(plate, *holes)
+    return minus(plate, *holes)
 
 
 def _part_concave_steps(segments: int = SEGMENTS) -> Mesh:
     """Three-step staircase 60 x 40 (steps 20 deep, 10 high): two concave 90-degree edges
     between the treads and the risers, and the convex nosings (``segments`` unused)."""
-    return _union(
-        _box((0, 0, 0), (60, 40, 10)),
-        _box((0, 0, 0), (40, 40, 20)),
-        _box((0, 0, 0), (20, 40, 30)),
+    return union(
+        box((0, 0, 0), (60, 40, 10)),
+        box((0, 0, 0), (40, 40, 20)),
+        box((0, 0, 0), (20, 40, 30)),
     )
 
 
@@ -178,7 +178,7 @@ def _part_star_prism(segments: int = SEGMENTS) -> Mesh:
     small = big * t22 / (math.sin(math.pi / n) + t22 * math.cos(math.pi / n))
     ang = np.pi / 2 + np.pi * np.arange(2 * n) / n
     rad = np.where(np.arange(2 * n) % 2 == 0, big, small)
-    return _prism(np.c_[rad * np.cos(ang), rad * np.sin(ang)], 0, 20)
+    return prism(np.c_[rad * np.cos(ang), rad * np.sin(ang)], 0, 20)
 
 
 def _part_sphere(segments: int = SEGMENTS) -> Mesh:
@@ -206,7 +206,7 @@ def _wedge(angle: float) -> Mesh:
     half = math.radians(angle) / 2
     tri = np.array([[0.0, 0.0], [50 * math.cos(half), -50 * math.sin(half)]])
     tri = np.vstack([tri, [50 * math.cos(half), 50 * math.sin(half)]])
-    return _prism(tri, 0.0, 30.0)
+    return prism(tri, 0.0, 30.0)
 
 
 def _part_wedge30(segments: int = SEGMENTS) -> Mesh:

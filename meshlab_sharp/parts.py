@@ -40,12 +40,22 @@ __all__ = [
     "CREASE_ANGLE",
     "SAMPLE_PARTS",
     "SamplePart",
+    "box",
+    "check_kind_and_count",
+    "crease_edges",
     "crease_segments",
+    "cylinder",
+    "face_normals",
     "float32_rounded",
+    "frustum",
     "make_part",
     "mesh_spacing",
+    "minus",
+    "prism",
     "reference_surface",
     "sample_surface",
+    "sampled",
+    "union",
     "vertex_normals",
 ]
 
@@ -155,26 +165,26 @@ def _loft(bottom: np.ndarray, top: np.ndarray) -> Mesh:
     return verts.astype(np.float64), faces.astype(np.int64)
 
 
-def _prism(polygon: np.ndarray, z0: float, z1: float) -> Mesh:
+def prism(polygon: np.ndarray, z0: float, z1: float) -> Mesh:
     """Extrude a counter-clockwise, star-shaped (k, 2) polygon from z0 to z1."""
     k = len(polygon)
     return _loft(np.c_[polygon, np.full(k, z0)], np.c_[polygon, np.full(k, z1)])
 
 
-def _box(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> Mesh:
+def box(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> Mesh:
     """Axis-aligned box."""
     rect = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]], float)
-    return _prism(rect, lo[2], hi[2])
+    return prism(rect, lo[2], hi[2])
 
 
-def _cylinder(
+def cylinder(
     center: tuple[float, float], r: float, z0: float, z1: float, n: int = SEGMENTS
 ) -> Mesh:
     """Vertical cylinder (n-gon prism)."""
-    return _prism(_circle(center, r, n), z0, z1)
+    return prism(_circle(center, r, n), z0, z1)
 
 
-def _frustum(
+def frustum(
     center: tuple[float, float], r0: float, r1: float, z0: float, z1: float, n: int = SEGMENTS
 ) -> Mesh:
     """Vertical truncated cone (n segments), radius r0 at z0 and r1 at z1."""
@@ -240,14 +250,16 @@ def _canonical(verts: np.ndarray, faces: np.ndarray) -> Mesh:
     return verts[order], f[np.lexsort(f.T[::-1])]
 
 
-def _union(*meshes: Mesh) -> Mesh:
+def union(*meshes: Mesh) -> Mesh:
+    """The exact union of closed meshes (at least one), taken left to right."""
     out = meshes[0]
     for m in meshes[1:]:
         out = _boolean("union", out, m)
     return out
 
 
-def _minus(a: Mesh, *cutters: Mesh) -> Mesh:
+def minus(a: Mesh, *cutters: Mesh) -> Mesh:
+    """``a`` less each of the closed meshes ``cutters`` in turn (exact differences)."""
     out = a
     for c in cutters:
         out = _boolean("difference", out, c)
@@ -274,17 +286,17 @@ def _part_fandisk(segments: int = SEGMENTS) -> Mesh:
     - a hole (r = 6) drilled through the raised block with a 45-degree countersink
       (r = 10 at the top face): two weak 45-degree circles and a 90-degree rim below.
     """
-    deck = _box((0, 0, 0), (100, 60, 20))
-    block = _box((0, 0, 0), (50, 60, 40))
-    boss = _cylinder((68, 30), 9, 10, 30, segments)
-    solid = _union(deck, block, boss)
+    deck = box((0, 0, 0), (100, 60, 20))
+    block = box((0, 0, 0), (50, 60, 40))
+    boss = cylinder((68, 30), 9, 10, 30, segments)
+    solid = union(deck, block, boss)
     s = 1 / math.sqrt(2)
     chamfer = _halfspace_cutter(np.array([0.0, 0.0, 32.0]), np.array([-s, 0.0, s]))
     a = math.radians(25)
     slope = _halfspace_cutter(np.array([85.0, 0.0, 20.0]), np.array([math.sin(a), 0, math.cos(a)]))
-    hole = _cylinder((27, 30), 6, -1, 41, segments)
-    countersink = _frustum((27, 30), 5, 12, 35, 42, segments)
-    return _minus(solid, chamfer, slope, hole, countersink)
+    hole = cylinder((27, 30), 6, -1, 41, segments)
+    countersink = frustum((27, 30), 5, 12, 35, 42, segments)
+    return minus(solid, chamfer, slope, hole, countersink)
 
 
 SAMPLE_PARTS: dict[str, Builder] = {"fandisk": _part_fandisk}
@@ -297,7 +309,7 @@ round surfaces: the sample's part (``evaluation/parts.py`` holds the others)."""
 # ----------------------------------------------------------------------------------
 
 
-def _face_normals(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def face_normals(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals (m, 3) and areas (m,) of triangles."""
     v = verts[faces]
     cr = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
@@ -305,7 +317,7 @@ def _face_normals(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     return cr / np.where(norm > 0, norm, 1.0)[:, None], 0.5 * norm
 
 
-def _crease_edges(
+def crease_edges(
     verts: np.ndarray, faces: np.ndarray, min_angle: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Edges whose two faces turn by more than ``min_angle`` degrees.
@@ -313,7 +325,7 @@ def _crease_edges(
     Returns (e, 2) vertex indices, (e,) and (e,) the two faces of each, and the (m, 3)
     face normals. Edges with other than two faces, and faces of zero area, are ignored.
     """
-    normals, areas = _face_normals(verts, faces)
+    normals, areas = face_normals(verts, faces)
     scale = np.ptp(verts, axis=0).max() if len(verts) else 1.0
     good = areas > 1e-12 * scale * scale
     f_idx = np.flatnonzero(good)
@@ -352,7 +364,7 @@ def crease_segments(
         are ignored.
     """
     verts = np.asarray(verts, np.float64)
-    ends = _crease_edges(verts, np.asarray(faces, np.int64), min_angle)[0]
+    ends = crease_edges(verts, np.asarray(faces, np.int64), min_angle)[0]
     return verts[ends].reshape(-1, 2, 3)
 
 
@@ -455,7 +467,7 @@ def sample_surface(
     ``density`` maps (c, 3) positions to relative point densities (default uniform).
     """
     rng = np.random.default_rng(seed)
-    normals, areas = _face_normals(verts, faces)
+    normals, areas = face_normals(verts, faces)
     weight = areas if density is None else areas * density(verts[faces].mean(axis=1))
     # area in units of the reference density (density 1)
     total = float(weight.sum())
@@ -489,7 +501,7 @@ def sample_surface(
 
 def _remesh(verts: np.ndarray, faces: np.ndarray, n_vertices: int) -> Mesh:
     """Isotropic remesh with about n_vertices, creases over CREASE_ANGLE kept as edges."""
-    _, areas = _face_normals(verts, faces)
+    _, areas = face_normals(verts, faces)
     # an equilateral mesh of edge L has area sqrt(3)/2 * L^2 per vertex
     target = math.sqrt(2.0 * areas.sum() / (math.sqrt(3.0) * n_vertices))
     ms = pymeshlab.MeshSet()
@@ -512,7 +524,7 @@ def _remesh(verts: np.ndarray, faces: np.ndarray, n_vertices: int) -> Mesh:
 
 def vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Unit vertex normals (n, 3) of a triangle mesh: its face normals weighted by area."""
-    fn, areas = _face_normals(verts, faces)
+    fn, areas = face_normals(verts, faces)
     vn = np.zeros_like(verts)
     for k in range(3):
         np.add.at(vn, faces[:, k], fn * areas[:, None])
@@ -537,7 +549,7 @@ def mesh_spacing(verts: np.ndarray, faces: np.ndarray) -> float:
     return float(np.linalg.norm(verts[e[:, 0]] - verts[e[:, 1]], axis=1).mean())
 
 
-def _sampled(
+def sampled(
     name: str, reference: tuple[np.ndarray, np.ndarray, np.ndarray], kind: str, n: int, seed: int
 ) -> SamplePart:
     """Points (exactly n) or an isotropic mesh (about n vertices) of a reference surface."""
@@ -566,7 +578,7 @@ def _sampled(
     )
 
 
-def _check_kind_and_count(kind: str, n_points: int | None) -> int:
+def check_kind_and_count(kind: str, n_points: int | None) -> int:
     """The number of points for ``kind`` (default when None), validated."""
     if kind not in ("points", "mesh"):
         raise ValueError(f"kind must be 'points' or 'mesh', not {kind!r}")
@@ -611,5 +623,5 @@ def make_part(
     -------
     SamplePart
     """
-    n = _check_kind_and_count(kind, n_points)
-    return _sampled(name, reference_surface(name, parts=parts), kind, n, seed)
+    n = check_kind_and_count(kind, n_points)
+    return sampled(name, reference_surface(name, parts=parts), kind, n, seed)

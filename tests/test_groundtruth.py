@@ -181,7 +181,7 @@ def test_density_gradient(box):
 def test_wedge_apex_angle_and_edges(angle):
     v, f, e = gt.reference_surface(f"wedge{angle}")
     # the apex edge is the vertical edge through the origin; its faces turn by 180 - angle
-    ends, fa, fb, normals = parts._crease_edges(v, f, gt.CREASE_ANGLE)
+    ends, fa, fb, normals = parts.crease_edges(v, f, gt.CREASE_ANGLE)
     apex = [k for k, (a, b) in enumerate(ends) if np.allclose(v[[a, b], :2], 0)]
     assert len(apex) == 1
     turn = math.degrees(math.acos(normals[fa[apex[0]]] @ normals[fb[apex[0]]]))
@@ -212,7 +212,7 @@ def test_coarse_cylinder_truth_is_two_24_gons():
     assert np.allclose(np.hypot(e[..., 0], e[..., 1]), 20)
     assert sorted(set(np.round(e[..., 2].ravel(), 9))) == [0, 40]
     # the side facets turn by 15 degrees: below the crease angle, not in the truth
-    _, fa, fb, normals = parts._crease_edges(v, f, 1.0)
+    _, fa, fb, normals = parts.crease_edges(v, f, 1.0)
     turns = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", normals[fa], normals[fb]), -1, 1)))
     assert sorted(set(np.round(turns, 6))) == [15.0, 90.0]
 
@@ -247,7 +247,7 @@ def test_openscad_exports(name):
     # the truth is exact: facets turn by <= 15 degrees ($fn >= 24; float32 rounding adds
     # 0.01), designed edges by
     # >= 45 degrees; nothing in between
-    _, fa, fb, normals = parts._crease_edges(v, f, 1e-3)
+    _, fa, fb, normals = parts.crease_edges(v, f, 1e-3)
     turns = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", normals[fa], normals[fb]), -1, 1)))
     assert not np.any((turns > 16) & (turns < 40)) and np.any(turns >= 40)
     assert len(e) == int((turns > gt.CREASE_ANGLE).sum())
@@ -300,7 +300,7 @@ def test_thin_tube_wall():
 def _planes(name: str, axis: int) -> list[float]:
     """Offsets of the planes of the faces of a thin part (wall W) normal to an axis."""
     v, f, _ = gt.thin_surface(name, W)
-    normals, _ = parts._face_normals(v, f)
+    normals, _ = parts.face_normals(v, f)
     on = np.abs(normals[:, axis]) > 1 - 1e-9
     return sorted(set(np.round(v[f[on, 0], axis], 9)))
 
@@ -345,7 +345,7 @@ def test_thin_wall_in_spacings(kind, tol):
     part = gt.make_thin_part("tube", 2, kind, n_points=3000)
     assert part.extra["wall"] / part.spacing == pytest.approx(2, rel=tol)
     v, _, _ = gt.thin_surface("tube", part.extra["wall"])
-    area = parts._face_normals(*gt.thin_surface("tube", part.extra["wall"])[:2])[1].sum()
+    area = parts.face_normals(*gt.thin_surface("tube", part.extra["wall"])[:2])[1].sum()
     n = part.n if kind == "points" else 3000
     assert part.extra["wall"] == pytest.approx(2 * gt.expected_spacing(area, n, kind), rel=1e-3)
     assert len(v) and np.array_equal(part.edges, gt.thin_surface("tube", part.extra["wall"])[2])
