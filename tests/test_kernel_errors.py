@@ -13,6 +13,7 @@ import os
 import resource
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -23,14 +24,18 @@ from meshlab_sharp.errors import InputError
 
 pytestmark = pytest.mark.skipif(not _kernels.available(), reason="compiled kernels not built")
 
-_UNDER_LIMIT = """
+#: What both subprocesses start with: the address space in use now (VmSize).
+_PRELUDE = """
 import resource
 import numpy as np
-from meshlab_sharp import _kernels
 
 def vm_bytes():
     with open("/proc/self/status") as f:
         return next(int(l.split()[1]) * 1024 for l in f if l.startswith("VmSize:"))
+"""
+
+_UNDER_LIMIT = """
+from meshlab_sharp import _kernels
 
 n = 16_000_000
 faces = np.array([[0, 1, 2]], dtype=np.int64)
@@ -43,16 +48,29 @@ except MemoryError as e:
 """
 
 
-def test_out_of_memory_is_a_memory_error():
+def _run(
+    script: str,
+    timeout: float,
+    env: dict[str, str] | None = None,
+    preexec_fn: Callable[[], None] | None = None,
+) -> subprocess.CompletedProcess[str]:
+    """``script`` after :data:`_PRELUDE` in a Python subprocess at the checkout's root,
+    which, like ``tests/``, is on its path, with ``env`` added to this environment."""
     root = Path(__file__).resolve().parent.parent
-    run = subprocess.run(
-        [sys.executable, "-c", _UNDER_LIMIT],
+    path = {"PYTHONPATH": f"{root}{os.pathsep}{root / 'tests'}"}
+    return subprocess.run(
+        [sys.executable, "-c", _PRELUDE + script],
         capture_output=True,
         text=True,
-        timeout=60,
+        timeout=timeout,
         cwd=root,
-        env={**os.environ, "PYTHONPATH": str(root), "OPENBLAS_NUM_THREADS": "1"},
+        env={**os.environ, **path, **(env or {})},
+        preexec_fn=preexec_fn,
     )
+
+
+def test_out_of_memory_is_a_memory_error():
+    run = _run(_UNDER_LIMIT, 60, {"OPENBLAS_NUM_THREADS": "1"})
     assert run.returncode == 0, run.stderr
     assert run.stdout.startswith("MemoryError: out of memory"), run.stdout + run.stderr
 
@@ -74,15 +92,12 @@ def test_cloud_statistics_need_fewer_than_2_31_points():
 
 
 _THREADS_CANNOT_START = """
-import resource
-import numpy as np
 import meshlab_sharp as ms
 from shapes import box_cylinder_points, cube_grid_mesh
 
 inputs = [(box_cylinder_points(3000), None), cube_grid_mesh(6)]  # a cloud, a mesh
 free = [ms.detect(*a).mask for a in inputs]
-with open("/proc/self/status") as f:
-    vm = next(int(l.split()[1]) * 1024 for l in f if l.startswith("VmSize:"))
+vm = vm_bytes()
 # each new thread's stack is RLIMIT_STACK's 1 GB (read at start-up): none fits any more
 resource.setrlimit(resource.RLIMIT_AS, (vm + 256 * 2**20, resource.RLIM_INFINITY))
 for a, mask in zip(inputs, free):
@@ -96,15 +111,10 @@ def test_threads_that_cannot_start_leave_their_work_to_the_caller():
     stack each, 256 MB left): the calling thread does all the work, with the same
     result, instead of failing with EAGAIN, on a cloud and on a mesh (whose sharp edges
     otherwise take a thread of their own)."""
-    root = Path(__file__).resolve().parent.parent
     gb = 2**30
-    run = subprocess.run(
-        [sys.executable, "-c", _THREADS_CANNOT_START],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        cwd=root,
-        env={**os.environ, "PYTHONPATH": f"{root}{os.pathsep}{root / 'tests'}"},
+    run = _run(
+        _THREADS_CANNOT_START,
+        120,
         preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_STACK, (gb, gb)),
     )
     assert run.returncode == 0, run.stderr
