@@ -5,6 +5,7 @@ weighting and the scales."""
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -12,7 +13,15 @@ import numpy as np
 import pymeshlab
 
 from . import _header
-from .defaults import MAX_KNN_SCALE, MAX_RING_SCALE, MAX_SCALES, MODES, WEIGHTINGS
+from .defaults import (
+    DEFAULT_KNN_SCALES,
+    DEFAULT_RING_SCALES,
+    MAX_KNN_SCALE,
+    MAX_RING_SCALE,
+    MAX_SCALES,
+    MODES,
+    WEIGHTINGS,
+)
 from .errors import InputError
 from .io import Geometry, as_geometry, load, mesh_arrays
 
@@ -49,6 +58,33 @@ def as_input(source: Source, faces: np.ndarray | None, as_points: bool) -> Geome
             raise InputError("faces are taken from the file; do not pass faces with a path")
         return load(source, as_points=as_points)
     return as_geometry(source, faces, source="array")
+
+
+def load_input(
+    source: Source,
+    faces: np.ndarray | None,
+    as_points: bool,
+    mode: object,
+    weighting: object,
+    timings: dict[str, float],
+) -> Geometry:
+    """:func:`check_mode_and_weighting`, then :func:`as_input`, its seconds added to
+    ``timings["load"]``: how every in-memory detection starts."""
+    check_mode_and_weighting(mode, weighting)
+    t0 = time.perf_counter()
+    geometry = as_input(source, faces, as_points)
+    timings["load"] = time.perf_counter() - t0
+    return geometry
+
+
+def input_scales(
+    geometry: Geometry, as_points: bool, scales: Sequence[int] | int | None
+) -> tuple[bool, tuple[int, ...]]:
+    """Whether ``geometry`` is detected as a mesh (it has faces and not ``as_points``) and
+    its scales (:func:`check_scales`: rings for a mesh, kNN sizes for a cloud)."""
+    is_mesh = geometry.is_mesh and not as_points
+    default = DEFAULT_RING_SCALES if is_mesh else DEFAULT_KNN_SCALES
+    return is_mesh, check_scales(scales, default, "mesh" if is_mesh else "points")
 
 
 def check_scales(

@@ -20,10 +20,9 @@ from .curves import extract_curves
 from .defaults import DEFAULT_MODE
 from .errors import InputError
 from .io import Geometry
-from .multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES
 from .neighbourhoods import unit_scale
 from .normals import DEFAULT_WEIGHTING, Weighting
-from .options import Source, as_input, check_mode_and_weighting, check_scales
+from .options import Source, input_scales, load_input
 from .preprocessing import (
     Preprocessing,
     PreprocessingReport,
@@ -177,11 +176,9 @@ def _detect(
 ) -> DetectionResult:
     """:func:`detect` in memory, every step with ``backend`` (resolved: "compiled" or
     "numpy")."""
-    check_mode_and_weighting(mode, weighting)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    geometry = as_input(source, faces, as_points)
-    timings["load"] = time.perf_counter() - t0
+    geometry = load_input(source, faces, as_points, mode, weighting, timings)
     steps = as_preprocessing(preprocessing)
     if steps is not None and steps.active:
         t = time.perf_counter()
@@ -212,9 +209,7 @@ def _detect(
         result.timings["total"] = time.perf_counter() - t0
         return result
 
-    is_mesh = geometry.is_mesh and not as_points
-    kind = "mesh" if is_mesh else "points"
-    scales_t = check_scales(scales, DEFAULT_RING_SCALES if is_mesh else DEFAULT_KNN_SCALES, kind)
+    is_mesh, scales_t = input_scales(geometry, as_points, scales)
     bar = (
         progress
         if isinstance(progress, Progress)
@@ -237,7 +232,7 @@ def _detect(
             result = DetectionResult(
                 mask=native.mask,
                 strength=native.strength,
-                kind=kind,
+                kind="mesh" if is_mesh else "points",
                 scales=native.scales,
                 thresholds=native.thresholds,
                 candidate_counts=native.candidate_counts,

@@ -3,7 +3,11 @@
 
 Runs robust mode as chosen and with one constant changed at a time on the evaluation's
 inputs (``scripts/evaluate.py``'s generators and cache), and prints one markdown row per
-variant: mean F1 per condition (share of points flagged for the smooth controls).
+variant: mean F1 per condition (share of points flagged for the smooth controls). The
+native library has its constants compiled in, so every variant runs the Python-driven
+sequence with the numpy backend (``backend="numpy"``, the same bits as the library
+where nothing is changed), its rules taken from the numpy reference's statement
+(:mod:`meshlab_sharp.reference.robust`), with the constant set there too.
 
     python3 scripts/robust_variants.py --quick
     python3 scripts/robust_variants.py --quick --conditions clean,noise25 --variants chosen
@@ -27,6 +31,7 @@ import evaluate  # noqa: E402
 from evaluation import groundtruth as gt  # noqa: E402
 from evaluation.scoring import score_part  # noqa: E402
 from meshlab_sharp import creases, detect, robust  # noqa: E402
+from meshlab_sharp.reference import robust as reference  # noqa: E402
 
 #: name -> ((module, constant, value), ...) changed from the chosen mode.
 VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
@@ -81,21 +86,27 @@ VARIANTS: dict[str, tuple[tuple[object, str, object], ...]] = {
 
 def run_variant(name: str, pairs: list[tuple[str, str]], n: int, cache: Path) -> dict[str, float]:
     """Mean F1 (or flagged share, in %) per condition with one variant."""
-    saved = [(m, a, getattr(m, a)) for m, a, _ in VARIANTS[name]]
+    changes: list[tuple[object, str, object]] = [(robust, "_RULES", reference)]
     for m, a, v in VARIANTS[name]:
+        changes.append((m, a, v))
+        if m is robust and hasattr(reference, a):  # the rules' own copy
+            changes.append((reference, a, v))
+    saved = [(m, a, getattr(m, a)) for m, a, _ in changes]
+    for m, a, v in changes:
         setattr(m, a, v)
     try:
         per: dict[str, list[float]] = {}
         for part_name, condition in pairs:
             part, _ = evaluate.generate(part_name, condition, n, 0, cache)
-            s = score_part(part, detect(part.vertices, part.faces, mode="robust").mask)
+            found = detect(part.vertices, part.faces, mode="robust", backend="numpy")
+            s = score_part(part, found.mask)
             if len(part.edges):
                 per.setdefault(condition, []).append(s.f1)
             else:
                 per.setdefault(f"{condition} flagged %", []).append(100 * s.fp_rate)
         return {c: float(np.mean(v)) for c, v in per.items()}
     finally:
-        for m, a, v in saved:
+        for m, a, v in reversed(saved):
             setattr(m, a, v)
 
 

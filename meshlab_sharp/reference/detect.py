@@ -21,12 +21,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .. import _kernels
+from .. import robust as robust_mode  # read when run: variants set its rules there
 from ..cleaning import CleanGeometry, clean
 from ..creases import sharp_vertices
 from ..defaults import DEFAULT_MODE
 from ..errors import InputError
 from ..io import Geometry
-from ..multiscale import DEFAULT_KNN_SCALES, DEFAULT_RING_SCALES, decide, run_scales
+from ..multiscale import decide, run_scales
 from ..neighbourhoods import (
     KnnNeighbourhoods,
     Neighbourhood,
@@ -37,39 +38,12 @@ from ..neighbourhoods import (
     unit_scale,
 )
 from ..normals import DEFAULT_WEIGHTING, Weighting, face_average_normals
-from ..options import Source, as_input, check_mode_and_weighting, check_scales
+from ..options import Source, input_scales, load_input
 from ..progress import Progress
 from ..result import DetectionResult
-from ..robust import (
-    ISOLATED_NTH,
-    ISOLATED_REF,
-    ISOLATED_SPREAD,
-    NOISE_KNN,
-    SUPPORT_KNN,
-    THIN_KNN,
-    THIN_RING,
-    acute_tests,
-    grown_scales,
-    local_scale,
-    noise_factor,
-    noise_median,
-    otsu_splits,
-    ranking_smoothed,
-    relative_distances,
-    robust_threshold,
-    scale_floor,
-    sheet_parameters,
-    support_exempt,
-    support_free_score,
-    thin_blockers,
-    thin_cone,
-    thin_knn,
-)
 from ..threshold import histogram, otsu_from_histogram
 from . import robust as reference_robust
 from .robust import (
-    SUPPORT_MIN,
-    THIN_CONE_COS,
     SheetNeighbourhoods,
     acute_tips,
     isolated_points,
@@ -98,14 +72,10 @@ def detect(
     :func:`meshlab_sharp._kernels.resolve`'s): the same results as the library's
     sequence, bit for bit. The arguments are :func:`meshlab_sharp.detect`'s."""
     backend = _kernels.resolve(backend)
-    check_mode_and_weighting(mode, weighting)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    geometry = as_input(source, faces, as_points)
-    timings["load"] = time.perf_counter() - t0
-    is_mesh = geometry.is_mesh and not as_points
-    kind = "mesh" if is_mesh else "points"
-    scales_t = check_scales(scales, DEFAULT_RING_SCALES if is_mesh else DEFAULT_KNN_SCALES, kind)
+    geometry = load_input(source, faces, as_points, mode, weighting, timings)
+    is_mesh, scales_t = input_scales(geometry, as_points, scales)
     result = run(
         geometry,
         is_mesh=is_mesh,
@@ -359,7 +329,7 @@ def pass_noise_median(ratio: np.ndarray, workers: int = -1) -> float:
     """:func:`meshlab_sharp.robust.noise_median` of the compiled pass's ratios (n,), the
     same value, on ``workers`` threads (:func:`meshlab_sharp._kernels.lower_median`)."""
     median = _kernels.lower_median(ratio, workers)
-    return noise_median(ratio) if median is None else median
+    return robust_mode.noise_median(ratio) if median is None else median
 
 
 def isolated_from_stats(
@@ -370,7 +340,7 @@ def isolated_from_stats(
     ``(|p_i - p_j|^2, i)`` does not come after ``j``'s k_max-th neighbour in the
     lists' order (squared distance, then index), and the second rule (ISOLATED_SPREAD).
     (n,) bool, computed in C (:func:`meshlab_sharp._kernels.isolated_from_stats`)."""
-    return _kernels.isolated_from_stats(points, stats, ISOLATED_SPREAD, workers)
+    return _kernels.isolated_from_stats(points, stats, robust_mode.ISOLATED_SPREAD, workers)
 
 
 @dataclass
@@ -396,7 +366,8 @@ class RelativeRule:
         :func:`sheet_parameters` when ``lists`` leave out the other sheets
         (:class:`SheetNeighbourhoods`): the compiled pass over a cloud then does too.
     otsu : bool, default True
-        :func:`robust_threshold`'s ``otsu`` (:func:`otsu_splits`).
+        Whether Otsu's split raises the thresholds above the floor (:func:`otsu_splits`;
+        :func:`meshlab_sharp.robust.robust_threshold`).
     noise : float, default 0.0
         The cloud's noise ratio, read by :func:`scale_floor` (0 on a mesh).
     backend : {"compiled", "numpy"}, optional
@@ -417,23 +388,28 @@ class RelativeRule:
     def __call__(self, i: int, scale: int, pdis: np.ndarray) -> tuple[np.ndarray, float]:
         """Relative distances (m,) and threshold of the i-th scale, ``scale``."""
         lists = self.lists(scale)  # type: ignore[operator]
-        ell, offset = local_scale(self.points, lists, backend=self.backend)
-        r = relative_distances(np.asarray(pdis, np.float64), ell)
-        self.score += relative_distances(offset, ell) / self.n_scales
-        return r, robust_threshold(r, self.otsu, self.floor(i, r))
+        ell, offset = robust_mode.local_scale(self.points, lists, backend=self.backend)
+        r = robust_mode.relative_distances(np.asarray(pdis, np.float64), ell)
+        self.score += robust_mode.relative_distances(offset, ell) / self.n_scales
+        # one histogram for Otsu's split and the largest scale's floor
+        last = i == self.n_scales - 1
+        counts = histogram(r) if self.otsu or last else None
+        floor = robust_mode.scale_floor(counts, last, False, self.noise, self.backend)
+        return r, max(otsu_from_histogram(counts), floor) if self.otsu else floor
 
     def floor(self, i: int, r: np.ndarray) -> float:
         """:func:`scale_floor` of the i-th scale's relative distances ``r`` (m,)."""
         last = i == self.n_scales - 1
         counts = histogram(r) if last else None  # read on the largest scale only
-        return scale_floor(counts, last, False, self.noise, self.backend)
+        return robust_mode.scale_floor(counts, last, False, self.noise, self.backend)
 
     def from_pass(self, score: np.ndarray, i: int, r: np.ndarray) -> tuple[bool, float]:
         """Take the final ``score`` (m,) of the compiled pass (over a cloud or a mesh's
         rings), which computed it and every scale's relative distances with this rule's
         arithmetic (:class:`meshlab_sharp._kernels.ScalePass`); returns how
-        :func:`robust_threshold` thresholds the i-th scale's, ``r`` (m,), ``(otsu,
-        floor)``, for :func:`meshlab_sharp._kernels.scale_vote` (the same threshold)."""
+        :func:`meshlab_sharp.robust.robust_threshold` thresholds the i-th scale's, ``r``
+        (m,), ``(otsu, floor)``, for :func:`meshlab_sharp._kernels.scale_vote` (the same
+        threshold)."""
         self.score = score
         return self.otsu, self.floor(i, r)
 
@@ -523,9 +499,9 @@ class RobustSetup:
         sheet = None
         if faces is None:
             assert isinstance(neighbourhoods, KnnNeighbourhoods)
-            sheet = sheet_parameters()
+            sheet = robust_mode.sheet_parameters()
             top = max(self.scales)
-            k0 = min(NOISE_KNN, top)
+            k0 = min(robust_mode.NOISE_KNN, top)
             compiled = neighbourhoods.tree is not None
             if compiled:
                 self.fused = self._pass(k0, sheet)
@@ -535,9 +511,9 @@ class RobustSetup:
                 isolated = isolated_points(
                     points,
                     neighbourhoods.indices,
-                    nth=ISOLATED_NTH,
-                    ref=ISOLATED_REF,
-                    spread=ISOLATED_SPREAD,
+                    nth=robust_mode.ISOLATED_NTH,
+                    ref=robust_mode.ISOLATED_REF,
+                    spread=robust_mode.ISOLATED_SPREAD,
                 )
             if isolated.any():
                 self.fused = None  # freed before the pass over the points kept
@@ -555,13 +531,13 @@ class RobustSetup:
                 self.scale_neighbourhoods = self.neighbourhoods
             else:
                 self.scale_neighbourhoods = self._sheets()
-                self.noise = noise_median(
+                self.noise = robust_mode.noise_median(
                     noise_ratios_lists(self.points, self.scale_neighbourhoods.first(k0))
                 )
-            factor = min(noise_factor(self.noise), len(self.points) / top)
+            factor = min(robust_mode.noise_factor(self.noise), len(self.points) / top)
             if factor > 1.0:
                 self.growth = factor
-                self.scales = grown_scales(self.scales, factor)
+                self.scales = robust_mode.grown_scales(self.scales, factor)
                 self.neighbourhoods = build_neighbourhoods(
                     self.points, None, self.scales, workers=workers, backend=self.backend
                 )
@@ -573,7 +549,7 @@ class RobustSetup:
             self.sharp_edges = sharp_vertices(points, faces, backend=self.backend)[0]
         else:
             self.sharp_edges = np.asarray(sharp_edges, bool)
-        otsu = otsu_splits(faces is not None, self.noise)
+        otsu = robust_mode.otsu_splits(faces is not None, self.noise)
         # the lists' own method, not one of self: a rule that referred back to this
         # setup made a reference cycle, so the arrays of every call (the kd-tree, the
         # pass's outputs: about 55 bytes a point) stayed until the garbage collector ran
@@ -586,7 +562,7 @@ class RobustSetup:
         """:class:`SheetNeighbourhoods` of ``neighbourhoods`` (numpy kNN lists)."""
         assert isinstance(self.neighbourhoods, KnnNeighbourhoods)
         return SheetNeighbourhoods(
-            self.points, self.neighbourhoods, self.weighting, sheet_parameters()
+            self.points, self.neighbourhoods, self.weighting, robust_mode.sheet_parameters()
         )
 
     def _pass(self, noise_k: int, sheet: _kernels.SheetParameters) -> _kernels.ScalePass:
@@ -604,7 +580,7 @@ class RobustSetup:
             keep_normals=self.keep_normals,
             relative=True,
             noise_k=noise_k,
-            isolated=(ISOLATED_NTH, ISOLATED_REF),
+            isolated=(robust_mode.ISOLATED_NTH, robust_mode.ISOLATED_REF),
             sheet=sheet,
             workers=self.neighbourhoods.workers,
             tree_order=True,  # read by scale_vote, isolated_from_stats and a median only
@@ -651,8 +627,8 @@ class RobustSetup:
         the largest ring (meshes)."""
         top = max(self.scales)
         if self.mesh:
-            return min(THIN_RING, top), min(THIN_RING, top), top
-        return min(SUPPORT_KNN, top), min(thin_knn(self.growth), top), top
+            return min(robust_mode.THIN_RING, top), min(robust_mode.THIN_RING, top), top
+        return min(robust_mode.SUPPORT_KNN, top), min(robust_mode.thin_knn(self.growth), top), top
 
     def finish(self, mask: np.ndarray, strength: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Acute tips (clouds without noise), support, thinning and (meshes) the sharp
@@ -688,7 +664,7 @@ class RobustSetup:
         numpy (the reference): the thinned mask (p,) bool."""
         mesh = self.mesh
         around_k, compare_k, top = self._list_sizes()
-        tests = acute_tests(self.rule.score, mask, mesh, self.noise)
+        tests = robust_mode.acute_tests(self.rule.score, mask, mesh, self.noise)
         if len(tests):
             (near,) = self._candidate_lists(tests, (compare_k,))
             mask = mask.copy()
@@ -701,16 +677,28 @@ class RobustSetup:
                 np.flatnonzero(mask), (around_k, compare_k, top)
             )
         e = line_directions(self.points, mask, direction, self.workers)
-        free = support_exempt(self.rule.score, mesh, self.noise)
-        block = thin_blockers(mask, mesh, self.noise)
+        free = robust_mode.support_exempt(self.rule.score, mesh, self.noise)
+        block = robust_mode.thin_blockers(mask, mesh, self.noise)
         rank = self.rule.score
-        if ranking_smoothed(mesh, self.noise):
-            rank = smoothed_ranking(rank, compare, THIN_KNN)
+        if robust_mode.ranking_smoothed(mesh, self.noise):
+            rank = smoothed_ranking(rank, compare, robust_mode.THIN_KNN)
         mask = supported(
-            self.points, mask, e, around, SUPPORT_MIN, cone_cos=THIN_CONE_COS, exempt=free
+            self.points,
+            mask,
+            e,
+            around,
+            robust_mode.SUPPORT_MIN,
+            cone_cos=robust_mode.THIN_CONE_COS,
+            exempt=free,
         )
         return thin(
-            self.points, mask, rank, e, compare, cone_cos=thin_cone(mesh, self.noise), between=block
+            self.points,
+            mask,
+            rank,
+            e,
+            compare,
+            cone_cos=robust_mode.thin_cone(mesh, self.noise),
+            between=block,
         )
 
     def _finish_compiled(self, mask: np.ndarray) -> np.ndarray:
@@ -725,7 +713,7 @@ class RobustSetup:
         lists = self.neighbourhoods
         if isinstance(lists, KnnNeighbourhoods):
             assert lists.tree is not None
-            tests = acute_tests(self.rule.score, mask, mesh, self.noise)
+            tests = robust_mode.acute_tests(self.rule.score, mask, mesh, self.noise)
             todo = mask
             if len(tests):
                 todo = mask.copy()
@@ -753,12 +741,12 @@ class RobustSetup:
             around, direction = _kernels.CandidateLists.rings(members)
             compare = around
         rules = _kernels.FinishRules(
-            support_cone=THIN_CONE_COS,
-            minimum=SUPPORT_MIN,
-            free_below=support_free_score(mesh, self.noise),
-            thin_cone=thin_cone(mesh, self.noise),
-            window=THIN_KNN if ranking_smoothed(mesh, self.noise) else 0,
-            between=thin_blockers(mask, mesh, self.noise),
+            support_cone=robust_mode.THIN_CONE_COS,
+            minimum=robust_mode.SUPPORT_MIN,
+            free_below=robust_mode.support_free_score(mesh, self.noise),
+            thin_cone=robust_mode.thin_cone(mesh, self.noise),
+            window=robust_mode.THIN_KNN if robust_mode.ranking_smoothed(mesh, self.noise) else 0,
+            between=robust_mode.thin_blockers(mask, mesh, self.noise),
         )
         return _kernels.support_and_thin(
             self.points,
