@@ -68,7 +68,7 @@ choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down
    spacings keeps most of two parallel lines (the rims of a thin wall) apart, and on
    a cloud thresholded at the floor alone a point that is not a candidate, or ranks
    below the point (a valley of the ranking), lying between the two (the middle of a
-   wall's end face) keeps both (:func:`thin_blockers`). Where the noise grew the scales
+   wall's end face) keeps both (:func:`robust_plan`). Where the noise grew the scales
    to the cap, the ranking is the mean over the ``THIN_KNN`` nearest (points lifted by
    the noise beside a line do not outrank it).
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
@@ -81,9 +81,12 @@ choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from . import _header, _kernels
+from ._kernels import RobustPlan
 from .creases import CREASE_ANGLE
 from .neighbourhoods import (
     Neighbourhood,
@@ -133,35 +136,27 @@ __all__ = [
     "SheetNeighbourhoods",
     "acute_tests",
     "acute_tips",
-    "grown_scales",
     "isolated_points",
     "line_directions",
     "local_scale",
-    "noise_factor",
     "noise_median",
     "noise_ratios",
     "noise_ratios_lists",
     "noise_scale_factor",
-    "otsu_splits",
-    "quiet_cloud",
     "relative_distances",
+    "robust_plan",
     "robust_threshold",
     "scale_floor",
     "sheet_mask",
     "sheet_parameters",
-    "support_exempt",
-    "support_free_score",
     "supported",
     "thin",
-    "thin_blockers",
-    "thin_cone",
-    "thin_knn",
 ]
 
 #: Relative projected distance at a point on a straight edge turning by CREASE_ANGLE,
 #: with a disc-shaped neighbourhood: ``(2 / pi) * sin(CREASE_ANGLE / 2)`` = 0.1105.
 R_MIN = _header.real("R_MIN")
-#: ... and by more than about 63 degrees on a noisy cloud (:func:`thin_cone`).
+#: ... and by more than about 63 degrees on a noisy cloud (:func:`robust_plan`).
 THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
 #: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
 #: about 1.9 spacings: across the band of candidates (1.3-1.5 spacings) and the points
@@ -176,7 +171,7 @@ THIN_RING = _header.integer("THIN_RING")
 #: line one point wide has two neighbours along it within 16 points, a point lifted
 #: alone by noise has none.
 SUPPORT_KNN = _header.integer("SUPPORT_KNN")
-#: ... except, on a cloud thresholded at the floor alone (:func:`support_exempt`), the
+#: ... except, on a cloud thresholded at the floor alone (:func:`robust_plan`), the
 #: candidates whose score (:class:`RelativeRule`'s, the mean ``o / l``) is below
 #: SUPPORT_FREE_SCORE: without noise no point is lifted alone, and a weak edge beside
 #: strong ones (the fandisk's) is a candidate at every scale only here and there, one
@@ -211,7 +206,7 @@ NOISE_KNN = _header.integer("NOISE_KNN")
 #: square of the ratio (the noise of ``r`` at scale k goes as ``sigma / sqrt(k)``).
 NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
 #: At most this noise ratio (the lower median of :func:`noise_ratios`), a cloud is
-#: thresholded at the floor alone (:func:`otsu_splits`). Measured on the evaluation's
+#: thresholded at the floor alone (:func:`robust_plan`). Measured on the evaluation's
 #: clouds (20,000 points): 0-0.003 clean, 0-0.01 thin walls, 0.004-0.018 smooth
 #: controls, 0.09-0.096 with normal noise of 10 % of the spacing, 0.068-0.115 on the
 #: simulated scans; a third of ``NOISE_TOLERATED`` lies between.
@@ -325,29 +320,37 @@ def noise_scale_factor(points: np.ndarray, indices: np.ndarray, k: int) -> float
 _RULES = _kernels if _kernels.available() else reference
 
 
-def noise_factor(nu: float) -> float:
-    """The scales' growth for the median noise ratio ``nu``:
-    ``min(max(1, (nu / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)`` (``ms_noise_factor``)."""
-    return _RULES.noise_factor(nu)
+def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) -> RobustPlan:
+    """Robust mode's decisions once the noise ratio ``noise`` (the lower median of
+    :func:`noise_ratios`, 0 on a mesh) of ``n_kept`` points (isolated ones left out) is
+    measured, at the given increasing ``scales`` (``ms_robust_plan``; the numpy
+    reference's :func:`~meshlab_sharp.reference.robust.robust_plan` in an install
+    without the library):
 
-
-def grown_scales(scales: tuple[int, ...], factor: float) -> tuple[int, ...]:
-    """The scales times ``factor``, rounded half up (``ms_grown_scale``)."""
-    return tuple(_RULES.grown_scale(k, factor) for k in scales)
-
-
-def thin_knn(growth: float) -> int:
-    """Thinning's comparison list (clouds): ``THIN_KNN`` grown with the scales
-    (``growth`` the factor the noise grew them by, 1 when it did not), rounded half
-    up: the band of points that noise lifts beside a line widens with the noise
-    (``ms_thin_knn``)."""
-    return _RULES.thin_knn(growth)
+    * the scales grow as ``min(max(1, (noise / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)``,
+      at most ``n_kept / k_max``, rounded half up, and so does thinning's comparison list
+      ``THIN_KNN``: the band of points that noise lifts beside a line widens with it;
+    * on a cloud whose noise is at most ``NOISE_QUIET`` (a quiet cloud) the thresholds
+      are the floor alone (measured: thin walls 1 / 2 / 3 spacings F1 0.736 / 0.675 /
+      0.896 -> 0.744 / 0.711 / 0.913, no condition lower), candidates scoring below
+      ``SUPPORT_FREE_SCORE`` need no support, acute tips are looked for, and the points
+      that are not candidates block thinning (the two rims of a wall 2-3 spacings thick
+      then do not thin each other away); elsewhere Otsu's split, with the largest
+      scale's noise floor (:func:`scale_floor`) on a noisy cloud;
+    * on a noisy cloud thinning's cone is ``THIN_CONE_COS_NOISY``: noise tilts the
+      offsets between a line's own points, which then count as across the line
+      (measured: thickness on the scan 0.79 -> 0.82, at noise 50 % 0.78 -> 0.83);
+    * where the noise grew the scales to the cap, thinning ranks by the smoothed score:
+      beyond it the larger scales no longer dilute the noise of the score (measured:
+      noise 50 % F1 0.752 -> 0.813, thickness 0.72 -> 0.78)."""
+    return _RULES.robust_plan(noise, n_kept, scales, mesh)
 
 
 def _noise_factor(ratio: np.ndarray) -> float:
-    """:func:`noise_factor` of the lower median of the per-point ratios (n,), which are
-    reordered in place (no copy of n values)."""
-    return noise_factor(noise_median(ratio))
+    """The scales' growth (``ms_noise_factor``, before :func:`robust_plan`'s cap) for
+    the lower median of the per-point ratios (n,), which are reordered in place (no copy
+    of n values)."""
+    return _RULES.noise_factor(noise_median(ratio))
 
 
 def noise_median(ratio: np.ndarray) -> float:
@@ -427,7 +430,7 @@ def robust_threshold(r: np.ndarray, otsu: bool = True, floor: float = R_MIN) -> 
     r : (m,) float64
         Relative projected distances in [0, 1] (isolated points left out).
     otsu : bool, default True
-        False on a cloud without noise (:func:`otsu_splits`): the floor alone.
+        False on a cloud without noise (:func:`robust_plan`): the floor alone.
     floor : float, default R_MIN
         :func:`scale_floor`.
 
@@ -455,80 +458,9 @@ def scale_floor(
     return rules.scale_floor(counts, last, mesh, noise)
 
 
-def quiet_cloud(mesh: bool, noise: float) -> bool:
-    """Whether the input is a cloud without noise: not a mesh, and its noise ratio
-    ``noise`` (the lower median of :func:`noise_ratios`, as :func:`noise_scale_factor`
-    takes it) not above ``NOISE_QUIET``. The one test behind every rule kept for such
-    clouds: the floor alone (:func:`otsu_splits`), :func:`support_exempt`,
-    :func:`acute_tests`, :func:`thin_blockers` and the cone of :func:`thin_cone`
-    (``ms_quiet_cloud``)."""
-    return _RULES.quiet_cloud(mesh, noise)
-
-
-def otsu_splits(mesh: bool, noise: float) -> bool:
-    """Whether Otsu's split raises the threshold above ``R_MIN``: on meshes, and on
-    clouds whose noise ratio ``noise`` (the lower median of :func:`noise_ratios`, as
-    :func:`noise_scale_factor` takes it) exceeds ``NOISE_QUIET``. On a cloud without
-    noise the floor alone (measured: thin walls 1 / 2 / 3
-    spacings F1 0.736 / 0.675 / 0.896 -> 0.744 / 0.711 / 0.913, no condition lower)
-    (``ms_otsu_splits``)."""
-    return _RULES.otsu_splits(mesh, noise)
-
-
-def thin_blockers(candidates: np.ndarray, mesh: bool, noise: float) -> np.ndarray | None:
-    """:func:`thin`'s ``between``: on a cloud whose noise ratio ``noise`` (as
-    :func:`otsu_splits` takes it) is at most ``NOISE_QUIET``, the points that are not
-    ``candidates`` (m,) bool (at every scale); None (no blocking) on meshes and noisier
-    clouds. The two rims of a wall 2-3 spacings thick then do not thin each other away:
-    the end face's middle, between them, is not a candidate, or ranks below both (a
-    valley of the score, which :func:`thin` also reads as a parting)."""
-    if not quiet_cloud(mesh, noise):
-        return None
-    return ~np.asarray(candidates, bool)
-
-
-def thin_cone(mesh: bool, noise: float) -> float:
-    """:func:`thin`'s ``cone_cos``: ``THIN_CONE_COS_NOISY`` on a cloud whose noise ratio
-    ``noise`` (as :func:`otsu_splits` takes it) exceeds ``NOISE_QUIET``,
-    ``THIN_CONE_COS`` on meshes and quiet clouds. Noise tilts the offsets between a
-    line's own points, which then count as across the line and thin it to gaps
-    (measured: thickness on the scan 0.79 -> 0.82, at noise 50 %
-    0.78 -> 0.83) (``ms_thin_cone``)."""
-    return _RULES.thin_cone(mesh, noise)
-
-
-def ranking_smoothed(mesh: bool, noise: float) -> bool:
-    """Whether thinning ranks by :func:`smoothed_ranking`: on a cloud whose noise ratio
-    ``noise`` (as :func:`otsu_splits` takes it) grew the scales to the cap
-    (``noise_factor(noise) == NOISE_MAX_FACTOR``). Beyond it the larger scales no longer
-    dilute the noise of the score, and single points lifted 1-2 spacings beside a line
-    outrank the line's own (measured: noise 50 % F1 0.752 ->
-    0.813, thickness 0.72 -> 0.78) (``ms_ranking_smoothed``)."""
-    return _RULES.ranking_smoothed(mesh, noise)
-
-
-def support_free_score(mesh: bool, noise: float) -> float | None:
-    """The score below which :func:`supported` keeps a point without support:
-    ``SUPPORT_FREE_SCORE`` on a cloud whose noise ratio ``noise`` (as :func:`otsu_splits`
-    takes it) is at most ``NOISE_QUIET``; None (no such score) on meshes and noisier
-    clouds (``ms_support_free_score``)."""
-    return _RULES.support_free_score(mesh, noise)
-
-
-def support_exempt(score: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
-    """The points that :func:`supported` keeps without support: those whose ``score``
-    (m,) is below :func:`support_free_score` (none on meshes and noisier clouds).
-    Returns (m,) bool."""
-    score = np.asarray(score, np.float64)
-    free = support_free_score(mesh, noise)
-    if free is None:
-        return np.zeros(len(score), bool)
-    return score < free
-
-
 def acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
     """The points :func:`acute_tips` tests: on a cloud whose noise ratio ``noise`` (as
-    :func:`otsu_splits` takes it) is at most ``NOISE_QUIET``, those not in ``mask`` (m,)
+    :func:`robust_plan` takes it) is at most ``NOISE_QUIET``, those not in ``mask`` (m,)
     bool (the candidates at every scale) whose ``score`` (m,) lies in ``[ACUTE_SCORE,
     ACUTE_SCORE_MAX)``; none on meshes and noisier clouds. Returns (t,) int64,
     increasing."""

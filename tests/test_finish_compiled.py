@@ -83,7 +83,7 @@ def test_compiled_finish_is_the_numpy_finish(monkeypatch, name):
     if name == "outliers":
         assert len(setup.keep) < setup.n  # isolated points were removed
     if name == "very-noisy-cloud":
-        assert robust.ranking_smoothed(False, setup.noise)
+        assert setup.plan.ranking_smoothed
 
 
 @pytest.mark.parametrize("kind", ["one", "every", "lone-pair"])

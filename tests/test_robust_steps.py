@@ -13,10 +13,18 @@ import shapes
 
 import meshlab_sharp
 from meshlab_sharp import _kernels, robust
+from meshlab_sharp._kernels import RobustPlan
 from meshlab_sharp.neighbourhoods import KnnNeighbourhoods, Neighbourhood
+from meshlab_sharp.reference import detect as reference_sequence
 from meshlab_sharp.reference import robust as reference
 from meshlab_sharp.reference.detect import RelativeRule
 from meshlab_sharp.threshold import BINS, histogram
+
+
+def _plan(mesh: bool, noise: float) -> RobustPlan:
+    """Robust mode's plan for an input of noise ratio ``noise`` (10,000 points, the
+    default scales)."""
+    return robust.robust_plan(noise, 10_000, (12, 16, 20, 24, 28, 32, 36, 40), mesh)
 
 
 def _csr(lists: list[list[int]]) -> Neighbourhood:
@@ -110,18 +118,19 @@ def test_threshold_is_otsu_with_a_floor():
 
 def test_otsu_splits_on_meshes_and_on_clouds_with_noise():
     assert robust.NOISE_QUIET == 0.05
-    assert robust.otsu_splits(True, 0.0) and robust.otsu_splits(True, 0.3)
-    assert not robust.otsu_splits(False, 0.0)
-    assert not robust.otsu_splits(False, 0.05)
-    assert robust.otsu_splits(False, 0.05 + 1e-12)
+    assert _plan(True, 0.0).otsu and _plan(True, 0.3).otsu
+    assert not _plan(False, 0.0).otsu
+    assert not _plan(False, 0.05).otsu
+    assert _plan(False, 0.05 + 1e-12).otsu
 
 
 def test_weak_candidates_of_a_cloud_without_noise_need_no_support():
     assert robust.SUPPORT_FREE_SCORE == 0.22
     score = np.array([0.0, 0.2199, 0.22, 0.9])
-    np.testing.assert_array_equal(robust.support_exempt(score, False, 0.05), [1, 1, 0, 0])
-    assert not robust.support_exempt(score, False, 0.05 + 1e-12).any()  # noisy cloud
-    assert not robust.support_exempt(score, True, 0.0).any()  # mesh
+    exempt = reference_sequence.support_exempt
+    np.testing.assert_array_equal(exempt(score, _plan(False, 0.05)), [1, 1, 0, 0])
+    assert not exempt(score, _plan(False, 0.05 + 1e-12)).any()  # noisy cloud
+    assert not exempt(score, _plan(True, 0.0)).any()  # mesh
     # a lone feature (no other feature along its line) stays only where exempt
     pts = np.array([[0.0, 0, 0], [0, 1, 0], [0, 0, 3]])
     mask = np.array([True, True, False])
@@ -303,18 +312,18 @@ def test_sheet_neighbourhoods_keep_the_prefixes_of_the_kept_points():
 
 
 def test_thinning_list_grows_with_the_scales():
-    assert robust.thin_knn(1.0) == robust.THIN_KNN == 12
-    assert robust.thin_knn(1.8) == 22  # 21.6, rounded half up as the scales are
-    assert robust.thin_knn(3.0) == 36
-    assert robust.thin_knn(1.125) == 14  # 13.5 exactly: half up
+    assert reference.thin_knn(1.0) == robust.THIN_KNN == 12
+    assert reference.thin_knn(1.8) == 22  # 21.6, rounded half up as the scales are
+    assert reference.thin_knn(3.0) == 36
+    assert reference.thin_knn(1.125) == 14  # 13.5 exactly: half up
 
 
 def test_thinning_ranks_by_the_mean_score_where_the_noise_grew_the_scales_to_the_cap():
     # the cap is reached at nu = 0.15 * sqrt(3) = 0.2598...: below it, and on meshes, the
     # score itself
-    assert robust.ranking_smoothed(False, 0.27)
-    assert not robust.ranking_smoothed(False, 0.25)
-    assert not robust.ranking_smoothed(True, 0.5)
+    assert _plan(False, 0.27).ranking_smoothed
+    assert not _plan(False, 0.25).ranking_smoothed
+    assert not _plan(True, 0.5).ranking_smoothed
     score = np.array([0.9, 0.1, 0.2, 0.6, 0.3])
     compare = _csr([[0, 1, 2, 3], [1, 0], [], [3, 4, 0], []])
     rank = reference.smoothed_ranking(score, compare, 3)
@@ -341,7 +350,8 @@ def test_thinning_is_blocked_by_a_non_candidate_or_a_valley_between_on_a_quiet_c
     e = np.tile([1.0, 0.0, 0.0], (4, 1))
     compare = _csr([[0, 1, 2], [1, 0], [2], [3]])
     assert robust.thin(pts, mask, score, e, compare).tolist() == [False, True, False, False]
-    between = robust.thin_blockers(np.array([True, True, False, False]), False, 0.0)
+    blockers = reference_sequence.thin_blockers
+    between = blockers(np.array([True, True, False, False]), _plan(False, 0.0))
     np.testing.assert_array_equal(between, [False, False, True, True])
     kept = robust.thin(pts, mask, score, e, compare, between=between)
     assert kept.tolist() == [True, True, False, False]
@@ -349,20 +359,20 @@ def test_thinning_is_blocked_by_a_non_candidate_or_a_valley_between_on_a_quiet_c
     out = robust.thin(pts, mask, score, e, beyond, between=between)
     assert out.tolist() == [False, True, False, False]
     # a candidate between blocks only when it ranks below the beaten point (a valley)
-    valley = robust.thin_blockers(np.array([True, True, True, False]), False, 0.0)
+    valley = blockers(np.array([True, True, True, False]), _plan(False, 0.0))
     for middle, blocked in ((0.49, True), (0.5, False), (0.7, False)):
         got = robust.thin(pts, mask, np.array([0.5, 0.9, middle, 0.0]), e, compare, between=valley)
         assert got.tolist() == [blocked, True, False, False]
     # meshes and clouds with noise: no blocking
-    assert robust.thin_blockers(mask, True, 0.0) is None
-    assert robust.thin_blockers(mask, False, 0.05 + 1e-12) is None
-    assert robust.thin_blockers(mask, False, 0.05) is not None
+    assert blockers(mask, _plan(True, 0.0)) is None
+    assert blockers(mask, _plan(False, 0.05 + 1e-12)) is None
+    assert blockers(mask, _plan(False, 0.05)) is not None
 
 
 def test_thinning_cone_is_wider_on_a_noisy_cloud():
-    assert robust.thin_cone(False, 0.05) == robust.THIN_CONE_COS == 0.5
-    assert robust.thin_cone(False, 0.05 + 1e-12) == robust.THIN_CONE_COS_NOISY == 0.45
-    assert robust.thin_cone(True, 0.5) == robust.THIN_CONE_COS  # meshes: never
+    assert _plan(False, 0.05).thin_cone == robust.THIN_CONE_COS == 0.5
+    assert _plan(False, 0.05 + 1e-12).thin_cone == robust.THIN_CONE_COS_NOISY == 0.45
+    assert _plan(True, 0.5).thin_cone == robust.THIN_CONE_COS  # meshes: never
     # feature 0 (score 0.5) and feature 1 (0.9) at 62 degrees from the line along x
     # (cos 0.469): across in the 60-degree cone, so 1 beats 0; along the line in the
     # noisy cone (about 63 degrees); at 64 degrees (cos 0.438) across in both

@@ -325,6 +325,27 @@ def plan_thresholds(plan: _kernels.RobustPlan, counts: np.ndarray) -> np.ndarray
     return np.array(out, dtype=np.float64)
 
 
+def support_exempt(score: np.ndarray, plan: _kernels.RobustPlan) -> np.ndarray:
+    """The points that :func:`~meshlab_sharp.reference.robust.supported` keeps without
+    support: those whose ``score`` (m,) is below ``plan.free_below`` (none where the plan
+    has no such score: meshes and noisy clouds). Returns (m,) bool."""
+    score = np.asarray(score, np.float64)
+    if plan.free_below is None:
+        return np.zeros(len(score), bool)
+    return score < plan.free_below
+
+
+def thin_blockers(candidates: np.ndarray, plan: _kernels.RobustPlan) -> np.ndarray | None:
+    """:func:`~meshlab_sharp.reference.robust.thin`'s ``between``: where
+    ``plan.thin_between`` (a quiet cloud), the points that are not ``candidates`` (m,)
+    bool (at every scale); None (no blocking) otherwise. The end face's middle between
+    the two rims of a thin wall is not a candidate, or ranks below both (a valley of the
+    score, which ``thin`` also reads as a parting)."""
+    if not plan.thin_between:
+        return None
+    return ~np.asarray(candidates, bool)
+
+
 def pass_noise_median(ratio: np.ndarray, workers: int = -1) -> float:
     """:func:`meshlab_sharp.robust.noise_median` of the compiled pass's ratios (n,), the
     same value, on ``workers`` threads (:func:`meshlab_sharp._kernels.lower_median`)."""
@@ -489,6 +510,8 @@ class RobustSetup:
         self.fused: _kernels.ScalePass | None = None
         #: How much the noise grew the scales (1: not at all).
         self.growth = 1.0
+        #: Every decision once the noise is measured (:func:`meshlab_sharp.robust.robust_plan`).
+        self.plan: _kernels.RobustPlan
         #: The cloud's noise ratio (the lower median of :func:`noise_ratios`; 0 on a mesh).
         self.noise = 0.0
         #: The neighbourhoods the scales use: ``neighbourhoods`` (meshes; clouds with
@@ -534,28 +557,29 @@ class RobustSetup:
                 self.noise = robust_mode.noise_median(
                     noise_ratios_lists(self.points, self.scale_neighbourhoods.first(k0))
                 )
-            factor = min(robust_mode.noise_factor(self.noise), len(self.points) / top)
-            if factor > 1.0:
-                self.growth = factor
-                self.scales = robust_mode.grown_scales(self.scales, factor)
+            self.plan = robust_mode.robust_plan(self.noise, len(self.points), self.scales, False)
+            if self.plan.grown:
+                self.growth = self.plan.growth
+                self.scales = self.plan.scales
                 self.neighbourhoods = build_neighbourhoods(
                     self.points, None, self.scales, workers=workers, backend=self.backend
                 )
                 self.fused = None
                 self.scale_neighbourhoods = self.neighbourhoods if compiled else self._sheets()
+        else:
+            self.plan = robust_mode.robust_plan(0.0, self.n, self.scales, True)
         if faces is None:
             self.sharp_edges = None
         elif sharp_edges is None:
             self.sharp_edges = sharp_vertices(points, faces, backend=self.backend)[0]
         else:
             self.sharp_edges = np.asarray(sharp_edges, bool)
-        otsu = robust_mode.otsu_splits(faces is not None, self.noise)
         # the lists' own method, not one of self: a rule that referred back to this
         # setup made a reference cycle, so the arrays of every call (the kd-tree, the
         # pass's outputs: about 55 bytes a point) stayed until the garbage collector ran
         lists = self.scale_neighbourhoods.at
         self.rule = RelativeRule(
-            self.points, lists, len(self.scales), sheet, otsu, self.noise, backend=self.backend
+            self.points, lists, len(self.scales), sheet, self.plan.otsu, self.noise, self.backend
         )
 
     def _sheets(self) -> SheetNeighbourhoods:
@@ -623,12 +647,16 @@ class RobustSetup:
 
     def _list_sizes(self) -> tuple[int, int, int]:
         """The sizes of each candidate's support, comparison and direction lists: the
-        SUPPORT_KNN, thin_knn and k_max nearest (clouds), the THIN_RING-ring twice and
-        the largest ring (meshes)."""
-        top = max(self.scales)
-        if self.mesh:
-            return min(robust_mode.THIN_RING, top), min(robust_mode.THIN_RING, top), top
-        return min(robust_mode.SUPPORT_KNN, top), min(robust_mode.thin_knn(self.growth), top), top
+        plan's (clouds: the SUPPORT_KNN and thinning's nearest; meshes: the
+        THIN_RING-ring twice) and the largest scale."""
+        return self.plan.support_knn, self.plan.compare_knn, max(self.scales)
+
+    def _acute_tests(self, mask: np.ndarray) -> np.ndarray:
+        """The points tested as acute tips where the plan looks for them
+        (:func:`meshlab_sharp.robust.acute_tests`), (t,) int64; else none."""
+        if not self.plan.acute_tests:
+            return np.zeros(0, np.int64)
+        return robust_mode.acute_tests(self.rule.score, mask, self.mesh, self.noise)
 
     def finish(self, mask: np.ndarray, strength: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Acute tips (clouds without noise), support, thinning and (meshes) the sharp
@@ -664,7 +692,7 @@ class RobustSetup:
         numpy (the reference): the thinned mask (p,) bool."""
         mesh = self.mesh
         around_k, compare_k, top = self._list_sizes()
-        tests = robust_mode.acute_tests(self.rule.score, mask, mesh, self.noise)
+        tests = self._acute_tests(mask)
         if len(tests):
             (near,) = self._candidate_lists(tests, (compare_k,))
             mask = mask.copy()
@@ -677,10 +705,10 @@ class RobustSetup:
                 np.flatnonzero(mask), (around_k, compare_k, top)
             )
         e = line_directions(self.points, mask, direction, self.workers)
-        free = robust_mode.support_exempt(self.rule.score, mesh, self.noise)
-        block = robust_mode.thin_blockers(mask, mesh, self.noise)
+        free = support_exempt(self.rule.score, self.plan)
+        block = thin_blockers(mask, self.plan)
         rank = self.rule.score
-        if robust_mode.ranking_smoothed(mesh, self.noise):
+        if self.plan.ranking_smoothed:
             rank = smoothed_ranking(rank, compare, robust_mode.THIN_KNN)
         mask = supported(
             self.points,
@@ -697,7 +725,7 @@ class RobustSetup:
             rank,
             e,
             compare,
-            cone_cos=robust_mode.thin_cone(mesh, self.noise),
+            cone_cos=self.plan.thin_cone,
             between=block,
         )
 
@@ -708,12 +736,11 @@ class RobustSetup:
         with their lists from the kd-tree (one table of the k_max nearest of the
         candidates and the points tested as tips, read at every k) or the adjacency (the
         largest ring, its THIN_RING-ring a prefix): the same mask."""
-        mesh = self.mesh
         around_k, compare_k, top = self._list_sizes()
         lists = self.neighbourhoods
         if isinstance(lists, KnnNeighbourhoods):
             assert lists.tree is not None
-            tests = robust_mode.acute_tests(self.rule.score, mask, mesh, self.noise)
+            tests = self._acute_tests(mask)
             todo = mask
             if len(tests):
                 todo = mask.copy()
@@ -743,10 +770,10 @@ class RobustSetup:
         rules = _kernels.FinishRules(
             support_cone=robust_mode.THIN_CONE_COS,
             minimum=robust_mode.SUPPORT_MIN,
-            free_below=robust_mode.support_free_score(mesh, self.noise),
-            thin_cone=robust_mode.thin_cone(mesh, self.noise),
-            window=robust_mode.THIN_KNN if robust_mode.ranking_smoothed(mesh, self.noise) else 0,
-            between=robust_mode.thin_blockers(mask, mesh, self.noise),
+            free_below=self.plan.free_below,
+            thin_cone=self.plan.thin_cone,
+            window=robust_mode.THIN_KNN if self.plan.ranking_smoothed else 0,
+            between=thin_blockers(mask, self.plan),
         )
         return _kernels.support_and_thin(
             self.points,

@@ -390,7 +390,7 @@ def supported(
     cone_cos : float, default THIN_CONE_COS (0.5)
     exempt : (m,) bool, optional
         Features kept whatever their support
-        (:func:`meshlab_sharp.robust.support_exempt`); default none.
+        (:func:`meshlab_sharp.reference.detect.support_exempt`); default none.
 
     Returns
     -------
@@ -447,7 +447,7 @@ def thin(
     cone_cos : float, default THIN_CONE_COS (0.5)
     between : (m,) bool, optional
         The points that part two features whatever their score
-        (:func:`meshlab_sharp.robust.thin_blockers`); default none, and then no blocking
+        (:func:`meshlab_sharp.reference.detect.thin_blockers`); default none, and then no blocking
         at all.
 
     Returns

@@ -89,7 +89,7 @@
  * an edge and the median is no longer the flat points' noise. */
 #define MS_NOISE_FLOOR_MAX 0.22
 /* At most this median noise ratio, a cloud is thresholded at the floor alone
- * (robust.otsu_splits). */
+ * (ms_otsu_splits). */
 #define MS_NOISE_QUIET 0.05
 /* The sheet filter (robust.sheet_mask): gap in spacings, fewest points and kept share. */
 #define MS_SHEET_GAP 0.4
@@ -116,7 +116,7 @@
 #define MS_THIN_CONE_COS 0.5
 /* On a noisy cloud (noise ratio above MS_NOISE_QUIET) thinning's cone is wider (about 63
  * degrees; support keeps MS_THIN_CONE_COS): noise tilts the offsets between a line's own
- * points, which then count as across it and thin the line to gaps (robust.thin_cone). */
+ * points, which then count as across it and thin the line to gaps (ms_thin_cone). */
 #define MS_THIN_CONE_COS_NOISY 0.45
 #define MS_THIN_KNN 12
 #define MS_THIN_RING 2
@@ -124,7 +124,8 @@
 #define MS_SUPPORT_MIN 2
 /* On a cloud thresholded at the floor alone (noise ratio at most MS_NOISE_QUIET), a
  * candidate whose score (the mean o / l over the scales) is below this needs no support
- * (robust.support_exempt): the candidates of weak edges come only here and there. */
+ * (reference.detect.support_exempt): the candidates of weak edges come only here and
+ * there. */
 #define MS_SUPPORT_FREE_SCORE 0.22
 /* On such a cloud, a point that is not a candidate at every scale but whose score lies in
  * [MS_ACUTE_SCORE, MS_ACUTE_SCORE_MAX) and that lies between two candidates of its
@@ -481,9 +482,9 @@ int64_t ms_keep_faces(const double *p, const int64_t *faces, int64_t m, const in
 
 /* Robust mode's finishing steps (reference.detect.RobustSetup.finish; reference/robust.py
  * is the numpy reference), over candidate slots r in [begin, end): the point rows[r]
- * (cleaned index) and its lists in an ms_lists_t; below i = rows[r]. f0, f1, f2, between: (n) masks, one
- * byte a point; e (c, 3) and out (c) per slot; f1, f2 and rank are written at the rows
- * only (the caller sets the rest).
+ * (cleaned index) and its lists in an ms_lists_t; below i = rows[r]. f0, f1, f2,
+ * between: (n) masks, one byte a point; e (c, 3) and out (c) per slot; f1, f2 and rank
+ * are written at the rows only (the caller sets the rest).
  * Slot r's list: the members idx[first ...], len of them, first = start[r] (start NULL:
  * r * stride), len = len[r] (len NULL: k); idx int64 when wide, else int32. The lists of
  * the steps may be views of one table (the k nearest at several k: one stride, several
@@ -503,7 +504,7 @@ typedef struct {
  * within about 1e-16 of numpy's eigh, up to sign). Returns 0, or -1 out of memory.
  * ms_supported (robust.supported): f1[i] = at least `minimum` points j != i of around's
  * list with f0[j] and p_j - p_i along the line (not |d . e| < cone |d|), or (score not
- * NULL) score[i] < free_below (robust.support_exempt). ms_smoothed_ranking
+ * NULL) score[i] < free_below (reference.detect.support_exempt). ms_smoothed_ranking
  * (robust.smoothed_ranking): rank[i] = the mean of score over the first `window` of
  * compare's list (added in order to 0.0), when it is not empty; the other entries of
  * rank are the caller's. ms_thin (robust.thin; f1 complete first): f2[i] = f1[i] and no
@@ -566,7 +567,7 @@ typedef struct {
     int grown;                 /* growth > 1: the scales grew, and a pass at them follows */
     int otsu;                  /* Otsu's split raises the thresholds (ms_otsu_splits) */
     int noise_floor;           /* the largest scale's floor reads its histogram (ms_scale_floor) */
-    int acute_tests;           /* acute tips are looked for (ms_quiet_cloud; ms_stage_acute_tests) */
+    int acute_tests;           /* acute tips are looked for (ms_stage_acute_tests) */
     int support_knn;           /* support's list: the MS_SUPPORT_KNN nearest (a mesh's
                                   MS_THIN_RING-ring), at most the largest scale */
     int compare_knn;           /* thinning's and acute tips' comparison list: ms_thin_knn(growth)
@@ -576,7 +577,7 @@ typedef struct {
     double free_below;         /* ms_support_free_score's score (0 when not support_exempt) */
     double thin_cone;          /* thinning's cone (ms_thin_cone) */
     int thin_between;          /* thinning is blocked by the points that are not candidates
-                                  (a quiet cloud: robust.thin_blockers) */
+                                  (a quiet cloud: reference.detect.thin_blockers) */
 } ms_robust_plan_t;
 /* ms_robust_plan: the plan for an input of `mesh`, noise ratio `noise`, n_kept points (the
  * isolated ones left out) and the s given scales (increasing, s <= MS_MAX_SCALES; a cloud's

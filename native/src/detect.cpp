@@ -580,10 +580,10 @@ const uint8_t *bytes(const std::vector<char> &mask) { return reinterpret_cast<co
 // Robust mode's support and thinning of the candidates rows = the points of f0, by the
 // kernel's finishing steps on every core, as _kernels.support_and_thin: per candidate its
 // line direction (lists D), support (lists S; a score below freeBelow exempts, when
-// exempt: robust.support_exempt) and, with smooth, the score averaged over the first
-// THIN_KNN of K (robust.smoothed_ranking); then, every candidate's support known, thinning
-// across the line (cone: robust.thin_cone) over K, the points not in f0 blocking with
-// block (robust.thin_blockers).
+// exempt: reference.detect.support_exempt) and, with smooth, the score averaged over the
+// first THIN_KNN of K (robust.smoothed_ranking); then, every candidate's support known, thinning
+// across the line (cone: ms_robust_plan) over K, the points not in f0 blocking with
+// block (reference.detect.thin_blockers).
 std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
                                  const ms_lists_t &D, const ms_lists_t &S, const ms_lists_t &K, bool exempt,
@@ -711,9 +711,10 @@ void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
 // the order `order` maps to the cleaned points (empty: that order): each scale's threshold
 // from the histograms summed over chunks of points on every core (ms_stage_threshold:
 // with otsu, Otsu's split, never below floor, or with a plan its floors, ms_plan_thresholds;
-// lo, hi and flatSpan: ms_stage_histograms' normalisation), then the decision (ms_stage_decide); thresholds and candidates to r,
-// strength and feature (in the cleaned order) to d; with values not null, the values the
-// thresholds split (S, n; x's order: normalised with lo, else x's) into values.
+// lo, hi and flatSpan: ms_stage_histograms' normalisation), then the decision
+// (ms_stage_decide); thresholds and candidates to r, strength and feature (in the
+// cleaned order) to d; with values not null, the values the thresholds split (S, n; x's
+// order: normalised with lo, else x's) into values.
 void stageDecision(const double *x, Index n, size_t S, const double *lo, const double *hi, double flatSpan, bool otsu,
                    double floor, const std::vector<Index> &order, Decision &d, Result &r,
                    const ms_robust_plan_t *plan = nullptr, double *values = nullptr) {
