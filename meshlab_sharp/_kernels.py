@@ -627,7 +627,7 @@ class CloudStats:
 def isolated_from_stats(
     points: np.ndarray, stats: CloudStats, spread: float, workers: int = -1
 ) -> np.ndarray:
-    """:func:`meshlab_sharp.robust.isolated_points` from a pass's :class:`CloudStats` at
+    """:func:`meshlab_sharp.reference.robust.isolated_points` from a pass's :class:`CloudStats` at
     ``k_max`` over ``points`` (n, 3) (no kNN table): ``i`` is isolated when ``(|p_i -
     p_j|^2, i)``, ``j = near[i]``, comes after ``j``'s k_max-th neighbour in the lists'
     order (squared distance, then index), or when ``nth_d2[i] > spread**2 *
@@ -742,7 +742,7 @@ def cloud_projected_distances(
     ``ref_d2`` at the columns ``isolated``, default the header's ``MS_ISOLATED_NTH`` and
     ``MS_ISOLATED_REF``). With ``sheet``
     (:func:`meshlab_sharp.robust.sheet_parameters`), robust mode's
-    :func:`meshlab_sharp.robust.sheet_mask` first: every
+    :func:`meshlab_sharp.reference.detect.sheet_mask` first: every
     neighbourhood (the scales', the noise's) is then the kept neighbours among its
     points. One neighbour search at the largest scale. With ``rows`` (cleaned indices),
     only those points' values are computed (and a few others'); the rest are undefined.
@@ -813,7 +813,7 @@ def sheet_mask(
     parameters: SheetParameters,
     workers: int = -1,
 ) -> np.ndarray:
-    """:func:`meshlab_sharp.robust.sheet_mask`, bit for bit, by the filter of the compiled
+    """:func:`meshlab_sharp.reference.detect.sheet_mask`, bit for bit, by the filter of the compiled
     pass (``ms_sheet_mask``): ``points`` (n, 3), ``indices`` (n, k) the kNN lists (the
     point itself first), ``normals`` (n, 3), ``parameters`` as
     :func:`meshlab_sharp.robust.sheet_parameters` gives them (gap > 0). Returns the (n, k)
@@ -834,7 +834,7 @@ def sheet_mask(
 def local_scale_csr(
     points: np.ndarray, indptr: np.ndarray, indices: np.ndarray, workers: int = -1
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`meshlab_sharp.robust.local_scale` over CSR lists, bit for bit."""
+    """:func:`meshlab_sharp.reference.detect.local_scale` over CSR lists, bit for bit."""
     lib = _LIB
     assert lib is not None
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -1292,7 +1292,7 @@ def scale_vote(
         Min-max normalise first, every value 0 when ``max - min <= flat_span``.
     otsu : bool, default True
         ``T = max(otsu_threshold(v), floor)``; False: ``T = floor``
-        (:func:`meshlab_sharp.robust.robust_threshold`).
+        (:func:`meshlab_sharp.reference.detect.robust_threshold`).
     floor : float, default 0.0
     out : (m,) float64, optional
         Receives ``v``.
@@ -1753,7 +1753,7 @@ def _slot_chunks(c: int, workers: int, task: Callable[[int, int], int]) -> None:
 def acute_tips(
     points: np.ndarray, mask: np.ndarray, rows: np.ndarray, lists: CandidateLists, workers: int = -1
 ) -> np.ndarray:
-    """:func:`meshlab_sharp.robust.acute_tips` of the points ``rows`` (t,) with their
+    """:func:`meshlab_sharp.reference.robust.acute_tips` of the points ``rows`` (t,) with their
     lists (the thinning's): (t,) bool, on ``workers`` threads."""
     lib = _LIB
     assert lib is not None
@@ -1908,7 +1908,7 @@ def support_and_thin(
     """Robust mode's finishing steps over the candidates ``rows`` (c,) = the points of
     ``mask`` (n,) bool, in C: :func:`line_support` (with ``rules.window``, the smoothed
     ranking too), then, once every candidate's support is known,
-    :func:`thin_candidates` (:func:`meshlab_sharp.robust.line_directions`, ``supported``,
+    :func:`thin_candidates` (:func:`meshlab_sharp.reference.robust.line_directions`, ``supported``,
     ``smoothed_ranking``, ``thin``, of which this gives the masks). ``lists``: each
     candidate's direction, support and comparison lists; ``score`` (n,): the ranking.
     Returns the thinned mask (n,) bool."""

@@ -45,7 +45,7 @@ choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down
    noise the flat and smooth points have ``r`` near 0 and the floor is the definition
    of sharp, while Otsu's split, above it on parts with strong edges, drops the weaker
    ones (the fandisk's, concave edges and the rims of thin walls).
-3b. **Acute tips** (:func:`acute_tips`): on a cloud thresholded at the floor alone, a
+3b. **Acute tips** (``ms_acute_tips``): on a cloud thresholded at the floor alone, a
    point that is not a candidate at every scale but whose score (step 5's ranking)
    lies in ``[ACUTE_SCORE, ACUTE_SCORE_MAX)`` and that lies between two candidates of
    its thinning list is a candidate too: at an acute edge the PCA normal turns
@@ -68,7 +68,7 @@ choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down
    spacings keeps most of two parallel lines (the rims of a thin wall) apart, and on
    a cloud thresholded at the floor alone a point that is not a candidate, or ranks
    below the point (a valley of the ranking), lying between the two (the middle of a
-   wall's end face) keeps both (:func:`robust_plan`). Where the noise grew the scales
+   wall's end face) keeps both (``ms_robust_plan``). Where the noise grew the scales
    to the cap, the ranking is the mean over the ``THIN_KNN`` nearest (points lifted by
    the noise beside a line do not outrank it).
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
@@ -81,30 +81,13 @@ choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
-import numpy as np
-
 from . import _header, _kernels
-from ._kernels import RobustPlan
 from .creases import CREASE_ANGLE
-from .neighbourhoods import (
-    Neighbourhood,
-)
-from .reference import robust as reference
 from .reference.robust import (
     SUPPORT_MIN,
     THIN_CONE_COS,
-    SheetNeighbourhoods,
-    acute_tips,
-    isolated_points,
-    line_directions,
     noise_ratios,
-    noise_ratios_lists,
-    supported,
-    thin,
 )
-from .threshold import otsu_threshold
 
 __all__ = [
     "ACUTE_SCORE",
@@ -133,30 +116,14 @@ __all__ = [
     "THIN_CONE_COS_NOISY",
     "THIN_KNN",
     "THIN_RING",
-    "SheetNeighbourhoods",
-    "acute_tests",
-    "acute_tips",
-    "isolated_points",
-    "line_directions",
-    "local_scale",
-    "noise_median",
     "noise_ratios",
-    "noise_ratios_lists",
-    "noise_scale_factor",
-    "relative_distances",
-    "robust_plan",
-    "robust_threshold",
-    "scale_floor",
-    "sheet_mask",
     "sheet_parameters",
-    "supported",
-    "thin",
 ]
 
 #: Relative projected distance at a point on a straight edge turning by CREASE_ANGLE,
 #: with a disc-shaped neighbourhood: ``(2 / pi) * sin(CREASE_ANGLE / 2)`` = 0.1105.
 R_MIN = _header.real("R_MIN")
-#: ... and by more than about 63 degrees on a noisy cloud (:func:`robust_plan`).
+#: ... and by more than about 63 degrees on a noisy cloud (``ms_robust_plan``).
 THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
 #: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
 #: about 1.9 spacings: across the band of candidates (1.3-1.5 spacings) and the points
@@ -171,8 +138,8 @@ THIN_RING = _header.integer("THIN_RING")
 #: line one point wide has two neighbours along it within 16 points, a point lifted
 #: alone by noise has none.
 SUPPORT_KNN = _header.integer("SUPPORT_KNN")
-#: ... except, on a cloud thresholded at the floor alone (:func:`robust_plan`), the
-#: candidates whose score (:class:`RelativeRule`'s, the mean ``o / l``) is below
+#: ... except, on a cloud thresholded at the floor alone (``ms_robust_plan``), the
+#: candidates whose score (``RelativeRule``'s, the mean ``o / l``) is below
 #: SUPPORT_FREE_SCORE: without noise no point is lifted alone, and a weak edge beside
 #: strong ones (the fandisk's) is a candidate at every scale only here and there, one
 #: or none of the 16 nearest. Points lifted off the surface (outliers that are not
@@ -185,7 +152,7 @@ SUPPORT_FREE_SCORE = _header.real("SUPPORT_FREE_SCORE")
 #: On a cloud thresholded at the floor alone, a point that is not a candidate at every
 #: scale but scores (the mean ``o / l``) at least ACUTE_SCORE and below
 #: ACUTE_SCORE_MAX, and lies between two candidates of its thinning list, is a candidate
-#: too (:func:`acute_tips`): the tip of an acute edge, where the PCA normal turns
+#: too (``ms_acute_tips``): the tip of an acute edge, where the PCA normal turns
 #: into the wedge's mid-plane and ``r`` is small, while the centroid's offset along the
 #: bisector makes ``o / l`` peak (0.5-0.8 on the 30-60 degree wedges, the star prism
 #: and the rims of walls 1 spacing thick; outliers that are not isolated: 0.8-0.96;
@@ -206,13 +173,13 @@ NOISE_KNN = _header.integer("NOISE_KNN")
 #: square of the ratio (the noise of ``r`` at scale k goes as ``sigma / sqrt(k)``).
 NOISE_TOLERATED = _header.real("NOISE_TOLERATED")
 #: At most this noise ratio (the lower median of :func:`noise_ratios`), a cloud is
-#: thresholded at the floor alone (:func:`robust_plan`). Measured on the evaluation's
+#: thresholded at the floor alone (``ms_robust_plan``). Measured on the evaluation's
 #: clouds (20,000 points): 0-0.003 clean, 0-0.01 thin walls, 0.004-0.018 smooth
 #: controls, 0.09-0.096 with normal noise of 10 % of the spacing, 0.068-0.115 on the
 #: simulated scans; a third of ``NOISE_TOLERATED`` lies between.
 NOISE_QUIET = _header.real("NOISE_QUIET")
 #: On a cloud noisier than ``NOISE_QUIET``, the largest scale's threshold is at least
-#: this many times the median of its relative distances (:func:`scale_floor`). The noise
+#: this many times the median of its relative distances (``ms_scale_floor``). The noise
 #: that lifts a point's ``r`` lifts it at every scale, and where a part has few edges
 #: Otsu's split lies below ``R_MIN``: 15 % of the points of a noisy cylinder (a CAD end
 #: mill with noise of 25 % of the spacing) passed the floor at every scale. The median
@@ -293,73 +260,6 @@ ISOLATED_REF = _header.integer("ISOLATED_REF")
 ISOLATED_SPREAD = _header.real("ISOLATED_SPREAD")
 
 
-def noise_scale_factor(points: np.ndarray, indices: np.ndarray, k: int) -> float:
-    """How much larger the scales must be for the noise of the points.
-
-    Parameters
-    ----------
-    points : (n, 3) float64
-    indices : (n, k_max) int
-        kNN lists sorted by distance, the point itself first, ``k_max >= k >= 2``.
-    k : int
-        The first ``k`` columns give each point's plane (unweighted PCA normal ``n_i``;
-        ``NOISE_KNN``).
-
-    Returns
-    -------
-    float
-        ``min(max(1, (nu / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)``, ``nu`` the lower
-        median over the points of :func:`noise_ratios`.
-    """
-    return _noise_factor(noise_ratios(points, indices, k))
-
-
-#: Where robust mode's rules on the noise are defined: the native library
-#: (``ms_noise_factor``, ``ms_quiet_cloud``, ... in ``native/src/stages.c``), or, in an
-#: install without it, the numpy reference's statement of the same rules.
-_RULES = _kernels if _kernels.available() else reference
-
-
-def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) -> RobustPlan:
-    """Robust mode's decisions once the noise ratio ``noise`` (the lower median of
-    :func:`noise_ratios`, 0 on a mesh) of ``n_kept`` points (isolated ones left out) is
-    measured, at the given increasing ``scales`` (``ms_robust_plan``; the numpy
-    reference's :func:`~meshlab_sharp.reference.robust.robust_plan` in an install
-    without the library):
-
-    * the scales grow as ``min(max(1, (noise / NOISE_TOLERATED)**2), NOISE_MAX_FACTOR)``,
-      at most ``n_kept / k_max``, rounded half up, and so does thinning's comparison list
-      ``THIN_KNN``: the band of points that noise lifts beside a line widens with it;
-    * on a cloud whose noise is at most ``NOISE_QUIET`` (a quiet cloud) the thresholds
-      are the floor alone (measured: thin walls 1 / 2 / 3 spacings F1 0.736 / 0.675 /
-      0.896 -> 0.744 / 0.711 / 0.913, no condition lower), candidates scoring below
-      ``SUPPORT_FREE_SCORE`` need no support, acute tips are looked for, and the points
-      that are not candidates block thinning (the two rims of a wall 2-3 spacings thick
-      then do not thin each other away); elsewhere Otsu's split, with the largest
-      scale's noise floor (:func:`scale_floor`) on a noisy cloud;
-    * on a noisy cloud thinning's cone is ``THIN_CONE_COS_NOISY``: noise tilts the
-      offsets between a line's own points, which then count as across the line
-      (measured: thickness on the scan 0.79 -> 0.82, at noise 50 % 0.78 -> 0.83);
-    * where the noise grew the scales to the cap, thinning ranks by the smoothed score:
-      beyond it the larger scales no longer dilute the noise of the score (measured:
-      noise 50 % F1 0.752 -> 0.813, thickness 0.72 -> 0.78)."""
-    return _RULES.robust_plan(noise, n_kept, scales, mesh)
-
-
-def _noise_factor(ratio: np.ndarray) -> float:
-    """The scales' growth (``ms_noise_factor``, before :func:`robust_plan`'s cap) for
-    the lower median of the per-point ratios (n,), which are reordered in place (no copy
-    of n values)."""
-    return _RULES.noise_factor(noise_median(ratio))
-
-
-def noise_median(ratio: np.ndarray) -> float:
-    """The lower median of the per-point noise ratios (n,), reordered in place."""
-    at = (len(ratio) - 1) // 2
-    ratio.partition(at)
-    return float(ratio[at])
-
-
 def sheet_parameters() -> _kernels.SheetParameters:
     """The sheet filter's parameters as the module holds them now: ``(SHEET_GAP,
     SHEET_MIN, SHEET_OWN, SHEET_COLUMN, SHEET_COLUMN_GAP, SHEET_FAR_SPAN, SHEET_TRIM,
@@ -374,94 +274,3 @@ def sheet_parameters() -> _kernels.SheetParameters:
         SHEET_TRIM,
         SHEET_TRIM_COS,
     )
-
-
-def sheet_mask(
-    points: np.ndarray,
-    indices: np.ndarray,
-    normals: np.ndarray,
-    parameters: _kernels.SheetParameters | None = None,
-) -> np.ndarray:
-    """The neighbours on each point's own sheet, (n, k) bool
-    (:func:`meshlab_sharp.reference.robust.sheet_mask`, where the rules are written out),
-    with ``parameters`` or, by default, :func:`sheet_parameters`."""
-    chosen = sheet_parameters() if parameters is None else parameters
-    return reference.sheet_mask(points, indices, normals, chosen)
-
-
-def local_scale(
-    points: np.ndarray, neighbourhood: Neighbourhood, *, backend: str | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Mean distance from each point to its neighbourhood ``l`` (m,) and its centroid's
-    distance ``o`` (m,), as :func:`meshlab_sharp.reference.robust.local_scale` defines
-    them, with ``backend`` (default :func:`meshlab_sharp._kernels.default_backend`; both
-    give the same bits). ``points`` (m, 3) float64; ``neighbourhood`` CSR lists, each
-    point's own index included."""
-    if _kernels.resolve(backend) == "compiled":
-        return _kernels.local_scale_csr(points, neighbourhood.indptr, neighbourhood.indices)
-    return reference.local_scale(points, neighbourhood)
-
-
-def relative_distances(pdis: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """Projected distances relative to the local scale, clipped to [0, 1].
-
-    Parameters
-    ----------
-    pdis : (m,) float64
-        Projected distances ``|mean . n|``.
-    scale : (m,) float64
-        :func:`local_scale` at the same neighbourhoods.
-
-    Returns
-    -------
-    (m,) float64
-        ``min(pdis / scale, 1)``; 0 where ``scale == 0``.
-    """
-    r = np.zeros(np.shape(pdis))
-    np.divide(pdis, scale, out=r, where=scale > 0)
-    return np.minimum(r, 1.0, out=r)
-
-
-def robust_threshold(r: np.ndarray, otsu: bool = True, floor: float = R_MIN) -> float:
-    """Otsu's threshold of relative distances on [0, 1], never below ``floor``.
-
-    Parameters
-    ----------
-    r : (m,) float64
-        Relative projected distances in [0, 1] (isolated points left out).
-    otsu : bool, default True
-        False on a cloud without noise (:func:`robust_plan`): the floor alone.
-    floor : float, default R_MIN
-        :func:`scale_floor`.
-
-    Returns
-    -------
-    float
-        ``max(otsu_threshold(r), floor)``, or ``floor`` when not ``otsu`` (then no
-        histogram is made); candidates are ``r >= T``.
-    """
-    return max(otsu_threshold(r), floor) if otsu else floor
-
-
-def scale_floor(
-    counts: np.ndarray, last: bool, mesh: bool, noise: float, backend: str | None = None
-) -> float:
-    """The floor of a scale's threshold: ``R_MIN``, and on the largest scale (``last``)
-    of a cloud whose noise ratio ``noise`` exceeds ``NOISE_QUIET``, at least
-    ``NOISE_FLOOR`` times the median of its relative distances (at most
-    ``NOISE_FLOOR_MAX``), read from their histogram ``counts`` (B,) int
-    (``ms_noise_floor``; the numpy reference with ``backend="numpy"``). Measured on the
-    CAD parts with noise of 25 % of the spacing (50,000 points): the end mill 0.258 ->
-    0.942, filleted parts 4.19 / 4.43 % flagged -> 0.66 / 2.78 %; parts with many edges
-    keep Otsu's split, which lies higher."""
-    rules = reference if backend == "numpy" else _RULES
-    return rules.scale_floor(counts, last, mesh, noise)
-
-
-def acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: float) -> np.ndarray:
-    """The points :func:`acute_tips` tests: on a cloud whose noise ratio ``noise`` (as
-    :func:`robust_plan` takes it) is at most ``NOISE_QUIET``, those not in ``mask`` (m,)
-    bool (the candidates at every scale) whose ``score`` (m,) lies in ``[ACUTE_SCORE,
-    ACUTE_SCORE_MAX)``; none on meshes and noisier clouds. Returns (t,) int64,
-    increasing."""
-    return _RULES.stage_acute_tests(score, mask, mesh, noise)

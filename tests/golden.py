@@ -43,7 +43,7 @@ SHAPES: dict[str, Shape] = {
         None,
     ),
     # a 45-degree wedge (the evaluation's Poisson-disk samples): its tip's points join
-    # the candidates (robust.acute_tips)
+    # the candidates (reference.robust.acute_tips)
     "wedge45_points": lambda: (
         groundtruth.make_condition("wedge45", "acute", n_points=1500).vertices,
         None,

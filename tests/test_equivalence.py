@@ -40,17 +40,18 @@ from meshlab_sharp.neighbourhoods import (
     squared_distances,
 )
 from meshlab_sharp.normals import face_average_normals
-from meshlab_sharp.reference.detect import RelativeRule, isolated_from_stats, pass_noise_median
-from meshlab_sharp.robust import (
-    R_MIN,
-    _noise_factor,
-    isolated_points,
+from meshlab_sharp.reference.detect import (
+    RelativeRule,
+    isolated_from_stats,
     local_scale,
+    median_noise_factor,
     noise_scale_factor,
+    pass_noise_median,
     robust_threshold,
     sheet_mask,
-    sheet_parameters,
 )
+from meshlab_sharp.reference.robust import isolated_points
+from meshlab_sharp.robust import R_MIN, sheet_parameters
 from meshlab_sharp.threshold import normalise, otsu_threshold
 
 pytestmark = pytest.mark.skipif(
@@ -782,7 +783,7 @@ def test_isolated_points_and_noise_from_one_search(name):
     expected = isolated_points(points, table)
     assert expected.any()
     np.testing.assert_array_equal(isolated_from_stats(points, fused.stats), expected)
-    assert _noise_factor(fused.stats.noise) == pytest.approx(
+    assert median_noise_factor(fused.stats.noise) == pytest.approx(
         noise_scale_factor(points, table, 7), rel=1e-12
     )
 
@@ -1238,7 +1239,7 @@ def _sheet_cases() -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
 def test_sheet_filter_is_numpys():
     """The compiled pass's sheet filter (``ms_sheet_mask``: sheet_keep, its first test, the
     no_gap shortcuts that skip sorting the heights, the sorts by ranks) keeps exactly
-    the neighbours that robust.sheet_mask keeps, on lists that take every branch: kept
+    the neighbours that reference_sequence.sheet_mask keeps, on lists that take every branch: kept
     whole by the first test, by no_gap on both rules, the column sorted after rule 1
     showed no gap, rule 1 sorted (gaps: parallel sheets, ties of a grid, far outliers),
     no_gap's fallback on the range; rows dropping neighbours and rows kept whole."""

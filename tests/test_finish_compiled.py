@@ -1,7 +1,7 @@
 """Robust mode's finishing steps in C (``ms_line_directions``, ``ms_supported``,
 ``ms_smoothed_ranking``, ``ms_thin``, ``ms_acute_tips``; ``_kernels.support_and_thin``
 and ``_kernels.acute_tips``, ``reference.detect.RobustSetup._finish_compiled``) against their numpy
-reference (``robust.line_directions``, ``supported``, ``smoothed_ranking``, ``thin``,
+reference (``reference_robust.line_directions``, ``supported``, ``smoothed_ranking``, ``thin``,
 ``acute_tips``, ``RobustSetup._finish_numpy``): the same masks and ranks, bit for bit,
 and the same line directions up to sign and rounding (the 3x3 solver of the normals,
 not LAPACK)."""
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import shapes
 
-from meshlab_sharp import _kernels, robust
+from meshlab_sharp import _kernels
 from meshlab_sharp.neighbourhoods import Neighbourhood
 from meshlab_sharp.reference import detect as reference_sequence
 from meshlab_sharp.reference import robust as reference_robust
@@ -151,7 +151,7 @@ def test_the_kernels_steps_one_by_one(wide):
         lib.ms_line_directions(p, f0, r, ctypes.byref(direction.spec()), 0, c, _kernels._ptr(e))
         == 0
     )
-    want = robust.line_directions(points, mask, d_ref)[rows]
+    want = reference_robust.line_directions(points, mask, d_ref)[rows]
     sign = np.where((e * want).sum(axis=1) < 0, -1.0, 1.0)
     line = mask[table].sum(axis=1) >= 2  # one point alone has no direction
     assert line.mean() > 0.5
@@ -175,7 +175,7 @@ def test_the_kernels_steps_one_by_one(wide):
         )  # fmt: skip
         exempt = None if free is None else score < free
         assert np.array_equal(
-            f1, robust.supported(points, mask, e_full, a_ref, minimum, exempt=exempt)
+            f1, reference_robust.supported(points, mask, e_full, a_ref, minimum, exempt=exempt)
         )
     half = mask & (rng.uniform(size=n) < 0.7)
     for between in (None, ~mask, rng.uniform(size=n) < 0.3):
@@ -184,11 +184,13 @@ def test_the_kernels_steps_one_by_one(wide):
             p, _kernels._ptr(half), r, _kernels._ptr(e), ctypes.byref(compare.spec()),
             _kernels._ptr(rank), 0.45, _kernels._ptr(between), 0, c, _kernels._ptr(f2),
         )  # fmt: skip
-        want = robust.thin(points, half, rank, e_full, c_ref, cone_cos=0.45, between=between)
+        want = reference_robust.thin(
+            points, half, rank, e_full, c_ref, cone_cos=0.45, between=between
+        )
         assert np.array_equal(f2, want)
 
     tips = _kernels.acute_tips(points, half, rows, compare)
-    assert np.array_equal(tips, robust.acute_tips(points, half, rows, c_ref))
+    assert np.array_equal(tips, reference_robust.acute_tips(points, half, rows, c_ref))
     assert 0 < tips.sum() < c
 
 

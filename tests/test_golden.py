@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from meshlab_sharp import creases, robust
+from meshlab_sharp.reference import detect as reference_sequence
 from meshlab_sharp.reference import robust as reference
 
 
@@ -107,7 +108,7 @@ def test_every_constant_is_pinned_by_the_golden_outputs(inputs, monkeypatch, nud
     monkeypatch.setattr(module, name, change(getattr(module, name)))
     if module is robust and hasattr(reference, name):
         monkeypatch.setattr(reference, name, change(getattr(reference, name)))
-    monkeypatch.setattr(robust, "_RULES", reference)
+    monkeypatch.setattr(reference_sequence, "RULES", reference)
     changed = [
         shape
         for shape in sorted(golden.SHAPES)

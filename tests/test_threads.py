@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import shapes
 
-from meshlab_sharp import _kernels, robust
+from meshlab_sharp import _kernels
 from meshlab_sharp.io import Geometry
 from meshlab_sharp.neighbourhoods import Neighbourhood, knn
 from meshlab_sharp.reference import detect as reference_sequence
@@ -86,10 +86,13 @@ def _features(seed: int) -> tuple[np.ndarray, np.ndarray, Neighbourhood]:
 
 def test_line_directions_in_parts_on_threads_are_one_calls(monkeypatch):
     points, mask, lists = _features(1)
-    one = robust.line_directions(points, mask, lists)
+    one = reference_robust.line_directions(points, mask, lists)
     monkeypatch.setattr(reference_robust, "PART_MIN", 5)  # parts of a few hundred features
     for workers in (2, 3, -1):
-        assert robust.line_directions(points, mask, lists, workers).tobytes() == one.tobytes()
+        assert (
+            reference_robust.line_directions(points, mask, lists, workers).tobytes()
+            == one.tobytes()
+        )
     # unit directions of the features, zero rows elsewhere
     np.testing.assert_allclose(np.linalg.norm(one[mask], axis=1), 1.0)
     assert (one[~mask] == 0).all()

@@ -348,7 +348,7 @@ def test_noise_grown_scales_equal_in_memory(noise: float) -> None:
 
 
 def test_noise_floor_equal_in_memory() -> None:
-    """The largest scale's noise floor (robust.scale_floor) read from the tiles' summed
+    """The largest scale's noise floor (reference_sequence.scale_floor) read from the tiles' summed
     histogram is the in-memory one: on a noisy sphere it, not Otsu's split, sets the
     threshold, and few points are features."""
     pts = noisy_sphere_points(6000, 0.25)

@@ -98,7 +98,7 @@ def noise_floor(counts: np.ndarray) -> float:
     """Robust mode's noise floor of a histogram's counts (``threshold.BINS``,) int:
     ``min(NOISE_FLOOR * (b + 1) / BINS, NOISE_FLOOR_MAX)``, ``b`` the bin of the lower
     median (the first bin whose cumulative count exceeds ``(total - 1) // 2``); 0.0 when
-    every count is 0 (``ms_noise_floor``, :func:`meshlab_sharp.robust.scale_floor`)."""
+    every count is 0 (``ms_noise_floor``, :func:`meshlab_sharp.reference.detect.scale_floor`)."""
     counts = np.asarray(counts, np.int64)
     total = int(counts.sum())
     if total == 0:
@@ -113,7 +113,7 @@ def noise_ratios(points: np.ndarray, indices: np.ndarray, k: int) -> np.ndarray:
     """``|d . n_i| / |d|`` of every point, ``d = p_{N(i)[1]} - p_i`` (the nearest
     neighbour's offset across the plane of the ``k`` nearest, relative to its distance;
     0 when ``d = 0``). ``points`` (n, 3), ``indices`` (n, >= k) as
-    :func:`meshlab_sharp.robust.noise_scale_factor`; returns (n,) float64."""
+    :func:`meshlab_sharp.reference.detect.noise_scale_factor`; returns (n,) float64."""
     idx = np.asarray(indices)[:, :k]
     return _plane_ratios(points[idx] - points[:, None, :])
 
@@ -249,7 +249,7 @@ def acute_tips(
     mask : (m,) bool
         Candidates at every scale.
     rows : (t,) int
-        The points tested (:func:`meshlab_sharp.robust.acute_tests`), increasing.
+        The points tested (:func:`meshlab_sharp.reference.detect.acute_tests`), increasing.
     lists : Neighbourhood
         CSR lists of at least the ``rows`` (the thinning's ``thin_knn`` nearest).
 

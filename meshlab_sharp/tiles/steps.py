@@ -157,7 +157,7 @@ def robust_pass(ctx: Context, *, first: bool) -> Partial:
 
 
 def robust_isolated(span: Span) -> Partial:
-    """``ms_stage_isolated`` (:func:`meshlab_sharp.robust.isolated_points`) of the
+    """``ms_stage_isolated`` (:func:`meshlab_sharp.reference.robust.isolated_points`) of the
     span's distinct points, with their nearest's values read wherever it lies: ``i`` is
     isolated when it is not among the k nearest of its nearest ``j`` (``(d2(j, i), i)``
     after ``j``'s k-th neighbour in the (squared distance, index) order), or when its
@@ -224,7 +224,7 @@ def robust_acute_tests(span: Span, *, plan: RobustPlan) -> Partial:
 
 
 def robust_acute_tips(ctx: Context, *, compare: int) -> Partial:
-    """``ms_acute_tips`` (:func:`meshlab_sharp.robust.acute_tips`) of the rows (the points
+    """``ms_acute_tips`` (:func:`meshlab_sharp.reference.robust.acute_tips`) of the rows (the points
     tested) among the candidates ``mask`` of their ``compare`` nearest: writes ``tip``."""
     near = CandidateLists.knn(ctx.idx, compare)
     tips = _kernels.acute_tips(ctx.points, ctx.gather("mask"), ctx.rows, near, TILE_THREADS)
