@@ -1017,7 +1017,30 @@ std::vector<Piece> joinPieces(const std::vector<Piece> &pieces, double spacing, 
 	return out;
 }
 
-std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spacing)
+// trace._vertex_ahead: the vertex of another curve that end q's line (the end chord at
+// MS_CURVE_CORNER_SCALE) reaches first, ahead of the end, within MS_CURVE_LONG_GAP spacings
+// of it and MS_CURVE_LATERAL_OFFSET spacings of the line (the lowest index of equally near
+// ones); -1 when none
+long vertexAhead(const Ends &e, long q, const KdTree &tree, const std::vector<Vec3> &data,
+                 const std::vector<long> &owner, double spacing)
+{
+	const Vec3 &out = e.out[MS_CURVE_CORNER_SCALE][q], &anchor = e.anchor[MS_CURVE_CORNER_SCALE][q];
+	const Vec3 &point = e.point[q];
+	long best = -1;
+	double bestAhead = INF;
+	for (long j : tree.ball(point, MS_CURVE_LONG_GAP * spacing)) {
+		if (owner[j] == e.piece[q]) continue;
+		const double ahead = bdot(sub(data[j], point), out);
+		const Vec3 w = sub(data[j], anchor);
+		if (ahead <= 0.0 || bnorm(sub(w, mul(bdot(w, out), out))) > MS_CURVE_LATERAL_OFFSET * spacing) continue;
+		if (ahead < bestAhead || (ahead == bestAhead && j < best)) best = j, bestAhead = ahead;
+	}
+	return best;
+}
+
+// trace.split_at_touches; lines (clouds): where no other curve is within
+// MS_CURVE_GAP_LENGTH spacings of a free end, the end's line reaches on (vertexAhead)
+std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spacing, bool lines)
 {
 	const Ends e = ends(pieces, spacing);
 	const auto clusters = endClusters(e, pieces, spacing);
@@ -1042,6 +1065,7 @@ std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spaci
 			const double d = bnorm(sub(data[j], e.point[q]));
 			if (d < bestD) bestD = d, best = j;
 		}
+		if (best < 0 && lines) best = vertexAhead(e, long(q), tree, data, owner, spacing);
 		if (best < 0) continue;
 		const Piece &pc = pieces[owner[best]];
 		const long v = local[best];
@@ -1484,7 +1508,7 @@ double cloudSpacing(const KdTree &tree, const std::vector<Vec3> &fp, bool &irreg
 std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<char> &mask,
                                const std::vector<char> &ok, const std::vector<long> &feat,
                                const std::vector<Vec3> &fp, const std::array<Vec3, 2> *bounds,
-                               const ms_curves_math &math, double &spacing, bool &irregular)
+                               const ms_curves_math &math, double &spacing)
 {
 	const KdTree fpTree(fp);
 	std::vector<double> d1(fp.size());
@@ -1496,6 +1520,7 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	std::vector<char> nearFeature;
 	for (long i : near) nearPts.push_back(pts[i]), nearFeature.push_back(mask[i]);
 	const KdTree tree(nearPts);
+	bool irregular = false;
 	spacing = cloudSpacing(tree, fp, irregular);
 	// cloud_graph
 	const long n = long(fp.size());
@@ -1754,11 +1779,10 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	double spacing = 0.0;
 	std::unique_ptr<MeshPaths> paths;
 	CreaseChains creases;
-	bool irregular = false;
 	if (faces.empty()) {
 		std::vector<char> mask(n);
 		for (size_t i = 0; i < n; ++i) mask[i] = feature[i] != 0;
-		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing, irregular);
+		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing);
 	} else {
 		std::vector<char> usable(n, 0);
 		for (long v : feat) usable[v] = 1;
@@ -1777,13 +1801,14 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	};
 	const Bridge *bridge = paths ? &bridgeFn : nullptr;
 	pieces = cutAll(pieces, spacing, math);
-	// the short pieces are dropped before joining, but on an irregular cloud, where the
-	// sampling's gaps cut an edge's features into short pieces: they join first
-	if (!irregular) pieces = dropShort(pieces, spacing);
+	// a mesh's short pieces are dropped before joining; a cloud's join first: its
+	// sampling's gaps (iid points, a scan's density falling with range, noise) cut an
+	// edge's features into short pieces
+	if (paths) pieces = dropShort(pieces, spacing);
 	pieces = dropShort(joinPieces(pieces, spacing, bridge), spacing);
 	pieces = joinPieces(pieces, spacing, bridge);
 	pieces = cutAll(pieces, spacing, math);
-	pieces = splitAtTouches(pieces, spacing);
+	pieces = splitAtTouches(pieces, spacing, !paths);
 	if (!paths) pieces = dropIsolated(pieces, spacing);
 	pieces = corners(pieces, spacing, pts, paths.get(), result);
 	if (!creases.chains.empty()) {  // the mesh's sharp edges, and their corners

@@ -65,13 +65,12 @@ MAX_FLAT_SHARE = CURVES.real("MAX_FLAT_SHARE")
 CELL_SPACINGS = CURVES.real("CELL_SPACINGS")
 #: Irregular (iid) clouds: where DENSITY_SCALE times the median distance from a feature
 #: to its DENSITY_NEIGHBOURS-th nearest point exceeds the median nearest distance d by a
-#: factor q > 1, the spacing is d q^1.5 and the short pieces join before the short ones
-#: are dropped. Independently drawn points cluster: their nearest distances are short
-#: (0.6 times blue noise's of the same density) and the features along an edge leave
-#: gaps of several of them, which split the feature graph. On Poisson-disk (blue
-#: noise) clouds, noisy or not, d is 0.47-0.50 times the 8th nearest distance (q < 1):
-#: they are regular and keep d; on iid clouds d is 0.30-0.33 times it (q about 1.4,
-#: the spacing about 1.7 d, blue noise's of the same density).
+#: factor q > 1, the spacing is d q^1.5. Independently drawn points cluster: their
+#: nearest distances are short (0.6 times blue noise's of the same density) and the
+#: features along an edge leave gaps of several of them, which split the feature graph.
+#: On Poisson-disk (blue noise) clouds, noisy or not, d is 0.47-0.50 times the 8th
+#: nearest distance (q < 1): they are regular and keep d; on iid clouds d is 0.30-0.33
+#: times it (q about 1.4, the spacing about 1.7 d, blue noise's of the same density).
 DENSITY_NEIGHBOURS = CURVES.integer("DENSITY_NEIGHBOURS")
 #: See DENSITY_NEIGHBOURS.
 DENSITY_SCALE = CURVES.real("DENSITY_SCALE")
@@ -156,9 +155,8 @@ def extract_curves(
         return _no_curves()
     paths: MeshPaths | None = None
     creases: CreaseChains | None = None
-    irregular = False
     if faces is None:
-        pieces, spacing, irregular = _cloud_pieces(pts, feat_mask, ok, feat, fp, bounds)
+        pieces, spacing = _cloud_pieces(pts, feat_mask, ok, feat, fp, bounds)
     else:
         usable = np.zeros(len(pts), bool)
         usable[feat] = True
@@ -171,15 +169,16 @@ def extract_curves(
         return _no_curves()
     bridge = None if paths is None else _bridge(pts, paths, spacing)
     pieces = cut_at_turns(pieces, spacing)
-    # the short pieces are dropped before joining, but on an irregular cloud, where the
-    # sampling's gaps cut an edge's features into short pieces: they join first
-    if not irregular:
+    # a mesh's short pieces are dropped before joining; a cloud's join first: its
+    # sampling's gaps (iid points, a scan's density falling with range, noise) cut an
+    # edge's features into short pieces
+    if paths is not None:
         pieces = _drop_short(pieces, spacing)
     pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
     pieces = join_pieces(pieces, spacing, bridge)
     # joining may have run a curve round a corner whose vertex was near a piece's end
     pieces = cut_at_turns(pieces, spacing)
-    pieces = split_at_touches(pieces, spacing)
+    pieces = split_at_touches(pieces, spacing, lines=paths is None)
     if paths is None:
         pieces = _drop_isolated(pieces, spacing)
     pieces, corner_points, corner_indices = _corners(pieces, spacing, pts, paths)
@@ -259,15 +258,15 @@ def _cloud_pieces(
     feat: np.ndarray,
     fp: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray] | None,
-) -> tuple[list[Piece], float, bool]:
-    """Skeleton polylines of a cloud's features, refined; the spacing; whether the
-    cloud is irregular (:func:`cloud_spacing`)."""
+) -> tuple[list[Piece], float]:
+    """Skeleton polylines of a cloud's features, refined; the spacing
+    (:func:`cloud_spacing`)."""
     near = cell_neighbourhood(pts, ok, fp, support_radius(fp), bounds)
     near_pts = pts[near]
     order = np.lexsort((near_pts[:, 2], near_pts[:, 1], near_pts[:, 0]))
     near, near_pts = near[order], near_pts[order]
     tree = cKDTree(near_pts)
-    spacing, irregular = cloud_spacing(tree, fp)
+    spacing, _ = cloud_spacing(tree, fp)
     edges, lengths = cloud_graph(fp, spacing)
     paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
     pieces = []
@@ -276,7 +275,7 @@ def _cloud_pieces(
         nodes = path[:-1] if closed else path
         pieces.append(Piece(nodes, fp[nodes], closed))
     if not pieces:
-        return [], spacing, irregular
+        return [], spacing
     # refine every vertex at once, across the skeleton's directions over a wide window
     # (the skeleton zigzags across the band of features)
     raw = np.concatenate([pc.points for pc in pieces])
@@ -302,7 +301,7 @@ def _cloud_pieces(
         p, d = smooth[stop - size : stop], dirs[stop - size : stop]
         keep = _advancing(p, d, spacing)
         out.append(Piece(feat[pc.nodes[keep]], p[keep], pc.closed))
-    return out, spacing, irregular
+    return out, spacing
 
 
 def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
