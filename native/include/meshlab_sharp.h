@@ -195,6 +195,7 @@
 #define MS_CURVE_RAW_TANGENT_WINDOW (2.0 * MS_CURVE_TANGENT_WINDOW)
 #define MS_CURVE_SNAP 0.75
 #define MS_CURVE_MAX_CORNER_CONDITION 1e6
+#define MS_CURVE_CORNER_OFFSET 1.5
 
 /* refine.py: the two arms' lines across a cloud curve. */
 #define MS_CURVE_REFINE_NEIGHBOURS 40

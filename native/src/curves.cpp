@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <functional>
 #include <limits>
 #include <map>
@@ -1633,6 +1634,61 @@ std::vector<Piece> cutAll(const std::vector<Piece> &pieces, double spacing, cons
 	return out;
 }
 
+using Mat3 = std::array<std::array<double, 3>, 3>;
+
+// extract._line_system: the normal equations a x = b of the point nearest the lines
+// through through[i] along the unit outs[i], i in c
+void lineSystem(const std::vector<long> &c, const std::vector<Vec3> &outs, const std::vector<Vec3> &through,
+                Mat3 &a, Vec3 &b)
+{
+	a = Mat3{};
+	b = Vec3{0.0, 0.0, 0.0};
+	for (long i : c) {
+		const Vec3 &o = outs[i];
+		Mat3 proj{};
+		for (int r = 0; r < 3; ++r)
+			for (int k = 0; k < 3; ++k) proj[r][k] = (r == k ? 1.0 : 0.0) - o[r] * o[k];
+		for (int r = 0; r < 3; ++r)
+			for (int k = 0; k < 3; ++k) a[r][k] += proj[r][k];
+		for (int r = 0; r < 3; ++r) b[r] += gemvRow(proj[r], through[i]);
+	}
+}
+
+// extract._outlying: the ends of cluster c (a well-conditioned system) whose lines pass
+// farther than MS_CURVE_CORNER_OFFSET spacings from the others' meeting point, the
+// farthest (the first of equally far ones) left out first while more than two remain
+// and their system stays well-conditioned; ascending
+std::vector<long> outlying(const std::vector<long> &c, const std::vector<Vec3> &outs,
+                           const std::vector<Vec3> &through, double spacing)
+{
+	std::vector<long> kept = c;
+	Mat3 a;
+	Vec3 b;
+	lineSystem(c, outs, through, a, b);
+	while (kept.size() > 2) {
+		const Vec3 x = solve3(a, b);
+		double far = MS_CURVE_CORNER_OFFSET * spacing;
+		long worst = -1;
+		for (long i : kept) {
+			const Vec3 v = sub(x, through[i]);
+			const double d = bnorm(sub(v, mul(bdot(v, outs[i]), outs[i])));
+			if (d > far) far = d, worst = i;
+		}
+		if (worst < 0) break;
+		std::vector<long> trial;
+		for (long i : kept)
+			if (i != worst) trial.push_back(i);
+		lineSystem(trial, outs, through, a, b);
+		if (!(condition(a) < MS_CURVE_MAX_CORNER_CONDITION)) break;
+		kept = trial;
+	}
+	std::vector<long> rest;
+	for (long i : c)
+		if (std::find(kept.begin(), kept.end(), i) == kept.end()) rest.push_back(i);
+	std::sort(rest.begin(), rest.end());
+	return rest;
+}
+
 std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std::vector<Vec3> &pts,
                            const MeshPaths *paths, Curves &result)
 {
@@ -1646,17 +1702,24 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 	const std::vector<Vec3> &through = cloud ? e.anchor[MS_CURVE_CORNER_SCALE] : e.point;
 	std::vector<Vec3> points;
 	std::vector<long> indices;
-	for (const auto &c : clusters) {
-		std::array<std::array<double, 3>, 3> a{};
-		Vec3 b{0.0, 0.0, 0.0};
-		for (long i : c) {
-			const Vec3 &o = outs[i];
-			std::array<std::array<double, 3>, 3> proj{};
-			for (int r = 0; r < 3; ++r)
-				for (int k = 0; k < 3; ++k) proj[r][k] = (r == k ? 1.0 : 0.0) - o[r] * o[k];
-			for (int r = 0; r < 3; ++r)
-				for (int k = 0; k < 3; ++k) a[r][k] += proj[r][k];
-			for (int r = 0; r < 3; ++r) b[r] += gemvRow(proj[r], through[i]);
+	std::deque<std::vector<long>> work(clusters.begin(), clusters.end());
+	while (!work.empty()) {
+		std::vector<long> c = work.front();
+		work.pop_front();
+		Mat3 a;
+		Vec3 b;
+		lineSystem(c, outs, through, a, b);
+		if (cloud && condition(a) < MS_CURVE_MAX_CORNER_CONDITION) {
+			// ends whose lines pass far from the others' meeting point: a short piece's
+			// noisy direction, or the ends of a nearby corner; two or more meet apart
+			const std::vector<long> rest = outlying(c, outs, through, spacing);
+			if (!rest.empty()) {
+				std::vector<long> kept;
+				for (long i : c)
+					if (!std::binary_search(rest.begin(), rest.end(), i)) kept.push_back(i);
+				lineSystem(kept, outs, through, a, b);
+				if (rest.size() >= 2) work.push_back(rest), c = kept;
+			}
 		}
 		Vec3 sum = e.point[c[0]];
 		for (size_t j = 1; j < c.size(); ++j) sum = add(sum, e.point[c[j]]);

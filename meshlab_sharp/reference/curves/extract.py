@@ -90,6 +90,12 @@ SNAP = CURVES.real("SNAP")
 #: only where that 3x3 system's condition number is below this (lines not nearly
 #: parallel).
 MAX_CORNER_CONDITION = CURVES.real("MAX_CORNER_CONDITION")
+#: Of the curve ends meeting at a corner (clouds), those whose lines pass farther than
+#: this, in spacings, from the others' meeting point are left out of it, the farthest
+#: first: a short piece's direction is noisy, and the ends of two corners a few
+#: spacings apart fall into one group; two or more left out meet at a corner of
+#: their own.
+CORNER_OFFSET = CURVES.real("CORNER_OFFSET")
 
 
 @dataclass
@@ -421,13 +427,20 @@ def _corners(
         out, through = ends.out[0], ends.point
     points, indices = [], []
     pieces = [Piece(pc.nodes.copy(), pc.points.copy(), pc.closed) for pc in pieces]
-    for c in clusters:
-        a = np.zeros((3, 3))
-        b = np.zeros(3)
-        for i in c:
-            proj = np.eye(3) - np.outer(out[i], out[i])
-            a += proj
-            b += proj @ through[i]
+    work = list(clusters)
+    while work:
+        c = work.pop(0)
+        a, b = _line_system(c, out, through)
+        if paths is None and np.linalg.cond(a) < MAX_CORNER_CONDITION:
+            # ends whose lines pass far from the others' meeting point: a short piece's
+            # noisy direction, or the ends of a nearby corner; two or more meet apart
+            rest = _outlying(c, out, through, spacing)
+            if len(rest):
+                kept = c[~np.isin(c, rest)]
+                a, b = _line_system(kept, out, through)
+                if len(rest) >= 2:
+                    work.append(rest)
+                    c = kept
         mean = ends.point[c].mean(axis=0)
         corner = mean
         if np.linalg.cond(a) < MAX_CORNER_CONDITION:
@@ -477,6 +490,47 @@ def _corners(
     p = np.array(points)
     order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
     return pieces, p[order], np.array(indices, np.int64)[order]
+
+
+def _line_system(
+    c: np.ndarray, out: np.ndarray, through: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The normal equations ``a x = b`` ((3, 3), (3,)) of the point nearest the lines
+    through ``through[i]`` along the unit ``out[i]``, ``i`` in ``c``."""
+    a = np.zeros((3, 3))
+    b = np.zeros(3)
+    for i in c:
+        proj = np.eye(3) - np.outer(out[i], out[i])
+        a += proj
+        b += proj @ through[i]
+    return a, b
+
+
+def _outlying(c: np.ndarray, out: np.ndarray, through: np.ndarray, spacing: float) -> np.ndarray:
+    """The ends of the cluster ``c`` (whose lines' system is well-conditioned) whose
+    lines pass farther than CORNER_OFFSET spacings from the meeting point of the
+    others' (least squares): the farthest (the first of equally far ones) left out
+    first, one at a time, while more than two remain and their system stays
+    well-conditioned. Ascending."""
+    kept = [int(i) for i in c]
+    a, b = _line_system(c, out, through)
+    while len(kept) > 2:
+        x = _solve3(a, b)
+        far, worst = CORNER_OFFSET * spacing, -1
+        for i in kept:
+            v = x - through[i]
+            r = v - float(v @ out[i]) * out[i]
+            d = math.sqrt(float(r @ r))
+            if d > far:
+                far, worst = d, i
+        if worst < 0:
+            break
+        trial = [i for i in kept if i != worst]
+        a, b = _line_system(np.array(trial), out, through)
+        if not np.linalg.cond(a) < MAX_CORNER_CONDITION:
+            break
+        kept = trial
+    return np.array(sorted(set(c.tolist()) - set(kept)), np.int64)
 
 
 def _merged_corners(
