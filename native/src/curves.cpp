@@ -1506,6 +1506,20 @@ double cloudSpacing(const KdTree &tree, const std::vector<Vec3> &fp, bool &irreg
 	return nearest * (q * std::sqrt(q));
 }
 
+// local_spacings: each feature's own spacing, MS_CURVE_DENSITY_SCALE times its distance to
+// the MS_CURVE_DENSITY_NEIGHBOURS-th nearest point, clipped to 1 to
+// MS_CURVE_MAX_LOCAL_SPACING times the cloud's
+std::vector<double> localSpacings(const KdTree &tree, const std::vector<Vec3> &fp, double spacing)
+{
+	const size_t k = std::min<size_t>(MS_CURVE_DENSITY_NEIGHBOURS + 1, tree.size());
+	std::vector<double> out(fp.size());
+	for (size_t i = 0; i < fp.size(); ++i) {
+		const double dk = std::sqrt(tree.query(fp[i], k)[k - 1].first);
+		out[i] = std::min(std::max(MS_CURVE_DENSITY_SCALE * dk, spacing), MS_CURVE_MAX_LOCAL_SPACING * spacing);
+	}
+	return out;
+}
+
 std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<char> &mask,
                                const std::vector<char> &ok, const std::vector<long> &feat,
                                const std::vector<Vec3> &fp, const std::array<Vec3, 2> *bounds,
@@ -1523,16 +1537,21 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	const KdTree tree(nearPts);
 	bool irregular = false;
 	spacing = cloudSpacing(tree, fp, irregular);
-	// cloud_graph
+	// cloud_graph, each feature's own spacing (local_spacings) reaching its links
+	const std::vector<double> local = localSpacings(tree, fp, spacing);
 	const long n = long(fp.size());
 	const size_t k = std::min<size_t>(MS_CURVE_LINK_NEIGHBOURS + 1, fp.size());
+	const double reach = *std::max_element(local.begin(), local.end());
 	std::set<Edge> pairSet;
 	for (long i = 0; i < n; ++i)
-		for (const auto &hit : fpTree.query(fp[i], k, MS_CURVE_LINK_RADIUS * spacing))
+		for (const auto &hit : fpTree.query(fp[i], k, MS_CURVE_LINK_RADIUS * reach))
 			if (hit.second != i) pairSet.insert({std::min(i, hit.second), std::max(i, hit.second)});
-	const std::vector<Edge> edges(pairSet.begin(), pairSet.end());
-	std::vector<double> lengths(edges.size());
-	for (size_t i = 0; i < edges.size(); ++i) lengths[i] = norm(sub(fp[edges[i][0]], fp[edges[i][1]]));
+	std::vector<Edge> edges;
+	std::vector<double> lengths;
+	for (const Edge &e : pairSet) {
+		const double length = norm(sub(fp[e[0]], fp[e[1]]));
+		if (length < MS_CURVE_LINK_RADIUS * std::max(local[e[0]], local[e[1]])) edges.push_back(e), lengths.push_back(length);
+	}
 	std::vector<Piece> pieces = skeletonPieces(n, edges, lengths, fp, spacing, {});
 	if (pieces.empty()) return {};
 	// refine every vertex at once, across the skeleton's directions over a wide window

@@ -46,7 +46,14 @@ from .trace import (
     trace_paths,
 )
 
-__all__ = ["MIN_CURVE_LENGTH", "CurveSet", "cloud_spacing", "extract_curves", "support_radius"]
+__all__ = [
+    "MIN_CURVE_LENGTH",
+    "CurveSet",
+    "cloud_spacing",
+    "extract_curves",
+    "local_spacings",
+    "support_radius",
+]
 
 # The numbers are defined once, in native/include/meshlab_sharp.h.
 #: An open curve shorter than this, in spacings (GAP_LENGTH), is dropped: what is left of a spur
@@ -74,6 +81,9 @@ CELL_SPACINGS = CURVES.real("CELL_SPACINGS")
 DENSITY_NEIGHBOURS = CURVES.integer("DENSITY_NEIGHBOURS")
 #: See DENSITY_NEIGHBOURS.
 DENSITY_SCALE = CURVES.real("DENSITY_SCALE")
+#: A cloud feature's own spacing (:func:`local_spacings`, which links the feature graph
+#: where a scan's density falls with range) is at most this many times the cloud's.
+MAX_LOCAL_SPACING = CURVES.real("MAX_LOCAL_SPACING")
 #: Cloud vertices closer than this along the curve's direction to the previous vertex
 #: kept, in spacings, are dropped after refinement (a skeleton that zigzags across a
 #: wide band of features leaves vertices that double back once refined).
@@ -257,6 +267,28 @@ def cloud_spacing(tree: cKDTree, features: np.ndarray) -> tuple[float, bool]:
     return nearest * (q * math.sqrt(q)), True
 
 
+def local_spacings(tree: cKDTree, features: np.ndarray, spacing: float) -> np.ndarray:
+    """Each feature's own spacing: DENSITY_SCALE times its distance to the
+    DENSITY_NEIGHBOURS-th nearest point, clipped to 1 to MAX_LOCAL_SPACING times the
+    cloud's ``spacing`` (:func:`cloud_spacing`).
+
+    Parameters
+    ----------
+    tree : cKDTree
+        Of the points near the features (the features among them), at least 2.
+    features : (f, 3) float64
+        The distinct feature positions.
+    spacing : float
+
+    Returns
+    -------
+    (f,) float64
+    """
+    k = min(DENSITY_NEIGHBOURS + 1, tree.n)
+    d, _ = tree.query(features, k=k, workers=-1)
+    return np.minimum(np.maximum(DENSITY_SCALE * d[:, k - 1], spacing), MAX_LOCAL_SPACING * spacing)
+
+
 def _cloud_pieces(
     pts: np.ndarray,
     mask: np.ndarray,
@@ -273,7 +305,7 @@ def _cloud_pieces(
     near, near_pts = near[order], near_pts[order]
     tree = cKDTree(near_pts)
     spacing, _ = cloud_spacing(tree, fp)
-    edges, lengths = cloud_graph(fp, spacing)
+    edges, lengths = cloud_graph(fp, spacing, local_spacings(tree, fp, spacing))
     paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
     pieces = []
     for path in paths:
