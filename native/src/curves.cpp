@@ -1523,7 +1523,7 @@ std::vector<double> localSpacings(const KdTree &tree, const std::vector<Vec3> &f
 std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<char> &mask,
                                const std::vector<char> &ok, const std::vector<long> &feat,
                                const std::vector<Vec3> &fp, const std::array<Vec3, 2> *bounds,
-                               const ms_curves_math &math, double &spacing)
+                               const ms_curves_math &math, double &spacing, bool &irregular)
 {
 	const KdTree fpTree(fp);
 	std::vector<double> d1(fp.size());
@@ -1535,7 +1535,6 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	std::vector<char> nearFeature;
 	for (long i : near) nearPts.push_back(pts[i]), nearFeature.push_back(mask[i]);
 	const KdTree tree(nearPts);
-	bool irregular = false;
 	spacing = cloudSpacing(tree, fp, irregular);
 	// cloud_graph, each feature's own spacing (local_spacings) reaching its links
 	const std::vector<double> local = localSpacings(tree, fp, spacing);
@@ -1550,7 +1549,7 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	std::vector<double> lengths;
 	for (const Edge &e : pairSet) {
 		const double length = norm(sub(fp[e[0]], fp[e[1]]));
-		if (length < MS_CURVE_LINK_RADIUS * std::max(local[e[0]], local[e[1]])) edges.push_back(e), lengths.push_back(length);
+		if (length < MS_CURVE_LINK_RADIUS * std::min(local[e[0]], local[e[1]])) edges.push_back(e), lengths.push_back(length);
 	}
 	std::vector<Piece> pieces = skeletonPieces(n, edges, lengths, fp, spacing, {});
 	if (pieces.empty()) return {};
@@ -1595,7 +1594,7 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 
 // ---------------------------------------------------------------- extract.py
 
-std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing)
+std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing, double share = 1.0)
 {
 	const Ends e = ends(pieces, spacing);
 	const auto clusters = endClusters(e, pieces, spacing);
@@ -1612,7 +1611,8 @@ std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing)
 			continue;
 		}
 		const double length = pieces[i].length();
-		if (length >= MS_CURVE_MIN_CURVE_LENGTH * spacing && (!spur.count(long(i)) || length >= MS_CURVE_SPUR_PIECE * spacing))
+		if (length >= share * MS_CURVE_MIN_CURVE_LENGTH * spacing &&
+		    (!spur.count(long(i)) || length >= share * MS_CURVE_SPUR_PIECE * spacing))
 			out.push_back(pieces[i]);
 	}
 	return out;
@@ -1861,10 +1861,11 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	double spacing = 0.0;
 	std::unique_ptr<MeshPaths> paths;
 	CreaseChains creases;
+	bool irregular = false;
 	if (faces.empty()) {
 		std::vector<char> mask(n);
 		for (size_t i = 0; i < n; ++i) mask[i] = feature[i] != 0;
-		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing);
+		pieces = cloudPieces(pts, mask, ok, feat, fp, bounds, math, spacing, irregular);
 	} else {
 		std::vector<char> usable(n, 0);
 		for (long v : feat) usable[v] = 1;
@@ -1883,10 +1884,13 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	};
 	const Bridge *bridge = paths ? &bridgeFn : nullptr;
 	pieces = cutAll(pieces, spacing, math);
-	// a mesh's short pieces are dropped before joining; a cloud's join first: its
-	// sampling's gaps (iid points, a scan's density falling with range, noise) cut an
-	// edge's features into short pieces
-	if (paths) pieces = dropShort(pieces, spacing);
+	// a mesh's short pieces are dropped before joining; a cloud's sampling gaps cut an
+	// edge's features into short pieces, which join first: on a regular cloud only the
+	// shortest are dropped before, on an irregular one (iid points, a scan) none
+	if (paths)
+		pieces = dropShort(pieces, spacing);
+	else if (!irregular)
+		pieces = dropShort(pieces, spacing, MS_CURVE_EARLY_DROP);
 	pieces = dropShort(joinPieces(pieces, spacing, bridge), spacing);
 	pieces = joinPieces(pieces, spacing, bridge);
 	pieces = cutAll(pieces, spacing, math);

@@ -84,6 +84,11 @@ DENSITY_SCALE = CURVES.real("DENSITY_SCALE")
 #: A cloud feature's own spacing (:func:`local_spacings`, which links the feature graph
 #: where a scan's density falls with range) is at most this many times the cloud's.
 MAX_LOCAL_SPACING = CURVES.real("MAX_LOCAL_SPACING")
+#: Before the joins, a regular cloud's pieces and spurs are dropped only below this
+#: share of MIN_CURVE_LENGTH and SPUR_PIECE (an irregular cloud's none, a mesh's all):
+#: the shortest are noise beside the edges, the others may be parts of an edge that
+#: noise or the sampling cut, and join.
+EARLY_DROP = CURVES.real("EARLY_DROP")
 #: Cloud vertices closer than this along the curve's direction to the previous vertex
 #: kept, in spacings, are dropped after refinement (a skeleton that zigzags across a
 #: wide band of features leaves vertices that double back once refined).
@@ -171,8 +176,9 @@ def extract_curves(
         return _no_curves()
     paths: MeshPaths | None = None
     creases: CreaseChains | None = None
+    irregular = False
     if faces is None:
-        pieces, spacing = _cloud_pieces(pts, feat_mask, ok, feat, fp, bounds)
+        pieces, spacing, irregular = _cloud_pieces(pts, feat_mask, ok, feat, fp, bounds)
     else:
         usable = np.zeros(len(pts), bool)
         usable[feat] = True
@@ -185,11 +191,13 @@ def extract_curves(
         return _no_curves()
     bridge = None if paths is None else _bridge(pts, paths, spacing)
     pieces = cut_at_turns(pieces, spacing)
-    # a mesh's short pieces are dropped before joining; a cloud's join first: its
-    # sampling's gaps (iid points, a scan's density falling with range, noise) cut an
-    # edge's features into short pieces
+    # a mesh's short pieces are dropped before joining; a cloud's sampling gaps cut an
+    # edge's features into short pieces, which join first: on a regular cloud only the
+    # shortest are dropped before, on an irregular one (iid points, a scan) none
     if paths is not None:
         pieces = _drop_short(pieces, spacing)
+    elif not irregular:
+        pieces = _drop_short(pieces, spacing, EARLY_DROP)
     pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
     pieces = join_pieces(pieces, spacing, bridge)
     # joining may have run a curve round a corner whose vertex was near a piece's end
@@ -296,15 +304,15 @@ def _cloud_pieces(
     feat: np.ndarray,
     fp: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray] | None,
-) -> tuple[list[Piece], float]:
-    """Skeleton polylines of a cloud's features, refined; the spacing
-    (:func:`cloud_spacing`)."""
+) -> tuple[list[Piece], float, bool]:
+    """Skeleton polylines of a cloud's features, refined; the spacing; whether the
+    cloud is irregular (:func:`cloud_spacing`)."""
     near = cell_neighbourhood(pts, ok, fp, support_radius(fp), bounds)
     near_pts = pts[near]
     order = np.lexsort((near_pts[:, 2], near_pts[:, 1], near_pts[:, 0]))
     near, near_pts = near[order], near_pts[order]
     tree = cKDTree(near_pts)
-    spacing, _ = cloud_spacing(tree, fp)
+    spacing, irregular = cloud_spacing(tree, fp)
     edges, lengths = cloud_graph(fp, spacing, local_spacings(tree, fp, spacing))
     paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
     pieces = []
@@ -313,7 +321,7 @@ def _cloud_pieces(
         nodes = path[:-1] if closed else path
         pieces.append(Piece(nodes, fp[nodes], closed))
     if not pieces:
-        return [], spacing
+        return [], spacing, irregular
     # refine every vertex at once, across the skeleton's directions over a wide window
     # (the skeleton zigzags across the band of features)
     raw = np.concatenate([pc.points for pc in pieces])
@@ -339,7 +347,7 @@ def _cloud_pieces(
         p, d = smooth[stop - size : stop], dirs[stop - size : stop]
         keep = _advancing(p, d, spacing)
         out.append(Piece(feat[pc.nodes[keep]], p[keep], pc.closed))
-    return out, spacing
+    return out, spacing, irregular
 
 
 def _advancing(p: np.ndarray, t: np.ndarray, spacing: float) -> np.ndarray:
@@ -398,10 +406,10 @@ def _bridge(pts: np.ndarray, paths: MeshPaths, spacing: float) -> Bridge:
     return bridge
 
 
-def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
-    """Leave out open pieces shorter than MIN_CURVE_LENGTH spacings, and spurs: pieces
-    shorter than SPUR_PIECE spacings with one end free and the other where three or
-    more ends meet."""
+def _drop_short(pieces: list[Piece], spacing: float, share: float = 1.0) -> list[Piece]:
+    """Leave out open pieces shorter than ``share`` times MIN_CURVE_LENGTH spacings, and
+    spurs: pieces shorter than ``share`` times SPUR_PIECE spacings with one end free and
+    the other where three or more ends meet."""
     ends, clusters = end_clusters(pieces, spacing)
     size = np.ones(len(ends.piece), np.int64)
     for c in clusters:
@@ -416,8 +424,8 @@ def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
         for i, (pc, length) in enumerate(zip(pieces, lengths, strict=True))
         if pc.closed
         or (
-            length >= MIN_CURVE_LENGTH * spacing
-            and (i not in spur or length >= SPUR_PIECE * spacing)
+            length >= share * MIN_CURVE_LENGTH * spacing
+            and (i not in spur or length >= share * SPUR_PIECE * spacing)
         )
     ]
 

@@ -66,7 +66,7 @@ def cloud_graph(
         Point spacing.
     local : (f,) float64, optional
         Each point's own spacing (at least ``spacing``): two points are linked within
-        LINK_RADIUS times the larger of theirs (where a scan's density falls with
+        LINK_RADIUS times the smaller of theirs (where a scan's density falls with
         range). Default: ``spacing`` everywhere.
 
     Returns
@@ -88,7 +88,7 @@ def cloud_graph(
     pairs = np.unique(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1), axis=0)
     lengths = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
     if local is not None:
-        near = lengths < LINK_RADIUS * np.maximum(local[pairs[:, 0]], local[pairs[:, 1]])
+        near = lengths < LINK_RADIUS * np.minimum(local[pairs[:, 0]], local[pairs[:, 1]])
         pairs, lengths = pairs[near], lengths[near]
     return pairs.astype(np.int64), lengths
 
