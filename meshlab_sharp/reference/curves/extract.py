@@ -265,10 +265,9 @@ def cloud_spacing(tree: cKDTree, features: np.ndarray) -> tuple[float, bool]:
     spacing : float
     irregular : bool
     """
-    k = min(DENSITY_NEIGHBOURS + 1, tree.n)
-    d, _ = tree.query(features, k=k, workers=-1)
+    d = _neighbour_distances(tree, features)
     nearest = float(np.median(d[:, 1]))
-    density = DENSITY_SCALE * float(np.median(d[:, k - 1]))
+    density = DENSITY_SCALE * float(np.median(d[:, -1]))
     if nearest <= 0.0 or not density > nearest:
         return nearest, False
     q = density / nearest
@@ -276,25 +275,17 @@ def cloud_spacing(tree: cKDTree, features: np.ndarray) -> tuple[float, bool]:
 
 
 def local_spacings(tree: cKDTree, features: np.ndarray, spacing: float) -> np.ndarray:
-    """Each feature's own spacing: DENSITY_SCALE times its distance to the
+    """Each feature's own spacing, (f,) float64: DENSITY_SCALE times its distance to the
     DENSITY_NEIGHBOURS-th nearest point, clipped to 1 to MAX_LOCAL_SPACING times the
-    cloud's ``spacing`` (:func:`cloud_spacing`).
+    cloud's ``spacing``; ``tree`` and ``features`` as for :func:`cloud_spacing`."""
+    d = _neighbour_distances(tree, features)
+    return np.minimum(np.maximum(DENSITY_SCALE * d[:, -1], spacing), MAX_LOCAL_SPACING * spacing)
 
-    Parameters
-    ----------
-    tree : cKDTree
-        Of the points near the features (the features among them), at least 2.
-    features : (f, 3) float64
-        The distinct feature positions.
-    spacing : float
 
-    Returns
-    -------
-    (f,) float64
-    """
-    k = min(DENSITY_NEIGHBOURS + 1, tree.n)
-    d, _ = tree.query(features, k=k, workers=-1)
-    return np.minimum(np.maximum(DENSITY_SCALE * d[:, k - 1], spacing), MAX_LOCAL_SPACING * spacing)
+def _neighbour_distances(tree: cKDTree, features: np.ndarray) -> np.ndarray:
+    """Distances (f, k) from each feature to its k nearest points (itself first), k
+    DENSITY_NEIGHBOURS + 1 or the tree's size if smaller."""
+    return tree.query(features, k=min(DENSITY_NEIGHBOURS + 1, tree.n), workers=-1)[0]
 
 
 def _cloud_pieces(
