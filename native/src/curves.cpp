@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <functional>
 #include <limits>
 #include <map>
@@ -1017,7 +1018,30 @@ std::vector<Piece> joinPieces(const std::vector<Piece> &pieces, double spacing, 
 	return out;
 }
 
-std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spacing)
+// trace._vertex_ahead: the vertex of another curve that end q's line (the end chord at
+// MS_CURVE_CORNER_SCALE) reaches first, ahead of the end, within MS_CURVE_LONG_GAP spacings
+// of it and MS_CURVE_LATERAL_OFFSET spacings of the line (the lowest index of equally near
+// ones); -1 when none
+long vertexAhead(const Ends &e, long q, const KdTree &tree, const std::vector<Vec3> &data,
+                 const std::vector<long> &owner, double spacing)
+{
+	const Vec3 &out = e.out[MS_CURVE_CORNER_SCALE][q], &anchor = e.anchor[MS_CURVE_CORNER_SCALE][q];
+	const Vec3 &point = e.point[q];
+	long best = -1;
+	double bestAhead = INF;
+	for (long j : tree.ball(point, MS_CURVE_LONG_GAP * spacing)) {
+		if (owner[j] == e.piece[q]) continue;
+		const double ahead = bdot(sub(data[j], point), out);
+		const Vec3 w = sub(data[j], anchor);
+		if (ahead <= 0.0 || bnorm(sub(w, mul(bdot(w, out), out))) > MS_CURVE_LATERAL_OFFSET * spacing) continue;
+		if (ahead < bestAhead || (ahead == bestAhead && j < best)) best = j, bestAhead = ahead;
+	}
+	return best;
+}
+
+// trace.split_at_touches; lines (clouds): where no other curve is within
+// MS_CURVE_GAP_LENGTH spacings of a free end, the end's line reaches on (vertexAhead)
+std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spacing, bool lines)
 {
 	const Ends e = ends(pieces, spacing);
 	const auto clusters = endClusters(e, pieces, spacing);
@@ -1042,6 +1066,7 @@ std::vector<Piece> splitAtTouches(const std::vector<Piece> &pieces, double spaci
 			const double d = bnorm(sub(data[j], e.point[q]));
 			if (d < bestD) bestD = d, best = j;
 		}
+		if (best < 0 && lines) best = vertexAhead(e, long(q), tree, data, owner, spacing);
 		if (best < 0) continue;
 		const Piece &pc = pieces[owner[best]];
 		const long v = local[best];
@@ -1481,6 +1506,20 @@ double cloudSpacing(const KdTree &tree, const std::vector<Vec3> &fp, bool &irreg
 	return nearest * (q * std::sqrt(q));
 }
 
+// local_spacings: each feature's own spacing, MS_CURVE_DENSITY_SCALE times its distance to
+// the MS_CURVE_DENSITY_NEIGHBOURS-th nearest point, clipped to 1 to
+// MS_CURVE_MAX_LOCAL_SPACING times the cloud's
+std::vector<double> localSpacings(const KdTree &tree, const std::vector<Vec3> &fp, double spacing)
+{
+	const size_t k = std::min<size_t>(MS_CURVE_DENSITY_NEIGHBOURS + 1, tree.size());
+	std::vector<double> out(fp.size());
+	for (size_t i = 0; i < fp.size(); ++i) {
+		const double dk = std::sqrt(tree.query(fp[i], k)[k - 1].first);
+		out[i] = std::min(std::max(MS_CURVE_DENSITY_SCALE * dk, spacing), MS_CURVE_MAX_LOCAL_SPACING * spacing);
+	}
+	return out;
+}
+
 std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<char> &mask,
                                const std::vector<char> &ok, const std::vector<long> &feat,
                                const std::vector<Vec3> &fp, const std::array<Vec3, 2> *bounds,
@@ -1497,16 +1536,21 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	for (long i : near) nearPts.push_back(pts[i]), nearFeature.push_back(mask[i]);
 	const KdTree tree(nearPts);
 	spacing = cloudSpacing(tree, fp, irregular);
-	// cloud_graph
+	// cloud_graph, each feature's own spacing (local_spacings) reaching its links
+	const std::vector<double> local = localSpacings(tree, fp, spacing);
 	const long n = long(fp.size());
 	const size_t k = std::min<size_t>(MS_CURVE_LINK_NEIGHBOURS + 1, fp.size());
+	const double reach = *std::max_element(local.begin(), local.end());
 	std::set<Edge> pairSet;
 	for (long i = 0; i < n; ++i)
-		for (const auto &hit : fpTree.query(fp[i], k, MS_CURVE_LINK_RADIUS * spacing))
+		for (const auto &hit : fpTree.query(fp[i], k, MS_CURVE_LINK_RADIUS * reach))
 			if (hit.second != i) pairSet.insert({std::min(i, hit.second), std::max(i, hit.second)});
-	const std::vector<Edge> edges(pairSet.begin(), pairSet.end());
-	std::vector<double> lengths(edges.size());
-	for (size_t i = 0; i < edges.size(); ++i) lengths[i] = norm(sub(fp[edges[i][0]], fp[edges[i][1]]));
+	std::vector<Edge> edges;
+	std::vector<double> lengths;
+	for (const Edge &e : pairSet) {
+		const double length = norm(sub(fp[e[0]], fp[e[1]]));
+		if (length < MS_CURVE_LINK_RADIUS * std::min(local[e[0]], local[e[1]])) edges.push_back(e), lengths.push_back(length);
+	}
 	std::vector<Piece> pieces = skeletonPieces(n, edges, lengths, fp, spacing, {});
 	if (pieces.empty()) return {};
 	// refine every vertex at once, across the skeleton's directions over a wide window
@@ -1550,7 +1594,7 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 
 // ---------------------------------------------------------------- extract.py
 
-std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing)
+std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing, double share = 1.0)
 {
 	const Ends e = ends(pieces, spacing);
 	const auto clusters = endClusters(e, pieces, spacing);
@@ -1567,7 +1611,8 @@ std::vector<Piece> dropShort(const std::vector<Piece> &pieces, double spacing)
 			continue;
 		}
 		const double length = pieces[i].length();
-		if (length >= MS_CURVE_MIN_CURVE_LENGTH * spacing && (!spur.count(long(i)) || length >= MS_CURVE_SPUR_PIECE * spacing))
+		if (length >= share * MS_CURVE_MIN_CURVE_LENGTH * spacing &&
+		    (!spur.count(long(i)) || length >= share * MS_CURVE_SPUR_PIECE * spacing))
 			out.push_back(pieces[i]);
 	}
 	return out;
@@ -1608,6 +1653,61 @@ std::vector<Piece> cutAll(const std::vector<Piece> &pieces, double spacing, cons
 	return out;
 }
 
+using Mat3 = std::array<std::array<double, 3>, 3>;
+
+// extract._line_system: the normal equations a x = b of the point nearest the lines
+// through through[i] along the unit outs[i], i in c
+void lineSystem(const std::vector<long> &c, const std::vector<Vec3> &outs, const std::vector<Vec3> &through,
+                Mat3 &a, Vec3 &b)
+{
+	a = Mat3{};
+	b = Vec3{0.0, 0.0, 0.0};
+	for (long i : c) {
+		const Vec3 &o = outs[i];
+		Mat3 proj{};
+		for (int r = 0; r < 3; ++r)
+			for (int k = 0; k < 3; ++k) proj[r][k] = (r == k ? 1.0 : 0.0) - o[r] * o[k];
+		for (int r = 0; r < 3; ++r)
+			for (int k = 0; k < 3; ++k) a[r][k] += proj[r][k];
+		for (int r = 0; r < 3; ++r) b[r] += gemvRow(proj[r], through[i]);
+	}
+}
+
+// extract._outlying: the ends of cluster c (a well-conditioned system) whose lines pass
+// farther than MS_CURVE_CORNER_OFFSET spacings from the others' meeting point, the
+// farthest (the first of equally far ones) left out first while more than two remain
+// and their system stays well-conditioned; ascending
+std::vector<long> outlying(const std::vector<long> &c, const std::vector<Vec3> &outs,
+                           const std::vector<Vec3> &through, double spacing)
+{
+	std::vector<long> kept = c;
+	Mat3 a;
+	Vec3 b;
+	lineSystem(c, outs, through, a, b);
+	while (kept.size() > 2) {
+		const Vec3 x = solve3(a, b);
+		double far = MS_CURVE_CORNER_OFFSET * spacing;
+		long worst = -1;
+		for (long i : kept) {
+			const Vec3 v = sub(x, through[i]);
+			const double d = bnorm(sub(v, mul(bdot(v, outs[i]), outs[i])));
+			if (d > far) far = d, worst = i;
+		}
+		if (worst < 0) break;
+		std::vector<long> trial;
+		for (long i : kept)
+			if (i != worst) trial.push_back(i);
+		lineSystem(trial, outs, through, a, b);
+		if (!(condition(a) < MS_CURVE_MAX_CORNER_CONDITION)) break;
+		kept = trial;
+	}
+	std::vector<long> rest;
+	for (long i : c)
+		if (std::find(kept.begin(), kept.end(), i) == kept.end()) rest.push_back(i);
+	std::sort(rest.begin(), rest.end());
+	return rest;
+}
+
 std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std::vector<Vec3> &pts,
                            const MeshPaths *paths, Curves &result)
 {
@@ -1621,17 +1721,24 @@ std::vector<Piece> corners(std::vector<Piece> pieces, double spacing, const std:
 	const std::vector<Vec3> &through = cloud ? e.anchor[MS_CURVE_CORNER_SCALE] : e.point;
 	std::vector<Vec3> points;
 	std::vector<long> indices;
-	for (const auto &c : clusters) {
-		std::array<std::array<double, 3>, 3> a{};
-		Vec3 b{0.0, 0.0, 0.0};
-		for (long i : c) {
-			const Vec3 &o = outs[i];
-			std::array<std::array<double, 3>, 3> proj{};
-			for (int r = 0; r < 3; ++r)
-				for (int k = 0; k < 3; ++k) proj[r][k] = (r == k ? 1.0 : 0.0) - o[r] * o[k];
-			for (int r = 0; r < 3; ++r)
-				for (int k = 0; k < 3; ++k) a[r][k] += proj[r][k];
-			for (int r = 0; r < 3; ++r) b[r] += gemvRow(proj[r], through[i]);
+	std::deque<std::vector<long>> work(clusters.begin(), clusters.end());
+	while (!work.empty()) {
+		std::vector<long> c = work.front();
+		work.pop_front();
+		Mat3 a;
+		Vec3 b;
+		lineSystem(c, outs, through, a, b);
+		if (cloud && condition(a) < MS_CURVE_MAX_CORNER_CONDITION) {
+			// ends whose lines pass far from the others' meeting point: a short piece's
+			// noisy direction, or the ends of a nearby corner; two or more meet apart
+			const std::vector<long> rest = outlying(c, outs, through, spacing);
+			if (!rest.empty()) {
+				std::vector<long> kept;
+				for (long i : c)
+					if (!std::binary_search(rest.begin(), rest.end(), i)) kept.push_back(i);
+				lineSystem(kept, outs, through, a, b);
+				if (rest.size() >= 2) work.push_back(rest), c = kept;
+			}
 		}
 		Vec3 sum = e.point[c[0]];
 		for (size_t j = 1; j < c.size(); ++j) sum = add(sum, e.point[c[j]]);
@@ -1777,13 +1884,17 @@ Curves extractCurves(const std::vector<Point> &vertices, const std::vector<char>
 	};
 	const Bridge *bridge = paths ? &bridgeFn : nullptr;
 	pieces = cutAll(pieces, spacing, math);
-	// the short pieces are dropped before joining, but on an irregular cloud, where the
-	// sampling's gaps cut an edge's features into short pieces: they join first
-	if (!irregular) pieces = dropShort(pieces, spacing);
+	// a mesh's short pieces are dropped before joining; a cloud's sampling gaps cut an
+	// edge's features into short pieces, which join first: on a regular cloud only the
+	// shortest are dropped before, on an irregular one (iid points, a scan) none
+	if (paths)
+		pieces = dropShort(pieces, spacing);
+	else if (!irregular)
+		pieces = dropShort(pieces, spacing, MS_CURVE_EARLY_DROP);
 	pieces = dropShort(joinPieces(pieces, spacing, bridge), spacing);
 	pieces = joinPieces(pieces, spacing, bridge);
 	pieces = cutAll(pieces, spacing, math);
-	pieces = splitAtTouches(pieces, spacing);
+	pieces = splitAtTouches(pieces, spacing, !paths);
 	if (!paths) pieces = dropIsolated(pieces, spacing);
 	pieces = corners(pieces, spacing, pts, paths.get(), result);
 	if (!creases.chains.empty()) {  // the mesh's sharp edges, and their corners

@@ -46,7 +46,14 @@ from .trace import (
     trace_paths,
 )
 
-__all__ = ["MIN_CURVE_LENGTH", "CurveSet", "cloud_spacing", "extract_curves", "support_radius"]
+__all__ = [
+    "MIN_CURVE_LENGTH",
+    "CurveSet",
+    "cloud_spacing",
+    "extract_curves",
+    "local_spacings",
+    "support_radius",
+]
 
 # The numbers are defined once, in native/include/meshlab_sharp.h.
 #: An open curve shorter than this, in spacings (GAP_LENGTH), is dropped: what is left of a spur
@@ -65,16 +72,23 @@ MAX_FLAT_SHARE = CURVES.real("MAX_FLAT_SHARE")
 CELL_SPACINGS = CURVES.real("CELL_SPACINGS")
 #: Irregular (iid) clouds: where DENSITY_SCALE times the median distance from a feature
 #: to its DENSITY_NEIGHBOURS-th nearest point exceeds the median nearest distance d by a
-#: factor q > 1, the spacing is d q^1.5 and the short pieces join before the short ones
-#: are dropped. Independently drawn points cluster: their nearest distances are short
-#: (0.6 times blue noise's of the same density) and the features along an edge leave
-#: gaps of several of them, which split the feature graph. On Poisson-disk (blue
-#: noise) clouds, noisy or not, d is 0.47-0.50 times the 8th nearest distance (q < 1):
-#: they are regular and keep d; on iid clouds d is 0.30-0.33 times it (q about 1.4,
-#: the spacing about 1.7 d, blue noise's of the same density).
+#: factor q > 1, the spacing is d q^1.5. Independently drawn points cluster: their
+#: nearest distances are short (0.6 times blue noise's of the same density) and the
+#: features along an edge leave gaps of several of them, which split the feature graph.
+#: On Poisson-disk (blue noise) clouds, noisy or not, d is 0.47-0.50 times the 8th
+#: nearest distance (q < 1): they are regular and keep d; on iid clouds d is 0.30-0.33
+#: times it (q about 1.4, the spacing about 1.7 d, blue noise's of the same density).
 DENSITY_NEIGHBOURS = CURVES.integer("DENSITY_NEIGHBOURS")
 #: See DENSITY_NEIGHBOURS.
 DENSITY_SCALE = CURVES.real("DENSITY_SCALE")
+#: A cloud feature's own spacing (:func:`local_spacings`, which links the feature graph
+#: where a scan's density falls with range) is at most this many times the cloud's.
+MAX_LOCAL_SPACING = CURVES.real("MAX_LOCAL_SPACING")
+#: Before the joins, a regular cloud's pieces and spurs are dropped only below this
+#: share of MIN_CURVE_LENGTH and SPUR_PIECE (an irregular cloud's none, a mesh's all):
+#: the shortest are noise beside the edges, the others may be parts of an edge that
+#: noise or the sampling cut, and join.
+EARLY_DROP = CURVES.real("EARLY_DROP")
 #: Cloud vertices closer than this along the curve's direction to the previous vertex
 #: kept, in spacings, are dropped after refinement (a skeleton that zigzags across a
 #: wide band of features leaves vertices that double back once refined).
@@ -91,6 +105,12 @@ SNAP = CURVES.real("SNAP")
 #: only where that 3x3 system's condition number is below this (lines not nearly
 #: parallel).
 MAX_CORNER_CONDITION = CURVES.real("MAX_CORNER_CONDITION")
+#: Of the curve ends meeting at a corner (clouds), those whose lines pass farther than
+#: this, in spacings, from the others' meeting point are left out of it, the farthest
+#: first: a short piece's direction is noisy, and the ends of two corners a few
+#: spacings apart fall into one group; two or more left out meet at a corner of
+#: their own.
+CORNER_OFFSET = CURVES.real("CORNER_OFFSET")
 
 
 @dataclass
@@ -171,15 +191,18 @@ def extract_curves(
         return _no_curves()
     bridge = None if paths is None else _bridge(pts, paths, spacing)
     pieces = cut_at_turns(pieces, spacing)
-    # the short pieces are dropped before joining, but on an irregular cloud, where the
-    # sampling's gaps cut an edge's features into short pieces: they join first
-    if not irregular:
+    # a mesh's short pieces are dropped before joining; a cloud's sampling gaps cut an
+    # edge's features into short pieces, which join first: on a regular cloud only the
+    # shortest are dropped before, on an irregular one (iid points, a scan) none
+    if paths is not None:
         pieces = _drop_short(pieces, spacing)
+    elif not irregular:
+        pieces = _drop_short(pieces, spacing, EARLY_DROP)
     pieces = _drop_short(join_pieces(pieces, spacing, bridge), spacing)
     pieces = join_pieces(pieces, spacing, bridge)
     # joining may have run a curve round a corner whose vertex was near a piece's end
     pieces = cut_at_turns(pieces, spacing)
-    pieces = split_at_touches(pieces, spacing)
+    pieces = split_at_touches(pieces, spacing, lines=paths is None)
     if paths is None:
         pieces = _drop_isolated(pieces, spacing)
     pieces, corner_points, corner_indices = _corners(pieces, spacing, pts, paths)
@@ -242,14 +265,27 @@ def cloud_spacing(tree: cKDTree, features: np.ndarray) -> tuple[float, bool]:
     spacing : float
     irregular : bool
     """
-    k = min(DENSITY_NEIGHBOURS + 1, tree.n)
-    d, _ = tree.query(features, k=k, workers=-1)
+    d = _neighbour_distances(tree, features)
     nearest = float(np.median(d[:, 1]))
-    density = DENSITY_SCALE * float(np.median(d[:, k - 1]))
+    density = DENSITY_SCALE * float(np.median(d[:, -1]))
     if nearest <= 0.0 or not density > nearest:
         return nearest, False
     q = density / nearest
     return nearest * (q * math.sqrt(q)), True
+
+
+def local_spacings(tree: cKDTree, features: np.ndarray, spacing: float) -> np.ndarray:
+    """Each feature's own spacing, (f,) float64: DENSITY_SCALE times its distance to the
+    DENSITY_NEIGHBOURS-th nearest point, clipped to 1 to MAX_LOCAL_SPACING times the
+    cloud's ``spacing``; ``tree`` and ``features`` as for :func:`cloud_spacing`."""
+    d = _neighbour_distances(tree, features)
+    return np.minimum(np.maximum(DENSITY_SCALE * d[:, -1], spacing), MAX_LOCAL_SPACING * spacing)
+
+
+def _neighbour_distances(tree: cKDTree, features: np.ndarray) -> np.ndarray:
+    """Distances (f, k) from each feature to its k nearest points (itself first), k
+    DENSITY_NEIGHBOURS + 1 or the tree's size if smaller."""
+    return tree.query(features, k=min(DENSITY_NEIGHBOURS + 1, tree.n), workers=-1)[0]
 
 
 def _cloud_pieces(
@@ -268,7 +304,7 @@ def _cloud_pieces(
     near, near_pts = near[order], near_pts[order]
     tree = cKDTree(near_pts)
     spacing, irregular = cloud_spacing(tree, fp)
-    edges, lengths = cloud_graph(fp, spacing)
+    edges, lengths = cloud_graph(fp, spacing, local_spacings(tree, fp, spacing))
     paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
     pieces = []
     for path in paths:
@@ -361,10 +397,10 @@ def _bridge(pts: np.ndarray, paths: MeshPaths, spacing: float) -> Bridge:
     return bridge
 
 
-def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
-    """Leave out open pieces shorter than MIN_CURVE_LENGTH spacings, and spurs: pieces
-    shorter than SPUR_PIECE spacings with one end free and the other where three or
-    more ends meet."""
+def _drop_short(pieces: list[Piece], spacing: float, share: float = 1.0) -> list[Piece]:
+    """Leave out open pieces shorter than ``share`` times MIN_CURVE_LENGTH spacings, and
+    spurs: pieces shorter than ``share`` times SPUR_PIECE spacings with one end free and
+    the other where three or more ends meet."""
     ends, clusters = end_clusters(pieces, spacing)
     size = np.ones(len(ends.piece), np.int64)
     for c in clusters:
@@ -379,8 +415,8 @@ def _drop_short(pieces: list[Piece], spacing: float) -> list[Piece]:
         for i, (pc, length) in enumerate(zip(pieces, lengths, strict=True))
         if pc.closed
         or (
-            length >= MIN_CURVE_LENGTH * spacing
-            and (i not in spur or length >= SPUR_PIECE * spacing)
+            length >= share * MIN_CURVE_LENGTH * spacing
+            and (i not in spur or length >= share * SPUR_PIECE * spacing)
         )
     ]
 
@@ -422,13 +458,20 @@ def _corners(
         out, through = ends.out[0], ends.point
     points, indices = [], []
     pieces = [Piece(pc.nodes.copy(), pc.points.copy(), pc.closed) for pc in pieces]
-    for c in clusters:
-        a = np.zeros((3, 3))
-        b = np.zeros(3)
-        for i in c:
-            proj = np.eye(3) - np.outer(out[i], out[i])
-            a += proj
-            b += proj @ through[i]
+    work = list(clusters)
+    while work:
+        c = work.pop(0)
+        a, b = _line_system(c, out, through)
+        if paths is None and np.linalg.cond(a) < MAX_CORNER_CONDITION:
+            # ends whose lines pass far from the others' meeting point: a short piece's
+            # noisy direction, or the ends of a nearby corner; two or more meet apart
+            rest = _outlying(c, out, through, spacing)
+            if len(rest):
+                kept = c[~np.isin(c, rest)]
+                a, b = _line_system(kept, out, through)
+                if len(rest) >= 2:
+                    work.append(rest)
+                    c = kept
         mean = ends.point[c].mean(axis=0)
         corner = mean
         if np.linalg.cond(a) < MAX_CORNER_CONDITION:
@@ -478,6 +521,47 @@ def _corners(
     p = np.array(points)
     order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
     return pieces, p[order], np.array(indices, np.int64)[order]
+
+
+def _line_system(
+    c: np.ndarray, out: np.ndarray, through: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The normal equations ``a x = b`` ((3, 3), (3,)) of the point nearest the lines
+    through ``through[i]`` along the unit ``out[i]``, ``i`` in ``c``."""
+    a = np.zeros((3, 3))
+    b = np.zeros(3)
+    for i in c:
+        proj = np.eye(3) - np.outer(out[i], out[i])
+        a += proj
+        b += proj @ through[i]
+    return a, b
+
+
+def _outlying(c: np.ndarray, out: np.ndarray, through: np.ndarray, spacing: float) -> np.ndarray:
+    """The ends of the cluster ``c`` (whose lines' system is well-conditioned) whose
+    lines pass farther than CORNER_OFFSET spacings from the meeting point of the
+    others' (least squares): the farthest (the first of equally far ones) left out
+    first, one at a time, while more than two remain and their system stays
+    well-conditioned. Ascending."""
+    kept = [int(i) for i in c]
+    a, b = _line_system(c, out, through)
+    while len(kept) > 2:
+        x = _solve3(a, b)
+        far, worst = CORNER_OFFSET * spacing, -1
+        for i in kept:
+            v = x - through[i]
+            r = v - float(v @ out[i]) * out[i]
+            d = math.sqrt(float(r @ r))
+            if d > far:
+                far, worst = d, i
+        if worst < 0:
+            break
+        trial = [i for i in kept if i != worst]
+        a, b = _line_system(np.array(trial), out, through)
+        if not np.linalg.cond(a) < MAX_CORNER_CONDITION:
+            break
+        kept = trial
+    return np.array(sorted(set(c.tolist()) - set(kept)), np.int64)
 
 
 def _merged_corners(

@@ -53,7 +53,9 @@ MESH_FLAT_WEIGHT = CURVES.real("MESH_FLAT_WEIGHT")
 PRUNE_ROUNDS = CURVES.integer("PRUNE_ROUNDS")
 
 
-def cloud_graph(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+def cloud_graph(
+    points: np.ndarray, spacing: float, local: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Links between feature points of a cloud.
 
     Parameters
@@ -62,6 +64,10 @@ def cloud_graph(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndar
         Distinct feature points.
     spacing : float
         Point spacing.
+    local : (f,) float64, optional
+        Each point's own spacing (at least ``spacing``): two points are linked within
+        LINK_RADIUS times the smaller of theirs (where a scan's density falls with
+        range). Default: ``spacing`` everywhere.
 
     Returns
     -------
@@ -74,12 +80,16 @@ def cloud_graph(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndar
     if n < 2:
         return np.zeros((0, 2), np.int64), np.zeros(0)
     k = min(LINK_NEIGHBOURS + 1, n)
-    idx = nearest(cKDTree(points), points, k, LINK_RADIUS * spacing)
+    reach = spacing if local is None else float(local.max())
+    idx = nearest(cKDTree(points), points, k, LINK_RADIUS * reach)
     rows = np.repeat(np.arange(n), k).reshape(n, k)
     ok = (idx < n) & (idx != rows)
     a, b = rows[ok], idx[ok]
     pairs = np.unique(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1), axis=0)
     lengths = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
+    if local is not None:
+        near = lengths < LINK_RADIUS * np.minimum(local[pairs[:, 0]], local[pairs[:, 1]])
+        pairs, lengths = pairs[near], lengths[near]
     return pairs.astype(np.int64), lengths
 
 

@@ -715,7 +715,7 @@ def _bridged(parts: list[Piece], closed: bool, bridge: Bridge) -> list[Piece]:
     return out
 
 
-def split_at_touches(pieces: list[Piece], spacing: float) -> list[Piece]:
+def split_at_touches(pieces: list[Piece], spacing: float, lines: bool = False) -> list[Piece]:
     """Cut a curve where the free end of another one touches it (a T-junction whose
     stem detection left short of the line): at the vertex nearest the end, if it is
     within GAP_LENGTH spacings of the end and farther than that from both ends of its
@@ -725,6 +725,10 @@ def split_at_touches(pieces: list[Piece], spacing: float) -> list[Piece]:
     ----------
     pieces : list of Piece
     spacing : float
+    lines : bool, default False
+        Clouds: where no other curve is that near, the end's line reaches on
+        (:func:`_vertex_ahead`): detection thins out where three faces meet, and the
+        stem may stop up to LONG_GAP spacings short of the curve it meets.
 
     Returns
     -------
@@ -744,9 +748,12 @@ def split_at_touches(pieces: list[Piece], spacing: float) -> list[Piece]:
     for e in np.flatnonzero(free):
         near = tree.query_ball_point(ends.point[e], reach)
         near = [j for j in near if owner[j] != ends.piece[e]]
-        if not near:
-            continue
-        j = min(near, key=lambda j: (_norm(tree.data[j] - ends.point[e]), j))
+        if near:
+            j = min(near, key=lambda j: (_norm(tree.data[j] - ends.point[e]), j))
+        else:
+            j = _vertex_ahead(ends, int(e), tree, owner, spacing) if lines else -1
+            if j < 0:
+                continue
         pc, v = pieces[owner[j]], int(local[j])
         cum = _arc(pc.points)
         if pc.closed or (cum[v] > reach and cum[-1] - cum[v] > reach):
@@ -771,3 +778,24 @@ def split_at_touches(pieces: list[Piece], spacing: float) -> list[Piece]:
                 sel = order[a : b + 1]
                 out.append(Piece(pc.nodes[sel], pc.points[sel]))
     return out
+
+
+def _vertex_ahead(ends: _Ends, e: int, tree: cKDTree, owner: np.ndarray, spacing: float) -> int:
+    """The vertex of another curve (an index into ``tree``'s points, owned by the pieces
+    ``owner``) that end ``e``'s line (the end chord at :data:`CORNER_SCALE`) reaches
+    first: ahead of the end, within LONG_GAP spacings of it and LATERAL_OFFSET
+    spacings of the line (the lowest index of equally near ones); -1 when none."""
+    out, anchor, point = ends.out[CORNER_SCALE][e], ends.anchor[CORNER_SCALE][e], ends.point[e]
+    limit = LATERAL_OFFSET * spacing
+    best, best_key = -1, (math.inf, 0)
+    for j in tree.query_ball_point(point, LONG_GAP * spacing):
+        if owner[j] == ends.piece[e]:
+            continue
+        q = tree.data[j]
+        ahead = float((q - point) @ out)
+        w = q - anchor
+        if ahead <= 0.0 or _norm(w - float(w @ out) * out) > limit:
+            continue
+        if (ahead, j) < best_key:
+            best, best_key = int(j), (ahead, j)
+    return best
