@@ -239,7 +239,8 @@ def robust_acute_join(span: Span) -> Partial:
 
 def _rules(noise: float, candidates: np.ndarray | None = None) -> FinishRules:
     """Robust mode's finishing rules on a cloud of noise ratio ``noise`` (the library's:
-    :func:`meshlab_sharp.robust.support_free_score`, ``thin_cone``, ``thin_blockers`` of
+    :func:`meshlab_sharp.robust.support_free_score`, ``thin_cone``, ``thin_side``,
+    ``thin_blockers`` of
     the ``candidates`` when given)."""
     between = None if candidates is None else robust.thin_blockers(candidates, False, noise)
     return FinishRules(
@@ -247,6 +248,7 @@ def _rules(noise: float, candidates: np.ndarray | None = None) -> FinishRules:
         minimum=robust.SUPPORT_MIN,
         free_below=robust.support_free_score(False, noise),
         thin_cone=robust.thin_cone(False, noise),
+        thin_side=robust.thin_side(False, noise),
         window=0,
         between=between,
     )

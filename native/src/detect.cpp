@@ -582,12 +582,13 @@ const uint8_t *bytes(const std::vector<char> &mask) { return reinterpret_cast<co
 // line direction (lists D), support (lists S; a score below freeBelow exempts, when
 // exempt: robust.support_exempt) and, with smooth, the score averaged over the first
 // THIN_KNN of K (robust.smoothed_ranking); then, every candidate's support known, thinning
-// across the line (cone: robust.thin_cone) over K, the points not in f0 blocking with
-// block (robust.thin_blockers).
+// across the line (cone: robust.thin_cone) or beside it (side: robust.thin_side) over K,
+// the points not in f0 blocking with block (robust.thin_blockers).
 std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
                                  const ms_lists_t &D, const ms_lists_t &S, const ms_lists_t &K, bool exempt,
-                                 double freeBelow, bool smooth, bool block, double cone, Bar &bar, int from, int to) {
+                                 double freeBelow, bool smooth, bool block, double cone, double side, Bar &bar,
+                                 int from, int to) {
 	const Index c = Index(rows.size());
 	std::vector<double> e(3 * c), smoothed(smooth ? score : std::vector<double>());
 	const double *rank = smooth ? smoothed.data() : score.data();
@@ -602,8 +603,8 @@ std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char
 	}, bar, from, (from + to) / 2, "support and thinning");
 	std::vector<char> f2(f0.size(), 0);
 	chunks(c, [&](unsigned, Index a, Index b) {
-		ms_thin(p.data(), f1.data(), rows.data(), e.data(), &K, rank, cone, block ? between.data() : nullptr, a,
-		        b, reinterpret_cast<uint8_t *>(f2.data()));
+		ms_thin(p.data(), f1.data(), rows.data(), e.data(), &K, rank, cone, side,
+		        block ? between.data() : nullptr, a, b, reinterpret_cast<uint8_t *>(f2.data()));
 		return 0;
 	}, bar, (from + to) / 2, to, "support and thinning");
 	return f2;
@@ -1024,8 +1025,8 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const bool exempt = ms_support_free_score(0, ratio, &freeBelow) != 0;
 	d.feature = supportAndThin(pts, d.feature, pass.score, rows, knn.lists(top, starts),
 	                           knn.lists(std::min(MS_SUPPORT_KNN, top), starts), knn.lists(thinK, starts), exempt,
-	                           freeBelow, ms_ranking_smoothed(0, ratio) != 0, quiet, ms_thin_cone(0, ratio), bar, 90,
-	                           95);
+	                           freeBelow, ms_ranking_smoothed(0, ratio) != 0, quiet, ms_thin_cone(0, ratio),
+	                           ms_thin_side(0, ratio), bar, 90, 95);
 	return d;
 }
 
@@ -1061,7 +1062,7 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	if (!rows.empty()) {
 		const RingRows rings = ringRows(adj, rows, std::min(MS_THIN_RING, top), top);
 		d.feature = supportAndThin(c.pts, d.feature, score, rows, rings.lists(1), rings.lists(0), rings.lists(0), false,
-		                           0.0, false, false, MS_THIN_CONE_COS, bar, 85, 95);
+		                           0.0, false, false, MS_THIN_CONE_COS, MS_THIN_SIDE, bar, 85, 95);
 	}
 	for (Index i = 0; i < n; ++i)
 		if (edges[i]) {

@@ -34,6 +34,10 @@ double ms_thin_cone(int mesh, double noise) {
     return mesh || ms_quiet_cloud(mesh, noise) ? MS_THIN_CONE_COS : MS_THIN_CONE_COS_NOISY;
 }
 
+double ms_thin_side(int mesh, double noise) {
+    return mesh || ms_quiet_cloud(mesh, noise) ? MS_THIN_SIDE : MS_THIN_SIDE_NOISY;
+}
+
 int ms_ranking_smoothed(int mesh, double noise) {
     return !mesh && ms_noise_factor(noise) == MS_NOISE_MAX_FACTOR;
 }
