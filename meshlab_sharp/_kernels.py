@@ -111,7 +111,7 @@ _SIGNATURES = {
     ),
     "ms_thin": (
         None,
-        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _c_void_p]
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _f64, _c_void_p]
         + [_i64, _i64, _c_void_p],
     ),
     "ms_acute_tips": (
@@ -147,6 +147,7 @@ _SIGNATURES = {
     "ms_otsu_splits": (_int, [_int, _f64]),
     "ms_scale_floor": (_f64, [_c_void_p, _int, _int, _f64]),
     "ms_thin_cone": (_f64, [_int, _f64]),
+    "ms_thin_side": (_f64, [_int, _f64]),
     "ms_ranking_smoothed": (_int, [_int, _f64]),
     "ms_support_free_score": (_int, [_int, _f64, _c_void_p]),
     "ms_robust_plan": (_int, [_f64, _i64, _c_void_p, _int, _int, _c_void_p]),
@@ -1376,6 +1377,11 @@ def thin_cone(mesh: bool, noise: float) -> float:
     return float(_lib().ms_thin_cone(int(mesh), float(noise)))
 
 
+def thin_side(mesh: bool, noise: float) -> float:
+    """``ms_thin_side``: thinning's side rule, a fraction of the list's reach."""
+    return float(_lib().ms_thin_side(int(mesh), float(noise)))
+
+
 def ranking_smoothed(mesh: bool, noise: float) -> bool:
     """``ms_ranking_smoothed``: thinning ranks by the smoothed score."""
     return bool(_lib().ms_ranking_smoothed(int(mesh), float(noise)))
@@ -1408,6 +1414,7 @@ class _RobustPlan(ctypes.Structure):
         ("support_exempt", _int),
         ("free_below", _f64),
         ("thin_cone", _f64),
+        ("thin_side", _f64),
         ("thin_between", _int),
     ]
 
@@ -1423,7 +1430,8 @@ class RobustPlan:
     looked for; ``support_knn``, ``compare_knn``: the support and comparison lists' sizes
     (a mesh's ``THIN_RING``-ring); ``ranking_smoothed``: thinning ranks by the smoothed
     score; ``free_below``: the score below which a candidate needs no support (None: every
-    candidate needs it); ``thin_cone``: thinning's cone; ``thin_between``: thinning is
+    candidate needs it); ``thin_cone``: thinning's cone; ``thin_side``: its side rule;
+    ``thin_between``: thinning is
     blocked by the points that are not candidates."""
 
     mesh: bool
@@ -1439,6 +1447,7 @@ class RobustPlan:
     ranking_smoothed: bool
     free_below: float | None
     thin_cone: float
+    thin_side: float
     thin_between: bool
 
 
@@ -1465,6 +1474,7 @@ def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) ->
         ranking_smoothed=bool(c.ranking_smoothed),
         free_below=c.free_below if c.support_exempt else None,
         thin_cone=c.thin_cone,
+        thin_side=c.thin_side,
         thin_between=bool(c.thin_between),
     )
 
@@ -1776,13 +1786,15 @@ def acute_tips(
 class FinishRules:
     """How robust mode's support and thinning decide (robust.py's rules for the input):
     support's cone and minimum and the scores it exempts (below ``free_below``; None:
-    none), thinning's cone, its ranking smoothed over the first ``window`` of its lists
-    (0: the score itself), and its blockers ``between`` (n,) bool (None: none)."""
+    none), thinning's cone and side rule, its ranking smoothed over the first ``window``
+    of its lists (0: the score itself), and its blockers ``between`` (n,) bool (None:
+    none)."""
 
     support_cone: float
     minimum: int
     free_below: float | None
     thin_cone: float
+    thin_side: float
     window: int
     between: np.ndarray | None
 
@@ -1875,8 +1887,8 @@ def thin_candidates(
     """Thinning, the last of robust mode's finishing steps (``ms_thin``), of the points
     ``rows`` (c,) with their line directions ``e`` (c, 3), once ``supported`` (n,) bool
     is known at every point of their ``compare`` lists: by ``rank`` (n,), in
-    ``rules.thin_cone``, blocked by ``rules.between``. Returns the thinned mask (n,) bool
-    (False off the rows)."""
+    ``rules.thin_cone`` or beside the line (``rules.thin_side``), blocked by
+    ``rules.between``. Returns the thinned mask (n,) bool (False off the rows)."""
     lib = _lib()
     points = np.ascontiguousarray(points, dtype=np.float64)
     supported = np.ascontiguousarray(supported, dtype=bool)
@@ -1889,7 +1901,7 @@ def thin_candidates(
     args = (_ptr(points), _ptr(supported), _ptr(rows), _ptr(e), spec, _ptr(rank))
 
     def task(a: int, b: int) -> int:
-        lib.ms_thin(*args, rules.thin_cone, _ptr(between), a, b, _ptr(out))
+        lib.ms_thin(*args, rules.thin_cone, rules.thin_side, _ptr(between), a, b, _ptr(out))
         return 0
 
     _slot_chunks(len(rows), workers, task)

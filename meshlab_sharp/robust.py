@@ -61,9 +61,11 @@ choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down
 5. **Thinning**: a point is dropped when a supported neighbour among its ``THIN_KNN``
    (12) nearest (grown with the scales on noisy clouds), lying across the feature
    line (more than 60 degrees from the line's direction; on noisy clouds about 63,
-   ``THIN_CONE_COS_NOISY``: noise tilts a line's own offsets), ranks higher (mean over the
-   scales of the centroid's distance relative to ``l``, which peaks on acute edges
-   where ``r`` does not): non-maximum suppression
+   ``THIN_CONE_COS_NOISY``: noise tilts a line's own offsets) or beside it (farther from
+   the line than ``THIN_SIDE``, on noisy clouds ``THIN_SIDE_NOISY``, times the distance
+   to the last of the list, whatever the angle: ``ms_robust_plan``), ranks higher (mean
+   over the scales of the centroid's distance relative to ``l``, which peaks on acute
+   edges where ``r`` does not): non-maximum suppression
    across the line, so lines stay one point wide; comparing only within about 1.9
    spacings keeps most of two parallel lines (the rims of a thin wall) apart, and on
    a cloud thresholded at the floor alone a point that is not a candidate, or ranks
@@ -116,6 +118,8 @@ __all__ = [
     "THIN_CONE_COS_NOISY",
     "THIN_KNN",
     "THIN_RING",
+    "THIN_SIDE",
+    "THIN_SIDE_NOISY",
     "noise_ratios",
     "sheet_parameters",
 ]
@@ -125,6 +129,10 @@ __all__ = [
 R_MIN = _header.real("R_MIN")
 #: ... and by more than about 63 degrees on a noisy cloud (``ms_robust_plan``).
 THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
+#: Thinning's side rule, a fraction of the comparison list's reach: on meshes and quiet
+#: clouds, and on noisy clouds (``ms_robust_plan``).
+THIN_SIDE = _header.real("THIN_SIDE")
+THIN_SIDE_NOISY = _header.real("THIN_SIDE_NOISY")
 #: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
 #: about 1.9 spacings: across the band of candidates (1.3-1.5 spacings) and the points
 #: that noise lifts beside it, mostly short of a second line 2-3 spacings away, such as

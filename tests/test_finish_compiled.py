@@ -182,10 +182,10 @@ def test_the_kernels_steps_one_by_one(wide):
         f2 = np.zeros(n, bool)
         lib.ms_thin(
             p, _kernels._ptr(half), r, _kernels._ptr(e), ctypes.byref(compare.spec()),
-            _kernels._ptr(rank), 0.45, _kernels._ptr(between), 0, c, _kernels._ptr(f2),
+            _kernels._ptr(rank), 0.45, 0.65, _kernels._ptr(between), 0, c, _kernels._ptr(f2),
         )  # fmt: skip
         want = reference_robust.thin(
-            points, half, rank, e_full, c_ref, cone_cos=0.45, between=between
+            points, half, rank, e_full, c_ref, cone_cos=0.45, side=0.65, between=between
         )
         assert np.array_equal(f2, want)
 
@@ -199,7 +199,7 @@ def test_no_candidates():
     points = np.random.default_rng(0).normal(size=(50, 3))
     none = np.zeros(0, np.int64)
     lists = _kernels.CandidateLists.knn(np.zeros((0, 4), np.int64), 4)
-    rules = _kernels.FinishRules(0.5, 2, None, 0.5, 0, None)
+    rules = _kernels.FinishRules(0.5, 2, None, 0.5, 0.7, 0, None)
     out = _kernels.support_and_thin(
         points, np.zeros(50, bool), np.zeros(50), none, (lists,) * 3, rules
     )

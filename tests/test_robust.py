@@ -294,7 +294,9 @@ def test_thinning_cone(cone_cos, dropped):
     everyone = _csr([list(range(6))] * 6)
     e = reference_robust.line_directions(pts, np.ones(6, bool), everyone)
     score = np.array([0.5, 0.5, 0.5, 0.5, 0.5, 0.9])
-    out = reference_robust.thin(pts, np.ones(6, bool), score, e, everyone, cone_cos=cone_cos)
+    out = reference_robust.thin(
+        pts, np.ones(6, bool), score, e, everyone, cone_cos=cone_cos, side=math.inf
+    )
     assert out[0] == (not dropped)
     assert robust.THIN_CONE_COS == 0.5
     assert robust.THIN_KNN == 12 and robust.THIN_RING == 2

@@ -397,8 +397,31 @@ def test_thinning_cone_is_wider_on_a_noisy_cloud():
     for degrees, cone, kept in ((62, 0.5, False), (62, 0.45, True), (64, 0.45, False)):
         a = math.radians(degrees)
         pts = np.array([[0.0, 0, 0], [math.cos(a), math.sin(a), 0]])
-        got = reference.thin(pts, mask, score, e, compare, cone_cos=cone)
+        got = reference.thin(pts, mask, score, e, compare, cone_cos=cone, side=math.inf)
         assert got.tolist() == [kept, True], (degrees, cone)
+
+
+def test_thinning_drops_a_point_beside_a_higher_ranked_one_of_its_band():
+    assert _plan(False, 0.05).thin_side == _plan(True, 0.5).thin_side == robust.THIN_SIDE
+    assert _plan(False, 0.05 + 1e-12).thin_side == robust.THIN_SIDE_NOISY
+    assert (robust.THIN_SIDE, robust.THIN_SIDE_NOISY) == (0.7, 0.65)
+    # feature 0 (score 0.5) on a line along x, its list reaching 2 (point 2); feature 1
+    # (0.9) ahead along the line (inside the cone) and 1.35 to its side: beaten beyond
+    # 0.65 * 2 = 1.3, kept within 0.7 * 2 = 1.4
+    pts = np.array([[0.0, 0, 0], [1.5, 1.35, 0], [-2.0, 0, 0]])
+    mask = np.array([True, True, False])
+    score = np.array([0.5, 0.9, 0.0])
+    e = np.tile([1.0, 0.0, 0.0], (3, 1))
+    compare = _csr([[0, 1, 2], [1, 0], [2]])
+    for side, kept in ((robust.THIN_SIDE, True), (robust.THIN_SIDE_NOISY, False)):
+        got = reference.thin(pts, mask, score, e, compare, side=side)
+        assert got.tolist() == [kept, True, False], side
+        if _kernels.available():  # ms_thin: the same
+            table = _kernels.CandidateLists.knn(np.array([[0, 1, 2], [1, 0, 2]]), 3)
+            rules = _kernels.FinishRules(0.5, 2, None, 0.5, side, 0, None)
+            rows = np.array([0, 1])
+            ours = _kernels.thin_candidates(pts, mask, rows, e[:2], table, score, rules, 1)
+            assert ours.tolist() == got.tolist(), side
 
 
 def test_acute_tests_are_the_non_candidates_scoring_in_the_band_on_a_cloud_without_noise():

@@ -17,7 +17,7 @@ from meshlab_sharp.reference import robust as reference
 pytestmark = pytest.mark.skipif(not _kernels.available(), reason="needs the compiled kernels")
 
 NOISES = [0.0, 0.01, 0.05, np.nextafter(0.05, 1.0), 0.1, 0.15, 0.2, 0.25, 0.259, 0.26, 0.3, 2.0]
-RULES = ["noise_factor", "thin_knn", "quiet_cloud", "otsu_splits", "thin_cone"]
+RULES = ["noise_factor", "thin_knn", "quiet_cloud", "otsu_splits", "thin_cone", "thin_side"]
 RULES += ["ranking_smoothed", "support_free_score"]
 
 
@@ -40,6 +40,8 @@ def test_rules_known_answers() -> None:
     assert not _kernels.quiet_cloud(True, 0.0) and _kernels.otsu_splits(True, 0.0)
     assert _kernels.thin_cone(False, 0.1) == robust.THIN_CONE_COS_NOISY
     assert _kernels.thin_cone(True, 0.1) == robust.THIN_CONE_COS
+    assert _kernels.thin_side(False, 0.1) == robust.THIN_SIDE_NOISY
+    assert _kernels.thin_side(False, 0.05) == _kernels.thin_side(True, 0.1) == robust.THIN_SIDE
     assert _kernels.ranking_smoothed(False, 0.3) and not _kernels.ranking_smoothed(True, 0.3)
     assert _kernels.support_free_score(False, 0.0) == robust.SUPPORT_FREE_SCORE
     assert _kernels.support_free_score(False, 0.1) is None
@@ -96,6 +98,8 @@ def test_plan_known_answers() -> None:
     mesh = _kernels.robust_plan(0.0, 10_000, (1, 2, 3, 4), True)
     assert mesh.otsu and not mesh.noise_floor and mesh.support_knn == robust.THIN_RING
     assert mesh.compare_knn == robust.THIN_RING and mesh.thin_cone == robust.THIN_CONE_COS
+    assert noisy.thin_side == robust.THIN_SIDE_NOISY
+    assert quiet.thin_side == mesh.thin_side == robust.THIN_SIDE
 
 
 @pytest.mark.parametrize("normalise", [False, True])

@@ -41,6 +41,10 @@ THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
 THIN_KNN = _header.integer("THIN_KNN")
 THIN_RING = _header.integer("THIN_RING")
 SUPPORT_KNN = _header.integer("SUPPORT_KNN")
+#: Thinning's side rule (:func:`thin`), a fraction of the comparison list's reach: on
+#: meshes and quiet clouds, and on noisy clouds (:func:`thin_side`).
+THIN_SIDE = _header.real("THIN_SIDE")
+THIN_SIDE_NOISY = _header.real("THIN_SIDE_NOISY")
 SUPPORT_FREE_SCORE = _header.real("SUPPORT_FREE_SCORE")
 ACUTE_SCORE = _header.real("ACUTE_SCORE")
 ACUTE_SCORE_MAX = _header.real("ACUTE_SCORE_MAX")
@@ -365,6 +369,28 @@ def _feature_pairs(
     return owner, ci, nb, across
 
 
+def _beside(
+    points: np.ndarray,
+    ci: np.ndarray,
+    nb: np.ndarray,
+    e: np.ndarray,
+    lists: Neighbourhood,
+    side: float,
+) -> np.ndarray:
+    """Whether ``d = p_j - p_i`` of each pair (``i = ci``, ``j = nb``) lies to the side of
+    the line through ``i`` by more than ``side`` times the reach of ``lists[i]`` (the
+    distance to its last member ``l``): ``|d|^2 - (d . e_i)^2 > (side * side) *
+    |p_l - p_i|^2``, each sum over x, y, z in that order (``ms_thin``'s)."""
+    indptr = np.asarray(lists.indptr, np.int64)
+    last = np.asarray(lists.indices, np.int64)[indptr[ci + 1] - 1]
+    r = points[last] - points[ci]
+    reach2 = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1] + r[:, 2] * r[:, 2]
+    d = points[nb] - points[ci]
+    along = d[:, 0] * e[ci, 0] + d[:, 1] * e[ci, 1] + d[:, 2] * e[ci, 2]
+    d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+    return d2 - along * along > side * side * reach2
+
+
 def supported(
     points: np.ndarray,
     mask: np.ndarray,
@@ -421,13 +447,16 @@ def thin(
     compare: Neighbourhood,
     *,
     cone_cos: float = THIN_CONE_COS,
+    side: float = THIN_SIDE,
     between: np.ndarray | None = None,
 ) -> np.ndarray:
     """Non-maximum suppression of feature points across the feature line.
 
     A feature point ``i`` is dropped when some feature point ``j != i`` of
     ``compare[i]`` with ``d = p_j - p_i`` lies across the line through ``i``
-    (``|d . e_i| < cone_cos * |d|``) and ``score[j] > score[i]``, unless (with
+    (``|d . e_i| < cone_cos * |d|``) or beside it (:func:`_beside`: farther from the line
+    than ``side`` times the distance to the list's last member) and ``score[j] >
+    score[i]``, unless (with
     ``between``) a point ``m`` of ``compare[i]`` with ``between[m]`` or ``score[m] <
     score[i]`` (a valley between two ridges) lies between them: ``(p_m - p_i) . (p_m -
     p_j) < 0``. Every decision uses the mask before thinning.
@@ -445,6 +474,8 @@ def thin(
         CSR lists for the comparison (:mod:`meshlab_sharp.robust`'s ``THIN_KNN``
         nearest or ``THIN_RING``-ring).
     cone_cos : float, default THIN_CONE_COS (0.5)
+    side : float, default THIN_SIDE (0.7)
+        The plan's ``thin_side`` (:func:`thin_side`).
     between : (m,) bool, optional
         The points that part two features whatever their score
         (:func:`meshlab_sharp.reference.detect.thin_blockers`); default none, and then no blocking
@@ -460,7 +491,7 @@ def thin(
     if len(cand) == 0:
         return mask.copy()
     owner, ci, nb, across = _feature_pairs(points, mask, e, compare, cone_cos)
-    beaten = across & (score[nb] > score[ci])
+    beaten = (across | _beside(points, ci, nb, e, compare, side)) & (score[nb] > score[ci])
     if between is not None:
         pair = np.flatnonzero(beaten)
         at, m = _rows(compare, ci[pair])
@@ -740,6 +771,11 @@ def thin_cone(mesh: bool, noise: float) -> float:
     return THIN_CONE_COS if mesh or quiet_cloud(mesh, noise) else THIN_CONE_COS_NOISY
 
 
+def thin_side(mesh: bool, noise: float) -> float:
+    """``THIN_SIDE_NOISY`` on a noisy cloud, else ``THIN_SIDE``."""
+    return THIN_SIDE if mesh or quiet_cloud(mesh, noise) else THIN_SIDE_NOISY
+
+
 def ranking_smoothed(mesh: bool, noise: float) -> bool:
     """A cloud whose noise grew the scales to the cap."""
     return not mesh and noise_factor(noise) == NOISE_MAX_FACTOR
@@ -790,5 +826,6 @@ def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) ->
         ranking_smoothed=ranking_smoothed(mesh, noise),
         free_below=support_free_score(mesh, noise),
         thin_cone=thin_cone(mesh, noise),
+        thin_side=thin_side(mesh, noise),
         thin_between=quiet,
     )

@@ -240,8 +240,8 @@ def robust_acute_join(span: Span) -> Partial:
 
 def _rules(plan: RobustPlan, candidates: np.ndarray | None = None) -> FinishRules:
     """Robust mode's finishing rules as ``plan`` states them (the score that needs no
-    support, thinning's cone and, with ``candidates`` given and ``plan.thin_between``,
-    the points that are not candidates as thinning's blockers)."""
+    support, thinning's cone and side rule and, with ``candidates`` given and
+    ``plan.thin_between``, the points that are not candidates as thinning's blockers)."""
     between = None
     if candidates is not None and plan.thin_between:
         between = ~np.asarray(candidates, bool)
@@ -250,6 +250,7 @@ def _rules(plan: RobustPlan, candidates: np.ndarray | None = None) -> FinishRule
         minimum=robust.SUPPORT_MIN,
         free_below=plan.free_below,
         thin_cone=plan.thin_cone,
+        thin_side=plan.thin_side,
         window=0,
         between=between,
     )

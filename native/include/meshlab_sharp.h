@@ -118,6 +118,16 @@
  * degrees; support keeps MS_THIN_CONE_COS): noise tilts the offsets between a line's own
  * points, which then count as across it and thin the line to gaps (ms_thin_cone). */
 #define MS_THIN_CONE_COS_NOISY 0.45
+/* Thinning also compares a point with the higher-ranked features of its list that lie to
+ * the side of its line by more than this fraction of the list's reach (the distance to
+ * its last member), whatever their angle (robust.thin_side): the band of candidates
+ * along an edge is 1.3-1.5 spacings wide, and a second point of it kept 1-1.5 spacings
+ * from the edge, ahead or behind along the line, lies outside the cone. On meshes and
+ * quiet clouds MS_THIN_SIDE (below it the rims of a wall 2 spacings thick, about 1.3
+ * spacings apart in their bands, thin each other), on noisy clouds MS_THIN_SIDE_NOISY
+ * (below it a noisy line thins to gaps). */
+#define MS_THIN_SIDE 0.7
+#define MS_THIN_SIDE_NOISY 0.65
 #define MS_THIN_KNN 12
 #define MS_THIN_RING 2
 #define MS_SUPPORT_KNN 16
@@ -511,8 +521,9 @@ typedef struct {
  * (robust.smoothed_ranking): rank[i] = the mean of score over the first `window` of
  * compare's list (added in order to 0.0), when it is not empty; the other entries of
  * rank are the caller's. ms_thin (robust.thin; f1 complete first): f2[i] = f1[i] and no
- * j != i of compare's list with f1[j], rank[j] > rank[i] and p_j - p_i across the line
- * (|d . e| < cone |d|), unless (between not NULL) a point m of the list with between[m]
+ * j != i of compare's list with f1[j], rank[j] > rank[i] and d = p_j - p_i across the line
+ * (|d . e| < cone |d|) or beside it (|d|^2 - (d . e)^2 > (side * side) |p_l - p_i|^2, l
+ * the list's last member), unless (between not NULL) a point m of the list with between[m]
  * or rank[m] < rank[i] lies between: (p_m - p_i) . (p_m - p_j) < 0. ms_acute_tips
  * (robust.acute_tips): out[r] = some j != l of the list, both f0 and not i, with
  * (p_j - p_i) . (p_l - p_i) < 0. Sums over x, y, z in that order, as numpy's. */
@@ -524,8 +535,8 @@ void ms_supported(const double *p, const uint8_t *f0, const int64_t *rows, const
 void ms_smoothed_ranking(const double *score, const int64_t *rows, const ms_lists_t *compare,
                          int64_t window, int64_t begin, int64_t end, double *rank);
 void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const double *e,
-             const ms_lists_t *compare, const double *rank, double cone, const uint8_t *between,
-             int64_t begin, int64_t end, uint8_t *f2);
+             const ms_lists_t *compare, const double *rank, double cone, double side,
+             const uint8_t *between, int64_t begin, int64_t end, uint8_t *f2);
 void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
                    const ms_lists_t *lists, int64_t begin, int64_t end, uint8_t *out);
 
@@ -538,7 +549,8 @@ void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
  * ms_thin_knn: thinning's comparison list on a cloud, MS_THIN_KNN grown by `growth` (1:
  * not grown). ms_quiet_cloud: a cloud whose noise is at most MS_NOISE_QUIET, thresholded
  * at the floor alone; ms_otsu_splits its negation. ms_thin_cone: thinning's cone,
- * MS_THIN_CONE_COS_NOISY on a noisy cloud, else MS_THIN_CONE_COS. ms_ranking_smoothed:
+ * MS_THIN_CONE_COS_NOISY on a noisy cloud, else MS_THIN_CONE_COS; ms_thin_side its side
+ * rule, MS_THIN_SIDE_NOISY on a noisy cloud, else MS_THIN_SIDE. ms_ranking_smoothed:
  * thinning ranks by ms_smoothed_ranking, on a cloud whose noise grew the scales to the
  * cap. ms_support_free_score: 1 and *score = MS_SUPPORT_FREE_SCORE on a quiet cloud (a
  * candidate scoring below it needs no support), else 0 (*score untouched). */
@@ -549,6 +561,7 @@ int ms_thin_knn(double growth);
 int ms_quiet_cloud(int mesh, double noise);
 int ms_otsu_splits(int mesh, double noise);
 double ms_thin_cone(int mesh, double noise);
+double ms_thin_side(int mesh, double noise);
 int ms_ranking_smoothed(int mesh, double noise);
 int ms_support_free_score(int mesh, double noise, double *score);
 /* ms_scale_floor (robust.scale_floor): the floor of a scale's threshold, MS_R_MIN; on the
@@ -579,6 +592,7 @@ typedef struct {
     int support_exempt;        /* candidates scoring below free_below need no support */
     double free_below;         /* ms_support_free_score's score (0 when not support_exempt) */
     double thin_cone;          /* thinning's cone (ms_thin_cone) */
+    double thin_side;          /* thinning's side rule (ms_thin_side) */
     int thin_between;          /* thinning is blocked by the points that are not candidates
                                   (a quiet cloud: reference.detect.thin_blockers) */
 } ms_robust_plan_t;

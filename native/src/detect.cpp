@@ -582,12 +582,13 @@ const uint8_t *bytes(const std::vector<char> &mask) { return reinterpret_cast<co
 // line direction (lists D), support (lists S; a score below freeBelow exempts, when
 // exempt: reference.detect.support_exempt) and, with smooth, the score averaged over the
 // first THIN_KNN of K (robust.smoothed_ranking); then, every candidate's support known, thinning
-// across the line (cone: ms_robust_plan) over K, the points not in f0 blocking with
-// block (reference.detect.thin_blockers).
+// across the line (cone) or beside it (side; both ms_robust_plan's) over K, the points not
+// in f0 blocking with block (reference.detect.thin_blockers).
 std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
                                  const ms_lists_t &D, const ms_lists_t &S, const ms_lists_t &K, bool exempt,
-                                 double freeBelow, bool smooth, bool block, double cone, Bar &bar, int from, int to) {
+                                 double freeBelow, bool smooth, bool block, double cone, double side, Bar &bar,
+                                 int from, int to) {
 	const Index c = Index(rows.size());
 	std::vector<double> e(3 * c), smoothed(smooth ? score : std::vector<double>());
 	const double *rank = smooth ? smoothed.data() : score.data();
@@ -602,8 +603,8 @@ std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char
 	}, bar, from, (from + to) / 2, "support and thinning");
 	std::vector<char> f2(f0.size(), 0);
 	chunks(c, [&](unsigned, Index a, Index b) {
-		ms_thin(p.data(), f1.data(), rows.data(), e.data(), &K, rank, cone, block ? between.data() : nullptr, a,
-		        b, reinterpret_cast<uint8_t *>(f2.data()));
+		ms_thin(p.data(), f1.data(), rows.data(), e.data(), &K, rank, cone, side,
+		        block ? between.data() : nullptr, a, b, reinterpret_cast<uint8_t *>(f2.data()));
 		return 0;
 	}, bar, (from + to) / 2, to, "support and thinning");
 	return f2;
@@ -1020,8 +1021,8 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	if (rows.empty()) return d;
 	d.feature = supportAndThin(pts, d.feature, pass.score, rows, knn.lists(top, starts),
 	                           knn.lists(plan.support_knn, starts), knn.lists(thinK, starts), plan.support_exempt != 0,
-	                           plan.free_below, plan.ranking_smoothed != 0, plan.thin_between != 0, plan.thin_cone, bar,
-	                           90, 95);
+	                           plan.free_below, plan.ranking_smoothed != 0, plan.thin_between != 0, plan.thin_cone,
+	                           plan.thin_side, bar, 90, 95);
 	return d;
 }
 
@@ -1055,9 +1056,11 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	for (Index i = 0; i < n; ++i)
 		if (d.feature[i]) rows.push_back(i);
 	if (!rows.empty()) {
-		const RingRows rings = ringRows(adj, rows, std::min(MS_THIN_RING, top), top);
+		ms_robust_plan_t plan;  // a mesh's: its ring, cone and side rule
+		ms_robust_plan(0.0, n, r.scales.data(), int(S), 1, &plan);  // scales checked
+		const RingRows rings = ringRows(adj, rows, plan.support_knn, top);
 		d.feature = supportAndThin(c.pts, d.feature, score, rows, rings.lists(1), rings.lists(0), rings.lists(0), false,
-		                           0.0, false, false, MS_THIN_CONE_COS, bar, 85, 95);
+		                           0.0, false, false, plan.thin_cone, plan.thin_side, bar, 85, 95);
 	}
 	for (Index i = 0; i < n; ++i)
 		if (edges[i]) {

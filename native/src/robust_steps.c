@@ -111,18 +111,39 @@ static int parted(const double *p, const ms_lists_t *compare, int64_t first, int
     return 0;
 }
 
+/* Squared distance from p_i to the last member of slot r's list (first, len; len > 0):
+ * the list's reach, the unit of thinning's side rule (robust.thin). */
+static inline double list_reach2(const double *p, const ms_lists_t *L, int64_t first,
+                                 int64_t len, int64_t i) {
+    const double *q = p + 3 * list_member(L, first + len - 1), *pi = p + 3 * i;
+    const double dx = q[0] - pi[0], dy = q[1] - pi[1], dz = q[2] - pi[2];
+    return dx * dx + dy * dy + dz * dz;
+}
+
+/* Whether d = p_j - p_i lies across the line through p_i of direction e (across_line),
+ * or to its side by more than side_reach2's root: |d|^2 - (d . e)^2 > side_reach2
+ * (robust.thin's pairs). */
+static inline int beside_line(const double *pi, const double *pj, const double *e, double cone,
+                              double side_reach2) {
+    const double dx = pj[0] - pi[0], dy = pj[1] - pi[1], dz = pj[2] - pi[2];
+    const double along = dx * e[0] + dy * e[1] + dz * e[2];
+    const double d2 = dx * dx + dy * dy + dz * dz;
+    return fabs(along) < cone * sqrt(d2) || d2 - along * along > side_reach2;
+}
+
 void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const double *e,
-             const ms_lists_t *compare, const double *rank, double cone, const uint8_t *between,
-             int64_t begin, int64_t end, uint8_t *f2) {
+             const ms_lists_t *compare, const double *rank, double cone, double side,
+             const uint8_t *between, int64_t begin, int64_t end, uint8_t *f2) {
     for (int64_t r = begin; r < end; r++) {
         const int64_t i = rows[r];
         int keep = f1[i];
         int64_t first, len;
         list_span(compare, r, &first, &len);
+        const double side2 = len > 0 ? side * side * list_reach2(p, compare, first, len, i) : 0.0;
         for (int64_t t = first; keep && t < first + len; t++) {
             const int64_t j = list_member(compare, t);
             if (j != i && f1[j] && rank[j] > rank[i] &&
-                across_line(p + 3 * i, p + 3 * j, e + 3 * r, cone) &&
+                beside_line(p + 3 * i, p + 3 * j, e + 3 * r, cone, side2) &&
                 !(between != NULL && parted(p, compare, first, len, rank, between, i, j)))
                 keep = 0;
         }

@@ -37,6 +37,10 @@ double ms_thin_cone(int mesh, double noise) {
     return mesh || ms_quiet_cloud(mesh, noise) ? MS_THIN_CONE_COS : MS_THIN_CONE_COS_NOISY;
 }
 
+double ms_thin_side(int mesh, double noise) {
+    return mesh || ms_quiet_cloud(mesh, noise) ? MS_THIN_SIDE : MS_THIN_SIDE_NOISY;
+}
+
 int ms_ranking_smoothed(int mesh, double noise) {
     return !mesh && ms_noise_factor(noise) == MS_NOISE_MAX_FACTOR;
 }
@@ -70,6 +74,7 @@ int ms_robust_plan(double noise, int64_t n_kept, const int *scales, int s, int m
     plan->free_below = 0.0;
     plan->support_exempt = ms_support_free_score(mesh, noise, &plan->free_below);
     plan->thin_cone = ms_thin_cone(mesh, noise);
+    plan->thin_side = ms_thin_side(mesh, noise);
     plan->thin_between = ms_quiet_cloud(mesh, noise);
     return 0;
 }
