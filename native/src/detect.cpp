@@ -483,6 +483,12 @@ struct CloudPass {
 	std::vector<double> score, noise, kthD2;
 	std::vector<int32_t> near, kthIdx;
 	std::vector<double> nthD2, refD2;  // isolation's second rule
+	// The noise and isolation statistics freed, once read.
+	void dropStatistics() {
+		std::vector<double>().swap(noise), std::vector<double>().swap(kthD2);
+		std::vector<int32_t>().swap(near), std::vector<int32_t>().swap(kthIdx);
+		std::vector<double>().swap(nthD2), std::vector<double>().swap(refD2);
+	}
 };
 
 // One pass over the tree's points at the scales ks: projected distances (paper mode) or
@@ -672,7 +678,7 @@ void toCleanedRows(const std::vector<Index> &orig, Buffer<double> &rows, int wid
 	}
 }
 
-// Decision's details kept for S scales of n points: the distances written by vote() or
+// Decision's details kept for S scales of n points: the distances written by
 // stageDecision(), the normals moved from the pass's.
 void keepDetails(Decision &d, bool details, size_t S, Index n, Buffer<double> &normals) {
 	if (!details) return;
@@ -682,30 +688,6 @@ void keepDetails(Decision &d, bool details, size_t S, Index n, Buffer<double> &n
 
 // The distances' row of scale s (null without details).
 double *detailRow(Decision &d, size_t s, Index n) { return d.distances.empty() ? nullptr : &d.distances[s * n]; }
-
-// One scale's threshold and candidates v >= T over x (n), by the kernel's ms_scale_vote
-// (threshold.py's and robust.robust_threshold's arithmetic): votes, threshold and count,
-// and v into out (n) unless it is null.
-// normalise: min-max with the flat rule (flatSpan), else x in [0, 1]; otsu: T =
-// max(Otsu's split, floor), else floor. Returns T.
-double vote(const double *x, Index n, bool normalise, double flatSpan, bool otsu, double floor,
-            std::vector<int64_t> &votes, Result &r, double *out = nullptr) {
-	int64_t count = 0;
-	const double T = ms_scale_vote(x, n, normalise, flatSpan, otsu, floor, out, votes.data(), &count);
-	r.thresholds.push_back(T);
-	r.candidates.push_back(long(count));
-	return T;
-}
-
-// Features are candidates at every scale; strength is the fraction of scales.
-void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
-	d.strength.resize(votes.size());
-	d.feature.resize(votes.size());
-	for (size_t i = 0; i < votes.size(); ++i) {
-		d.strength[i] = double(votes[i]) / double(S);
-		d.feature[i] = votes[i] == int64_t(S);
-	}
-}
 
 // The pointwise stages (stages.c) over the n points' values x, scale s at x[s * n ...], in
 // the order `order` maps to the cleaned points (empty: that order): each scale's threshold
@@ -734,12 +716,26 @@ void stageDecision(const double *x, Index n, size_t S, const double *lo, const d
 		const double f = noise < 0.0 ? floor : ms_scale_floor(hist, k + 1 == S, 0, noise);
 		thresholds[k] = ms_stage_threshold(hist, otsu, f);
 	}
-	std::vector<uint8_t> feature(n);
-	std::vector<double> strength(n);
+	d.feature.assign(n, 0);
+	d.strength.assign(n, 0.0);
+	uint8_t *feature = reinterpret_cast<uint8_t *>(d.feature.data());
 	std::vector<int64_t> candidates(size_t(count) * S, 0);
 	eachIndex(count, [&](Index u) {
-		ms_stage_decide(x, 1, n, s, u * MS_CHUNK, std::min(n, (u + 1) * MS_CHUNK), lo, hi, flatSpan, thresholds.data(),
-		                feature.data(), strength.data(), &candidates[size_t(u) * S], values);
+		const Index a = u * MS_CHUNK, b = std::min(n, a + MS_CHUNK);
+		if (order.empty()) {
+			ms_stage_decide(x, 1, n, s, a, b, lo, hi, flatSpan, thresholds.data(), feature, d.strength.data(),
+			                &candidates[size_t(u) * S], values);
+			return;
+		}
+		// a chunk's decision, then moved to the cleaned order
+		uint8_t chunkFeature[MS_CHUNK];
+		double chunkStrength[MS_CHUNK];
+		ms_stage_decide(x + a, 1, n, s, 0, b - a, lo, hi, flatSpan, thresholds.data(), chunkFeature, chunkStrength,
+		                &candidates[size_t(u) * S], values == nullptr ? nullptr : values + a);
+		for (Index i = a; i < b; ++i) {
+			feature[order[i]] = chunkFeature[i - a];
+			d.strength[order[i]] = chunkStrength[i - a];
+		}
 	});
 	for (size_t k = 0; k < S; ++k) {
 		int64_t c = 0;
@@ -747,20 +743,15 @@ void stageDecision(const double *x, Index n, size_t S, const double *lo, const d
 		r.thresholds.push_back(thresholds[k]);
 		r.candidates.push_back(long(c));
 	}
-	if (!order.empty()) {
-		feature = toCleaned(order, feature);
-		strength = toCleaned(order, strength);
-	}
-	d.feature.assign(feature.begin(), feature.end());
-	d.strength.swap(strength);
 }
 
 // What the ring pass reads of a mesh, besides its points: the adjacency, the
 // face-average normals (n, 3) and, in robust mode, the vertices of its sharp edges
-// (creases.py), the faces' turns found first. In robust mode, unless the run has one
-// thread, the sharp edges (the longest) on a thread beside the adjacency and then the
-// normals; in paper mode one after the other (the peak of memory: the adjacency's
-// untrimmed lists beside the normals would add 24 bytes a vertex).
+// (creases.py). Unless the run has one thread, on two threads: in paper mode the faces'
+// turns (ms_face_windings: on a mesh wound either way round its incidence and
+// union-find) and then the normals beside the adjacency; in robust mode the turns found
+// first from the incidence the sharp edges read too, then the sharp edges (the longest)
+// beside the adjacency and then the normals.
 // The faces are freed once read (no later step reads them, as pipeline.py).
 struct MeshLists {
 	Rings adj;
@@ -771,25 +762,21 @@ struct MeshLists {
 MeshLists meshLists(Clean &c, bool robust) {
 	MeshLists out;
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
-	// the faces' turns first (ms_face_windings: on a mesh wound either way round its
-	// incidence and union-find, about 60 bytes a vertex), freed before the adjacency
 	std::vector<uint8_t> turned(size_t(std::max<Index>(F, 1)));
-	Incidence at;  // robust mode: built once, read by the windings and the sharp edges
-	if (robust) {
-		at = vertexFaces(c.faces, n);
-		check(ms_face_windings_at(c.faces.data(), F, n, at.ptr.data(), at.inc.data(), turned.data()) < 0);
-	} else {
-		check(ms_face_windings(c.faces.data(), F, n, turned.data()) < 0);
-	}
 	auto normals = [&] {
 		out.normals.assign(3 * n, 0.0);
 		check(ms_face_average_normals_at(c.pts.data(), n, c.faces.data(), F, turned.data(), MS_ZERO_NORMAL,
 		                                 out.normals.data()) < 0);
 	};
-	if (!robust) {  // the adjacency (48 bytes a vertex until trimmed to about half), then the normals
-		out.adj = adjacency(c);
-		normals();
-	} else {  // the sharp edges (the longest) beside the adjacency and then the normals
+	if (!robust) {  // the faces' turns and then the normals beside the adjacency
+		twoParts(2, [&](Index part) {
+			if (part == 0) return void(out.adj = adjacency(c));
+			check(ms_face_windings(c.faces.data(), F, n, turned.data()) < 0);
+			normals();
+		}, workers() > 1);
+	} else {  // the faces' turns first, then the sharp edges (the longest) beside the adjacency and the normals
+		const Incidence at = vertexFaces(c.faces, n);  // read by the turns and the sharp edges
+		check(ms_face_windings_at(c.faces.data(), F, n, at.ptr.data(), at.inc.data(), turned.data()) < 0);
 		twoParts(2, [&](Index part) {
 			if (part == 1) return void(out.edges = sharpVertices(c.pts, c.faces, at));
 			out.adj = adjacency(c);
@@ -962,6 +949,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	const Index at = (n - 1) / 2;
 	std::nth_element(pass.noise.begin(), pass.noise.begin() + at, pass.noise.end());
 	const double ratio = pass.noise[at];  // the median noise ratio
+	pass.dropStatistics();
 	const double factor = ms_scale_growth(ratio, n, top0);
 	int thinKnn = ms_thin_knn(1.0);  // grows with the scales
 	if (factor > 1.0) {
@@ -1047,13 +1035,12 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	bar.report(85, "thresholds");
 	Decision d;
 	keepDetails(d, options.details, S, n, normals);
-	std::vector<int64_t> votes(n, 0);
-	for (size_t s = 0; s < S; ++s) vote(&relative[s * n], n, false, 0.0, true, R_MIN, votes, r, detailRow(d, s, n));
+	// a mesh's thresholds: Otsu's split over the floor at every scale (ms_otsu_splits,
+	// ms_scale_floor of a mesh)
+	stageDecision(relative.data(), n, S, nullptr, nullptr, 0.0, true, R_MIN, {}, d, r, -1.0, detailRow(d, 0, n));
 	Buffer<double>().swap(relative);
 	d.toClean.resize(n);
 	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
-	decide(votes, S, d);
-	std::vector<int64_t>().swap(votes);
 	bar.report(85, "support and thinning");
 	std::vector<Index> rows;
 	for (Index i = 0; i < n; ++i)
