@@ -658,7 +658,7 @@ std::vector<char> sharpVertices(const Buffer<double> &p, const Buffer<Index> &fa
 
 // What one mode leaves per processed point.
 struct Decision {
-	std::vector<Index> toClean;    // cleaned index of each processed point
+	std::vector<Index> toClean;    // cleaned index of each processed point; empty: every one, in order
 	std::vector<double> strength;  // fraction of scales (1 on robust mode's sharp mesh edges)
 	std::vector<char> feature;
 	// Options::details: per scale and processed point the distances Otsu split (S, p) and
@@ -749,9 +749,9 @@ void stageDecision(const double *x, Index n, size_t S, const double *lo, const d
 // face-average normals (n, 3) and, in robust mode, the vertices of its sharp edges
 // (creases.py). Unless the run has one thread, on two threads: in paper mode the faces'
 // turns (ms_face_windings: on a mesh wound either way round its incidence and
-// union-find) and then the normals beside the adjacency; in robust mode the turns found
-// first from the incidence the sharp edges read too, then the sharp edges (the longest)
-// beside the adjacency and then the normals.
+// union-find) and then the normals beside the adjacency; in robust mode the sharp edges
+// (the longest) beside the turns (from the incidence the sharp edges read too), the
+// adjacency and the normals.
 // The faces are freed once read (no later step reads them, as pipeline.py).
 struct MeshLists {
 	Rings adj;
@@ -774,11 +774,11 @@ MeshLists meshLists(Clean &c, bool robust) {
 			check(ms_face_windings(c.faces.data(), F, n, turned.data()) < 0);
 			normals();
 		}, workers() > 1);
-	} else {  // the faces' turns first, then the sharp edges (the longest) beside the adjacency and the normals
+	} else {  // the sharp edges (the longest) beside the turns, the adjacency and the normals
 		const Incidence at = vertexFaces(c.faces, n);  // read by the turns and the sharp edges
-		check(ms_face_windings_at(c.faces.data(), F, n, at.ptr.data(), at.inc.data(), turned.data()) < 0);
 		twoParts(2, [&](Index part) {
 			if (part == 1) return void(out.edges = sharpVertices(c.pts, c.faces, at));
+			check(ms_face_windings_at(c.faces.data(), F, n, at.ptr.data(), at.inc.data(), turned.data()) < 0);
 			out.adj = adjacency(c);
 			normals();
 		}, workers() > 1);
@@ -874,8 +874,6 @@ Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 	// a flat scale's threshold is 1.0, and only a flat scale's: any other's normalised
 	// values hold 0 and 1, which Otsu's split parts
 	r.allFlat = std::all_of(r.thresholds.begin(), r.thresholds.end(), [](double t) { return !(t < 1.0); });
-	d.toClean.resize(n);
-	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
 	return d;
 }
 
@@ -912,7 +910,7 @@ KnnOfMask knnOfMask(const Tree &t, const std::vector<char> &mask, int k, Bar &ba
 // from the kernel (RelativeRule.from_pass); acute tips, support and thinning by the
 // kernel on the candidates' kNN rows (RobustSetup._finish_compiled).
 Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
-	Decision d;  // its toClean: all cleaned points unless isolated ones are left out
+	Decision d;  // its toClean: empty (all cleaned points) unless isolated ones are left out
 	const int top0 = r.scales.back();
 	const int k0 = std::min(MS_NOISE_KNN, top0);
 	bar.report(0, "kd-tree");
@@ -969,10 +967,6 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	Buffer<double>().swap(pass.relative);
 	toCleanedRows(tree->orig, d.distances, 1);
 	toCleanedRows(tree->orig, d.normals, 3);
-	if (d.toClean.empty()) {
-		d.toClean.resize(n);
-		std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
-	}
 	pass.score = toCleaned(tree->orig, pass.score);
 	if (pts.empty()) pts = cleanedPoints(*tree);
 	bar.report(85, "support and thinning");
@@ -1039,8 +1033,6 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	// ms_scale_floor of a mesh)
 	stageDecision(relative.data(), n, S, nullptr, nullptr, 0.0, true, R_MIN, {}, d, r, -1.0, detailRow(d, 0, n));
 	Buffer<double>().swap(relative);
-	d.toClean.resize(n);
-	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
 	bar.report(85, "support and thinning");
 	std::vector<Index> rows;
 	for (Index i = 0; i < n; ++i)
@@ -1061,7 +1053,7 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 // Per-scale rows (S, p, width) of the p processed points moved to the nIn input
 // vertices (S, nIn, width), NaN where a vertex took no part: input vertex i is cleaned
 // vertex fromInput[i] (itself when fromInput is empty; -1: dropped), that processed
-// point processed[.] (-1: left out).
+// point processed[.] (-1: left out; processed empty: itself).
 void toInputRows(const Buffer<double> &rows, int width, size_t p, const std::vector<Index> &fromInput,
                  const std::vector<Index> &processed, Index nIn, std::vector<double> &out) {
 	if (rows.empty()) return;
@@ -1069,8 +1061,9 @@ void toInputRows(const Buffer<double> &rows, int width, size_t p, const std::vec
 	out.assign(S * size_t(nIn) * width, std::numeric_limits<double>::quiet_NaN());
 	for (Index i = 0; i < nIn; ++i) {
 		const Index ci = fromInput.empty() ? i : fromInput[i];
-		if (ci < 0 || processed[ci] < 0) continue;
-		const size_t pi = size_t(processed[ci]);
+		const Index at = ci < 0 || processed.empty() ? ci : processed[ci];
+		if (at < 0) continue;
+		const size_t pi = size_t(at);
 		for (size_t s = 0; s < S; ++s)
 			for (int a = 0; a < width; ++a)
 				out[(s * nIn + i) * width + a] = rows[(s * p + pi) * width + a];
@@ -1226,9 +1219,9 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	Buffer<double>().swap(c.pts);
 
 	// Back to the input's order.
-	if (c.fromInput.empty() && Index(d.toClean.size()) == c.size()) {  // every input point, in order
-		r.strength = d.strength;
-		r.feature = d.feature;
+	if (c.fromInput.empty() && d.toClean.empty()) {  // every input point, in order
+		r.strength.swap(d.strength);
+		r.feature.swap(d.feature);
 		r.kept.assign(nIn, 1);
 		r.nFeatures = long(std::count(r.feature.begin(), r.feature.end(), 1));
 		r.distances.assign(d.distances.begin(), d.distances.end());
@@ -1237,19 +1230,21 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 		bar.report(100, "done");
 		return r;
 	}
-	std::vector<Index> processed(c.size(), -1);
+	std::vector<Index> processed;  // the processed point of each cleaned one (empty: itself)
+	if (!d.toClean.empty()) processed.assign(c.size(), -1);
 	for (size_t i = 0; i < d.toClean.size(); ++i) processed[d.toClean[i]] = Index(i);
-	toInputRows(d.distances, 1, d.toClean.size(), c.fromInput, processed, nIn, r.distances);
+	const size_t p = d.toClean.empty() ? size_t(c.size()) : d.toClean.size();
+	toInputRows(d.distances, 1, p, c.fromInput, processed, nIn, r.distances);
 	Buffer<double>().swap(d.distances);
-	toInputRows(d.normals, 3, d.toClean.size(), c.fromInput, processed, nIn, r.normals);
+	toInputRows(d.normals, 3, p, c.fromInput, processed, nIn, r.normals);
 	Buffer<double>().swap(d.normals);
 	r.strength.assign(nIn, 0.0);
 	r.feature.assign(nIn, 0);
 	r.kept.assign(nIn, 0);
 	for (Index i = 0; i < nIn; ++i) {
 		const Index ci = c.fromInput.empty() ? i : c.fromInput[i];
-		if (ci < 0 || processed[ci] < 0) continue;
-		const Index pi = processed[ci];
+		const Index pi = ci < 0 || processed.empty() ? ci : processed[ci];
+		if (pi < 0) continue;
 		r.kept[i] = 1;
 		r.strength[i] = d.strength[pi];
 		r.feature[i] = d.feature[pi];
