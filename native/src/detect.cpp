@@ -17,7 +17,6 @@
 #include <limits>
 #include <memory>
 #include <new>
-#include <numeric>
 #include <sstream>
 #include <system_error>
 #include <thread>
