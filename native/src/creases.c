@@ -4,14 +4,10 @@
 #include "internal.h"
 
 /* Whether face f, along its winding, goes from its corner lo straight to its corner hi
- * (1) or from hi to lo (0). The two faces of an edge of a consistently wound mesh go
- * opposite ways along it; where they go the same way one of them is wound the other way
- * round, and the dot product of their normals is negated: the angle between the faces'
- * normals as the two would be wound alike, whatever the winding of either. */
+ * (corners_walk_up). */
 static inline int walks_up(const int64_t *faces, int64_t f, int64_t lo, int64_t hi) {
     const int64_t *c = faces + 3 * f;
-    const int at = c[0] == lo ? 0 : c[1] == lo ? 1 : 2;
-    return c[(at + 1) % 3] == hi;
+    return corners_walk_up(c[0], c[1], c[2], lo, hi);
 }
 
 /* Union-find over the faces with, per face, the parity of its winding against its
@@ -256,10 +252,9 @@ int64_t ms_two_face_edges(const double *p, const int64_t *faces, int64_t m, int6
                 double u[3], w[3];
                 face_normal(p, faces, f0, u);
                 face_normal(p, faces, f1, w);
-                const double d = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
                 out_edges[2 * e] = v;
                 out_edges[2 * e + 1] = hi;
-                out_dot[e++] = walks_up(faces, f0, v, hi) == walks_up(faces, f1, v, hi) ? -d : d;
+                out_dot[e++] = edge_dot(u, w, walks_up(faces, f0, v, hi) == walks_up(faces, f1, v, hi));
             }
             i = j;
         }
@@ -372,8 +367,7 @@ static int64_t crease_walk(const double *p, const int64_t *faces, int64_t a0, in
                     face_normal(p, faces, fa[i], u);
                     face_normal(p, faces, second, w);
                 }
-                const double uw = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
-                const double d = (k == 0) == walks_up(faces, second, a, b) ? -uw : uw;
+                const double d = edge_dot(u, w, (k == 0) == walks_up(faces, second, a, b));
                 if (d >= 1.0) {
                     if (flat != NULL) ++*flat;
                     continue;

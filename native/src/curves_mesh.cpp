@@ -5,6 +5,7 @@
 // see curves.h).
 #include "curves.h"
 
+#include "internal.h"
 #include "meshlab_sharp.h"
 
 #include <algorithm>
@@ -27,14 +28,12 @@ double radians(double deg) { return deg * (PI / 180.0); }
 double length3(const Vec3 &a) { return std::sqrt((a[0] * a[0] + a[1] * a[1]) + a[2] * a[2]); }
 
 // a face's normal as creases.dihedral_angles gives it: the cross product over its length
-// (false for a face of zero area)
+// (face_cross; false for a face of zero area)
 bool faceNormal(const std::vector<Vec3> &pts, const std::array<int, 3> &t, Vec3 &normal)
 {
-	const Vec3 &p0 = pts[t[0]], &p1 = pts[t[1]], &p2 = pts[t[2]];
-	const Vec3 a{p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
-	const Vec3 b{p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
-	const Vec3 c{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-	const double length = length3(c);
+	static_assert(sizeof(Vec3) == 3 * sizeof(double), "the points are rows of 3 doubles");
+	double c[3];
+	const double length = face_cross(pts.front().data(), t[0], t[1], t[2], c);
 	normal = {c[0] / length, c[1] / length, c[2] / length};
 	return length > 0;
 }
@@ -77,8 +76,7 @@ std::vector<Edge> sharpEdges(const std::vector<Vec3> &pts, const std::vector<std
 		}
 	auto walksUp = [&](long f, long lo, long hi) {  // the face goes from lo straight to hi
 		const std::array<int, 3> &c = faces[solid[f]];
-		const int at = c[0] == lo ? 0 : c[1] == lo ? 1 : 2;
-		return c[(at + 1) % 3] == hi;
+		return corners_walk_up(c[0], c[1], c[2], lo, hi);
 	};
 	std::vector<Edge> edges;
 	std::vector<double> dots;
@@ -91,10 +89,9 @@ std::vector<Edge> sharpEdges(const std::vector<Vec3> &pts, const std::vector<std
 			while (next != last && *next / m == hi) ++next;
 			if (next - it == 2) {
 				const long f0 = *it % m, f1 = *(it + 1) % m;
-				const Vec3 &u = normal[f0], &w = normal[f1];
-				const double d = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+				const double d = edge_dot(normal[f0].data(), normal[f1].data(), walksUp(f0, v, hi) == walksUp(f1, v, hi));
 				edges.push_back({v, hi});
-				dots.push_back(std::max(-1.0, std::min(1.0, walksUp(f0, v, hi) == walksUp(f1, v, hi) ? -d : d)));
+				dots.push_back(std::max(-1.0, std::min(1.0, d)));
 			}
 			it = next;
 		}

@@ -17,7 +17,6 @@
 #include <limits>
 #include <memory>
 #include <new>
-#include <numeric>
 #include <sstream>
 #include <system_error>
 #include <thread>
@@ -483,6 +482,12 @@ struct CloudPass {
 	std::vector<double> score, noise, kthD2;
 	std::vector<int32_t> near, kthIdx;
 	std::vector<double> nthD2, refD2;  // isolation's second rule
+	// The noise and isolation statistics freed, once read.
+	void dropStatistics() {
+		std::vector<double>().swap(noise), std::vector<double>().swap(kthD2);
+		std::vector<int32_t>().swap(near), std::vector<int32_t>().swap(kthIdx);
+		std::vector<double>().swap(nthD2), std::vector<double>().swap(refD2);
+	}
 };
 
 // One pass over the tree's points at the scales ks: projected distances (paper mode) or
@@ -653,7 +658,7 @@ std::vector<char> sharpVertices(const Buffer<double> &p, const Buffer<Index> &fa
 
 // What one mode leaves per processed point.
 struct Decision {
-	std::vector<Index> toClean;    // cleaned index of each processed point
+	std::vector<Index> toClean;    // cleaned index of each processed point; empty: every one, in order
 	std::vector<double> strength;  // fraction of scales (1 on robust mode's sharp mesh edges)
 	std::vector<char> feature;
 	// Options::details: per scale and processed point the distances Otsu split (S, p) and
@@ -673,7 +678,7 @@ void toCleanedRows(const std::vector<Index> &orig, Buffer<double> &rows, int wid
 	}
 }
 
-// Decision's details kept for S scales of n points: the distances written by vote() or
+// Decision's details kept for S scales of n points: the distances written by
 // stageDecision(), the normals moved from the pass's.
 void keepDetails(Decision &d, bool details, size_t S, Index n, Buffer<double> &normals) {
 	if (!details) return;
@@ -683,30 +688,6 @@ void keepDetails(Decision &d, bool details, size_t S, Index n, Buffer<double> &n
 
 // The distances' row of scale s (null without details).
 double *detailRow(Decision &d, size_t s, Index n) { return d.distances.empty() ? nullptr : &d.distances[s * n]; }
-
-// One scale's threshold and candidates v >= T over x (n), by the kernel's ms_scale_vote
-// (threshold.py's and robust.robust_threshold's arithmetic): votes, threshold and count,
-// and v into out (n) unless it is null.
-// normalise: min-max with the flat rule (flatSpan), else x in [0, 1]; otsu: T =
-// max(Otsu's split, floor), else floor. Returns T.
-double vote(const double *x, Index n, bool normalise, double flatSpan, bool otsu, double floor,
-            std::vector<int64_t> &votes, Result &r, double *out = nullptr) {
-	int64_t count = 0;
-	const double T = ms_scale_vote(x, n, normalise, flatSpan, otsu, floor, out, votes.data(), &count);
-	r.thresholds.push_back(T);
-	r.candidates.push_back(long(count));
-	return T;
-}
-
-// Features are candidates at every scale; strength is the fraction of scales.
-void decide(const std::vector<int64_t> &votes, size_t S, Decision &d) {
-	d.strength.resize(votes.size());
-	d.feature.resize(votes.size());
-	for (size_t i = 0; i < votes.size(); ++i) {
-		d.strength[i] = double(votes[i]) / double(S);
-		d.feature[i] = votes[i] == int64_t(S);
-	}
-}
 
 // The pointwise stages (stages.c) over the n points' values x, scale s at x[s * n ...], in
 // the order `order` maps to the cleaned points (empty: that order): each scale's threshold
@@ -734,12 +715,26 @@ void stageDecision(const double *x, Index n, size_t S, const double *lo, const d
 		ms_plan_thresholds(plan, otsu ? counts.data() : nullptr, thresholds.data());
 	for (size_t k = 0; k < S && plan == nullptr; ++k)
 		thresholds[k] = ms_stage_threshold(otsu ? &counts[k * MS_BINS] : nullptr, otsu, floor);
-	std::vector<uint8_t> feature(n);
-	std::vector<double> strength(n);
+	d.feature.assign(n, 0);
+	d.strength.assign(n, 0.0);
+	uint8_t *feature = reinterpret_cast<uint8_t *>(d.feature.data());
 	std::vector<int64_t> candidates(size_t(count) * S, 0);
 	eachIndex(count, [&](Index u) {
-		ms_stage_decide(x, 1, n, s, u * MS_CHUNK, std::min(n, (u + 1) * MS_CHUNK), lo, hi, flatSpan, thresholds.data(),
-		                feature.data(), strength.data(), &candidates[size_t(u) * S], values);
+		const Index a = u * MS_CHUNK, b = std::min(n, a + MS_CHUNK);
+		if (order.empty()) {
+			ms_stage_decide(x, 1, n, s, a, b, lo, hi, flatSpan, thresholds.data(), feature, d.strength.data(),
+			                &candidates[size_t(u) * S], values);
+			return;
+		}
+		// a chunk's decision, then moved to the cleaned order
+		uint8_t chunkFeature[MS_CHUNK];
+		double chunkStrength[MS_CHUNK];
+		ms_stage_decide(x + a, 1, n, s, 0, b - a, lo, hi, flatSpan, thresholds.data(), chunkFeature, chunkStrength,
+		                &candidates[size_t(u) * S], values == nullptr ? nullptr : values + a);
+		for (Index i = a; i < b; ++i) {
+			feature[order[i]] = chunkFeature[i - a];
+			d.strength[order[i]] = chunkStrength[i - a];
+		}
 	});
 	for (size_t k = 0; k < S; ++k) {
 		int64_t c = 0;
@@ -747,20 +742,15 @@ void stageDecision(const double *x, Index n, size_t S, const double *lo, const d
 		r.thresholds.push_back(thresholds[k]);
 		r.candidates.push_back(long(c));
 	}
-	if (!order.empty()) {
-		feature = toCleaned(order, feature);
-		strength = toCleaned(order, strength);
-	}
-	d.feature.assign(feature.begin(), feature.end());
-	d.strength.swap(strength);
 }
 
 // What the ring pass reads of a mesh, besides its points: the adjacency, the
 // face-average normals (n, 3) and, in robust mode, the vertices of its sharp edges
-// (creases.py), the faces' turns found first. In robust mode, unless the run has one
-// thread, the sharp edges (the longest) on a thread beside the adjacency and then the
-// normals; in paper mode one after the other (the peak of memory: the adjacency's
-// untrimmed lists beside the normals would add 24 bytes a vertex).
+// (creases.py). Unless the run has one thread, on two threads: in paper mode the faces'
+// turns (ms_face_windings: on a mesh wound either way round its incidence and
+// union-find) and then the normals beside the adjacency; in robust mode the sharp edges
+// (the longest) beside the turns (from the incidence the sharp edges read too), the
+// adjacency and the normals.
 // The faces are freed once read (no later step reads them, as pipeline.py).
 struct MeshLists {
 	Rings adj;
@@ -771,27 +761,23 @@ struct MeshLists {
 MeshLists meshLists(Clean &c, bool robust) {
 	MeshLists out;
 	const Index n = c.size(), F = Index(c.faces.size() / 3);
-	// the faces' turns first (ms_face_windings: on a mesh wound either way round its
-	// incidence and union-find, about 60 bytes a vertex), freed before the adjacency
 	std::vector<uint8_t> turned(size_t(std::max<Index>(F, 1)));
-	Incidence at;  // robust mode: built once, read by the windings and the sharp edges
-	if (robust) {
-		at = vertexFaces(c.faces, n);
-		check(ms_face_windings_at(c.faces.data(), F, n, at.ptr.data(), at.inc.data(), turned.data()) < 0);
-	} else {
-		check(ms_face_windings(c.faces.data(), F, n, turned.data()) < 0);
-	}
 	auto normals = [&] {
 		out.normals.assign(3 * n, 0.0);
 		check(ms_face_average_normals_at(c.pts.data(), n, c.faces.data(), F, turned.data(), MS_ZERO_NORMAL,
 		                                 out.normals.data()) < 0);
 	};
-	if (!robust) {  // the adjacency (48 bytes a vertex until trimmed to about half), then the normals
-		out.adj = adjacency(c);
-		normals();
-	} else {  // the sharp edges (the longest) beside the adjacency and then the normals
+	if (!robust) {  // the faces' turns and then the normals beside the adjacency
+		twoParts(2, [&](Index part) {
+			if (part == 0) return void(out.adj = adjacency(c));
+			check(ms_face_windings(c.faces.data(), F, n, turned.data()) < 0);
+			normals();
+		}, workers() > 1);
+	} else {  // the sharp edges (the longest) beside the turns, the adjacency and the normals
+		const Incidence at = vertexFaces(c.faces, n);  // read by the turns and the sharp edges
 		twoParts(2, [&](Index part) {
 			if (part == 1) return void(out.edges = sharpVertices(c.pts, c.faces, at));
+			check(ms_face_windings_at(c.faces.data(), F, n, at.ptr.data(), at.inc.data(), turned.data()) < 0);
 			out.adj = adjacency(c);
 			normals();
 		}, workers() > 1);
@@ -887,8 +873,6 @@ Decision paperMode(Clean &c, const Options &options, Result &r, Bar &bar) {
 	// a flat scale's threshold is 1.0, and only a flat scale's: any other's normalised
 	// values hold 0 and 1, which Otsu's split parts
 	r.allFlat = std::all_of(r.thresholds.begin(), r.thresholds.end(), [](double t) { return !(t < 1.0); });
-	d.toClean.resize(n);
-	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
 	return d;
 }
 
@@ -926,7 +910,7 @@ KnnOfMask knnOfMask(const Tree &t, const std::vector<char> &mask, int k, Bar &ba
 // score from the kernel (RelativeRule.from_pass); acute tips, support and thinning by the
 // kernel on the candidates' kNN rows (RobustSetup._finish_compiled).
 Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
-	Decision d;  // its toClean: all cleaned points unless isolated ones are left out
+	Decision d;  // its toClean: empty (all cleaned points) unless isolated ones are left out
 	const int top0 = r.scales.back();
 	const int k0 = std::min(MS_NOISE_KNN, top0);
 	bar.report(0, "kd-tree");
@@ -964,6 +948,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	std::nth_element(pass.noise.begin(), pass.noise.begin() + at, pass.noise.end());
 	ms_robust_plan_t plan;  // every decision below (the median noise ratio's)
 	ms_robust_plan(pass.noise[at], n, r.scales.data(), int(r.scales.size()), 0, &plan);  // scales checked
+	pass.dropStatistics();
 	if (plan.grown) {
 		r.scales.assign(plan.scales, plan.scales + plan.n_scales);
 		if (r.scales.back() > n)
@@ -979,10 +964,6 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	Buffer<double>().swap(pass.relative);
 	toCleanedRows(tree->orig, d.distances, 1);
 	toCleanedRows(tree->orig, d.normals, 3);
-	if (d.toClean.empty()) {
-		d.toClean.resize(n);
-		std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
-	}
 	pass.score = toCleaned(tree->orig, pass.score);
 	if (pts.empty()) pts = cleanedPoints(*tree);
 	bar.report(85, "support and thinning");
@@ -1044,20 +1025,16 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	bar.report(85, "thresholds");
 	Decision d;
 	keepDetails(d, options.details, S, n, normals);
-	std::vector<int64_t> votes(n, 0);
-	for (size_t s = 0; s < S; ++s) vote(&relative[s * n], n, false, 0.0, true, R_MIN, votes, r, detailRow(d, s, n));
+	ms_robust_plan_t plan;  // a mesh's: Otsu over the floor at every scale, its ring, cone and side rule
+	ms_robust_plan(0.0, n, r.scales.data(), int(S), 1, &plan);  // scales checked
+	stageDecision(relative.data(), n, S, nullptr, nullptr, 0.0, plan.otsu != 0, R_MIN, {}, d, r, &plan,
+	              detailRow(d, 0, n));
 	Buffer<double>().swap(relative);
-	d.toClean.resize(n);
-	std::iota(d.toClean.begin(), d.toClean.end(), Index(0));
-	decide(votes, S, d);
-	std::vector<int64_t>().swap(votes);
 	bar.report(85, "support and thinning");
 	std::vector<Index> rows;
 	for (Index i = 0; i < n; ++i)
 		if (d.feature[i]) rows.push_back(i);
 	if (!rows.empty()) {
-		ms_robust_plan_t plan;  // a mesh's: its ring, cone and side rule
-		ms_robust_plan(0.0, n, r.scales.data(), int(S), 1, &plan);  // scales checked
 		const RingRows rings = ringRows(adj, rows, plan.support_knn, top);
 		d.feature = supportAndThin(c.pts, d.feature, score, rows, rings.lists(1), rings.lists(0), rings.lists(0), false,
 		                           0.0, false, false, plan.thin_cone, plan.thin_side, bar, 85, 95);
@@ -1073,7 +1050,7 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 // Per-scale rows (S, p, width) of the p processed points moved to the nIn input
 // vertices (S, nIn, width), NaN where a vertex took no part: input vertex i is cleaned
 // vertex fromInput[i] (itself when fromInput is empty; -1: dropped), that processed
-// point processed[.] (-1: left out).
+// point processed[.] (-1: left out; processed empty: itself).
 void toInputRows(const Buffer<double> &rows, int width, size_t p, const std::vector<Index> &fromInput,
                  const std::vector<Index> &processed, Index nIn, std::vector<double> &out) {
 	if (rows.empty()) return;
@@ -1081,8 +1058,9 @@ void toInputRows(const Buffer<double> &rows, int width, size_t p, const std::vec
 	out.assign(S * size_t(nIn) * width, std::numeric_limits<double>::quiet_NaN());
 	for (Index i = 0; i < nIn; ++i) {
 		const Index ci = fromInput.empty() ? i : fromInput[i];
-		if (ci < 0 || processed[ci] < 0) continue;
-		const size_t pi = size_t(processed[ci]);
+		const Index at = ci < 0 || processed.empty() ? ci : processed[ci];
+		if (at < 0) continue;
+		const size_t pi = size_t(at);
 		for (size_t s = 0; s < S; ++s)
 			for (int a = 0; a < width; ++a)
 				out[(s * nIn + i) * width + a] = rows[(s * p + pi) * width + a];
@@ -1238,9 +1216,9 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	Buffer<double>().swap(c.pts);
 
 	// Back to the input's order.
-	if (c.fromInput.empty() && Index(d.toClean.size()) == c.size()) {  // every input point, in order
-		r.strength = d.strength;
-		r.feature = d.feature;
+	if (c.fromInput.empty() && d.toClean.empty()) {  // every input point, in order
+		r.strength.swap(d.strength);
+		r.feature.swap(d.feature);
 		r.kept.assign(nIn, 1);
 		r.nFeatures = long(std::count(r.feature.begin(), r.feature.end(), 1));
 		r.distances.assign(d.distances.begin(), d.distances.end());
@@ -1249,19 +1227,21 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 		bar.report(100, "done");
 		return r;
 	}
-	std::vector<Index> processed(c.size(), -1);
+	std::vector<Index> processed;  // the processed point of each cleaned one (empty: itself)
+	if (!d.toClean.empty()) processed.assign(c.size(), -1);
 	for (size_t i = 0; i < d.toClean.size(); ++i) processed[d.toClean[i]] = Index(i);
-	toInputRows(d.distances, 1, d.toClean.size(), c.fromInput, processed, nIn, r.distances);
+	const size_t p = d.toClean.empty() ? size_t(c.size()) : d.toClean.size();
+	toInputRows(d.distances, 1, p, c.fromInput, processed, nIn, r.distances);
 	Buffer<double>().swap(d.distances);
-	toInputRows(d.normals, 3, d.toClean.size(), c.fromInput, processed, nIn, r.normals);
+	toInputRows(d.normals, 3, p, c.fromInput, processed, nIn, r.normals);
 	Buffer<double>().swap(d.normals);
 	r.strength.assign(nIn, 0.0);
 	r.feature.assign(nIn, 0);
 	r.kept.assign(nIn, 0);
 	for (Index i = 0; i < nIn; ++i) {
 		const Index ci = c.fromInput.empty() ? i : c.fromInput[i];
-		if (ci < 0 || processed[ci] < 0) continue;
-		const Index pi = processed[ci];
+		const Index pi = ci < 0 || processed.empty() ? ci : processed[ci];
+		if (pi < 0) continue;
 		r.kept[i] = 1;
 		r.strength[i] = d.strength[pi];
 		r.feature[i] = d.feature[pi];

@@ -28,6 +28,10 @@
 #define HAVE_AVX2_PATH 1
 #endif
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /* Functions one file of the library defines for the others: not exported. */
 #if defined(__GNUC__)
 #define MS_INTERNAL __attribute__((visibility("hidden")))
@@ -213,5 +217,28 @@ static inline void face_normal(const double *p, const int64_t *faces, int64_t f,
     double dv = len > 0 ? len : 1.0;
     u[0] = c[0] / dv; u[1] = c[1] / dv; u[2] = c[2] / dv;
 }
+
+/* Whether a face with corners c0, c1, c2, along its winding, goes from its corner lo
+ * straight to its corner hi (1) or from hi to lo (0). The two faces of an edge of a
+ * consistently wound mesh go opposite ways along it; where they go the same way one of
+ * them is wound the other way round (edge_dot). */
+static inline int corners_walk_up(int64_t c0, int64_t c1, int64_t c2, int64_t lo, int64_t hi) {
+    const int64_t c[3] = {c0, c1, c2};
+    const int at = c0 == lo ? 0 : c1 == lo ? 1 : 2;
+    return c[(at + 1) % 3] == hi;
+}
+
+/* The dot product of the unit normals u and w of an edge's two faces as the two would be
+ * wound alike, whatever the winding of either: negated where they go the same way along
+ * the edge (same_way: corners_walk_up equal for both), the dihedral angle's cosine of
+ * creases.dihedral_angles. */
+static inline double edge_dot(const double *u, const double *w, int same_way) {
+    const double d = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+    return same_way ? -d : d;
+}
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif
