@@ -1456,8 +1456,8 @@ def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) ->
     noise ratio ``noise`` and ``n_kept`` points (isolated ones left out) at the given
     increasing ``scales``."""
     c = _RobustPlan()
-    given = (ctypes.c_int * len(scales))(*scales)
-    args = (float(noise), int(n_kept), given, len(scales), int(mesh), ctypes.byref(c))
+    given = np.ascontiguousarray(scales, dtype=np.intc)  # not a ctypes array type per call
+    args = (float(noise), int(n_kept), given.ctypes.data, len(given), int(mesh), ctypes.byref(c))
     if _lib().ms_robust_plan(*args):
         raise ValueError(f"robust_plan: 1 to {len(c.scales)} scales, got {len(scales)}")
     return RobustPlan(

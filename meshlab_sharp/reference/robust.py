@@ -388,7 +388,8 @@ def _beside(
     d = points[nb] - points[ci]
     along = d[:, 0] * e[ci, 0] + d[:, 1] * e[ci, 1] + d[:, 2] * e[ci, 2]
     d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
-    return d2 - along * along > side * side * reach2
+    with np.errstate(invalid="ignore"):  # side = inf (no side rule) times reach 0: NaN, False
+        return d2 - along * along > side * side * reach2
 
 
 def supported(
