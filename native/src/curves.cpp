@@ -1465,7 +1465,11 @@ void planeIntersections(size_t first, size_t last, const std::vector<Vec3> &vert
 		const Vec3 there = add(add(vertex, mul(hit0, x.u)), mul(hit1, x.w));
 		moved[first + v] = ok ? there : vertex;
 		fitted[first + v] = ok;
-		flat[first + v] = isFitted && !crease;
+		// a thin wall's two faces (parallel arms) leave its rim on one side, a wall apart
+		const bool oneSide = (l1.c[0] * l1.a[0] + l1.c[1] * l1.a[1]) * (l2.c[0] * l1.a[0] + l2.c[1] * l1.a[1]) > 0;
+		const double apart = std::fabs(diff0 * l1.a[1] - diff1 * l1.a[0]);
+		const bool wall = oneSide && apart > MS_CURVE_THIN_WALL * spacing;
+		flat[first + v] = isFitted && !crease && !wall;
 	}
 }
 

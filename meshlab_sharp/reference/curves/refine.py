@@ -72,6 +72,11 @@ FRAME_SWITCH = CURVES.real("FRAME_SWITCH")
 OTHER_EDGE = CURVES.real("OTHER_EDGE")
 #: See :data:`OTHER_EDGE`.
 OTHER_EDGE_MARGIN = CURVES.real("OTHER_EDGE_MARGIN")
+#: Two nearly parallel arms that leave the vertex on one side, their lines farther apart
+#: than this in spacings, are the two faces of a thin wall at its rim (an edge, its
+#: position from the curve's own vertices); a smooth surface runs on through the vertex
+#: (its arms on opposite sides), or its noise leaves arms on one line.
+THIN_WALL = CURVES.real("THIN_WALL")
 
 
 class CellGrid:
@@ -220,8 +225,9 @@ def plane_intersection_positions(
     ok : (v,) bool
         Where the fit succeeded.
     flat : (v,) bool
-        Where both arms were fitted well but meet at less than MIN_ARM_ANGLE: no edge
-        there (false detections on a smooth surface).
+        Where both arms were fitted well but meet at less than MIN_ARM_ANGLE, and are
+        not the two faces of a thin wall (:data:`THIN_WALL`): no edge there (false
+        detections on a smooth surface).
     """
     v = len(vertices)
     if v == 0:
@@ -266,7 +272,13 @@ def plane_intersection_positions(
         & (np.linalg.norm(hit, axis=1) <= MAX_SHIFT * spacing)
     )
     moved = vertices + hit[:, :1] * u + hit[:, 1:] * w
-    return np.where(ok[:, None], moved, vertices), ok, fitted & ~crease
+    # a thin wall's two faces (parallel arms) leave its rim on one side, a wall apart
+    one_side = (c1[:, 0] * a1[:, 0] + c1[:, 1] * a1[:, 1]) * (
+        c2[:, 0] * a1[:, 0] + c2[:, 1] * a1[:, 1]
+    ) > 0
+    apart = np.abs(diff[:, 0] * a1[:, 1] - diff[:, 1] * a1[:, 0])
+    wall = one_side & (apart > THIN_WALL * spacing)
+    return np.where(ok[:, None], moved, vertices), ok, fitted & ~crease & ~wall
 
 
 def line_fit_positions(
