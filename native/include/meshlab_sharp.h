@@ -221,6 +221,9 @@
 #define MS_CURVE_MAX_ARM_RMS 0.5
 #define MS_CURVE_ZERO_OFFSET 1e-12
 #define MS_CURVE_FRAME_SWITCH 0.9
+#define MS_CURVE_OTHER_EDGE 3.0
+#define MS_CURVE_OTHER_EDGE_MARGIN 0.5
+#define MS_CURVE_THIN_WALL 1.0
 
 /* fit.py: line, arc or free-form (Python only: the plugin does not classify). */
 #define MS_CURVE_FIT_TOLERANCE 0.5

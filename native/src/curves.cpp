@@ -1383,16 +1383,28 @@ void planeIntersections(size_t first, size_t last, const std::vector<Vec3> &vert
 		const std::vector<long> &nb = nbrs[first + v];
 		const size_t k = nb.size();
 		x.xy.resize(k), x.unitv.resize(k), x.use.resize(k);
+		std::vector<double> radius(k);
+		// the nearest features of another edge across the curve, ahead and behind along it
+		double ahead = std::numeric_limits<double>::infinity(), behind = ahead;
 		for (size_t i = 0; i < k; ++i) {
 			const Vec3 d = sub(treePts[nb[i]], vertex);
 			x.xy[i] = {edot(d, x.u), edot(d, x.w)};
 			const double along = edot(d, t) / (MS_CURVE_SLAB * spacing);
 			arg.push_back(-0.5 * (along * along));
 			const double r = std::sqrt(x.xy[i][0] * x.xy[i][0] + x.xy[i][1] * x.xy[i][1]);
-			x.use[i] = !treeFeature[nb[i]] && r > MS_CURVE_ZERO_OFFSET * spacing;
+			radius[i] = r;
+			if (treeFeature[nb[i]] && r > MS_CURVE_OTHER_EDGE * spacing) {
+				if (along > 0) ahead = std::min(ahead, r);
+				if (along < 0) behind = std::min(behind, r);
+			}
 			const double rr = r > 0 ? r : 1.0;
 			x.unitv[i] = {x.xy[i][0] / rr, x.xy[i][1] / rr};
 		}
+		// the arms end short of another edge running beside this one (a thin wall's other
+		// rim): seen on both sides along the curve, unlike an edge crossing near a corner
+		const double reach = std::max(ahead, behind) - MS_CURVE_OTHER_EDGE_MARGIN * spacing;
+		for (size_t i = 0; i < k; ++i)
+			x.use[i] = !treeFeature[nb[i]] && radius[i] > MS_CURVE_ZERO_OFFSET * spacing && radius[i] < reach;
 	}
 	std::vector<double> weight(arg.size());
 	math.exp(arg.data(), weight.data(), int64_t(arg.size()));
@@ -1453,7 +1465,11 @@ void planeIntersections(size_t first, size_t last, const std::vector<Vec3> &vert
 		const Vec3 there = add(add(vertex, mul(hit0, x.u)), mul(hit1, x.w));
 		moved[first + v] = ok ? there : vertex;
 		fitted[first + v] = ok;
-		flat[first + v] = isFitted && !crease;
+		// a thin wall's two faces (parallel arms) leave its rim on one side, a wall apart
+		const bool oneSide = (l1.c[0] * l1.a[0] + l1.c[1] * l1.a[1]) * (l2.c[0] * l1.a[0] + l2.c[1] * l1.a[1]) > 0;
+		const double apart = std::fabs(diff0 * l1.a[1] - diff1 * l1.a[0]);
+		const bool wall = oneSide && apart > MS_CURVE_THIN_WALL * spacing;
+		flat[first + v] = isFitted && !crease && !wall;
 	}
 }
 

@@ -6,7 +6,9 @@ near the vertex form two arms, one per surface; a line is fitted to each arm and
 vertex moves to their intersection. Where that fails (fewer than
 :data:`MIN_ARM_POINTS` on an arm, arms nearly parallel, a poor fit, or a move of more
 than :data:`MAX_SHIFT` spacings: near corners, or on false detections) the vertex is
-projected onto the line fitted to the curve's own vertices nearby.
+projected onto the line fitted to the curve's own vertices nearby. The arms end short of
+another edge running beside the curve (the other rim of a thin wall,
+:data:`OTHER_EDGE`).
 """
 
 from __future__ import annotations
@@ -60,6 +62,21 @@ ZERO_OFFSET = CURVES.real("ZERO_OFFSET")
 #: The plane across a unit direction t is spanned from the x axis, or from the y axis
 #: where ``|t_x|`` is at least this (t nearly along x).
 FRAME_SWITCH = CURVES.real("FRAME_SWITCH")
+#: Feature points farther than this, in spacings, from the vertex in the plane across
+#: the curve belong to another edge (a band of features is about 2 spacings wide and
+#: the vertex lies within it). Where such features lie both ahead of the vertex and
+#: behind it along the curve, the other edge runs beside this one (the other rim of a
+#: thin wall, whose far face would join an arm and tilt its line): the points at least
+#: as far across as that edge (the farther of its nearest features ahead and behind),
+#: less :data:`OTHER_EDGE_MARGIN` spacings, take no part in the arms.
+OTHER_EDGE = CURVES.real("OTHER_EDGE")
+#: See :data:`OTHER_EDGE`.
+OTHER_EDGE_MARGIN = CURVES.real("OTHER_EDGE_MARGIN")
+#: Two nearly parallel arms that leave the vertex on one side, their lines farther apart
+#: than this in spacings, are the two faces of a thin wall at its rim (an edge, its
+#: position from the curve's own vertices); a smooth surface runs on through the vertex
+#: (its arms on opposite sides), or its noise leaves arms on one line.
+THIN_WALL = CURVES.real("THIN_WALL")
 
 
 class CellGrid:
@@ -208,8 +225,9 @@ def plane_intersection_positions(
     ok : (v,) bool
         Where the fit succeeded.
     flat : (v,) bool
-        Where both arms were fitted well but meet at less than MIN_ARM_ANGLE: no edge
-        there (false detections on a smooth surface).
+        Where both arms were fitted well but meet at less than MIN_ARM_ANGLE, and are
+        not the two faces of a thin wall (:data:`THIN_WALL`): no edge there (false
+        detections on a smooth surface).
     """
     v = len(vertices)
     if v == 0:
@@ -221,7 +239,14 @@ def plane_intersection_positions(
     along = np.einsum("vkj,vj->vk", d, directions) / (SLAB * spacing)
     weight = np.exp(-0.5 * along**2)
     r = np.linalg.norm(xy, axis=-1)
-    use = ~tree_is_feature[idx] & (r > ZERO_OFFSET * spacing)
+    # the arms end short of another edge running beside this one (a thin wall's other
+    # rim): its features are seen on both sides along the curve, those of an edge that
+    # crosses the plane near a corner on one side only
+    other = tree_is_feature[idx] & (r > OTHER_EDGE * spacing)
+    ahead = np.where(other & (along > 0), r, np.inf).min(axis=1)
+    behind = np.where(other & (along < 0), r, np.inf).min(axis=1)
+    reach = np.maximum(ahead, behind) - OTHER_EDGE_MARGIN * spacing
+    use = ~tree_is_feature[idx] & (r > ZERO_OFFSET * spacing) & (r < reach[:, None])
     unit = xy / np.where(r > 0, r, 1.0)[..., None]
     bisector = (unit * use[..., None]).sum(axis=1)
     side = (bisector[:, None, 0] * unit[..., 1] - bisector[:, None, 1] * unit[..., 0]) > 0
@@ -247,7 +272,13 @@ def plane_intersection_positions(
         & (np.linalg.norm(hit, axis=1) <= MAX_SHIFT * spacing)
     )
     moved = vertices + hit[:, :1] * u + hit[:, 1:] * w
-    return np.where(ok[:, None], moved, vertices), ok, fitted & ~crease
+    # a thin wall's two faces (parallel arms) leave its rim on one side, a wall apart
+    one_side = (c1[:, 0] * a1[:, 0] + c1[:, 1] * a1[:, 1]) * (
+        c2[:, 0] * a1[:, 0] + c2[:, 1] * a1[:, 1]
+    ) > 0
+    apart = np.abs(diff[:, 0] * a1[:, 1] - diff[:, 1] * a1[:, 0])
+    wall = one_side & (apart > THIN_WALL * spacing)
+    return np.where(ok[:, None], moved, vertices), ok, fitted & ~crease & ~wall
 
 
 def line_fit_positions(
