@@ -468,6 +468,17 @@ def markdown(rows: list[dict], summary: dict, checks: list[dict], worse: dict, m
     return "\n".join(lines) + "\n\n" + METHOD
 
 
+#: The page's last section, written by ``scripts/evaluate_cad.py``.
+CAD_SECTION = "## CAD parts with exact truth"
+
+
+def write_atomically(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file beside it."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command line."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
@@ -533,8 +544,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {args.json}")
     if not args.no_write:
         md = ROOT / "docs" / "evaluation.md"
-        md.write_text(markdown(rows, summary, checks, worse, meta))
-        (ROOT / "docs" / "evaluation.json").write_text(text)
+        old = md.read_text() if md.is_file() else ""
+        cad = old.find(CAD_SECTION)  # evaluate_cad.py's section stays as it is
+        page = markdown(rows, summary, checks, worse, meta)
+        write_atomically(md, page if cad < 0 else page.rstrip("\n") + "\n\n" + old[cad:])
+        write_atomically(ROOT / "docs" / "evaluation.json", text)
         print(f"wrote {md} and docs/evaluation.json")
     return 0
 
