@@ -408,16 +408,19 @@ Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 	                                      c.faces.data(), used);
 	c.faces.resize(3 * nonzero);
 	if (c.faces.empty()) throw InputError("every face has zero area: nothing is left of the mesh");
-	std::vector<Index> renumber(m, -1);
-	Index kept = 0;
-	for (Index i = 0; i < m; ++i)
-		if (used[i]) {
+	const Index first = Index(std::find(used.begin(), used.end(), uint8_t(0)) - used.begin());
+	Index kept = first;  // every vertex before the first unused one keeps its index
+	if (first < m) {     // else nothing moves: no map, no pass over the points
+		Buffer<Index> renumber(m);
+		for (Index i = 0; i < first; ++i) renumber[i] = i;
+		for (Index i = first; i < m; ++i) {
+			renumber[i] = used[i] ? kept : -1;
+			if (!used[i]) continue;
 			for (int a = 0; a < 3; ++a) c.pts[3 * kept + a] = c.pts[3 * i + a];
-			renumber[i] = kept++;
+			++kept;
 		}
-	c.pts.resize(3 * kept);
-	c.n = kept;
-	if (kept < m) {  // else renumber is the identity
+		c.pts.resize(3 * kept);
+		c.n = kept;
 		for (Index &f : c.faces) f = renumber[f];
 		for (Index &i : fromInput) i = i < 0 ? i : renumber[i];
 	}
