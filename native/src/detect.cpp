@@ -351,8 +351,10 @@ Index keepFaces(const double *p, Index m, const Index *faces, Index F, const Ind
 		                           part ? second.data() : used.data());
 	});
 	if (parts == 1) return kept[0];
-	// the second part's faces moved to follow the first's
-	std::copy(out + 3 * bounds[1], out + 3 * (bounds[1] + kept[1]), out + 3 * kept[0]);
+	// the second part's faces moved to follow the first's (where they are when the first
+	// part dropped none)
+	if (kept[0] < bounds[1])
+		std::copy(out + 3 * bounds[1], out + 3 * (bounds[1] + kept[1]), out + 3 * kept[0]);
 	for (Index i = 0; i < m; ++i) used[size_t(i)] |= second[size_t(i)];
 	return kept[0] + kept[1];
 }
