@@ -478,8 +478,8 @@ void ms_crease_mask(const double *p, const int64_t *faces, int64_t n, const int6
  * to_input (n, first m used): input index of each cleaned point; out (room for n rows)
  * or NULL: the cleaned points (m, 3) when some points merge, untouched when none does.
  * Returns m. The same merge on threads: ms_dedup_probe on each part of the table, then
- * ms_dedup_number and (when some merge) ms_dedup_resolve on spans of the points
- * (_kernels.merge_duplicates). */
+ * ms_dedup_number (its to_input may be NULL) and (when some merge) ms_dedup_resolve on
+ * spans of the points (_kernels.merge_duplicates). */
 int64_t ms_dedup(const double *p, int64_t n, uint64_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input, double *out);
 void ms_dedup_probe(const double *p, int64_t n, uint64_t *table, int64_t tmask, int64_t parts,

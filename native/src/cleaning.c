@@ -99,8 +99,9 @@ void ms_dedup_probe(const double *p, int64_t n, uint64_t *table, int64_t tmask, 
 
 /* The numbering of a duplicate merge over the input points [lo, hi), after every
  * part's ms_dedup_probe: first occurrences (from_input >= 0) numbered from `base` (the
- * first occurrences before lo) in order, into from_input and to_input, their rows copied
- * to out (room for the cleaned points) unless out is NULL. Spans may run at once. */
+ * first occurrences before lo) in order, into from_input and (unless NULL) to_input,
+ * their rows copied to out (room for the cleaned points) unless out is NULL. Spans may
+ * run at once. */
 void ms_dedup_number(const double *p, int64_t lo, int64_t hi, int64_t base, int64_t *from_input,
                      int64_t *to_input, double *out) {
     const size_t row = 3 * sizeof(double);
@@ -112,8 +113,8 @@ void ms_dedup_number(const double *p, int64_t lo, int64_t hi, int64_t base, int6
             run = i + 1;
             continue;
         }
-        from_input[i] = base;
-        to_input[base++] = i;
+        if (to_input != NULL) to_input[base] = i;
+        from_input[i] = base++;
     }
     if (out != NULL && run < hi)
         memcpy(out + 3 * (base - (hi - run)), p + 3 * run, (size_t)(hi - run) * row);

@@ -168,13 +168,18 @@ void eachIndex(Index count, F f) {
 	});
 }
 
+// The largest |x| of the count values x.
+double maxAbs(const double *x, Index count) {
+	double big = 0.0;
+	for (Index i = 0; i < count; ++i) big = std::max(big, std::fabs(x[i]));
+	return big;
+}
+
 // neighbourhoods.unit_scale: multiply by 2^-e, 2^(e-1) <= max |coordinate| < 2^e, when e is
 // outside (-MS_UNIT_RANGE, MS_UNIT_RANGE]: exact, and no squared distance can then
-// overflow or underflow whatever the unit. Returns xyz (n, 3) itself, or its scaled copy
-// in `scaled`.
-const double *unitScale(const double *xyz, Index n, std::vector<double> &scaled) {
-	double big = 0.0;
-	for (Index i = 0; i < 3 * n; ++i) big = std::max(big, std::fabs(xyz[i]));
+// overflow or underflow whatever the unit. big: max |coordinate| of xyz (n, 3) (maxAbs).
+// Returns xyz itself, or its scaled copy in `scaled`.
+const double *unitScale(const double *xyz, Index n, double big, std::vector<double> &scaled) {
 	int e = 0;
 	std::frexp(big, &e);
 	if (big == 0.0 || (-MS_UNIT_RANGE < e && e <= MS_UNIT_RANGE)) return xyz;
@@ -316,7 +321,6 @@ Index mergeDuplicates(const double *v, Index n, std::vector<Index> &fromInput, d
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
 	Buffer<uint64_t> table(size);  // each part cleared by its probe
-	Buffer<Index> toInput(n);
 	const Index bounds[3] = {0, n * 1 / parts, n};
 	Index dups[2][2] = {{0, 0}, {0, 0}};  // (table part, span of the points)
 	twoParts(parts, [&](Index part) {
@@ -328,7 +332,7 @@ Index mergeDuplicates(const double *v, Index n, std::vector<Index> &fromInput, d
 	const Index m = n - before[parts];
 	twoParts(parts, [&](Index span) {
 		const Index lo = bounds[span], hi = bounds[span + 1];
-		ms_dedup_number(v, lo, hi, lo - before[span], fromInput.data(), toInput.data(), m < n ? out : nullptr);
+		ms_dedup_number(v, lo, hi, lo - before[span], fromInput.data(), nullptr, m < n ? out : nullptr);
 	});
 	if (m < n)  // after every span's numbering: it reads them all
 		twoParts(parts, [&](Index span) { ms_dedup_resolve(bounds[span], bounds[span + 1], fromInput.data()); });
@@ -351,8 +355,10 @@ Index keepFaces(const double *p, Index m, const Index *faces, Index F, const Ind
 		                           part ? second.data() : used.data());
 	});
 	if (parts == 1) return kept[0];
-	// the second part's faces moved to follow the first's
-	std::copy(out + 3 * bounds[1], out + 3 * (bounds[1] + kept[1]), out + 3 * kept[0]);
+	// the second part's faces moved to follow the first's (where they are when the first
+	// part dropped none)
+	if (kept[0] < bounds[1])
+		std::copy(out + 3 * bounds[1], out + 3 * (bounds[1] + kept[1]), out + 3 * kept[0]);
 	for (Index i = 0; i < m; ++i) used[size_t(i)] |= second[size_t(i)];
 	return kept[0] + kept[1];
 }
@@ -408,16 +414,19 @@ Clean clean(const double *v, Index n, const Index *faces, Index F, bool mesh) {
 	                                      c.faces.data(), used);
 	c.faces.resize(3 * nonzero);
 	if (c.faces.empty()) throw InputError("every face has zero area: nothing is left of the mesh");
-	std::vector<Index> renumber(m, -1);
-	Index kept = 0;
-	for (Index i = 0; i < m; ++i)
-		if (used[i]) {
+	const Index first = Index(std::find(used.begin(), used.end(), uint8_t(0)) - used.begin());
+	Index kept = first;  // every vertex before the first unused one keeps its index
+	if (first < m) {     // else nothing moves: no map, no pass over the points
+		Buffer<Index> renumber(m);
+		for (Index i = 0; i < first; ++i) renumber[i] = i;
+		for (Index i = first; i < m; ++i) {
+			renumber[i] = used[i] ? kept : -1;
+			if (!used[i]) continue;
 			for (int a = 0; a < 3; ++a) c.pts[3 * kept + a] = c.pts[3 * i + a];
-			renumber[i] = kept++;
+			++kept;
 		}
-	c.pts.resize(3 * kept);
-	c.n = kept;
-	if (kept < m) {  // else renumber is the identity
+		c.pts.resize(3 * kept);
+		c.n = kept;
 		for (Index &f : c.faces) f = renumber[f];
 		for (Index &i : fromInput) i = i < 0 ? i : renumber[i];
 	}
@@ -1166,7 +1175,12 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	bar.report(0, "cleaning");
 	if (nIn == 0) throw InputError("the layer has no vertices");
 	bool finite = true;  // branch-free checks over the whole input, the culprit found after
-	for (Index i = 0; i < 3 * nIn; ++i) finite &= std::fabs(xyz[i]) <= DBL_MAX;
+	double big = 0.0;    // max |coordinate|, for unitScale in the same pass
+	for (Index i = 0; i < 3 * nIn; ++i) {
+		const double a = std::fabs(xyz[i]);
+		finite &= a <= DBL_MAX;
+		big = std::max(big, a);
+	}
 	for (Index i = 0; !finite; ++i)
 		if (!std::isfinite(xyz[i]))
 			throw InputError("vertex " + std::to_string(i / 3) + " has a non-finite coordinate (NaN or inf)");
@@ -1188,8 +1202,9 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	}
 	const Index nNear = far.empty() ? nIn : Index(near.size());
 	std::vector<double> scaled;
-	Clean c = clean(unitScale(far.empty() ? xyz : rest.data(), nNear, scaled), nNear, faces, r.mesh ? m : 0,
-	                r.mesh);
+	const double *nearXyz = far.empty() ? xyz : rest.data();
+	Clean c = clean(unitScale(nearXyz, nNear, far.empty() ? big : maxAbs(nearXyz, 3 * nNear), scaled), nNear, faces,
+	                r.mesh ? m : 0, r.mesh);
 	scaled = std::vector<double>();
 	rest = std::vector<double>();
 	if (!far.empty()) {  // the map from the input, the far points dropped
