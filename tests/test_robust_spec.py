@@ -52,6 +52,11 @@ SHEET_TRIM, SHEET_TRIM_COS = 1.3, 0.985
 SUPPORT_KNN, SUPPORT_MIN, THIN_KNN, MESH_RING, CONE_COS = 16, 2, 12, 2, 0.5
 #: Step 8: on a cloud whose nu exceeds NOISE_QUIET, thinning's cone (support keeps 0.5).
 CONE_COS_NOISY = 0.45
+#: Step 8: beside the line, farther than this times the reach of the list (its last
+#: member's distance); on a cloud whose nu exceeds NOISE_QUIET, the second.
+SIDE, SIDE_NOISY = 0.7, 0.65
+#: The relative margin of a "maybe" on the side test's squared distances.
+SIDE_EPS = 1e-9
 #: Step 7: on a cloud whose nu is at most NOISE_QUIET, no support below this score.
 SUPPORT_FREE_SCORE = 0.22
 #: Step 5b: on a cloud whose nu is at most NOISE_QUIET, a point scoring in [0.5, 0.8)
@@ -59,6 +64,32 @@ SUPPORT_FREE_SCORE = 0.22
 ACUTE_SCORE, ACUTE_SCORE_MAX = 0.5, 0.8
 #: Step 9: 20 degrees, 4 / 0.3186 lower quartiles.
 CREASE, QUARTILE_FACTOR = math.pi / 9, 4 / 0.3186
+
+
+def _last_found(faces: np.ndarray, n: int, k: int) -> np.ndarray:
+    """Per vertex, the last vertex a breadth-first search within k edges finds, each
+    vertex's neighbours taken in the order its faces list them (face (a, b, c): a gets b,
+    c; b gets a, c; c gets a, b), each once: the last member of its k-ring's list."""
+    adj: list[list[int]] = [[] for _ in range(n)]
+    for a, b, c in faces.tolist():
+        for v, first, second in ((a, b, c), (b, a, c), (c, a, b)):
+            for w in (first, second):
+                if w not in adj[v]:
+                    adj[v].append(w)
+    last = np.empty(n, np.int64)
+    for i in range(n):
+        level, order, head = {i: 0}, [i], 0
+        while head < len(order):
+            u = order[head]
+            head += 1
+            if level[u] == k:
+                continue
+            for w in adj[u]:
+                if w not in level:
+                    level[w] = level[u] + 1
+                    order.append(w)
+        last[i] = order[-1]
+    return last
 
 
 class Reading:
@@ -80,6 +111,7 @@ class Reading:
             free = 0.0 if otsu else SUPPORT_FREE_SCORE  # step 7
             block = not otsu  # step 8: blocked by non-candidates or valleys between
             thin_cone = CONE_COS_NOISY if otsu else CONE_COS  # step 8: wider where noisy
+            side = SIDE_NOISY if otsu else SIDE
             normals = None
             around = [h[: min(SUPPORT_KNN, len(h))] for h in hoods]
             thin_k = math.floor(THIN_KNN * growth + 0.5)  # grown with the scales
@@ -93,9 +125,11 @@ class Reading:
             free = 0.0
             block = False
             thin_cone = CONE_COS
+            side = SIDE
             normals = spec_face_normals(points, faces)
             ring = min(MESH_RING, max(scales))
             around = compare = spec_rings(faces, n, ring)
+            last_found = _last_found(faces, n, ring)
             direction = spec_rings(faces, n, max(scales))
             hood_at = lambda k: spec_rings(faces, n, k)  # noqa: E731
         m = len(points)
@@ -175,6 +209,22 @@ class Reading:
             sure_f1[i] = sure_f0[i] and (least >= SUPPORT_MIN or score[i] < free - EPS)
             maybe_f1[i] = most >= SUPPORT_MIN or score[i] < free + EPS
 
+        def reach2(i: int) -> float:
+            """The squared distance from i to the last member of compare[i]: a kNN
+            list's farthest; a ring's last found (``last_found``)."""
+            d = points[compare[i][-1] if faces is None else last_found[i]] - points[i]
+            return d @ d
+
+        def beside(i: int, j: int) -> tuple[bool, bool]:
+            """(surely, possibly) farther from the line through i than ``side`` times the
+            reach of compare[i]."""
+            if not e_sure[i]:
+                return False, True
+            d = points[j] - points[i]
+            off = d @ d - (d @ e[i]) ** 2
+            reach = side * side * reach2(i)
+            return bool(off > reach * (1 + SIDE_EPS)), bool(off > reach * (1 - SIDE_EPS))
+
         def parted(i: int, j: int) -> tuple[bool, bool]:
             """(surely, possibly) a non-candidate of compare[i], or a point ranking
             below i, between i and j."""
@@ -199,7 +249,7 @@ class Reading:
         ):
             rank = np.array([score[h[:THIN_KNN]].mean() for h in hoods])
 
-        # step 8: thinning across the line, every test on F1
+        # step 8: thinning across or beside the line, every test on F1
         # (tied: a possible rival across ranks within EPS, e.g. two points whose first 12
         # nearest are one set, ranked alike by the mean up to its rounding)
         sure_f2, maybe_f2, tied = np.zeros(m, bool), np.zeros(m, bool), np.zeros(m, bool)
@@ -209,6 +259,8 @@ class Reading:
                 if j == i or not maybe_f1[j]:
                     continue
                 across_sure, across_maybe = cosines(i, j, thin_cone)
+                side_sure, side_maybe = beside(i, j)
+                across_sure, across_maybe = across_sure or side_sure, across_maybe or side_maybe
                 parted_sure, parted_maybe = parted(i, j)
                 tied[i] |= bool(across_maybe and abs(rank[j] - rank[i]) < EPS)
                 beaten_maybe |= across_maybe and rank[j] > rank[i] - EPS and not parted_sure
