@@ -196,15 +196,15 @@ const ms_curves_math C_MATH = {cExp, cAcos, cAtan2};
 // Fewest items a block of inBlocks takes: smaller inputs stay on the calling thread.
 constexpr size_t MIN_BLOCK = 4096;
 
-// body(begin, end) over [0, n) in contiguous blocks, one per core (each at least MIN_BLOCK
+// body(begin, end) over [0, n) in contiguous blocks, one per core (each at least `least`
 // items), the first on the calling thread; a block whose thread cannot start runs on the
 // calling thread. body writes only its own items' results, so the bits do not depend on
 // the threads. An exception of a block is rethrown once every block is done.
 template <class Body>
-void inBlocks(size_t n, const Body &body)
+void inBlocks(size_t n, const Body &body, size_t least = MIN_BLOCK)
 {
 	const size_t blocks = std::min<size_t>(std::max(1u, std::thread::hardware_concurrency()),
-	                                       std::max<size_t>(1, n / MIN_BLOCK));
+	                                       std::max<size_t>(1, n / least));
 	std::vector<std::exception_ptr> errors(blocks);
 	auto run = [&](size_t b) {
 		try {
@@ -1657,9 +1657,12 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	const std::vector<Vec3> dirs = batchTangents(pieces, MS_CURVE_RAW_TANGENT_WINDOW * spacing);
 	std::vector<Vec3> moved(raw.size());
 	std::vector<char> fitted(raw.size()), flat(raw.size());
-	for (size_t first = 0; first < raw.size(); first += REFINE_BATCH)
-		planeIntersections(first, std::min(raw.size(), first + REFINE_BATCH), raw, dirs, nbrs, nearPts,
-		                   nearFeature, spacing, math, moved, fitted, flat);
+	// the batches on every core (math's functions may be called from any thread)
+	inBlocks((raw.size() + REFINE_BATCH - 1) / REFINE_BATCH, [&](size_t begin, size_t end) {
+		for (size_t first = begin * REFINE_BATCH; first < std::min(raw.size(), end * REFINE_BATCH); first += REFINE_BATCH)
+			planeIntersections(first, std::min(raw.size(), first + REFINE_BATCH), raw, dirs, nbrs, nearPts,
+			                   nearFeature, spacing, math, moved, fitted, flat);
+	}, 1);
 	std::vector<Piece> out;
 	size_t at = 0;
 	for (const Piece &pc : pieces) {
