@@ -8,6 +8,8 @@
 // cloud vertices differ from them in the last bits.
 #include "curves.h"
 
+#include "cores.h"
+
 #include "meshlab_sharp.h"
 
 #include <algorithm>
@@ -196,14 +198,14 @@ const ms_curves_math C_MATH = {cExp, cAcos, cAtan2};
 // Fewest items a block of inBlocks takes: smaller inputs stay on the calling thread.
 constexpr size_t MIN_BLOCK = 4096;
 
-// body(begin, end) over [0, n) in contiguous blocks, one per core (each at least `least`
+// body(begin, end) over [0, n) in contiguous blocks, one per core this process may use (each at least `least`
 // items), the first on the calling thread; a block whose thread cannot start runs on the
 // calling thread. body writes only its own items' results, so the bits do not depend on
 // the threads. An exception of a block is rethrown once every block is done.
 template <class Body>
 void inBlocks(size_t n, const Body &body, size_t least = MIN_BLOCK)
 {
-	const size_t blocks = std::min<size_t>(std::max(1u, std::thread::hardware_concurrency()),
+	const size_t blocks = std::min<size_t>(cores(),
 	                                       std::max<size_t>(1, n / least));
 	std::vector<std::exception_ptr> errors(blocks);
 	auto run = [&](size_t b) {
