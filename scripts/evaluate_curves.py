@@ -98,8 +98,8 @@ def summarise(rows: list[dict]) -> dict:
 def timing(n: int, repeat: int = 1) -> dict:
     """Extra time of the curves over detection on the benchmark's n-point CAD cloud (best
     of ``repeat``), robust and paper modes: wall-clock and CPU time (the latter less
-    sensitive to a busy machine; detection runs on every core, the curves on one but
-    for their kd-tree queries)."""
+    sensitive to a busy machine; detection runs on every core, the curves' neighbour
+    queries, neighbourhood and refinement too, their other steps on one)."""
     sys.path.insert(0, str(ROOT / "scripts"))
     from bench import cad_cloud
 

@@ -485,9 +485,9 @@ CURVES_CPP = sorted((Path(__file__).resolve().parent.parent / "native" / "src").
 #: (fit.py).
 PYTHON_ONLY = {"FIT_TOLERANCE", "FIT_MAX", "MAX_RADIUS_RATIO"}
 #: curves.cpp's upper-case constants that tune nothing: pi, infinity, the C library's
-#: math table, and how many vertices share one call of the math functions (no result
-#: depends on it).
-NOT_TUNING = {"PI", "INF", "C_MATH", "REFINE_BATCH"}
+#: math table, how many vertices share one call of the math functions, the least items
+#: a thread takes and the largest dense cell grid (no result depends on them).
+NOT_TUNING = {"PI", "INF", "C_MATH", "REFINE_BATCH", "MIN_BLOCK", "MAX_DENSE_CELLS"}
 
 
 def test_the_curves_constants_are_typed_only_in_their_header():

@@ -769,7 +769,7 @@ typedef void (*ms_curves_fn2)(const double *y, const double *x, double *out, int
 
 /* The three functions of the curves whose last bits differ between math libraries:
  * exp (the refinement's weights), acos (turn angles) and atan2 (the arms' directions).
- * Each is called on many values at once. The Python package passes numpy's, so that the
+ * Each is called on many values at once, from several threads at once. The Python package passes numpy's, so that the
  * library reproduces its numpy reference bit for bit; NULL: the C library's. */
 typedef struct ms_curves_math {
 	ms_curves_fn1 exp;

@@ -8,11 +8,14 @@
 // cloud vertices differ from them in the last bits.
 #include "curves.h"
 
+#include "cores.h"
+
 #include "meshlab_sharp.h"
 
 #include <algorithm>
 #include <cmath>
 #include <deque>
+#include <exception>
 #include <functional>
 #include <limits>
 #include <map>
@@ -20,6 +23,8 @@
 #include <numeric>
 #include <queue>
 #include <set>
+#include <system_error>
+#include <thread>
 #include <tuple>
 #include <unordered_set>
 #include <utility>
@@ -187,6 +192,42 @@ void cAtan2(const double *y, const double *x, double *out, int64_t n)
 	for (int64_t i = 0; i < n; ++i) out[i] = std::atan2(y[i], x[i]);
 }
 const ms_curves_math C_MATH = {cExp, cAcos, cAtan2};
+
+// ---------------------------------------------------------------- threads
+
+// Fewest items a block of inBlocks takes: smaller inputs stay on the calling thread.
+constexpr size_t MIN_BLOCK = 4096;
+
+// body(begin, end) over [0, n) in contiguous blocks, one per core this process may use (each at least `least`
+// items), the first on the calling thread; a block whose thread cannot start runs on the
+// calling thread. body writes only its own items' results, so the bits do not depend on
+// the threads. An exception of a block is rethrown once every block is done.
+template <class Body>
+void inBlocks(size_t n, const Body &body, size_t least = MIN_BLOCK)
+{
+	const size_t blocks = std::min<size_t>(cores(),
+	                                       std::max<size_t>(1, n / least));
+	std::vector<std::exception_ptr> errors(blocks);
+	auto run = [&](size_t b) {
+		try {
+			body(n * b / blocks, n * (b + 1) / blocks);
+		} catch (...) {
+			errors[b] = std::current_exception();
+		}
+	};
+	std::vector<std::thread> pool;
+	pool.reserve(blocks);
+	size_t started = 1;
+	try {
+		for (; started < blocks; ++started) pool.emplace_back(run, started);
+	} catch (const std::system_error &) {
+	}
+	run(0);
+	for (size_t b = started; b < blocks; ++b) run(b);
+	for (std::thread &t : pool) t.join();
+	for (const std::exception_ptr &e : errors)
+		if (e) std::rethrow_exception(e);
+}
 
 // ---------------------------------------------------------------- k nearest neighbours
 
@@ -1267,6 +1308,9 @@ std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<st
 
 // ---------------------------------------------------------------- clouds (refine.py)
 
+// Most cells cellNeighbourhood flags in a dense grid (one byte each).
+constexpr long MAX_DENSE_CELLS = 1L << 24;
+
 std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vector<char> &valid,
                                     const std::vector<Vec3> &centres, double radius,
                                     const std::array<Vec3, 2> *bounds)
@@ -1282,16 +1326,32 @@ std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vec
 	for (int d = 0; d < 3; ++d) dims[d] = long(std::floor((hi[d] - lo[d]) / radius)) + 3;
 	auto cell = [&](const Vec3 &p, int d) { return long(std::floor((p[d] - lo[d]) / radius)) + 1; };
 	auto key = [&](long a, long b, long c) { return (a * dims[1] + b) * dims[2] + c; };
+	// the wanted cells: a flag per cell of the grid where it is small enough, else a hash set
+	const double cells = double(dims[0]) * double(dims[1]) * double(dims[2]);
+	const long dense = cells <= double(MAX_DENSE_CELLS) ? long(cells) : 0;
+	std::vector<char> flag(size_t(dense), 0);
 	std::unordered_set<long> wanted;
 	for (const Vec3 &c : centres) {
 		const long a = cell(c, 0), b = cell(c, 1), z = cell(c, 2);
 		for (long i = -1; i <= 1; ++i)
 			for (long j = -1; j <= 1; ++j)
-				for (long k = -1; k <= 1; ++k) wanted.insert(key(a + i, b + j, z + k));
+				for (long k = -1; k <= 1; ++k) {
+					const long at = key(a + i, b + j, z + k);
+					if (dense == 0)
+						wanted.insert(at);
+					else if (at >= 0 && at < dense)
+						flag[size_t(at)] = 1;
+				}
 	}
+	auto isWanted = [&](long at) { return dense == 0 ? wanted.count(at) > 0 : at >= 0 && at < dense && flag[size_t(at)]; };
+	std::vector<char> in(pts.size());
+	inBlocks(pts.size(), [&](size_t begin, size_t end) {
+		for (size_t i = begin; i < end; ++i)
+			in[i] = valid[i] && isWanted(key(cell(pts[i], 0), cell(pts[i], 1), cell(pts[i], 2)));
+	});
 	std::vector<long> out;
 	for (size_t i = 0; i < pts.size(); ++i)
-		if (valid[i] && wanted.count(key(cell(pts[i], 0), cell(pts[i], 1), cell(pts[i], 2)))) out.push_back(long(i));
+		if (in[i]) out.push_back(long(i));
 	return out;
 }
 
@@ -1502,18 +1562,27 @@ std::vector<long> advancing(const std::vector<Vec3> &p, const std::vector<Vec3> 
 	return keep;
 }
 
-// cloud_spacing: the median distance d from a feature to the nearest other point; where
-// DENSITY_SCALE times the median distance to the DENSITY_NEIGHBOURS-th nearest is
-// q d with q > 1, the cloud is irregular and the spacing d q^1.5
-double cloudSpacing(const KdTree &tree, const std::vector<Vec3> &fp, bool &irregular)
+// each feature's distance to the nearest other point (d1) and to the
+// MS_CURVE_DENSITY_NEIGHBOURS-th nearest (dk), on every core
+void densityDistances(const KdTree &tree, const std::vector<Vec3> &fp, std::vector<double> &d1,
+                      std::vector<double> &dk)
 {
 	const size_t k = std::min<size_t>(MS_CURVE_DENSITY_NEIGHBOURS + 1, tree.size());
-	std::vector<double> d1(fp.size()), dk(fp.size());
-	for (size_t i = 0; i < fp.size(); ++i) {
-		const auto hits = tree.query(fp[i], k);
-		d1[i] = std::sqrt(hits[1].first);
-		dk[i] = std::sqrt(hits[k - 1].first);
-	}
+	d1.resize(fp.size());
+	dk.resize(fp.size());
+	inBlocks(fp.size(), [&](size_t begin, size_t end) {
+		for (size_t i = begin; i < end; ++i) {
+			const auto hits = tree.query(fp[i], k);
+			d1[i] = std::sqrt(hits[1].first);
+			dk[i] = std::sqrt(hits[k - 1].first);
+		}
+	});
+}
+
+// cloud_spacing: the median d of the features' d1; where DENSITY_SCALE times the median
+// of their dk is q d with q > 1, the cloud is irregular and the spacing d q^1.5
+double cloudSpacing(const std::vector<double> &d1, const std::vector<double> &dk, bool &irregular)
+{
 	const double nearest = median(d1);
 	const double density = MS_CURVE_DENSITY_SCALE * median(dk);
 	irregular = nearest > 0.0 && density > nearest;
@@ -1522,17 +1591,13 @@ double cloudSpacing(const KdTree &tree, const std::vector<Vec3> &fp, bool &irreg
 	return nearest * (q * std::sqrt(q));
 }
 
-// local_spacings: each feature's own spacing, MS_CURVE_DENSITY_SCALE times its distance to
-// the MS_CURVE_DENSITY_NEIGHBOURS-th nearest point, clipped to 1 to
-// MS_CURVE_MAX_LOCAL_SPACING times the cloud's
-std::vector<double> localSpacings(const KdTree &tree, const std::vector<Vec3> &fp, double spacing)
+// local_spacings: each feature's own spacing, MS_CURVE_DENSITY_SCALE times its dk,
+// clipped to 1 to MS_CURVE_MAX_LOCAL_SPACING times the cloud's
+std::vector<double> localSpacings(const std::vector<double> &dk, double spacing)
 {
-	const size_t k = std::min<size_t>(MS_CURVE_DENSITY_NEIGHBOURS + 1, tree.size());
-	std::vector<double> out(fp.size());
-	for (size_t i = 0; i < fp.size(); ++i) {
-		const double dk = std::sqrt(tree.query(fp[i], k)[k - 1].first);
-		out[i] = std::min(std::max(MS_CURVE_DENSITY_SCALE * dk, spacing), MS_CURVE_MAX_LOCAL_SPACING * spacing);
-	}
+	std::vector<double> out(dk.size());
+	for (size_t i = 0; i < dk.size(); ++i)
+		out[i] = std::min(std::max(MS_CURVE_DENSITY_SCALE * dk[i], spacing), MS_CURVE_MAX_LOCAL_SPACING * spacing);
 	return out;
 }
 
@@ -1543,23 +1608,36 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 {
 	const KdTree fpTree(fp);
 	std::vector<double> d1(fp.size());
-	for (size_t i = 0; i < fp.size(); ++i) d1[i] = std::sqrt(fpTree.query(fp[i], 2)[1].first);
+	inBlocks(fp.size(), [&](size_t begin, size_t end) {
+		for (size_t i = begin; i < end; ++i) d1[i] = std::sqrt(fpTree.query(fp[i], 2)[1].first);
+	});
 	const double featureSpacing = median(d1);
 	std::vector<long> near = cellNeighbourhood(pts, ok, fp, MS_CURVE_CELL_SPACINGS * featureSpacing, bounds);
-	std::stable_sort(near.begin(), near.end(), [&](long a, long b) { return lexLess(pts[a], pts[b]); });
-	std::vector<Vec3> nearPts;
-	std::vector<char> nearFeature;
-	for (long i : near) nearPts.push_back(pts[i]), nearFeature.push_back(mask[i]);
+	// in lexicographic order, ties by index (the points beside their indices: fewer cache misses)
+	std::vector<std::pair<Vec3, long>> byPoint(near.size());
+	for (size_t i = 0; i < near.size(); ++i) byPoint[i] = {pts[near[i]], near[i]};
+	std::sort(byPoint.begin(), byPoint.end(), [](const std::pair<Vec3, long> &a, const std::pair<Vec3, long> &b) {
+		return lexLess(a.first, b.first) || (!lexLess(b.first, a.first) && a.second < b.second);
+	});
+	std::vector<Vec3> nearPts(near.size());
+	std::vector<char> nearFeature(near.size());
+	for (size_t i = 0; i < near.size(); ++i) nearPts[i] = byPoint[i].first, nearFeature[i] = mask[byPoint[i].second];
 	const KdTree tree(nearPts);
-	spacing = cloudSpacing(tree, fp, irregular);
+	std::vector<double> dk;
+	densityDistances(tree, fp, d1, dk);
+	spacing = cloudSpacing(d1, dk, irregular);
 	// cloud_graph, each feature's own spacing (local_spacings) reaching its links
-	const std::vector<double> local = localSpacings(tree, fp, spacing);
+	const std::vector<double> local = localSpacings(dk, spacing);
 	const long n = long(fp.size());
 	const size_t k = std::min<size_t>(MS_CURVE_LINK_NEIGHBOURS + 1, fp.size());
 	const double reach = *std::max_element(local.begin(), local.end());
+	std::vector<std::vector<std::pair<double, long>>> linked(fp.size());
+	inBlocks(fp.size(), [&](size_t begin, size_t end) {
+		for (size_t i = begin; i < end; ++i) linked[i] = fpTree.query(fp[i], k, MS_CURVE_LINK_RADIUS * reach);
+	});
 	std::set<Edge> pairSet;
 	for (long i = 0; i < n; ++i)
-		for (const auto &hit : fpTree.query(fp[i], k, MS_CURVE_LINK_RADIUS * reach))
+		for (const auto &hit : linked[i])
 			if (hit.second != i) pairSet.insert({std::min(i, hit.second), std::max(i, hit.second)});
 	std::vector<Edge> edges;
 	std::vector<double> lengths;
@@ -1574,14 +1652,19 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	for (const Piece &pc : pieces) raw.insert(raw.end(), pc.points.begin(), pc.points.end());
 	const size_t kk = std::min<size_t>(MS_CURVE_REFINE_NEIGHBOURS, tree.size());
 	std::vector<std::vector<long>> nbrs(raw.size());
-	for (size_t i = 0; i < raw.size(); ++i)
-		for (const auto &hit : tree.query(raw[i], kk)) nbrs[i].push_back(hit.second);
+	inBlocks(raw.size(), [&](size_t begin, size_t end) {
+		for (size_t i = begin; i < end; ++i)
+			for (const auto &hit : tree.query(raw[i], kk)) nbrs[i].push_back(hit.second);
+	});
 	const std::vector<Vec3> dirs = batchTangents(pieces, MS_CURVE_RAW_TANGENT_WINDOW * spacing);
 	std::vector<Vec3> moved(raw.size());
 	std::vector<char> fitted(raw.size()), flat(raw.size());
-	for (size_t first = 0; first < raw.size(); first += REFINE_BATCH)
-		planeIntersections(first, std::min(raw.size(), first + REFINE_BATCH), raw, dirs, nbrs, nearPts,
-		                   nearFeature, spacing, math, moved, fitted, flat);
+	// the batches on every core (math's functions may be called from any thread)
+	inBlocks((raw.size() + REFINE_BATCH - 1) / REFINE_BATCH, [&](size_t begin, size_t end) {
+		for (size_t first = begin * REFINE_BATCH; first < std::min(raw.size(), end * REFINE_BATCH); first += REFINE_BATCH)
+			planeIntersections(first, std::min(raw.size(), first + REFINE_BATCH), raw, dirs, nbrs, nearPts,
+			                   nearFeature, spacing, math, moved, fitted, flat);
+	}, 1);
 	std::vector<Piece> out;
 	size_t at = 0;
 	for (const Piece &pc : pieces) {

@@ -6,6 +6,8 @@
 // "Robust mode's arithmetic") is the contract.
 #include "detect.h"
 
+#include "cores.h"
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -21,9 +23,6 @@
 #include <system_error>
 #include <thread>
 
-#ifdef __linux__
-#include <sched.h>
-#endif
 
 namespace sharp {
 namespace {
@@ -100,15 +99,6 @@ private:
 	Clock::time_point since_;
 	std::vector<std::pair<std::string, double>> times_;
 };
-
-// One thread per core this process may use (as _kernels._workers).
-unsigned cores() {
-#ifdef __linux__
-	cpu_set_t set;
-	if (sched_getaffinity(0, sizeof set, &set) == 0) return unsigned(std::max(1, CPU_COUNT(&set)));
-#endif
-	return std::max(1u, std::thread::hardware_concurrency());
-}
 
 // Threads of the calling thread's run (Options::threads, or cores()): set by detect().
 thread_local unsigned runThreads = 1;
