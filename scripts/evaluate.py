@@ -39,6 +39,7 @@ sys.path.insert(0, str(ROOT))
 from evaluation import groundtruth as gt  # noqa: E402
 from evaluation.scoring import score_part  # noqa: E402
 from meshlab_sharp import detect  # noqa: E402
+from meshlab_sharp.io import atomic_write  # noqa: E402
 
 SCORE_KEYS = ("precision", "coverage", "f1", "thickness", "fp_rate")
 
@@ -472,13 +473,6 @@ def markdown(rows: list[dict], summary: dict, checks: list[dict], worse: dict, m
 CAD_SECTION = "## CAD parts with exact truth"
 
 
-def write_atomically(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file beside it."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Command line."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
@@ -547,8 +541,9 @@ def main(argv: list[str] | None = None) -> int:
         old = md.read_text() if md.is_file() else ""
         cad = old.find(CAD_SECTION)  # evaluate_cad.py's section stays as it is
         page = markdown(rows, summary, checks, worse, meta)
-        write_atomically(md, page if cad < 0 else page.rstrip("\n") + "\n\n" + old[cad:])
-        write_atomically(ROOT / "docs" / "evaluation.json", text)
+        page = page if cad < 0 else page.rstrip("\n") + "\n\n" + old[cad:]
+        atomic_write(md, lambda tmp: Path(tmp).write_text(page))
+        atomic_write(ROOT / "docs" / "evaluation.json", lambda tmp: Path(tmp).write_text(text))
         print(f"wrote {md} and docs/evaluation.json")
     return 0
 

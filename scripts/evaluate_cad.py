@@ -33,6 +33,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from meshlab_sharp.io import atomic_write  # noqa: E402
+
 TARGETS = {
     ("clear", "fine_mesh", "f1"): 0.99,
     ("clear", "blue_noise", "f1"): 0.975,
@@ -238,9 +240,7 @@ def write_section(path: Path, section: str) -> None:
     else:
         end = old.find("\n## ", start + len(SECTION))
         new = old[:start] + section + ("" if end < 0 else old[end:])
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(new)
-    os.replace(tmp, path)
+    atomic_write(path, lambda tmp: Path(tmp).write_text(new))
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -315,9 +315,8 @@ def main(argv: list[str] | None = None) -> int:
         "summary": summary,
         "parts": rows,
     }
-    tmp = args.json.with_name(f".{args.json.name}.tmp")
-    tmp.write_text(json.dumps(out, indent=1, default=float) + "\n")
-    os.replace(tmp, args.json)
+    text = json.dumps(out, indent=1, default=float) + "\n"
+    atomic_write(args.json, lambda tmp: Path(tmp).write_text(text))
     if args.markdown is not None:
         figure = None
         if args.figure is not None:
