@@ -22,7 +22,14 @@ import math
 import numpy as np
 import pytest
 import shapes
-from test_spec import spec_face_normals, spec_knn, spec_otsu, spec_pca_normal, spec_rings
+from test_spec import (
+    spec_face_normals,
+    spec_knn,
+    spec_otsu,
+    spec_pca_normal,
+    spec_ring_search,
+    spec_rings,
+)
 
 import meshlab_sharp
 from evaluation import groundtruth
@@ -66,32 +73,6 @@ ACUTE_SCORE, ACUTE_SCORE_MAX = 0.5, 0.8
 CREASE, QUARTILE_FACTOR = math.pi / 9, 4 / 0.3186
 
 
-def _last_found(faces: np.ndarray, n: int, k: int) -> np.ndarray:
-    """Per vertex, the last vertex a breadth-first search within k edges finds, each
-    vertex's neighbours taken in the order its faces list them (face (a, b, c): a gets b,
-    c; b gets a, c; c gets a, b), each once: the last member of its k-ring's list."""
-    adj: list[list[int]] = [[] for _ in range(n)]
-    for a, b, c in faces.tolist():
-        for v, first, second in ((a, b, c), (b, a, c), (c, a, b)):
-            for w in (first, second):
-                if w not in adj[v]:
-                    adj[v].append(w)
-    last = np.empty(n, np.int64)
-    for i in range(n):
-        level, order, head = {i: 0}, [i], 0
-        while head < len(order):
-            u = order[head]
-            head += 1
-            if level[u] == k:
-                continue
-            for w in adj[u]:
-                if w not in level:
-                    level[w] = level[u] + 1
-                    order.append(w)
-        last[i] = order[-1]
-    return last
-
-
 class Reading:
     """Sure and possible answers of the pinned arithmetic on one input.
 
@@ -128,8 +109,9 @@ class Reading:
             side = SIDE
             normals = spec_face_normals(points, faces)
             ring = min(MESH_RING, max(scales))
-            around = compare = spec_rings(faces, n, ring)
-            last_found = _last_found(faces, n, ring)
+            found = spec_ring_search(faces, n, ring)  # a ring list's last: its last found
+            around = compare = [np.array(sorted(f)) for f in found]
+            last_found = [f[-1] for f in found]
             direction = spec_rings(faces, n, max(scales))
             hood_at = lambda k: spec_rings(faces, n, k)  # noqa: E731
         m = len(points)
@@ -211,7 +193,7 @@ class Reading:
 
         def reach2(i: int) -> float:
             """The squared distance from i to the last member of compare[i]: a kNN
-            list's farthest; a ring's last found (``last_found``)."""
+            list's farthest; a ring's last found by its search (``last_found``)."""
             d = points[compare[i][-1] if faces is None else last_found[i]] - points[i]
             return d @ d
 

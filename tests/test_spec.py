@@ -27,16 +27,20 @@ def spec_knn(points: np.ndarray, k: int) -> list[np.ndarray]:
     return [order[i, :k] for i in range(n)]
 
 
-def spec_rings(faces: np.ndarray, n: int, k: int) -> list[np.ndarray]:
-    """Vertices within k edges (breadth-first search)."""
-    adj: list[set[int]] = [set() for _ in range(n)]
-    for a, b, c in faces:
-        adj[a] |= {b, c}
-        adj[b] |= {a, c}
-        adj[c] |= {a, b}
-    rings = []
+def spec_ring_search(faces: np.ndarray, n: int, k: int) -> list[list[int]]:
+    """Per vertex, the vertices within k edges in the order a breadth-first search finds
+    them, each vertex's neighbours taken in the order its faces list them (face (a, b,
+    c): a gets b, c; b gets a, c; c gets a, b), each once."""
+    adj: list[list[int]] = [[] for _ in range(n)]
+    for a, b, c in faces.tolist():
+        for v, first, second in ((a, b, c), (b, a, c), (c, a, b)):
+            for w in (first, second):
+                if w not in adj[v]:
+                    adj[v].append(w)
+    found = []
     for i in range(n):
         seen = {i: 0}
+        order = [i]
         queue = deque([i])
         while queue:
             u = queue.popleft()
@@ -45,9 +49,15 @@ def spec_rings(faces: np.ndarray, n: int, k: int) -> list[np.ndarray]:
             for w in adj[u]:
                 if w not in seen:
                     seen[w] = seen[u] + 1
+                    order.append(w)
                     queue.append(w)
-        rings.append(np.array(sorted(seen)))
-    return rings
+        found.append(order)
+    return found
+
+
+def spec_rings(faces: np.ndarray, n: int, k: int) -> list[np.ndarray]:
+    """Vertices within k edges (breadth-first search), in increasing order."""
+    return [np.array(sorted(order)) for order in spec_ring_search(faces, n, k)]
 
 
 def spec_pca_normal(points: np.ndarray, i: int, nb: np.ndarray, weighting: str) -> np.ndarray:
