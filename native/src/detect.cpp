@@ -712,8 +712,9 @@ void stageDecision(const double *x, Index n, size_t S, const double *lo, const d
 		for (size_t b = 0; b < S * MS_BINS; ++b) counts[b] += counts[size_t(u) * S * MS_BINS + b];
 	if (plan != nullptr)  // robust mode's floors
 		ms_plan_thresholds(plan, otsu ? counts.data() : nullptr, thresholds.data());
-	for (size_t k = 0; k < S && plan == nullptr; ++k)
-		thresholds[k] = ms_stage_threshold(otsu ? &counts[k * MS_BINS] : nullptr, otsu, floor);
+	else
+		for (size_t k = 0; k < S; ++k)
+			thresholds[k] = ms_stage_threshold(otsu ? &counts[k * MS_BINS] : nullptr, otsu, floor);
 	d.feature.assign(n, 0);
 	d.strength.assign(n, 0.0);
 	uint8_t *feature = reinterpret_cast<uint8_t *>(d.feature.data());
