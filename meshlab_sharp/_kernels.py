@@ -164,6 +164,7 @@ _SIGNATURES = {
         + [_c_void_p, _c_void_p, _c_void_p, _c_void_p],
     ),
     "ms_stage_acute_tests": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _int, _f64, _c_void_p]),
+    "ms_stage_curved": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _int, _int, _c_void_p]),
     "ms_stage_isolated": (None, [_c_void_p] * 7 + [_f64, _i64, _i64, _c_void_p]),
     "ms_two_face_edges": (_i64, [_c_void_p, _c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
     "ms_vertex_faces": (_int, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p]),
@@ -1416,6 +1417,7 @@ class _RobustPlan(ctypes.Structure):
         ("thin_cone", _f64),
         ("thin_side", _f64),
         ("thin_between", _int),
+        ("curved_dropped", _int),
     ]
 
 
@@ -1432,7 +1434,8 @@ class RobustPlan:
     score; ``free_below``: the score below which a candidate needs no support (None: every
     candidate needs it); ``thin_cone``: thinning's cone; ``thin_side``: its side rule;
     ``thin_between``: thinning is
-    blocked by the points that are not candidates."""
+    blocked by the points that are not candidates; ``curved_dropped``: the candidates on
+    a curved surface are dropped (:func:`stage_curved`)."""
 
     mesh: bool
     noise: float
@@ -1449,6 +1452,7 @@ class RobustPlan:
     thin_cone: float
     thin_side: float
     thin_between: bool
+    curved_dropped: bool
 
 
 def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) -> RobustPlan:
@@ -1476,6 +1480,7 @@ def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) ->
         thin_cone=c.thin_cone,
         thin_side=c.thin_side,
         thin_between=bool(c.thin_between),
+        curved_dropped=bool(c.curved_dropped),
     )
 
 
@@ -1592,6 +1597,20 @@ def stage_acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: fl
     args = (int(mesh), float(noise), _ptr(tested))
     _lib().ms_stage_acute_tests(_ptr(score), _ptr(mask), 0, len(score), *args)
     return np.flatnonzero(tested)
+
+
+def stage_curved(
+    first: np.ndarray, last: np.ndarray, s_first: int, s_last: int, mask: np.ndarray
+) -> np.ndarray:
+    """``ms_stage_curved``: ``mask`` (m,) bool less the points whose relative distance
+    grows from ``first`` (m,), at the ring ``s_first``, to ``last`` (m,), at the ring
+    ``s_last``, at least as the square root of the ring. Returns (m,) bool, a copy."""
+    first = np.ascontiguousarray(first, dtype=np.float64)
+    last = np.ascontiguousarray(last, dtype=np.float64)
+    out = np.array(mask, dtype=bool)
+    ends = (int(s_first), int(s_last))
+    _lib().ms_stage_curved(_ptr(first), _ptr(last), 0, len(out), *ends, _ptr(out))
+    return out
 
 
 def stage_isolated(

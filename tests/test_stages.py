@@ -9,8 +9,11 @@ import math
 
 import numpy as np
 import pytest
+import shapes
 
+import meshlab_sharp
 from meshlab_sharp import _header, _kernels, robust
+from meshlab_sharp.creases import sharp_vertices
 from meshlab_sharp.reference import detect as reference_sequence
 from meshlab_sharp.reference import robust as reference
 
@@ -100,6 +103,7 @@ def test_plan_known_answers() -> None:
     assert mesh.compare_knn == robust.THIN_RING and mesh.thin_cone == robust.THIN_CONE_COS
     assert noisy.thin_side == robust.THIN_SIDE_NOISY
     assert quiet.thin_side == mesh.thin_side == robust.THIN_SIDE
+    assert mesh.curved_dropped and not quiet.curved_dropped and not noisy.curved_dropped
 
 
 @pytest.mark.parametrize("normalise", [False, True])
@@ -153,6 +157,42 @@ def test_acute_tests_only_on_quiet_clouds() -> None:
     assert len(_kernels.stage_acute_tests(score, mask, False, 0.1)) == 0
     assert len(_kernels.stage_acute_tests(score, mask, True, 0.0)) == 0
     assert list(reference.stage_acute_tests(score, mask, False, 0.0)) == [1, 2]
+
+
+@pytest.mark.parametrize("ends", [(1, 4), (2, 3), (12, 40)])
+def test_curved_stage_equals_reference(ends: tuple[int, int]) -> None:
+    """ms_stage_curved drops the reference's points: a candidate whose relative distance
+    grows at least as the square root of the ring; an exact tie is kept (strict)."""
+    rng = np.random.default_rng(ends[1])
+    first, last = rng.random(500), rng.random(500)
+    first[:3] = last[:3] = 0.0
+    last[3:6] = 0.5
+    first[3:6] = 0.5 * math.sqrt(ends[0] / ends[1])  # about the tie, on either side
+    first[6], last[6] = 0.25, 0.5  # exact: 0.25**2 * 4 == 0.5**2 * 1
+    mask = rng.random(500) < 0.8
+    mask[:7] = True
+    got = _kernels.stage_curved(first, last, *ends, mask)
+    assert got.tolist() == reference.stage_curved(first, last, *ends, mask).tolist()
+    assert not (got & ~mask).any() and (got != mask).any()
+    if ends == (1, 4):
+        assert got[6]
+
+
+def test_a_noisy_meshs_curved_candidates_are_dropped_by_both() -> None:
+    """On a noisy cube's mesh the rule drops candidates at every scale (near the
+    corners, where the third face joins the larger rings): the library's sequence and
+    the numpy reference's give the same features."""
+    vertices, faces = shapes.noisy_mesh(*shapes.cube_grid_mesh(4), 0.2)
+    native = meshlab_sharp.detect(vertices, faces, return_details=True)
+    numpy = meshlab_sharp.detect(vertices, faces, backend="numpy")
+    r = native.distances
+    assert r is not None
+    every = (r >= np.asarray(native.thresholds)[:, None]).all(axis=0)
+    scales = native.scales
+    curved = every & (r[0] * r[0] * scales[-1] < r[-1] * r[-1] * scales[0])
+    edges = np.asarray(sharp_vertices(np.asarray(vertices, np.float64), faces)[0], bool)
+    assert curved.any() and not (native.mask & curved & ~edges).any()
+    assert native.mask.tolist() == numpy.mask.tolist()
 
 
 def test_isolated_stage_equals_reference() -> None:

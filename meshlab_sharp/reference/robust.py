@@ -797,6 +797,23 @@ def stage_acute_tests(score: np.ndarray, mask: np.ndarray, mesh: bool, noise: fl
     return np.flatnonzero(test)
 
 
+def stage_curved(
+    first: np.ndarray, last: np.ndarray, s_first: int, s_last: int, mask: np.ndarray
+) -> np.ndarray:
+    """``mask`` (m,) bool less the points on a curved surface: those whose relative
+    distance grows from ``first`` (m,), at the smallest ring ``s_first``, to ``last``
+    (m,), at the largest ``s_last``, at least as the square root of the ring,
+    ``first * first * s_last < last * last * s_first``. A crease is a wedge, the same
+    at every size, so its relative distance does not grow with the ring; a smooth
+    surface's grows in proportion to the ring's radius (the sagitta over the radius),
+    which on a mesh is in proportion to the ring. The square root is the geometric
+    middle of the two. Returns (m,) bool."""
+    first = np.asarray(first, np.float64)
+    last = np.asarray(last, np.float64)
+    curved = first * first * float(s_last) < last * last * float(s_first)
+    return np.asarray(mask, bool) & ~curved
+
+
 def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) -> RobustPlan:
     """Robust mode's decisions once the first pass has measured the noise ratio ``noise``
     of an input (``mesh`` or a cloud of ``n_kept`` points, isolated ones left out) at the
@@ -829,4 +846,5 @@ def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) ->
         thin_cone=thin_cone(mesh, noise),
         thin_side=thin_side(mesh, noise),
         thin_between=quiet,
+        curved_dropped=bool(mesh),
     )

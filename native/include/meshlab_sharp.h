@@ -598,6 +598,8 @@ typedef struct {
     double thin_side;          /* thinning's side rule (ms_thin_side) */
     int thin_between;          /* thinning is blocked by the points that are not candidates
                                   (a quiet cloud: reference.detect.thin_blockers) */
+    int curved_dropped;        /* candidates on a curved surface are dropped (a mesh:
+                                  ms_stage_curved) */
 } ms_robust_plan_t;
 /* ms_robust_plan: the plan for an input of `mesh`, noise ratio `noise`, n_kept points (the
  * isolated ones left out) and the s given scales (increasing, s <= MS_MAX_SCALES; a cloud's
@@ -623,7 +625,14 @@ void ms_plan_thresholds(const ms_robust_plan_t *plan, const int64_t *counts, dou
  * to counts (s), and v into out (x's layout) when out is not NULL.
  * ms_stage_acute_tests (robust.acute_tests): on a quiet cloud (ms_quiet_cloud),
  * tested[i] = not feature[i] and score[i] in [MS_ACUTE_SCORE, MS_ACUTE_SCORE_MAX); returns
- * how many (0, tested untouched, otherwise). */
+ * how many (0, tested untouched, otherwise).
+ * ms_stage_curved (robust.stage_curved): a mesh's candidates whose relative distance
+ * grows with the ring at least as the square root of the ring, feature[i] = 0 where
+ * feature[i] and first[i] * first[i] * s_last < last[i] * last[i] * s_first (first and
+ * last: the relative distances at the smallest ring s_first and the largest s_last);
+ * returns how many. A crease is a wedge, the same at every size: its relative distance
+ * does not grow; a smooth surface's grows in proportion to the ring's radius, which is
+ * in proportion to the ring. */
 double ms_flat_span(const double *extent);
 void ms_stage_histograms(const double *x, int64_t point_stride, int64_t scale_stride, int s,
                          int64_t begin, int64_t end, const double *lo, const double *hi,
@@ -635,6 +644,8 @@ void ms_stage_decide(const double *x, int64_t point_stride, int64_t scale_stride
                      double *strength, int64_t *counts, double *out);
 int64_t ms_stage_acute_tests(const double *score, const uint8_t *feature, int64_t begin,
                              int64_t end, int mesh, double noise, uint8_t *tested);
+int64_t ms_stage_curved(const double *first, const double *last, int64_t begin, int64_t end,
+                        int s_first, int s_last, uint8_t *feature);
 /* ms_isolated's test of the rows [begin, end) whose values are gathered per row (a tile's
  * points, their nearest anywhere in the cloud): out[r] = 1 when the point a[r] (3; index
  * idx[r] in the lists' order) is not among the kmax nearest of its nearest b[r] (3), whose

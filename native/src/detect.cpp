@@ -1029,6 +1029,9 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	ms_robust_plan(0.0, n, r.scales.data(), int(S), 1, &plan);  // scales checked
 	stageDecision(relative.data(), n, S, nullptr, nullptr, 0.0, plan.otsu != 0, R_MIN, {}, d, r, &plan,
 	              detailRow(d, 0, n));
+	if (plan.curved_dropped)  // the candidates on a curved surface (its relative distance grows with the ring)
+		ms_stage_curved(relative.data(), relative.data() + (S - 1) * size_t(n), 0, n, r.scales.front(),
+		                r.scales.back(), reinterpret_cast<uint8_t *>(d.feature.data()));
 	Buffer<double>().swap(relative);
 	bar.report(85, "support and thinning");
 	std::vector<Index> rows;

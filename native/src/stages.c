@@ -76,6 +76,7 @@ int ms_robust_plan(double noise, int64_t n_kept, const int *scales, int s, int m
     plan->thin_cone = ms_thin_cone(mesh, noise);
     plan->thin_side = ms_thin_side(mesh, noise);
     plan->thin_between = ms_quiet_cloud(mesh, noise);
+    plan->curved_dropped = mesh;
     return 0;
 }
 
@@ -164,6 +165,19 @@ int64_t ms_stage_acute_tests(const double *score, const uint8_t *feature, int64_
         const uint8_t t = !feature[i] && score[i] >= MS_ACUTE_SCORE && score[i] < MS_ACUTE_SCORE_MAX;
         tested[i] = t;
         count += t;
+    }
+    return count;
+}
+
+int64_t ms_stage_curved(const double *first, const double *last, int64_t begin, int64_t end,
+                        int s_first, int s_last, uint8_t *feature) {
+    int64_t count = 0;
+    const double a = (double)s_last, b = (double)s_first;
+    for (int64_t i = begin; i < end; i++) {
+        if (feature[i] && first[i] * first[i] * a < last[i] * last[i] * b) {
+            feature[i] = 0;
+            count++;
+        }
     }
     return count;
 }
