@@ -134,6 +134,11 @@ class Reading:
         sure_f0 = (r >= thresholds[:, None] + EPS_R).all(axis=0)
         maybe_f0 = (r >= thresholds[:, None] - EPS_R).all(axis=0)
         near = (np.abs(r - thresholds[:, None]) < EPS_R).any(axis=0)
+        if faces is not None and len(scales) > 1:  # step 5: less those whose r grows
+            grows = r[-1] * r[-1] * scales[0] - r[0] * r[0] * scales[-1]
+            margin = 2 * EPS_R * max(scales)  # r within EPS_R, r * r * k within this
+            sure_f0 &= grows < -margin
+            maybe_f0 &= grows < margin
         if faces is None and not otsu:  # step 5b: acute tips join the candidates
             sure_tip, maybe_tip = np.zeros(m, bool), np.zeros(m, bool)
             for i in np.flatnonzero(~sure_f0):
