@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -98,6 +99,110 @@ def test_closest_gap_and_classes_of_a_thin_plate(occ):
     cls, reasons = classify(truth, 0.05)
     assert cls == "ambiguous"
     assert reasons == ["features 2.00 spacings apart"]
+
+
+def _chamfered_box(occ, width: float) -> None:
+    """The unit cube with the edge x = y = 1 chamfered ``width`` on both faces."""
+    box = _box(occ, 1, 1, 1)
+    edge = next(
+        c
+        for _, c in gmsh.model.getEntities(1)
+        if np.allclose(gmsh.model.getBoundingBox(1, c), [1, 1, 0, 1, 1, 1], atol=1e-7)
+    )
+    face = int(gmsh.model.getAdjacencies(1, edge)[0][0])
+    occ.chamfer([box], [edge], [face], [width])
+    occ.synchronize()
+
+
+def test_chamfer_narrower_than_3_spacings_is_ambiguous(occ):
+    _chamfered_box(occ, 0.05)
+    truth = brep_truth()
+    # the chamfer's two long edges and its end corners are 0.05 * sqrt(2) apart
+    width = 0.05 * math.sqrt(2)
+    # 11 box edges, the chamfer's 2 long and 2 end edges; 6 box corners, 4 new
+    assert len(truth.sharp_curves) == 15 and len(truth.corners) == 10
+    assert closest_gap(truth, 3 * 0.05) == pytest.approx(width, rel=1e-6)
+    assert classify(truth, 0.05) == ("ambiguous", ["features 1.41 spacings apart"])
+    assert classify(truth, 0.02) == ("clear", [])
+
+
+def _cut_corner_cube(occ, d: float) -> None:
+    """The unit cube less the small tetrahedron of its corner (1, 1, 1) with legs ``d``."""
+    box = _box(occ, 1, 1, 1)
+    apex = [(1, 1, 1), (1 - d, 1, 1), (1, 1 - d, 1), (1, 1, 1 - d)]
+    p = [occ.addPoint(*xyz) for xyz in apex]
+    lines = {
+        (a, b): occ.addLine(p[a], p[b]) for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (2, 3), (3, 1))
+    }
+
+    def loop(*edges: tuple[int, int]) -> int:
+        return occ.addPlaneSurface([occ.addCurveLoop([lines[e] for e in edges])])
+
+    faces = [
+        loop((0, 1), (1, 2), (0, 2)),
+        loop((0, 2), (2, 3), (0, 3)),
+        loop((0, 3), (3, 1), (0, 1)),
+        loop((1, 2), (2, 3), (3, 1)),
+    ]
+    tet = occ.addVolume([occ.addSurfaceLoop(faces)])
+    occ.cut([(3, box)], [(3, tet)])
+    occ.synchronize()
+
+
+def test_two_corners_closer_than_3_spacings_are_separate_features(occ):
+    _cut_corner_cube(occ, 0.05)
+    truth = brep_truth()
+    # the cut makes a triangle of side 0.05 * sqrt(2) whose vertices are corners; the
+    # cube's edges meet it at right angles: only the corners are close
+    side = 0.05 * math.sqrt(2)
+    assert len(truth.corners) == 10
+    assert closest_gap(truth, 3 * 0.05) == pytest.approx(side, rel=1e-6)
+    no_corners = replace(truth, corners=np.zeros((0, 3)))
+    assert closest_gap(no_corners, 3 * 0.05) == math.inf
+    assert classify(truth, 0.05)[0] == "ambiguous"
+    assert classify(truth, 0.02)[0] == "clear"
+
+
+def test_curves_meeting_at_a_sharp_angle_are_separate_features(occ):
+    # a prism on a triangle with a 10-degree tip: its two long rims leave the tip
+    # 10 degrees apart; near it they are closer than 3 spacings at any spacing
+    tan10 = math.tan(math.radians(10))
+    occ.extrude(
+        [(2, occ.addPlaneSurface([occ.addCurveLoop(_triangle(occ, (1, 0), (1, tan10)))]))],
+        0,
+        0,
+        0.5,
+    )
+    occ.synchronize()
+    truth = brep_truth()
+    assert len(truth.sharp_curves) == 9 and len(truth.corners) == 6
+    for spacing in (0.05, 0.01):
+        gap = closest_gap(truth, 3 * spacing)
+        assert gap < 3 * spacing
+        assert classify(truth, spacing)[0] == "ambiguous"
+    # an equilateral triangle: rims 60 degrees apart are one feature near a tip
+    gmsh.clear()
+    occ.extrude(
+        [
+            (
+                2,
+                occ.addPlaneSurface(
+                    [occ.addCurveLoop(_triangle(occ, (1, 0), (0.5, math.sqrt(0.75))))]
+                ),
+            )
+        ],
+        0,
+        0,
+        0.5,
+    )
+    occ.synchronize()
+    assert classify(brep_truth(), 0.05) == ("clear", [])
+
+
+def _triangle(occ, b: tuple[float, float], c: tuple[float, float]) -> list[int]:
+    """The lines of the triangle (0, 0), ``b``, ``c`` in the plane z = 0."""
+    p = [occ.addPoint(x, y, 0) for x, y in ((0, 0), b, c)]
+    return [occ.addLine(p[i], p[(i + 1) % 3]) for i in range(3)]
 
 
 def test_stl_like_box_is_its_8_corners_and_cylinder_24_per_turn(occ):
