@@ -96,6 +96,7 @@ __all__ = [
     "part_names",
     "reference_surface",
     "scan_part",
+    "seen_creases",
     "suite",
     "thin_surface",
     "thin_wall",
@@ -385,7 +386,7 @@ def _subdivide(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarra
     return np.stack([a + t0 * ab, a + t1 * ab], axis=1), sid
 
 
-def visible_edges(
+def seen_creases(
     verts: np.ndarray,
     faces: np.ndarray,
     surface: np.ndarray,
@@ -393,8 +394,8 @@ def visible_edges(
     spacing: np.ndarray,
     *,
     radius: float = 2.0,
-) -> np.ndarray:
-    """The parts of a mesh's sharp edges that a scan saw from both sides.
+) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces of a mesh's sharp edges, and which of them a scan saw from both sides.
 
     The edges are cut into pieces of half the median spacing; a piece is
     seen when each of its two faces has a scan point within ``radius`` times that
@@ -419,13 +420,15 @@ def visible_edges(
 
     Returns
     -------
-    (p, 2, 3) float64
-        The seen pieces of the sharp edges.
+    pieces : (p, 2, 3) float64
+        The pieces of the sharp edges.
+    seen : (p,) bool
+        The pieces seen from both sides.
     """
     v = np.asarray(verts, np.float64)
     ends, fa, fb, fn = crease_edges(v, np.asarray(faces, np.int64), CREASE_ANGLE)
     if len(ends) == 0 or len(surface) == 0:
-        return np.zeros((0, 2, 3))
+        return np.zeros((0, 2, 3)), np.zeros(0, bool)
     spacing = np.asarray(spacing, np.float64)
     pieces, sid = _subdivide(v[ends], float(np.median(spacing)) / 2)
     mid = pieces.mean(axis=1)
@@ -438,7 +441,27 @@ def visible_edges(
     c30 = math.cos(math.radians(30.0))
     side_a = np.bincount(pid[near & (ca > c30) & (ca > cb)], minlength=len(mid)) > 0
     side_b = np.bincount(pid[near & (cb > c30) & (cb > ca)], minlength=len(mid)) > 0
-    return pieces[side_a & side_b]
+    return pieces, side_a & side_b
+
+
+def visible_edges(
+    verts: np.ndarray,
+    faces: np.ndarray,
+    surface: np.ndarray,
+    normals: np.ndarray,
+    spacing: np.ndarray,
+    *,
+    radius: float = 2.0,
+) -> np.ndarray:
+    """The parts of a mesh's sharp edges that a scan saw from both sides
+    (:func:`seen_creases`'s seen pieces; same parameters).
+
+    Returns
+    -------
+    (p, 2, 3) float64
+    """
+    pieces, seen = seen_creases(verts, faces, surface, normals, spacing, radius=radius)
+    return pieces[seen]
 
 
 def scan_part(

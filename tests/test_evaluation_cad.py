@@ -11,11 +11,17 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 gmsh = pytest.importorskip("gmsh")
 
-from evaluation.cad.inputs import gmsh_mesh, make_inputs  # noqa: E402
-from evaluation.cad.run import classify, curve_scores, evaluate_part  # noqa: E402
+from evaluation.cad.inputs import _seen_pieces, gmsh_mesh, make_inputs  # noqa: E402
+from evaluation.cad.run import (  # noqa: E402
+    classify,
+    curve_scores,
+    evaluate_part,
+    seen_corners,
+)
 from evaluation.cad.sources import PARTS  # noqa: E402
 from evaluation.cad.truth import brep_truth, closest_gap  # noqa: E402
 
@@ -240,6 +246,50 @@ def test_curve_scores_known_answer(occ):
     assert part["precision"] == pytest.approx(12 / 13, abs=0.01)
     assert part["count_ratio"] == pytest.approx(5 / 12)
     assert part["corners_found"] == 0.0 and part["corners_hit"] == 0
+
+
+def test_curve_scores_on_the_seen_truth(occ):
+    _box(occ)
+    truth = brep_truth()
+    ends = np.array([[x, y, z] for x in (0, 1) for y in (0, 2) for z in (0, 3)], np.float64)
+    edges = [(a, b) for a in ends for b in ends if (a < b).sum() == 1 and (a <= b).all()]
+    exact = [_curve(e) for e in edges]
+    seen = np.ones(len(truth.segments), bool)
+    assert len(seen_corners(truth, seen)) == 8
+    assert curve_scores(exact, ends, truth, 0.05, seen=seen) == curve_scores(
+        exact, ends, truth, 0.05
+    )
+    # seen: the four edges along z and two edges of the top face z = 3, those on x = 0
+    # and y = 0; of the top corners only (0, 0, 3) has three seen curves
+    mid = truth.segments.mean(axis=1)
+    seen = np.isclose(mid[:, 2], 3) & ~np.isclose(mid[:, 0], 1) & ~np.isclose(mid[:, 1], 2)
+    seen |= ~np.isclose(mid[:, 2], 0) & ~np.isclose(mid[:, 2], 3)
+    assert {tuple(c) for c in seen_corners(truth, seen)} == {(0.0, 0.0, 3.0)}
+    along_z = [_curve(e) for e in edges if e[1][2] - e[0][2] == 3]
+    s = curve_scores(along_z, np.zeros((0, 3)), truth, 0.05, seen=seen)
+    # 12 of the 15 seen length covered, and 1.5 spacings at both ends of the 2 others
+    assert s["coverage"] == pytest.approx((12 + 2 * 2 * 1.5 * 0.05) / 15, abs=0.002)
+    assert s["precision"] == 1.0
+    assert s["count_ratio"] == pytest.approx(4 / 6)
+    assert s["n_truth_corners"] == 1 and s["corners_hit"] == 0
+
+
+def test_seen_pieces_are_matched_on_their_own_curve(occ):
+    _box(occ)
+    truth = brep_truth()
+    edges, curve = truth.segments, truth.segment_curve
+    # the scan saw the mesh creases of the four edges along z only
+    along_z = np.isclose(
+        edges[:, 1, 2] - edges[:, 0, 2], np.linalg.norm(edges[:, 1] - edges[:, 0], axis=1)
+    )
+    near = _seen_pieces(edges, curve, edges, along_z, 0.05)
+    assert np.array_equal(near, along_z)
+    # matched on any curve, the other edges' pieces within half a spacing of a corner
+    # were seen
+    stubs = _seen_pieces(edges, np.zeros(len(edges), np.int64), edges, along_z, 0.05)
+    extra = edges[stubs & ~along_z].mean(axis=1)
+    assert len(extra) > 16
+    assert cKDTree(truth.corners).query(extra)[0].max() <= 0.025
 
 
 def test_inputs_of_a_box(occ):
