@@ -100,7 +100,6 @@ __all__ = [
     "suite",
     "thin_surface",
     "thin_wall",
-    "visible_edges",
     "weld",
 ]
 
@@ -444,26 +443,6 @@ def seen_creases(
     return pieces, side_a & side_b
 
 
-def visible_edges(
-    verts: np.ndarray,
-    faces: np.ndarray,
-    surface: np.ndarray,
-    normals: np.ndarray,
-    spacing: np.ndarray,
-    *,
-    radius: float = 2.0,
-) -> np.ndarray:
-    """The parts of a mesh's sharp edges that a scan saw from both sides
-    (:func:`seen_creases`'s seen pieces; same parameters).
-
-    Returns
-    -------
-    (p, 2, 3) float64
-    """
-    pieces, seen = seen_creases(verts, faces, surface, normals, spacing, radius=radius)
-    return pieces[seen]
-
-
 def scan_part(
     name: str, *, n_points: int = DEFAULT_POINTS, seed: int = 0, noise: float = SCAN_NOISE
 ) -> SamplePart:
@@ -475,13 +454,14 @@ def scan_part(
     point's spacing from the local density (``evaluation.density_spacing``: where views
     overlap, nearest-neighbour distances are no measure of the gaps), used for scoring;
     ``extra["visible_edges"]`` the
-    pieces of the sharp edges seen from both sides (``visible_edges``): coverage is
+    pieces of the sharp edges seen from both sides (:func:`seen_creases`): coverage is
     measured on those only, precision against all the edges.
     """
     verts, faces, edges = reference_surface(name)
     res = scan(verts, faces, scanner_positions(verts), n_points=n_points, noise=noise, seed=seed)
     pts = float32_rounded(res.points)
     local = density_spacing(pts)
+    pieces, seen = seen_creases(verts, faces, res.surface, res.normals, local)
     return SamplePart(
         name=name,
         vertices=pts,
@@ -495,7 +475,7 @@ def scan_part(
         extra={
             "reference": (verts, faces),
             "local_spacing": local,
-            "visible_edges": visible_edges(verts, faces, res.surface, res.normals, local),
+            "visible_edges": pieces[seen],
             "view": res.view,
         },
     )
