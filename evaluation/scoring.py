@@ -19,7 +19,8 @@ With no truth segments (smooth parts), precision, coverage, F1 and thickness are
 
 A simulated scan measures coverage on the edges it saw (``cover``), precision against
 all the edges: a detection on a true edge is right even where the scan did not see
-enough of it to count it as findable.
+enough of it to count it as findable. Its curves likewise (``evaluate_curves``'s
+``cover``): coverage, the truth curves counted and their corners on the seen edges.
 
 **CAD tessellations** (long thin triangles, vertices only where faces meet) are scored
 per vertex (``evaluate_vertices``): a vertex is a true feature when it lies on an exact
