@@ -96,10 +96,10 @@ __all__ = [
     "part_names",
     "reference_surface",
     "scan_part",
+    "seen_creases",
     "suite",
     "thin_surface",
     "thin_wall",
-    "visible_edges",
     "weld",
 ]
 
@@ -385,7 +385,7 @@ def _subdivide(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarra
     return np.stack([a + t0 * ab, a + t1 * ab], axis=1), sid
 
 
-def visible_edges(
+def seen_creases(
     verts: np.ndarray,
     faces: np.ndarray,
     surface: np.ndarray,
@@ -393,8 +393,8 @@ def visible_edges(
     spacing: np.ndarray,
     *,
     radius: float = 2.0,
-) -> np.ndarray:
-    """The parts of a mesh's sharp edges that a scan saw from both sides.
+) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces of a mesh's sharp edges, and which of them a scan saw from both sides.
 
     The edges are cut into pieces of half the median spacing; a piece is
     seen when each of its two faces has a scan point within ``radius`` times that
@@ -419,13 +419,15 @@ def visible_edges(
 
     Returns
     -------
-    (p, 2, 3) float64
-        The seen pieces of the sharp edges.
+    pieces : (p, 2, 3) float64
+        The pieces of the sharp edges.
+    seen : (p,) bool
+        The pieces seen from both sides.
     """
     v = np.asarray(verts, np.float64)
     ends, fa, fb, fn = crease_edges(v, np.asarray(faces, np.int64), CREASE_ANGLE)
     if len(ends) == 0 or len(surface) == 0:
-        return np.zeros((0, 2, 3))
+        return np.zeros((0, 2, 3)), np.zeros(0, bool)
     spacing = np.asarray(spacing, np.float64)
     pieces, sid = _subdivide(v[ends], float(np.median(spacing)) / 2)
     mid = pieces.mean(axis=1)
@@ -438,7 +440,7 @@ def visible_edges(
     c30 = math.cos(math.radians(30.0))
     side_a = np.bincount(pid[near & (ca > c30) & (ca > cb)], minlength=len(mid)) > 0
     side_b = np.bincount(pid[near & (cb > c30) & (cb > ca)], minlength=len(mid)) > 0
-    return pieces[side_a & side_b]
+    return pieces, side_a & side_b
 
 
 def scan_part(
@@ -452,13 +454,14 @@ def scan_part(
     point's spacing from the local density (``evaluation.density_spacing``: where views
     overlap, nearest-neighbour distances are no measure of the gaps), used for scoring;
     ``extra["visible_edges"]`` the
-    pieces of the sharp edges seen from both sides (``visible_edges``): coverage is
+    pieces of the sharp edges seen from both sides (:func:`seen_creases`): coverage is
     measured on those only, precision against all the edges.
     """
     verts, faces, edges = reference_surface(name)
     res = scan(verts, faces, scanner_positions(verts), n_points=n_points, noise=noise, seed=seed)
     pts = float32_rounded(res.points)
     local = density_spacing(pts)
+    pieces, seen = seen_creases(verts, faces, res.surface, res.normals, local)
     return SamplePart(
         name=name,
         vertices=pts,
@@ -472,7 +475,7 @@ def scan_part(
         extra={
             "reference": (verts, faces),
             "local_spacing": local,
-            "visible_edges": visible_edges(verts, faces, res.surface, res.normals, local),
+            "visible_edges": pieces[seen],
             "view": res.view,
         },
     )

@@ -19,7 +19,8 @@ With no truth segments (smooth parts), precision, coverage, F1 and thickness are
 
 A simulated scan measures coverage on the edges it saw (``cover``), precision against
 all the edges: a detection on a true edge is right even where the scan did not see
-enough of it to count it as findable.
+enough of it to count it as findable. Its curves likewise (``evaluate_curves``'s
+``cover``): coverage, the truth curves counted and their corners on the seen edges.
 
 **CAD tessellations** (long thin triangles, vertices only where faces meet) are scored
 per vertex (``evaluate_vertices``): a vertex is a true feature when it lies on an exact
@@ -429,6 +430,8 @@ def evaluate_curves(
     corners: np.ndarray,
     segments: np.ndarray,
     spacing: float,
+    *,
+    cover: np.ndarray | None = None,
 ) -> CurveScores:
     """Score feature curves against exact edge segments.
 
@@ -440,6 +443,10 @@ def evaluate_curves(
     - **corners_found**: share of the exact corners with a corner within
       ``2 * spacing`` (NaN when the part has none).
 
+    With ``cover``, coverage, count ratio and corners are measured on those segments
+    (for a scan, the pieces of the edges it saw, as :func:`evaluate`'s ``cover``);
+    precision and RMS on all of ``segments``.
+
     Parameters
     ----------
     curves : list of Curve
@@ -450,13 +457,17 @@ def evaluate_curves(
         Exact sharp edges (``SamplePart.edges``).
     spacing : float
         Point spacing (``SamplePart.spacing``).
+    cover : (c, 2, 3) float, optional
+        The segments whose coverage, curves and corners are measured (default
+        ``segments``).
 
     Returns
     -------
     CurveScores
     """
     seg = np.asarray(segments, np.float64).reshape(-1, 2, 3)
-    n_truth, truth_corners = truth_curves(seg)
+    cov_seg = seg if cover is None else np.asarray(cover, np.float64).reshape(-1, 2, 3)
+    n_truth, truth_corners = truth_curves(cov_seg)
     pieces = [
         np.stack([c.points, np.roll(c.points, -1, axis=0)], axis=1)[
             : len(c.points) if c.closed else len(c.points) - 1
@@ -474,12 +485,12 @@ def evaluate_curves(
         rms = float(np.sqrt(np.mean((distance_to_segments(verts, seg, step=step) / spacing) ** 2)))
     else:
         precision, rms = nan, nan
-    if len(seg) and len(curve_seg):
-        samples, piece, _ = sample_segments(seg, spacing / 8)
+    if len(cov_seg) and len(curve_seg):
+        samples, piece, _ = sample_segments(cov_seg, spacing / 8)
         covered = distance_to_segments(samples, curve_seg, step=step) <= 1.5 * spacing
         coverage = float(piece[covered].sum() / piece.sum())
     else:
-        coverage = 0.0 if len(seg) else nan
+        coverage = 0.0 if len(cov_seg) else nan
     c = np.asarray(corners, np.float64).reshape(-1, 3)
     if len(truth_corners):
         found = (

@@ -197,9 +197,11 @@ def markdown(out: dict, figure: str | None) -> str:
         "degrees or more; a curve with one face (a seam) never is; a corner is a vertex of 3 "
         "or more sharp curves. A mesh's own dihedral angles are never used. **Ambiguous** "
         "parts have an angle between 15 and 30 degrees on a curve, or two separate sharp "
-        "features closer than 3 blue-noise spacings; **filleted** parts have no sharp curve "
-        "(their score is the share of points flagged). They are reported apart, never "
-        "dropped.",
+        "features closer than 3 blue-noise spacings: two corners, or two points of the "
+        "sharp curves whose way along the sharp curves is more than twice their distance "
+        "(curves that do not meet or meet only far away, or meet at a sharp angle; a curve "
+        "that comes back near itself). **Filleted** parts have no sharp curve (their score "
+        "is the share of points flagged). They are reported apart, never dropped.",
         "",
         "**Inputs** (`evaluation/cad/inputs.py`): *fine_mesh*: gmsh's Frontal-Delaunay mesh "
         "of about n vertices, refined to 48 elements per turn on curved surfaces (B-rep "
@@ -207,11 +209,16 @@ def markdown(out: dict, figure: str | None) -> str:
         "(long thin triangles); *blue_noise*: Poisson-disk points on the fine mesh; "
         "*noise25*: the same with normal noise of 25 % of the spacing; *iid*: independent "
         "uniform points; *scan*: the simulated scanner of `evaluation/scan.py` around the "
-        "fine mesh (coverage on the edges it saw). **Scores**: detection per point "
-        "(`evaluation.scoring.score_part`: precision within 1 spacing, coverage within 1.5); "
-        "curves by `evaluation.scoring.evaluate_curves` (the STL-like tessellation at the "
-        "blue-noise spacing), corners within 2 spacings of the B-rep corners. Means over "
-        "the parts of a class; count ratio: median; corners: pooled. ✗: a target missed.",
+        "fine mesh. **Scores**: detection per point (`evaluation.scoring.score_part`: "
+        "precision within 1 spacing, coverage within 1.5); curves by "
+        "`evaluation.scoring.evaluate_curves` (the STL-like tessellation at the blue-noise "
+        "spacing), corners within 2 spacings of the B-rep corners. On the scan, coverage, "
+        "count ratio and corners are measured on the truth the scanner saw, as detection "
+        "coverage is: a piece of an exact edge is seen when a piece of the mesh's creases "
+        "on the same curve with scan points on both sides lies within half a spacing of "
+        "it, a corner when the seen pieces of 3 or more of its sharp curves end at it; "
+        "precision against all the edges. Means over the parts of a class; count ratio: "
+        "median; corners: pooled. ✗: a target missed.",
         "",
         table(out["summary"]),
         "",

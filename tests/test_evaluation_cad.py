@@ -5,16 +5,23 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 gmsh = pytest.importorskip("gmsh")
 
-from evaluation.cad.inputs import gmsh_mesh, make_inputs  # noqa: E402
-from evaluation.cad.run import classify, curve_scores, evaluate_part  # noqa: E402
+from evaluation.cad.inputs import _seen_pieces, gmsh_mesh, make_inputs  # noqa: E402
+from evaluation.cad.run import (  # noqa: E402
+    classify,
+    curve_scores,
+    evaluate_part,
+    seen_corners,
+)
 from evaluation.cad.sources import PARTS  # noqa: E402
 from evaluation.cad.truth import brep_truth, closest_gap  # noqa: E402
 
@@ -100,6 +107,110 @@ def test_closest_gap_and_classes_of_a_thin_plate(occ):
     assert reasons == ["features 2.00 spacings apart"]
 
 
+def _chamfered_box(occ, width: float) -> None:
+    """The unit cube with the edge x = y = 1 chamfered ``width`` on both faces."""
+    box = _box(occ, 1, 1, 1)
+    edge = next(
+        c
+        for _, c in gmsh.model.getEntities(1)
+        if np.allclose(gmsh.model.getBoundingBox(1, c), [1, 1, 0, 1, 1, 1], atol=1e-7)
+    )
+    face = int(gmsh.model.getAdjacencies(1, edge)[0][0])
+    occ.chamfer([box], [edge], [face], [width])
+    occ.synchronize()
+
+
+def test_chamfer_narrower_than_3_spacings_is_ambiguous(occ):
+    _chamfered_box(occ, 0.05)
+    truth = brep_truth()
+    # the chamfer's two long edges and its end corners are 0.05 * sqrt(2) apart
+    width = 0.05 * math.sqrt(2)
+    # 11 box edges, the chamfer's 2 long and 2 end edges; 6 box corners, 4 new
+    assert len(truth.sharp_curves) == 15 and len(truth.corners) == 10
+    assert closest_gap(truth, 3 * 0.05) == pytest.approx(width, rel=1e-6)
+    assert classify(truth, 0.05) == ("ambiguous", ["features 1.41 spacings apart"])
+    assert classify(truth, 0.02) == ("clear", [])
+
+
+def _cut_corner_cube(occ, d: float) -> None:
+    """The unit cube less the small tetrahedron of its corner (1, 1, 1) with legs ``d``."""
+    box = _box(occ, 1, 1, 1)
+    apex = [(1, 1, 1), (1 - d, 1, 1), (1, 1 - d, 1), (1, 1, 1 - d)]
+    p = [occ.addPoint(*xyz) for xyz in apex]
+    lines = {
+        (a, b): occ.addLine(p[a], p[b]) for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (2, 3), (3, 1))
+    }
+
+    def loop(*edges: tuple[int, int]) -> int:
+        return occ.addPlaneSurface([occ.addCurveLoop([lines[e] for e in edges])])
+
+    faces = [
+        loop((0, 1), (1, 2), (0, 2)),
+        loop((0, 2), (2, 3), (0, 3)),
+        loop((0, 3), (3, 1), (0, 1)),
+        loop((1, 2), (2, 3), (3, 1)),
+    ]
+    tet = occ.addVolume([occ.addSurfaceLoop(faces)])
+    occ.cut([(3, box)], [(3, tet)])
+    occ.synchronize()
+
+
+def test_two_corners_closer_than_3_spacings_are_separate_features(occ):
+    _cut_corner_cube(occ, 0.05)
+    truth = brep_truth()
+    # the cut makes a triangle of side 0.05 * sqrt(2) whose vertices are corners; the
+    # cube's edges meet it at right angles: only the corners are close
+    side = 0.05 * math.sqrt(2)
+    assert len(truth.corners) == 10
+    assert closest_gap(truth, 3 * 0.05) == pytest.approx(side, rel=1e-6)
+    no_corners = replace(truth, corners=np.zeros((0, 3)))
+    assert closest_gap(no_corners, 3 * 0.05) == math.inf
+    assert classify(truth, 0.05)[0] == "ambiguous"
+    assert classify(truth, 0.02)[0] == "clear"
+
+
+def test_curves_meeting_at_a_sharp_angle_are_separate_features(occ):
+    # a prism on a triangle with a 10-degree tip: its two long rims leave the tip
+    # 10 degrees apart; near it they are closer than 3 spacings at any spacing
+    tan10 = math.tan(math.radians(10))
+    occ.extrude(
+        [(2, occ.addPlaneSurface([occ.addCurveLoop(_triangle(occ, (1, 0), (1, tan10)))]))],
+        0,
+        0,
+        0.5,
+    )
+    occ.synchronize()
+    truth = brep_truth()
+    assert len(truth.sharp_curves) == 9 and len(truth.corners) == 6
+    for spacing in (0.05, 0.01):
+        gap = closest_gap(truth, 3 * spacing)
+        assert gap < 3 * spacing
+        assert classify(truth, spacing)[0] == "ambiguous"
+    # an equilateral triangle: rims 60 degrees apart are one feature near a tip
+    gmsh.clear()
+    occ.extrude(
+        [
+            (
+                2,
+                occ.addPlaneSurface(
+                    [occ.addCurveLoop(_triangle(occ, (1, 0), (0.5, math.sqrt(0.75))))]
+                ),
+            )
+        ],
+        0,
+        0,
+        0.5,
+    )
+    occ.synchronize()
+    assert classify(brep_truth(), 0.05) == ("clear", [])
+
+
+def _triangle(occ, b: tuple[float, float], c: tuple[float, float]) -> list[int]:
+    """The lines of the triangle (0, 0), ``b``, ``c`` in the plane z = 0."""
+    p = [occ.addPoint(x, y, 0) for x, y in ((0, 0), b, c)]
+    return [occ.addLine(p[i], p[(i + 1) % 3]) for i in range(3)]
+
+
 def test_stl_like_box_is_its_8_corners_and_cylinder_24_per_turn(occ):
     _box(occ)
     verts, faces = gmsh_mesh(10.0, 24, extend=False)
@@ -135,6 +246,50 @@ def test_curve_scores_known_answer(occ):
     assert part["precision"] == pytest.approx(12 / 13, abs=0.01)
     assert part["count_ratio"] == pytest.approx(5 / 12)
     assert part["corners_found"] == 0.0 and part["corners_hit"] == 0
+
+
+def test_curve_scores_on_the_seen_truth(occ):
+    _box(occ)
+    truth = brep_truth()
+    ends = np.array([[x, y, z] for x in (0, 1) for y in (0, 2) for z in (0, 3)], np.float64)
+    edges = [(a, b) for a in ends for b in ends if (a < b).sum() == 1 and (a <= b).all()]
+    exact = [_curve(e) for e in edges]
+    seen = np.ones(len(truth.segments), bool)
+    assert len(seen_corners(truth, seen)) == 8
+    assert curve_scores(exact, ends, truth, 0.05, seen=seen) == curve_scores(
+        exact, ends, truth, 0.05
+    )
+    # seen: the four edges along z and two edges of the top face z = 3, those on x = 0
+    # and y = 0; of the top corners only (0, 0, 3) has three seen curves
+    mid = truth.segments.mean(axis=1)
+    seen = np.isclose(mid[:, 2], 3) & ~np.isclose(mid[:, 0], 1) & ~np.isclose(mid[:, 1], 2)
+    seen |= ~np.isclose(mid[:, 2], 0) & ~np.isclose(mid[:, 2], 3)
+    assert {tuple(c) for c in seen_corners(truth, seen)} == {(0.0, 0.0, 3.0)}
+    along_z = [_curve(e) for e in edges if e[1][2] - e[0][2] == 3]
+    s = curve_scores(along_z, np.zeros((0, 3)), truth, 0.05, seen=seen)
+    # 12 of the 15 seen length covered, and 1.5 spacings at both ends of the 2 others
+    assert s["coverage"] == pytest.approx((12 + 2 * 2 * 1.5 * 0.05) / 15, abs=0.002)
+    assert s["precision"] == 1.0
+    assert s["count_ratio"] == pytest.approx(4 / 6)
+    assert s["n_truth_corners"] == 1 and s["corners_hit"] == 0
+
+
+def test_seen_pieces_are_matched_on_their_own_curve(occ):
+    _box(occ)
+    truth = brep_truth()
+    edges, curve = truth.segments, truth.segment_curve
+    # the scan saw the mesh creases of the four edges along z only
+    along_z = np.isclose(
+        edges[:, 1, 2] - edges[:, 0, 2], np.linalg.norm(edges[:, 1] - edges[:, 0], axis=1)
+    )
+    near = _seen_pieces(edges, curve, edges, along_z, 0.05)
+    assert np.array_equal(near, along_z)
+    # matched on any curve, the other edges' pieces within half a spacing of a corner
+    # were seen
+    stubs = _seen_pieces(edges, np.zeros(len(edges), np.int64), edges, along_z, 0.05)
+    extra = edges[stubs & ~along_z].mean(axis=1)
+    assert len(extra) > 16
+    assert cKDTree(truth.corners).query(extra)[0].max() <= 0.025
 
 
 def test_inputs_of_a_box(occ):

@@ -9,7 +9,13 @@
 - **blue noise**: Poisson-disk points (``meshlab_sharp.parts``' sampler) on the fine
   mesh; **noise 25 %**: the same moved along the true normal by N(0, (0.25 s)^2);
   **iid**: points drawn independently, uniform over the area;
-- **scan**: ``evaluation.scan`` from four positions around the fine mesh.
+- **scan**: ``evaluation.scan`` from four positions around the fine mesh. A piece of
+  the exact edges is **seen** when a piece of the mesh's creases with scan points on
+  both sides (``evaluation.groundtruth.seen_creases``) lies within half a spacing of
+  its midpoint, on the same B-rep curve (a crease piece is on the curve of the exact
+  piece nearest it; the end of a curve that was not seen is not seen through its
+  neighbour's crease); ``extra["visible_edges"]`` holds the seen pieces and
+  ``extra["seen"]`` marks them among the exact edges.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from evaluation.groundtruth import (
     SCAN_NOISE,
@@ -24,11 +31,11 @@ from evaluation.groundtruth import (
     add_noise,
     expected_spacing,
     iid_points,
-    visible_edges,
+    seen_creases,
     weld,
 )
 from evaluation.scan import scan, scanner_positions
-from evaluation.scoring import density_spacing, distance_to_segments
+from evaluation.scoring import density_spacing, sample_segments
 from meshlab_sharp.parts import float32_rounded, mesh_spacing, sample_surface, vertex_normals
 
 __all__ = [
@@ -123,8 +130,49 @@ def _part(
     )
 
 
+def _seen_pieces(
+    edges: np.ndarray, curve: np.ndarray, pieces: np.ndarray, seen: np.ndarray, spacing: float
+) -> np.ndarray:
+    """Which pieces of the exact edges a scan saw: those within half a spacing of a seen
+    piece of the mesh's creases on the same curve (a crease piece is on the curve of
+    the exact piece nearest it).
+
+    Parameters
+    ----------
+    edges : (e, 2, 3) float
+        The exact edges' pieces.
+    curve : (e,) int
+        The curve of each.
+    pieces : (p, 2, 3) float, seen : (p,) bool
+        ``evaluation.groundtruth.seen_creases``.
+    spacing : float
+
+    Returns
+    -------
+    (e,) bool
+    """
+    near = np.zeros(len(edges), bool)
+    if not np.any(seen) or len(edges) == 0:
+        return near
+    exact, _, sid = sample_segments(edges, spacing / 8)
+    crease, _, _ = sample_segments(pieces[seen], spacing / 8)
+    crease_curve = curve[sid[cKDTree(exact).query(crease)[1]]]
+    pairs = cKDTree(edges.mean(axis=1)).sparse_distance_matrix(
+        cKDTree(crease), spacing / 2, output_type="ndarray"
+    )
+    i, j = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    near[i[curve[i] == crease_curve[j]]] = True
+    return near
+
+
 def make_inputs(
-    name: str, edges: np.ndarray, n: int, *, seed: int = 0, which: tuple[str, ...] = INPUTS
+    name: str,
+    edges: np.ndarray,
+    n: int,
+    *,
+    seed: int = 0,
+    which: tuple[str, ...] = INPUTS,
+    curve: np.ndarray | None = None,
 ) -> dict[str, SamplePart]:
     """The inputs of the part loaded in gmsh.
 
@@ -138,12 +186,18 @@ def make_inputs(
     seed : int
     which : tuple of str
         Names from :data:`INPUTS`.
+    curve : (e,) int, optional
+        The B-rep curve of each piece of ``edges`` (``BrepTruth.segment_curve``): the
+        scan's seen pieces are matched to creases of their own curve (default: one
+        curve).
 
     Returns
     -------
     dict of str to SamplePart
         ``stl_like``'s ``spacing`` is the blue-noise spacing (its curves are scored at
-        the clouds' tolerance); ``fine_mesh``'s is its mean edge length.
+        the clouds' tolerance); ``fine_mesh``'s is its mean edge length; ``scan``'s is
+        its mean local spacing, with ``extra`` ``local_spacing``, ``visible_edges`` and
+        ``seen`` (the module's docstring).
     """
     area = surface_area()
     h = expected_spacing(area, n, "mesh")
@@ -166,14 +220,9 @@ def make_inputs(
     if "scan" in which:
         res = scan(fv, ff, scanner_positions(fv), n_points=n, noise=SCAN_NOISE, seed=seed + 3)
         local = density_spacing(float32_rounded(res.points))
-        seen = visible_edges(fv, ff, res.surface, res.normals, local)
-        # the exact edges' pieces the scan saw: those near a seen crease of the mesh
-        mid = edges.mean(axis=1)
-        near = (
-            distance_to_segments(mid, seen, step=s / 4) <= s / 2
-            if len(seen)
-            else np.zeros(len(mid), bool)
-        )
+        creases = seen_creases(fv, ff, res.surface, res.normals, local)
+        curves = np.zeros(len(edges), np.int64) if curve is None else np.asarray(curve)
+        near = _seen_pieces(edges, curves, *creases, s)
         out["scan"] = _part(
             name,
             res.points,
@@ -184,6 +233,7 @@ def make_inputs(
             ref,
             local_spacing=local,
             visible_edges=edges[near],
+            seen=near,
         )
     if "stl_like" in which:
         diag = math.dist(fv.min(axis=0), fv.max(axis=0))

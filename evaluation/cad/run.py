@@ -6,6 +6,10 @@
 - **curves** (``detect(..., curves=True)``) by ``evaluation.scoring.evaluate_curves``'s
   precision, coverage and count ratio, and corners found against the B-rep corners
   (vertices of three or more sharp curves) within two spacings;
+- on a **scan**, detection coverage, curve coverage, count ratio and corners are
+  measured on the truth the scanner saw (``evaluation.cad.inputs``: the seen pieces of
+  the exact edges); a corner is seen when the seen pieces of three or more of its
+  sharp curves end at it. Precision is measured against all the exact edges;
 - **parts** are *clear*, *ambiguous* (an angle between 15 and 30 degrees somewhere on
   a curve, or two separate sharp features closer than 3 blue-noise spacings) or
   *filleted* (no sharp curve: the score is the share of points flagged).
@@ -29,7 +33,15 @@ from .inputs import INPUTS, make_inputs, surface_area
 from .sources import CadSource, load
 from .truth import CLOSE_SPACINGS, BrepTruth, brep_truth, closest_gap
 
-__all__ = ["CLASSES", "classify", "curve_scores", "evaluate_part", "score_input", "summarise"]
+__all__ = [
+    "CLASSES",
+    "classify",
+    "curve_scores",
+    "evaluate_part",
+    "score_input",
+    "seen_corners",
+    "summarise",
+]
 
 #: Part classes, in table order.
 CLASSES = ("clear", "ambiguous", "filleted")
@@ -60,22 +72,60 @@ def score_input(part: SamplePart, truth: BrepTruth, condition: str) -> dict:
     if condition != "stl_like":
         row["detection"] = score_part(part, mask).as_dict()
     assert result.curves is not None and result.corners is not None
-    row["curves"] = curve_scores(result.curves, result.corners.points, truth, part.spacing)
+    seen = part.extra.get("seen")
+    row["curves"] = curve_scores(
+        result.curves, result.corners.points, truth, part.spacing, seen=seen
+    )
     return row
 
 
-def curve_scores(curves: list, corners: np.ndarray, truth: BrepTruth, spacing: float) -> dict:
+def seen_corners(truth: BrepTruth, seen: np.ndarray) -> np.ndarray:
+    """The B-rep corners where the seen pieces of three or more sharp curves end.
+
+    Parameters
+    ----------
+    truth : BrepTruth
+    seen : (e,) bool
+        The seen pieces among ``truth.segments``.
+
+    Returns
+    -------
+    (c, 3) float64
+    """
+    if len(truth.corners) == 0 or not np.any(seen):
+        return np.zeros((0, 3))
+    ends = truth.segments[seen].reshape(-1, 3)
+    curve = np.repeat(truth.segment_curve[seen], 2)
+    # a piece ends at a corner where its end point is the corner's position (float
+    # rounding aside)
+    near = cKDTree(ends).query_ball_point(truth.corners, 1e-6 * truth.diagonal)
+    keep = [len(set(curve[k].tolist())) >= 3 for k in near]
+    return truth.corners[np.asarray(keep, bool)]
+
+
+def curve_scores(
+    curves: list,
+    corners: np.ndarray,
+    truth: BrepTruth,
+    spacing: float,
+    *,
+    seen: np.ndarray | None = None,
+) -> dict:
     """Curves scored by ``evaluation.scoring.evaluate_curves`` (precision, coverage, RMS,
     count ratio), corners against the B-rep corners: found when a corner lies within
-    ``2 * spacing``; ``corners_hit`` counts them."""
-    scores = evaluate_curves(curves, corners, truth.segments, spacing)
+    ``2 * spacing``; ``corners_hit`` counts them. With ``seen`` (which of
+    ``truth.segments`` a scan saw), coverage, count ratio and corners are measured on
+    the seen truth (:func:`seen_corners`)."""
+    cover = None if seen is None else truth.segments[seen]
+    scores = evaluate_curves(curves, corners, truth.segments, spacing, cover=cover)
+    truth_corners = truth.corners if seen is None else seen_corners(truth, seen)
     c = np.asarray(corners, np.float64).reshape(-1, 3)
-    if len(truth.corners) and len(c):
-        hit = int((cKDTree(c).query(truth.corners)[0] <= 2 * spacing).sum())
+    if len(truth_corners) and len(c):
+        hit = int((cKDTree(c).query(truth_corners)[0] <= 2 * spacing).sum())
     else:
         hit = 0
-    found = hit / len(truth.corners) if len(truth.corners) else math.nan
-    scores = replace(scores, corners_found=found, n_truth_corners=len(truth.corners))
+    found = hit / len(truth_corners) if len(truth_corners) else math.nan
+    scores = replace(scores, corners_found=found, n_truth_corners=len(truth_corners))
     return {**scores.as_dict(), "corners_hit": hit}
 
 
@@ -101,7 +151,9 @@ def evaluate_part(
     load(source, workdir)
     truth = brep_truth()
     spacing = expected_spacing(surface_area(), n, "points")
-    parts = make_inputs(source.name, truth.segments, n, seed=seed, which=inputs)
+    parts = make_inputs(
+        source.name, truth.segments, n, seed=seed, which=inputs, curve=truth.segment_curve
+    )
     cls, reasons = classify(truth, spacing)
     n_curves = len(gmsh.model.getEntities(1))
     built = time.perf_counter() - t0

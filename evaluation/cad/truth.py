@@ -11,8 +11,11 @@ dihedral angles are never used: a coarse tessellation makes false creases.
 
 The truth is **ambiguous** where a sharp or nearly sharp curve has an angle between
 :data:`AMBIGUOUS_ANGLES` (a detection may or may not call it sharp), or where two
-sharp curves that share no vertex come closer than :data:`CLOSE_SPACINGS` point
-spacings (the features merge at that sampling).
+separate sharp features come closer than :data:`CLOSE_SPACINGS` point spacings (the
+features merge at that sampling): two corners, or two points of the sharp edges
+whose way between them along the sharp edges is more than twice their distance (two
+curves that do not meet, or meet only far away or at a sharp angle; one curve that
+comes back near itself), see :func:`closest_gap`.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ __all__ = [
 SHARP_ANGLE = 20.0
 #: Degrees: angles in this range make the truth ambiguous.
 AMBIGUOUS_ANGLES = (15.0, 30.0)
-#: Spacings: sharp curves closer than this (sharing no vertex) make the truth ambiguous.
+#: Spacings: separate sharp features closer than this make the truth ambiguous.
 CLOSE_SPACINGS = 3.0
 #: Samples along every curve, at least.
 MIN_SAMPLES = 16
@@ -63,7 +66,8 @@ class BrepTruth:
     diagonal : float
         The bounding-box diagonal of the model.
     curve_vertices : dict of int to tuple of int
-        The end vertices of every sharp curve.
+        The end vertices of every sharp curve, the one at its first sample first (a
+        closed curve has one).
     """
 
     segments: np.ndarray
@@ -141,6 +145,9 @@ def brep_truth(step: float | None = None) -> BrepTruth:
         segments.append(np.stack([pts[:-1][piece], pts[1:][piece]], axis=1))
         seg_curve.append(np.full(int(piece.sum()), curve, np.int64))
         ends = [int(v) for _, v in gmsh.model.getBoundary([(1, curve)], oriented=False)]
+        if len(ends) == 2:  # the vertex at the curve's first sample first
+            at = [np.linalg.norm(np.asarray(gmsh.model.getValue(0, v, [])) - pts[0]) for v in ends]
+            ends = ends if at[0] <= at[1] else ends[::-1]
         curve_vertices[curve] = tuple(ends)
         first_last = [sharp[0], sharp[-1]] if len(ends) == 2 else [sharp[0]] * len(ends)
         for v, s in zip(ends, first_last, strict=True):
@@ -166,9 +173,12 @@ def brep_truth(step: float | None = None) -> BrepTruth:
 def closest_gap(truth: BrepTruth, radius: float) -> float:
     """The smallest distance under ``radius`` between two separate sharp features.
 
-    Two points of the sharp edges are separate features when they lie on two curves
-    that share no vertex, or on one curve that comes back near itself (the length of
-    curve between them is more than twice their distance, as across a small hole).
+    Two corners are separate features. Two points of the sharp edges are separate
+    features when the way between them along the sharp edges (through the curves' end
+    vertices) is more than twice their distance: two curves that do not meet, or meet
+    only far away, or leave a vertex less than about 47 degrees apart; one curve that
+    comes back near itself (as across a small hole). The way is measured with a
+    slack of two sampling steps (``radius / 4``).
 
     Parameters
     ----------
@@ -181,36 +191,65 @@ def closest_gap(truth: BrepTruth, radius: float) -> float:
     float
         ``inf`` when no two separate features come closer than ``radius``.
     """
+    from scipy.sparse.csgraph import dijkstra
+
     from evaluation.scoring import sample_segments
 
+    c = truth.corners
+    pairs = cKDTree(c).query_pairs(radius, output_type="ndarray")
+    gap = (
+        float(np.linalg.norm(c[pairs[:, 0]] - c[pairs[:, 1]], axis=1).min())
+        if len(pairs)
+        else math.inf
+    )
     step = radius / 4
     pts, piece, sid = sample_segments(truth.segments, step)
-    if len(pts) < 2:
-        return math.inf
-    curve = truth.segment_curve[sid]
-    # length along each curve's sharp pieces (samples come in curve order); a curve
-    # with one end vertex is closed: the length between two samples goes either way
-    start = np.r_[True, curve[1:] != curve[:-1]]
-    total = np.cumsum(piece)
-    offset = np.maximum.accumulate(np.where(start, total - piece, 0.0))
-    along = total - piece / 2 - offset
-    curve_len = np.bincount(np.cumsum(start) - 1, piece)[np.cumsum(start) - 1]
-    closed = np.array([len(truth.curve_vertices.get(int(c), ())) < 2 for c in curve])
     pairs = cKDTree(pts).query_pairs(radius, output_type="ndarray")
     if len(pairs) == 0:
-        return math.inf
+        return gap
+    curve = truth.segment_curve[sid]
+    # length along each curve's sharp pieces from its first end vertex (samples come
+    # in curve order) and the curve's length
+    start = np.r_[True, curve[1:] != curve[:-1]]
+    run = np.cumsum(start) - 1
+    total = np.cumsum(piece)
+    along = total - piece / 2 - (total - piece)[start][run]
+    length = np.bincount(run, piece)[run]
+    # the shortest ways between the curves' end vertices along the sharp curves (the
+    # shortest of two curves between the same vertices)
+    verts = truth.curve_vertices
+    node = {v: k for k, v in enumerate(sorted({v for e in verts.values() for v in e}))}
+    seg_length = np.linalg.norm(truth.segments[:, 1] - truth.segments[:, 0], axis=1)
+    weight = np.bincount(truth.segment_curve, seg_length)
+    graph = np.zeros((len(node), len(node)))  # 0: no curve between them
+    for c_tag, e in verts.items():
+        if len(set(e)) == 2:
+            a, b = node[e[0]], node[e[1]]
+            w = weight[c_tag] if graph[a, b] == 0 else min(graph[a, b], weight[c_tag])
+            graph[a, b] = graph[b, a] = w
+    way = dijkstra(graph, limit=3 * radius)
+    # each sample's curve's end vertices (a closed curve's one vertex twice; -1: none)
+    ends = np.array(
+        [
+            [node[e[0]], node[e[-1]]] if e else [-1, -1]
+            for e in (verts.get(int(k), ()) for k in curve)
+        ],
+        np.int64,
+    ).reshape(-1, 2)
+    to_end = np.stack([along, length - along], axis=1)  # to the first, the last end
     i, j = pairs[:, 0], pairs[:, 1]
     dist = np.linalg.norm(pts[i] - pts[j], axis=1)
-    ci, cj = curve[i], curve[j]
-    verts = truth.curve_vertices
-    share = np.array(
-        [
-            bool(set(verts.get(int(a), ())) & set(verts.get(int(b), ())))
-            for a, b in zip(ci, cj, strict=True)
-        ]
-    )
-    same = ci == cj
+    # on one curve: the length between the two (either way round a closed curve)
     arc = np.abs(along[i] - along[j])
-    arc = np.where(closed[i], np.minimum(arc, curve_len[i] - arc), arc)
-    separate = np.where(same, arc > 2 * dist + 2 * step, ~share)
-    return float(dist[separate].min()) if separate.any() else math.inf
+    closed = np.array([len(set(verts.get(int(k), ()))) < 2 for k in curve[i]])
+    arc = np.where(closed, np.minimum(arc, length[i] - arc), arc)
+    path = np.where(curve[i] == curve[j], arc, np.inf)
+    # through the vertices: from an end of one curve to an end of the other
+    for a in (0, 1):
+        for b in (0, 1):
+            ok = (ends[i, a] >= 0) & (ends[j, b] >= 0)
+            via = np.full(len(i), np.inf)
+            via[ok] = way[ends[i, a][ok], ends[j, b][ok]]
+            path = np.minimum(path, to_end[i, a] + via + to_end[j, b])
+    separate = path > 2 * dist + 2 * step
+    return min(gap, float(dist[separate].min())) if separate.any() else gap
