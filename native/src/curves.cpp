@@ -1519,16 +1519,18 @@ void planeIntersections(size_t first, size_t last, const std::vector<Vec3> &vert
 		const bool isFitted = l1.total >= MS_CURVE_MIN_ARM_POINTS && l2.total >= MS_CURVE_MIN_ARM_POINTS &&
 		                      std::max(l1.rms, l2.rms) <= MS_CURVE_MAX_ARM_RMS * spacing;
 		const bool crease = std::fabs(crossA) >= std::sin(radians(MS_CURVE_MIN_ARM_ANGLE));
-		const bool ok = isFitted && crease && std::sqrt(bis[0] * bis[0] + bis[1] * bis[1]) > 0 &&
-		                std::sqrt(hit0 * hit0 + hit1 * hit1) <= MS_CURVE_MAX_SHIFT * spacing;
-		const Vec3 &vertex = vertices[first + v];
-		const Vec3 there = add(add(vertex, mul(hit0, x.u)), mul(hit1, x.w));
-		moved[first + v] = ok ? there : vertex;
-		fitted[first + v] = ok;
 		// a thin wall's two faces (parallel arms) leave its rim on one side, a wall apart
 		const bool oneSide = (l1.c[0] * l1.a[0] + l1.c[1] * l1.a[1]) * (l2.c[0] * l1.a[0] + l2.c[1] * l1.a[1]) > 0;
 		const double apart = std::fabs(diff0 * l1.a[1] - diff1 * l1.a[0]);
 		const bool wall = oneSide && apart > MS_CURVE_THIN_WALL * spacing;
+		// arms on one side and far apart move the vertex at most MS_CURVE_WALL_SHIFT spacings
+		const double shift = (oneSide && apart > MS_CURVE_WALL_APART * spacing ? MS_CURVE_WALL_SHIFT : MS_CURVE_MAX_SHIFT) * spacing;
+		const bool ok = isFitted && crease && std::sqrt(bis[0] * bis[0] + bis[1] * bis[1]) > 0 &&
+		                std::sqrt(hit0 * hit0 + hit1 * hit1) <= shift;
+		const Vec3 &vertex = vertices[first + v];
+		const Vec3 there = add(add(vertex, mul(hit0, x.u)), mul(hit1, x.w));
+		moved[first + v] = ok ? there : vertex;
+		fitted[first + v] = ok;
 		flat[first + v] = isFitted && !crease && !wall;
 	}
 }

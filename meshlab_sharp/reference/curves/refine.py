@@ -5,8 +5,9 @@ edge: in the plane across the curve (normal to its direction), the non-feature p
 near the vertex form two arms, one per surface; a line is fitted to each arm and the
 vertex moves to their intersection. Where that fails (fewer than
 :data:`MIN_ARM_POINTS` on an arm, arms nearly parallel, a poor fit, or a move of more
-than :data:`MAX_SHIFT` spacings: near corners, or on false detections) the vertex is
-projected onto the line fitted to the curve's own vertices nearby. The arms end short of
+than :data:`MAX_SHIFT` spacings: near corners, or on false detections; more than
+:data:`WALL_SHIFT` where the arms lie on one side far apart: across a thin wall) the
+vertex is projected onto the line fitted to the curve's own vertices nearby. The arms end short of
 another edge running beside the curve (the other rim of a thin wall,
 :data:`OTHER_EDGE`).
 """
@@ -77,6 +78,15 @@ OTHER_EDGE_MARGIN = CURVES.real("OTHER_EDGE_MARGIN")
 #: position from the curve's own vertices); a smooth surface runs on through the vertex
 #: (its arms on opposite sides), or its noise leaves arms on one line.
 THIN_WALL = CURVES.real("THIN_WALL")
+#: Where the two arms leave the vertex on one side with their lines farther apart than
+#: this, in spacings, the vertex moves at most :data:`WALL_SHIFT` spacings: across a
+#: wall about 3 spacings thick the arms are often a face of the wall and the face beside
+#: its other rim, which meet inside the wall, 2 to 3 spacings from the rim the vertex
+#: lies on; a rim's own move is shorter (the vertex lies within the band of features
+#: along it).
+WALL_APART = CURVES.real("WALL_APART")
+#: See :data:`WALL_APART`.
+WALL_SHIFT = CURVES.real("WALL_SHIFT")
 
 
 class CellGrid:
@@ -265,19 +275,21 @@ def plane_intersection_positions(
         & (np.maximum(rms1, rms2) <= MAX_ARM_RMS * spacing)
     )
     crease = np.abs(cross) >= math.sin(math.radians(MIN_ARM_ANGLE))
-    ok = (
-        fitted
-        & crease
-        & (np.linalg.norm(bisector, axis=1) > 0)
-        & (np.linalg.norm(hit, axis=1) <= MAX_SHIFT * spacing)
-    )
-    moved = vertices + hit[:, :1] * u + hit[:, 1:] * w
     # a thin wall's two faces (parallel arms) leave its rim on one side, a wall apart
     one_side = (c1[:, 0] * a1[:, 0] + c1[:, 1] * a1[:, 1]) * (
         c2[:, 0] * a1[:, 0] + c2[:, 1] * a1[:, 1]
     ) > 0
     apart = np.abs(diff[:, 0] * a1[:, 1] - diff[:, 1] * a1[:, 0])
     wall = one_side & (apart > THIN_WALL * spacing)
+    # arms on one side and far apart move the vertex at most WALL_SHIFT spacings
+    shift = np.where(one_side & (apart > WALL_APART * spacing), WALL_SHIFT, MAX_SHIFT) * spacing
+    ok = (
+        fitted
+        & crease
+        & (np.linalg.norm(bisector, axis=1) > 0)
+        & (np.linalg.norm(hit, axis=1) <= shift)
+    )
+    moved = vertices + hit[:, :1] * u + hit[:, 1:] * w
     return np.where(ok[:, None], moved, vertices), ok, fitted & ~crease & ~wall
 
 
