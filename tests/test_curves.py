@@ -164,8 +164,8 @@ def test_curves_do_not_depend_on_the_order_of_the_points(mode):
 
 def test_the_curves_of_a_thin_wall_stay_on_its_rims():
     """A tube whose wall is 3 spacings thick: the two arms fitted across a rim are
-    often a face of the wall and the face beside the other rim, which meet inside the
-    wall; the refinement does not move the curves there (MS_CURVE_WALL_SHIFT)."""
+    often a face of the wall and the face beside the other rim, whose lines meet off the
+    surface; the refinement does not move the curves there (MS_CURVE_WALL_GAP)."""
     part = gt.make_thin_part("tube", 3, n_points=3000)
     result = meshlab_sharp.detect(part.vertices, curves=True)
     assert result.curves is not None and result.corners is not None

@@ -82,7 +82,7 @@ def _cloud(case: str) -> tuple[np.ndarray, str]:
         return shapes.box_cylinder_points(4000, seed=3), "paper"
     if case == "noisy-box":
         return shapes.noisy_box_points(8000, 0.01, seed=4), "robust"
-    if case == "thin-tube":  # walls 3 spacings thick (MS_CURVE_WALL_SHIFT)
+    if case == "thin-tube":  # walls 3 spacings thick (MS_CURVE_WALL_GAP)
         return gt.make_thin_part("tube", 3, n_points=3000).vertices, "robust"
     if case == "iid":  # no surface: false detections everywhere
         return np.random.default_rng(11).random((4000, 3)), "robust"

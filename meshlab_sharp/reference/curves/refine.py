@@ -5,9 +5,9 @@ edge: in the plane across the curve (normal to its direction), the non-feature p
 near the vertex form two arms, one per surface; a line is fitted to each arm and the
 vertex moves to their intersection. Where that fails (fewer than
 :data:`MIN_ARM_POINTS` on an arm, arms nearly parallel, a poor fit, or a move of more
-than :data:`MAX_SHIFT` spacings: near corners, or on false detections; more than
-:data:`WALL_SHIFT` where the arms lie on one side far apart: across a thin wall) the
-vertex is projected onto the line fitted to the curve's own vertices nearby. The arms end short of
+than :data:`MAX_SHIFT` spacings: near corners, or on false detections; arms on one
+side that meet off the surface, across a thin wall, :data:`WALL_APART`) the vertex is
+projected onto the line fitted to the curve's own vertices nearby. The arms end short of
 another edge running beside the curve (the other rim of a thin wall,
 :data:`OTHER_EDGE`).
 """
@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..._header import CURVES
+from ..neighbourhoods import squared_distances
 from .graph import nearest
 
 __all__ = [
@@ -79,14 +80,15 @@ OTHER_EDGE_MARGIN = CURVES.real("OTHER_EDGE_MARGIN")
 #: (its arms on opposite sides), or its noise leaves arms on one line.
 THIN_WALL = CURVES.real("THIN_WALL")
 #: Where the two arms leave the vertex on one side with their lines farther apart than
-#: this, in spacings, the vertex moves at most :data:`WALL_SHIFT` spacings: across a
-#: wall about 3 spacings thick the arms are often a face of the wall and the face beside
-#: its other rim, which meet inside the wall, 2 to 3 spacings from the rim the vertex
-#: lies on; a rim's own move is shorter (the vertex lies within the band of features
-#: along it).
+#: this, in spacings, the vertex does not move onto their intersection when that lies
+#: farther than :data:`WALL_GAP` spacings from every point: across a wall about 3
+#: spacings thick the arms are often a face of the wall and the face beside its other
+#: rim, whose lines meet off the surface, 2 to 3 spacings from any point; an edge's own
+#: intersection, an acute one's too, lies on the surface, within about a spacing of a
+#: point.
 WALL_APART = CURVES.real("WALL_APART")
 #: See :data:`WALL_APART`.
-WALL_SHIFT = CURVES.real("WALL_SHIFT")
+WALL_GAP = CURVES.real("WALL_GAP")
 
 
 class CellGrid:
@@ -281,15 +283,20 @@ def plane_intersection_positions(
     ) > 0
     apart = np.abs(diff[:, 0] * a1[:, 1] - diff[:, 1] * a1[:, 0])
     wall = one_side & (apart > THIN_WALL * spacing)
-    # arms on one side and far apart move the vertex at most WALL_SHIFT spacings
-    shift = np.where(one_side & (apart > WALL_APART * spacing), WALL_SHIFT, MAX_SHIFT) * spacing
     ok = (
         fitted
         & crease
         & (np.linalg.norm(bisector, axis=1) > 0)
-        & (np.linalg.norm(hit, axis=1) <= shift)
+        & (np.linalg.norm(hit, axis=1) <= MAX_SHIFT * spacing)
     )
     moved = vertices + hit[:, :1] * u + hit[:, 1:] * w
+    # arms on one side and far apart whose lines meet far from every point: across a
+    # thin wall, not on its rim
+    rows = np.flatnonzero(ok & one_side & (apart > WALL_APART * spacing))
+    if len(rows):
+        near = nearest(cKDTree(tree_points), moved[rows], 1)[:, 0]
+        gap = WALL_GAP * spacing
+        ok[rows] = squared_distances(tree_points[near], moved[rows]) <= gap * gap
     return np.where(ok[:, None], moved, vertices), ok, fitted & ~crease & ~wall
 
 
