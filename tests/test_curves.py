@@ -162,6 +162,17 @@ def test_curves_do_not_depend_on_the_order_of_the_points(mode):
     np.testing.assert_allclose(a.corners.points, b.corners.points, atol=1e-9)
 
 
+def test_the_curves_of_a_thin_wall_stay_on_its_rims():
+    """A tube whose wall is 3 spacings thick: the two arms fitted across a rim are
+    often a face of the wall and the face beside the other rim, whose lines meet off the
+    surface; the refinement does not move the curves there (MS_CURVE_WALL_GAP)."""
+    part = gt.make_thin_part("tube", 3, n_points=3000)
+    result = meshlab_sharp.detect(part.vertices, curves=True)
+    assert result.curves is not None and result.corners is not None
+    s = evaluate_curves(result.curves, result.corners.points, part.edges, part.spacing)
+    assert s.precision >= 0.85
+
+
 def test_curves_reach_the_corners_across_a_gap_in_the_detection():
     """Features missing within 6 spacings of every corner (the three ends 8.5 spacings
     apart): the ends' lines meet at the corner, which is found, and the curves run on

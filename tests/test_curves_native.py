@@ -16,6 +16,7 @@ import shapes
 from scipy.spatial import cKDTree
 
 import meshlab_sharp
+from evaluation import groundtruth as gt
 from meshlab_sharp import _header
 from meshlab_sharp.curves import _native, extract_curves
 from meshlab_sharp.reference import curves as reference
@@ -81,13 +82,15 @@ def _cloud(case: str) -> tuple[np.ndarray, str]:
         return shapes.box_cylinder_points(4000, seed=3), "paper"
     if case == "noisy-box":
         return shapes.noisy_box_points(8000, 0.01, seed=4), "robust"
+    if case == "thin-tube":  # walls 3 spacings thick (MS_CURVE_WALL_GAP)
+        return gt.make_thin_part("tube", 3, n_points=3000).vertices, "robust"
     if case == "iid":  # no surface: false detections everywhere
         return np.random.default_rng(11).random((4000, 3)), "robust"
     raise AssertionError(case)
 
 
 @pytest.mark.parametrize(
-    "case", ["cube-grid", "random-box", "iid-box", "box-cylinder", "noisy-box", "iid"]
+    "case", ["cube-grid", "random-box", "iid-box", "box-cylinder", "noisy-box", "thin-tube", "iid"]
 )
 def test_cloud_curves_are_the_references_to_the_bit(case):
     """Refined positions, indices, loops, lengths, corners and their order: the same

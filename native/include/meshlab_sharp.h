@@ -224,6 +224,8 @@
 #define MS_CURVE_OTHER_EDGE 3.0
 #define MS_CURVE_OTHER_EDGE_MARGIN 0.5
 #define MS_CURVE_THIN_WALL 1.0
+#define MS_CURVE_WALL_APART (2.0 * MS_CURVE_THIN_WALL)
+#define MS_CURVE_WALL_GAP 2.0
 
 /* fit.py: line, arc or free-form (Python only: the plugin does not classify). */
 #define MS_CURVE_FIT_TOLERANCE 0.5

@@ -1426,7 +1426,7 @@ constexpr size_t REFINE_BATCH = 4096;
 void planeIntersections(size_t first, size_t last, const std::vector<Vec3> &vertices,
                         const std::vector<Vec3> &dirs, const std::vector<std::vector<long>> &nbrs,
                         const std::vector<Vec3> &treePts, const std::vector<char> &treeFeature,
-                        double spacing, const ms_curves_math &math, std::vector<Vec3> &moved,
+                        const KdTree &tree, double spacing, const ms_curves_math &math, std::vector<Vec3> &moved,
                         std::vector<char> &fitted, std::vector<char> &flat)
 {
 	const size_t nv = last - first;
@@ -1519,16 +1519,22 @@ void planeIntersections(size_t first, size_t last, const std::vector<Vec3> &vert
 		const bool isFitted = l1.total >= MS_CURVE_MIN_ARM_POINTS && l2.total >= MS_CURVE_MIN_ARM_POINTS &&
 		                      std::max(l1.rms, l2.rms) <= MS_CURVE_MAX_ARM_RMS * spacing;
 		const bool crease = std::fabs(crossA) >= std::sin(radians(MS_CURVE_MIN_ARM_ANGLE));
-		const bool ok = isFitted && crease && std::sqrt(bis[0] * bis[0] + bis[1] * bis[1]) > 0 &&
-		                std::sqrt(hit0 * hit0 + hit1 * hit1) <= MS_CURVE_MAX_SHIFT * spacing;
-		const Vec3 &vertex = vertices[first + v];
-		const Vec3 there = add(add(vertex, mul(hit0, x.u)), mul(hit1, x.w));
-		moved[first + v] = ok ? there : vertex;
-		fitted[first + v] = ok;
 		// a thin wall's two faces (parallel arms) leave its rim on one side, a wall apart
 		const bool oneSide = (l1.c[0] * l1.a[0] + l1.c[1] * l1.a[1]) * (l2.c[0] * l1.a[0] + l2.c[1] * l1.a[1]) > 0;
 		const double apart = std::fabs(diff0 * l1.a[1] - diff1 * l1.a[0]);
 		const bool wall = oneSide && apart > MS_CURVE_THIN_WALL * spacing;
+		bool ok = isFitted && crease && std::sqrt(bis[0] * bis[0] + bis[1] * bis[1]) > 0 &&
+		          std::sqrt(hit0 * hit0 + hit1 * hit1) <= MS_CURVE_MAX_SHIFT * spacing;
+		const Vec3 &vertex = vertices[first + v];
+		const Vec3 there = add(add(vertex, mul(hit0, x.u)), mul(hit1, x.w));
+		// arms on one side and far apart whose lines meet far from every point: across a
+		// thin wall, not on its rim
+		if (ok && oneSide && apart > MS_CURVE_WALL_APART * spacing) {
+			const double gap = MS_CURVE_WALL_GAP * spacing;
+			ok = tree.query(there, 1)[0].first <= gap * gap;
+		}
+		moved[first + v] = ok ? there : vertex;
+		fitted[first + v] = ok;
 		flat[first + v] = isFitted && !crease && !wall;
 	}
 }
@@ -1663,7 +1669,7 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 	inBlocks((raw.size() + REFINE_BATCH - 1) / REFINE_BATCH, [&](size_t begin, size_t end) {
 		for (size_t first = begin * REFINE_BATCH; first < std::min(raw.size(), end * REFINE_BATCH); first += REFINE_BATCH)
 			planeIntersections(first, std::min(raw.size(), first + REFINE_BATCH), raw, dirs, nbrs, nearPts,
-			                   nearFeature, spacing, math, moved, fitted, flat);
+			                   nearFeature, tree, spacing, math, moved, fitted, flat);
 	}, 1);
 	std::vector<Piece> out;
 	size_t at = 0;

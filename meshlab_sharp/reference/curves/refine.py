@@ -5,7 +5,8 @@ edge: in the plane across the curve (normal to its direction), the non-feature p
 near the vertex form two arms, one per surface; a line is fitted to each arm and the
 vertex moves to their intersection. Where that fails (fewer than
 :data:`MIN_ARM_POINTS` on an arm, arms nearly parallel, a poor fit, or a move of more
-than :data:`MAX_SHIFT` spacings: near corners, or on false detections) the vertex is
+than :data:`MAX_SHIFT` spacings: near corners, or on false detections; arms on one
+side that meet off the surface, across a thin wall, :data:`WALL_APART`) the vertex is
 projected onto the line fitted to the curve's own vertices nearby. The arms end short of
 another edge running beside the curve (the other rim of a thin wall,
 :data:`OTHER_EDGE`).
@@ -19,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..._header import CURVES
+from ..neighbourhoods import squared_distances
 from .graph import nearest
 
 __all__ = [
@@ -77,6 +79,16 @@ OTHER_EDGE_MARGIN = CURVES.real("OTHER_EDGE_MARGIN")
 #: position from the curve's own vertices); a smooth surface runs on through the vertex
 #: (its arms on opposite sides), or its noise leaves arms on one line.
 THIN_WALL = CURVES.real("THIN_WALL")
+#: Where the two arms leave the vertex on one side with their lines farther apart than
+#: this, in spacings, the vertex does not move onto their intersection when that lies
+#: farther than :data:`WALL_GAP` spacings from every point: across a wall about 3
+#: spacings thick the arms are often a face of the wall and the face beside its other
+#: rim, whose lines meet off the surface, 2 to 3 spacings from any point; an edge's own
+#: intersection, an acute one's too, lies on the surface, within about a spacing of a
+#: point.
+WALL_APART = CURVES.real("WALL_APART")
+#: See :data:`WALL_APART`.
+WALL_GAP = CURVES.real("WALL_GAP")
 
 
 class CellGrid:
@@ -265,6 +277,12 @@ def plane_intersection_positions(
         & (np.maximum(rms1, rms2) <= MAX_ARM_RMS * spacing)
     )
     crease = np.abs(cross) >= math.sin(math.radians(MIN_ARM_ANGLE))
+    # a thin wall's two faces (parallel arms) leave its rim on one side, a wall apart
+    one_side = (c1[:, 0] * a1[:, 0] + c1[:, 1] * a1[:, 1]) * (
+        c2[:, 0] * a1[:, 0] + c2[:, 1] * a1[:, 1]
+    ) > 0
+    apart = np.abs(diff[:, 0] * a1[:, 1] - diff[:, 1] * a1[:, 0])
+    wall = one_side & (apart > THIN_WALL * spacing)
     ok = (
         fitted
         & crease
@@ -272,12 +290,13 @@ def plane_intersection_positions(
         & (np.linalg.norm(hit, axis=1) <= MAX_SHIFT * spacing)
     )
     moved = vertices + hit[:, :1] * u + hit[:, 1:] * w
-    # a thin wall's two faces (parallel arms) leave its rim on one side, a wall apart
-    one_side = (c1[:, 0] * a1[:, 0] + c1[:, 1] * a1[:, 1]) * (
-        c2[:, 0] * a1[:, 0] + c2[:, 1] * a1[:, 1]
-    ) > 0
-    apart = np.abs(diff[:, 0] * a1[:, 1] - diff[:, 1] * a1[:, 0])
-    wall = one_side & (apart > THIN_WALL * spacing)
+    # arms on one side and far apart whose lines meet far from every point: across a
+    # thin wall, not on its rim
+    rows = np.flatnonzero(ok & one_side & (apart > WALL_APART * spacing))
+    if len(rows):
+        near = nearest(cKDTree(tree_points), moved[rows], 1)[:, 0]
+        gap = WALL_GAP * spacing
+        ok[rows] = squared_distances(tree_points[near], moved[rows]) <= gap * gap
     return np.where(ok[:, None], moved, vertices), ok, fitted & ~crease & ~wall
 
 
