@@ -128,6 +128,24 @@
  * (below it a noisy line thins to gaps). */
 #define MS_THIN_SIDE 0.7
 #define MS_THIN_SIDE_NOISY 0.65
+/* After thinning, a cloud's feature point is dropped when it lies beside the line through
+ * the higher-ranked features of its comparison list (at least MS_LINE_MIN of them) by
+ * more than MS_LINE_OFFSET local units, and those features lie on one line: their mean
+ * squared distance to it below (MS_LINE_SPREAD units)^2. The unit is the mean distance to
+ * the MS_LINE_UNIT nearest, so it follows the cloud's local density (robust.line_test).
+ * Not where the ranking is smoothed (ms_ranking_smoothed): there the points beside a line
+ * already rank below it, and the smoothed ranking of a row beside it can outrank the line.
+ * The point's foot on the line must lie among theirs: past a line's end (a corner, where
+ * the stronger points belong to another edge) nothing is extrapolated.
+ * The band of candidates along an edge leaves points 1-1.5 spacings beside it whose own
+ * line direction, tilted by noise, keeps the stronger edge points outside thinning's cone
+ * and side rule; two rims or two edges side by side spread the stronger points over two
+ * lines, and on a quiet cloud a point that is not a candidate, or ranks below, between the
+ * point and the line blocks as in thinning. */
+#define MS_LINE_OFFSET 0.6
+#define MS_LINE_SPREAD 0.4
+#define MS_LINE_MIN 3
+#define MS_LINE_UNIT 6
 #define MS_THIN_KNN 12
 #define MS_THIN_RING 2
 #define MS_SUPPORT_KNN 16
@@ -529,7 +547,16 @@ typedef struct {
  * the list's last member), unless (between not NULL) a point m of the list with between[m]
  * or rank[m] < rank[i] lies between: (p_m - p_i) . (p_m - p_j) < 0. ms_acute_tips
  * (robust.acute_tips): out[r] = some j != l of the list, both f0 and not i, with
- * (p_j - p_i) . (p_l - p_i) < 0. Sums over x, y, z in that order, as numpy's. */
+ * (p_j - p_i) . (p_l - p_i) < 0. ms_line_test (robust.line_test; f2 complete first):
+ * f3[i] = f2[i], unless the m >= MS_LINE_MIN points j != i of compare's list with f2[j] and
+ * rank[j] > rank[i] (q_j = p_j - p_i, in list order) have, with qbar and e as
+ * ms_line_directions forms them over those j, a mean of |r_j|^2 - (r_j . e)^2, r_j = q_j -
+ * qbar (add.reduceat's sum, divided by m), below (spread u)^2 while g = qbar - (qbar . e) e
+ * has |g|^2 > (offset u)^2 (u: the mean of |q| over the next min(MS_LINE_UNIT, len - 1)
+ * members after i, added in order to 0.0), and some r_j . e > -(qbar . e) and some
+ * r_j . e < -(qbar . e) (p_i's foot lies among theirs): then f3[i] = 0, unless (between not NULL) a
+ * point m of the list with between[m] or rank[m] < rank[i] has (p_m - p_i) . (p_m - (p_i +
+ * g)) < 0. Returns 0, or -1 out of memory. Sums over x, y, z in that order, as numpy's. */
 int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
                        const ms_lists_t *direction, int64_t begin, int64_t end, double *e);
 void ms_supported(const double *p, const uint8_t *f0, const int64_t *rows, const double *e,
@@ -540,6 +567,9 @@ void ms_smoothed_ranking(const double *score, const int64_t *rows, const ms_list
 void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const double *e,
              const ms_lists_t *compare, const double *rank, double cone, double side,
              const uint8_t *between, int64_t begin, int64_t end, uint8_t *f2);
+int ms_line_test(const double *p, const uint8_t *f2, const int64_t *rows,
+                 const ms_lists_t *compare, const double *rank, double offset, double spread,
+                 const uint8_t *between, int64_t begin, int64_t end, uint8_t *f3);
 void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
                    const ms_lists_t *lists, int64_t begin, int64_t end, uint8_t *out);
 
@@ -600,6 +630,8 @@ typedef struct {
                                   (a quiet cloud: reference.detect.thin_blockers) */
     int curved_dropped;        /* candidates on a curved surface are dropped (a mesh:
                                   ms_stage_curved) */
+    int thin_line;             /* thinning's line test follows (ms_line_test): a cloud whose
+                                  ranking is not smoothed */
 } ms_robust_plan_t;
 /* ms_robust_plan: the plan for an input of `mesh`, noise ratio `noise`, n_kept points (the
  * isolated ones left out) and the s given scales (increasing, s <= MS_MAX_SCALES; a cloud's
