@@ -116,7 +116,7 @@ _SIGNATURES = {
     ),
     "ms_line_test": (
         _int,
-        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _f64, _c_void_p]
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p]
         + [_i64, _i64, _c_void_p],
     ),
     "ms_acute_tips": (
@@ -1810,13 +1810,37 @@ def acute_tips(
     return out
 
 
+@dataclass(frozen=True)
+class LineRules:
+    """Thinning's line test (``ms_line_rules_t``): the offset, spread and reach in local
+    units, the fewest stronger features that make a line, and how many nearest set the
+    unit (robust.py's ``LINE_`` constants)."""
+
+    offset: float
+    spread: float
+    reach: float
+    minimum: int
+    unit: int
+
+
+class _LineRules(ctypes.Structure):
+    _fields_ = [
+        ("offset", _f64),
+        ("spread", _f64),
+        ("reach", _f64),
+        ("minimum", _i64),
+        ("unit", _i64),
+    ]
+
+
 @dataclass
 class FinishRules:
     """How robust mode's support and thinning decide (robust.py's rules for the input):
     support's cone and minimum and the scores it exempts (below ``free_below``; None:
     none), thinning's cone and side rule, its ranking smoothed over the first ``window``
     of its lists (0: the score itself), its blockers ``between`` (n,) bool (None:
-    none), and whether its line test follows (``line``: a cloud's, ``ms_line_test``)."""
+    none), and the rules of the line test that follows (``line``: a cloud's,
+    ``ms_line_test``; None: none)."""
 
     support_cone: float
     minimum: int
@@ -1825,7 +1849,7 @@ class FinishRules:
     thin_side: float
     window: int
     between: np.ndarray | None
-    line: bool = False
+    line: LineRules | None = None
 
 
 def line_support(
@@ -1943,14 +1967,14 @@ def line_test(
     rows: np.ndarray,
     compare: CandidateLists,
     rank: np.ndarray,
+    rules: LineRules,
     between: np.ndarray | None,
     workers: int = -1,
 ) -> np.ndarray:
-    """Thinning's line test (``ms_line_test``, ``LINE_OFFSET`` and ``LINE_SPREAD``) of
-    the points ``rows`` (c,), once ``thinned`` (n,) bool is known at every point of their
-    ``compare`` lists: by ``rank`` (n,), blocked by ``between`` (n,) bool (None: none).
-    Returns the tested mask (n,) bool (False off the rows)
-    (:func:`meshlab_sharp.reference.robust.line_test`'s)."""
+    """Thinning's line test (``ms_line_test``, by ``rules``) of the points ``rows`` (c,),
+    once ``thinned`` (n,) bool is known at every point of their ``compare`` lists: by
+    ``rank`` (n,), blocked by ``between`` (n,) bool (None: none). Returns the tested mask
+    (n,) bool (False off the rows) (:func:`meshlab_sharp.reference.robust.line_test`'s)."""
     lib = _lib()
     points = np.ascontiguousarray(points, dtype=np.float64)
     thinned = np.ascontiguousarray(thinned, dtype=bool)
@@ -1959,11 +1983,11 @@ def line_test(
     between = None if between is None else np.ascontiguousarray(between, bool)
     spec = ctypes.byref(compare.spec())
     out = np.zeros(len(thinned), dtype=bool)
-    args = (_ptr(points), _ptr(thinned), _ptr(rows), spec, _ptr(rank))
-    offset, spread = _header.real("LINE_OFFSET"), _header.real("LINE_SPREAD")
+    c_rules = _LineRules(rules.offset, rules.spread, rules.reach, rules.minimum, rules.unit)
+    args = (_ptr(points), _ptr(thinned), _ptr(rows), spec, _ptr(rank), ctypes.byref(c_rules))
 
     def task(a: int, b: int) -> int:
-        return lib.ms_line_test(*args, offset, spread, _ptr(between), a, b, _ptr(out))
+        return lib.ms_line_test(*args, _ptr(between), a, b, _ptr(out))
 
     _slot_chunks(len(rows), workers, task)
     return out
@@ -1990,6 +2014,6 @@ def support_and_thin(
         points, mask, score, rows, (direction, around), rules, workers, compare
     )
     thinned = thin_candidates(points, supported, rows, e, compare, rank, rules, workers)
-    if not rules.line:
+    if rules.line is None:
         return thinned
-    return line_test(points, thinned, rows, compare, rank, rules.between, workers)
+    return line_test(points, thinned, rows, compare, rank, rules.line, rules.between, workers)

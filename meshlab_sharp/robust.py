@@ -106,6 +106,7 @@ __all__ = [
     "ISOLATED_SPREAD",
     "LINE_MIN",
     "LINE_OFFSET",
+    "LINE_REACH",
     "LINE_SPREAD",
     "LINE_UNIT",
     "NOISE_KNN",
@@ -130,6 +131,7 @@ __all__ = [
     "THIN_RING",
     "THIN_SIDE",
     "THIN_SIDE_NOISY",
+    "line_rules",
     "noise_ratios",
     "sheet_parameters",
 ]
@@ -151,6 +153,8 @@ LINE_OFFSET = _header.real("LINE_OFFSET")
 LINE_SPREAD = _header.real("LINE_SPREAD")
 LINE_MIN = _header.integer("LINE_MIN")
 LINE_UNIT = _header.integer("LINE_UNIT")
+#: ... and how far ahead and behind the point's foot some of them lie, in units.
+LINE_REACH = _header.real("LINE_REACH")
 #: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
 #: about 1.9 spacings: across the band of candidates (1.3-1.5 spacings) and the points
 #: that noise lifts beside it, mostly short of a second line 2-3 spacings away, such as
@@ -300,3 +304,9 @@ def sheet_parameters() -> _kernels.SheetParameters:
         SHEET_TRIM,
         SHEET_TRIM_COS,
     )
+
+
+def line_rules() -> _kernels.LineRules:
+    """Thinning's line test's rules as the module holds them now: ``LINE_OFFSET``,
+    ``LINE_SPREAD``, ``LINE_REACH``, ``LINE_MIN`` and ``LINE_UNIT``."""
+    return _kernels.LineRules(LINE_OFFSET, LINE_SPREAD, LINE_REACH, LINE_MIN, LINE_UNIT)

@@ -994,7 +994,7 @@ class RobustSetup:
             thin_side=self.plan.thin_side,
             window=robust_mode.THIN_KNN if self.plan.ranking_smoothed else 0,
             between=thin_blockers(mask, self.plan),
-            line=self.plan.thin_line,
+            line=robust_mode.line_rules() if self.plan.thin_line else None,
         )
         return _kernels.support_and_thin(
             self.points,

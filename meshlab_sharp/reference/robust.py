@@ -51,6 +51,7 @@ LINE_OFFSET = _header.real("LINE_OFFSET")
 LINE_SPREAD = _header.real("LINE_SPREAD")
 LINE_MIN = _header.integer("LINE_MIN")
 LINE_UNIT = _header.integer("LINE_UNIT")
+LINE_REACH = _header.real("LINE_REACH")
 ACUTE_SCORE = _header.real("ACUTE_SCORE")
 ACUTE_SCORE_MAX = _header.real("ACUTE_SCORE_MAX")
 #: Fewest feature points in one thread's part of the line directions (below it the
@@ -529,8 +530,8 @@ def line_test(
     rank: np.ndarray,
     compare: Neighbourhood,
     *,
-    offset: float = LINE_OFFSET,
-    spread: float = LINE_SPREAD,
+    offset: float | None = None,
+    spread: float | None = None,
     between: np.ndarray | None = None,
 ) -> np.ndarray:
     """Thinning's line test: feature points beside the line of their stronger neighbours.
@@ -543,10 +544,12 @@ def line_test(
     ``p_i`` to its foot on the line, has ``|g|^2 > (offset * u)^2``; ``u`` is the mean of
     ``|q|`` over the ``min(LINE_UNIT, len - 1)`` members of ``compare[i]`` after ``i``
     (its first), added in order to 0.0; and the foot ``p_i + g`` lies among the features'
-    along the line (some ``r_j . e`` above ``-(qbar . e)``, some below: nothing is
-    extrapolated past a line's end). With ``between``, a point ``m`` of ``compare[i]``
-    with ``between[m]`` or ``rank[m] < rank[i]`` and ``(p_m - p_i) . (p_m - (p_i + g)) <
-    0`` keeps ``i`` (as :func:`thin`'s blocking). Every decision uses ``mask``.
+    along the line (some ``r_j . e`` above ``-(qbar . e) + LINE_REACH * u``, some below
+    ``-(qbar . e) - LINE_REACH * u``: nothing is extrapolated past a line's end, and the
+    bent row of a corner's other edges makes no line). With ``between``, a point ``m`` of
+    ``compare[i]`` with ``between[m]`` or ``rank[m] < rank[i]`` and ``(p_m - p_i) . (p_m -
+    (p_i + g)) < 0`` keeps ``i`` (as :func:`thin`'s blocking). Every decision uses
+    ``mask``.
 
     Parameters
     ----------
@@ -557,8 +560,8 @@ def line_test(
         Thinning's ranking.
     compare : Neighbourhood
         CSR lists (each point first in its own), thinning's.
-    offset, spread : float
-        ``LINE_OFFSET``, ``LINE_SPREAD``.
+    offset, spread : float, optional
+        Default ``LINE_OFFSET``, ``LINE_SPREAD`` (read at the call).
     between : (m,) bool, optional
         Thinning's blockers; default none.
 
@@ -582,40 +585,47 @@ def line_test(
     along = r[:, 0] * e[o, 0] + r[:, 1] * e[o, 1] + r[:, 2] * e[o, 2]
     w = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1] + r[:, 2] * r[:, 2] - along * along
     scatter = _segment_sums(w, ptr) / np.maximum(sizes, 1)
-    # i's foot lies among theirs along the line (no extrapolation past a line's end)
+    u = _list_unit(points, compare, cand)
+    # i's foot lies among theirs along the line, some reach ahead and some behind
+    at = qbar[:, 0] * e[:, 0] + qbar[:, 1] * e[:, 1] + qbar[:, 2] * e[:, 2]
+    reach = LINE_REACH * u
     ahead = np.zeros(len(cand), bool)
     behind = np.zeros(len(cand), bool)
-    at = qbar[:, 0] * e[:, 0] + qbar[:, 1] * e[:, 1] + qbar[:, 2] * e[:, 2]
-    np.logical_or.at(ahead, o, along > -at[o])
-    np.logical_or.at(behind, o, along < -at[o])
+    np.logical_or.at(ahead, o, along > -at[o] + reach[o])
+    np.logical_or.at(behind, o, along < -at[o] - reach[o])
     g = qbar - at[:, None] * e
     off2 = g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1] + g[:, 2] * g[:, 2]
-    # the local unit: the mean distance to the next members of each list, added in order
-    indptr = np.asarray(compare.indptr, np.int64)
-    indices = np.asarray(compare.indices, np.int64)
-    start, count = indptr[cand], indptr[cand + 1] - indptr[cand]
-    take = np.clip(count - 1, 0, LINE_UNIT)
-    acc = np.zeros(len(cand))
-    for t in range(1, LINE_UNIT + 1):
-        has = take >= t
-        d = points[indices[start[has] + t]] - points[cand[has]]
-        acc[has] += np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
-    u = np.where(take > 0, acc / np.maximum(take, 1), 0.0)
-    far, thin_ = offset * u, spread * u
+    far = (LINE_OFFSET if offset is None else offset) * u
+    thin_ = (LINE_SPREAD if spread is None else spread) * u
     drop = (sizes >= LINE_MIN) & (off2 > far * far) & (scatter < thin_ * thin_) & ahead & behind
-    if between is not None and drop.any():
-        at_, m = _rows(compare, cand[drop])
-        rows_ = np.flatnonzero(drop)[at_]
-        i_ = cand[rows_]
-        hit = np.asarray(between, bool)[m] | (rank[m] < rank[i_])
-        at_, m, rows_, i_ = at_[hit], m[hit], rows_[hit], i_[hit]
-        foot = points[i_] + g[rows_]
-        a = points[m] - points[i_]
-        b = points[m] - foot
+    if between is not None and drop.any():  # thinning's blocking, towards the foot p_i + g
+        at_row, m = _rows(compare, cand[drop])
+        slot = np.flatnonzero(drop)[at_row]
+        i = cand[slot]
+        hit = np.asarray(between, bool)[m] | (rank[m] < rank[i])
+        m, slot, i = m[hit], slot[hit], i[hit]
+        a = points[m] - points[i]
+        b = points[m] - (points[i] + g[slot])
         dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
-        drop[rows_[dot < 0]] = False
+        drop[slot[dot < 0]] = False
     out[cand[drop]] = False
     return out
+
+
+def _list_unit(points: np.ndarray, lists: Neighbourhood, rows: np.ndarray) -> np.ndarray:
+    """The local unit of each of ``rows`` (c,): the mean distance from the point to the
+    next ``min(LINE_UNIT, len - 1)`` members of its list (itself first), added in order
+    to 0.0 (0 for a list of one): (c,) float64."""
+    indptr = np.asarray(lists.indptr, np.int64)
+    indices = np.asarray(lists.indices, np.int64)
+    start = indptr[rows]
+    take = np.clip(indptr[rows + 1] - start - 1, 0, LINE_UNIT)
+    acc = np.zeros(len(rows))
+    for t in range(1, LINE_UNIT + 1):
+        has = take >= t
+        d = points[indices[start[has] + t]] - points[rows[has]]
+        acc[has] += np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+    return np.where(take > 0, acc / np.maximum(take, 1), 0.0)
 
 
 #: Rows per block of :func:`sheet_mask` (bounds its (rows, k, 3) temporaries).

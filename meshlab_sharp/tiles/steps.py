@@ -309,6 +309,7 @@ def robust_line(ctx: Context, *, plan: RobustPlan, ranking: str) -> Partial:
         ctx.rows,
         CandidateLists.knn(ctx.idx, plan.compare_knn),
         ctx.gather(ranking),
+        robust.line_rules(),
         _rules(plan, ctx.gather("mask")).between,
         TILE_THREADS,
     )

@@ -614,9 +614,10 @@ std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char
 	}, bar, (from + to) / 2, to, "support and thinning");
 	if (!line) return f2;
 	std::vector<char> f3(f0.size(), 0);
+	const ms_line_rules_t rules{MS_LINE_OFFSET, MS_LINE_SPREAD, MS_LINE_REACH, MS_LINE_MIN, MS_LINE_UNIT};
 	chunks(c, [&](unsigned, Index a, Index b) {
-		return ms_line_test(p.data(), bytes(f2), rows.data(), &K, rank, MS_LINE_OFFSET, MS_LINE_SPREAD,
-		                    block ? between.data() : nullptr, a, b, reinterpret_cast<uint8_t *>(f3.data()));
+		return ms_line_test(p.data(), bytes(f2), rows.data(), &K, rank, &rules, block ? between.data() : nullptr, a,
+		                    b, reinterpret_cast<uint8_t *>(f3.data()));
 	}, bar, to, to, "support and thinning");
 	return f3;
 }

@@ -171,10 +171,10 @@ static int parted_from(const double *p, const ms_lists_t *compare, int64_t first
 }
 
 /* The local unit of slot r's list (i first): the mean distance from p_i to the next
- * min(MS_LINE_UNIT, len - 1) members, added in order to 0.0 (robust.line_test). */
+ * min(unit, len - 1) members, added in order to 0.0 (robust.line_test). */
 static double list_unit(const double *p, const ms_lists_t *L, int64_t first, int64_t len,
-                        int64_t i) {
-    const int64_t m = len - 1 < MS_LINE_UNIT ? len - 1 : MS_LINE_UNIT;
+                        int64_t i, int64_t unit) {
+    const int64_t m = len - 1 < unit ? len - 1 : unit;
     double acc = 0.0;
     for (int64_t t = first + 1; t < first + 1 + m; t++) {
         const double *q = p + 3 * list_member(L, t), *pi = p + 3 * i;
@@ -185,7 +185,7 @@ static double list_unit(const double *p, const ms_lists_t *L, int64_t first, int
 }
 
 int ms_line_test(const double *p, const uint8_t *f2, const int64_t *rows,
-                 const ms_lists_t *compare, const double *rank, double offset, double spread,
+                 const ms_lists_t *compare, const double *rank, const ms_line_rules_t *rules,
                  const uint8_t *between, int64_t begin, int64_t end, uint8_t *f3) {
     int64_t cap = 0;
     for (int64_t r = begin; r < end; r++) {
@@ -206,24 +206,25 @@ int ms_line_test(const double *p, const uint8_t *f2, const int64_t *rows,
             if (j != i && f2[j] && rank[j] > rank[i]) line_column(pi, p + 3 * j, col + 9 * m++);
         }
         int keep = f2[i];
-        if (keep && m >= MS_LINE_MIN) {
+        if (keep && m >= rules->minimum) {
             double e[3], qbar[3];
             line_direction(col, m, e, qbar);
             const double at = qbar[0] * e[0] + qbar[1] * e[1] + qbar[2] * e[2];
-            int ahead = 0, behind = 0;  // i's foot lies among theirs along the line
+            const double u = list_unit(p, compare, first, len, i, rules->unit);
+            const double reach = rules->reach * u;
+            int ahead = 0, behind = 0; /* i's foot lies among theirs along the line */
             for (int64_t t = 0; t < m; t++) {
                 const double *c = col + 9 * t;
                 const double rx = c[0] - qbar[0], ry = c[1] - qbar[1], rz = c[2] - qbar[2];
                 const double along = rx * e[0] + ry * e[1] + rz * e[2];
                 w[t] = rx * rx + ry * ry + rz * rz - along * along;
-                ahead |= along > -at;
-                behind |= along < -at;
+                ahead |= along > -at + reach;
+                behind |= along < -at - reach;
             }
             const double scatter = segment_sum(w, m, 1) / (double)m;
             const double g[3] = {qbar[0] - at * e[0], qbar[1] - at * e[1], qbar[2] - at * e[2]};
             const double off2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-            const double u = list_unit(p, compare, first, len, i);
-            const double far = offset * u, thin = spread * u;
+            const double far = rules->offset * u, thin = rules->spread * u;
             if (ahead && behind && off2 > far * far && scatter < thin * thin) {
                 const double foot[3] = {pi[0] + g[0], pi[1] + g[1], pi[2] + g[2]};
                 keep = between != NULL && parted_from(p, compare, first, len, rank, between, i, foot);
