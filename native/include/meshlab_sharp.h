@@ -563,15 +563,16 @@ typedef struct {
  * (p_j - p_i) . (p_l - p_i) < 0. ms_line_test (robust.line_test; f2 complete first; the
  * rules' offset, spread, reach, minimum and unit are MS_LINE_OFFSET, MS_LINE_SPREAD,
  * MS_LINE_REACH, MS_LINE_MIN and MS_LINE_UNIT in ms_detect): f3[i] = f2[i], unless the
- * m >= minimum points j != i of compare's list with f2[j] and
- * rank[j] > rank[i] (q_j = p_j - p_i, in list order) have, with qbar and e as
- * ms_line_directions forms them over those j, a mean of |r_j|^2 - (r_j . e)^2, r_j = q_j -
- * qbar (add.reduceat's sum, divided by m), below (spread u)^2 while g = qbar - (qbar . e) e
- * has |g|^2 > (offset u)^2 (u: the mean of |q| over the next min(unit, len - 1) members
- * after i, added in order to 0.0), and some r_j . e > -(qbar . e) + reach u and some
- * r_j . e < -(qbar . e) - reach u (p_i's foot lies among theirs): then f3[i] = 0, unless (between not NULL) a
- * point m of the list with between[m] or rank[m] < rank[i] has (p_m - p_i) . (p_m - (p_i +
- * g)) < 0. Returns 0, or -1 out of memory. Sums over x, y, z in that order, as numpy's. */
+ * m >= minimum points j != i of compare's list with f2[j] and rank[j] > rank[i] (q_j =
+ * p_j - p_i, in list order) have, with qbar and e as ms_line_directions forms them over
+ * those j, a mean of |r_j|^2 - (r_j . e)^2, r_j = q_j - qbar (add.reduceat's sum,
+ * divided by m), below (spread u)^2 while g = qbar - (qbar . e) e has |g|^2 > (offset
+ * u)^2 (u: the mean of |q| over the next min(unit, len - 1) members after i, added in
+ * order to 0.0), and some r_j . e > -(qbar . e) + reach u and some r_j . e < -(qbar .
+ * e) - reach u (p_i's foot lies among theirs): then f3[i] = 0, unless (between not
+ * NULL) a point m of the list with between[m] or rank[m] < rank[i] has (p_m - p_i) .
+ * (p_m - (p_i + g)) < 0. Returns 0, or -1 out of memory. Sums over x, y, z in that
+ * order, as numpy's. */
 int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
                        const ms_lists_t *direction, int64_t begin, int64_t end, double *e);
 void ms_supported(const double *p, const uint8_t *f0, const int64_t *rows, const double *e,

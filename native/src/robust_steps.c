@@ -105,12 +105,13 @@ void ms_smoothed_ranking(const double *score, const int64_t *rows, const ms_list
 }
 
 /* Whether a point m of slot r's compare list with between[m], or ranking below i, lies
- * between p_i and p_j: (p_m - p_i) . (p_m - p_j) < 0 (robust.thin's blocking). */
+ * between p_i and the point b: (p_m - p_i) . (p_m - b) < 0 (robust.thin's blocking, b =
+ * p_j; robust.line_test's, b = p_i's foot on the line). */
 static int parted(const double *p, const ms_lists_t *compare, int64_t first, int64_t len,
-                  const double *rank, const uint8_t *between, int64_t i, int64_t j) {
+                  const double *rank, const uint8_t *between, int64_t i, const double *b) {
     for (int64_t t = first; t < first + len; t++) {
         const int64_t m = list_member(compare, t);
-        if ((between[m] || rank[m] < rank[i]) && ball_dot(p + 3 * m, p + 3 * i, p + 3 * j) < 0)
+        if ((between[m] || rank[m] < rank[i]) && ball_dot(p + 3 * m, p + 3 * i, b) < 0)
             return 1;
     }
     return 0;
@@ -149,25 +150,11 @@ void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const doub
             const int64_t j = list_member(compare, t);
             if (j != i && f1[j] && rank[j] > rank[i] &&
                 beside_line(p + 3 * i, p + 3 * j, e + 3 * r, cone, side2) &&
-                !(between != NULL && parted(p, compare, first, len, rank, between, i, j)))
+                !(between != NULL && parted(p, compare, first, len, rank, between, i, p + 3 * j)))
                 keep = 0;
         }
         f2[i] = (uint8_t)keep;
     }
-}
-
-/* Whether a point m of slot r's compare list with between[m], or ranking below i, lies
- * between p_i and the point foot: (p_m - p_i) . (p_m - foot) < 0 (robust.line_test's
- * blocking, as parted's). */
-static int parted_from(const double *p, const ms_lists_t *compare, int64_t first, int64_t len,
-                       const double *rank, const uint8_t *between, int64_t i,
-                       const double *foot) {
-    for (int64_t t = first; t < first + len; t++) {
-        const int64_t m = list_member(compare, t);
-        if ((between[m] || rank[m] < rank[i]) && ball_dot(p + 3 * m, p + 3 * i, foot) < 0)
-            return 1;
-    }
-    return 0;
 }
 
 /* The local unit of slot r's list (i first): the mean distance from p_i to the next
@@ -227,7 +214,7 @@ int ms_line_test(const double *p, const uint8_t *f2, const int64_t *rows,
             const double far = rules->offset * u, thin = rules->spread * u;
             if (ahead && behind && off2 > far * far && scatter < thin * thin) {
                 const double foot[3] = {pi[0] + g[0], pi[1] + g[1], pi[2] + g[2]};
-                keep = between != NULL && parted_from(p, compare, first, len, rank, between, i, foot);
+                keep = between != NULL && parted(p, compare, first, len, rank, between, i, foot);
             }
         }
         f3[i] = (uint8_t)keep;
