@@ -51,15 +51,22 @@ static inline void line_column(const double *pi, const double *pj, double *c) {
     c[6] = c[1] * c[1]; c[7] = c[1] * c[2]; c[8] = c[2] * c[2];
 }
 
-int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
-                       const ms_lists_t *direction, int64_t begin, int64_t end, double *e) {
-    int64_t cap = 0;
+/* The longest of the lists of slots [begin, end) of L, at least 1: the rows of a
+ * per-list scratch. */
+static int64_t longest_list(const ms_lists_t *L, int64_t begin, int64_t end) {
+    int64_t cap = 1;
     for (int64_t r = begin; r < end; r++) {
         int64_t first, len;
-        list_span(direction, r, &first, &len);
+        list_span(L, r, &first, &len);
         cap = len > cap ? len : cap;
     }
-    double *col = (double *)malloc((size_t)(cap > 0 ? cap : 1) * 9 * sizeof(double));
+    return cap;
+}
+
+int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
+                       const ms_lists_t *direction, int64_t begin, int64_t end, double *e) {
+    const int64_t cap = longest_list(direction, begin, end);
+    double *col = (double *)malloc((size_t)cap * 9 * sizeof(double));
     if (!col) return -1;
     for (int64_t r = begin; r < end; r++) {
         const double *pi = p + 3 * rows[r];
@@ -174,15 +181,10 @@ static double list_unit(const double *p, const ms_lists_t *L, int64_t first, int
 int ms_line_test(const double *p, const uint8_t *f2, const int64_t *rows,
                  const ms_lists_t *compare, const double *rank, const ms_line_rules_t *rules,
                  const uint8_t *between, int64_t begin, int64_t end, uint8_t *f3) {
-    int64_t cap = 0;
-    for (int64_t r = begin; r < end; r++) {
-        int64_t first, len;
-        list_span(compare, r, &first, &len);
-        cap = len > cap ? len : cap;
-    }
-    double *col = (double *)malloc((size_t)(cap > 0 ? cap : 1) * 10 * sizeof(double));
+    const int64_t cap = longest_list(compare, begin, end);
+    double *col = (double *)malloc((size_t)cap * 10 * sizeof(double)); /* then w (cap) */
     if (!col) return -1;
-    double *w = col + 9 * (cap > 0 ? cap : 1);
+    double *w = col + 9 * cap;
     for (int64_t r = begin; r < end; r++) {
         const int64_t i = rows[r];
         const double *pi = p + 3 * i;
