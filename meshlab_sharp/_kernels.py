@@ -114,6 +114,11 @@ _SIGNATURES = {
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _f64, _f64, _c_void_p]
         + [_i64, _i64, _c_void_p],
     ),
+    "ms_line_test": (
+        _int,
+        [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p, _c_void_p]
+        + [_i64, _i64, _c_void_p],
+    ),
     "ms_acute_tips": (
         None,
         [_c_void_p, _c_void_p, _c_void_p, _c_void_p, _i64, _i64, _c_void_p],
@@ -1418,6 +1423,7 @@ class _RobustPlan(ctypes.Structure):
         ("thin_side", _f64),
         ("thin_between", _int),
         ("curved_dropped", _int),
+        ("thin_line", _int),
     ]
 
 
@@ -1435,7 +1441,8 @@ class RobustPlan:
     candidate needs it); ``thin_cone``: thinning's cone; ``thin_side``: its side rule;
     ``thin_between``: thinning is
     blocked by the points that are not candidates; ``curved_dropped``: the candidates on
-    a curved surface are dropped (:func:`stage_curved`)."""
+    a curved surface are dropped (:func:`stage_curved`); ``thin_line``: thinning's line test
+    follows (a cloud whose ranking is not smoothed)."""
 
     mesh: bool
     noise: float
@@ -1453,6 +1460,7 @@ class RobustPlan:
     thin_side: float
     thin_between: bool
     curved_dropped: bool
+    thin_line: bool
 
 
 def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) -> RobustPlan:
@@ -1481,6 +1489,7 @@ def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) ->
         thin_side=c.thin_side,
         thin_between=bool(c.thin_between),
         curved_dropped=bool(c.curved_dropped),
+        thin_line=bool(c.thin_line),
     )
 
 
@@ -1801,13 +1810,37 @@ def acute_tips(
     return out
 
 
+@dataclass(frozen=True)
+class LineRules:
+    """Thinning's line test (``ms_line_rules_t``): the offset, spread and reach in local
+    units, the fewest stronger features that make a line, and how many nearest set the
+    unit (robust.py's ``LINE_`` constants)."""
+
+    offset: float
+    spread: float
+    reach: float
+    minimum: int
+    unit: int
+
+
+class _LineRules(ctypes.Structure):
+    _fields_ = [
+        ("offset", _f64),
+        ("spread", _f64),
+        ("reach", _f64),
+        ("minimum", _i64),
+        ("unit", _i64),
+    ]
+
+
 @dataclass
 class FinishRules:
     """How robust mode's support and thinning decide (robust.py's rules for the input):
     support's cone and minimum and the scores it exempts (below ``free_below``; None:
     none), thinning's cone and side rule, its ranking smoothed over the first ``window``
-    of its lists (0: the score itself), and its blockers ``between`` (n,) bool (None:
-    none)."""
+    of its lists (0: the score itself), its blockers ``between`` (n,) bool (None:
+    none), and the rules of the line test that follows (``line``: a cloud's,
+    ``ms_line_test``; None: none)."""
 
     support_cone: float
     minimum: int
@@ -1816,6 +1849,7 @@ class FinishRules:
     thin_side: float
     window: int
     between: np.ndarray | None
+    line: LineRules | None = None
 
 
 def line_support(
@@ -1927,6 +1961,38 @@ def thin_candidates(
     return out
 
 
+def line_test(
+    points: np.ndarray,
+    thinned: np.ndarray,
+    rows: np.ndarray,
+    compare: CandidateLists,
+    rank: np.ndarray,
+    rules: LineRules,
+    between: np.ndarray | None,
+    workers: int = -1,
+) -> np.ndarray:
+    """Thinning's line test (``ms_line_test``, by ``rules``) of the points ``rows`` (c,),
+    once ``thinned`` (n,) bool is known at every point of their ``compare`` lists: by
+    ``rank`` (n,), blocked by ``between`` (n,) bool (None: none). Returns the tested mask
+    (n,) bool (False off the rows) (:func:`meshlab_sharp.reference.robust.line_test`'s)."""
+    lib = _lib()
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    thinned = np.ascontiguousarray(thinned, dtype=bool)
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    rank = np.ascontiguousarray(rank, dtype=np.float64)
+    between = None if between is None else np.ascontiguousarray(between, bool)
+    spec = ctypes.byref(compare.spec())
+    out = np.zeros(len(thinned), dtype=bool)
+    c_rules = _LineRules(rules.offset, rules.spread, rules.reach, rules.minimum, rules.unit)
+    args = (_ptr(points), _ptr(thinned), _ptr(rows), spec, _ptr(rank), ctypes.byref(c_rules))
+
+    def task(a: int, b: int) -> int:
+        return lib.ms_line_test(*args, _ptr(between), a, b, _ptr(out))
+
+    _slot_chunks(len(rows), workers, task)
+    return out
+
+
 def support_and_thin(
     points: np.ndarray,
     mask: np.ndarray,
@@ -1947,4 +2013,7 @@ def support_and_thin(
     e, supported, rank = line_support(
         points, mask, score, rows, (direction, around), rules, workers, compare
     )
-    return thin_candidates(points, supported, rows, e, compare, rank, rules, workers)
+    thinned = thin_candidates(points, supported, rows, e, compare, rank, rules, workers)
+    if rules.line is None:
+        return thinned
+    return line_test(points, thinned, rows, compare, rank, rules.line, rules.between, workers)

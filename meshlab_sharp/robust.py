@@ -72,7 +72,13 @@ choices, see ``docs/method.md``; the arithmetic the plugin shares is pinned down
    below the point (a valley of the ranking), lying between the two (the middle of a
    wall's end face) keeps both (``ms_robust_plan``). Where the noise grew the scales
    to the cap, the ranking is the mean over the ``THIN_KNN`` nearest (points lifted by
-   the noise beside a line do not outrank it).
+   the noise beside a line do not outrank it). On a cloud, a point still kept is
+   then dropped when it lies more than ``LINE_OFFSET`` (0.6) local units (the mean
+   distance to its ``LINE_UNIT`` nearest) beside the line through the higher-ranked
+   points kept among its comparison list, those lying on one line (their mean squared
+   distance to it below ``LINE_SPREAD`` units squared): the second row of the band,
+   which its own tilted direction keeps out of the cone; blocked as thinning is, and
+   not where the ranking is smoothed (``ms_line_test``).
 6. **Meshes: the mesh's own sharp edges** (:mod:`meshlab_sharp.creases`): vertices on
    an edge whose two faces turn by more than ``CREASE_ANGLE`` (more on a noisy mesh)
    are features too. On a CAD tessellation they are all of them. A mesh's rings (its
@@ -98,6 +104,11 @@ __all__ = [
     "ISOLATED_NTH",
     "ISOLATED_REF",
     "ISOLATED_SPREAD",
+    "LINE_MIN",
+    "LINE_OFFSET",
+    "LINE_REACH",
+    "LINE_SPREAD",
+    "LINE_UNIT",
     "NOISE_KNN",
     "NOISE_MAX_FACTOR",
     "NOISE_QUIET",
@@ -120,6 +131,7 @@ __all__ = [
     "THIN_RING",
     "THIN_SIDE",
     "THIN_SIDE_NOISY",
+    "line_rules",
     "noise_ratios",
     "sheet_parameters",
 ]
@@ -133,6 +145,16 @@ THIN_CONE_COS_NOISY = _header.real("THIN_CONE_COS_NOISY")
 #: clouds, and on noisy clouds (``ms_robust_plan``).
 THIN_SIDE = _header.real("THIN_SIDE")
 THIN_SIDE_NOISY = _header.real("THIN_SIDE_NOISY")
+#: Thinning's line test (``ms_line_test``): the offset beside the line of the
+#: higher-ranked features that drops a cloud's feature point, the spread of those
+#: features that still reads as one line, both in local units (the mean distance to
+#: the LINE_UNIT nearest), and how many of them make a line.
+LINE_OFFSET = _header.real("LINE_OFFSET")
+LINE_SPREAD = _header.real("LINE_SPREAD")
+LINE_MIN = _header.integer("LINE_MIN")
+LINE_UNIT = _header.integer("LINE_UNIT")
+#: ... and how far ahead and behind the point's foot some of them lie, in units.
+LINE_REACH = _header.real("LINE_REACH")
 #: Neighbourhood of the comparison in thinning: the 12 nearest points (clouds; within
 #: about 1.9 spacings: across the band of candidates (1.3-1.5 spacings) and the points
 #: that noise lifts beside it, mostly short of a second line 2-3 spacings away, such as
@@ -282,3 +304,9 @@ def sheet_parameters() -> _kernels.SheetParameters:
         SHEET_TRIM,
         SHEET_TRIM_COS,
     )
+
+
+def line_rules() -> _kernels.LineRules:
+    """Thinning's line test's rules as the module holds them now: ``LINE_OFFSET``,
+    ``LINE_SPREAD``, ``LINE_REACH``, ``LINE_MIN`` and ``LINE_UNIT``."""
+    return _kernels.LineRules(LINE_OFFSET, LINE_SPREAD, LINE_REACH, LINE_MIN, LINE_UNIT)

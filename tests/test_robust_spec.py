@@ -10,7 +10,8 @@ Decisions that a last-bit difference could flip are followed as "maybe" alongsid
 sure answer (three-valued logic): a relative distance within ``EPS_R`` of its threshold,
 a repeated largest eigenvalue of a line direction (the doc: "implementations may differ
 on those points"), an offset within ``EPS`` of a thinning cone, two scores within
-``EPS`` of each other (their sums' order over a ring is not pinned). ``detect`` must
+``EPS`` of each other (their sums' order over a ring is not pinned), a line test's
+offset, spread, reach or blocking within ``LINE_EPS`` local units of its bound. ``detect`` must
 select every surely selected point and no point that cannot be selected; the points in
 between are excluded, and each case bounds how many there are.
 """
@@ -69,6 +70,13 @@ SUPPORT_FREE_SCORE = 0.22
 #: Step 5b: on a cloud whose nu is at most NOISE_QUIET, a point scoring in [0.5, 0.8)
 #: between two candidates of its thinning list is a candidate too.
 ACUTE_SCORE, ACUTE_SCORE_MAX = 0.5, 0.8
+#: Step 8b: beside the line of at least LINE_MIN stronger features by more than
+#: LINE_OFFSET units, they lying within LINE_SPREAD units of it, some LINE_REACH units
+#: ahead of the point's foot and some behind; the unit the mean distance to the
+#: LINE_UNIT nearest of the list.
+LINE_MIN, LINE_OFFSET, LINE_SPREAD, LINE_REACH, LINE_UNIT = 3, 0.6, 0.4, 0.75, 6
+#: The relative margin of a "maybe" on the line test's comparisons (in units of u).
+LINE_EPS = 1e-9
 #: Step 9: 20 degrees, 4 / 0.3186 lower quartiles.
 CREASE, QUARTILE_FACTOR = math.pi / 9, 4 / 0.3186
 
@@ -228,6 +236,53 @@ class Reading:
                 maybe |= bool(parts_maybe and dot < EPS)
             return sure, maybe
 
+        def line_drop(i: int) -> tuple[bool, bool, bool]:
+            """(surely, possibly) dropped by the line test, and whether a rival ranked
+            within EPS of i leaves the stronger features unsure."""
+            others = [j for j in compare[i] if j != i and maybe_f2[j]]
+            tie = any(abs(rank[j] - rank[i]) < EPS for j in others)
+            if tie or any(not sure_f2[j] and rank[j] > rank[i] - EPS for j in others):
+                return False, True, tie  # which features are the stronger ones is unsure
+            stronger = [j for j in others if rank[j] > rank[i]]
+            if len(stronger) < LINE_MIN:
+                return False, False, False
+            q = points[stronger] - points[i]
+            qbar = q.mean(axis=0)
+            w, v = np.linalg.eigh(q.T @ q - len(q) * np.outer(qbar, qbar))
+            if w[2] - w[1] <= 1e-9 * max(w[2], 1e-300):  # a repeated largest eigenvalue
+                return False, True, False
+            line = v[:, 2]
+            near = points[compare[i][1 : 1 + LINE_UNIT]] - points[i]
+            u = np.sqrt((near * near).sum(axis=1)).mean()
+            tol = LINE_EPS * u
+            at = qbar @ line
+            foot = qbar - at * line  # from p_i to its foot on the line
+            along = (q - qbar) @ line
+            scatter = ((q - qbar) ** 2).sum(axis=1) - along * along
+            # (sure, possible) answers of each rule, the possible ones within tol
+            rules = [
+                (along > -at + LINE_REACH * u + tol, along > -at + LINE_REACH * u - tol),
+                (along < -at - LINE_REACH * u - tol, along < -at - LINE_REACH * u + tol),
+            ]
+            sure = all(r.any() for r, _ in rules)
+            maybe = all(r.any() for _, r in rules)
+            off = np.sqrt(foot @ foot)
+            sure &= bool(off > LINE_OFFSET * u + tol)
+            maybe &= bool(off > LINE_OFFSET * u - tol)
+            spread = np.sqrt(max(scatter.mean(), 0.0))
+            sure &= bool(spread < LINE_SPREAD * u - tol)
+            maybe &= bool(spread < LINE_SPREAD * u + tol)
+            if block:  # thinning's blocking, towards the foot
+                for k in compare[i]:
+                    if k == i:  # its dot product is exactly 0: never between
+                        continue
+                    dot = (points[k] - points[i]) @ (points[k] - points[i] - foot)
+                    parts_sure = not maybe_f0[k] or score[k] < score[i] - EPS
+                    parts_maybe = not sure_f0[k] or score[k] < score[i] + EPS
+                    sure &= not (parts_maybe and dot < u * tol)
+                    maybe &= not (parts_sure and dot < -u * tol)
+            return sure, maybe, False
+
         # step 8: the ranking; where the noise grew the scales to the cap, the score
         # averaged over the THIN_KNN nearest
         rank = score
@@ -256,6 +311,14 @@ class Reading:
                 )
             sure_f2[i] = sure_f1[i] and not beaten_maybe
             maybe_f2[i] = not beaten_sure
+
+        # step 8b: the line test, on a cloud whose ranking is not smoothed, every test on F2
+        if faces is None and rank is score:
+            line_sure, line_maybe = np.zeros(m, bool), np.zeros(m, bool)
+            for i in np.flatnonzero(maybe_f2):
+                line_sure[i], line_maybe[i], tie = line_drop(i)
+                tied[i] |= tie
+            sure_f2, maybe_f2 = sure_f2 & ~line_maybe, maybe_f2 & ~line_sure
 
         strength = (r >= thresholds[:, None]).sum(axis=0) / len(scales)
         if faces is not None:

@@ -48,6 +48,7 @@ from .robust import (
     acute_tips,
     isolated_points,
     line_directions,
+    line_test,
     noise_ratios,
     noise_ratios_lists,
     smoothed_ranking,
@@ -933,7 +934,7 @@ class RobustSetup:
             cone_cos=robust_mode.THIN_CONE_COS,
             exempt=free,
         )
-        return thin(
+        mask = thin(
             self.points,
             mask,
             rank,
@@ -943,6 +944,9 @@ class RobustSetup:
             side=self.plan.thin_side,
             between=block,
         )
+        if self.plan.thin_line:
+            mask = line_test(self.points, mask, rank, compare, between=block)
+        return mask
 
     def _finish_compiled(self, mask: np.ndarray) -> np.ndarray:
         """:meth:`_finish_numpy` in C (:func:`meshlab_sharp._kernels.acute_tips` and
@@ -990,6 +994,7 @@ class RobustSetup:
             thin_side=self.plan.thin_side,
             window=robust_mode.THIN_KNN if self.plan.ranking_smoothed else 0,
             between=thin_blockers(mask, self.plan),
+            line=robust_mode.line_rules() if self.plan.thin_line else None,
         )
         return _kernels.support_and_thin(
             self.points,

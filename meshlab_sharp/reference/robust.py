@@ -46,6 +46,12 @@ SUPPORT_KNN = _header.integer("SUPPORT_KNN")
 THIN_SIDE = _header.real("THIN_SIDE")
 THIN_SIDE_NOISY = _header.real("THIN_SIDE_NOISY")
 SUPPORT_FREE_SCORE = _header.real("SUPPORT_FREE_SCORE")
+#: Thinning's line test (:func:`line_test`; meshlab_sharp.robust says why).
+LINE_OFFSET = _header.real("LINE_OFFSET")
+LINE_SPREAD = _header.real("LINE_SPREAD")
+LINE_MIN = _header.integer("LINE_MIN")
+LINE_UNIT = _header.integer("LINE_UNIT")
+LINE_REACH = _header.real("LINE_REACH")
 ACUTE_SCORE = _header.real("ACUTE_SCORE")
 ACUTE_SCORE_MAX = _header.real("ACUTE_SCORE_MAX")
 #: Fewest feature points in one thread's part of the line directions (below it the
@@ -342,14 +348,24 @@ def _line_directions_of(
     use = mask[members]
     owner, members = owner[use], members[use]
     q = points[members] - points[cand[owner]]
-    sizes = np.bincount(owner, minlength=len(cand))
+    return _fitted_lines(q, owner, len(cand))[3]
+
+
+def _fitted_lines(
+    q: np.ndarray, owner: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The line through each of ``n`` groups of offsets ``q`` (k, 3) (group ``owner``,
+    increasing): the groups' sizes (n,), CSR pointers (n + 1,), means ``qbar`` (n, 3) and
+    the unit eigenvectors ``e`` (n, 3) of the largest eigenvalues of ``C = sum q q^T -
+    |Q| qbar qbar^T`` (numpy's sums in add.reduceat's order)."""
+    sizes = np.bincount(owner, minlength=n)
     ptr = np.concatenate([[0], np.cumsum(sizes)])
     qsum = _segment_sums(q, ptr)
     outer = _segment_sums(q[:, :, None] * q[:, None, :], ptr)
     safe = np.maximum(sizes.astype(np.float64), 1.0)[:, None]
     qbar = qsum / safe
     cov = outer - safe[:, :, None] * qbar[:, :, None] * qbar[:, None, :]
-    return largest_eigenvectors(cov)
+    return sizes, ptr, qbar, largest_eigenvectors(cov)
 
 
 def _feature_pairs(
@@ -506,6 +522,110 @@ def thin(
     out = mask.copy()
     out[cand[suppressed]] = False
     return out
+
+
+def line_test(
+    points: np.ndarray,
+    mask: np.ndarray,
+    rank: np.ndarray,
+    compare: Neighbourhood,
+    *,
+    offset: float | None = None,
+    spread: float | None = None,
+    between: np.ndarray | None = None,
+) -> np.ndarray:
+    """Thinning's line test: feature points beside the line of their stronger neighbours.
+
+    For a feature point ``i``, the features ``j != i`` of ``compare[i]`` with ``rank[j] >
+    rank[i]`` (``q_j = p_j - p_i``, list order; at least ``LINE_MIN``) give ``qbar`` and
+    the line direction ``e`` as :func:`line_directions` forms them. ``i`` is dropped when
+    the mean of ``|r_j|^2 - (r_j . e)^2`` (``r_j = q_j - qbar``) is below ``(spread *
+    u)^2`` (the features lie on one line) and ``g = qbar - (qbar . e) e``, the offset from
+    ``p_i`` to its foot on the line, has ``|g|^2 > (offset * u)^2``; ``u`` is the mean of
+    ``|q|`` over the ``min(LINE_UNIT, len - 1)`` members of ``compare[i]`` after ``i``
+    (its first), added in order to 0.0; and the foot ``p_i + g`` lies among the features'
+    along the line (some ``r_j . e`` above ``-(qbar . e) + LINE_REACH * u``, some below
+    ``-(qbar . e) - LINE_REACH * u``: nothing is extrapolated past a line's end, and the
+    bent row of a corner's other edges makes no line). With ``between``, a point ``m`` of
+    ``compare[i]`` with ``between[m]`` or ``rank[m] < rank[i]`` and ``(p_m - p_i) . (p_m -
+    (p_i + g)) < 0`` keeps ``i`` (as :func:`thin`'s blocking). Every decision uses
+    ``mask``.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+    mask : (m,) bool
+        Feature points after :func:`thin`.
+    rank : (m,) float64
+        Thinning's ranking.
+    compare : Neighbourhood
+        CSR lists (each point first in its own), thinning's.
+    offset, spread : float, optional
+        Default ``LINE_OFFSET``, ``LINE_SPREAD`` (read at the call).
+    between : (m,) bool, optional
+        Thinning's blockers; default none.
+
+    Returns
+    -------
+    (m,) bool
+        The tested mask (a subset of ``mask``).
+    """
+    mask = np.asarray(mask, bool)
+    cand = np.flatnonzero(mask)
+    out = mask.copy()
+    if len(cand) == 0:
+        return out
+    owner, nb = _rows(compare, cand)
+    ci = cand[owner]
+    use = mask[nb] & (nb != ci) & (rank[nb] > rank[ci])
+    o, j = owner[use], nb[use]
+    q = points[j] - points[cand[o]]
+    sizes, ptr, qbar, e = _fitted_lines(q, o, len(cand))
+    r = q - qbar[o]
+    along = r[:, 0] * e[o, 0] + r[:, 1] * e[o, 1] + r[:, 2] * e[o, 2]
+    w = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1] + r[:, 2] * r[:, 2] - along * along
+    scatter = _segment_sums(w, ptr) / np.maximum(sizes, 1)
+    u = _list_unit(points, compare, cand)
+    # i's foot lies among theirs along the line, some reach ahead and some behind
+    at = qbar[:, 0] * e[:, 0] + qbar[:, 1] * e[:, 1] + qbar[:, 2] * e[:, 2]
+    reach = LINE_REACH * u
+    ahead = np.zeros(len(cand), bool)
+    behind = np.zeros(len(cand), bool)
+    np.logical_or.at(ahead, o, along > -at[o] + reach[o])
+    np.logical_or.at(behind, o, along < -at[o] - reach[o])
+    g = qbar - at[:, None] * e
+    off2 = g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1] + g[:, 2] * g[:, 2]
+    far = (LINE_OFFSET if offset is None else offset) * u
+    thin_ = (LINE_SPREAD if spread is None else spread) * u
+    drop = (sizes >= LINE_MIN) & (off2 > far * far) & (scatter < thin_ * thin_) & ahead & behind
+    if between is not None and drop.any():  # thinning's blocking, towards the foot p_i + g
+        at_row, m = _rows(compare, cand[drop])
+        slot = np.flatnonzero(drop)[at_row]
+        i = cand[slot]
+        hit = np.asarray(between, bool)[m] | (rank[m] < rank[i])
+        m, slot, i = m[hit], slot[hit], i[hit]
+        a = points[m] - points[i]
+        b = points[m] - (points[i] + g[slot])
+        dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+        drop[slot[dot < 0]] = False
+    out[cand[drop]] = False
+    return out
+
+
+def _list_unit(points: np.ndarray, lists: Neighbourhood, rows: np.ndarray) -> np.ndarray:
+    """The local unit of each of ``rows`` (c,): the mean distance from the point to the
+    next ``min(LINE_UNIT, len - 1)`` members of its list (itself first), added in order
+    to 0.0 (0 for a list of one): (c,) float64."""
+    indptr = np.asarray(lists.indptr, np.int64)
+    indices = np.asarray(lists.indices, np.int64)
+    start = indptr[rows]
+    take = np.clip(indptr[rows + 1] - start - 1, 0, LINE_UNIT)
+    acc = np.zeros(len(rows))
+    for t in range(1, LINE_UNIT + 1):
+        has = take >= t
+        d = points[indices[start[has] + t]] - points[rows[has]]
+        acc[has] += np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+    return np.where(take > 0, acc / np.maximum(take, 1), 0.0)
 
 
 #: Rows per block of :func:`sheet_mask` (bounds its (rows, k, 3) temporaries).
@@ -847,4 +967,5 @@ def robust_plan(noise: float, n_kept: int, scales: Sequence[int], mesh: bool) ->
         thin_side=thin_side(mesh, noise),
         thin_between=quiet,
         curved_dropped=bool(mesh),
+        thin_line=not mesh and not ranking_smoothed(mesh, noise),
     )

@@ -57,6 +57,7 @@ from .steps import (
     robust_decide,
     robust_histograms,
     robust_isolated,
+    robust_line,
     robust_pass,
     robust_rank,
     robust_support,
@@ -412,6 +413,7 @@ def _robust(
         ("e", (n, 3), np.float64),
         ("mask1", (n,), bool),
         ("final", (n,), bool),
+        ("lined", (n,), bool),
     ):
         store.create(name, shape, dtype)
     top = max(scales)
@@ -461,7 +463,11 @@ def _robust(
         store.create(ranking, (n,), np.float64)
         runner.step(Step("rank", robust_rank, reuse, {"plan": plan}))
     runner.step(Step("thin", robust_thin, reuse, {"plan": plan, "ranking": ranking}))
-    return thresholds, decided["counts"], "final", "kept", plan.scales
+    if not plan.thin_line:
+        return thresholds, decided["counts"], "final", "kept", plan.scales
+    kept = Query(compare, "kept", "final", reuse="lists")  # final: a subset of mask1
+    runner.step(Step("line", robust_line, kept, {"plan": plan, "ranking": ranking}))
+    return thresholds, decided["counts"], "lined", "kept", plan.scales
 
 
 def _resident() -> int:

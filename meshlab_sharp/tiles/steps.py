@@ -300,6 +300,23 @@ def robust_thin(ctx: Context, *, plan: RobustPlan, ranking: str) -> Partial:
     return {}
 
 
+def robust_line(ctx: Context, *, plan: RobustPlan, ranking: str) -> Partial:
+    """``ms_line_test`` of the rows (``final``) by the store array ``ranking`` over their
+    ``plan.compare_knn`` nearest, blocked as thinning is; writes ``lined``."""
+    out = _kernels.line_test(
+        ctx.points,
+        ctx.gather("final"),
+        ctx.rows,
+        CandidateLists.knn(ctx.idx, plan.compare_knn),
+        ctx.gather(ranking),
+        robust.line_rules(),
+        _rules(plan, ctx.gather("mask")).between,
+        TILE_THREADS,
+    )
+    ctx.store.write_at("lined", ctx.own, out[ctx.rows])
+    return {}
+
+
 def finish(span: Span, *, mask: str, kept: str | None) -> dict[str, np.ndarray]:
     """The tile's results per input point: input index, mask, strength, kept (duplicates
     take their first occurrence's values)."""

@@ -128,6 +128,27 @@
  * (below it a noisy line thins to gaps). */
 #define MS_THIN_SIDE 0.7
 #define MS_THIN_SIDE_NOISY 0.65
+/* After thinning, a cloud's feature point is dropped when it lies beside the line through
+ * the higher-ranked features of its comparison list (at least MS_LINE_MIN of them) by
+ * more than MS_LINE_OFFSET local units, and those features lie on one line: their mean
+ * squared distance to it below (MS_LINE_SPREAD units)^2. The unit is the mean distance to
+ * the MS_LINE_UNIT nearest, so it follows the cloud's local density (robust.line_test).
+ * Not where the ranking is smoothed (ms_ranking_smoothed): there the points beside a line
+ * already rank below it, and the smoothed ranking of a row beside it can outrank the line.
+ * The point's foot on the line must lie among theirs, with some of them at least
+ * MS_LINE_REACH units ahead of it and some as far behind: past a line's end nothing is
+ * extrapolated, and at a corner the stronger points of the other edges, a short bent
+ * row, do not make a line.
+ * The band of candidates along an edge leaves points 1-1.5 spacings beside it whose own
+ * line direction, tilted by noise, keeps the stronger edge points outside thinning's cone
+ * and side rule; two rims or two edges side by side spread the stronger points over two
+ * lines, and on a quiet cloud a point that is not a candidate, or ranks below, between the
+ * point and the line blocks as in thinning. */
+#define MS_LINE_OFFSET 0.6
+#define MS_LINE_SPREAD 0.4
+#define MS_LINE_MIN 3
+#define MS_LINE_UNIT 6
+#define MS_LINE_REACH 0.75
 #define MS_THIN_KNN 12
 #define MS_THIN_RING 2
 #define MS_SUPPORT_KNN 16
@@ -516,6 +537,16 @@ typedef struct {
     int64_t k;
 } ms_lists_t;
 
+/* ms_line_test's rules (robust.line_test): the offset, spread and reach in local units,
+ * the fewest stronger features that make a line, and how many nearest set the unit. */
+typedef struct {
+    double offset;
+    double spread;
+    double reach;
+    int64_t minimum;
+    int64_t unit;
+} ms_line_rules_t;
+
 /* robust.line_directions: e[r] (3) = the unit eigenvector of the largest eigenvalue of
  * C = sum_j (q_j - qbar)(q_j - qbar)^T, q_j = p_j - p_i, over the j of direction's list
  * with f0[j] (numpy's sums and lower triangle; the 3x3 solver of the normals, on -C:
@@ -531,7 +562,19 @@ typedef struct {
  * the list's last member), unless (between not NULL) a point m of the list with between[m]
  * or rank[m] < rank[i] lies between: (p_m - p_i) . (p_m - p_j) < 0. ms_acute_tips
  * (robust.acute_tips): out[r] = some j != l of the list, both f0 and not i, with
- * (p_j - p_i) . (p_l - p_i) < 0. Sums over x, y, z in that order, as numpy's. */
+ * (p_j - p_i) . (p_l - p_i) < 0. ms_line_test (robust.line_test; f2 complete first; the
+ * rules' offset, spread, reach, minimum and unit are MS_LINE_OFFSET, MS_LINE_SPREAD,
+ * MS_LINE_REACH, MS_LINE_MIN and MS_LINE_UNIT in ms_detect): f3[i] = f2[i], unless the
+ * m >= minimum points j != i of compare's list with f2[j] and rank[j] > rank[i] (q_j =
+ * p_j - p_i, in list order) have, with qbar and e as ms_line_directions forms them over
+ * those j, a mean of |r_j|^2 - (r_j . e)^2, r_j = q_j - qbar (add.reduceat's sum,
+ * divided by m), below (spread u)^2 while g = qbar - (qbar . e) e has |g|^2 > (offset
+ * u)^2 (u: the mean of |q| over the next min(unit, len - 1) members after i, added in
+ * order to 0.0), and some r_j . e > -(qbar . e) + reach u and some r_j . e < -(qbar .
+ * e) - reach u (p_i's foot lies among theirs): then f3[i] = 0, unless (between not
+ * NULL) a point m of the list with between[m] or rank[m] < rank[i] has (p_m - p_i) .
+ * (p_m - (p_i + g)) < 0. Returns 0, or -1 out of memory. Sums over x, y, z in that
+ * order, as numpy's. */
 int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
                        const ms_lists_t *direction, int64_t begin, int64_t end, double *e);
 void ms_supported(const double *p, const uint8_t *f0, const int64_t *rows, const double *e,
@@ -542,6 +585,9 @@ void ms_smoothed_ranking(const double *score, const int64_t *rows, const ms_list
 void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const double *e,
              const ms_lists_t *compare, const double *rank, double cone, double side,
              const uint8_t *between, int64_t begin, int64_t end, uint8_t *f2);
+int ms_line_test(const double *p, const uint8_t *f2, const int64_t *rows,
+                 const ms_lists_t *compare, const double *rank, const ms_line_rules_t *rules,
+                 const uint8_t *between, int64_t begin, int64_t end, uint8_t *f3);
 void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,
                    const ms_lists_t *lists, int64_t begin, int64_t end, uint8_t *out);
 
@@ -602,6 +648,8 @@ typedef struct {
                                   (a quiet cloud: reference.detect.thin_blockers) */
     int curved_dropped;        /* candidates on a curved surface are dropped (a mesh:
                                   ms_stage_curved) */
+    int thin_line;             /* thinning's line test follows (ms_line_test): a cloud whose
+                                  ranking is not smoothed */
 } ms_robust_plan_t;
 /* ms_robust_plan: the plan for an input of `mesh`, noise ratio `noise`, n_kept points (the
  * isolated ones left out) and the s given scales (increasing, s <= MS_MAX_SCALES; a cloud's

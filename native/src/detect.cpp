@@ -587,12 +587,13 @@ const uint8_t *bytes(const std::vector<char> &mask) { return reinterpret_cast<co
 // exempt: reference.detect.support_exempt) and, with smooth, the score averaged over the
 // first THIN_KNN of K (robust.smoothed_ranking); then, every candidate's support known, thinning
 // across the line (cone) or beside it (side; both ms_robust_plan's) over K, the points not
-// in f0 blocking with block (reference.detect.thin_blockers).
+// in f0 blocking with block (reference.detect.thin_blockers); then, with line, every
+// candidate's thinning known, the line test over K (ms_line_test, the same blockers).
 std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char> &f0,
                                  const std::vector<double> &score, const std::vector<Index> &rows,
                                  const ms_lists_t &D, const ms_lists_t &S, const ms_lists_t &K, bool exempt,
-                                 double freeBelow, bool smooth, bool block, double cone, double side, Bar &bar,
-                                 int from, int to) {
+                                 double freeBelow, bool smooth, bool block, double cone, double side, bool line,
+                                 Bar &bar, int from, int to) {
 	const Index c = Index(rows.size());
 	std::vector<double> e(3 * c), smoothed(smooth ? score : std::vector<double>());
 	const double *rank = smooth ? smoothed.data() : score.data();
@@ -611,7 +612,14 @@ std::vector<char> supportAndThin(const Buffer<double> &p, const std::vector<char
 		        block ? between.data() : nullptr, a, b, reinterpret_cast<uint8_t *>(f2.data()));
 		return 0;
 	}, bar, (from + to) / 2, to, "support and thinning");
-	return f2;
+	if (!line) return f2;
+	std::vector<char> f3(f0.size(), 0);
+	const ms_line_rules_t rules{MS_LINE_OFFSET, MS_LINE_SPREAD, MS_LINE_REACH, MS_LINE_MIN, MS_LINE_UNIT};
+	chunks(c, [&](unsigned, Index a, Index b) {
+		return ms_line_test(p.data(), bytes(f2), rows.data(), &K, rank, &rules, block ? between.data() : nullptr, a,
+		                    b, reinterpret_cast<uint8_t *>(f3.data()));
+	}, bar, to, to, "support and thinning");
+	return f3;
 }
 
 // creases.sharp_vertices: both vertices of every edge with exactly two faces whose unit
@@ -1003,7 +1011,7 @@ Decision robustCloud(Clean &c, const Options &options, Result &r, Bar &bar) {
 	d.feature = supportAndThin(pts, d.feature, pass.score, rows, knn.lists(top, starts),
 	                           knn.lists(plan.support_knn, starts), knn.lists(thinK, starts), plan.support_exempt != 0,
 	                           plan.free_below, plan.ranking_smoothed != 0, plan.thin_between != 0, plan.thin_cone,
-	                           plan.thin_side, bar, 90, 95);
+	                           plan.thin_side, plan.thin_line != 0, bar, 90, 95);
 	return d;
 }
 
@@ -1040,7 +1048,8 @@ Decision robustMesh(Clean &c, const Options &options, Result &r, Bar &bar) {
 	if (!rows.empty()) {
 		const RingRows rings = ringRows(adj, rows, plan.support_knn, top);
 		d.feature = supportAndThin(c.pts, d.feature, score, rows, rings.lists(1), rings.lists(0), rings.lists(0), false,
-		                           0.0, false, false, plan.thin_cone, plan.thin_side, bar, 85, 95);
+		                           0.0, false, false, plan.thin_cone, plan.thin_side, plan.thin_line != 0, bar, 85,
+		                           95);
 	}
 	for (Index i = 0; i < n; ++i)
 		if (edges[i]) {

@@ -32,10 +32,11 @@ static inline double ball_dot(const double *a, const double *b, const double *c)
  * list, q = p_j - p_i and the products q0 q0, q0 q1, q0 q2, q1 q1, q1 q2, q2 q2. The
  * covariance C = sum q q^T - m qbar qbar^T as numpy forms it (sums in add.reduceat's
  * order, the lower triangle that eigh reads: entry (b, a) = outer_ba - (m qbar_b) qbar_a),
- * negated, to the 3x3 solver: the eigenvector of C's largest eigenvalue into e. */
-static void line_direction(const double *col, int64_t m, double *e) {
+ * negated, to the 3x3 solver: the eigenvector of C's largest eigenvalue into e, the mean
+ * qbar into qbar. */
+static void line_direction(const double *col, int64_t m, double *e, double *qbar) {
     const double count = (double)(m > 1 ? m : 1);
-    double qbar[3], neg[6];
+    double neg[6];
     static const int row[6] = {0, 1, 2, 1, 2, 2}, column[6] = {0, 0, 0, 1, 1, 2};
     for (int a = 0; a < 3; a++) qbar[a] = segment_sum(col + a, m, 9) / count;
     for (int t = 0; t < 6; t++)
@@ -43,15 +44,29 @@ static void line_direction(const double *col, int64_t m, double *e) {
     smallest_eigvec(neg[0], neg[1], neg[2], neg[3], neg[4], neg[5], e);
 }
 
-int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
-                       const ms_lists_t *direction, int64_t begin, int64_t end, double *e) {
-    int64_t cap = 0;
+/* line_direction's column of one point pj of pi's list: q = p_j - p_i and its products. */
+static inline void line_column(const double *pi, const double *pj, double *c) {
+    for (int a = 0; a < 3; a++) c[a] = pj[a] - pi[a];
+    c[3] = c[0] * c[0]; c[4] = c[0] * c[1]; c[5] = c[0] * c[2];
+    c[6] = c[1] * c[1]; c[7] = c[1] * c[2]; c[8] = c[2] * c[2];
+}
+
+/* The longest of the lists of slots [begin, end) of L, at least 1: the rows of a
+ * per-list scratch. */
+static int64_t longest_list(const ms_lists_t *L, int64_t begin, int64_t end) {
+    int64_t cap = 1;
     for (int64_t r = begin; r < end; r++) {
         int64_t first, len;
-        list_span(direction, r, &first, &len);
+        list_span(L, r, &first, &len);
         cap = len > cap ? len : cap;
     }
-    double *col = (double *)malloc((size_t)(cap > 0 ? cap : 1) * 9 * sizeof(double));
+    return cap;
+}
+
+int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
+                       const ms_lists_t *direction, int64_t begin, int64_t end, double *e) {
+    const int64_t cap = longest_list(direction, begin, end);
+    double *col = (double *)malloc((size_t)cap * 9 * sizeof(double));
     if (!col) return -1;
     for (int64_t r = begin; r < end; r++) {
         const double *pi = p + 3 * rows[r];
@@ -59,13 +74,10 @@ int ms_line_directions(const double *p, const uint8_t *f0, const int64_t *rows,
         list_span(direction, r, &first, &len);
         for (int64_t t = first; t < first + len; t++) {
             const int64_t j = list_member(direction, t);
-            if (!f0[j]) continue;
-            double *c = col + 9 * m++;
-            for (int a = 0; a < 3; a++) c[a] = p[3 * j + a] - pi[a];
-            c[3] = c[0] * c[0]; c[4] = c[0] * c[1]; c[5] = c[0] * c[2];
-            c[6] = c[1] * c[1]; c[7] = c[1] * c[2]; c[8] = c[2] * c[2];
+            if (f0[j]) line_column(pi, p + 3 * j, col + 9 * m++);
         }
-        line_direction(col, m, e + 3 * r);
+        double qbar[3];
+        line_direction(col, m, e + 3 * r, qbar);
     }
     free(col);
     return 0;
@@ -100,12 +112,13 @@ void ms_smoothed_ranking(const double *score, const int64_t *rows, const ms_list
 }
 
 /* Whether a point m of slot r's compare list with between[m], or ranking below i, lies
- * between p_i and p_j: (p_m - p_i) . (p_m - p_j) < 0 (robust.thin's blocking). */
+ * between p_i and the point b: (p_m - p_i) . (p_m - b) < 0 (robust.thin's blocking, b =
+ * p_j; robust.line_test's, b = p_i's foot on the line). */
 static int parted(const double *p, const ms_lists_t *compare, int64_t first, int64_t len,
-                  const double *rank, const uint8_t *between, int64_t i, int64_t j) {
+                  const double *rank, const uint8_t *between, int64_t i, const double *b) {
     for (int64_t t = first; t < first + len; t++) {
         const int64_t m = list_member(compare, t);
-        if ((between[m] || rank[m] < rank[i]) && ball_dot(p + 3 * m, p + 3 * i, p + 3 * j) < 0)
+        if ((between[m] || rank[m] < rank[i]) && ball_dot(p + 3 * m, p + 3 * i, b) < 0)
             return 1;
     }
     return 0;
@@ -144,11 +157,72 @@ void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const doub
             const int64_t j = list_member(compare, t);
             if (j != i && f1[j] && rank[j] > rank[i] &&
                 beside_line(p + 3 * i, p + 3 * j, e + 3 * r, cone, side2) &&
-                !(between != NULL && parted(p, compare, first, len, rank, between, i, j)))
+                !(between != NULL && parted(p, compare, first, len, rank, between, i, p + 3 * j)))
                 keep = 0;
         }
         f2[i] = (uint8_t)keep;
     }
+}
+
+/* The local unit of slot r's list (i first): the mean distance from p_i to the next
+ * min(unit, len - 1) members, added in order to 0.0 (robust.line_test). */
+static double list_unit(const double *p, const ms_lists_t *L, int64_t first, int64_t len,
+                        int64_t i, int64_t unit) {
+    const int64_t m = len - 1 < unit ? len - 1 : unit;
+    double acc = 0.0;
+    for (int64_t t = first + 1; t < first + 1 + m; t++) {
+        const double *q = p + 3 * list_member(L, t), *pi = p + 3 * i;
+        const double dx = q[0] - pi[0], dy = q[1] - pi[1], dz = q[2] - pi[2];
+        acc += sqrt(dx * dx + dy * dy + dz * dz);
+    }
+    return m > 0 ? acc / (double)m : 0.0;
+}
+
+int ms_line_test(const double *p, const uint8_t *f2, const int64_t *rows,
+                 const ms_lists_t *compare, const double *rank, const ms_line_rules_t *rules,
+                 const uint8_t *between, int64_t begin, int64_t end, uint8_t *f3) {
+    const int64_t cap = longest_list(compare, begin, end);
+    double *col = (double *)malloc((size_t)cap * 10 * sizeof(double)); /* then w (cap) */
+    if (!col) return -1;
+    double *w = col + 9 * cap;
+    for (int64_t r = begin; r < end; r++) {
+        const int64_t i = rows[r];
+        const double *pi = p + 3 * i;
+        int64_t first, len, m = 0;
+        list_span(compare, r, &first, &len);
+        for (int64_t t = first; f2[i] && t < first + len; t++) {
+            const int64_t j = list_member(compare, t);
+            if (j != i && f2[j] && rank[j] > rank[i]) line_column(pi, p + 3 * j, col + 9 * m++);
+        }
+        int keep = f2[i];
+        if (keep && m >= rules->minimum) {
+            double e[3], qbar[3];
+            line_direction(col, m, e, qbar);
+            const double at = qbar[0] * e[0] + qbar[1] * e[1] + qbar[2] * e[2];
+            const double u = list_unit(p, compare, first, len, i, rules->unit);
+            const double reach = rules->reach * u;
+            int ahead = 0, behind = 0; /* i's foot lies among theirs along the line */
+            for (int64_t t = 0; t < m; t++) {
+                const double *c = col + 9 * t;
+                const double rx = c[0] - qbar[0], ry = c[1] - qbar[1], rz = c[2] - qbar[2];
+                const double along = rx * e[0] + ry * e[1] + rz * e[2];
+                w[t] = rx * rx + ry * ry + rz * rz - along * along;
+                ahead |= along > -at + reach;
+                behind |= along < -at - reach;
+            }
+            const double scatter = segment_sum(w, m, 1) / (double)m;
+            const double g[3] = {qbar[0] - at * e[0], qbar[1] - at * e[1], qbar[2] - at * e[2]};
+            const double off2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+            const double far = rules->offset * u, thin = rules->spread * u;
+            if (ahead && behind && off2 > far * far && scatter < thin * thin) {
+                const double foot[3] = {pi[0] + g[0], pi[1] + g[1], pi[2] + g[2]};
+                keep = between != NULL && parted(p, compare, first, len, rank, between, i, foot);
+            }
+        }
+        f3[i] = (uint8_t)keep;
+    }
+    free(col);
+    return 0;
 }
 
 void ms_acute_tips(const double *p, const uint8_t *f0, const int64_t *rows,

@@ -77,6 +77,7 @@ int ms_robust_plan(double noise, int64_t n_kept, const int *scales, int s, int m
     plan->thin_side = ms_thin_side(mesh, noise);
     plan->thin_between = ms_quiet_cloud(mesh, noise);
     plan->curved_dropped = mesh;
+    plan->thin_line = !mesh && !plan->ranking_smoothed;
     return 0;
 }
 
