@@ -178,37 +178,83 @@ const double *unitScale(const double *xyz, Index n, double big, std::vector<doub
 	return scaled.data();
 }
 
-// neighbourhoods.far_points: the points of a cloud (xyz, n x 3) further from its median
-// than MS_FAR_SPREADS of its spreads on some axis (the median and interquartile ranges of
-// at most MS_FAR_SAMPLE points evenly spread through it, numpy's linear quantiles); empty
-// when there are none.
-std::vector<char> farPoints(const double *xyz, const Index n) {
+// neighbourhoods.far_points' bulk: the median of each axis and the reach beyond which a
+// point is far, MS_FAR_SPREADS times the largest interquartile range (the median and
+// interquartile ranges of at most MS_FAR_SAMPLE points evenly spread through the cloud
+// xyz, n x 3, numpy's linear quantiles); reach left at 0 when a sampled coordinate is not
+// finite (the input is refused then).
+struct FarTest {
+	double median[3] = {0.0, 0.0, 0.0}, reach = 0.0;  // reach 0: no point is far
+	// Whether point x (3 coordinates) is far (a NaN coordinate is not).
+	bool far(const double *x) const {
+		bool out = false;
+		for (int a = 0; a < 3; ++a) out |= std::fabs(x[a] - median[a]) > reach;
+		return reach != 0.0 && out;
+	}
+};
+
+void farTest(const double *xyz, const Index n, FarTest &test) {
 	const Index step = std::max<Index>(1, (n + MS_FAR_SAMPLE - 1) / MS_FAR_SAMPLE);
-	double median[3], reach = 0.0;
+	double reach = 0.0;
+	std::vector<double> sample[3];  // each axis's, read in one pass
+	for (Index i = 0; i < n; i += step)
+		for (int a = 0; a < 3; ++a) sample[a].push_back(xyz[3 * i + a]);
+	for (std::vector<double> &x : sample) {
+		if (!std::all_of(x.begin(), x.end(), [](double v) { return std::isfinite(v); })) return;
+	}
 	for (int a = 0; a < 3; ++a) {
-		std::vector<double> x;
-		for (Index i = 0; i < n; i += step) x.push_back(xyz[3 * i + a]);
-		std::sort(x.begin(), x.end());
-		auto quantile = [&](double q) {
-			const double h = double(x.size() - 1) * q;
-			const size_t lo = size_t(std::floor(h));
-			const double t = h - double(lo), below = x[lo], above = x[std::min(lo + 1, x.size() - 1)];
-			const double diff = above - below;
+		std::vector<double> &x = sample[a];
+		// the order statistics the quantiles read, by selection (the values a sort leaves
+		// there): the middle one's first, then each other one among the values on its side
+		const Index size = Index(x.size()), mid = (size - 1) / 2;
+		std::nth_element(x.begin(), x.begin() + mid, x.end());
+		const auto stat = [&](Index k) {
+			if (k < mid) std::nth_element(x.begin(), x.begin() + k, x.begin() + mid);
+			if (k > mid) std::nth_element(x.begin() + mid + 1, x.begin() + k, x.end());
+			return x[size_t(k)];
+		};
+		const auto quantile = [&](double q) {
+			const double h = double(size - 1) * q;
+			const Index lo = Index(std::floor(h));
+			const double below = stat(lo), above = stat(std::min(lo + 1, size - 1));
+			const double t = h - double(lo), diff = above - below;
 			return t >= 0.5 ? above - diff * (1.0 - t) : below + diff * t;
 		};
-		median[a] = quantile(0.5);
-		reach = std::max(reach, quantile(0.75) - quantile(0.25));
+		test.median[a] = quantile(0.5);
+		const double q25 = quantile(0.25), q75 = quantile(0.75);
+		reach = std::max(reach, q75 - q25);
 	}
-	reach *= MS_FAR_SPREADS;
-	std::vector<char> far;
-	if (n == 0 || reach == 0.0) return far;
-	for (Index i = 0; i < n; ++i)
-		for (int a = 0; a < 3; ++a)
-			if (std::fabs(xyz[3 * i + a] - median[a]) > reach) {
-				if (far.empty()) far.assign(n, 0);
-				far[i] = 1;
-			}
-	return far;
+	test.reach = reach * MS_FAR_SPREADS;
+}
+
+// What one pass over the input's coordinates (xyz, n x 3) finds, on every core: whether
+// every coordinate is finite, the largest |coordinate| (for unitScale) and, with a far
+// test, whether some point is far.
+struct Scan {
+	bool finite = true, anyFar = false;
+	double big = 0.0;
+};
+
+Scan scanInput(const double *xyz, const Index n, const FarTest *test) {
+	const Index count = (n + MS_CHUNK - 1) / MS_CHUNK;
+	std::vector<Scan> parts(static_cast<size_t>(count));
+	eachIndex(count, [&](Index u) {
+		Scan &p = parts[size_t(u)];
+		const Index end = std::min(n, (u + 1) * MS_CHUNK);
+		for (Index i = 3 * u * MS_CHUNK; i < 3 * end; ++i) {  // branch-free
+			const double a = std::fabs(xyz[i]);
+			p.finite &= a <= DBL_MAX;
+			p.big = std::max(p.big, a);
+		}
+		for (Index i = u * MS_CHUNK; test != nullptr && i < end; ++i) p.anyFar |= test->far(xyz + 3 * i);
+	});
+	Scan all;
+	for (const Scan &p : parts) {
+		all.finite &= p.finite;
+		all.anyFar |= p.anyFar;
+		all.big = std::max(all.big, p.big);
+	}
+	return all;
 }
 
 // An array in malloc'd memory whose shrinking resize hands the tail back (realloc), where
@@ -1165,40 +1211,36 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	Bar bar(progress, ctx);
 	bar.report(0, "cleaning");
 	if (nIn == 0) throw InputError("the layer has no vertices");
-	bool finite = true;  // branch-free checks over the whole input, the culprit found after
-	double big = 0.0;    // max |coordinate|, for unitScale in the same pass
-	for (Index i = 0; i < 3 * nIn; ++i) {
-		const double a = std::fabs(xyz[i]);
-		finite &= a <= DBL_MAX;
-		big = std::max(big, a);
-	}
-	for (Index i = 0; !finite; ++i)
-		if (!std::isfinite(xyz[i]))
-			throw InputError("vertex " + std::to_string(i / 3) + " has a non-finite coordinate (NaN or inf)");
 	Result r;
 	r.mesh = m > 0 && !options.asPoints;
+	// a cloud's far points dropped first (as pipeline.py): kept, they would set the unit;
+	// found in the pass that checks the coordinates (the culprit of a refusal after it)
+	FarTest test;
+	if (!r.mesh) farTest(xyz, nIn, test);
+	const Scan scan = scanInput(xyz, nIn, r.mesh ? nullptr : &test);
+	for (Index i = 0; !scan.finite; ++i)
+		if (!std::isfinite(xyz[i]))
+			throw InputError("vertex " + std::to_string(i / 3) + " has a non-finite coordinate (NaN or inf)");
 	bool inRange = true;
 	for (Index i = 0; i < 3 * m; ++i) inRange &= uint64_t(faces[i]) < uint64_t(nIn);
 	if (!inRange) throw InputError("a face index is out of range");
-	// a cloud's far points dropped first (as pipeline.py): kept, they would set the unit
-	const std::vector<char> far = r.mesh ? std::vector<char>() : farPoints(xyz, nIn);
 	std::vector<Index> near;
 	std::vector<double> rest;
-	if (!far.empty()) {
+	if (scan.anyFar) {
 		for (Index i = 0; i < nIn; ++i)
-			if (!far[i]) {
+			if (!test.far(xyz + 3 * i)) {
 				near.push_back(i);
 				rest.insert(rest.end(), xyz + 3 * i, xyz + 3 * i + 3);
 			}
 	}
-	const Index nNear = far.empty() ? nIn : Index(near.size());
+	const Index nNear = scan.anyFar ? Index(near.size()) : nIn;
 	std::vector<double> scaled;
-	const double *nearXyz = far.empty() ? xyz : rest.data();
-	Clean c = clean(unitScale(nearXyz, nNear, far.empty() ? big : maxAbs(nearXyz, 3 * nNear), scaled), nNear, faces,
+	const double *nearXyz = scan.anyFar ? rest.data() : xyz;
+	Clean c = clean(unitScale(nearXyz, nNear, scan.anyFar ? maxAbs(nearXyz, 3 * nNear) : scan.big, scaled), nNear, faces,
 	                r.mesh ? m : 0, r.mesh);
 	scaled = std::vector<double>();
 	rest = std::vector<double>();
-	if (!far.empty()) {  // the map from the input, the far points dropped
+	if (scan.anyFar) {  // the map from the input, the far points dropped
 		std::vector<Index> fromInput(nIn, -1);
 		for (size_t j = 0; j < near.size(); ++j)
 			fromInput[near[j]] = c.fromInput.empty() ? Index(j) : c.fromInput[j];
