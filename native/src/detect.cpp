@@ -316,8 +316,7 @@ struct Clean {
 	Index size() const { return n; }
 };
 
-// Fewest points or faces that cleaning splits between two threads (_kernels'
-// _PARALLEL_POINTS, _PARALLEL_FACES).
+// Fewest faces that cleaning splits between two threads (_kernels' _PARALLEL_FACES).
 const Index PARALLEL_ITEMS = Index(1) << 16;
 
 // f(part) for the parts 0 and 1 of a two-part step, on two threads (one unless
@@ -347,32 +346,16 @@ void twoParts(Index parts, F f, bool threads = true) {
 	if (error) std::rethrow_exception(error);
 }
 
-// _kernels.merge_duplicates: exact duplicates merged into their first occurrence, on two
-// threads for a large input (each probes the points whose hash falls in its half of the
-// table, then numbers half of the points: the same result). fromInput (n, all 0):
-// cleaned index of each input point; out (room for n rows): the cleaned points when some
-// merge. Returns their number m.
+// _kernels.merge_duplicates: exact duplicates merged into their first occurrence, on one
+// thread (ms_dedup; split between two threads, each probing the points whose hash falls in
+// its half of the table, every point is hashed twice: about twice the CPU time for no
+// shorter wall time). fromInput (n, all 0): cleaned index of each input point;
+// out (room for n rows): the cleaned points when some merge. Returns their number m.
 Index mergeDuplicates(const double *v, Index n, std::vector<Index> &fromInput, double *out) {
-	const Index parts = workers() > 1 && n >= PARALLEL_ITEMS ? 2 : 1;
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
-	Buffer<uint64_t> table(size);  // each part cleared by its probe
-	const Index bounds[3] = {0, n * 1 / parts, n};
-	Index dups[2][2] = {{0, 0}, {0, 0}};  // (table part, span of the points)
-	twoParts(parts, [&](Index part) {
-		ms_dedup_probe(v, n, table.data(), size - 1, parts, part, bounds, fromInput.data(), dups[part]);
-	});
-	Buffer<uint64_t>().swap(table);
-	Index before[3] = {0, 0, 0};  // merged points before each span
-	for (Index span = 0; span < parts; ++span) before[span + 1] = before[span] + dups[0][span] + dups[1][span];
-	const Index m = n - before[parts];
-	twoParts(parts, [&](Index span) {
-		const Index lo = bounds[span], hi = bounds[span + 1];
-		ms_dedup_number(v, lo, hi, lo - before[span], fromInput.data(), nullptr, m < n ? out : nullptr);
-	});
-	if (m < n)  // after every span's numbering: it reads them all
-		twoParts(parts, [&](Index span) { ms_dedup_resolve(bounds[span], bounds[span + 1], fromInput.data()); });
-	return m;
+	Buffer<uint64_t> table(size);  // cleared by the probe
+	return ms_dedup(v, n, table.data(), size - 1, fromInput.data(), nullptr, out);
 }
 
 // _kernels.keep_faces: the faces (F, 3) mapped through remap (or not, when null) whose
