@@ -484,20 +484,29 @@ struct Tree {
 	}
 };
 
+// f(t) for every tree position t in [0, n), in chunks of MS_CHUNK on every core.
+template <class F>
+void eachPosition(Index n, F f) {
+	eachIndex((n + MS_CHUNK - 1) / MS_CHUNK, [&](Index u) {
+		for (Index t = u * MS_CHUNK, end = std::min(n, t + MS_CHUNK); t < end; ++t) f(t);
+	});
+}
+
 // Per-point values v in tree order moved to the cleaned order: v[t] to orig[t]
-// (_kernels.to_cleaned_order).
+// (_kernels.to_cleaned_order), on every core.
 template <class T>
 std::vector<T> toCleaned(const std::vector<Index> &orig, const std::vector<T> &v) {
 	std::vector<T> out(v.size());
-	for (size_t t = 0; t < orig.size(); ++t) out[size_t(orig[t])] = v[t];
+	eachPosition(Index(orig.size()), [&](Index t) { out[size_t(orig[size_t(t)])] = v[size_t(t)]; });
 	return out;
 }
 
-// The tree's points in the cleaned order (row t to row orig[t]).
+// The tree's points in the cleaned order (row t to row orig[t]), on every core.
 Buffer<double> cleanedPoints(const Tree &t) {
 	Buffer<double> out(t.pts.size());
-	for (Index x = 0; x < t.n; ++x)
+	eachPosition(t.n, [&](Index x) {
 		for (int a = 0; a < 3; ++a) out[3 * t.orig[x] + a] = t.pts[3 * x + a];
+	});
 	return out;
 }
 
