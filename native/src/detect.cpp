@@ -178,37 +178,83 @@ const double *unitScale(const double *xyz, Index n, double big, std::vector<doub
 	return scaled.data();
 }
 
-// neighbourhoods.far_points: the points of a cloud (xyz, n x 3) further from its median
-// than MS_FAR_SPREADS of its spreads on some axis (the median and interquartile ranges of
-// at most MS_FAR_SAMPLE points evenly spread through it, numpy's linear quantiles); empty
-// when there are none.
-std::vector<char> farPoints(const double *xyz, const Index n) {
+// neighbourhoods.far_points' bulk: the median of each axis and the reach beyond which a
+// point is far, MS_FAR_SPREADS times the largest interquartile range (the median and
+// interquartile ranges of at most MS_FAR_SAMPLE points evenly spread through the cloud
+// xyz, n x 3, numpy's linear quantiles); reach left at 0 when a sampled coordinate is not
+// finite (the input is refused then).
+struct FarTest {
+	double median[3] = {0.0, 0.0, 0.0}, reach = 0.0;  // reach 0: no point is far
+	// Whether point x (3 coordinates) is far (a NaN coordinate is not).
+	bool far(const double *x) const {
+		bool out = false;
+		for (int a = 0; a < 3; ++a) out |= std::fabs(x[a] - median[a]) > reach;
+		return reach != 0.0 && out;
+	}
+};
+
+void farTest(const double *xyz, const Index n, FarTest &test) {
 	const Index step = std::max<Index>(1, (n + MS_FAR_SAMPLE - 1) / MS_FAR_SAMPLE);
-	double median[3], reach = 0.0;
+	double reach = 0.0;
+	std::vector<double> sample[3];  // each axis's, read in one pass
+	for (Index i = 0; i < n; i += step)
+		for (int a = 0; a < 3; ++a) sample[a].push_back(xyz[3 * i + a]);
+	for (std::vector<double> &x : sample) {
+		if (!std::all_of(x.begin(), x.end(), [](double v) { return std::isfinite(v); })) return;
+	}
 	for (int a = 0; a < 3; ++a) {
-		std::vector<double> x;
-		for (Index i = 0; i < n; i += step) x.push_back(xyz[3 * i + a]);
-		std::sort(x.begin(), x.end());
-		auto quantile = [&](double q) {
-			const double h = double(x.size() - 1) * q;
-			const size_t lo = size_t(std::floor(h));
-			const double t = h - double(lo), below = x[lo], above = x[std::min(lo + 1, x.size() - 1)];
-			const double diff = above - below;
+		std::vector<double> &x = sample[a];
+		// the order statistics the quantiles read, by selection (the values a sort leaves
+		// there): the middle one's first, then each other one among the values on its side
+		const Index size = Index(x.size()), mid = (size - 1) / 2;
+		std::nth_element(x.begin(), x.begin() + mid, x.end());
+		const auto stat = [&](Index k) {
+			if (k < mid) std::nth_element(x.begin(), x.begin() + k, x.begin() + mid);
+			if (k > mid) std::nth_element(x.begin() + mid + 1, x.begin() + k, x.end());
+			return x[size_t(k)];
+		};
+		const auto quantile = [&](double q) {
+			const double h = double(size - 1) * q;
+			const Index lo = Index(std::floor(h));
+			const double below = stat(lo), above = stat(std::min(lo + 1, size - 1));
+			const double t = h - double(lo), diff = above - below;
 			return t >= 0.5 ? above - diff * (1.0 - t) : below + diff * t;
 		};
-		median[a] = quantile(0.5);
-		reach = std::max(reach, quantile(0.75) - quantile(0.25));
+		test.median[a] = quantile(0.5);
+		const double q25 = quantile(0.25), q75 = quantile(0.75);
+		reach = std::max(reach, q75 - q25);
 	}
-	reach *= MS_FAR_SPREADS;
-	std::vector<char> far;
-	if (n == 0 || reach == 0.0) return far;
-	for (Index i = 0; i < n; ++i)
-		for (int a = 0; a < 3; ++a)
-			if (std::fabs(xyz[3 * i + a] - median[a]) > reach) {
-				if (far.empty()) far.assign(n, 0);
-				far[i] = 1;
-			}
-	return far;
+	test.reach = reach * MS_FAR_SPREADS;
+}
+
+// What one pass over the input's coordinates (xyz, n x 3) finds, on every core: whether
+// every coordinate is finite, the largest |coordinate| (for unitScale) and, with a far
+// test, whether some point is far.
+struct Scan {
+	bool finite = true, anyFar = false;
+	double big = 0.0;
+};
+
+Scan scanInput(const double *xyz, const Index n, const FarTest *test) {
+	const Index count = (n + MS_CHUNK - 1) / MS_CHUNK;
+	std::vector<Scan> parts(static_cast<size_t>(count));
+	eachIndex(count, [&](Index u) {
+		Scan &p = parts[size_t(u)];
+		const Index end = std::min(n, (u + 1) * MS_CHUNK);
+		for (Index i = 3 * u * MS_CHUNK; i < 3 * end; ++i) {  // branch-free
+			const double a = std::fabs(xyz[i]);
+			p.finite &= a <= DBL_MAX;
+			p.big = std::max(p.big, a);
+		}
+		for (Index i = u * MS_CHUNK; test != nullptr && i < end; ++i) p.anyFar |= test->far(xyz + 3 * i);
+	});
+	Scan all;
+	for (const Scan &p : parts) {
+		all.finite &= p.finite;
+		all.anyFar |= p.anyFar;
+		all.big = std::max(all.big, p.big);
+	}
+	return all;
 }
 
 // An array in malloc'd memory whose shrinking resize hands the tail back (realloc), where
@@ -270,8 +316,7 @@ struct Clean {
 	Index size() const { return n; }
 };
 
-// Fewest points or faces that cleaning splits between two threads (_kernels'
-// _PARALLEL_POINTS, _PARALLEL_FACES).
+// Fewest faces that cleaning splits between two threads (_kernels' _PARALLEL_FACES).
 const Index PARALLEL_ITEMS = Index(1) << 16;
 
 // f(part) for the parts 0 and 1 of a two-part step, on two threads (one unless
@@ -301,32 +346,16 @@ void twoParts(Index parts, F f, bool threads = true) {
 	if (error) std::rethrow_exception(error);
 }
 
-// _kernels.merge_duplicates: exact duplicates merged into their first occurrence, on two
-// threads for a large input (each probes the points whose hash falls in its half of the
-// table, then numbers half of the points: the same result). fromInput (n, all 0):
-// cleaned index of each input point; out (room for n rows): the cleaned points when some
-// merge. Returns their number m.
+// _kernels.merge_duplicates: exact duplicates merged into their first occurrence, on one
+// thread (ms_dedup; split between two threads, each probing the points whose hash falls in
+// its half of the table, every point is hashed twice: about twice the CPU time for no
+// shorter wall time). fromInput (n, all 0): cleaned index of each input point;
+// out (room for n rows): the cleaned points when some merge. Returns their number m.
 Index mergeDuplicates(const double *v, Index n, std::vector<Index> &fromInput, double *out) {
-	const Index parts = workers() > 1 && n >= PARALLEL_ITEMS ? 2 : 1;
 	Index size = 2;
 	while (size < 2 * n) size *= 2;
-	Buffer<uint64_t> table(size);  // each part cleared by its probe
-	const Index bounds[3] = {0, n * 1 / parts, n};
-	Index dups[2][2] = {{0, 0}, {0, 0}};  // (table part, span of the points)
-	twoParts(parts, [&](Index part) {
-		ms_dedup_probe(v, n, table.data(), size - 1, parts, part, bounds, fromInput.data(), dups[part]);
-	});
-	Buffer<uint64_t>().swap(table);
-	Index before[3] = {0, 0, 0};  // merged points before each span
-	for (Index span = 0; span < parts; ++span) before[span + 1] = before[span] + dups[0][span] + dups[1][span];
-	const Index m = n - before[parts];
-	twoParts(parts, [&](Index span) {
-		const Index lo = bounds[span], hi = bounds[span + 1];
-		ms_dedup_number(v, lo, hi, lo - before[span], fromInput.data(), nullptr, m < n ? out : nullptr);
-	});
-	if (m < n)  // after every span's numbering: it reads them all
-		twoParts(parts, [&](Index span) { ms_dedup_resolve(bounds[span], bounds[span + 1], fromInput.data()); });
-	return m;
+	Buffer<uint64_t> table(size);  // cleared by the probe
+	return ms_dedup(v, n, table.data(), size - 1, fromInput.data(), nullptr, out);
 }
 
 // _kernels.keep_faces: the faces (F, 3) mapped through remap (or not, when null) whose
@@ -455,20 +484,29 @@ struct Tree {
 	}
 };
 
+// f(t) for every tree position t in [0, n), in chunks of MS_CHUNK on every core.
+template <class F>
+void eachPosition(Index n, F f) {
+	eachIndex((n + MS_CHUNK - 1) / MS_CHUNK, [&](Index u) {
+		for (Index t = u * MS_CHUNK, end = std::min(n, t + MS_CHUNK); t < end; ++t) f(t);
+	});
+}
+
 // Per-point values v in tree order moved to the cleaned order: v[t] to orig[t]
-// (_kernels.to_cleaned_order).
+// (_kernels.to_cleaned_order), on every core.
 template <class T>
 std::vector<T> toCleaned(const std::vector<Index> &orig, const std::vector<T> &v) {
 	std::vector<T> out(v.size());
-	for (size_t t = 0; t < orig.size(); ++t) out[size_t(orig[t])] = v[t];
+	eachPosition(Index(orig.size()), [&](Index t) { out[size_t(orig[size_t(t)])] = v[size_t(t)]; });
 	return out;
 }
 
-// The tree's points in the cleaned order (row t to row orig[t]).
+// The tree's points in the cleaned order (row t to row orig[t]), on every core.
 Buffer<double> cleanedPoints(const Tree &t) {
 	Buffer<double> out(t.pts.size());
-	for (Index x = 0; x < t.n; ++x)
+	eachPosition(t.n, [&](Index x) {
 		for (int a = 0; a < 3; ++a) out[3 * t.orig[x] + a] = t.pts[3 * x + a];
+	});
 	return out;
 }
 
@@ -1177,40 +1215,36 @@ Result detect(const double *xyz, const Index nIn, const Index *faces, const Inde
 	Bar bar(progress, ctx);
 	bar.report(0, "cleaning");
 	if (nIn == 0) throw InputError("the layer has no vertices");
-	bool finite = true;  // branch-free checks over the whole input, the culprit found after
-	double big = 0.0;    // max |coordinate|, for unitScale in the same pass
-	for (Index i = 0; i < 3 * nIn; ++i) {
-		const double a = std::fabs(xyz[i]);
-		finite &= a <= DBL_MAX;
-		big = std::max(big, a);
-	}
-	for (Index i = 0; !finite; ++i)
-		if (!std::isfinite(xyz[i]))
-			throw InputError("vertex " + std::to_string(i / 3) + " has a non-finite coordinate (NaN or inf)");
 	Result r;
 	r.mesh = m > 0 && !options.asPoints;
+	// a cloud's far points dropped first (as pipeline.py): kept, they would set the unit;
+	// found in the pass that checks the coordinates (the culprit of a refusal after it)
+	FarTest test;
+	if (!r.mesh) farTest(xyz, nIn, test);
+	const Scan scan = scanInput(xyz, nIn, r.mesh ? nullptr : &test);
+	for (Index i = 0; !scan.finite; ++i)
+		if (!std::isfinite(xyz[i]))
+			throw InputError("vertex " + std::to_string(i / 3) + " has a non-finite coordinate (NaN or inf)");
 	bool inRange = true;
 	for (Index i = 0; i < 3 * m; ++i) inRange &= uint64_t(faces[i]) < uint64_t(nIn);
 	if (!inRange) throw InputError("a face index is out of range");
-	// a cloud's far points dropped first (as pipeline.py): kept, they would set the unit
-	const std::vector<char> far = r.mesh ? std::vector<char>() : farPoints(xyz, nIn);
 	std::vector<Index> near;
 	std::vector<double> rest;
-	if (!far.empty()) {
+	if (scan.anyFar) {
 		for (Index i = 0; i < nIn; ++i)
-			if (!far[i]) {
+			if (!test.far(xyz + 3 * i)) {
 				near.push_back(i);
 				rest.insert(rest.end(), xyz + 3 * i, xyz + 3 * i + 3);
 			}
 	}
-	const Index nNear = far.empty() ? nIn : Index(near.size());
+	const Index nNear = scan.anyFar ? Index(near.size()) : nIn;
 	std::vector<double> scaled;
-	const double *nearXyz = far.empty() ? xyz : rest.data();
-	Clean c = clean(unitScale(nearXyz, nNear, far.empty() ? big : maxAbs(nearXyz, 3 * nNear), scaled), nNear, faces,
+	const double *nearXyz = scan.anyFar ? rest.data() : xyz;
+	Clean c = clean(unitScale(nearXyz, nNear, scan.anyFar ? maxAbs(nearXyz, 3 * nNear) : scan.big, scaled), nNear, faces,
 	                r.mesh ? m : 0, r.mesh);
 	scaled = std::vector<double>();
 	rest = std::vector<double>();
-	if (!far.empty()) {  // the map from the input, the far points dropped
+	if (scan.anyFar) {  // the map from the input, the far points dropped
 		std::vector<Index> fromInput(nIn, -1);
 		for (size_t j = 0; j < near.size(); ++j)
 			fromInput[near[j]] = c.fromInput.empty() ? Index(j) : c.fromInput[j];
