@@ -20,6 +20,7 @@ from shapes import random_box_points
 
 from meshlab_sharp import _kernels, detect
 from meshlab_sharp.cli import main
+from meshlab_sharp.curves import extract_curves
 from meshlab_sharp.neighbourhoods import FAR_SPREADS, far_points
 
 BACKENDS = ["numpy", "compiled"] if _kernels.available() else ["numpy"]
@@ -171,3 +172,26 @@ def test_far_points_leave_the_command_lines_curves(tmp_path) -> None:
         assert main(["detect", str(src), "--curves", str(out), "--quiet"]) == 0
         curves[name] = out.read_bytes()
     assert curves["far"] == curves["box"]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_curves_refuse_nan_and_inf_they_would_read(backend: str) -> None:
+    """A NaN or infinite coordinate the curves read is a ValueError; on a point the
+    detection did not keep it is never read, and the curves stay."""
+    box = random_box_points(3000)
+    result = detect(box, backend=backend)
+    base, _ = extract_curves(box, result.mask, valid=result.kept, backend=backend)
+    for bad in (np.nan, np.inf):
+        for i in (int(np.flatnonzero(result.mask)[0]), int(np.flatnonzero(~result.mask)[0])):
+            points = box.copy()
+            points[i, 1] = bad
+            with pytest.raises(ValueError, match="finite coordinates"):
+                extract_curves(points, result.mask, valid=result.kept, backend=backend)
+            valid = result.kept.copy()
+            valid[i] = False
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                got, _ = extract_curves(points, result.mask, valid=valid, backend=backend)
+            assert len(got) > 0
+            if not result.mask[i]:  # a point the curves read only near the features
+                assert len(got) == len(base)

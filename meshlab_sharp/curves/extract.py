@@ -122,10 +122,21 @@ def extract_curves(
     curves : list of Curve
         In a deterministic order (by first vertex), independent of the input's order.
     corners : Corners
+
+    Raises
+    ------
+    ValueError
+        A NaN or infinite coordinate among the points the curves read: a cloud's valid
+        points (the others are never read and may lie anywhere), every vertex of a mesh.
     """
     chosen = _kernels.default_backend() if backend is None else backend
     if chosen not in _kernels.BACKENDS:
         raise ValueError(f"unknown backend {chosen!r}; choose from {', '.join(_kernels.BACKENDS)}")
+    read = np.asarray(vertices, np.float64)
+    if faces is None and valid is not None:
+        read = read[np.asarray(valid, bool)]
+    if not np.isfinite(read).all():
+        raise ValueError("the curves need finite coordinates: a point they read is NaN or inf")
     native = chosen == "compiled" and _native.available()
     run = _native.extract_curves if native else reference.extract_curves
     found = run(vertices, mask, faces, valid, bounds)
