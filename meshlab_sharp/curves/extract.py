@@ -132,11 +132,11 @@ def extract_curves(
     chosen = _kernels.default_backend() if backend is None else backend
     if chosen not in _kernels.BACKENDS:
         raise ValueError(f"unknown backend {chosen!r}; choose from {', '.join(_kernels.BACKENDS)}")
-    read = np.asarray(vertices, np.float64)
-    if faces is None and valid is not None:
-        read = read[np.asarray(valid, bool)]
-    if not np.isfinite(read).all():
-        raise ValueError("the curves need finite coordinates: a point they read is NaN or inf")
+    finite = np.isfinite(np.asarray(vertices, np.float64).reshape(-1, 3))
+    if not finite.all():  # rare: then the rows the curves read decide
+        read = np.ones(len(finite), bool) if faces is not None or valid is None else valid
+        if (~finite.all(axis=1) & np.asarray(read, bool)).any():
+            raise ValueError("the curves need finite coordinates: a point they read is NaN or inf")
     native = chosen == "compiled" and _native.available()
     run = _native.extract_curves if native else reference.extract_curves
     found = run(vertices, mask, faces, valid, bounds)

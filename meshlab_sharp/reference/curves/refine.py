@@ -145,15 +145,16 @@ def cell_neighbourhood(
     # only the valid points are read: the others may lie outside the grid, and one
     # dropped far away (cleaning's far points) would stretch it past what its keys number
     inside = np.flatnonzero(valid)
+    read = points if len(inside) == len(points) else points[inside]
     if bounds is None:
         # column by column: a strided reduction over axis 0 is several times slower
         # (the same values; min and max do not round)
-        lo = np.array([points[inside, j].min() for j in range(3)])
-        hi = np.array([points[inside, j].max() for j in range(3)])
+        lo = np.array([read[:, j].min() for j in range(3)])
+        hi = np.array([read[:, j].max() for j in range(3)])
     else:
         lo, hi = bounds
     grid = CellGrid(lo, hi, radius)
-    return inside[np.isin(grid.keys(points[inside]), grid.around(centres))]
+    return inside[np.isin(grid.keys(read), grid.around(centres))]
 
 
 def refine_neighbours(tree: cKDTree, vertices: np.ndarray) -> np.ndarray:
