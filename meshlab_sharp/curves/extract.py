@@ -108,10 +108,12 @@ def extract_curves(
         Points that took part in detection (``DetectionResult.kept``); the others are
         not used to refine positions.
     bounds : ((3,), (3,)) float64, optional
-        Clouds: bounding box of the whole input when ``vertices`` is only the part of
-        it that the curves read: the features and the valid points in the cells of side
-        :func:`meshlab_sharp.reference.curves.support_radius` around them (out of core,
-        :func:`meshlab_sharp.tiles.curves.curves_out_of_core`). Default: the vertices'.
+        Clouds: bounding box of the whole input's valid points when ``vertices`` is only
+        the part of it that the curves read: the features and the valid points in the
+        cells of side :func:`meshlab_sharp.reference.curves.support_radius` around them
+        (out of core, :func:`meshlab_sharp.tiles.curves.curves_out_of_core`). Default:
+        the valid vertices' (the others, a far point the detection dropped, may lie
+        anywhere).
     backend : {"compiled", "numpy"}, optional
         "compiled": the native library, where it is built (else the numpy reference,
         which gives the same bits); "numpy": the reference. Default: the detection's
