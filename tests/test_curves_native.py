@@ -180,7 +180,8 @@ def test_too_few_features_give_no_curve():
 
 def test_the_c_abi_refuses_bad_input():
     """A face index outside the vertices, an unknown face index size, a null result
-    pointer or a negative count: MS_CURVES_EINVAL (-2), no result."""
+    pointer, a negative count, or a NaN or infinite coordinate the curves read (a
+    cloud's valid point, any vertex of a mesh): MS_CURVES_EINVAL (-2), no result."""
     lib = _native._LIB
     vertices = np.zeros((3, 3))
     feature = np.ones(3, np.uint8)
@@ -200,6 +201,15 @@ def test_the_c_abi_refuses_bad_input():
     assert extract(np.array([[0, 1, 2]], np.int64), 2) == -2
     assert extract(None, 8, n=-1) == -2
     assert extract(None, 8, no_out=True) == -2
+    for bad in (np.nan, np.inf, -np.inf):
+        vertices[1, 2] = bad
+        assert extract(None, 8) == -2
+        assert extract(np.array([[0, 1, 2]], np.int64), 8) == -2
+        valid = np.array([1, 0, 1], np.uint8)  # never read: anything goes
+        args = (vertices.ctypes.data, feature.ctypes.data, valid.ctypes.data, 3, None, 8, 0)
+        assert lib.ms_curves_extract(*args, None, None, ctypes.byref(handle)) == 0
+        lib.ms_curves_free(handle)
+    vertices[1, 2] = 0.0
     assert extract(np.array([[0, 1, 2]], np.int64), 8) == 0
     assert lib.ms_curves_count(handle) == 0
     lib.ms_curves_free(handle)

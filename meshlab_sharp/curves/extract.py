@@ -108,10 +108,12 @@ def extract_curves(
         Points that took part in detection (``DetectionResult.kept``); the others are
         not used to refine positions.
     bounds : ((3,), (3,)) float64, optional
-        Clouds: bounding box of the whole input when ``vertices`` is only the part of
-        it that the curves read: the features and the valid points in the cells of side
-        :func:`meshlab_sharp.reference.curves.support_radius` around them (out of core,
-        :func:`meshlab_sharp.tiles.curves.curves_out_of_core`). Default: the vertices'.
+        Clouds: bounding box of the whole input's valid points when ``vertices`` is only
+        the part of it that the curves read: the features and the valid points in the
+        cells of side :func:`meshlab_sharp.reference.curves.support_radius` around them
+        (out of core, :func:`meshlab_sharp.tiles.curves.curves_out_of_core`). Default:
+        the valid vertices' (the others, a far point the detection dropped, may lie
+        anywhere).
     backend : {"compiled", "numpy"}, optional
         "compiled": the native library, where it is built (else the numpy reference,
         which gives the same bits); "numpy": the reference. Default: the detection's
@@ -122,10 +124,21 @@ def extract_curves(
     curves : list of Curve
         In a deterministic order (by first vertex), independent of the input's order.
     corners : Corners
+
+    Raises
+    ------
+    ValueError
+        A NaN or infinite coordinate among the points the curves read: a cloud's valid
+        points (the others are never read and may lie anywhere), every vertex of a mesh.
     """
     chosen = _kernels.default_backend() if backend is None else backend
     if chosen not in _kernels.BACKENDS:
         raise ValueError(f"unknown backend {chosen!r}; choose from {', '.join(_kernels.BACKENDS)}")
+    finite = np.isfinite(np.asarray(vertices, np.float64).reshape(-1, 3))
+    if not finite.all():  # rare: then the rows the curves read decide
+        read = np.ones(len(finite), bool) if faces is not None or valid is None else valid
+        if (~finite.all(axis=1) & np.asarray(read, bool)).any():
+            raise ValueError("the curves need finite coordinates: a point they read is NaN or inf")
     native = chosen == "compiled" and _native.available()
     run = _native.extract_curves if native else reference.extract_curves
     found = run(vertices, mask, faces, valid, bounds)

@@ -4,9 +4,9 @@
 the valid points in the grid cells of side
 :func:`~meshlab_sharp.reference.curves.support_radius` around them (for the refinement),
 nothing else. Two streaming passes over the input gather exactly those points (the
-features' coordinates and the cloud's bounding box; then the valid points in the
-features' cells), and ``extract_curves`` runs on them with the whole cloud's bounding
-box, so that its grid is the in-memory run's: the curves and corners are the in-memory
+features' coordinates and the bounding box of the cloud's valid points; then the valid
+points in the features' cells), and ``extract_curves`` runs on them with that box, so
+that its grid is the in-memory run's: the curves and corners are the in-memory
 ones, their indices mapped back to the input's.
 """
 
@@ -48,7 +48,7 @@ def curves_out_of_core(
         index the input's points.
     """
     valid = np.flatnonzero(mask & kept)
-    lo, hi, found = _bounds_and_rows(source, valid)
+    lo, hi, found = _bounds_and_rows(source, kept, valid)
     features = np.unique(found, axis=0)
     if len(features) < 2:  # extract_curves finds no curve in fewer than 2 features
         part, points = valid, found
@@ -57,9 +57,10 @@ def curves_out_of_core(
         wanted = grid.around(features)
         parts, coords, start = [], [], 0
         for block in source.blocks(BLOCK):
-            near = np.flatnonzero(
-                np.isin(grid.keys(block), wanted) & kept[start : start + len(block)]
-            )
+            inside = np.flatnonzero(
+                kept[start : start + len(block)]
+            )  # the others may lie outside the grid
+            near = inside[np.isin(grid.keys(block[inside]), wanted)]
             parts.append(start + near)
             coords.append(block[near])
             start += len(block)
@@ -72,15 +73,17 @@ def curves_out_of_core(
 
 
 def _bounds_and_rows(
-    source: PointSource, rows: np.ndarray
+    source: PointSource, kept: np.ndarray, rows: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One pass: the bounding box of the source's points, (3,) and (3,), and the
-    coordinates of the given ascending rows, (r, 3) float64."""
+    """One pass: the bounding box of the source's ``kept`` (n,) points, (3,) and (3,),
+    and the coordinates of the given ascending rows, (r, 3) float64."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     out, start = [np.zeros((0, 3))], 0
     for block in source.blocks(BLOCK):
-        blo, bhi = bounds(block)
-        lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
+        inside = block[kept[start : start + len(block)]]
+        if len(inside):
+            blo, bhi = bounds(inside)
+            lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
         a, b = np.searchsorted(rows, [start, start + len(block)])
         out.append(block[rows[a:b] - start])
         start += len(block)

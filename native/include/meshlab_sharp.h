@@ -846,13 +846,15 @@ typedef struct ms_curves ms_curves;
  * detected features; valid: (n,) 0/1, the points that took part in detection, or NULL
  * (all); faces: (m, 3) row-major indices into the vertices, int32 (face_bytes 4) or
  * int64 (face_bytes 8), or NULL (m 0) for a cloud; bounds: {lo x, lo y, lo z, hi x,
- * hi y, hi z}, the bounding box of the whole cloud when the vertices are only the part
- * of it near the features (out of core), or NULL (the vertices' box; ignored on a
- * mesh); math: the elementwise functions to use, or NULL (the C library's). On
+ * hi y, hi z}, the bounding box of the whole cloud's valid points when the vertices are
+ * only the part of it near the features (out of core), or NULL (the valid vertices' box;
+ * ignored on a mesh); math: the elementwise functions to use, or NULL (the C library's).
+ * The vertices that are not valid are never read on a cloud: they may lie anywhere. On
  * MS_CURVES_OK *out holds the result (free it with ms_curves_free); on an
  * error *out is NULL. MS_CURVES_EINVAL: n < 0, m < 0, out NULL, vertices, feature or
  * (m > 0) faces NULL, face_bytes not 4 or 8, a mesh (m > 0) of more than 2^31
- * vertices, or a face index outside [0, n). */
+ * vertices, a face index outside [0, n), or a NaN or infinite coordinate of a valid
+ * vertex (of any vertex of a mesh). */
 int ms_curves_extract(const double *vertices, const uint8_t *feature, const uint8_t *valid,
                       int64_t n, const void *faces, int face_bytes, int64_t m,
                       const double *bounds, const ms_curves_math *math, ms_curves **out);

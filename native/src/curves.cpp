@@ -1318,9 +1318,10 @@ std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vec
 	Vec3 lo{INF, INF, INF}, hi{-INF, -INF, -INF};
 	if (bounds != nullptr) {
 		lo = (*bounds)[0], hi = (*bounds)[1];
-	} else {
-		for (const Vec3 &p : pts)
-			for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], p[d]), hi[d] = std::max(hi[d], p[d]);
+	} else {  // the valid points' box: the others are never read (a far one would blow it up)
+		for (size_t i = 0; i < pts.size(); ++i)
+			if (valid[i])
+				for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], pts[i][d]), hi[d] = std::max(hi[d], pts[i][d]);
 	}
 	long dims[3];
 	for (int d = 0; d < 3; ++d) dims[d] = long(std::floor((hi[d] - lo[d]) / radius)) + 3;

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstring>
 #include <memory>
 #include <new>
@@ -44,6 +45,11 @@ int extract(const double *vertices, const uint8_t *feature, const uint8_t *valid
 	std::vector<char> feat(feature, feature + n);
 	std::vector<char> ok;
 	if (valid != nullptr) ok.assign(valid, valid + n);
+	// the vertices the curves read are finite: a cloud's valid ones, all of a mesh's
+	for (int64_t i = 0; i < n; ++i)
+		if ((m > 0 || ok.empty() || ok[size_t(i)]) &&
+		    !(std::isfinite(pts[size_t(i)].x) && std::isfinite(pts[size_t(i)].y) && std::isfinite(pts[size_t(i)].z)))
+			return MS_CURVES_EINVAL;
 	std::vector<std::array<int, 3>> tri;
 	if (m > 0) {
 		const bool inRange = faceBytes == 4

@@ -98,7 +98,7 @@ class CellGrid:
     Parameters
     ----------
     lo, hi : (3,) float64
-        The box (the bounding box of all the points).
+        The box (the bounding box of the valid points).
     radius : float > 0
     """
 
@@ -146,23 +146,27 @@ def cell_neighbourhood(
     centres : (f, 3) float64
     radius : float > 0
     bounds : ((3,), (3,)) float64, optional
-        The box the grid is laid over; default the points' bounding box. Given when
+        The box the grid is laid over; default the valid points' bounding box. Given when
         ``points`` is the part of a larger cloud near the centres (out of core): the
-        larger cloud's box gives the same cells.
+        box of the larger cloud's valid points gives the same cells.
 
     Returns
     -------
     (s,) int64, ascending.
     """
+    # only the valid points are read: the others may lie outside the grid, and one
+    # dropped far away (cleaning's far points) would stretch it past what its keys number
+    inside = np.flatnonzero(valid)
+    read = points if len(inside) == len(points) else points[inside]
     if bounds is None:
         # column by column: a strided reduction over axis 0 is several times slower
         # (the same values; min and max do not round)
-        lo = np.array([points[:, j].min() for j in range(3)])
-        hi = np.array([points[:, j].max() for j in range(3)])
+        lo = np.array([read[:, j].min() for j in range(3)])
+        hi = np.array([read[:, j].max() for j in range(3)])
     else:
         lo, hi = bounds
     grid = CellGrid(lo, hi, radius)
-    return np.flatnonzero(np.isin(grid.keys(points), grid.around(centres)) & valid)
+    return inside[np.isin(grid.keys(read), grid.around(centres))]
 
 
 def refine_neighbours(tree: cKDTree, vertices: np.ndarray) -> np.ndarray:
