@@ -58,7 +58,7 @@ def test_one_far_point_leaves_the_box_features() -> None:
     box = random_box_points(20000)
     backend = BACKENDS[-1]
     base = detect(box, backend=backend)
-    assert base.n_features == 770
+    assert base.n_features == 751
     for far in FAR:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
