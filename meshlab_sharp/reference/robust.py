@@ -511,17 +511,34 @@ def thin(
     beaten = (across | _beside(points, ci, nb, e, compare, side)) & (score[nb] > score[ci])
     if between is not None:
         pair = np.flatnonzero(beaten)
-        at, m = _rows(compare, ci[pair])
-        use = np.asarray(between, bool)[m] | (score[m] < score[ci[pair[at]]])
-        at, m = at[use], m[use]
-        a = points[m] - points[ci[pair[at]]]
-        b = points[m] - points[nb[pair[at]]]
-        dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
-        beaten[pair[np.unique(at[dot < 0])]] = False
+        beaten[pair[_parted(points, compare, ci[pair], points[nb[pair]], score, between)]] = False
     suppressed = np.bincount(owner[beaten], minlength=len(cand)) > 0
     out = mask.copy()
     out[cand[suppressed]] = False
     return out
+
+
+def _parted(
+    points: np.ndarray,
+    compare: Neighbourhood,
+    i: np.ndarray,
+    target: np.ndarray,
+    rank: np.ndarray,
+    between: np.ndarray,
+) -> np.ndarray:
+    """Thinning's blocking (the library's ``parted``): for each point ``i`` (k,) and
+    point ``target`` (k, 3), whether a point ``m`` of ``compare[i]`` with ``between[m]``
+    or ``rank[m] < rank[i]`` lies between them, ``(p_m - p_i) . (p_m - target) < 0``:
+    (k,) bool."""
+    at, m = _rows(compare, i)
+    use = np.asarray(between, bool)[m] | (rank[m] < rank[i[at]])
+    at, m = at[use], m[use]
+    a = points[m] - points[i[at]]
+    b = points[m] - target[at]
+    dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+    parted = np.zeros(len(i), bool)
+    parted[at[dot < 0]] = True
+    return parted
 
 
 def line_test(
@@ -599,15 +616,9 @@ def line_test(
     thin_ = (LINE_SPREAD if spread is None else spread) * u
     drop = (sizes >= LINE_MIN) & (off2 > far * far) & (scatter < thin_ * thin_) & ahead & behind
     if between is not None and drop.any():  # thinning's blocking, towards the foot p_i + g
-        at_row, m = _rows(compare, cand[drop])
-        slot = np.flatnonzero(drop)[at_row]
+        slot = np.flatnonzero(drop)
         i = cand[slot]
-        hit = np.asarray(between, bool)[m] | (rank[m] < rank[i])
-        m, slot, i = m[hit], slot[hit], i[hit]
-        a = points[m] - points[i]
-        b = points[m] - (points[i] + g[slot])
-        dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
-        drop[slot[dot < 0]] = False
+        drop[slot[_parted(points, compare, i, points[i] + g[slot], rank, between)]] = False
     out[cand[drop]] = False
     return out
 
