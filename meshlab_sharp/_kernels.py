@@ -131,12 +131,6 @@ _SIGNATURES = {
     "ms_face_windings": (_i64, [_c_void_p, _i64, _i64, _c_void_p]),
     "ms_face_windings_at": (_i64, [_c_void_p, _i64, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_dedup": (_i64, [_c_void_p, _i64, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
-    "ms_dedup_probe": (
-        None,
-        [_c_void_p, _i64, _c_void_p, _i64, _i64, _i64, _c_void_p, _c_void_p, _c_void_p],
-    ),
-    "ms_dedup_number": (None, [_c_void_p, _i64, _i64, _i64, _c_void_p, _c_void_p, _c_void_p]),
-    "ms_dedup_resolve": (None, [_i64, _i64, _c_void_p]),
     "ms_keep_faces": (_i64, [_c_void_p, _c_void_p, _i64, _c_void_p, _c_void_p, _c_void_p]),
     "ms_extent": (None, [_c_void_p, _i64, _c_void_p]),
     "ms_noise_floor": (_f64, [_c_void_p]),
@@ -1645,21 +1639,9 @@ def stage_isolated(
     return out
 
 
-#: Fewest points that :func:`merge_duplicates` splits between threads (65,536 points are
-#: about 3 ms of one thread; below, handing work to the pool is not worth it).
-_PARALLEL_POINTS = 1 << 16
-
-
-def merge_duplicates(
-    points: np.ndarray, workers: int = 1
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Exactly equal points merged into their first occurrence.
-
-    The C merge in three steps (``ms_dedup_probe``, ``ms_dedup_number``,
-    ``ms_dedup_resolve``). With ``workers`` other than 1 and enough points, two threads:
-    each probes the points whose hash falls in its half of the table (their first
-    occurrences are found in input order all the same), then each numbers half of the
-    points; the result does not depend on ``workers``.
+def merge_duplicates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exactly equal points merged into their first occurrence (``ms_dedup``, one thread:
+    the library's merge in ``ms_detect``).
 
     Returns
     -------
@@ -1677,42 +1659,17 @@ def merge_duplicates(
     n = len(points)
     if n >= 2**31:
         raise ValueError("the compiled duplicate merge handles fewer than 2**31 points")
-    parts = 2 if _workers(workers) > 1 and n >= _PARALLEL_POINTS else 1
     size = 1 << int(np.ceil(np.log2(max(2 * n, 2))))
-    table = np.empty(size, dtype=np.uint64)  # each part cleared by its probe
+    table = np.empty(size, dtype=np.uint64)  # cleared by ms_dedup
     from_input = np.zeros(n, dtype=np.int64)
     to_input = np.empty(n, dtype=np.int64)
-    bounds = np.array([n * part // parts for part in range(parts + 1)], dtype=np.int64)
-    dups = np.zeros((parts, parts), dtype=np.int64)  # (table part, span of the points)
-    p, tb, fi, ti = _ptr(points), _ptr(table), _ptr(from_input), _ptr(to_input)
-
-    def probe(a: int, b: int) -> int:
-        for part in range(a, b):
-            lib.ms_dedup_probe(p, n, tb, size - 1, parts, part, _ptr(bounds), fi, _ptr(dups[part]))
-        return 0
-
-    _run_chunks(parts, parts, probe, chunk=1)
+    distinct = np.empty_like(points)  # its pages: touched by the copy only when some merge
+    m = lib.ms_dedup(
+        _ptr(points), n, _ptr(table), size - 1, _ptr(from_input), _ptr(to_input), _ptr(distinct)
+    )
     del table
-    before = np.concatenate([[0], np.cumsum(dups.sum(axis=0))])  # merged points before each span
-    m = n - int(before[-1])
-    distinct = np.empty_like(points) if m < n else None  # its pages: touched by the copy
-
-    def number(a: int, b: int) -> int:
-        for span in range(a, b):
-            lo, hi = int(bounds[span]), int(bounds[span + 1])
-            lib.ms_dedup_number(p, lo, hi, lo - int(before[span]), fi, ti, _ptr(distinct))
-        return 0
-
-    def resolve(a: int, b: int) -> int:  # after every span's numbering: it reads them all
-        for span in range(a, b):
-            lib.ms_dedup_resolve(int(bounds[span]), int(bounds[span + 1]), fi)
-        return 0
-
-    _run_chunks(parts, parts, number, chunk=1)
-    if m < n:
-        _run_chunks(parts, parts, resolve, chunk=1)
     to_input.resize(m, refcheck=False)  # trimmed in place: no copy
-    if distinct is None:
+    if m == n:
         return to_input, from_input, points
     distinct.resize((m, 3), refcheck=False)
     return to_input, from_input, distinct

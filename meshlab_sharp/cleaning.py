@@ -156,7 +156,7 @@ def _clean_compiled(geometry: Geometry, workers: int, local_order: bool) -> Clea
     ``meshing_remove_unreferenced_vertices`` then compacts, keeping the order.
     ``local_order``: the renumbering between the merge and the faces' test.
     """
-    to_input, from_input, merged = _kernels.merge_duplicates(geometry.vertices, workers)
+    to_input, from_input, merged = _kernels.merge_duplicates(geometry.vertices)
     if not geometry.is_mesh:
         return CleanGeometry.with_maps(merged, None, to_input, from_input)
     distinct = len(to_input) == len(from_input)

@@ -502,12 +502,10 @@ def _mesh_to_clean() -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize("smallest", [1, 7, 1 << 16])
 def test_compiled_cleaning_identical_on_two_threads(smallest, monkeypatch):
-    """The duplicate merge and the face pass split between two threads (the faces moved
-    after the first half's dropped ones, the used vertices of both halves) give
-    pymeshlab's cleaning; the split is forced on this small mesh by lowering the sizes
-    that start it."""
+    """The face pass split between two threads (the faces moved after the first half's
+    dropped ones, the used vertices of both halves) gives pymeshlab's cleaning; the split
+    is forced on this small mesh by lowering the size that starts it."""
     monkeypatch.setattr(_kernels, "_PARALLEL_FACES", smallest)
-    monkeypatch.setattr(_kernels, "_PARALLEL_POINTS", smallest)
     g = as_geometry(*_mesh_to_clean())
     ref = clean(g, backend="numpy")
     assert len(ref.vertices) < len(g.vertices) and len(ref.faces) < len(g.faces)
@@ -549,14 +547,14 @@ def _first_occurrences(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _inputs_to_merge() -> dict[str, np.ndarray]:
-    """Points to merge: duplicates within and across the two threads' halves (of the
-    points and of the table), none, all equal, few values, signed zeros, tiny inputs."""
+    """Points to merge: duplicates near and far apart in the input, none, all equal, few
+    values, signed zeros, tiny inputs."""
     rng = np.random.default_rng(11)
     x = rng.normal(size=(3000, 3))
     signed = rng.integers(-1, 2, size=(4000, 3)).astype(float)
     signed[rng.random(signed.shape) < 0.3] *= -1.0  # -0.0 where it was 0.0
     return {
-        "across halves": np.concatenate([x, x[::-1], x[:700], x[2900:]]),
+        "far apart": np.concatenate([x, x[::-1], x[:700], x[2900:]]),
         "none": x,
         "all equal": np.full((5000, 3), 0.25),
         "few values": rng.integers(0, 3, size=(6000, 3)).astype(float),
@@ -570,14 +568,11 @@ def _inputs_to_merge() -> dict[str, np.ndarray]:
 
 
 @pytest.mark.parametrize("name", sorted(_inputs_to_merge()))
-@pytest.mark.parametrize("workers", [1, 2, -1])
-def test_merge_duplicates_matches_numpy_on_threads(name, workers, monkeypatch):
-    """``merge_duplicates`` on one or two threads (the split forced on small inputs)
-    gives numpy's first occurrences, in order, and their rows bit for bit (a -0.0 kept
-    as -0.0 where it came first)."""
-    monkeypatch.setattr(_kernels, "_PARALLEL_POINTS", 2)
+def test_merge_duplicates_matches_numpy(name):
+    """``merge_duplicates`` gives numpy's first occurrences, in order, and their rows bit
+    for bit (a -0.0 kept as -0.0 where it came first)."""
     p = _inputs_to_merge()[name]
-    to_input, from_input, distinct = _kernels.merge_duplicates(p, workers)
+    to_input, from_input, distinct = _kernels.merge_duplicates(p)
     ref_to, ref_from = _first_occurrences(p)
     np.testing.assert_array_equal(to_input, ref_to)
     np.testing.assert_array_equal(from_input, ref_from)
@@ -586,13 +581,11 @@ def test_merge_duplicates_matches_numpy_on_threads(name, workers, monkeypatch):
     assert (distinct is p) == (len(ref_to) == len(p))
 
 
-@pytest.mark.parametrize("workers", [1, 2])
-def test_merge_duplicates_keeps_each_nan_point(workers, monkeypatch):
-    """A point with a NaN equals no point (``==``), itself included, as before: each one
-    is a first occurrence (``detect`` rejects such input before cleaning)."""
-    monkeypatch.setattr(_kernels, "_PARALLEL_POINTS", 2)
+def test_merge_duplicates_keeps_each_nan_point():
+    """A point with a NaN equals no point (``==``), itself included: each one is a first
+    occurrence (``detect`` rejects such input before cleaning)."""
     p = np.array([[np.nan, 0.0, 0.0], [np.nan, 0.0, 0.0], [1.0, 2.0, 3.0], [1.0, 2.0, 3.0]])
-    to_input, from_input, distinct = _kernels.merge_duplicates(p, workers)
+    to_input, from_input, distinct = _kernels.merge_duplicates(p)
     np.testing.assert_array_equal(to_input, [0, 1, 2])
     np.testing.assert_array_equal(from_input, [0, 1, 2, 2])
     assert distinct.tobytes() == p[:3].tobytes()

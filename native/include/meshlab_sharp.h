@@ -496,20 +496,13 @@ void ms_crease_mask(const double *p, const int64_t *faces, int64_t n, const int6
                     uint8_t *mask);
 
 /* Merge exactly equal points (==, so -0.0 equals 0.0) into their first occurrence, on one
- * thread. table: (tmask + 1) uint64 scratch, tmask + 1 a power of two >= 2 n and
- * <= 2^32; n < 2^31. from_input (n, all 0 at first): cleaned index of each input point;
- * to_input (n, first m used): input index of each cleaned point; out (room for n rows)
- * or NULL: the cleaned points (m, 3) when some points merge, untouched when none does.
- * Returns m. The same merge on threads: ms_dedup_probe on each part of the table, then
- * ms_dedup_number (its to_input may be NULL) and (when some merge) ms_dedup_resolve on
- * spans of the points (_kernels.merge_duplicates). */
+ * thread (cleaning and _kernels.merge_duplicates). table: (tmask + 1) uint64 scratch,
+ * tmask + 1 a power of two >= 2 n and <= 2^32; n < 2^31. from_input (n, all 0 at
+ * first): cleaned index of each input point; to_input (n, first m used) or NULL: input
+ * index of each cleaned point; out (room for n rows) or NULL: the cleaned points (m, 3)
+ * when some points merge, untouched when none does. Returns m. */
 int64_t ms_dedup(const double *p, int64_t n, uint64_t *table, int64_t tmask,
                  int64_t *from_input, int64_t *to_input, double *out);
-void ms_dedup_probe(const double *p, int64_t n, uint64_t *table, int64_t tmask, int64_t parts,
-                    int64_t part, const int64_t *bounds, int64_t *from_input, int64_t *dups);
-void ms_dedup_number(const double *p, int64_t lo, int64_t hi, int64_t base, int64_t *from_input,
-                     int64_t *to_input, double *out);
-void ms_dedup_resolve(int64_t lo, int64_t hi, int64_t *from_input);
 
 /* Cleaning's faces in one pass (cleaning.clean): each face of faces (m, 3) (indices of
  * the input points, mapped through from_input when not NULL) whose double area on p,

@@ -346,10 +346,9 @@ void twoParts(Index parts, F f, bool threads = true) {
 	if (error) std::rethrow_exception(error);
 }
 
-// _kernels.merge_duplicates: exact duplicates merged into their first occurrence, on one
-// thread (ms_dedup; split between two threads, each probing the points whose hash falls in
-// its half of the table, every point is hashed twice: about twice the CPU time for no
-// shorter wall time). fromInput (n, all 0): cleaned index of each input point;
+// cleaning._clean_compiled's merge (_kernels.merge_duplicates): exact duplicates merged
+// into their first occurrence, on one thread (ms_dedup). fromInput (n, all 0): cleaned
+// index of each input point;
 // out (room for n rows): the cleaned points when some merge. Returns their number m.
 Index mergeDuplicates(const double *v, Index n, std::vector<Index> &fromInput, double *out) {
 	Index size = 2;
