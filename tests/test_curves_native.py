@@ -125,6 +125,32 @@ def test_a_larger_grid_box_gives_the_references_curves():
         _assert_same(_native.extract_curves(vertices, result.mask, None, result.kept, box), want)
 
 
+@pytest.mark.parametrize("shift", [2.0**30, 2.0**45])
+def test_two_clusters_far_apart_give_each_ones_curves(shift):
+    """Two copies of a cube's edges (spacing 1) ``shift`` apart on every axis: the grid
+    over both has far more cells than an int64 numbers (its cells keyed by their three
+    coordinates), and each copy gets its 12 curves: the first the cube's alone to the
+    bit, the second the same chains (coordinates of 2**30 and more cost the refined
+    positions some precision); the reference's to the bit."""
+    cube = shapes.cube_grid_points(15) * 7.0
+    edges = shapes.on_cube_edges(cube, half=7.0)
+    alone = _native.extract_curves(cube, edges, None, np.ones(len(cube), bool), None)
+    points = np.vstack([cube, cube + shift])
+    mask, kept = np.concatenate([edges, edges]), np.ones(len(points), bool)
+    got = _native.extract_curves(points, mask, None, kept, None)
+    _assert_same(got, reference.extract_curves(points, mask, None, kept))
+    assert len(alone.curves) == 12 and len(got.curves) == 24 and len(got.corner_points) == 16
+    near = [c for c in got.curves if c[0].max() < shift / 2]
+    far = [c for c in got.curves if c[0].min() > shift / 2]
+    assert len(near) == len(far) == 12
+    for (p, *_), (q, *_) in zip(near, alone.curves, strict=True):
+        assert p.tobytes() == q.tobytes()
+    assert sorted(len(p) for p, *_ in far) == sorted(len(p) for p, *_ in alone.curves)
+    for p, *_ in far:  # on the cube's edges: two coordinates within 0.1 of +-7
+        off = np.abs(np.abs(p - shift) - 7.0)
+        assert ((off < 0.1).sum(axis=1) >= 2).all()
+
+
 @pytest.mark.parametrize("dtype", [np.int32, np.int64])
 def test_mesh_curves_are_the_references_to_the_bit(dtype):
     """Mesh curves (chains of the mesh's edges; faces int32 or int64): the reference's,

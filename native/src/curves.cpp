@@ -1311,6 +1311,46 @@ std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<st
 // Most cells cellNeighbourhood flags in a dense grid (one byte each).
 constexpr long MAX_DENSE_CELLS = 1L << 24;
 
+// A grid cell by its three coordinates (cellNeighbourhood's cells of a huge grid).
+struct Cell {
+	long a, b, c;
+	bool operator==(const Cell &o) const { return a == o.a && b == o.b && c == o.c; }
+};
+struct CellHash {
+	size_t operator()(const Cell &k) const
+	{
+		uint64_t h = uint64_t(k.a) * 0x9e3779b97f4a7c15ULL;
+		h = (h ^ (h >> 29) ^ uint64_t(k.b)) * 0xbf58476d1ce4e5b9ULL;
+		h = (h ^ (h >> 31) ^ uint64_t(k.c)) * 0x94d049bb133111ebULL;
+		return size_t(h ^ (h >> 32));
+	}
+};
+
+// The valid points (indices, increasing) whose cell is among the 3x3x3 cells around a
+// centre: mark(a, b, c) records a wanted cell, wanted(a, b, c) reads one (from several
+// threads).
+template <class Cellof, class Mark, class Wanted>
+std::vector<long> pointsInCells(const std::vector<Vec3> &pts, const std::vector<char> &valid,
+                                const std::vector<Vec3> &centres, const Cellof &cell, const Mark &mark,
+                                const Wanted &wanted)
+{
+	for (const Vec3 &c : centres) {
+		const long a = cell(c, 0), b = cell(c, 1), z = cell(c, 2);
+		for (long i = -1; i <= 1; ++i)
+			for (long j = -1; j <= 1; ++j)
+				for (long k = -1; k <= 1; ++k) mark(a + i, b + j, z + k);
+	}
+	std::vector<char> in(pts.size());
+	inBlocks(pts.size(), [&](size_t begin, size_t end) {
+		for (size_t i = begin; i < end; ++i)
+			in[i] = valid[i] && wanted(cell(pts[i], 0), cell(pts[i], 1), cell(pts[i], 2));
+	});
+	std::vector<long> out;
+	for (size_t i = 0; i < pts.size(); ++i)
+		if (in[i]) out.push_back(long(i));
+	return out;
+}
+
 std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vector<char> &valid,
                                     const std::vector<Vec3> &centres, double radius,
                                     const std::array<Vec3, 2> *bounds)
@@ -1323,37 +1363,42 @@ std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vec
 			if (valid[i])
 				for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], pts[i][d]), hi[d] = std::max(hi[d], pts[i][d]);
 	}
-	long dims[3];
-	for (int d = 0; d < 3; ++d) dims[d] = long(std::floor((hi[d] - lo[d]) / radius)) + 3;
-	auto cell = [&](const Vec3 &p, int d) { return long(std::floor((p[d] - lo[d]) / radius)) + 1; };
+	auto along = [&](double x, int d) { return std::min(std::max(std::floor((x - lo[d]) / radius), -MS_CURVE_MAX_CELL), MS_CURVE_MAX_CELL); };
+	auto cell = [&](const Vec3 &p, int d) { return long(along(p[d], d)) + 1; };
+	double span[3];
+	for (int d = 0; d < 3; ++d) span[d] = along(hi[d], d) + 3;
+	const double cells = span[0] * span[1] * span[2];
+	// At most MS_CURVE_MAX_CELL cells: one int64 key (a * dims1 + b) * dims2 + c each; a
+	// larger grid (an extent huge against the features' spacing): cells by their three
+	// coordinates. A coordinate beyond MS_CURVE_MAX_CELL (it would overflow an int64 once
+	// offset; the far-points rule keeps inputs well inside it) is clamped to it.
+	if (!(cells <= MS_CURVE_MAX_CELL)) {
+		std::unordered_set<Cell, CellHash> wanted;
+		return pointsInCells(
+		    pts, valid, centres, cell, [&](long a, long b, long c) { wanted.insert({a, b, c}); },
+		    [&](long a, long b, long c) { return wanted.count({a, b, c}) > 0; });
+	}
+	const long dims[3] = {long(span[0]), long(span[1]), long(span[2])};
 	auto key = [&](long a, long b, long c) { return (a * dims[1] + b) * dims[2] + c; };
 	// the wanted cells: a flag per cell of the grid where it is small enough, else a hash set
-	const double cells = double(dims[0]) * double(dims[1]) * double(dims[2]);
-	const long dense = cells <= double(MAX_DENSE_CELLS) ? long(cells) : 0;
-	std::vector<char> flag(size_t(dense), 0);
-	std::unordered_set<long> wanted;
-	for (const Vec3 &c : centres) {
-		const long a = cell(c, 0), b = cell(c, 1), z = cell(c, 2);
-		for (long i = -1; i <= 1; ++i)
-			for (long j = -1; j <= 1; ++j)
-				for (long k = -1; k <= 1; ++k) {
-					const long at = key(a + i, b + j, z + k);
-					if (dense == 0)
-						wanted.insert(at);
-					else if (at >= 0 && at < dense)
-						flag[size_t(at)] = 1;
-				}
+	if (cells <= double(MAX_DENSE_CELLS)) {
+		const long dense = long(cells);
+		std::vector<char> flag(size_t(dense), 0);
+		return pointsInCells(
+		    pts, valid, centres, cell,
+		    [&](long a, long b, long c) {
+			    const long at = key(a, b, c);
+			    if (at >= 0 && at < dense) flag[size_t(at)] = 1;
+		    },
+		    [&](long a, long b, long c) {
+			    const long at = key(a, b, c);
+			    return at >= 0 && at < dense && flag[size_t(at)];
+		    });
 	}
-	auto isWanted = [&](long at) { return dense == 0 ? wanted.count(at) > 0 : at >= 0 && at < dense && flag[size_t(at)]; };
-	std::vector<char> in(pts.size());
-	inBlocks(pts.size(), [&](size_t begin, size_t end) {
-		for (size_t i = begin; i < end; ++i)
-			in[i] = valid[i] && isWanted(key(cell(pts[i], 0), cell(pts[i], 1), cell(pts[i], 2)));
-	});
-	std::vector<long> out;
-	for (size_t i = 0; i < pts.size(); ++i)
-		if (in[i]) out.push_back(long(i));
-	return out;
+	std::unordered_set<long> wanted;
+	return pointsInCells(
+	    pts, valid, centres, cell, [&](long a, long b, long c) { wanted.insert(key(a, b, c)); },
+	    [&](long a, long b, long c) { return wanted.count(key(a, b, c)) > 0; });
 }
 
 // _arm_lines up to numpy's arctan2: the weight total, the centroid and the second moments

@@ -91,9 +91,18 @@ WALL_APART = CURVES.real("WALL_APART")
 WALL_GAP = CURVES.real("WALL_GAP")
 
 
+#: :class:`CellGrid`'s limit (2**62): its largest cell coordinate along an axis (a
+#: farther cell is merged into the last one: a coordinate beyond it would overflow an
+#: int64 once offset; the far-points rule keeps inputs well inside it), and the most
+#: cells it numbers by one int64 key ``(a * dims1 + b) * dims2 + c`` (a larger grid, an
+#: extent huge against the features' spacing, keys its cells by their three coordinates).
+MAX_CELL = CURVES.real("MAX_CELL")
+
+
 class CellGrid:
     """Cubic cells of side ``radius`` over the box ``[lo, hi]``, with one cell of margin
-    on every side; cells are numbered by a flat key.
+    on every side; cells are numbered by a flat key (by their three coordinates when the
+    grid has more than :data:`MAX_CELL` cells).
 
     Parameters
     ----------
@@ -105,24 +114,34 @@ class CellGrid:
     def __init__(self, lo: np.ndarray, hi: np.ndarray, radius: float) -> None:
         self.lo = np.asarray(lo, np.float64)
         self.radius = radius
-        self.dims = np.floor((np.asarray(hi, np.float64) - self.lo) / radius).astype(np.int64) + 3
+        span = self._along(np.asarray(hi, np.float64)) + 3
+        self.flat = bool(span[0] * span[1] * span[2] <= MAX_CELL)
+        self.dims = span.astype(np.int64)
 
-    def _key(self, cells: np.ndarray) -> np.ndarray:
-        return (cells[..., 0] * self.dims[1] + cells[..., 1]) * self.dims[2] + cells[..., 2]
-
-    def keys(self, points: np.ndarray) -> np.ndarray:
-        """Key of each point's cell, (n,) int64 for points (n, 3)."""
-        q = points - self.lo  # floor((points - lo) / radius) + 1, in place (n can be large)
+    def _along(self, x: np.ndarray) -> np.ndarray:
+        """``floor((x - lo) / radius)``, clipped to +-MAX_CELL (float64, x's shape)."""
+        q = x - self.lo
         q /= self.radius
         np.floor(q, out=q)
-        cells = q.astype(np.int64)
+        return np.clip(q, -MAX_CELL, MAX_CELL, out=q)
+
+    def _key(self, cells: np.ndarray) -> np.ndarray:
+        if self.flat:
+            return (cells[..., 0] * self.dims[1] + cells[..., 1]) * self.dims[2] + cells[..., 2]
+        # each cell's three coordinates as one 24-byte value
+        rows = np.ascontiguousarray(cells.reshape(-1, 3))
+        return rows.view(np.dtype((np.void, 24))).reshape(cells.shape[:-1])
+
+    def keys(self, points: np.ndarray) -> np.ndarray:
+        """Key of each point's cell, (n,) for points (n, 3): int64, or 24-byte values."""
+        cells = self._along(points).astype(np.int64)  # n can be large: in place
         cells += 1
         return self._key(cells)
 
     def around(self, centres: np.ndarray) -> np.ndarray:
-        """Keys of the 3x3x3 cells around each of the centres (f, 3): (w,) int64, sorted,
+        """Keys of the 3x3x3 cells around each of the centres (f, 3): (w,), sorted,
         distinct."""
-        cells = np.floor((centres - self.lo) / self.radius).astype(np.int64) + 1
+        cells = self._along(centres).astype(np.int64) + 1
         offsets = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
         return np.unique(self._key(cells[:, None, :] + offsets[None, :, :]))
 
