@@ -64,6 +64,27 @@ def test_mesh_vertex_order_does_not_matter():
     np.testing.assert_array_equal(shuffled.thresholds, plain.thresholds)
 
 
+@pytest.mark.parametrize("backend", ["compiled", "numpy"])
+def test_noisy_mesh_vertex_and_face_order_do_not_matter(backend):
+    """Robust mode on a noisy mesh, whose thinning compares each vertex with its ring:
+    the ring lists vertices in the order the ring search meets them, so anything taken
+    from that order (the side rule's reach) would move with the vertex and face order."""
+    if backend == "compiled" and not _kernels.available():
+        pytest.skip("compiled kernels not built")
+    vertices, faces = shapes.noisy_mesh(*shapes.cube_grid_mesh(12), 0.1)
+    rng = np.random.default_rng(0)
+    perm = rng.permutation(len(vertices))
+    rank = np.argsort(perm)
+    moved = rank[faces][rng.permutation(len(faces))]
+    turn = rng.integers(0, 3, len(moved))  # each face's vertices rotated, winding kept
+    moved = np.take_along_axis(moved, (np.arange(3)[None] + turn[:, None]) % 3, axis=1)
+    plain = meshlab_sharp.detect(vertices, faces, mode="robust", backend=backend)
+    shuffled = meshlab_sharp.detect(vertices[perm], moved, mode="robust", backend=backend)
+    assert plain.n_features > 500
+    np.testing.assert_array_equal(shuffled.mask[rank], plain.mask)
+    np.testing.assert_array_equal(shuffled.strength[rank], plain.strength)
+
+
 #: Units from 1e-100 to 1e100 and beyond; the powers of two reach the ends of float64
 #: and both sides of the range kept unscaled (``neighbourhoods.UNIT_RANGE``).
 UNITS = (1e-100, 1e-85, 1e-30, 1e30, 1e100, 1e153, 1e200)

@@ -395,12 +395,15 @@ def _beside(
 ) -> np.ndarray:
     """Whether ``d = p_j - p_i`` of each pair (``i = ci``, ``j = nb``) lies to the side of
     the line through ``i`` by more than ``side`` times the reach of ``lists[i]`` (the
-    distance to its last member ``l``): ``|d|^2 - (d . e_i)^2 > (side * side) *
+    distance to its farthest member ``l``): ``|d|^2 - (d . e_i)^2 > (side * side) *
     |p_l - p_i|^2``, each sum over x, y, z in that order (``ms_thin``'s)."""
     indptr = np.asarray(lists.indptr, np.int64)
-    last = np.asarray(lists.indices, np.int64)[indptr[ci + 1] - 1]
-    r = points[last] - points[ci]
-    reach2 = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1] + r[:, 2] * r[:, 2]
+    members = np.asarray(lists.indices, np.int64)
+    owner = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+    r = points[members] - points[owner]
+    far2 = np.zeros(len(indptr) - 1)
+    np.maximum.at(far2, owner, r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1] + r[:, 2] * r[:, 2])
+    reach2 = far2[ci]
     d = points[nb] - points[ci]
     along = d[:, 0] * e[ci, 0] + d[:, 1] * e[ci, 1] + d[:, 2] * e[ci, 2]
     d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
@@ -472,7 +475,7 @@ def thin(
     A feature point ``i`` is dropped when some feature point ``j != i`` of
     ``compare[i]`` with ``d = p_j - p_i`` lies across the line through ``i``
     (``|d . e_i| < cone_cos * |d|``) or beside it (:func:`_beside`: farther from the line
-    than ``side`` times the distance to the list's last member) and ``score[j] >
+    than ``side`` times the distance to the list's farthest member) and ``score[j] >
     score[i]``, unless (with
     ``between``) a point ``m`` of ``compare[i]`` with ``between[m]`` or ``score[m] <
     score[i]`` (a valley between two ridges) lies between them: ``(p_m - p_i) . (p_m -

@@ -120,7 +120,7 @@
 #define MS_THIN_CONE_COS_NOISY 0.45
 /* Thinning also compares a point with the higher-ranked features of its list that lie to
  * the side of its line by more than this fraction of the list's reach (the distance to
- * its last member), whatever their angle (robust.thin_side): the band of candidates
+ * its farthest member), whatever their angle (robust.thin_side): the band of candidates
  * along an edge is 1.3-1.5 spacings wide, and a second point of it kept 1-1.5 spacings
  * from the edge, ahead or behind along the line, lies outside the cone. On meshes and
  * quiet clouds MS_THIN_SIDE (below it the rims of a wall 2 spacings thick, about 1.3
@@ -555,7 +555,7 @@ typedef struct {
  * rank are the caller's. ms_thin (robust.thin; f1 complete first): f2[i] = f1[i] and no
  * j != i of compare's list with f1[j], rank[j] > rank[i] and d = p_j - p_i across the line
  * (|d . e| < cone |d|) or beside it (|d|^2 - (d . e)^2 > (side * side) |p_l - p_i|^2, l
- * the list's last member), unless (between not NULL) a point m of the list with between[m]
+ * the list's farthest member), unless (between not NULL) a point m of the list with between[m]
  * or rank[m] < rank[i] lies between: (p_m - p_i) . (p_m - p_j) < 0. ms_acute_tips
  * (robust.acute_tips): out[r] = some j != l of the list, both f0 and not i, with
  * (p_j - p_i) . (p_l - p_i) < 0. ms_line_test (robust.line_test; f2 complete first; the

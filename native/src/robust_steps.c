@@ -124,13 +124,21 @@ static int parted(const double *p, const ms_lists_t *compare, int64_t first, int
     return 0;
 }
 
-/* Squared distance from p_i to the last member of slot r's list (first, len; len > 0):
- * the list's reach, the unit of thinning's side rule (robust.thin). */
+/* Squared distance from p_i to the farthest member of slot r's list (first, len; len > 0):
+ * the list's reach, the unit of thinning's side rule (robust.thin). The farthest, not the
+ * last: a mesh's ring lists its vertices in the order the ring search meets them, which
+ * depends on the vertex and face order. */
 static inline double list_reach2(const double *p, const ms_lists_t *L, int64_t first,
                                  int64_t len, int64_t i) {
-    const double *q = p + 3 * list_member(L, first + len - 1), *pi = p + 3 * i;
-    const double dx = q[0] - pi[0], dy = q[1] - pi[1], dz = q[2] - pi[2];
-    return dx * dx + dy * dy + dz * dz;
+    const double *pi = p + 3 * i;
+    double reach2 = 0.0;
+    for (int64_t t = first; t < first + len; t++) {
+        const double *q = p + 3 * list_member(L, t);
+        const double dx = q[0] - pi[0], dy = q[1] - pi[1], dz = q[2] - pi[2];
+        const double d2 = dx * dx + dy * dy + dz * dz;
+        if (d2 > reach2) reach2 = d2;
+    }
+    return reach2;
 }
 
 /* Whether d = p_j - p_i lies across the line through p_i of direction e (across_line),
