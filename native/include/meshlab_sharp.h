@@ -196,6 +196,9 @@
 #define MS_CURVE_LINK_RADIUS 2.5
 #define MS_CURVE_SPUR_LENGTH 4.0
 #define MS_CURVE_MESH_FLAT_WEIGHT 0.05
+#define MS_CURVE_BRIDGE_REACH 4.0
+#define MS_CURVE_BRIDGE_BACK 3
+#define MS_CURVE_BRIDGE_ANGLE 60.0
 #define MS_CURVE_PRUNE_ROUNDS 4
 
 /* trace.py: turns, tangents, joining the ends. */

@@ -14,8 +14,10 @@ from scipy.spatial import cKDTree
 
 from ..._header import CURVES
 from .graph import (
+    BRIDGE_REACH,
     SPUR_LENGTH,
     MeshPaths,
+    bridge_leaves,
     close_loops,
     cloud_graph,
     mesh_graph,
@@ -224,10 +226,17 @@ def extract_curves(
 
 
 def _skeleton_pieces(
-    n: int, edges: np.ndarray, weights: np.ndarray, positions: np.ndarray, spacing: float
+    n: int,
+    edges: np.ndarray,
+    weights: np.ndarray,
+    positions: np.ndarray,
+    spacing: float,
+    bridge: bool = False,
 ) -> list[np.ndarray]:
     forest = spanning_forest(n, edges, weights)
     forest = close_loops(n, forest, edges, positions, LOOP_LENGTH * GAP_LENGTH * spacing)
+    if bridge:
+        forest = bridge_leaves(n, forest, positions, BRIDGE_REACH * spacing)
     forest = prune_spurs(n, forest, positions, SPUR_LENGTH * spacing)
     return trace_paths(n, forest)
 
@@ -305,7 +314,7 @@ def _cloud_pieces(
     tree = cKDTree(near_pts)
     spacing, irregular = cloud_spacing(tree, fp)
     edges, lengths = cloud_graph(fp, spacing, local_spacings(tree, fp, spacing))
-    paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
+    paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing, irregular)
     pieces = []
     for path in paths:
         closed = len(path) > 2 and path[0] == path[-1]
