@@ -465,11 +465,11 @@ std::vector<Edge> closeLoops(long n, const std::vector<Edge> &forest, const std:
 }
 
 // graph.bridge_leaves: each free end of the forest linked to the nearest node of another
-// tree within reach that lies within MS_CURVE_BRIDGE_ANGLE of its direction (from the
+// tree within reach that lies within angle (degrees) of its direction (from the
 // node MS_CURVE_BRIDGE_BACK links back; another free end, each within that of the
 // other's); shortest first, each joining two trees still apart
 std::vector<Edge> bridgeLeaves(long n, const std::vector<Edge> &forest, const std::vector<Vec3> &pos,
-                               double reach)
+                               double reach, double angle)
 {
 	std::vector<long> parent(n);
 	std::iota(parent.begin(), parent.end(), 0L);
@@ -501,7 +501,7 @@ std::vector<Edge> bridgeLeaves(long n, const std::vector<Edge> &forest, const st
 		direction[a] = {d, norm(d)};
 	}
 	const KdTree tree(pos);
-	const double minCos = std::cos(radians(MS_CURVE_BRIDGE_ANGLE));
+	const double minCos = std::cos(radians(angle));
 	std::vector<std::tuple<double, long, long>> cand;
 	for (long a : leaves) {
 		const Vec3 &d = direction[a].first;
@@ -1294,11 +1294,13 @@ private:
 
 std::vector<Piece> skeletonPieces(long n, const std::vector<Edge> &edges, const std::vector<double> &w,
                                   const std::vector<Vec3> &pos, double spacing,
-                                  const std::vector<long> &feat, bool bridge = false)
+                                  const std::vector<long> &feat, double bridgeReach = 0.0,
+                                  double bridgeAngle = 0.0)
 {
 	std::vector<Edge> forest = spanningForest(n, edges, w);
 	forest = closeLoops(n, forest, edges, pos, MS_CURVE_LOOP_LENGTH * MS_CURVE_GAP_LENGTH * spacing);
-	if (bridge) forest = bridgeLeaves(n, forest, pos, MS_CURVE_BRIDGE_REACH * spacing);
+	// clouds: the free ends bridged (bridgeReach in spacings, bridgeAngle in degrees)
+	if (bridgeReach > 0.0) forest = bridgeLeaves(n, forest, pos, bridgeReach * spacing, bridgeAngle);
 	forest = pruneSpurs(n, forest, pos, MS_CURVE_SPUR_LENGTH * spacing);
 	std::vector<Piece> pieces;
 	for (std::vector<long> path : tracePaths(n, forest)) {
@@ -1720,7 +1722,9 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 		const double length = norm(sub(fp[e[0]], fp[e[1]]));
 		if (length < MS_CURVE_LINK_RADIUS * std::min(local[e[0]], local[e[1]])) edges.push_back(e), lengths.push_back(length);
 	}
-	std::vector<Piece> pieces = skeletonPieces(n, edges, lengths, fp, spacing, {}, irregular);
+	std::vector<Piece> pieces = skeletonPieces(
+		n, edges, lengths, fp, spacing, {}, irregular ? MS_CURVE_IRREGULAR_BRIDGE_REACH : MS_CURVE_BRIDGE_REACH,
+		irregular ? MS_CURVE_IRREGULAR_BRIDGE_ANGLE : MS_CURVE_BRIDGE_ANGLE);
 	if (pieces.empty()) return {};
 	// refine every vertex at once, across the skeleton's directions over a wide window
 	std::vector<Vec3> raw;

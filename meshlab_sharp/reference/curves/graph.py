@@ -4,8 +4,8 @@ Clouds: every feature point is linked to the feature points among its
 :data:`LINK_NEIGHBOURS` nearest features that lie within :data:`LINK_RADIUS` spacings.
 Meshes: the mesh's own edges whose two vertices are features, weighted so that the
 skeleton prefers the edges where the surface turns most. The skeleton is the minimum
-spanning forest of the graph (on an irregular cloud, with its free ends bridged to the
-trees they point at, :func:`bridge_leaves`), pruned of spurs shorter than
+spanning forest of the graph (on a cloud, with its free ends bridged to the trees they
+point at, :func:`bridge_leaves`), pruned of spurs shorter than
 :data:`SPUR_LENGTH` spacings.
 """
 
@@ -26,6 +26,8 @@ __all__ = [
     "BRIDGE_ANGLE",
     "BRIDGE_BACK",
     "BRIDGE_REACH",
+    "IRREGULAR_BRIDGE_ANGLE",
+    "IRREGULAR_BRIDGE_REACH",
     "LINK_NEIGHBOURS",
     "LINK_RADIUS",
     "SPUR_LENGTH",
@@ -57,16 +59,22 @@ SPUR_LENGTH = CURVES.real("SPUR_LENGTH")
 MESH_FLAT_WEIGHT = CURVES.real("MESH_FLAT_WEIGHT")
 #: Rounds of spur pruning (a spur on a spur is removed in the next round).
 PRUNE_ROUNDS = CURVES.integer("PRUNE_ROUNDS")
-#: Irregular clouds: a free end of the skeleton is linked to the nearest feature of
-#: another tree within this many spacings (points drawn independently leave gaps of
-#: several spacings along an edge, which cut its skeleton into pieces too short to
-#: join by their direction) ...
-BRIDGE_REACH = CURVES.real("BRIDGE_REACH")
-#: ... that lies ahead of the end: within BRIDGE_ANGLE degrees of the direction from
-#: the skeleton vertex BRIDGE_BACK links back (or the junction or end before it) to the
-#: end.
+#: Clouds: a free end of the skeleton is linked to the nearest feature of another tree
+#: that lies ahead of it, in the direction from the skeleton vertex BRIDGE_BACK links
+#: back (or the junction or end before it) to the end (:func:`bridge_leaves`): noise
+#: and sampling gaps cut an edge's skeleton into pieces too short to join by their
+#: direction.
 BRIDGE_BACK = CURVES.integer("BRIDGE_BACK")
+#: On a regular cloud, within this many spacings (one link longer than LINK_RADIUS) ...
+BRIDGE_REACH = CURVES.real("BRIDGE_REACH")
+#: ... and this many degrees of the end's direction (the features of a second edge
+#: converging at a sharp angle, or of a noisy band beside the edge, stay apart).
 BRIDGE_ANGLE = CURVES.real("BRIDGE_ANGLE")
+#: On an irregular cloud (points drawn independently leave gaps of several spacings
+#: along an edge), within this many spacings ...
+IRREGULAR_BRIDGE_REACH = CURVES.real("IRREGULAR_BRIDGE_REACH")
+#: ... and this many degrees.
+IRREGULAR_BRIDGE_ANGLE = CURVES.real("IRREGULAR_BRIDGE_ANGLE")
 
 
 def cloud_graph(
@@ -296,13 +304,15 @@ def close_loops(
     return np.concatenate([forest, np.array(added, np.int64)])
 
 
-def bridge_leaves(n: int, forest: np.ndarray, positions: np.ndarray, reach: float) -> np.ndarray:
+def bridge_leaves(
+    n: int, forest: np.ndarray, positions: np.ndarray, reach: float, angle: float
+) -> np.ndarray:
     """Link the free ends of a forest to the trees they point at.
 
     For each free end (a node of degree 1), the direction from the node BRIDGE_BACK
     links back (stopping early at a junction or another free end) to it; a candidate
     link goes to every node of another tree within ``reach`` of the end whose direction
-    from the end is within BRIDGE_ANGLE degrees of that one (and, for another free end,
+    from the end is within ``angle`` degrees of that one (and, for another free end,
     the other way round too: two edges' ends at a corner are not linked). Candidates are taken
     shortest first (ties by the end's, then the node's index), each joining two trees
     that are still apart.
@@ -315,6 +325,8 @@ def bridge_leaves(n: int, forest: np.ndarray, positions: np.ndarray, reach: floa
         The spanning forest, with its long loops closed (:func:`close_loops`).
     positions : (n, 3) float64
     reach : float
+    angle : float
+        In degrees.
 
     Returns
     -------
@@ -350,7 +362,7 @@ def bridge_leaves(n: int, forest: np.ndarray, positions: np.ndarray, reach: floa
         d = positions[a] - positions[cur]
         direction[a] = (d, float(np.linalg.norm(d[None], axis=1)[0]))
     tree = cKDTree(positions)
-    min_cos = math.cos(math.radians(BRIDGE_ANGLE))
+    min_cos = math.cos(math.radians(angle))
     cand: list[tuple[float, int, int]] = []
     for a in leaves:
         d, d_len = direction[a]
