@@ -65,7 +65,7 @@ PRUNE_ROUNDS = CURVES.integer("PRUNE_ROUNDS")
 #: and sampling gaps cut an edge's skeleton into pieces too short to join by their
 #: direction.
 BRIDGE_BACK = CURVES.integer("BRIDGE_BACK")
-#: On a regular cloud, within this many spacings (one link longer than LINK_RADIUS) ...
+#: On a regular cloud, within this many spacings (half a spacing beyond LINK_RADIUS) ...
 BRIDGE_REACH = CURVES.real("BRIDGE_REACH")
 #: ... and this many degrees of the end's direction (the features of a second edge
 #: converging at a sharp angle, or of a noisy band beside the edge, stay apart).
