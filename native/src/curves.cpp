@@ -464,6 +464,73 @@ std::vector<Edge> closeLoops(long n, const std::vector<Edge> &forest, const std:
 	return out;
 }
 
+// graph.bridge_leaves: each free end of the forest linked to the nearest node of another
+// tree within reach that lies within angle (degrees) of its direction (from the
+// node MS_CURVE_BRIDGE_BACK links back; another free end, each within that of the
+// other's); shortest first, each joining two trees still apart
+std::vector<Edge> bridgeLeaves(long n, const std::vector<Edge> &forest, const std::vector<Vec3> &pos,
+                               double reach, double angle)
+{
+	std::vector<long> parent(n);
+	std::iota(parent.begin(), parent.end(), 0L);
+	auto root = [&](long i) {
+		while (parent[i] != i) i = parent[i] = parent[parent[i]];
+		return i;
+	};
+	std::vector<std::vector<long>> nb(n);
+	for (const Edge &e : forest) {
+		nb[e[0]].push_back(e[1]);
+		nb[e[1]].push_back(e[0]);
+		const long ra = root(e[0]), rb = root(e[1]);
+		if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+	}
+	std::vector<long> leaves;
+	for (long a = 0; a < n; ++a)
+		if (nb[a].size() == 1) leaves.push_back(a);
+	if (leaves.empty()) return forest;
+	std::map<long, std::pair<Vec3, double>> direction;
+	for (long a : leaves) {
+		long prev = a, cur = nb[a][0];
+		for (int step = 0; step < MS_CURVE_BRIDGE_BACK - 1; ++step) {
+			if (nb[cur].size() != 2) break;
+			const long next = nb[cur][0] == prev ? nb[cur][1] : nb[cur][0];
+			prev = cur;
+			cur = next;
+		}
+		const Vec3 d = sub(pos[a], pos[cur]);
+		direction[a] = {d, norm(d)};
+	}
+	const KdTree tree(pos);
+	const double minCos = std::cos(radians(angle));
+	std::vector<std::tuple<double, long, long>> cand;
+	for (long a : leaves) {
+		const Vec3 &d = direction[a].first;
+		const double dLength = direction[a].second;
+		const long own = root(a);
+		for (long b : tree.ball(pos[a], reach)) {
+			if (root(b) == own) continue;
+			const Vec3 v = sub(pos[b], pos[a]);
+			const double length = norm(v);
+			if (edot(v, d) < minCos * length * dLength) continue;
+			auto other = direction.find(b);
+			// two free ends: each ahead of the other
+			if (other != direction.end() && edot(neg(v), other->second.first) < minCos * length * other->second.second)
+				continue;
+			cand.emplace_back(length, a, b);
+		}
+	}
+	std::sort(cand.begin(), cand.end());
+	std::vector<Edge> out = forest;
+	for (const auto &c : cand) {
+		const long a = std::get<1>(c), b = std::get<2>(c);
+		const long ra = root(a), rb = root(b);
+		if (ra == rb) continue;
+		parent[std::max(ra, rb)] = std::min(ra, rb);
+		out.push_back({std::min(a, b), std::max(a, b)});
+	}
+	return out;
+}
+
 std::vector<Edge> pruneSpurs(long n, const std::vector<Edge> &edges, const std::vector<Vec3> &pos,
                              double minLength)
 {
@@ -1227,10 +1294,13 @@ private:
 
 std::vector<Piece> skeletonPieces(long n, const std::vector<Edge> &edges, const std::vector<double> &w,
                                   const std::vector<Vec3> &pos, double spacing,
-                                  const std::vector<long> &feat)
+                                  const std::vector<long> &feat, double bridgeReach = 0.0,
+                                  double bridgeAngle = 0.0)
 {
 	std::vector<Edge> forest = spanningForest(n, edges, w);
 	forest = closeLoops(n, forest, edges, pos, MS_CURVE_LOOP_LENGTH * MS_CURVE_GAP_LENGTH * spacing);
+	// clouds: the free ends bridged (bridgeReach in spacings, bridgeAngle in degrees)
+	if (bridgeReach > 0.0) forest = bridgeLeaves(n, forest, pos, bridgeReach * spacing, bridgeAngle);
 	forest = pruneSpurs(n, forest, pos, MS_CURVE_SPUR_LENGTH * spacing);
 	std::vector<Piece> pieces;
 	for (std::vector<long> path : tracePaths(n, forest)) {
@@ -1697,7 +1767,9 @@ std::vector<Piece> cloudPieces(const std::vector<Vec3> &pts, const std::vector<c
 		const double length = norm(sub(fp[e[0]], fp[e[1]]));
 		if (length < MS_CURVE_LINK_RADIUS * std::min(local[e[0]], local[e[1]])) edges.push_back(e), lengths.push_back(length);
 	}
-	std::vector<Piece> pieces = skeletonPieces(n, edges, lengths, fp, spacing, {});
+	std::vector<Piece> pieces = skeletonPieces(
+		n, edges, lengths, fp, spacing, {}, irregular ? MS_CURVE_IRREGULAR_BRIDGE_REACH : MS_CURVE_BRIDGE_REACH,
+		irregular ? MS_CURVE_IRREGULAR_BRIDGE_ANGLE : MS_CURVE_BRIDGE_ANGLE);
 	if (pieces.empty()) return {};
 	// refine every vertex at once, across the skeleton's directions over a wide window
 	std::vector<Vec3> raw;

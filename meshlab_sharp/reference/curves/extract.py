@@ -14,8 +14,13 @@ from scipy.spatial import cKDTree
 
 from ..._header import CURVES
 from .graph import (
+    BRIDGE_ANGLE,
+    BRIDGE_REACH,
+    IRREGULAR_BRIDGE_ANGLE,
+    IRREGULAR_BRIDGE_REACH,
     SPUR_LENGTH,
     MeshPaths,
+    bridge_leaves,
     close_loops,
     cloud_graph,
     mesh_graph,
@@ -224,10 +229,20 @@ def extract_curves(
 
 
 def _skeleton_pieces(
-    n: int, edges: np.ndarray, weights: np.ndarray, positions: np.ndarray, spacing: float
+    n: int,
+    edges: np.ndarray,
+    weights: np.ndarray,
+    positions: np.ndarray,
+    spacing: float,
+    bridge: tuple[float, float] | None = None,
 ) -> list[np.ndarray]:
+    """The skeleton's paths; ``bridge``: the free ends' reach (spacings) and angle
+    (degrees) for :func:`meshlab_sharp.reference.curves.graph.bridge_leaves`, none by
+    default (meshes)."""
     forest = spanning_forest(n, edges, weights)
     forest = close_loops(n, forest, edges, positions, LOOP_LENGTH * GAP_LENGTH * spacing)
+    if bridge is not None:
+        forest = bridge_leaves(n, forest, positions, bridge[0] * spacing, bridge[1])
     forest = prune_spurs(n, forest, positions, SPUR_LENGTH * spacing)
     return trace_paths(n, forest)
 
@@ -305,7 +320,12 @@ def _cloud_pieces(
     tree = cKDTree(near_pts)
     spacing, irregular = cloud_spacing(tree, fp)
     edges, lengths = cloud_graph(fp, spacing, local_spacings(tree, fp, spacing))
-    paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing)
+    bridge = (
+        (IRREGULAR_BRIDGE_REACH, IRREGULAR_BRIDGE_ANGLE)
+        if irregular
+        else (BRIDGE_REACH, BRIDGE_ANGLE)
+    )
+    paths = _skeleton_pieces(len(fp), edges, lengths, fp, spacing, bridge)
     pieces = []
     for path in paths:
         closed = len(path) > 2 and path[0] == path[-1]

@@ -4,7 +4,9 @@ Clouds: every feature point is linked to the feature points among its
 :data:`LINK_NEIGHBOURS` nearest features that lie within :data:`LINK_RADIUS` spacings.
 Meshes: the mesh's own edges whose two vertices are features, weighted so that the
 skeleton prefers the edges where the surface turns most. The skeleton is the minimum
-spanning forest of the graph, pruned of spurs shorter than :data:`SPUR_LENGTH` spacings.
+spanning forest of the graph (on a cloud, with its free ends bridged to the trees they
+point at, :func:`bridge_leaves`), pruned of spurs shorter than
+:data:`SPUR_LENGTH` spacings.
 """
 
 from __future__ import annotations
@@ -21,11 +23,17 @@ from ..._header import CURVES
 from ..neighbourhoods import squared_distances
 
 __all__ = [
+    "BRIDGE_ANGLE",
+    "BRIDGE_BACK",
+    "BRIDGE_REACH",
+    "IRREGULAR_BRIDGE_ANGLE",
+    "IRREGULAR_BRIDGE_REACH",
     "LINK_NEIGHBOURS",
     "LINK_RADIUS",
     "SPUR_LENGTH",
     "MeshPaths",
     "adjacency",
+    "bridge_leaves",
     "close_loops",
     "cloud_graph",
     "mesh_graph",
@@ -51,6 +59,22 @@ SPUR_LENGTH = CURVES.real("SPUR_LENGTH")
 MESH_FLAT_WEIGHT = CURVES.real("MESH_FLAT_WEIGHT")
 #: Rounds of spur pruning (a spur on a spur is removed in the next round).
 PRUNE_ROUNDS = CURVES.integer("PRUNE_ROUNDS")
+#: Clouds: a free end of the skeleton is linked to the nearest feature of another tree
+#: that lies ahead of it, in the direction from the skeleton vertex BRIDGE_BACK links
+#: back (or the junction or end before it) to the end (:func:`bridge_leaves`): noise
+#: and sampling gaps cut an edge's skeleton into pieces too short to join by their
+#: direction.
+BRIDGE_BACK = CURVES.integer("BRIDGE_BACK")
+#: On a regular cloud, within this many spacings (half a spacing beyond LINK_RADIUS) ...
+BRIDGE_REACH = CURVES.real("BRIDGE_REACH")
+#: ... and this many degrees of the end's direction (the features of a second edge
+#: converging at a sharp angle, or of a noisy band beside the edge, stay apart).
+BRIDGE_ANGLE = CURVES.real("BRIDGE_ANGLE")
+#: On an irregular cloud (points drawn independently leave gaps of several spacings
+#: along an edge), within this many spacings ...
+IRREGULAR_BRIDGE_REACH = CURVES.real("IRREGULAR_BRIDGE_REACH")
+#: ... and this many degrees.
+IRREGULAR_BRIDGE_ANGLE = CURVES.real("IRREGULAR_BRIDGE_ANGLE")
 
 
 def cloud_graph(
@@ -275,6 +299,97 @@ def close_loops(
         added.append((a, b))
         adj.setdefault(a, []).append((b, d))
         adj.setdefault(b, []).append((a, d))
+    if not added:
+        return forest
+    return np.concatenate([forest, np.array(added, np.int64)])
+
+
+def bridge_leaves(
+    n: int, forest: np.ndarray, positions: np.ndarray, reach: float, angle: float
+) -> np.ndarray:
+    """Link the free ends of a forest to the trees they point at.
+
+    For each free end (a node of degree 1), the direction from the node BRIDGE_BACK
+    links back (stopping early at a junction or another free end) to it; a candidate
+    link goes to every node of another tree within ``reach`` of the end whose direction
+    from the end is within ``angle`` degrees of that one (and, for another free end,
+    the other way round too: two edges' ends at a corner are not linked). Candidates are taken
+    shortest first (ties by the end's, then the node's index), each joining two trees
+    that are still apart.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes.
+    forest : (t, 2) int
+        The spanning forest, with its long loops closed (:func:`close_loops`).
+    positions : (n, 3) float64
+    reach : float
+    angle : float
+        In degrees.
+
+    Returns
+    -------
+    (t + a, 2) int64
+        The forest and the links added.
+    """
+    parent = list(range(n))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    neighbours: list[list[int]] = [[] for _ in range(n)]
+    for a, b in forest.tolist():
+        neighbours[a].append(b)
+        neighbours[b].append(a)
+        ra, rb = root(a), root(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    leaves = [a for a in range(n) if len(neighbours[a]) == 1]
+    if not leaves:
+        return forest
+    direction = {}
+    for a in leaves:
+        prev, cur = a, neighbours[a][0]
+        for _ in range(BRIDGE_BACK - 1):
+            if len(neighbours[cur]) != 2:
+                break
+            two = neighbours[cur]
+            prev, cur = cur, (two[1] if two[0] == prev else two[0])
+        d = positions[a] - positions[cur]
+        direction[a] = (d, float(np.linalg.norm(d[None], axis=1)[0]))
+    tree = cKDTree(positions)
+    min_cos = math.cos(math.radians(angle))
+    cand: list[tuple[float, int, int]] = []
+    for a in leaves:
+        d, d_len = direction[a]
+        own = root(a)
+        near = np.array(
+            [b for b in tree.query_ball_point(positions[a], reach) if root(b) != own], np.int64
+        )
+        if len(near) == 0:
+            continue
+        v = positions[near] - positions[a]
+        length = np.linalg.norm(v, axis=1)
+        ahead = np.einsum("ij,ij->i", v, np.broadcast_to(d, v.shape))
+        for b, w, x, y in zip(near.tolist(), v, length.tolist(), ahead.tolist(), strict=True):
+            if y < min_cos * x * d_len:
+                continue
+            if b in direction:  # two free ends: each ahead of the other
+                e, e_len = direction[b]
+                back = float(np.einsum("ij,ij->i", -w[None], e[None])[0])
+                if back < min_cos * x * e_len:
+                    continue
+            cand.append((x, a, b))
+    added = []
+    for _, a, b in sorted(cand):
+        ra, rb = root(a), root(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+            added.append((min(a, b), max(a, b)))
     if not added:
         return forest
     return np.concatenate([forest, np.array(added, np.int64)])
