@@ -342,7 +342,7 @@ straight segments.
   triangles, vertices only where faces meet (and at the centre of fanned caps).
   *cad_coarse*: the parts with round surfaces rebuilt with 24 segments per turn
   (facets turn by 15 degrees, still below the crease angle; the truth is recomputed
-  from the coarse solid). *openscad*: four models (`evaluation/data/openscad/*.scad`:
+  from the coarse solid). *openscad*: five models (`evaluation/data/openscad/*.scad`:
   a bracket with a gusset and bolt holes, a plate with a pocket, chamfers and
   counterbores, a flanged pipe, a grooved knob, a turned handle whose fillet, shaft
   and dome are smooth) exported to STL by OpenSCAD 2021.01 and welded (identical
