@@ -377,7 +377,7 @@ straight segments.
   0.1 pixel footprints at the mean distance, growing with range squared; the views are
   merged without resampling (about n points). Density therefore falls with range and
   incidence, and overlaps are denser. Spacing: from the local density
-  (`evaluation.density_spacing`, 16 neighbours), since nearest-neighbour distances
+  (`evaluation.scoring.density_spacing`, 16 neighbours), since nearest-neighbour distances
   collapse where views interleave. **Coverage is measured only on the edges the scan
   saw**: a piece of an edge counts when each of its two faces has a scan point within
   2 of that point's spacings of it (an edge never seen, or seen from one side, cannot
