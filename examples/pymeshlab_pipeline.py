@@ -9,7 +9,8 @@ cloud with scanner-like noise (10 % of the point spacing along the normal) and 1
 outliers. Outputs in OUT_DIR (default: the current folder):
 
 - ``STEM_annotated.ply``: the cleaned cloud or mesh, vertex quality = feature strength,
-  features selected (MeshLab shows both);
+  the vertices whose strength is at least ``--min-strength`` selected, features red
+  (MeshLab shows all three);
 - ``STEM_features.ply``: only the vertices whose strength is at least ``--min-strength``.
 """
 

@@ -123,8 +123,8 @@ def clean(
         coordinates in C and vcg's zero-area test, same survivors, same faces.
         Default: :func:`meshlab_sharp._kernels.default_backend`.
     workers : int, default 1
-        Threads of the compiled backend's duplicate merge and face pass (-1: every
-        core); the result does not depend on it.
+        Threads of the compiled backend's face pass (-1: every core; its duplicate
+        merge runs on one); the result does not depend on it.
     local_order : bool, default False
         Compiled backend: a mesh whose vertex order is scattered
         (:func:`meshlab_sharp._kernels.scattered_faces`) is renumbered breadth-first

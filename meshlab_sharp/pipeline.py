@@ -74,7 +74,7 @@ def detect(
     progress : bool or Progress, default False
         Draw a progress bar on stderr (True), or report to the given Progress.
     workers : int, default -1
-        Threads for the kNN query (-1: all cores).
+        Threads the detection runs on (-1: every core).
     preprocessing : Preprocessing or dict, optional
         pymeshlab filters run first (outlier removal, denoising, hole filling,
         simplification; see :mod:`meshlab_sharp.preprocessing`). Detection runs on the

@@ -81,8 +81,10 @@ def add_plugin_command(subparsers: argparse._SubParsersAction) -> None:
     deps = sub.add_parser(
         "deps",
         help="only install the Debian packages and fetch the MeshLab headers",
+        description="Install the Debian packages the plugin needs (apt-get update first) "
+        "and fetch MeshLab's Debian source package for the headers if absent; build nothing.",
     )
-    _add_build_options(deps)
+    _add_build_options(deps, build_dir=False)
     deps.set_defaults(func=_run_deps)
     uninstall = sub.add_parser(
         "uninstall",
@@ -103,17 +105,18 @@ def add_plugin_command(subparsers: argparse._SubParsersAction) -> None:
     examples.set_defaults(func=_run_examples)
 
 
-def _add_build_options(parser: argparse.ArgumentParser) -> None:
+def _add_build_options(parser: argparse.ArgumentParser, *, build_dir: bool = True) -> None:
     parser.add_argument(
         "--source-dir",
         metavar="DIR",
         help=f"unpacked MeshLab source package (default: the cache folder's {SOURCE_FOLDER})",
     )
-    parser.add_argument(
-        "--build-dir",
-        metavar="DIR",
-        help="CMake build folder (default: one per plugin source tree in the cache folder)",
-    )
+    if build_dir:
+        parser.add_argument(
+            "--build-dir",
+            metavar="DIR",
+            help="CMake build folder (default: one per plugin source tree in the cache folder)",
+        )
     parser.add_argument(
         "--no-apt", action="store_true", help="do not run apt-get; fail if a package is missing"
     )

@@ -11,10 +11,10 @@ in this order (each only when asked for, and only to the kind of input it suits)
 2. **denoise**, unless the input looks clean (:func:`_noise_level`; smoothing clean
    edges only blurs them): meshes: ``apply_coord_taubin_smoothing`` (default) or
    ``apply_coord_two_steps_smoothing``; point clouds: MLS projection,
-   ``compute_mls_projection_rimls`` (default) or ``_apss``, called exactly as
-   ``PYMESHLAB_NOTES.md`` says (cloud as mesh 0, normals, copy as mesh 1, project 1
-   onto 0). Normal smoothing is not offered: detection computes its own normals from
-   the positions, so it would change nothing.
+   ``compute_mls_projection_rimls`` (default) or ``_apss`` (the cloud with its normals
+   as mesh 0, a copy as mesh 1, mesh 1 projected onto mesh 0). Normal smoothing is not
+   offered: detection computes its own normals from the positions, so it would change
+   nothing.
 3. **fill_holes** (meshes): ``meshing_close_holes``, holes up to ``max_hole_size``
    boundary edges (the patch refined to the mesh's mean edge length on request).
 4. **simplify**: meshes: ``meshing_decimation_quadric_edge_collapse`` (vertices stay
@@ -120,8 +120,8 @@ class Preprocessing:
         divided by the mean edge length (a hole about a third of the object across).
     refine_holes : bool, default False
         Refine the patch to the mesh's mean edge length (adds vertices), so the
-        neighbourhoods across it look like the rest of the mesh. Off by default: on an
-        11k-vertex part with two holes it took 4.8 s against 0.24 s, for the same
+        neighbourhoods across it look like the rest of the mesh. Off by default: on a
+        10,784-vertex part with two holes it took 4.9 s against 0.27 s, for the same
         features (docs/preprocessing.md).
     simplify : float or None, default None
         Keep about this fraction of the vertices, in (0, 1]; None: no simplification.
@@ -194,7 +194,8 @@ class PreprocessingReport:
     ----------
     steps : list of dict
         Per step: ``step``, ``filters``, ``parameters`` (as passed to pymeshlab),
-        ``vertices_before``, ``vertices_after``, ``seconds``; or ``skipped`` (why).
+        ``vertices_before``, ``vertices_after``, ``seconds``; or ``skipped`` (why);
+        denoising also ``method``, ``noise`` and, where it warned, ``warning``.
     geometry : Geometry
         The processed geometry detection ran on.
     to_input : (m,) int64
@@ -479,8 +480,8 @@ def _denoise(state: _State, config: Preprocessing, record: dict[str, Any]) -> st
         _apply(ms, "apply_coord_two_steps_smoothing", **params)
         state.update(ms)
         return ""
-    # MLS projection, exactly as PYMESHLAB_NOTES.md says: cloud = mesh 0, normals,
-    # copy = mesh 1, current mesh 0, project mesh 1 onto the surface of mesh 0.
+    # MLS projection: cloud = mesh 0, normals, copy = mesh 1, current mesh 0, project
+    # mesh 1 onto the surface of mesh 0.
     name = f"compute_mls_projection_{method}"
     params = {"filterscale": float(config.mls_filter_scale)}
     record.update(

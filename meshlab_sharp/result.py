@@ -19,7 +19,8 @@ class DetectionResult:
     Attributes
     ----------
     mask : (n,) bool
-        True for the sharp feature points (candidates at every scale).
+        True for the sharp feature points: the candidates at every scale (robust mode:
+        with its own steps, docs/method.md).
     strength : (n,) float64
         Fraction of scales at which the point was a candidate, in [0, 1].
     kind : {"points", "mesh"}
@@ -27,7 +28,7 @@ class DetectionResult:
     scales : tuple of int
         The scales used (k of kNN, or rings).
     thresholds : (s,) float64
-        Otsu's threshold at each scale.
+        The threshold at each scale: Otsu's (robust mode: with its floor).
     candidate_counts : (s,) int64
         Candidates at each scale (cleaned points; merged duplicates count once).
     kept : (n,) bool
@@ -41,8 +42,8 @@ class DetectionResult:
     timings : dict of str to float
         Seconds per stage.
     distances : (s, n) float64 or None
-        Normalised projected distances per scale (``return_details=True``); NaN for
-        dropped vertices.
+        Normalised projected distances per scale (robust mode: the relative distances)
+        (``return_details=True``); NaN for dropped vertices.
     normals : (s, n, 3) float64 or None
         Unit normals used at each scale (``return_details=True``); NaN for dropped
         vertices. Their sign is arbitrary.

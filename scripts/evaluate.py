@@ -342,7 +342,7 @@ straight segments.
   triangles, vertices only where faces meet (and at the centre of fanned caps).
   *cad_coarse*: the parts with round surfaces rebuilt with 24 segments per turn
   (facets turn by 15 degrees, still below the crease angle; the truth is recomputed
-  from the coarse solid). *openscad*: four models (`evaluation/data/openscad/*.scad`:
+  from the coarse solid). *openscad*: five models (`evaluation/data/openscad/*.scad`:
   a bracket with a gusset and bolt holes, a plate with a pocket, chamfers and
   counterbores, a flanged pipe, a grooved knob, a turned handle whose fillet, shaft
   and dome are smooth) exported to STL by OpenSCAD 2021.01 and welded (identical
@@ -377,7 +377,7 @@ straight segments.
   0.1 pixel footprints at the mean distance, growing with range squared; the views are
   merged without resampling (about n points). Density therefore falls with range and
   incidence, and overlaps are denser. Spacing: from the local density
-  (`evaluation.density_spacing`, 16 neighbours), since nearest-neighbour distances
+  (`evaluation.scoring.density_spacing`, 16 neighbours), since nearest-neighbour distances
   collapse where views interleave. **Coverage is measured only on the edges the scan
   saw**: a piece of an edge counts when each of its two faces has a scan point within
   2 of that point's spacings of it (an edge never seen, or seen from one side, cannot

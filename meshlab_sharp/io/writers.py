@@ -166,15 +166,17 @@ def feature_meshset(
     return ms
 
 
-def select_vertices(ms: pymeshlab.MeshSet, mask: np.ndarray) -> None:
+def select_vertices(ms: pymeshlab.MeshSet, mask: np.ndarray) -> str:
     """Make ``mask`` the vertex selection of the current mesh of ``ms``.
 
     pymeshlab has no selection setter: the mask goes into a custom per-vertex
     attribute (``sharp_feature``, or ``sharp_feature_2``... when taken), which stays on
-    the mesh, and MeshLab's select-by-condition filter reads it.
+    the mesh, and MeshLab's select-by-condition filter reads it. Returns that
+    attribute's name.
     """
     name = add_vertex_attribute(ms.current_mesh(), "sharp_feature", mask)
     ms.compute_selection_by_condition_per_vertex(condselect=f"({name} > 0.5)")
+    return name
 
 
 def add_vertex_attribute(mesh: pymeshlab.Mesh, name: str, values: np.ndarray) -> str:

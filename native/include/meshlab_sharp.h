@@ -283,7 +283,8 @@ extern "C" {
  *                             if l = 0; l = robust.local_scale in numpy's summation
  *                             order), and score[oi] its ranking: the sum over the scales
  *                             in order of min(o / l, 1) / nscales (RelativeRule's);
- *   noise[oi]                 robust.noise_scale_factor's ratio over the noise_k nearest;
+ *   noise[oi]                 reference.detect.noise_scale_factor's ratio over the
+ *                             noise_k nearest;
  *   sheet_gap > 0             robust.sheet_mask (sheet_gap, sheet_min, sheet_own,
  *                             sheet_column, sheet_column_gap, sheet_far_span,
  *                             sheet_trim, sheet_trim_cos; rule 2 off when
@@ -674,7 +675,7 @@ void ms_plan_thresholds(const ms_robust_plan_t *plan, const int64_t *counts, dou
  * (ms_scale_vote's T). ms_stage_decide: with the global thresholds (s), the votes v >= T
  * of each point: feature (all s), strength (votes / s), each scale's candidates added
  * to counts (s), and v into out (x's layout) when out is not NULL.
- * ms_stage_acute_tests (robust.acute_tests): on a quiet cloud (ms_quiet_cloud),
+ * ms_stage_acute_tests (reference.detect.acute_tests): on a quiet cloud (ms_quiet_cloud),
  * tested[i] = not feature[i] and score[i] in [MS_ACUTE_SCORE, MS_ACUTE_SCORE_MAX); returns
  * how many (0, tested untouched, otherwise).
  * ms_stage_curved (robust.stage_curved): a mesh's candidates whose relative distance
@@ -716,8 +717,8 @@ void ms_stage_isolated(const double *a, const double *b, const double *kth_d2,
  * [0, 1]). The threshold is T = max(Otsu's split of the MS_BINS-bin histogram of v (bin
  * min(floor(v * MS_BINS), MS_BINS - 1); the split's integer form of the notes, the first
  * largest wins; 1.0 when no split has points on both sides), floor_) with `otsu`, floor_
- * without (no histogram; robust.robust_threshold); then votes[i] += v[i] >= T, the number
- * of such points into *count, and v into out when out is not NULL. Returns T.
+ * without (no histogram; reference.detect.robust_threshold); then votes[i] += v[i] >= T,
+ * the number of such points into *count, and v into out when out is not NULL. Returns T.
  * ms_noise_floor: the least of MS_NOISE_FLOOR * (b + 1) / MS_BINS, b the bin of the
  * lower median of the MS_BINS counts (the first bin whose cumulative count exceeds
  * (total - 1) / 2), and MS_NOISE_FLOOR_MAX; 0 when every count is 0
