@@ -60,7 +60,7 @@ SHEET_TRIM, SHEET_TRIM_COS = 1.3, 0.985
 SUPPORT_KNN, SUPPORT_MIN, THIN_KNN, MESH_RING, CONE_COS = 16, 2, 12, 2, 0.5
 #: Step 8: on a cloud whose nu exceeds NOISE_QUIET, thinning's cone (support keeps 0.5).
 CONE_COS_NOISY = 0.45
-#: Step 8: beside the line, farther than this times the reach of the list (its last
+#: Step 8: beside the line, farther than this times the reach of the list (its farthest
 #: member's distance); on a cloud whose nu exceeds NOISE_QUIET, the second.
 SIDE, SIDE_NOISY = 0.7, 0.65
 #: The relative margin of a "maybe" on the side test's squared distances.
@@ -117,9 +117,8 @@ class Reading:
             side = SIDE
             normals = spec_face_normals(points, faces)
             ring = min(MESH_RING, max(scales))
-            found = spec_ring_search(faces, n, ring)  # a ring list's last: its last found
+            found = spec_ring_search(faces, n, ring)
             around = compare = [np.array(sorted(f)) for f in found]
-            last_found = [f[-1] for f in found]
             direction = spec_rings(faces, n, max(scales))
             hood_at = lambda k: spec_rings(faces, n, k)  # noqa: E731
         m = len(points)
@@ -205,10 +204,9 @@ class Reading:
             maybe_f1[i] = most >= SUPPORT_MIN or score[i] < free + EPS
 
         def reach2(i: int) -> float:
-            """The squared distance from i to the last member of compare[i]: a kNN
-            list's farthest; a ring's last found by its search (``last_found``)."""
-            d = points[compare[i][-1] if faces is None else last_found[i]] - points[i]
-            return d @ d
+            """The squared distance from i to the farthest member of compare[i]."""
+            d = points[compare[i]] - points[i]
+            return float(np.max(np.einsum("ij,ij->i", d, d)))
 
         def beside(i: int, j: int) -> tuple[bool, bool]:
             """(surely, possibly) farther from the line through i than ``side`` times the
