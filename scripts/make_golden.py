@@ -13,6 +13,10 @@ import json
 import sys
 from pathlib import Path
 
+import _venv  # scripts/, the script's own folder, is on sys.path
+
+_venv.enter()
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))

@@ -9,14 +9,18 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import matplotlib
+import _venv  # scripts/, the script's own folder, is on sys.path
+
+_venv.enter()
+
+import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-import numpy as np
-from mpl_toolkits.mplot3d.art3d import Line3DCollection
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from mpl_toolkits.mplot3d.art3d import Line3DCollection  # noqa: E402
 
-from meshlab_sharp.sample import sample_part
+from meshlab_sharp.sample import sample_part  # noqa: E402
 
 
 def render(out: Path, n_points: int = 50_000) -> None:

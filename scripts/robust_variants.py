@@ -20,7 +20,11 @@ import math
 import sys
 from pathlib import Path
 
-import numpy as np
+import _venv  # scripts/, the script's own folder, is on sys.path
+
+_venv.enter()
+
+import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
