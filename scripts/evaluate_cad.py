@@ -278,7 +278,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.points < 1000:
         fail("--points must be at least 1000")
     for out_path in (args.json, args.figure, args.markdown):
-        if out_path is not None and not out_path.resolve().parent.is_dir():
+        if out_path is None:
+            continue
+        if out_path.resolve().parent == (ROOT / "out").resolve():
+            out_path.resolve().parent.mkdir(exist_ok=True)  # out/, git-ignored, as the CLI's
+        if not out_path.resolve().parent.is_dir():
             fail(f"{out_path.parent}: no such folder")
     from evaluation.cad.sources import PARTS, QUICK_PARTS, missing_sources
 
