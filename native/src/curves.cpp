@@ -380,19 +380,11 @@ std::vector<Edge> spanningForest(long n, const std::vector<Edge> &edges, const s
 	std::iota(order.begin(), order.end(), 0L);
 	std::sort(order.begin(), order.end(), [&](long x, long y) { return edges[x] < edges[y]; });
 	std::stable_sort(order.begin(), order.end(), [&](long x, long y) { return w[x] < w[y]; });
-	std::vector<long> parent(n);
-	std::iota(parent.begin(), parent.end(), 0L);
-	std::function<long(long)> root = [&](long x) {
-		while (parent[x] != x) x = parent[x] = parent[parent[x]];
-		return x;
-	};
+	DisjointSets sets(n);
 	std::vector<Edge> tree;
 	for (long j : order) {
 		if (w[j] == 0) continue;  // an explicit zero is no edge
-		const long r1 = root(edges[j][0]), r2 = root(edges[j][1]);
-		if (r1 == r2) continue;
-		parent[std::max(r1, r2)] = std::min(r1, r2);
-		tree.push_back(edges[j]);
+		if (sets.join(edges[j][0], edges[j][1])) tree.push_back(edges[j]);
 	}
 	return sortedPairs(tree);
 }
@@ -471,18 +463,12 @@ std::vector<Edge> closeLoops(long n, const std::vector<Edge> &forest, const std:
 std::vector<Edge> bridgeLeaves(long n, const std::vector<Edge> &forest, const std::vector<Vec3> &pos,
                                double reach, double angle)
 {
-	std::vector<long> parent(n);
-	std::iota(parent.begin(), parent.end(), 0L);
-	auto root = [&](long i) {
-		while (parent[i] != i) i = parent[i] = parent[parent[i]];
-		return i;
-	};
+	DisjointSets sets(n);
 	std::vector<std::vector<long>> nb(n);
 	for (const Edge &e : forest) {
 		nb[e[0]].push_back(e[1]);
 		nb[e[1]].push_back(e[0]);
-		const long ra = root(e[0]), rb = root(e[1]);
-		if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+		sets.join(e[0], e[1]);
 	}
 	std::vector<long> leaves;
 	for (long a = 0; a < n; ++a)
@@ -506,9 +492,9 @@ std::vector<Edge> bridgeLeaves(long n, const std::vector<Edge> &forest, const st
 	for (long a : leaves) {
 		const Vec3 &d = direction[a].first;
 		const double dLength = direction[a].second;
-		const long own = root(a);
+		const long own = sets.root(a);
 		for (long b : tree.ball(pos[a], reach)) {
-			if (root(b) == own) continue;
+			if (sets.root(b) == own) continue;
 			const Vec3 v = sub(pos[b], pos[a]);
 			const double length = norm(v);
 			if (edot(v, d) < minCos * length * dLength) continue;
@@ -523,10 +509,7 @@ std::vector<Edge> bridgeLeaves(long n, const std::vector<Edge> &forest, const st
 	std::vector<Edge> out = forest;
 	for (const auto &c : cand) {
 		const long a = std::get<1>(c), b = std::get<2>(c);
-		const long ra = root(a), rb = root(b);
-		if (ra == rb) continue;
-		parent[std::max(ra, rb)] = std::min(ra, rb);
-		out.push_back({std::min(a, b), std::max(a, b)});
+		if (sets.join(a, b)) out.push_back({std::min(a, b), std::max(a, b)});
 	}
 	return out;
 }
@@ -932,24 +915,13 @@ std::vector<Edge> pairsWithin(const std::vector<Vec3> &pts, double r)
 std::vector<std::vector<long>> endClusters(const Ends &e, const std::vector<Piece> &pieces, double spacing)
 {
 	const long q = long(e.piece.size());
-	std::vector<long> parent(q);
-	std::iota(parent.begin(), parent.end(), 0L);
-	auto root = [&](long i) {
-		while (parent[i] != i) i = parent[i] = parent[parent[i]];
-		return i;
-	};
+	DisjointSets sets(q);
 	for (const Edge &p : pairsWithin(e.point, MS_CURVE_GAP_LENGTH * spacing)) {
 		if (e.piece[p[0]] == e.piece[p[1]] && pieces[e.piece[p[0]]].length() < MS_CURVE_LOOP_LENGTH * MS_CURVE_GAP_LENGTH * spacing)
 			continue;
-		const long ra = root(p[0]), rb = root(p[1]);
-		if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+		sets.join(p[0], p[1]);
 	}
-	std::map<long, std::vector<long>> groups;
-	for (long i = 0; i < q; ++i) groups[root(i)].push_back(i);
-	std::vector<std::vector<long>> clusters;
-	for (auto &g : groups)
-		if (g.second.size() >= 2) clusters.push_back(g.second);
-	return clusters;
+	return sets.groups();
 }
 
 bool continues(const Ends &e, long a, long b, double spacing)
@@ -972,16 +944,11 @@ std::vector<std::vector<long>> meetingClusters(const Ends &e, const std::vector<
                                                double spacing)
 {
 	const long q = long(e.piece.size());
-	std::vector<long> parent(q);
-	std::iota(parent.begin(), parent.end(), 0L);
+	DisjointSets sets(q);  // each cluster already one set
 	std::vector<char> freeEnd(q, 1);
 	for (const auto &c : clusters)
-		for (long i : c) parent[i] = c[0], freeEnd[i] = 0;
+		for (long i : c) sets.parent[i] = c[0], freeEnd[i] = 0;
 	if (q < 2 || std::find(freeEnd.begin(), freeEnd.end(), 1) == freeEnd.end()) return clusters;
-	auto root = [&](long i) {
-		while (parent[i] != i) i = parent[i] = parent[parent[i]];
-		return i;
-	};
 	struct Pair { double gap; long a, b; };
 	std::vector<Pair> pairs;
 	for (const Edge &p : pairsWithin(e.point, MS_CURVE_LONG_GAP * spacing))
@@ -1006,15 +973,9 @@ std::vector<std::vector<long>> meetingClusters(const Ends &e, const std::vector<
 		const double aheadA = bdot(sub(meet, e.point[a]), out[a]), aheadB = bdot(sub(meet, e.point[b]), out[b]);
 		if (std::min(aheadA, aheadB) < -MS_CURVE_LATERAL_OFFSET * spacing || std::max(aheadA, aheadB) > MS_CURVE_LONG_GAP * spacing)
 			continue;
-		const long ra = root(a), rb = root(b);
-		if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+		sets.join(a, b);
 	}
-	std::map<long, std::vector<long>> groups;
-	for (long i = 0; i < q; ++i) groups[root(i)].push_back(i);
-	std::vector<std::vector<long>> grouped;
-	for (auto &g : groups)
-		if (g.second.size() >= 2) grouped.push_back(g.second);
-	return grouped;
+	return sets.groups();
 }
 
 bool facesGap(const Ends &e, long a, long b)

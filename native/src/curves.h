@@ -11,12 +11,46 @@
 #include "curves_types.h"
 #include "meshlab_sharp.h"
 
+#include <algorithm>
 #include <array>
+#include <map>
+#include <numeric>
 #include <vector>
 
 namespace sharp {
 
 using Vec3 = std::array<double, 3>;
+
+// Union-find over 0..n-1 with path halving; a join hangs the larger root under the
+// smaller (reference/curves/graph.py DisjointSets)
+struct DisjointSets {
+	std::vector<long> parent;
+	explicit DisjointSets(long n) : parent(n) { std::iota(parent.begin(), parent.end(), 0L); }
+	long root(long i)
+	{
+		while (parent[i] != i) i = parent[i] = parent[parent[i]];
+		return i;
+	}
+	// whether a and b were apart (they are joined now)
+	bool join(long a, long b)
+	{
+		const long ra = root(a), rb = root(b);
+		if (ra == rb) return false;
+		parent[std::max(ra, rb)] = std::min(ra, rb);
+		return true;
+	}
+	// the members of each set of two or more, ascending, the sets in their roots' order
+	// (trace._groups)
+	std::vector<std::vector<long>> groups()
+	{
+		std::map<long, std::vector<long>> byRoot;
+		for (long i = 0; i < long(parent.size()); ++i) byRoot[root(i)].push_back(i);
+		std::vector<std::vector<long>> out;
+		for (auto &g : byRoot)
+			if (g.second.size() >= 2) out.push_back(std::move(g.second));
+		return out;
+	}
+};
 
 // One feature curve: vertices in order; a loop's last vertex connects to its first
 // (which is not repeated).

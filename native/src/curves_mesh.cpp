@@ -11,7 +11,6 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
-#include <numeric>
 #include <set>
 #include <utility>
 
@@ -36,12 +35,6 @@ bool faceNormal(const std::vector<Vec3> &pts, const std::array<int, 3> &t, Vec3 
 	const double length = face_cross(pts.front().data(), t[0], t[1], t[2], c);
 	normal = {c[0] / length, c[1] / length, c[2] / length};
 	return length > 0;
-}
-
-long findRoot(std::vector<long> &parent, long v)
-{
-	while (parent[v] != v) v = parent[v] = parent[parent[v]];
-	return v;
 }
 
 // mesh.py _sharp_edges: the edges (a < b, sorted) whose two faces turn by more than the
@@ -119,20 +112,19 @@ std::vector<Edge> sharpEdges(const std::vector<Vec3> &pts, const std::vector<std
 	std::vector<double> angle(steep.size());
 	if (!steep.empty()) math.acos(steep.data(), angle.data(), int64_t(steep.size()));
 	std::vector<Edge> turned;
-	std::vector<long> parent(n);
-	std::iota(parent.begin(), parent.end(), 0L);
+	DisjointSets sets(n);
 	for (size_t j = 0; j < which.size(); ++j)
 		if (angle[j] > threshold) {
 			const Edge &e = edges[which[j]];
 			turned.push_back(e);
-			parent[findRoot(parent, e[0])] = findRoot(parent, e[1]);
+			sets.join(e[0], e[1]);
 		}
 	std::vector<char> seen(n, 0);
 	for (const Edge &e : turned)
-		if (usable[e[0]] && usable[e[1]]) seen[findRoot(parent, e[0])] = 1;
+		if (usable[e[0]] && usable[e[1]]) seen[sets.root(e[0])] = 1;
 	std::vector<Edge> out;
 	for (const Edge &e : turned)
-		if (seen[findRoot(parent, e[0])]) out.push_back(e);
+		if (seen[sets.root(e[0])]) out.push_back(e);
 	return out;
 }
 
@@ -157,17 +149,16 @@ CreaseChains creaseChains(const std::vector<Vec3> &pts, const std::vector<std::a
 	const std::vector<Edge> sharp = sharpEdges(pts, faces, mask, usable, math);
 	if (sharp.empty()) return out;
 	// the usable vertices joined to a vertex of a sharp edge by edges between usable vertices
-	std::vector<long> parent(n);
-	std::iota(parent.begin(), parent.end(), 0L);
+	DisjointSets sets(n);
 	for (const auto &t : faces)
 		for (int k = 0; k < 3; ++k) {
 			const long a = t[k], b = t[(k + 1) % 3];
-			if (usable[a] && usable[b]) parent[findRoot(parent, a)] = findRoot(parent, b);
+			if (usable[a] && usable[b]) sets.join(a, b);
 		}
 	std::vector<char> crease(n, 0);
-	for (const Edge &e : sharp) crease[findRoot(parent, e[0])] = 1, crease[findRoot(parent, e[1])] = 1;
+	for (const Edge &e : sharp) crease[sets.root(e[0])] = 1, crease[sets.root(e[1])] = 1;
 	for (long v = 0; v < n; ++v)
-		if (usable[v] && crease[findRoot(parent, v)]) out.rest[v] = 0;
+		if (usable[v] && crease[sets.root(v)]) out.rest[v] = 0;
 	std::map<long, std::vector<long>> nbrs;
 	for (const Edge &e : sharp) nbrs[e[0]].push_back(e[1]), nbrs[e[1]].push_back(e[0]);
 	for (auto &kv : nbrs) std::sort(kv.second.begin(), kv.second.end());

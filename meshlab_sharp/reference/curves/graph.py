@@ -228,6 +228,34 @@ def mesh_graph(
     return edges, lengths / (sin_half + MESH_FLAT_WEIGHT), all_lengths
 
 
+class DisjointSets:
+    """Union-find over ``0..n-1`` with path halving; a join hangs the larger root under
+    the smaller (the library's ``DisjointSets``)."""
+
+    def __init__(self, n: int) -> None:
+        self.parent = list(range(n))
+
+    def root(self, i: int) -> int:
+        """The root of ``i``'s set."""
+        parent = self.parent
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    def join(self, a: int, b: int) -> bool:
+        """Join the sets of ``a`` and ``b``; whether they were apart."""
+        ra, rb = self.root(a), self.root(b)
+        if ra == rb:
+            return False
+        self.parent[max(ra, rb)] = min(ra, rb)
+        return True
+
+    def roots(self) -> np.ndarray:
+        """(n,) int64: every element's root."""
+        return np.array([self.root(i) for i in range(len(self.parent))], np.int64)
+
+
 def spanning_forest(n: int, edges: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """Minimum spanning forest.
 
@@ -333,21 +361,12 @@ def bridge_leaves(
     (t + a, 2) int64
         The forest and the links added.
     """
-    parent = list(range(n))
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
+    sets = DisjointSets(n)
     neighbours: list[list[int]] = [[] for _ in range(n)]
     for a, b in forest.tolist():
         neighbours[a].append(b)
         neighbours[b].append(a)
-        ra, rb = root(a), root(b)
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
+        sets.join(a, b)
     leaves = [a for a in range(n) if len(neighbours[a]) == 1]
     if not leaves:
         return forest
@@ -366,9 +385,9 @@ def bridge_leaves(
     cand: list[tuple[float, int, int]] = []
     for a in leaves:
         d, d_len = direction[a]
-        own = root(a)
+        own = sets.root(a)
         near = np.array(
-            [b for b in tree.query_ball_point(positions[a], reach) if root(b) != own], np.int64
+            [b for b in tree.query_ball_point(positions[a], reach) if sets.root(b) != own], np.int64
         )
         if len(near) == 0:
             continue
@@ -386,9 +405,7 @@ def bridge_leaves(
             cand.append((x, a, b))
     added = []
     for _, a, b in sorted(cand):
-        ra, rb = root(a), root(b)
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
+        if sets.join(a, b):
             added.append((min(a, b), max(a, b)))
     if not added:
         return forest

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..._header import CURVES
-from .graph import adjacency
+from .graph import DisjointSets, adjacency
 
 __all__ = [
     "CORNER_TURN",
@@ -477,14 +477,7 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
     """
     ends = _ends(pieces, spacing)
     q = len(ends.piece)
-    parent = list(range(q))
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
+    sets = DisjointSets(q)
     if q:
         of = ends.piece.tolist()
         pairs = sorted(cKDTree(ends.point).query_pairs(GAP_LENGTH * spacing))
@@ -496,11 +489,8 @@ def end_clusters(pieces: list[Piece], spacing: float) -> tuple[_Ends, list[np.nd
         for a, b in pairs:
             if of[a] == of[b] and of[a] in short:
                 continue  # the two ends of a short piece: no loop
-            ra, rb = root(a), root(b)
-            if ra != rb:
-                parent[max(ra, rb)] = min(ra, rb)
-    roots = np.array([root(i) for i in range(q)], np.int64)
-    return ends, _groups(roots)
+            sets.join(a, b)
+    return ends, _groups(sets.roots())
 
 
 def meeting_clusters(ends: _Ends, clusters: list[np.ndarray], spacing: float) -> list[np.ndarray]:
@@ -531,16 +521,10 @@ def meeting_clusters(ends: _Ends, clusters: list[np.ndarray], spacing: float) ->
         free[c] = False
     if not free.any() or q < 2:
         return clusters
-    parent = list(range(q))  # union-find over the ends, each cluster already one set
+    sets = DisjointSets(q)  # over the ends, each cluster already one set
     for c in clusters:
         for i in c.tolist():
-            parent[i] = int(c[0])
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
+            sets.parent[i] = int(c[0])
 
     pairs = cKDTree(ends.point).query_pairs(LONG_GAP * spacing, output_type="ndarray")
     pairs = pairs[(free[pairs[:, 0]] | free[pairs[:, 1]])]
@@ -567,11 +551,8 @@ def meeting_clusters(ends: _Ends, clusters: list[np.ndarray], spacing: float) ->
         )
         if min(ahead) < -LATERAL_OFFSET * spacing or max(ahead) > LONG_GAP * spacing:
             continue
-        ra, rb = root(a), root(b)
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
-    roots = np.array([root(i) for i in range(q)], np.int64)
-    return _groups(roots)
+        sets.join(a, b)
+    return _groups(sets.roots())
 
 
 def _continues(ends: _Ends, a: int, b: int, spacing: float) -> bool:
