@@ -248,8 +248,8 @@
 #define MS_CURVE_ZERO_OFFSET 1e-12
 #define MS_CURVE_FRAME_SWITCH 0.9
 #define MS_CURVE_OTHER_EDGE 3.0
-/* The grid of cells around the features: the largest cell coordinate, and the most
- * cells numbered by one int64 key (2^62). */
+/* The grid of cells around the features: the largest cell coordinate, and (in the numpy
+ * reference) the most cells numbered by one int64 key (2^62). */
 #define MS_CURVE_MAX_CELL 4611686018427387904.0
 #define MS_CURVE_OTHER_EDGE_MARGIN 0.5
 #define MS_CURVE_THIN_WALL 1.0

@@ -1342,7 +1342,7 @@ std::vector<Piece> meshPieces(const std::vector<Vec3> &pts, const std::vector<st
 // Most cells cellNeighbourhood flags in a dense grid (one byte each).
 constexpr long MAX_DENSE_CELLS = 1L << 24;
 
-// A grid cell by its three coordinates (cellNeighbourhood's cells of a huge grid).
+// A grid cell by its three coordinates (cellNeighbourhood's cells beyond a dense grid).
 struct Cell {
 	long a, b, c;
 	bool operator==(const Cell &o) const { return a == o.a && b == o.b && c == o.c; }
@@ -1399,20 +1399,13 @@ std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vec
 	double span[3];
 	for (int d = 0; d < 3; ++d) span[d] = along(hi[d], d) + 3;
 	const double cells = span[0] * span[1] * span[2];
-	// At most MS_CURVE_MAX_CELL cells: one int64 key (a * dims1 + b) * dims2 + c each; a
-	// larger grid (an extent huge against the features' spacing): cells by their three
-	// coordinates. A coordinate beyond MS_CURVE_MAX_CELL (it would overflow an int64 once
-	// offset; the far-points rule keeps inputs well inside it) is clamped to it.
-	if (!(cells <= MS_CURVE_MAX_CELL)) {
-		std::unordered_set<Cell, CellHash> wanted;
-		return pointsInCells(
-		    pts, valid, centres, cell, [&](long a, long b, long c) { wanted.insert({a, b, c}); },
-		    [&](long a, long b, long c) { return wanted.count({a, b, c}) > 0; });
-	}
-	const long dims[3] = {long(span[0]), long(span[1]), long(span[2])};
-	auto key = [&](long a, long b, long c) { return (a * dims[1] + b) * dims[2] + c; };
-	// the wanted cells: a flag per cell of the grid where it is small enough, else a hash set
+	// The wanted cells: a flag per cell where the grid is small enough, else a hash set of
+	// the cells' three coordinates (no flat key, which a grid huge against the features'
+	// spacing would overflow). A coordinate beyond MS_CURVE_MAX_CELL (the far-points rule
+	// keeps inputs well inside it) is clamped to it.
 	if (cells <= double(MAX_DENSE_CELLS)) {
+		const long dims[3] = {long(span[0]), long(span[1]), long(span[2])};
+		auto key = [&](long a, long b, long c) { return (a * dims[1] + b) * dims[2] + c; };
 		const long dense = long(cells);
 		std::vector<char> flag(size_t(dense), 0);
 		return pointsInCells(
@@ -1426,10 +1419,10 @@ std::vector<long> cellNeighbourhood(const std::vector<Vec3> &pts, const std::vec
 			    return at >= 0 && at < dense && flag[size_t(at)];
 		    });
 	}
-	std::unordered_set<long> wanted;
+	std::unordered_set<Cell, CellHash> wanted;
 	return pointsInCells(
-	    pts, valid, centres, cell, [&](long a, long b, long c) { wanted.insert(key(a, b, c)); },
-	    [&](long a, long b, long c) { return wanted.count(key(a, b, c)) > 0; });
+	    pts, valid, centres, cell, [&](long a, long b, long c) { wanted.insert({a, b, c}); },
+	    [&](long a, long b, long c) { return wanted.count({a, b, c}) > 0; });
 }
 
 // _arm_lines up to numpy's arctan2: the weight total, the centroid and the second moments
