@@ -160,7 +160,8 @@ void ms_thin(const double *p, const uint8_t *f1, const int64_t *rows, const doub
         int keep = f1[i];
         int64_t first, len;
         list_span(compare, r, &first, &len);
-        const double side2 = len > 0 ? side * side * list_reach2(p, compare, first, len, i) : 0.0;
+        /* the reach walks the whole list: only for a point still to test */
+        const double side2 = keep && len > 0 ? side * side * list_reach2(p, compare, first, len, i) : 0.0;
         for (int64_t t = first; keep && t < first + len; t++) {
             const int64_t j = list_member(compare, t);
             if (j != i && f1[j] && rank[j] > rank[i] &&
