@@ -154,6 +154,19 @@ def test_detect_meshset_colorize_false_keeps_the_colours():
             np.testing.assert_allclose(got, colours, atol=1e-6)
 
 
+def test_detect_meshset_colorize_paints_the_selection_red():
+    """Robust mode thins candidates of strength 1 out of the selection: red is the
+    selection, not the strength."""
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=shapes.box_cylinder_points(3000, seed=11)))
+    result = meshlab_sharp.detect_meshset(ms, colorize=True)
+    assert ((result.strength >= 1) & ~result.mask).sum() > 100  # thinned, strength 1
+    colour = ms.current_mesh().vertex_color_matrix()
+    red = (colour[:, 0] > 0.85) & (colour[:, 1] < 0.2) & (colour[:, 2] < 0.2)
+    np.testing.assert_array_equal(red, result.mask)
+    np.testing.assert_array_equal(ms.current_mesh().vertex_selection_array(), result.mask)
+
+
 def _las_scan(src: Path) -> laspy.LasData:
     """The cube cloud as a LAS/LAZ scan (point format 3) with intensity, class 2, GPS
     time and 16-bit red; written to ``src``, returned as written."""
